@@ -1,0 +1,13 @@
+//! GAST core: everything the studio and the command line compute, with no UI.
+//!
+//! Geometry-aware style transfer on 3D Gaussian Splatting scenes, as described
+//! in `ALGORITHM.md` of the shared data: scenes and cameras in the formats users
+//! bring, a differentiable tile-based CPU rasterizer, and (later) VGG features,
+//! the losses and the decoupled colour/geometry optimisation.
+
+pub mod camera;
+pub mod raster;
+pub mod scene;
+
+pub use camera::Camera;
+pub use scene::Gaussians;

@@ -1,0 +1,1 @@
+//! The differentiable tile-based CPU splat rasterizer.
