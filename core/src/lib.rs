@@ -6,8 +6,10 @@
 //! the losses and the decoupled colour/geometry optimisation.
 
 pub mod camera;
+pub mod io;
 pub mod raster;
 pub mod scene;
+pub mod style;
 
 pub use camera::Camera;
 pub use scene::Gaussians;

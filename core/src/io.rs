@@ -1,0 +1,181 @@
+//! Writing outputs safely: every file goes to a temporary sibling first and is
+//! renamed into place, so an existing file is never half-overwritten, plus the
+//! image formats the studio exports (PNG for colour, EXR for depth).
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+/// Why an output could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    /// Creating, writing or renaming the file failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The destination.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// The encoder refused the data.
+    #[error("{path}: could not encode {format}: {message}")]
+    Encode {
+        /// The destination.
+        path: PathBuf,
+        /// The format being written.
+        format: &'static str,
+        /// The encoder's message.
+        message: String,
+    },
+    /// The data does not have the size the image dimensions imply.
+    #[error("{path}: expected {expected} values for the image, found {found}")]
+    Size {
+        /// The destination.
+        path: PathBuf,
+        /// Values expected.
+        expected: usize,
+        /// Values given.
+        found: usize,
+    },
+}
+
+/// The temporary sibling a file is written to before the rename.
+fn temp_path(path: &Path) -> PathBuf {
+    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    name.push(format!(".{}.tmp", std::process::id()));
+    path.with_file_name(name)
+}
+
+/// Writes a file atomically: `write` fills a buffered temporary sibling, which is
+/// flushed, synced and renamed over `path`. On any error the temporary file is
+/// removed and `path` is untouched. Parent folders are created.
+pub fn atomic_write<F>(path: &Path, write: F) -> Result<(), OutputError>
+where
+    F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+{
+    let io_err = |source| OutputError::Io { path: path.to_path_buf(), source };
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(io_err)?;
+    }
+    let tmp = temp_path(path);
+    let result = (|| {
+        let file = File::create(&tmp)?;
+        let mut w = BufWriter::new(file);
+        write(&mut w)?;
+        w.flush()?;
+        w.get_ref().sync_all()?;
+        drop(w);
+        std::fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result.map_err(io_err)
+}
+
+/// Writes an RGB image (`width·height·3` floats in [0, 1], row-major) as 8-bit PNG.
+pub fn write_png_rgb(path: &Path, width: u32, height: u32, rgb: &[f32]) -> Result<(), OutputError> {
+    let bytes: Vec<u8> = rgb.iter().map(|&v| to_u8(v)).collect();
+    write_png(path, width, height, image::ColorType::Rgb8, &bytes)
+}
+
+/// Writes a single-channel map (`width·height` floats) as 8-bit grey PNG after
+/// min-max normalisation (a constant map is written black).
+pub fn write_png_gray_normalized(path: &Path, width: u32, height: u32, values: &[f32]) -> Result<(), OutputError> {
+    let (lo, hi) = finite_range(values);
+    let scale = if hi > lo { 1.0 / (hi - lo) } else { 0.0 };
+    let bytes: Vec<u8> = values.iter().map(|&v| to_u8(if v.is_finite() { (v - lo) * scale } else { 0.0 })).collect();
+    write_png(path, width, height, image::ColorType::L8, &bytes)
+}
+
+fn write_png(path: &Path, width: u32, height: u32, color: image::ColorType, bytes: &[u8]) -> Result<(), OutputError> {
+    let expected = width as usize * height as usize * color.channel_count() as usize;
+    if bytes.len() != expected {
+        return Err(OutputError::Size { path: path.to_path_buf(), expected, found: bytes.len() });
+    }
+    let mut encoded = Vec::new();
+    image::ImageEncoder::write_image(
+        image::codecs::png::PngEncoder::new(&mut encoded),
+        bytes,
+        width,
+        height,
+        color.into(),
+    )
+    .map_err(|e| OutputError::Encode { path: path.to_path_buf(), format: "PNG", message: e.to_string() })?;
+    atomic_write(path, |w| w.write_all(&encoded))
+}
+
+/// Writes a single-channel float map (`width·height`, row-major) as a 32-bit
+/// float OpenEXR file with one channel named `Z`.
+pub fn write_exr_depth(path: &Path, width: u32, height: u32, values: &[f32]) -> Result<(), OutputError> {
+    use exr::prelude::*;
+    let (w, h) = (width as usize, height as usize);
+    if values.len() != w * h {
+        return Err(OutputError::Size { path: path.to_path_buf(), expected: w * h, found: values.len() });
+    }
+    let channel = AnyChannel::new("Z", FlatSamples::F32(values.to_vec()));
+    let layer = Layer::new((w, h), LayerAttributes::named("depth"), Encoding::SMALL_LOSSLESS, AnyChannels::sort(SmallVec::from_vec(vec![channel])));
+    let image = Image::from_layer(layer);
+    let mut encoded = std::io::Cursor::new(Vec::new());
+    image
+        .write()
+        .non_parallel()
+        .to_buffered(&mut encoded)
+        .map_err(|e| OutputError::Encode { path: path.to_path_buf(), format: "EXR", message: e.to_string() })?;
+    atomic_write(path, |w| w.write_all(encoded.get_ref()))
+}
+
+fn to_u8(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
+}
+
+/// The smallest and largest finite value (0, 0 when there is none).
+pub fn finite_range(values: &[f32]) -> (f32, f32) {
+    let (lo, hi) = values
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    if lo <= hi { (lo, hi) } else { (0.0, 0.0) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn atomic_write_keeps_old_file_on_error() {
+        let dir = std::env::temp_dir().join(format!("gast-io-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let path = dir.join("keep.txt");
+        std::fs::write(&path, b"old contents").expect("seed file");
+        let err = atomic_write(&path, |w| {
+            w.write_all(b"half")?;
+            Err(std::io::Error::other("simulated failure"))
+        });
+        assert!(err.is_err());
+        assert_eq!(std::fs::read(&path).expect("read back"), b"old contents");
+        let leftovers: Vec<_> = std::fs::read_dir(&dir).expect("list").filter_map(|e| e.ok()).map(|e| e.file_name()).collect();
+        assert_eq!(leftovers.len(), 1, "temporary file left behind: {leftovers:?}");
+        atomic_write(&path, |w| w.write_all(b"new")).expect("write");
+        assert_eq!(std::fs::read(&path).expect("read back"), b"new");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn png_and_exr_round_trip() {
+        let dir = std::env::temp_dir().join(format!("gast-io-img-{}", std::process::id()));
+        let (w, h) = (5u32, 3u32);
+        let rgb: Vec<f32> = (0..w * h * 3).map(|i| i as f32 / 45.0).collect();
+        write_png_rgb(&dir.join("a.png"), w, h, &rgb).expect("png");
+        let back = image::open(dir.join("a.png")).expect("decode").to_rgb8();
+        assert_eq!(back.dimensions(), (w, h));
+        assert_eq!(back.as_raw()[7], to_u8(rgb[7]));
+        let depth: Vec<f32> = (0..w * h).map(|i| 0.1 * i as f32).collect();
+        write_exr_depth(&dir.join("d.exr"), w, h, &depth).expect("exr");
+        let img = exr::prelude::read_first_flat_layer_from_file(dir.join("d.exr")).expect("read exr");
+        let samples: Vec<f32> = img.layer_data.channel_data.list[0].sample_data.values_as_f32().collect();
+        assert_eq!(samples, depth);
+        assert!(matches!(write_png_rgb(&dir.join("b.png"), w, h, &rgb[1..]), Err(OutputError::Size { .. })));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

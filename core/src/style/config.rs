@@ -1,0 +1,204 @@
+//! One configuration struct for a stylization run.
+//!
+//! The same struct is filled from command-line flags, loaded from and saved to
+//! preset files (JSON), and edited by the studio's sliders; every field has the
+//! default of ALGORITHM.md, so a partial preset file is valid.
+
+use serde::{Deserialize, Serialize};
+
+use super::adam::AdamConfig;
+use super::schedule::{Mode, Schedule};
+
+/// Which way the style image's depth estimate points.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DepthPolarity {
+    /// Near = bright on both sides, like the rendered inverse depth (our default).
+    #[default]
+    NearBright,
+    /// The reference implementation's behaviour: the style estimate is inverted (near = dark).
+    Reference,
+}
+
+/// Loss weights (λ of ALGORITHM.md).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct LossWeights {
+    /// λ_GC, the geometry-aware contrastive feature matching.
+    pub gcfm: f32,
+    /// λ_cont, the content feature loss.
+    pub content: f32,
+    /// λ_TV, total variation of the rendered RGB.
+    pub tv: f32,
+    /// λ_α, opacity-logit regulariser (geometry phase).
+    pub opacity: f32,
+    /// λ_s, log-scale regulariser (geometry phase).
+    pub scale: f32,
+    /// λ_r, quaternion regulariser (geometry phase).
+    pub rotation: f32,
+    /// λ_d, inverse-depth regulariser (geometry phase).
+    pub depth: f32,
+}
+
+impl Default for LossWeights {
+    fn default() -> Self {
+        Self { gcfm: 2.0, content: 1e-3, tv: 0.02, opacity: 1.0, scale: 1.0, rotation: 1.0, depth: 10.0 }
+    }
+}
+
+/// Learning rates per parameter group.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct LearningRates {
+    /// SH DC coefficients (colour phase).
+    pub color: f32,
+    /// Means, as a factor of the scene extent (lr = factor · extent).
+    pub means_per_extent: f32,
+    /// Log-scales.
+    pub scales: f32,
+    /// Quaternions.
+    pub quats: f32,
+    /// Opacity logits.
+    pub opacity: f32,
+}
+
+impl Default for LearningRates {
+    fn default() -> Self {
+        Self { color: 0.01, means_per_extent: 1e-4, scales: 0.005, quats: 0.001, opacity: 0.05 }
+    }
+}
+
+/// Everything that defines one stylization run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct StyleConfig {
+    /// Number of cycles `K`.
+    pub cycles: u32,
+    /// Steps per cycle `N_c + N_g`.
+    pub steps_per_cycle: u32,
+    /// Geometry share of each cycle, `N_g / (N_c + N_g)`.
+    pub ratio_geo: f32,
+    /// Decoupled (default) or an ablation.
+    pub mode: Mode,
+    /// Loss weights.
+    pub weights: LossWeights,
+    /// Learning rates.
+    pub lr: LearningRates,
+    /// Adam hyper-parameters.
+    pub adam: AdamConfig,
+    /// Texture scale: the style image's height in pixels (128 / 256 / 512 = 0.5× / 1× / 2×).
+    pub texture_scale: u32,
+    /// Working resolution: the longer side of the optimisation renders, in pixels.
+    pub resolution: u32,
+    /// Background colour of the renders.
+    pub background: [f32; 3],
+    /// Style depth polarity.
+    pub depth_polarity: DepthPolarity,
+    /// Seed of the view shuffling.
+    pub seed: u64,
+}
+
+impl Default for StyleConfig {
+    fn default() -> Self {
+        Self {
+            cycles: 30,
+            steps_per_cycle: 100,
+            ratio_geo: 0.9,
+            mode: Mode::Decoupled,
+            weights: LossWeights::default(),
+            lr: LearningRates::default(),
+            adam: AdamConfig::default(),
+            texture_scale: 256,
+            resolution: 256,
+            background: [0.0; 3],
+            depth_polarity: DepthPolarity::NearBright,
+            seed: 0,
+        }
+    }
+}
+
+impl StyleConfig {
+    /// The step plan this configuration implies.
+    pub fn schedule(&self) -> Schedule {
+        Schedule::from_ratio(self.cycles, self.steps_per_cycle, self.ratio_geo, self.mode)
+    }
+
+    /// Reads a preset (JSON; missing fields take their defaults).
+    pub fn from_json(text: &str) -> Result<Self, serde_json::Error> {
+        serde_json::from_str(text)
+    }
+
+    /// The preset as pretty JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).unwrap_or_default()
+    }
+
+    /// Problems that make the configuration unusable, as sentences (empty when fine).
+    pub fn problems(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if self.steps_per_cycle == 0 || self.cycles == 0 {
+            out.push(format!("cycles and steps per cycle must be positive (found {} and {})", self.cycles, self.steps_per_cycle));
+        }
+        if !(0.0..=1.0).contains(&self.ratio_geo) {
+            out.push(format!("ratio_geo must lie in [0, 1], found {}", self.ratio_geo));
+        }
+        if !(16..=4096).contains(&self.texture_scale) {
+            out.push(format!("texture_scale must lie in 16..=4096 pixels, found {}", self.texture_scale));
+        }
+        if !(16..=4096).contains(&self.resolution) {
+            out.push(format!("resolution must lie in 16..=4096 pixels, found {}", self.resolution));
+        }
+        let w = self.weights;
+        let lr = self.lr;
+        for (name, v) in [
+            ("weights.gcfm", w.gcfm),
+            ("weights.content", w.content),
+            ("weights.tv", w.tv),
+            ("weights.opacity", w.opacity),
+            ("weights.scale", w.scale),
+            ("weights.rotation", w.rotation),
+            ("weights.depth", w.depth),
+            ("lr.color", lr.color),
+            ("lr.means_per_extent", lr.means_per_extent),
+            ("lr.scales", lr.scales),
+            ("lr.quats", lr.quats),
+            ("lr.opacity", lr.opacity),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                out.push(format!("{name} must be a finite non-negative number, found {v}"));
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_follow_the_algorithm() {
+        let c = StyleConfig::default();
+        let s = c.schedule();
+        assert_eq!((s.cycles, s.color_steps, s.geometry_steps), (30, 10, 90));
+        assert_eq!(c.weights.gcfm, 2.0);
+        assert_eq!(c.weights.depth, 10.0);
+        assert_eq!(c.lr.opacity, 0.05);
+        assert!(c.problems().is_empty());
+    }
+
+    #[test]
+    fn presets_round_trip_and_fill_defaults() {
+        let mut c = StyleConfig::default();
+        c.mode = Mode::Joint;
+        c.weights.tv = 0.5;
+        assert_eq!(StyleConfig::from_json(&c.to_json()).expect("parse"), c);
+        let partial = StyleConfig::from_json(r#"{"cycles": 3, "weights": {"gcfm": 1.5}}"#).expect("parse");
+        assert_eq!(partial.cycles, 3);
+        assert_eq!(partial.weights.gcfm, 1.5);
+        assert_eq!(partial.weights.depth, 10.0);
+        assert!(StyleConfig::from_json(r#"{"mode": "sideways"}"#).is_err());
+        let bad = StyleConfig { ratio_geo: 2.0, ..StyleConfig::default() };
+        assert_eq!(bad.problems().len(), 1);
+    }
+}
