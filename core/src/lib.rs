@@ -6,9 +6,11 @@
 //! the losses and the decoupled colour/geometry optimisation.
 
 pub mod camera;
+pub mod golden;
 pub mod io;
 pub mod raster;
 pub mod scene;
+pub mod session;
 pub mod style;
 
 pub use camera::Camera;

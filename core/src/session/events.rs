@@ -1,0 +1,121 @@
+//! The small typed messages between a running session and its front end.
+//!
+//! Commands go in (pause, resume, stop, new parameters), events come out (one
+//! per step, plus stage changes, warnings and the end). Both are small; the
+//! Gaussians themselves travel through the snapshot [`Slot`](super::Slot).
+
+use serde::{Deserialize, Serialize};
+
+use crate::style::{Phase, StyleConfig};
+
+/// What a front end asks of a running session; applied between steps.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Command {
+    /// Stop stepping until `Resume`.
+    Pause,
+    /// Continue after `Pause`.
+    Resume,
+    /// End the run after the current step (the result so far is kept).
+    Stop,
+    /// Use new parameters from the next step on (weights, rates, ratio, cycles, mode).
+    SetConfig(Box<StyleConfig>),
+}
+
+/// Each loss term of a step, unweighted, and the weighted total.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LossTerms {
+    /// Weighted sum of all terms of the step.
+    pub total: f32,
+    /// GCFM (contrastive feature matching).
+    pub gcfm: f32,
+    /// Content feature loss.
+    pub content: f32,
+    /// Total variation.
+    pub tv: f32,
+    /// ‖o − o^c‖₂ (geometry steps).
+    pub reg_opacity: f32,
+    /// ‖s − s^c‖₂ (geometry steps).
+    pub reg_scale: f32,
+    /// ‖q − q^c‖₂ (geometry steps).
+    pub reg_rotation: f32,
+    /// mean|D − D^c| (geometry steps).
+    pub depth: f32,
+}
+
+/// Time spent in each part of a step, in milliseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StepTimings {
+    /// Rasterizer forward.
+    pub render_ms: f32,
+    /// Edge map, downscale, VGG forward of the rendered maps.
+    pub features_ms: f32,
+    /// Nearest/farthest matching and the feature-space losses.
+    pub matching_ms: f32,
+    /// VGG backward of the rendered maps.
+    pub vgg_backward_ms: f32,
+    /// Rasterizer backward.
+    pub raster_backward_ms: f32,
+    /// Regularisers and Adam.
+    pub update_ms: f32,
+}
+
+/// One optimisation step's report.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepReport {
+    /// Step index from 0.
+    pub iter: u32,
+    /// Total steps of the run.
+    pub total: u32,
+    /// Cycle index from 0.
+    pub cycle: u32,
+    /// Phase of the step.
+    pub phase: Phase,
+    /// The view used.
+    pub view: u32,
+    /// Loss terms.
+    pub losses: LossTerms,
+    /// Where the time went.
+    pub timings: StepTimings,
+    /// Seconds since the optimisation started (pauses excluded).
+    pub elapsed_s: f64,
+}
+
+/// What a running session reports.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Event {
+    /// A preparation stage finished (`name`, seconds it took).
+    Stage {
+        /// Stage name (colour matching, style features, culling, …).
+        name: String,
+        /// Seconds.
+        seconds: f64,
+    },
+    /// Gaussians that no optimisation camera sees were set aside (kept in the export).
+    Culled {
+        /// Gaussians in the scene.
+        total: usize,
+        /// Gaussians being optimised.
+        kept: usize,
+    },
+    /// One step done.
+    Step(StepReport),
+    /// Something the user should know that does not stop the run.
+    Warning(String),
+    /// The run is paused.
+    Paused,
+    /// The run resumed.
+    Resumed,
+    /// New parameters were taken.
+    ConfigApplied,
+    /// The run ended: all steps done (`completed`) or stopped early.
+    Finished {
+        /// Whether every scheduled step ran.
+        completed: bool,
+        /// Steps run.
+        steps: u32,
+        /// Seconds of optimisation.
+        seconds: f64,
+    },
+    /// The run could not continue.
+    Failed(String),
+}

@@ -1,0 +1,21 @@
+//! One stylization run: configuration in, events and snapshots out.
+//!
+//! A front end (the studio's worker thread or the CLI) drives a session; the
+//! session never drives a viewer. Small [`Event`]s go out on a crossbeam channel,
+//! the newest Gaussians go into a latest-value [`Slot`], and [`Command`]s come in
+//! between steps.
+
+mod events;
+mod slot;
+
+pub use events::{Command, Event, LossTerms, StepReport, StepTimings};
+pub use slot::Slot;
+
+/// The newest state of the Gaussians, for viewers and exports.
+#[derive(Clone, Debug)]
+pub struct Snapshot {
+    /// Steps done when the snapshot was taken.
+    pub step: u32,
+    /// The whole scene (Gaussians set aside by culling included).
+    pub gaussians: crate::Gaussians,
+}
