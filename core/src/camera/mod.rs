@@ -213,8 +213,7 @@ pub fn load(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
 const EXPECTED: &str = "sparse/0/{cameras,images}.{bin,txt}, cameras.json or transforms*.json";
 
 fn load_dir(dir: &Path) -> Result<CameraSet, CameraError> {
-    for sub in ["sparse/0", "sparse", "."] {
-        let d = dir.join(sub);
+    for d in [dir.join("sparse/0"), dir.join("sparse"), dir.to_path_buf()] {
         if colmap::has_colmap_files(&d) {
             return load_colmap(&d);
         }

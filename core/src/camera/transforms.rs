@@ -182,9 +182,9 @@ fn image_size(path: &Path, base: &Path, record: &str, file: Option<&str>) -> Res
         CameraError::format(path, record, "an image size (w and h) or a file_path to read it from", "neither")
     })?;
     let direct = base.join(file);
-    let candidates = std::iter::once(direct.clone())
+    let mut candidates = std::iter::once(direct.clone())
         .chain(["png", "jpg", "jpeg", "webp", "PNG", "JPG", "JPEG"].iter().map(|e| PathBuf::from(format!("{}.{e}", direct.display()))));
-    let found = candidates.filter(|p| p.is_file()).next().ok_or_else(|| CameraError::NotFound {
+    let found = candidates.find(|p| p.is_file()).ok_or_else(|| CameraError::NotFound {
         path: direct.clone(),
         expected: format!(
             "the image of {record} (file_path {file:?}, with or without .png/.jpg/.webp) to read its size, since the json gives no w and h"
