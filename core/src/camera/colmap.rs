@@ -8,13 +8,11 @@
 //! corrupt count fails at once instead of exhausting memory.
 
 use std::collections::BTreeMap;
-use std::fs::File;
-use std::io::{BufReader, Read};
 use std::path::{Path, PathBuf};
 
 use glam::{DMat3, DQuat, Vec3};
 
-use super::{Camera, CameraError, CameraSet};
+use super::{Camera, CameraError, CameraSet, colmap_bin};
 
 /// How a model's first parameters map to the pinhole intrinsics.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -37,44 +35,57 @@ pub(crate) struct Model {
 /// Every model COLMAP defines (`colmap/sensor/models.h`). The first two are
 /// pure pinholes; the others carry distortion, which is ignored with a warning.
 pub(crate) const MODELS: [Model; 12] = [
-    Model { id: 0, name: "SIMPLE_PINHOLE", params: 3, focal: Focal::Single },
-    Model { id: 1, name: "PINHOLE", params: 4, focal: Focal::Pair },
-    Model { id: 2, name: "SIMPLE_RADIAL", params: 4, focal: Focal::Single },
-    Model { id: 3, name: "RADIAL", params: 5, focal: Focal::Single },
-    Model { id: 4, name: "OPENCV", params: 8, focal: Focal::Pair },
-    Model { id: 5, name: "OPENCV_FISHEYE", params: 8, focal: Focal::Pair },
-    Model { id: 6, name: "FULL_OPENCV", params: 12, focal: Focal::Pair },
-    Model { id: 7, name: "FOV", params: 5, focal: Focal::Pair },
-    Model { id: 8, name: "SIMPLE_RADIAL_FISHEYE", params: 4, focal: Focal::Single },
-    Model { id: 9, name: "RADIAL_FISHEYE", params: 5, focal: Focal::Single },
-    Model { id: 10, name: "THIN_PRISM_FISHEYE", params: 12, focal: Focal::Pair },
-    Model { id: 11, name: "RAD_TAN_THIN_PRISM_FISHEYE", params: 16, focal: Focal::Pair },
+    model(0, "SIMPLE_PINHOLE", 3, Focal::Single),
+    model(1, "PINHOLE", 4, Focal::Pair),
+    model(2, "SIMPLE_RADIAL", 4, Focal::Single),
+    model(3, "RADIAL", 5, Focal::Single),
+    model(4, "OPENCV", 8, Focal::Pair),
+    model(5, "OPENCV_FISHEYE", 8, Focal::Pair),
+    model(6, "FULL_OPENCV", 12, Focal::Pair),
+    model(7, "FOV", 5, Focal::Pair),
+    model(8, "SIMPLE_RADIAL_FISHEYE", 4, Focal::Single),
+    model(9, "RADIAL_FISHEYE", 5, Focal::Single),
+    model(10, "THIN_PRISM_FISHEYE", 12, Focal::Pair),
+    model(11, "RAD_TAN_THIN_PRISM_FISHEYE", 16, Focal::Pair),
 ];
 
-fn known_models() -> String {
+const fn model(id: i32, name: &'static str, params: usize, focal: Focal) -> Model {
+    Model {
+        id,
+        name,
+        params,
+        focal,
+    }
+}
+
+pub(crate) fn known_models() -> String {
     MODELS.iter().map(|m| m.name).collect::<Vec<_>>().join(", ")
 }
 
 /// One record of `cameras.{bin,txt}`.
-struct ColmapCamera {
-    model: &'static Model,
-    width: u32,
-    height: u32,
-    params: Vec<f64>,
+pub(crate) struct ColmapCamera {
+    pub model: &'static Model,
+    pub width: u32,
+    pub height: u32,
+    pub params: Vec<f64>,
 }
 
 /// One record of `images.{bin,txt}`.
-struct ColmapImage {
-    id: u32,
-    qvec: [f64; 4],
-    tvec: [f64; 3],
-    camera_id: u32,
-    name: String,
+pub(crate) struct ColmapImage {
+    pub id: u32,
+    pub qvec: [f64; 4],
+    pub tvec: [f64; 3],
+    pub camera_id: u32,
+    pub name: String,
 }
 
 /// Whether `dir` holds a COLMAP model (`cameras` and `images`, bin or txt).
 pub(crate) fn has_colmap_files(dir: &Path) -> bool {
-    let any = |stem: &str| ["bin", "txt"].iter().any(|e| dir.join(format!("{stem}.{e}")).is_file());
+    let any = |stem: &str| {
+        ["bin", "txt"]
+            .iter()
+            .any(|e| dir.join(format!("{stem}.{e}")).is_file())
+    };
     any("cameras") && any("images")
 }
 
@@ -86,7 +97,10 @@ pub fn load_colmap(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
     let path = path.as_ref();
     let (dir, prefer) = if path.is_file() {
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("bin");
-        (path.parent().unwrap_or(Path::new(".")).to_path_buf(), if ext == "txt" { "txt" } else { "bin" })
+        (
+            path.parent().unwrap_or(Path::new(".")).to_path_buf(),
+            if ext == "txt" { "txt" } else { "bin" },
+        )
     } else if path.join("sparse/0").is_dir() {
         (path.join("sparse/0"), "bin")
     } else {
@@ -94,8 +108,16 @@ pub fn load_colmap(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
     };
     let cameras_path = pick(&dir, "cameras", prefer)?;
     let images_path = pick(&dir, "images", prefer)?;
-    let cams = if is_bin(&cameras_path) { read_cameras_bin(&cameras_path)? } else { read_cameras_txt(&cameras_path)? };
-    let images = if is_bin(&images_path) { read_images_bin(&images_path)? } else { read_images_txt(&images_path)? };
+    let cams = if is_bin(&cameras_path) {
+        colmap_bin::read_cameras_bin(&cameras_path)?
+    } else {
+        read_cameras_txt(&cameras_path)?
+    };
+    let images = if is_bin(&images_path) {
+        colmap_bin::read_images_bin(&images_path)?
+    } else {
+        read_images_txt(&images_path)?
+    };
     assemble(&cameras_path, &images_path, &cams, images)
 }
 
@@ -109,7 +131,10 @@ fn pick(dir: &Path, stem: &str, prefer: &str) -> Result<PathBuf, CameraError> {
         .iter()
         .map(|e| dir.join(format!("{stem}.{e}")))
         .find(|p| p.is_file())
-        .ok_or_else(|| CameraError::NotFound { path: dir.to_path_buf(), expected: format!("{stem}.bin or {stem}.txt") })
+        .ok_or_else(|| CameraError::NotFound {
+            path: dir.to_path_buf(),
+            expected: format!("{stem}.bin or {stem}.txt"),
+        })
 }
 
 fn assemble(
@@ -119,7 +144,12 @@ fn assemble(
     mut images: Vec<ColmapImage>,
 ) -> Result<CameraSet, CameraError> {
     if images.is_empty() {
-        return Err(CameraError::format(images_path, "images", "at least one registered image", "none"));
+        return Err(CameraError::format(
+            images_path,
+            "images",
+            "at least one registered image",
+            "none",
+        ));
     }
     let mut warnings = Vec::new();
     for (id, c) in cams {
@@ -168,33 +198,57 @@ fn assemble(
 fn check_camera(path: &Path, id: u32, c: &ColmapCamera) -> Result<(), CameraError> {
     let rec = |f: &str| format!("camera {id}.{f}");
     if c.width == 0 || c.height == 0 {
-        return Err(CameraError::format(path, rec("size"), "a positive width and height", format!("{}x{}", c.width, c.height)));
+        return Err(CameraError::format(
+            path,
+            rec("size"),
+            "a positive width and height",
+            format!("{}x{}", c.width, c.height),
+        ));
     }
     let n_focal = if c.model.focal == Focal::Single { 1 } else { 2 };
     for (i, v) in c.params.iter().enumerate() {
         let bad = !v.is_finite() || (i < n_focal && *v <= 0.0);
         if bad {
-            let what = if i < n_focal { "a positive finite focal length" } else { "a finite number" };
-            return Err(CameraError::format(path, rec(&format!("params[{i}]")), what, v.to_string()));
+            let what = if i < n_focal {
+                "a positive finite focal length"
+            } else {
+                "a finite number"
+            };
+            return Err(CameraError::format(
+                path,
+                rec(&format!("params[{i}]")),
+                what,
+                v.to_string(),
+            ));
         }
     }
     Ok(())
 }
 
 /// Checks an image record's pose, shared by the text and binary readers.
-fn check_image(path: &Path, im: &ColmapImage) -> Result<(), CameraError> {
+pub(crate) fn check_image(path: &Path, im: &ColmapImage) -> Result<(), CameraError> {
     let rec = |f: &str| format!("image {} ({}).{f}", im.id, im.name);
     let norm2: f64 = im.qvec.iter().map(|v| v * v).sum();
     if !(norm2.is_finite() && norm2 > 1e-12) {
-        return Err(CameraError::format(path, rec("qvec"), "a finite non-zero quaternion", format!("{:?}", im.qvec)));
+        return Err(CameraError::format(
+            path,
+            rec("qvec"),
+            "a finite non-zero quaternion",
+            format!("{:?}", im.qvec),
+        ));
     }
     if im.tvec.iter().any(|v| !v.is_finite()) {
-        return Err(CameraError::format(path, rec("tvec"), "finite numbers", format!("{:?}", im.tvec)));
+        return Err(CameraError::format(
+            path,
+            rec("tvec"),
+            "finite numbers",
+            format!("{:?}", im.tvec),
+        ));
     }
     Ok(())
 }
 
-fn insert_camera(
+pub(crate) fn insert_camera(
     path: &Path,
     map: &mut BTreeMap<u32, ColmapCamera>,
     id: u32,
@@ -202,7 +256,12 @@ fn insert_camera(
 ) -> Result<(), CameraError> {
     check_camera(path, id, &cam)?;
     if map.insert(id, cam).is_some() {
-        return Err(CameraError::format(path, format!("camera {id}"), "unique camera ids", "a duplicate"));
+        return Err(CameraError::format(
+            path,
+            format!("camera {id}"),
+            "unique camera ids",
+            "a duplicate",
+        ));
     }
     Ok(())
 }
@@ -213,9 +272,15 @@ fn read_text(path: &Path) -> Result<String, CameraError> {
     std::fs::read_to_string(path).map_err(|e| CameraError::io(path, e))
 }
 
-fn parse<T: std::str::FromStr>(path: &Path, record: &str, tok: Option<&str>, what: &str) -> Result<T, CameraError> {
+fn parse<T: std::str::FromStr>(
+    path: &Path,
+    record: &str,
+    tok: Option<&str>,
+    what: &str,
+) -> Result<T, CameraError> {
     let tok = tok.ok_or_else(|| CameraError::format(path, record, what, "end of line"))?;
-    tok.parse().map_err(|_| CameraError::format(path, record, what, format!("{tok:?}")))
+    tok.parse()
+        .map_err(|_| CameraError::format(path, record, what, format!("{tok:?}")))
 }
 
 fn read_cameras_txt(path: &Path) -> Result<BTreeMap<u32, ColmapCamera>, CameraError> {
@@ -228,14 +293,22 @@ fn read_cameras_txt(path: &Path) -> Result<BTreeMap<u32, ColmapCamera>, CameraEr
         }
         let rec = format!("line {}", n + 1);
         let mut t = line.split_whitespace();
-        let id: u32 = parse(path, &format!("{rec}.CAMERA_ID"), t.next(), "an unsigned 32-bit camera id")?;
+        let id: u32 = parse(
+            path,
+            &format!("{rec}.CAMERA_ID"),
+            t.next(),
+            "an unsigned 32-bit camera id",
+        )?;
         let model_name = t.next().unwrap_or("");
-        let model = MODELS.iter().find(|m| m.name == model_name).ok_or_else(|| CameraError::UnknownModel {
-            path: path.to_path_buf(),
-            camera_id: id.into(),
-            model: model_name.into(),
-            known: known_models(),
-        })?;
+        let model = MODELS
+            .iter()
+            .find(|m| m.name == model_name)
+            .ok_or_else(|| CameraError::UnknownModel {
+                path: path.to_path_buf(),
+                camera_id: id.into(),
+                model: model_name.into(),
+                known: known_models(),
+            })?;
         let width: u32 = parse(path, &format!("{rec}.WIDTH"), t.next(), "a pixel width")?;
         let height: u32 = parse(path, &format!("{rec}.HEIGHT"), t.next(), "a pixel height")?;
         let params: Vec<&str> = t.collect();
@@ -250,9 +323,26 @@ fn read_cameras_txt(path: &Path) -> Result<BTreeMap<u32, ColmapCamera>, CameraEr
         let params = params
             .iter()
             .enumerate()
-            .map(|(i, s)| parse(path, &format!("{rec} (camera {id}).PARAMS[{i}]"), Some(s), "a number"))
+            .map(|(i, s)| {
+                parse(
+                    path,
+                    &format!("{rec} (camera {id}).PARAMS[{i}]"),
+                    Some(s),
+                    "a number",
+                )
+            })
             .collect::<Result<Vec<f64>, _>>()?;
-        insert_camera(path, &mut map, id, ColmapCamera { model, width, height, params })?;
+        insert_camera(
+            path,
+            &mut map,
+            id,
+            ColmapCamera {
+                model,
+                width,
+                height,
+                params,
+            },
+        )?;
     }
     Ok(map)
 }
@@ -277,191 +367,47 @@ fn read_images_txt(path: &Path) -> Result<Vec<ColmapImage>, CameraError> {
             ));
         }
         let field = |name: &str| format!("{rec}.{name}");
-        let id: u32 = parse(path, &field("IMAGE_ID"), Some(toks[0]), "an unsigned 32-bit image id")?;
+        let id: u32 = parse(
+            path,
+            &field("IMAGE_ID"),
+            Some(toks[0]),
+            "an unsigned 32-bit image id",
+        )?;
         let mut q = [0.0; 4];
         for (i, v) in q.iter_mut().enumerate() {
-            *v = parse(path, &field(&format!("QVEC[{i}]")), Some(toks[1 + i]), "a number")?;
+            *v = parse(
+                path,
+                &field(&format!("QVEC[{i}]")),
+                Some(toks[1 + i]),
+                "a number",
+            )?;
         }
         let mut tv = [0.0; 3];
         for (i, v) in tv.iter_mut().enumerate() {
-            *v = parse(path, &field(&format!("TVEC[{i}]")), Some(toks[5 + i]), "a number")?;
+            *v = parse(
+                path,
+                &field(&format!("TVEC[{i}]")),
+                Some(toks[5 + i]),
+                "a number",
+            )?;
         }
-        let camera_id: u32 = parse(path, &field("CAMERA_ID"), Some(toks[8]), "an unsigned 32-bit camera id")?;
-        let im = ColmapImage { id, qvec: q, tvec: tv, camera_id, name: toks[9..].join(" ") };
+        let camera_id: u32 = parse(
+            path,
+            &field("CAMERA_ID"),
+            Some(toks[8]),
+            "an unsigned 32-bit camera id",
+        )?;
+        let im = ColmapImage {
+            id,
+            qvec: q,
+            tvec: tv,
+            camera_id,
+            name: toks[9..].join(" "),
+        };
         check_image(path, &im)?;
         images.push(im);
         // The next line lists the image's 2D points (possibly empty): skip it.
         lines.next();
     }
     Ok(images)
-}
-
-// ---------------------------------------------------------------- binary
-
-/// A little-endian reader that knows the file length, so every read and
-/// every count is checked against the bytes that are really there.
-struct BinReader {
-    path: PathBuf,
-    inner: BufReader<File>,
-    pos: u64,
-    len: u64,
-}
-
-impl BinReader {
-    fn open(path: &Path) -> Result<Self, CameraError> {
-        let file = File::open(path).map_err(|e| CameraError::io(path, e))?;
-        let len = file.metadata().map_err(|e| CameraError::io(path, e))?.len();
-        Ok(Self { path: path.to_path_buf(), inner: BufReader::new(file), pos: 0, len })
-    }
-
-    fn remaining(&self) -> u64 {
-        self.len - self.pos
-    }
-
-    fn need(&self, n: u64, record: &str) -> Result<(), CameraError> {
-        if n > self.remaining() {
-            return Err(CameraError::Truncated {
-                path: self.path.clone(),
-                record: record.into(),
-                offset: self.pos,
-                needed: n,
-                available: self.remaining(),
-            });
-        }
-        Ok(())
-    }
-
-    fn bytes<const N: usize>(&mut self, record: &str) -> Result<[u8; N], CameraError> {
-        self.need(N as u64, record)?;
-        let mut b = [0u8; N];
-        self.inner.read_exact(&mut b).map_err(|e| CameraError::io(&self.path, e))?;
-        self.pos += N as u64;
-        Ok(b)
-    }
-
-    fn u32(&mut self, record: &str) -> Result<u32, CameraError> {
-        self.bytes(record).map(u32::from_le_bytes)
-    }
-
-    fn i32(&mut self, record: &str) -> Result<i32, CameraError> {
-        self.bytes(record).map(i32::from_le_bytes)
-    }
-
-    fn u64(&mut self, record: &str) -> Result<u64, CameraError> {
-        self.bytes(record).map(u64::from_le_bytes)
-    }
-
-    fn f64(&mut self, record: &str) -> Result<f64, CameraError> {
-        self.bytes(record).map(f64::from_le_bytes)
-    }
-
-    fn skip(&mut self, n: u64, record: &str) -> Result<(), CameraError> {
-        self.need(n, record)?;
-        let by = i64::try_from(n).map_err(|_| CameraError::format(&self.path, record, "a skippable size", n.to_string()))?;
-        self.inner.seek_relative(by).map_err(|e| CameraError::io(&self.path, e))?;
-        self.pos += n;
-        Ok(())
-    }
-
-    /// A NUL-terminated string, bounded by the file.
-    fn cstr(&mut self, record: &str) -> Result<String, CameraError> {
-        let mut out = Vec::new();
-        loop {
-            let [b] = self.bytes::<1>(record)?;
-            if b == 0 {
-                return Ok(String::from_utf8_lossy(&out).into_owned());
-            }
-            out.push(b);
-        }
-    }
-
-    /// A record count, rejected when even minimal records would not fit.
-    fn count(&mut self, record: &str, min_record_bytes: u64) -> Result<u64, CameraError> {
-        let n = self.u64(record)?;
-        let fits = n.checked_mul(min_record_bytes).is_some_and(|b| b <= self.remaining());
-        if !fits {
-            return Err(CameraError::format(
-                &self.path,
-                record,
-                format!("a count whose records fit in the {} bytes left (at least {min_record_bytes} bytes each)", self.remaining()),
-                n.to_string(),
-            ));
-        }
-        Ok(n)
-    }
-
-    fn u32_of_u64(&mut self, record: &str) -> Result<u32, CameraError> {
-        let v = self.u64(record)?;
-        u32::try_from(v).map_err(|_| CameraError::format(&self.path, record, "a value below 2^32", v.to_string()))
-    }
-}
-
-fn read_cameras_bin(path: &Path) -> Result<BTreeMap<u32, ColmapCamera>, CameraError> {
-    let mut r = BinReader::open(path)?;
-    // camera_id u32, model_id i32, width u64, height u64, then ≥ 3 f64 params.
-    let n = r.count("num_cameras", 4 + 4 + 8 + 8 + 3 * 8)?;
-    let mut map = BTreeMap::new();
-    for k in 0..n {
-        let rec = format!("camera record {k}");
-        let id = r.u32(&rec)?;
-        let rec = format!("camera {id}");
-        let model_id = r.i32(&format!("{rec}.model_id"))?;
-        let model = MODELS.iter().find(|m| m.id == model_id).ok_or_else(|| CameraError::UnknownModel {
-            path: path.to_path_buf(),
-            camera_id: id.into(),
-            model: format!("model id {model_id}"),
-            known: known_models(),
-        })?;
-        let width = r.u32_of_u64(&format!("{rec}.width"))?;
-        let height = r.u32_of_u64(&format!("{rec}.height"))?;
-        let prec = format!("{rec}.params ({} for {})", model.params, model.name);
-        r.need(8 * model.params as u64, &prec)?;
-        let params = (0..model.params).map(|_| r.f64(&prec)).collect::<Result<Vec<_>, _>>()?;
-        insert_camera(path, &mut map, id, ColmapCamera { model, width, height, params })?;
-    }
-    trailing(&r)?;
-    Ok(map)
-}
-
-fn read_images_bin(path: &Path) -> Result<Vec<ColmapImage>, CameraError> {
-    let mut r = BinReader::open(path)?;
-    // image_id u32, qvec 4 f64, tvec 3 f64, camera_id u32, name ≥ 1 byte, num_points2D u64.
-    const MIN_IMAGE: u64 = 4 + 7 * 8 + 4 + 1 + 8;
-    let n = r.count("num_reg_images", MIN_IMAGE)?;
-    let mut images = Vec::with_capacity(n as usize);
-    for k in 0..n {
-        let rec = format!("image record {k}");
-        let id = r.u32(&rec)?;
-        let rec = format!("image {id}");
-        let mut qvec = [0.0; 4];
-        for v in &mut qvec {
-            *v = r.f64(&format!("{rec}.qvec"))?;
-        }
-        let mut tvec = [0.0; 3];
-        for v in &mut tvec {
-            *v = r.f64(&format!("{rec}.tvec"))?;
-        }
-        let camera_id = r.u32(&format!("{rec}.camera_id"))?;
-        let name = r.cstr(&format!("{rec}.name"))?;
-        // x f64, y f64, point3D_id i64 per 2D point.
-        let points = r.count(&format!("{rec} ({name}).num_points2D"), 24)?;
-        r.skip(points * 24, &format!("{rec} ({name}).points2D"))?;
-        let im = ColmapImage { id, qvec, tvec, camera_id, name };
-        check_image(path, &im)?;
-        images.push(im);
-    }
-    trailing(&r)?;
-    Ok(images)
-}
-
-fn trailing(r: &BinReader) -> Result<(), CameraError> {
-    if r.remaining() != 0 {
-        return Err(CameraError::format(
-            &r.path,
-            "end of file",
-            format!("the file to end after the last record at byte {}", r.pos),
-            format!("{} more bytes", r.remaining()),
-        ));
-    }
-    Ok(())
 }

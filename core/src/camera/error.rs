@@ -62,7 +62,9 @@ pub enum CameraError {
         available: u64,
     },
     /// A COLMAP camera model the studio does not know.
-    #[error("{path}: camera {camera_id}: expected a known COLMAP camera model ({known}), found {model}")]
+    #[error(
+        "{path}: camera {camera_id}: expected a known COLMAP camera model ({known}), found {model}"
+    )]
     UnknownModel {
         /// The file.
         path: PathBuf,
@@ -93,6 +95,9 @@ impl CameraError {
 
     /// Shorthand for [`CameraError::Io`].
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Self::Io { path: path.into(), source }
+        Self::Io {
+            path: path.into(),
+            source,
+        }
     }
 }

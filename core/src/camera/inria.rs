@@ -34,38 +34,69 @@ struct Entry {
 pub fn load_inria(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
     let path = path.as_ref();
     let text = std::fs::read_to_string(path).map_err(|e| CameraError::io(path, e))?;
-    let value = serde_json::from_str(&text)
-        .map_err(|source| CameraError::Json { path: path.to_path_buf(), record: "document".into(), source })?;
+    let value = serde_json::from_str(&text).map_err(|source| CameraError::Json {
+        path: path.to_path_buf(),
+        record: "document".into(),
+        source,
+    })?;
     from_value(path, value)
 }
 
 /// Reads a parsed `cameras.json` document.
 pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<CameraSet, CameraError> {
     let serde_json::Value::Array(items) = value else {
-        return Err(CameraError::format(path, "document", "a list of cameras", super::json_kind(&value)));
+        return Err(CameraError::format(
+            path,
+            "document",
+            "a list of cameras",
+            super::json_kind(&value),
+        ));
     };
     if items.is_empty() {
-        return Err(CameraError::format(path, "document", "at least one camera", "an empty list"));
+        return Err(CameraError::format(
+            path,
+            "document",
+            "at least one camera",
+            "an empty list",
+        ));
     }
     let (mut corrected, mut worst) = (0, 0.0f64);
     let mut cameras = Vec::with_capacity(items.len());
     for (i, item) in items.into_iter().enumerate() {
         let record = format!("cameras[{i}]");
-        let e: Entry = serde_json::from_value(item)
-            .map_err(|source| CameraError::Json { path: path.to_path_buf(), record: record.clone(), source })?;
+        let e: Entry = serde_json::from_value(item).map_err(|source| CameraError::Json {
+            path: path.to_path_buf(),
+            record: record.clone(),
+            source,
+        })?;
         let rec = |f: &str| format!("{record} ({}).{f}", e.img_name);
         if e.width == 0 || e.height == 0 {
             let found = format!("{}x{}", e.width, e.height);
-            return Err(CameraError::format(path, rec("width/height"), "a positive image size", found));
+            return Err(CameraError::format(
+                path,
+                rec("width/height"),
+                "a positive image size",
+                found,
+            ));
         }
         for (name, f) in [("fx", e.fx), ("fy", e.fy)] {
             if !(f.is_finite() && f > 0.0) {
-                return Err(CameraError::format(path, rec(name), "a positive focal length", f.to_string()));
+                return Err(CameraError::format(
+                    path,
+                    rec(name),
+                    "a positive focal length",
+                    f.to_string(),
+                ));
             }
         }
         let center = DVec3::from_array(e.position);
         if !center.is_finite() {
-            return Err(CameraError::format(path, rec("position"), "finite numbers", format!("{:?}", e.position)));
+            return Err(CameraError::format(
+                path,
+                rec("position"),
+                "finite numbers",
+                format!("{:?}", e.position),
+            ));
         }
         // `rotation` is written row by row; glam builds matrices from columns.
         let c2w = DMat3::from_cols_array_2d(&e.rotation).transpose();
@@ -87,6 +118,8 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
             center.as_vec3(),
         ));
     }
-    let warnings = orthonormal_warning(path, corrected, worst).into_iter().collect();
+    let warnings = orthonormal_warning(path, corrected, worst)
+        .into_iter()
+        .collect();
     Ok(CameraSet { cameras, warnings })
 }

@@ -62,7 +62,10 @@ impl Default for OrbitOptions {
             height: 256,
             fov_y_degrees: 50.0,
             up: [0.0, -1.0, 0.0],
-            layout: OrbitLayout::Sphere { min_elevation_degrees: -30.0, max_elevation_degrees: 30.0 },
+            layout: OrbitLayout::Sphere {
+                min_elevation_degrees: -30.0,
+                max_elevation_degrees: 30.0,
+            },
             margin: 1.1,
         }
     }
@@ -94,14 +97,20 @@ impl RobustBounds {
 
     /// Radius of the smallest sphere about `center` that holds the box.
     pub fn radius(&self) -> f32 {
-        self.corners().iter().map(|c| c.distance(self.center)).fold(0.0, f32::max)
+        self.corners()
+            .iter()
+            .map(|c| c.distance(self.center))
+            .fold(0.0, f32::max)
     }
 }
 
 /// The robust bounds of `means` (points with a non-finite coordinate are
 /// ignored), or `None` when no point is finite.
 pub fn robust_bounds(means: &[[f32; 3]]) -> Option<RobustBounds> {
-    let finite: Vec<&[f32; 3]> = means.iter().filter(|p| p.iter().all(|v| v.is_finite())).collect();
+    let finite: Vec<&[f32; 3]> = means
+        .iter()
+        .filter(|p| p.iter().all(|v| v.is_finite()))
+        .collect();
     if finite.is_empty() {
         return None;
     }
@@ -115,7 +124,11 @@ pub fn robust_bounds(means: &[[f32; 3]]) -> Option<RobustBounds> {
             out[slot][a] = *axis.select_nth_unstable_by(k, f32::total_cmp).1;
         }
     }
-    Some(RobustBounds { min: Vec3::from(out[0]), max: Vec3::from(out[1]), center: Vec3::from(out[2]) })
+    Some(RobustBounds {
+        min: Vec3::from(out[0]),
+        max: Vec3::from(out[1]),
+        center: Vec3::from(out[2]),
+    })
 }
 
 /// `count` cameras looking at the robust centre of `means` (see the module
@@ -128,7 +141,11 @@ pub fn orbit_cameras(means: &[[f32; 3]], opts: &OrbitOptions) -> Vec<Camera> {
         Some(b) => (b.center, b.radius()),
         None => (Vec3::ZERO, 1.0),
     };
-    let radius = if radius.is_finite() && radius > 1e-6 { radius } else { 1.0 };
+    let radius = if radius.is_finite() && radius > 1e-6 {
+        radius
+    } else {
+        1.0
+    };
     let (w, h) = (opts.width.max(1), opts.height.max(1));
     let tan_y = (0.5 * opts.fov_y_degrees.to_radians()).tan();
     let tan_x = tan_y * w as f32 / h as f32;
@@ -151,7 +168,10 @@ pub fn orbit_cameras(means: &[[f32; 3]], opts: &OrbitOptions) -> Vec<Camera> {
                     elevation_degrees.to_radians().sin(),
                     std::f32::consts::TAU * i as f32 / opts.count as f32,
                 ),
-                OrbitLayout::Sphere { min_elevation_degrees: lo, max_elevation_degrees: hi } => {
+                OrbitLayout::Sphere {
+                    min_elevation_degrees: lo,
+                    max_elevation_degrees: hi,
+                } => {
                     let s = (i as f32 + 0.5) / opts.count as f32;
                     let (lo, hi) = (lo.to_radians().sin(), hi.to_radians().sin());
                     (lo + (hi - lo) * s, golden * i as f32)
@@ -160,7 +180,15 @@ pub fn orbit_cameras(means: &[[f32; 3]], opts: &OrbitOptions) -> Vec<Camera> {
             let cos_el = (1.0 - sin_el * sin_el).max(0.0).sqrt();
             let dir = cos_el * (azimuth.cos() * a + azimuth.sin() * b) + sin_el * up;
             let eye = center + distance * dir;
-            Camera::look_at(format!("orbit_{i:03}"), eye, center, up, w, h, opts.fov_y_degrees)
+            Camera::look_at(
+                format!("orbit_{i:03}"),
+                eye,
+                center,
+                up,
+                w,
+                h,
+                opts.fov_y_degrees,
+            )
         })
         .collect()
 }
