@@ -235,11 +235,11 @@ pub fn load(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
     {
         Some("json") => load_json(path),
         Some("bin" | "txt") => load_colmap(path),
-        _ => Err(CameraError::format(
+        other => Err(CameraError::format(
             path,
             "file name",
             "a .json, .bin or .txt camera file",
-            "another extension",
+            other.map_or("no extension".to_string(), |e| format!("a .{e} file")),
         )),
     }
 }
