@@ -42,7 +42,7 @@ pub struct OrbitOptions {
     pub width: u32,
     /// Image height in pixels.
     pub height: u32,
-    /// Vertical field of view, degrees.
+    /// Vertical field of view, degrees (used within 1°..=170°).
     pub fov_y_degrees: f32,
     /// The scene's up direction in world space. Most 3DGS scenes come from
     /// COLMAP, whose worlds are usually y-down, hence the default `[0, -1, 0]`.
@@ -147,10 +147,20 @@ pub fn orbit_cameras(means: &[[f32; 3]], opts: &OrbitOptions) -> Vec<Camera> {
         1.0
     };
     let (w, h) = (opts.width.max(1), opts.height.max(1));
-    let tan_y = (0.5 * opts.fov_y_degrees.to_radians()).tan();
+    let fov_y = if opts.fov_y_degrees.is_finite() {
+        opts.fov_y_degrees.clamp(1.0, 170.0)
+    } else {
+        50.0
+    };
+    let tan_y = (0.5 * fov_y.to_radians()).tan();
     let tan_x = tan_y * w as f32 / h as f32;
     let half_fov = tan_x.min(tan_y).atan();
-    let distance = opts.margin.max(1.0) * radius / half_fov.sin();
+    let margin = if opts.margin.is_finite() {
+        opts.margin.max(1.0)
+    } else {
+        1.0
+    };
+    let distance = margin * radius / half_fov.sin();
 
     let up = Vec3::from(opts.up).try_normalize().unwrap_or(Vec3::NEG_Y);
     // Azimuth 0 sits on the world's −z side (looking along +z, like an
@@ -180,15 +190,7 @@ pub fn orbit_cameras(means: &[[f32; 3]], opts: &OrbitOptions) -> Vec<Camera> {
             let cos_el = (1.0 - sin_el * sin_el).max(0.0).sqrt();
             let dir = cos_el * (azimuth.cos() * a + azimuth.sin() * b) + sin_el * up;
             let eye = center + distance * dir;
-            Camera::look_at(
-                format!("orbit_{i:03}"),
-                eye,
-                center,
-                up,
-                w,
-                h,
-                opts.fov_y_degrees,
-            )
+            Camera::look_at(format!("orbit_{i:03}"), eye, center, up, w, h, fov_y)
         })
         .collect()
 }

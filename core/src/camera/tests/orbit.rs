@@ -170,3 +170,37 @@ fn orbit_layouts_spread_the_views() {
         .is_empty()
     );
 }
+
+#[test]
+fn orbit_options_serialise_with_defaults() {
+    let o: OrbitOptions =
+        serde_json::from_str(r#"{"count": 8, "layout": {"Ring": {"elevation_degrees": 10.0}}}"#)
+            .expect("partial preset");
+    assert_eq!(o.count, 8);
+    assert_eq!(
+        o.layout,
+        OrbitLayout::Ring {
+            elevation_degrees: 10.0
+        }
+    );
+    assert_eq!(
+        (o.width, o.fov_y_degrees, o.up),
+        (256, 50.0, [0.0, -1.0, 0.0])
+    );
+    let back: OrbitOptions =
+        serde_json::from_str(&serde_json::to_string(&o).expect("serialise")).expect("parse");
+    assert_eq!(back, o);
+    // Out-of-range options still give usable cameras.
+    let odd = OrbitOptions {
+        fov_y_degrees: 0.0,
+        margin: f32::NAN,
+        up: [0.0; 3],
+        count: 3,
+        ..o
+    };
+    for c in orbit_cameras(&cloud(), &odd) {
+        assert!(
+            c.fx.is_finite() && c.fx > 0.0 && c.translation.is_finite() && c.rotation.is_finite()
+        );
+    }
+}
