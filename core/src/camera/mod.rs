@@ -321,7 +321,7 @@ pub(crate) fn json_kind(v: &serde_json::Value) -> &'static str {
     }
 }
 
-/// The rotation nearest (by Gram–Schmidt on the columns) to a pose matrix read
+/// A rotation made from a pose matrix read (Gram–Schmidt on its columns)
 /// from a file, with how far the file's matrix was from it (largest entry
 /// difference). Scaled or sheared poses are corrected, reflections and
 /// non-finite matrices are errors.
@@ -357,7 +357,7 @@ pub(crate) fn rotation_from(
 pub(crate) fn orthonormal_warning(path: &Path, corrected: usize, worst: f64) -> Option<String> {
     (corrected > 0).then(|| {
         format!(
-            "{}: {corrected} camera rotation(s) were not orthonormal (largest entry off by {worst:.2e}) and were replaced by the nearest rotation",
+            "{}: {corrected} camera rotation(s) were not orthonormal (largest entry off by {worst:.2e}) and were re-orthonormalised (Gram–Schmidt on the columns)",
             path.display()
         )
     })
