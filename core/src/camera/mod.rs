@@ -321,7 +321,7 @@ pub(crate) fn json_kind(v: &serde_json::Value) -> &'static str {
     }
 }
 
-/// A rotation made from a pose matrix read (Gram–Schmidt on its columns)
+/// A rotation made (Gram–Schmidt on the columns) from a pose matrix read
 /// from a file, with how far the file's matrix was from it (largest entry
 /// difference). Scaled or sheared poses are corrected, reflections and
 /// non-finite matrices are errors.
