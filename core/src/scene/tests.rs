@@ -1,0 +1,1 @@
+//! Robustness tests of the scene readers on small synthetic files.
