@@ -342,16 +342,19 @@ impl<'a> Body<'a> {
 
     /// A column reader for one property: precomputes the offsets `get` needs.
     pub(crate) fn column(&self, el: usize, prop: usize) -> Column<'_> {
-        let element = &self.header.elements[el.min(self.header.elements.len().saturating_sub(1))];
-        let prop = prop.min(element.props.len().saturating_sub(1));
+        let found = self.header.elements.get(el).and_then(|e| Some((e, e.props.get(prop)?)));
+        let Some((element, p)) = found else {
+            // Not a header index: a column that reads NaN everywhere.
+            return Column { body: self, el, prop, start: usize::MAX, stride: 0, ty: Scalar::F32 };
+        };
         let in_row: usize = element.props[..prop].iter().map(|p| p.ty.size()).sum();
         Column {
             body: self,
             el,
             prop,
-            start: self.offsets.get(el).copied().unwrap_or(0) + in_row,
+            start: self.offsets.get(el).copied().unwrap_or(usize::MAX).saturating_add(in_row),
             stride: element.row_size(),
-            ty: element.props.get(prop).map_or(Scalar::F32, |p| p.ty),
+            ty: p.ty,
         }
     }
 }
@@ -373,8 +376,8 @@ impl Column<'_> {
         if self.body.header.encoding == Encoding::Ascii {
             return self.body.get(self.el, row, self.prop);
         }
-        let at = self.start + row * self.stride;
-        match self.body.bytes.get(at..at + self.ty.size()) {
+        let at = self.start.saturating_add(row.saturating_mul(self.stride));
+        match self.body.bytes.get(at..at.saturating_add(self.ty.size())) {
             Some(b) => decode(self.ty, b, self.body.header.encoding == Encoding::BinaryBe),
             None => f64::NAN,
         }

@@ -268,8 +268,8 @@ fn decode(path: &Path, lay: &Layout, parts: &[Vec<u8>]) -> Result<Gaussians, Sce
         };
         g.quats.push([w, x, -y, -z]);
         let out = &mut g.sh[i * k * 3..(i + 1) * k * 3];
-        for ch in 0..3 {
-            out[ch] = (byte(colour, i * 3 + ch) as f32 / 255.0 - 0.5) / COLOR_SCALE;
+        for (ch, o) in out[..3].iter_mut().enumerate() {
+            *o = (byte(colour, i * 3 + ch) as f32 / 255.0 - 0.5) / COLOR_SCALE;
         }
         for j in 0..dim {
             for ch in 0..3 {
