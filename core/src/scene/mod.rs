@@ -123,23 +123,31 @@ pub fn load(path: impl AsRef<Path>) -> Result<Gaussians, SceneError> {
         return sog::read_sog(&path.join("meta.json"));
     }
     let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    load_from_bytes(path, &bytes)
+}
+
+/// Decodes a scene file already held in memory, recognising the format as
+/// [`load`] does. `path` names the file in errors; for a SOG `meta.json` the
+/// textures are read from beside it.
+pub fn load_from_bytes(path: impl AsRef<Path>, bytes: &[u8]) -> Result<Gaussians, SceneError> {
+    let path = path.as_ref();
     if bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r\n") {
-        let header = ply_header::parse_header(path, &bytes)?;
+        let header = ply_header::parse_header(path, bytes)?;
         let compressed = header
             .element("vertex")
             .is_some_and(|(_, v)| v.props.iter().any(|p| p.name.starts_with("packed_")));
         return if compressed {
-            compressed_ply::read_compressed_ply(path, &bytes, &header)
+            compressed_ply::read_compressed_ply(path, bytes, &header)
         } else {
-            ply::read_ply_bytes(path, &bytes, &header)
+            ply::read_ply_bytes(path, bytes, &header)
         };
     }
     if bytes.starts_with(&[0x1f, 0x8b]) || bytes.starts_with(b"NGSP") {
-        return spz::read_spz_bytes(path, &bytes);
+        return spz::read_spz_bytes(path, bytes);
     }
     let first = bytes.iter().find(|b| !b.is_ascii_whitespace());
     if first == Some(&b'{') {
-        return sog::read_sog_meta(path, &bytes);
+        return sog::read_sog_meta(path, bytes);
     }
     let ext = path.extension().map(|e| e.to_string_lossy().into_owned()).unwrap_or_default();
     let head: Vec<String> = bytes.iter().take(8).map(|b| format!("{b:02x}")).collect();

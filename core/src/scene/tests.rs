@@ -11,7 +11,7 @@ use super::{Gaussians, SceneError, atomic_write, load, save_ply};
 
 /// The 14 properties of a degree-0 INRIA file, in a non-trainer order, plus
 /// normals and an unknown extra.
-const PROPS: [&str; 14] =
+pub(super) const PROPS: [&str; 14] =
     ["x", "y", "z", "opacity", "f_dc_0", "f_dc_1", "f_dc_2", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"];
 
 fn row(i: usize) -> [f64; 14] {
@@ -38,7 +38,7 @@ fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
 }
 
 /// A binary little-endian file of `n` rows of `row()`, every property float.
-fn binary_le(n: usize) -> Vec<u8> {
+pub(super) fn binary_le(n: usize) -> Vec<u8> {
     let mut b = header("binary_little_endian", n, &float_props()).into_bytes();
     for i in 0..n {
         for v in row(i) {

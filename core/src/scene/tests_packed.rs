@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use super::super::spz::encode_for_test;
 use super::super::test_util::scratch;
-use super::super::{SH_C0, SceneError, load};
+use super::super::{SH_C0, SceneError, load, load_from_bytes};
 use super::{expect_err, write};
 
 // ---------------------------------------------------------------- compressed PLY
@@ -264,4 +264,60 @@ fn sog_broken_inputs() {
     assert!(e.to_string().contains("quats texel 0") && e.to_string().contains("17"), "{e}");
     let e = load(sog_dir("sog_label", 252, 9)).expect_err("bad label");
     assert!(e.to_string().contains("shN_labels texel 1") && e.to_string().contains("below 2"), "{e}");
+}
+
+// ---------------------------------------------------------------- fuzzing
+
+/// Every truncation and a few thousand single-byte corruptions of each
+/// synthetic file either load or fail with an error: none may panic.
+#[test]
+fn truncations_and_corruptions_never_panic() {
+    let dir = scratch("fuzz");
+    let mut ascii = String::from("ply\nformat ascii 1.0\nelement vertex 2\n");
+    for p in super::PROPS {
+        ascii.push_str(&format!("property float {p}\n"));
+    }
+    ascii.push_str("end_header\n0 0 0 0.5 0.1 0.2 0.3 -1 -2 -3 1 0 0 0\n1 1 1 0.5 0.1 0.2 0.3 -1 -2 -3 1 0 0 0\n");
+    let files: Vec<(&str, Vec<u8>)> = vec![
+        ("le.ply", super::binary_le(3)),
+        ("ascii.ply", ascii.into_bytes()),
+        ("c.ply", compressed(1, "uint", 9)),
+        ("v3.spz", encode_for_test(3, 2, 1, &spz_parts())),
+        ("v4.spz", encode_for_test(4, 2, 1, &spz_parts())),
+    ];
+    let mut state = 0x2545_f491_4f6c_dd1d_u64;
+    let mut rand = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let mut outcomes = [0usize; 2];
+    let mut try_load = |p: &Path, b: &[u8]| outcomes[load_from_bytes(p, b).is_ok() as usize] += 1;
+    for (name, bytes) in &files {
+        let p = dir.join(name);
+        for len in 0..bytes.len() {
+            try_load(&p, &bytes[..len]);
+        }
+        for _ in 0..1000 {
+            let mut b = bytes.clone();
+            for _ in 0..1 + rand() % 3 {
+                let at = (rand() as usize) % b.len();
+                b[at] = rand() as u8;
+            }
+            try_load(&p, &b);
+        }
+    }
+    let sog = sog_dir("fuzz_sog", 252, 0);
+    let meta_path = sog.join("meta.json");
+    let meta = std::fs::read(&meta_path).expect("meta");
+    for len in (0..meta.len()).step_by(5) {
+        try_load(&meta_path, &meta[..len]);
+    }
+    let quats = std::fs::read(sog.join("quats.webp")).expect("quats");
+    for len in 0..quats.len() {
+        std::fs::write(sog.join("quats.webp"), &quats[..len]).expect("write");
+        try_load(&meta_path, &meta);
+    }
+    eprintln!("fuzz: {} errors, {} loads", outcomes[0], outcomes[1]);
 }
