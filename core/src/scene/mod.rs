@@ -9,7 +9,7 @@
 //! [`load`] recognises a file by its contents, not its name: a PLY header with
 //! `packed_*` properties is PlayCanvas's compressed PLY, any other PLY is
 //! INRIA's, gzip or `NGSP` bytes are Niantic's `.spz`, and a directory or a
-//! `meta.json` is PlayCanvas's SOG. Every reader checks counts against the
+//! `meta.json` or a zip archive is PlayCanvas's SOG. Every reader checks counts against the
 //! bytes that are really there before allocating, and every decoded scene is
 //! validated (finite values, non-zero quaternions) before it is returned.
 
@@ -116,7 +116,8 @@ impl Gaussians {
 
 /// Reads a scene, recognising the format from the contents: INRIA `.ply`
 /// (ASCII or binary), PlayCanvas compressed `.ply`, Niantic `.spz` (gzip v2/v3
-/// or zstd v4), or a PlayCanvas SOG directory (or its `meta.json`).
+/// or zstd v4), or a PlayCanvas SOG directory, its `meta.json`, or a `.sog`
+/// zip bundle.
 pub fn load(path: impl AsRef<Path>) -> Result<Gaussians, SceneError> {
     let path = path.as_ref();
     if path.is_dir() {
@@ -145,6 +146,9 @@ pub fn load_from_bytes(path: impl AsRef<Path>, bytes: &[u8]) -> Result<Gaussians
     if bytes.starts_with(&[0x1f, 0x8b]) || bytes.starts_with(b"NGSP") {
         return spz::read_spz_bytes(path, bytes);
     }
+    if bytes.starts_with(b"PK\x03\x04") {
+        return sog::read_sog_zip(path, bytes);
+    }
     let first = bytes.iter().find(|b| !b.is_ascii_whitespace());
     if first == Some(&b'{') {
         return sog::read_sog_meta(path, bytes);
@@ -153,7 +157,8 @@ pub fn load_from_bytes(path: impl AsRef<Path>, bytes: &[u8]) -> Result<Gaussians
     let head: Vec<String> = bytes.iter().take(8).map(|b| format!("{b:02x}")).collect();
     Err(SceneError::UnknownFormat {
         path: path.to_path_buf(),
-        expected: "INRIA .ply, PlayCanvas compressed .ply, Niantic .spz, or a SOG directory / meta.json".into(),
+        expected: "INRIA .ply, PlayCanvas compressed .ply, Niantic .spz, or SOG (directory, meta.json or .sog bundle)"
+            .into(),
         found: if bytes.is_empty() {
             format!("an empty file (extension {ext:?})")
         } else {

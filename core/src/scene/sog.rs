@@ -15,10 +15,15 @@
 //!   row `p / 64`, columns `(p mod 64)·coeffs + j` for coefficient `j`, with
 //!   R, G, B indexing `shN.codebook`. `shN.bands` (1 to 3) is the SH degree.
 //!
+//! A `.sog` file is the same set of files in one zip archive (entries stored
+//! or deflated), with `meta.json` at its root.
+//!
 //! Quantisation: positions 1/65535 of the log-space range per axis, quaternion
 //! components `2/255/√2`, alpha 1/255, the rest by 256-entry codebooks (and SH
 //! additionally by the palette's k-means clustering).
 
+use std::cell::RefCell;
+use std::io::{Cursor, Read};
 use std::path::{Component, Path, PathBuf};
 
 use serde::Deserialize;
@@ -69,6 +74,59 @@ pub(crate) fn read_sog(meta_path: &Path) -> Result<Gaussians, SceneError> {
     read_sog_meta(meta_path, &bytes)
 }
 
+/// Decodes a SOG scene given the bytes of its `meta.json`; the textures are
+/// read from beside it.
+pub(crate) fn read_sog_meta(path: &Path, bytes: &[u8]) -> Result<Gaussians, SceneError> {
+    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    decode(path, bytes, &Source::Dir(dir))
+}
+
+/// Largest texture or metadata entry read from a bundle (a guard against zip bombs).
+const MAX_ENTRY: u64 = 1 << 30;
+
+/// Reads a `.sog` bundle: a zip archive holding `meta.json` and the textures.
+pub(crate) fn read_sog_zip(path: &Path, bytes: &[u8]) -> Result<Gaussians, SceneError> {
+    let archive = zip::ZipArchive::new(Cursor::new(bytes))
+        .map_err(|e| SceneError::format(path, "zip archive", "a readable .sog zip bundle", e.to_string()))?;
+    let source = Source::Zip { bundle: path.to_path_buf(), archive: RefCell::new(archive) };
+    let (meta_path, meta) = source.read("meta.json")?;
+    decode(&meta_path, &meta, &source)
+}
+
+/// Where the textures come from.
+enum Source<'a> {
+    /// Files in a directory.
+    Dir(PathBuf),
+    /// Entries of a zip bundle.
+    Zip { bundle: PathBuf, archive: RefCell<zip::ZipArchive<Cursor<&'a [u8]>>> },
+}
+
+impl Source<'_> {
+    /// The bytes of `name`, with the path to name in messages.
+    fn read(&self, name: &str) -> Result<(PathBuf, Vec<u8>), SceneError> {
+        match self {
+            Source::Dir(dir) => {
+                let file = dir.join(name);
+                let bytes = std::fs::read(&file).map_err(|e| SceneError::io(&file, e))?;
+                Ok((file, bytes))
+            }
+            Source::Zip { bundle, archive } => {
+                let shown = bundle.join(name);
+                let mut archive = archive.borrow_mut();
+                let entry = archive.by_name(name).map_err(|e| {
+                    SceneError::format(&shown, "zip entry", format!("an entry {name:?}"), e.to_string())
+                })?;
+                let mut out = Vec::new();
+                entry
+                    .take(MAX_ENTRY)
+                    .read_to_end(&mut out)
+                    .map_err(|e| SceneError::format(&shown, "zip entry", "readable data", e.to_string()))?;
+                Ok((shown, out))
+            }
+        }
+    }
+}
+
 /// An RGBA8 texture.
 struct Texture {
     rgba: Vec<u8>,
@@ -91,13 +149,12 @@ fn fmt(path: &Path, what: &str, expected: impl Into<String>, found: impl Into<St
 }
 
 /// Loads `name` (relative to the meta file) as RGBA and checks it holds `need` texels.
-fn texture(meta: &Path, field: &str, name: &str, need: usize) -> Result<Texture, SceneError> {
+fn texture(src: &Source<'_>, meta: &Path, field: &str, name: &str, need: usize) -> Result<Texture, SceneError> {
     let rel = Path::new(name);
     if rel.components().any(|c| !matches!(c, Component::Normal(_))) {
         return Err(fmt(meta, field, "a file name beside meta.json", format!("{name:?}")));
     }
-    let file: PathBuf = meta.parent().unwrap_or(Path::new(".")).join(rel);
-    let bytes = std::fs::read(&file).map_err(|e| SceneError::io(&file, e))?;
+    let (file, bytes) = src.read(name)?;
     let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::WebP)
         .map_err(|e| fmt(&file, field, "a WebP image", format!("undecodable data ({e})")))?
         .to_rgba8();
@@ -135,8 +192,8 @@ fn inv_log(v: f64) -> f32 {
     (if v < 0.0 { -e } else { e }) as f32
 }
 
-/// Decodes a SOG scene given the bytes of its `meta.json`.
-pub(crate) fn read_sog_meta(path: &Path, bytes: &[u8]) -> Result<Gaussians, SceneError> {
+/// Decodes a SOG scene from its `meta.json` bytes and a texture source.
+fn decode(path: &Path, bytes: &[u8], src: &Source<'_>) -> Result<Gaussians, SceneError> {
     let meta: Meta = serde_json::from_slice(bytes)
         .map_err(|e| fmt(path, "meta.json", "SOG metadata (count, means, scales, quats, sh0, shN)", e.to_string()))?;
     match meta.version {
@@ -174,16 +231,16 @@ pub(crate) fn read_sog_meta(path: &Path, bytes: &[u8]) -> Result<Gaussians, Scen
         }
     };
 
-    let lo = texture(path, "means_l", &meta.means.files[0], n)?;
-    let hi = texture(path, "means_u", &meta.means.files[1], n)?;
-    let quats = texture(path, "quats", &meta.quats.files[0], n)?;
-    let scales = texture(path, "scales", &meta.scales.files[0], n)?;
-    let sh0 = texture(path, "sh0", &meta.sh0.files[0], n)?;
+    let lo = texture(src, path, "means_l", &meta.means.files[0], n)?;
+    let hi = texture(src, path, "means_u", &meta.means.files[1], n)?;
+    let quats = texture(src, path, "quats", &meta.quats.files[0], n)?;
+    let scales = texture(src, path, "scales", &meta.scales.files[0], n)?;
+    let sh0 = texture(src, path, "sh0", &meta.sh0.files[0], n)?;
     let k = sh_coeffs_for_degree(degree);
     let palette = match &meta.sh_n {
         Some(s) => {
             let coeffs = k - 1;
-            let centroids = texture(path, "shN_centroids", &s.files[0], 0)?;
+            let centroids = texture(src, path, "shN_centroids", &s.files[0], 0)?;
             if centroids.width != 64 * coeffs || centroids.height * 64 < s.count {
                 return Err(fmt(
                     path,
@@ -192,7 +249,7 @@ pub(crate) fn read_sog_meta(path: &Path, bytes: &[u8]) -> Result<Gaussians, Scen
                     format!("{}×{}", centroids.width, centroids.height),
                 ));
             }
-            let labels = texture(path, "shN_labels", &s.files[1], n)?;
+            let labels = texture(src, path, "shN_labels", &s.files[1], n)?;
             Some((centroids, labels, s))
         }
         None => None,

@@ -321,3 +321,34 @@ fn truncations_and_corruptions_never_panic() {
     }
     eprintln!("fuzz: {} errors, {} loads", outcomes[0], outcomes[1]);
 }
+
+/// The same SOG files zipped into a `.sog` bundle (stored or deflated) load
+/// identically; broken bundles give errors naming the bundle.
+#[test]
+fn sog_zip_bundle() {
+    use std::io::Write;
+    let dir = sog_dir("sog_zip", 252, 0);
+    let want = load(&dir).expect("directory");
+    let names = ["meta.json", "means_l.webp", "means_u.webp", "quats.webp", "scales.webp", "sh0.webp", "shN_centroids.webp", "shN_labels.webp"];
+    let bundle = |method: zip::CompressionMethod, skip: &str| {
+        let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+        let opts = zip::write::SimpleFileOptions::default().compression_method(method);
+        for n in names.iter().filter(|n| **n != skip) {
+            w.start_file(*n, opts).expect("start");
+            w.write_all(&std::fs::read(dir.join(n)).expect("read")).expect("write");
+        }
+        w.finish().expect("finish").into_inner()
+    };
+    for method in [zip::CompressionMethod::Stored, zip::CompressionMethod::Deflated] {
+        let p = write(&dir, "scene.sog", &bundle(method, ""));
+        assert_eq!(load(&p).expect("bundle"), want);
+    }
+    expect_err(&write(&dir, "no_meta.sog", &bundle(zip::CompressionMethod::Stored, "meta.json")), &["meta.json", "zip entry"]);
+    expect_err(&write(&dir, "no_quats.sog", &bundle(zip::CompressionMethod::Stored, "quats.webp")), &["quats.webp", "zip entry"]);
+    expect_err(&write(&dir, "broken.sog", b"PK\x03\x04 this is not a zip archive"), &["zip archive"]);
+    // Truncated bundles fail without panicking.
+    let b = bundle(zip::CompressionMethod::Deflated, "");
+    for len in (0..b.len() - 1).step_by(3) {
+        assert!(load_from_bytes(dir.join("t.sog"), &b[..len]).is_err());
+    }
+}
