@@ -1,11 +1,11 @@
 //! Synthetic compressed PLY, SPZ (gzip v3 and zstd v4) and SOG files: exact
 //! decoding of known values, and the ways each container can be broken.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use super::super::spz::encode_for_test;
-use super::super::test_util::scratch;
+use super::super::test_util::{Scratch, scratch};
 use super::super::{SH_C0, SceneError, load, load_from_bytes};
 use super::{expect_err, write};
 
@@ -192,7 +192,7 @@ fn sog_meta(count: usize, palette: usize) -> String {
 }
 
 /// A two-Gaussian SOG directory; `quat_tag` and `label1` let tests break it.
-fn sog_dir(name: &str, quat_tag: u8, label1: u8) -> PathBuf {
+fn sog_dir(name: &str, quat_tag: u8, label1: u8) -> Scratch {
     let dir = scratch(name);
     webp(&dir, "means_l.webp", 2, 1, &[255, 0, 0, 255, 0, 255, 0, 255]);
     webp(&dir, "means_u.webp", 2, 1, &[255, 0, 128, 255, 0, 255, 0, 255]);
@@ -260,9 +260,9 @@ fn sog_broken_inputs() {
     let e = load(&dir).expect_err("garbage texture");
     assert!(e.to_string().contains("quats.webp") && e.to_string().contains("a WebP image"), "{e}");
 
-    let e = load(sog_dir("sog_tag", 17, 0)).expect_err("bad tag");
+    let e = load(&sog_dir("sog_tag", 17, 0)).expect_err("bad tag");
     assert!(e.to_string().contains("quats texel 0") && e.to_string().contains("17"), "{e}");
-    let e = load(sog_dir("sog_label", 252, 9)).expect_err("bad label");
+    let e = load(&sog_dir("sog_label", 252, 9)).expect_err("bad label");
     assert!(e.to_string().contains("shN_labels texel 1") && e.to_string().contains("below 2"), "{e}");
 }
 
