@@ -260,9 +260,9 @@ fn sog_broken_inputs() {
     let e = load(&dir).expect_err("garbage texture");
     assert!(e.to_string().contains("quats.webp") && e.to_string().contains("a WebP image"), "{e}");
 
-    let e = load(&sog_dir("sog_tag", 17, 0)).expect_err("bad tag");
+    let e = load(sog_dir("sog_tag", 17, 0)).expect_err("bad tag");
     assert!(e.to_string().contains("quats texel 0") && e.to_string().contains("17"), "{e}");
-    let e = load(&sog_dir("sog_label", 252, 9)).expect_err("bad label");
+    let e = load(sog_dir("sog_label", 252, 9)).expect_err("bad label");
     assert!(e.to_string().contains("shN_labels texel 1") && e.to_string().contains("below 2"), "{e}");
 }
 
