@@ -8,10 +8,12 @@
 //!
 //! [`load`] recognises a file by its contents, not its name: a PLY header with
 //! `packed_*` properties is PlayCanvas's compressed PLY, any other PLY is
-//! INRIA's, gzip or `NGSP` bytes are Niantic's `.spz`, and a directory or a
-//! `meta.json` or a zip archive is PlayCanvas's SOG. Every reader checks counts against the
-//! bytes that are really there before allocating, and every decoded scene is
-//! validated (finite values, non-zero quaternions) before it is returned.
+//! INRIA's, gzip or `NGSP` bytes are Niantic's `.spz`, and a directory, a
+//! `meta.json` or a zip archive is PlayCanvas's SOG. Every reader checks
+//! counts against the bytes that are really there before allocating, and
+//! every decoded scene is validated (finite values, non-zero quaternions)
+//! before it is returned; [`save_ply`] applies the same check, so whatever it
+//! writes [`load`] reads back.
 
 mod compressed_ply;
 mod error;
@@ -170,7 +172,9 @@ pub fn load_from_bytes(path: impl AsRef<Path>, bytes: &[u8]) -> Result<Gaussians
 /// Writes `g` as an INRIA binary little-endian `.ply` with the original
 /// trainer's property names and order. The file is written to a temporary
 /// file beside `path` and renamed over it, so an existing file is never left
-/// half-overwritten. Reading it back with [`load`] is bit-exact.
+/// half-overwritten. Reading it back with [`load`] is bit-exact. Scenes with
+/// non-finite values or zero quaternions are refused (the error names the
+/// Gaussian), since no reader would accept the file.
 pub fn save_ply(path: impl AsRef<Path>, g: &Gaussians) -> Result<(), SceneError> {
     ply::save_ply(path.as_ref(), g)
 }

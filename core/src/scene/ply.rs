@@ -172,7 +172,7 @@ pub(crate) fn write_ply_to(out: &mut impl Write, g: &Gaussians) -> std::io::Resu
 /// Writes `g` to `path` as an INRIA `.ply`, atomically (temporary file in the
 /// same directory, then rename).
 pub(crate) fn save_ply(path: &Path, g: &Gaussians) -> Result<(), SceneError> {
-    g.check_consistent().map_err(|e| SceneError::format(path, "gaussians", "consistent arrays", e))?;
+    validate(path, g)?;
     super::atomic_write(path, |w| write_ply_to(w, g))
 }
 

@@ -277,6 +277,12 @@ fn save_ply_never_half_overwrites() {
     bad.quats.pop();
     assert!(save_ply(&p, &bad).is_err());
     assert_eq!(std::fs::read(&p).expect("read"), before);
+    // So are scenes no reader would accept.
+    let mut nan = sample(3, 0);
+    nan.log_scales[2][1] = f32::NAN;
+    let e = save_ply(&p, &nan).expect_err("NaN refused").to_string();
+    assert!(e.contains("vertex 2") && e.contains("scale_1"), "{e}");
+    assert_eq!(std::fs::read(&p).expect("read"), before);
 
     // A successful save replaces the file.
     let g2 = sample(5, 3);
