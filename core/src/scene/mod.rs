@@ -136,9 +136,8 @@ pub fn load_from_bytes(path: impl AsRef<Path>, bytes: &[u8]) -> Result<Gaussians
     let path = path.as_ref();
     if bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r\n") {
         let header = ply_header::parse_header(path, bytes)?;
-        let compressed = header
-            .element("vertex")
-            .is_some_and(|(_, v)| v.props.iter().any(|p| p.name.starts_with("packed_")));
+        let compressed =
+            header.element("vertex").is_some_and(|(_, v)| v.props.iter().any(|p| p.name.starts_with("packed_")));
         return if compressed {
             compressed_ply::read_compressed_ply(path, bytes, &header)
         } else {
@@ -229,9 +228,9 @@ pub(crate) fn atomic_write(
     path: &Path,
     write: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
 ) -> Result<(), SceneError> {
-    let name = path.file_name().ok_or_else(|| {
-        SceneError::io(path, std::io::Error::new(std::io::ErrorKind::InvalidInput, "no file name"))
-    })?;
+    let name = path
+        .file_name()
+        .ok_or_else(|| SceneError::io(path, std::io::Error::new(std::io::ErrorKind::InvalidInput, "no file name")))?;
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
