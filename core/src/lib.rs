@@ -8,6 +8,7 @@
 pub mod camera;
 pub mod raster;
 pub mod scene;
+pub mod vision;
 
 pub use camera::Camera;
 pub use scene::Gaussians;
