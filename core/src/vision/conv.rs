@@ -12,8 +12,8 @@ use rayon::prelude::*;
 const BAND_ELEMS: usize = 1 << 23;
 
 /// Output rows per im2col band for a layer with `k` rows in its column matrix.
-fn band_rows(k: usize, h: usize, w: usize) -> usize {
-    (BAND_ELEMS / (k * w).max(1)).clamp(1, h.max(1))
+fn band_rows(k: usize, h: usize, w: usize, band_elems: usize) -> usize {
+    (band_elems / (k * w).max(1)).clamp(1, h.max(1))
 }
 
 /// `dst[i·dst_rs + j] (+)= Σ_p lhs[i·lhs_rs + p·lhs_cs] · rhs[p·rhs_rs + j]`
@@ -122,17 +122,43 @@ fn col2im(cols: &[f32], c_in: usize, h: usize, w: usize, y0: usize, y1: usize, v
 }
 
 /// `out = relu(conv3x3(input) + bias)`; `out` is `c_out × h × w`.
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn conv_relu(
+    input: &[f32],
+    dims: (usize, usize, usize),
+    weight: &[f32],
+    bias: &[f32],
+    out: &mut [f32],
+    scratch: &mut Vec<f32>,
+) {
+    conv_relu_banded(input, dims, weight, bias, out, scratch, BAND_ELEMS, true);
+}
+
+/// `out = conv3x3(input) + bias`, without the ReLU (for tests of the linearised network).
+#[cfg(test)]
+pub(crate) fn conv_affine(
+    input: &[f32],
+    dims: (usize, usize, usize),
+    weight: &[f32],
+    bias: &[f32],
+    out: &mut [f32],
+    scratch: &mut Vec<f32>,
+) {
+    conv_relu_banded(input, dims, weight, bias, out, scratch, BAND_ELEMS, false);
+}
+
+#[allow(clippy::too_many_arguments)]
+fn conv_relu_banded(
     input: &[f32],
     (c_in, h, w): (usize, usize, usize),
     weight: &[f32],
     bias: &[f32],
     out: &mut [f32],
     scratch: &mut Vec<f32>,
+    band_elems: usize,
+    relu: bool,
 ) {
     let (c_out, k) = (bias.len(), c_in * 9);
-    let rows = band_rows(k, h, w);
+    let rows = band_rows(k, h, w, band_elems);
     scratch.resize(scratch.len().max(k * rows * w), 0.0);
     let mut y0 = 0;
     while y0 < h {
@@ -143,21 +169,38 @@ pub(crate) fn conv_relu(
         y0 = y1;
     }
     out[..c_out * h * w].par_chunks_mut(h * w).zip(bias).for_each(|(plane, &b)| {
-        plane.iter_mut().for_each(|v| *v = (*v + b).max(0.0));
+        if relu {
+            plane.iter_mut().for_each(|v| *v = (*v + b).max(0.0));
+        } else {
+            plane.iter_mut().for_each(|v| *v += b);
+        }
     });
 }
 
 /// Input gradient of a 3×3 convolution: `v_input = convᵀ(v_out)` (overwrites `v_input`).
 pub(crate) fn conv_backward(
     v_out: &[f32],
-    (c_in, h, w): (usize, usize, usize),
+    dims: (usize, usize, usize),
     weight: &[f32],
     c_out: usize,
     v_input: &mut [f32],
     scratch: &mut Vec<f32>,
 ) {
+    conv_backward_banded(v_out, dims, weight, c_out, v_input, scratch, BAND_ELEMS);
+}
+
+#[allow(clippy::too_many_arguments)]
+fn conv_backward_banded(
+    v_out: &[f32],
+    (c_in, h, w): (usize, usize, usize),
+    weight: &[f32],
+    c_out: usize,
+    v_input: &mut [f32],
+    scratch: &mut Vec<f32>,
+    band_elems: usize,
+) {
     let k = c_in * 9;
-    let rows = band_rows(k, h, w);
+    let rows = band_rows(k, h, w, band_elems);
     scratch.resize(scratch.len().max(k * rows * w), 0.0);
     v_input[..c_in * h * w].fill(0.0);
     let mut y0 = 0;
@@ -222,4 +265,105 @@ pub(crate) fn max_pool_backward(v_out: &[f32], argmax: &[u32], (c, h, w): (usize
             plane[a as usize] += v;
         }
     });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Deterministic values in [-1, 1).
+    pub(crate) fn noise(n: usize, seed: u64) -> Vec<f32> {
+        let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (0..n)
+            .map(|_| {
+                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+            })
+            .collect()
+    }
+
+    /// The obvious 3×3 zero-padded convolution, in f64, without ReLU.
+    fn naive_conv(x: &[f32], (c_in, h, w): (usize, usize, usize), wt: &[f32], bias: &[f32]) -> Vec<f64> {
+        let c_out = bias.len();
+        let mut out = vec![0.0; c_out * h * w];
+        for o in 0..c_out {
+            for y in 0..h {
+                for xx in 0..w {
+                    let mut acc = bias[o] as f64;
+                    for i in 0..c_in {
+                        for ky in 0..3 {
+                            for kx in 0..3 {
+                                let (sy, sx) = (y as isize + ky as isize - 1, xx as isize + kx as isize - 1);
+                                if sy >= 0 && sx >= 0 && (sy as usize) < h && (sx as usize) < w {
+                                    acc += wt[((o * c_in + i) * 3 + ky) * 3 + kx] as f64
+                                        * x[(i * h + sy as usize) * w + sx as usize] as f64;
+                                }
+                            }
+                        }
+                    }
+                    out[(o * h + y) * w + xx] = acc;
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn conv_matches_naive_and_backward_is_its_adjoint() {
+        let mut failures = Vec::new();
+        for (c_in, c_out, h, w, band) in [(3, 5, 7, 9, 1 << 23), (4, 6, 9, 5, 4 * 9 * 5 * 2), (2, 3, 1, 6, 1)] {
+            let x = noise(c_in * h * w, 1);
+            let wt = noise(c_out * c_in * 9, 2);
+            let bias = noise(c_out, 3);
+            let mut out = vec![0.0; c_out * h * w];
+            let mut scratch = Vec::new();
+            conv_relu_banded(&x, (c_in, h, w), &wt, &bias, &mut out, &mut scratch, band, true);
+            let reference = naive_conv(&x, (c_in, h, w), &wt, &bias);
+            for (i, (a, b)) in out.iter().zip(&reference).enumerate() {
+                if (*a as f64 - b.max(0.0)).abs() > 1e-5 {
+                    failures.push(format!("{c_in}x{h}x{w} forward[{i}]: {a} vs {}", b.max(0.0)));
+                }
+            }
+            // <conv(x) - bias, v> == <x, convᵀ(v)>
+            let v = noise(c_out * h * w, 4);
+            let mut v_in = vec![0.0; c_in * h * w];
+            conv_backward_banded(&v, (c_in, h, w), &wt, c_out, &mut v_in, &mut scratch, band);
+            let lhs: f64 = reference
+                .iter()
+                .enumerate()
+                .map(|(i, r)| (r - bias[i / (h * w)] as f64) * v[i] as f64)
+                .sum();
+            let rhs: f64 = x.iter().zip(&v_in).map(|(a, b)| *a as f64 * *b as f64).sum();
+            if (lhs - rhs).abs() > 1e-4 * lhs.abs().max(1.0) {
+                failures.push(format!("{c_in}x{h}x{w} adjoint: {lhs} vs {rhs}"));
+            }
+        }
+        assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
+    }
+
+    #[test]
+    fn max_pool_floors_and_routes_gradients() {
+        let (c, h, w) = (2, 5, 7);
+        let x = noise(c * h * w, 9);
+        let mut out = vec![0.0; c * 2 * 3];
+        let mut arg = Vec::new();
+        max_pool(&x, (c, h, w), &mut out, Some(&mut arg));
+        for ci in 0..c {
+            for y in 0..2 {
+                for xx in 0..3 {
+                    let p = &x[ci * h * w..];
+                    let m = [p[2 * y * w + 2 * xx], p[2 * y * w + 2 * xx + 1], p[(2 * y + 1) * w + 2 * xx], p[(2 * y + 1) * w + 2 * xx + 1]]
+                        .into_iter()
+                        .fold(f32::MIN, f32::max);
+                    assert_eq!(out[(ci * 2 + y) * 3 + xx], m);
+                }
+            }
+        }
+        let v = noise(out.len(), 10);
+        let mut v_in = vec![1.0; c * h * w];
+        max_pool_backward(&v, &arg, (c, h, w), &mut v_in);
+        let total: f32 = v_in.iter().sum();
+        assert!((total - v.iter().sum::<f32>()).abs() < 1e-5);
+        assert_eq!(v_in[h * w - 1], 0.0, "the dropped last row gets no gradient");
+    }
 }

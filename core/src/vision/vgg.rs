@@ -197,3 +197,57 @@ impl Vgg {
             .sum()
     }
 }
+
+/// Timings of [`bench`].
+#[derive(Clone, Copy, Debug)]
+pub struct VggTiming {
+    /// Image height and width.
+    pub size: (usize, usize),
+    /// Best time of one [`Vgg::forward`], seconds.
+    pub forward_s: f64,
+    /// Best time of one [`Vgg::backward`], seconds.
+    pub backward_s: f64,
+    /// Forward floating-point operations.
+    pub forward_flops: f64,
+}
+
+impl std::fmt::Display for VggTiming {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let g = self.forward_flops * 1e-9;
+        write!(
+            f,
+            "VGG relu3 at {}×{} on {} threads: forward {:.1} ms ({:.1} GFLOP/s of {g:.2} GFLOP), backward {:.1} ms ({:.1} GFLOP/s, {:.2}× forward)",
+            self.size.0,
+            self.size.1,
+            rayon::current_num_threads(),
+            self.forward_s * 1e3,
+            g / self.forward_s,
+            self.backward_s * 1e3,
+            g / self.backward_s,
+            self.backward_s / self.forward_s
+        )
+    }
+}
+
+/// Times forward and backward at `h × w` (best of `reps` after a warm-up run)
+/// on a smooth test image; the backward has about the forward's FLOPs.
+pub fn bench(vgg: &Vgg, h: usize, w: usize, reps: usize) -> VggTiming {
+    let rgb: Vec<f32> = (0..h * w * 3).map(|i| 0.5 + 0.4 * ((i as f32) * 0.37).sin()).collect();
+    let (f, state) = vgg.forward(&rgb, h, w);
+    let v: Vec<f32> = (0..f.data.len()).map(|i| ((i as f32) * 0.11).cos()).collect();
+    let _ = vgg.backward(&state, &v);
+    let (mut fwd, mut bwd) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..reps.max(1) {
+        let t = std::time::Instant::now();
+        let (_, state) = vgg.forward(&rgb, h, w);
+        fwd = fwd.min(t.elapsed().as_secs_f64());
+        let t = std::time::Instant::now();
+        let _ = vgg.backward(&state, &v);
+        bwd = bwd.min(t.elapsed().as_secs_f64());
+    }
+    VggTiming { size: (h, w), forward_s: fwd, backward_s: bwd, forward_flops: vgg.forward_flops(h, w) }
+}
+
+#[cfg(test)]
+#[path = "vgg_tests.rs"]
+mod tests;
