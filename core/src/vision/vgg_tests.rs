@@ -147,5 +147,5 @@ fn backward_is_the_exact_gradient_of_the_linearised_network() {
 #[test]
 fn speed_at_128() {
     let vgg = random_vgg(3);
-    println!("{}", bench(&vgg, 128, 128, 3));
+    println!("{}", bench(&vgg, 128, 128, 5));
 }
