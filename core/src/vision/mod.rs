@@ -11,5 +11,6 @@ mod pth;
 pub mod vgg;
 pub mod weights;
 
+pub use download::resolve_weights;
 pub use vgg::{Features, Vgg, VggState};
 pub use weights::{VggWeights, WeightsError};
