@@ -121,6 +121,7 @@ fn broken_connection_keeps_part_and_next_attempt_resumes() -> Result<(), Weights
     let url = format!("http://127.0.0.1:{}/{GOOD_NAME}", server.port);
     let loc = WeightsLocations { explicit: None, cache_dir: Some(dir.clone()), torch_hub_dir: None, url };
     let err = loc.resolve(&mut |_, _| {}).err().map(|e| e.to_string()).unwrap_or_default();
+    println!("broken transfer: {err}");
     assert!(err.contains("resume"), "a broken transfer should say it will resume: {err}");
     let part = dir.join(format!("{GOOD_NAME}.part"));
     let kept = std::fs::metadata(&part).map(|m| m.len()).unwrap_or(0);
@@ -144,6 +145,7 @@ fn checksum_mismatch_leaves_nothing() {
     let dir = temp_dir("badsum");
     let url = format!("http://127.0.0.1:{}/vgg19-conv3-deadbeef.safetensors", server.port);
     let err = download(&url, &dir, &mut |_, _| {}).err();
+    println!("checksum: {}", err.as_ref().map(|e| e.to_string()).unwrap_or_default());
     assert!(
         matches!(&err, Some(WeightsError::Checksum { expected, found, .. }) if expected == "deadbeef" && found.starts_with("e61f7f6b")),
         "{err:?}"
@@ -159,6 +161,7 @@ fn server_down_and_http_errors_are_clear() {
     let dir = temp_dir("down");
     let url = format!("http://127.0.0.1:{port}/{GOOD_NAME}");
     let err = download(&url, &dir, &mut |_, _| {}).err().map(|e| e.to_string()).unwrap_or_default();
+    println!("server down: {err}");
     assert!(err.contains(&url) && err.contains("refused") && err.contains("vgg16-397923af.pth"), "{err}");
 
     let server = serve(Vec::new(), 0);
@@ -188,6 +191,7 @@ fn lookup_order_and_explicit_paths() -> Result<(), Box<dyn std::error::Error>> {
     assert_eq!(loc.find()?, cache.join("vgg16-397923af.pth"));
     loc.explicit = Some(root.join("nope.pth"));
     let err = loc.resolve(&mut |_, _| {}).err().map(|e| e.to_string()).unwrap_or_default();
+    println!("explicit missing: {err}");
     assert!(err.contains("nope.pth") && err.contains("GAST_WEIGHTS"), "{err}");
     loc.explicit = None;
     loc.cache_dir = None;
