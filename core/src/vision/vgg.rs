@@ -12,6 +12,8 @@
 //! Convolutions are im2col + `gemm` (see [`super::conv`]); the ImageNet
 //! normalisation torchvision's weights expect happens inside.
 
+use rayon::prelude::*;
+
 use super::conv::{conv_backward, conv_relu, max_pool, max_pool_backward};
 use super::weights::VggWeights;
 
@@ -100,9 +102,9 @@ impl Vgg {
             if layer == 5 || layer == 4 {
                 // relu3_2 and relu3_1 are features themselves as well as the next layer's input.
                 let block = &v_features[(layer - 4) * 256 * n3..(layer - 3) * 256 * n3];
-                v.iter_mut().zip(block).for_each(|(a, b)| *a += b);
+                v.par_iter_mut().zip(block).for_each(|(a, b)| *a += b);
             }
-            v.iter_mut().zip(&state.relu_open[layer]).for_each(|(g, &open)| {
+            v.par_iter_mut().zip(&state.relu_open[layer]).for_each(|(g, &open)| {
                 if !open {
                     *g = 0.0;
                 }
@@ -157,7 +159,7 @@ impl Vgg {
             y.resize(c.c_out * lh * lw, 0.0);
             conv_relu(&x, (c.c_in, lh, lw), &c.weight, &c.bias, &mut y, &mut scratch);
             if let Some(s) = save.as_deref_mut() {
-                s.relu_open.push(y.iter().map(|&v| v > 0.0).collect());
+                s.relu_open.push(y.par_iter().map(|&v| v > 0.0).collect());
             }
             std::mem::swap(&mut x, &mut y);
             if layer == 1 || layer == 3 {
@@ -180,7 +182,7 @@ impl Vgg {
         conv_relu(f2, (c.c_in, h3, w3), &c.weight, &c.bias, f3, &mut scratch);
         if let Some(s) = save {
             for f in [&*f1, &*f2, &*f3] {
-                s.relu_open.push(f.iter().map(|&v| v > 0.0).collect());
+                s.relu_open.push(f.par_iter().map(|&v| v > 0.0).collect());
             }
         }
         Features { c: FEATURE_CHANNELS, h: h3, w: w3, data: feats }
