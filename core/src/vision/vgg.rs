@@ -9,7 +9,7 @@
 //! saved state is small: a ReLU mask per convolution and the winners of the
 //! two max-pools.
 //!
-//! Convolutions are im2col + `gemm` (see [`super::conv`]); the ImageNet
+//! Convolutions are im2col + `gemm` (see `conv.rs`); the ImageNet
 //! normalisation torchvision's weights expect happens inside.
 
 use rayon::prelude::*;
@@ -200,7 +200,7 @@ impl Vgg {
     }
 }
 
-/// Timings of [`bench`].
+/// Timings of [`bench()`].
 #[derive(Clone, Copy, Debug)]
 pub struct VggTiming {
     /// Image height and width.
