@@ -3,7 +3,7 @@
 //! weights and torchvision normalisation).
 
 use anyhow::{Context, Result, bail};
-use gast_core::vision::{Vgg, VggWeights};
+use gast_core::vision::Vgg;
 use gast_tests::shared_file;
 use safetensors::SafeTensors;
 
@@ -20,7 +20,7 @@ fn relu3_features_match_golden() -> Result<()> {
     else {
         return Ok(());
     };
-    let vgg = Vgg::from_weights(VggWeights::load(&wp)?);
+    let vgg = Vgg::load(&wp)?;
     let bytes = std::fs::read(&gp)?;
     let st = SafeTensors::deserialize(&bytes)?;
     let (shape, rgb) = f64s(&st, "render_rgb")?;

@@ -64,6 +64,17 @@ impl Vgg {
         Self { weights }
     }
 
+    /// Loads the weights from a `.safetensors` or `.pth` file (see
+    /// [`super::resolve_weights`] for finding one).
+    pub fn load(path: &std::path::Path) -> Result<Self, super::WeightsError> {
+        VggWeights::load(path).map(Self::from_weights)
+    }
+
+    /// The convolution weights.
+    pub fn weights(&self) -> &VggWeights {
+        &self.weights
+    }
+
     /// The relu3 features of an RGB image (`h × w × 3`, HWC, values in [0, 1]),
     /// saving nothing for a backward pass.
     ///
