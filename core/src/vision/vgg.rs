@@ -78,8 +78,10 @@ impl Vgg {
     /// The relu3 features of an RGB image (`h × w × 3`, HWC, values in [0, 1]),
     /// saving nothing for a backward pass.
     ///
+    /// An image smaller than 4×4 has an empty feature map (`h` or `w` 0), as in torch.
+    ///
     /// # Panics
-    /// If `rgb.len() != h·w·3` or the image is smaller than 4×4.
+    /// If `rgb.len() != h·w·3`.
     pub fn features(&self, rgb: &[f32], h: usize, w: usize) -> Features {
         self.run(rgb, h, w, None)
     }
@@ -102,6 +104,9 @@ impl Vgg {
         let dims = [(h, w), (h / 2, w / 2), (h / 4, w / 4)];
         let n3 = dims[2].0 * dims[2].1;
         assert_eq!(v_features.len(), FEATURE_CHANNELS * n3, "backward: v_features has the wrong size");
+        if n3 == 0 {
+            return vec![0.0; h * w * 3];
+        }
         let convs = &self.weights.convs;
         let mut scratch = Vec::new();
         // v holds the gradient of the current layer's output (post-ReLU).
@@ -146,18 +151,20 @@ impl Vgg {
 
     fn run(&self, rgb: &[f32], h: usize, w: usize, mut save: Option<&mut VggState>) -> Features {
         assert_eq!(rgb.len(), h * w * 3, "VGG input must be h·w·3 RGB values");
-        assert!(h >= 4 && w >= 4, "VGG input must be at least 4×4, got {h}×{w}");
         let dims = [(h, w), (h / 2, w / 2), (h / 4, w / 4)];
+        if let Some(s) = save.as_deref_mut() {
+            s.size = (h, w);
+            s.relu_open.clear();
+        }
+        if dims[2].0 == 0 || dims[2].1 == 0 {
+            return Features { c: FEATURE_CHANNELS, h: dims[2].0, w: dims[2].1, data: Vec::new() };
+        }
         let n = h * w;
         let mut x = vec![0.0; 3 * n];
         for (p, px) in rgb.chunks_exact(3).enumerate() {
             for ch in 0..3 {
                 x[ch * n + p] = (px[ch] - IMAGENET_MEAN[ch]) / IMAGENET_STD[ch];
             }
-        }
-        if let Some(s) = save.as_deref_mut() {
-            s.size = (h, w);
-            s.relu_open.clear();
         }
         let convs = &self.weights.convs;
         let mut scratch = Vec::new();

@@ -149,3 +149,13 @@ fn speed_at_128() {
     let vgg = random_vgg(3);
     println!("{}", bench(&vgg, 128, 128, 5));
 }
+
+#[test]
+fn tiny_images_have_empty_features() {
+    let vgg = random_vgg(5);
+    for (h, w) in [(3, 9), (9, 2), (1, 1)] {
+        let (f, state) = vgg.forward(&vec![0.5; h * w * 3], h, w);
+        assert!(f.data.is_empty() && (f.h == 0 || f.w == 0), "{h}×{w}");
+        assert_eq!(vgg.backward(&state, &[]), vec![0.0; h * w * 3]);
+    }
+}
