@@ -32,7 +32,9 @@ fn relu3_features_match_golden() -> Result<()> {
     let max_mag = golden.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let max_err = f.data.iter().zip(&golden).fold(0.0f64, |m, (a, b)| m.max((*a as f64 - b).abs()));
     let rel = max_err / max_mag;
-    println!("VGG relu3 vs golden ({h}×{w}): max |err| {max_err:.3e}, largest |value| {max_mag:.3e}, relative {rel:.3e}");
+    println!(
+        "VGG relu3 vs golden ({h}×{w}): max |err| {max_err:.3e}, largest |value| {max_mag:.3e}, relative {rel:.3e}"
+    );
     if rel > 1e-4 {
         bail!("relu3 features differ from golden: relative error {rel:.3e} > 1e-4");
     }

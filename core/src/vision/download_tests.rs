@@ -47,7 +47,11 @@ fn serve(body: Vec<u8>, cut_first: usize) -> Server {
             let s = start.unwrap_or(0) as usize;
             let head = match start {
                 Some(_) if s >= body.len() => {
-                    let _ = write!(stream, "HTTP/1.1 416 Range Not Satisfiable\r\nContent-Range: bytes */{}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n", body.len());
+                    let _ = write!(
+                        stream,
+                        "HTTP/1.1 416 Range Not Satisfiable\r\nContent-Range: bytes */{}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n",
+                        body.len()
+                    );
                     continue;
                 }
                 Some(_) => format!(

@@ -5,8 +5,8 @@
 //! finds and loads those weights ([`weights`], [`download`]), and runs the
 //! network forward and backward on the CPU ([`vgg`]).
 
-pub mod download;
 mod conv;
+pub mod download;
 mod pth;
 pub mod vgg;
 pub mod weights;

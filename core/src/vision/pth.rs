@@ -100,9 +100,14 @@ fn read_legacy(
     wanted: &[String],
 ) -> Result<HashMap<String, RawTensor>, WeightsError> {
     let io = |e| WeightsError::io(path, e);
+    let file_len = r.get_ref().metadata().map_err(io)?.len();
     let magic = unpickle(path, &mut r)?;
     if !matches!(magic, Value::Int(0x1950a86a20f9469cfc6c)) {
-        return Err(WeightsError::format(path, "a PyTorch checkpoint (zip, or pickle with torch's magic number)", format!("{magic:?}")));
+        return Err(WeightsError::format(
+            path,
+            "a PyTorch checkpoint (zip, or pickle with torch's magic number)",
+            format!("{magic:?}"),
+        ));
     }
     let _protocol = unpickle(path, &mut r)?;
     let _sys_info = unpickle(path, &mut r)?;
@@ -116,6 +121,9 @@ fn read_legacy(
     }
     let mut out = HashMap::new();
     for key in keys {
+        if out.len() == refs.wanted.len() {
+            break;
+        }
         let Value::Str(key) = key else {
             return Err(WeightsError::format(path, "string storage keys", format!("{key:?}")));
         };
@@ -128,6 +136,14 @@ fn read_legacy(
             return Err(WeightsError::format(path, "a known storage type", format!("{ty} for storage {key}")));
         };
         let len = count.saturating_mul(elem as u64);
+        let at = r.stream_position().map_err(io)?;
+        if at.saturating_add(len) > file_len {
+            return Err(WeightsError::format(
+                path,
+                format!("storage {key} of {len} bytes at offset {at}"),
+                format!("a file of {file_len} bytes (truncated download?)"),
+            ));
+        }
         match users {
             Some(users) => {
                 let mut bytes = vec![0u8; usize::try_from(len).unwrap_or(usize::MAX)];
@@ -166,9 +182,9 @@ fn tensor_refs(path: &Path, r: &mut impl Read, wanted: &[String]) -> Result<Refs
         other => return Err(WeightsError::format(path, "a state dict (a dict of tensors)", format!("{other:?}"))),
     };
     // Training checkpoints wrap the state dict: {"state_dict": {...}} or {"model": {...}}.
-    let inner = dict.iter().position(|(k, v)| {
-        matches!((k, v), (Value::Str(k), Value::Dict(_)) if k == "state_dict" || k == "model")
-    });
+    let inner = dict
+        .iter()
+        .position(|(k, v)| matches!((k, v), (Value::Str(k), Value::Dict(_)) if k == "state_dict" || k == "model"));
     if let Some(i) = inner
         && let (_, Value::Dict(d)) = dict.swap_remove(i)
     {
@@ -264,10 +280,10 @@ fn unpickle(path: &Path, r: &mut impl Read) -> Result<Value, WeightsError> {
     loop {
         let op = bytes!(1)[0];
         match op {
-            0x80 => drop(bytes!(1)),       // PROTO
-            0x95 => drop(bytes!(8)),       // FRAME
+            0x80 => drop(bytes!(1)),                                                 // PROTO
+            0x95 => drop(bytes!(8)),                                                 // FRAME
             b'.' => return stack.pop().ok_or_else(|| bad("an empty pickle".into())), // STOP
-            b'(' => marks.push(stack.len()), // MARK
+            b'(' => marks.push(stack.len()),                                         // MARK
             b'N' => stack.push(Value::None),
             0x88 => stack.push(Value::Bool(true)),
             0x89 => stack.push(Value::Bool(false)),
@@ -387,12 +403,17 @@ fn unpickle(path: &Path, r: &mut impl Read) -> Result<Value, WeightsError> {
                 if let Some(Value::Global(m, n)) = stack.last()
                     && m == "torch"
                     && n.ends_with("Tensor")
-                    && let Value::Tensor(t) = reduce(Value::Global("torch._utils".into(), "_rebuild_tensor".into()), state)
+                    && let Value::Tensor(t) =
+                        reduce(Value::Global("torch._utils".into(), "_rebuild_tensor".into()), state)
                 {
                     *stack.last_mut().ok_or_else(|| bad("BUILD on an empty stack".into()))? = Value::Tensor(t);
                 }
             }
-            other => return Err(bad(format!("pickle opcode 0x{other:02x}, which torch.save does not write for a state dict"))),
+            other => {
+                return Err(bad(format!(
+                    "pickle opcode 0x{other:02x}, which torch.save does not write for a state dict"
+                )));
+            }
         }
     }
 }
@@ -446,7 +467,13 @@ fn reduce(func: Value, args: Value) -> Value {
             else {
                 return Value::Opaque;
             };
-            Value::Tensor(TensorRef { key: key.clone(), storage_type: ty.clone(), offset: offset + view_offset, shape, stride })
+            Value::Tensor(TensorRef {
+                key: key.clone(),
+                storage_type: ty.clone(),
+                offset: offset + view_offset,
+                shape,
+                stride,
+            })
         }
         // torch.FloatTensor() etc.: filled in by the BUILD that follows.
         ("torch", n) if n.ends_with("Tensor") && args.is_empty() => Value::Global(module.clone(), name.clone()),

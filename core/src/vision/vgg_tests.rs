@@ -74,8 +74,17 @@ fn backward_matches_finite_differences_mostly() {
             }
         }
     }
-    println!("{} of {checked} inputs cross a ReLU/pool switch within the step:\n{}", failures.len(), failures.join("\n"));
-    assert!(failures.len() * 5 <= checked, "{} of {checked} gradient checks failed:\n{}", failures.len(), failures.join("\n"));
+    println!(
+        "{} of {checked} inputs cross a ReLU/pool switch within the step:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
+    assert!(
+        failures.len() * 5 <= checked,
+        "{} of {checked} gradient checks failed:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
 }
 
 /// The network with its ReLU pattern and pool winners frozen at `state`: a
