@@ -12,6 +12,7 @@ pub mod raster;
 pub mod scene;
 pub mod session;
 pub mod style;
+pub mod vision;
 
 pub use camera::Camera;
 pub use scene::Gaussians;
