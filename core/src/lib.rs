@@ -8,6 +8,8 @@
 pub mod camera;
 pub mod raster;
 pub mod scene;
+pub mod style;
+pub mod vision;
 
 pub use camera::Camera;
 pub use scene::Gaussians;
