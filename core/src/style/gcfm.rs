@@ -226,10 +226,10 @@ fn exact_score(style: &StyleFeatures, rendered: &[&[f32]; 3], n: usize, x: usize
     let (c, m) = (style.channels, style.positions());
     let mut dot = 0f64;
     let mut sq = 0f64;
-    for k in 0..3 {
+    for (r, f) in rendered.iter().zip(&style.feats) {
         for ch in 0..c {
-            let s = f64::from(style.feats[k][ch * m + y]);
-            dot += f64::from(rendered[k][ch * n + x]) * s;
+            let s = f64::from(f[ch * m + y]);
+            dot += f64::from(r[ch * n + x]) * s;
             sq += s * s;
         }
     }

@@ -58,13 +58,13 @@ pub fn jet_lut() -> &'static [[u8; 3]; 256] {
         let mut lut = [[0u8; 3]; 256];
         for ch in 0..3 {
             let y: Vec<f32> = (0..256).map(|k| jet_base(ch, k)).collect();
-            for i in 0..256 {
+            for (i, entry) in lut.iter_mut().enumerate() {
                 // OpenCV's interp1 at the breakpoints themselves: the binary search
                 // ends with high = i, low = i - 1 (low = 0, high = 1 for i = 0).
                 let (lo, hi) = if i == 0 { (0, 1) } else { (i - 1, i) };
                 let v = y[lo] + (x[i] - x[lo]) * (y[hi] - y[lo]) / (x[hi] - x[lo]);
                 let s = (v * 255.0f32).round_ties_even();
-                lut[i][ch] = s.clamp(0.0, 255.0) as u8;
+                entry[ch] = s.clamp(0.0, 255.0) as u8;
             }
         }
         lut

@@ -85,7 +85,7 @@ pub fn resize_area(src: &[f32], h: usize, w: usize, c: usize, oh: usize, ow: usi
 /// factors use the area weights and round half to even.
 pub fn resize_area_u8(src: &[u8], h: usize, w: usize, c: usize, oh: usize, ow: usize) -> Vec<u8> {
     assert_eq!(src.len(), h * w * c, "resize_area_u8: image size mismatch");
-    let integer = oh > 0 && ow > 0 && h % oh == 0 && w % ow == 0 && oh <= h && ow <= w;
+    let integer = oh > 0 && ow > 0 && h.is_multiple_of(oh) && w.is_multiple_of(ow) && oh <= h && ow <= w;
     if integer {
         let (fy, fx) = (h / oh, w / ow);
         let area = (fy * fx) as u32;
