@@ -41,6 +41,22 @@ pub trait FeatureNet: Sync {
     fn backward(&self, state: &Self::State, v_features: &[f32]) -> Vec<f32>;
 }
 
+/// The studio's network: VGG relu3_1..3 ([`crate::vision::Vgg`]).
+impl FeatureNet for crate::vision::Vgg {
+    type State = crate::vision::VggState;
+    fn features(&self, rgb: &[f32], h: usize, w: usize) -> FeatureMap {
+        let f = crate::vision::Vgg::features(self, rgb, h, w);
+        FeatureMap { channels: f.c, height: f.h, width: f.w, data: f.data }
+    }
+    fn forward(&self, rgb: &[f32], h: usize, w: usize) -> (FeatureMap, Self::State) {
+        let (f, s) = crate::vision::Vgg::forward(self, rgb, h, w);
+        (FeatureMap { channels: f.c, height: f.h, width: f.w, data: f.data }, s)
+    }
+    fn backward(&self, state: &Self::State, v_features: &[f32]) -> Vec<f32> {
+        crate::vision::Vgg::backward(self, state, v_features)
+    }
+}
+
 /// Loss weights (ALGORITHM.md defaults).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LossWeights {

@@ -1,0 +1,1 @@
+//! Finding the VGG weights on this machine, or fetching them once.

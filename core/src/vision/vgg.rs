@@ -1,0 +1,276 @@
+//! VGG up to relu3_3, forward and backward, on the CPU.
+//!
+//! GAST compares images in the space of torchvision VGG's relu3_1, relu3_2 and
+//! relu3_3 activations (768 channels at a quarter of the resolution). The
+//! losses need these features for style maps and content renders (forward
+//! only, [`Vgg::features`]) and, for the rendered view, the gradient of a loss
+//! on them back to the image pixels ([`Vgg::forward`] then [`Vgg::backward`]).
+//! Only the input gradient is ever needed (the network is frozen), so the
+//! saved state is small: a ReLU mask per convolution and the winners of the
+//! two max-pools.
+//!
+//! Convolutions are im2col + `gemm` (see [`super::conv`]); the ImageNet
+//! normalisation torchvision's weights expect happens inside.
+
+use super::conv::{conv_backward, conv_relu, max_pool, max_pool_backward};
+use super::weights::VggWeights;
+
+/// torchvision's ImageNet normalisation, per RGB channel.
+pub const IMAGENET_MEAN: [f32; 3] = [0.485, 0.456, 0.406];
+/// torchvision's ImageNet normalisation, per RGB channel.
+pub const IMAGENET_STD: [f32; 3] = [0.229, 0.224, 0.225];
+
+/// Channels of the feature map: relu3_1, relu3_2, relu3_3 concatenated.
+pub const FEATURE_CHANNELS: usize = 768;
+
+/// A CHW feature map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Features {
+    /// Channels (768: relu3_1 in 0..256, relu3_2 in 256..512, relu3_3 in 512..768).
+    pub c: usize,
+    /// Height, `floor(floor(H/2)/2)` of the input.
+    pub h: usize,
+    /// Width, `floor(floor(W/2)/2)` of the input.
+    pub w: usize,
+    /// `c · h · w` values, channel-major.
+    pub data: Vec<f32>,
+}
+
+/// What [`Vgg::backward`] needs from a forward pass.
+#[derive(Clone, Debug, Default)]
+pub struct VggState {
+    /// Input size (H, W).
+    size: (usize, usize),
+    /// For each of the seven convolutions, whether its ReLU passed (output > 0).
+    relu_open: Vec<Vec<bool>>,
+    /// For the two max-pools, the in-plane index of each output's maximum.
+    pool_argmax: [Vec<u32>; 2],
+}
+
+/// The network: the seven convolutions conv1_1 … conv3_3.
+#[derive(Clone, Debug)]
+pub struct Vgg {
+    weights: VggWeights,
+}
+
+/// Index of each convolution's stage (0: full resolution, 1: ½, 2: ¼).
+const STAGE: [usize; 7] = [0, 0, 1, 1, 2, 2, 2];
+
+impl Vgg {
+    /// Wraps loaded weights (see [`VggWeights::load`]).
+    pub fn from_weights(weights: VggWeights) -> Self {
+        Self { weights }
+    }
+
+    /// The relu3 features of an RGB image (`h × w × 3`, HWC, values in [0, 1]),
+    /// saving nothing for a backward pass.
+    ///
+    /// # Panics
+    /// If `rgb.len() != h·w·3` or the image is smaller than 4×4.
+    pub fn features(&self, rgb: &[f32], h: usize, w: usize) -> Features {
+        self.run(rgb, h, w, None)
+    }
+
+    /// As [`Vgg::features`], also returning what [`Vgg::backward`] needs.
+    pub fn forward(&self, rgb: &[f32], h: usize, w: usize) -> (Features, VggState) {
+        let mut state = VggState::default();
+        let f = self.run(rgb, h, w, Some(&mut state));
+        (f, state)
+    }
+
+    /// Gradient with respect to the input image (HWC, `h × w × 3`) of a loss
+    /// whose gradient with respect to the features is `v_features`
+    /// (same layout as [`Features::data`]).
+    ///
+    /// # Panics
+    /// If `v_features` does not have the feature map's size.
+    pub fn backward(&self, state: &VggState, v_features: &[f32]) -> Vec<f32> {
+        let (h, w) = state.size;
+        let dims = [(h, w), (h / 2, w / 2), (h / 4, w / 4)];
+        let n3 = dims[2].0 * dims[2].1;
+        assert_eq!(v_features.len(), FEATURE_CHANNELS * n3, "backward: v_features has the wrong size");
+        let convs = &self.weights.convs;
+        let mut scratch = Vec::new();
+        // v holds the gradient of the current layer's output (post-ReLU).
+        let mut v = v_features[2 * 256 * n3..].to_vec();
+        let mut v_in = vec![0.0; 256 * n3];
+        for layer in (0..7).rev() {
+            let c = &convs[layer];
+            let (lh, lw) = dims[STAGE[layer]];
+            if layer == 5 || layer == 4 {
+                // relu3_2 and relu3_1 are features themselves as well as the next layer's input.
+                let block = &v_features[(layer - 4) * 256 * n3..(layer - 3) * 256 * n3];
+                v.iter_mut().zip(block).for_each(|(a, b)| *a += b);
+            }
+            v.iter_mut().zip(&state.relu_open[layer]).for_each(|(g, &open)| {
+                if !open {
+                    *g = 0.0;
+                }
+            });
+            v_in.resize(c.c_in * lh * lw, 0.0);
+            conv_backward(&v, (c.c_in, lh, lw), &c.weight, c.c_out, &mut v_in, &mut scratch);
+            std::mem::swap(&mut v, &mut v_in);
+            if layer == 4 || layer == 2 {
+                // Through the pool in front of this stage.
+                let p = if layer == 2 { 0 } else { 1 };
+                let (ph, pw) = dims[STAGE[layer] - 1];
+                let ch = c.c_in;
+                v_in.resize(ch * ph * pw, 0.0);
+                max_pool_backward(&v, &state.pool_argmax[p], (ch, ph, pw), &mut v_in);
+                std::mem::swap(&mut v, &mut v_in);
+            }
+        }
+        // v is the gradient of the normalised CHW input.
+        let n = h * w;
+        let mut v_rgb = vec![0.0; n * 3];
+        for (p, px) in v_rgb.chunks_exact_mut(3).enumerate() {
+            for ch in 0..3 {
+                px[ch] = v[ch * n + p] / IMAGENET_STD[ch];
+            }
+        }
+        v_rgb
+    }
+
+    fn run(&self, rgb: &[f32], h: usize, w: usize, mut save: Option<&mut VggState>) -> Features {
+        assert_eq!(rgb.len(), h * w * 3, "VGG input must be h·w·3 RGB values");
+        assert!(h >= 4 && w >= 4, "VGG input must be at least 4×4, got {h}×{w}");
+        let dims = [(h, w), (h / 2, w / 2), (h / 4, w / 4)];
+        let n = h * w;
+        let mut x = vec![0.0; 3 * n];
+        for (p, px) in rgb.chunks_exact(3).enumerate() {
+            for ch in 0..3 {
+                x[ch * n + p] = (px[ch] - IMAGENET_MEAN[ch]) / IMAGENET_STD[ch];
+            }
+        }
+        if let Some(s) = save.as_deref_mut() {
+            s.size = (h, w);
+            s.relu_open.clear();
+        }
+        let convs = &self.weights.convs;
+        let mut scratch = Vec::new();
+        let mut y = Vec::new();
+        let n3 = dims[2].0 * dims[2].1;
+        let mut feats = vec![0.0; FEATURE_CHANNELS * n3];
+        for layer in 0..4 {
+            let c = &convs[layer];
+            let (lh, lw) = dims[STAGE[layer]];
+            y.resize(c.c_out * lh * lw, 0.0);
+            conv_relu(&x, (c.c_in, lh, lw), &c.weight, &c.bias, &mut y, &mut scratch);
+            if let Some(s) = save.as_deref_mut() {
+                s.relu_open.push(y.iter().map(|&v| v > 0.0).collect());
+            }
+            std::mem::swap(&mut x, &mut y);
+            if layer == 1 || layer == 3 {
+                let (ph, pw) = dims[STAGE[layer] + 1];
+                y.resize(c.c_out * ph * pw, 0.0);
+                let p = layer / 2;
+                max_pool(&x, (c.c_out, lh, lw), &mut y, save.as_deref_mut().map(|s| &mut s.pool_argmax[p]));
+                std::mem::swap(&mut x, &mut y);
+            }
+        }
+        // Stage 3 writes straight into the concatenated feature map.
+        let (h3, w3) = dims[2];
+        let (f1, rest) = feats.split_at_mut(256 * n3);
+        let (f2, f3) = rest.split_at_mut(256 * n3);
+        let c = &convs[4];
+        conv_relu(&x, (c.c_in, h3, w3), &c.weight, &c.bias, f1, &mut scratch);
+        let c = &convs[5];
+        conv_relu(f1, (c.c_in, h3, w3), &c.weight, &c.bias, f2, &mut scratch);
+        let c = &convs[6];
+        conv_relu(f2, (c.c_in, h3, w3), &c.weight, &c.bias, f3, &mut scratch);
+        if let Some(s) = save {
+            for f in [&*f1, &*f2, &*f3] {
+                s.relu_open.push(f.iter().map(|&v| v > 0.0).collect());
+            }
+        }
+        Features { c: FEATURE_CHANNELS, h: h3, w: w3, data: feats }
+    }
+
+    /// Floating-point operations of one forward pass at `h × w` (multiply and add counted apart).
+    pub fn forward_flops(&self, h: usize, w: usize) -> f64 {
+        let dims = [(h, w), (h / 2, w / 2), (h / 4, w / 4)];
+        self.weights
+            .convs
+            .iter()
+            .zip(STAGE)
+            .map(|(c, s)| 2.0 * (c.c_out * c.c_in * 9) as f64 * (dims[s].0 * dims[s].1) as f64)
+            .sum()
+    }
+}
+
+/// Timings of [`bench`].
+#[derive(Clone, Copy, Debug)]
+pub struct VggTiming {
+    /// Image height and width.
+    pub size: (usize, usize),
+    /// Best time of one [`Vgg::forward`], seconds.
+    pub forward_s: f64,
+    /// Best time of one [`Vgg::backward`], seconds.
+    pub backward_s: f64,
+    /// Forward floating-point operations.
+    pub forward_flops: f64,
+    /// CPU seconds (all threads) of the best forward and backward, where the
+    /// platform reports them (Linux): on a shared machine wall time measures
+    /// the neighbours, CPU time what the kernels cost.
+    pub cpu_s: Option<(f64, f64)>,
+}
+
+/// CPU time of this process so far, in seconds (Linux `/proc`, 10 ms ticks).
+fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let fields: Vec<&str> = stat.rsplit(')').next()?.split_whitespace().collect();
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
+
+impl std::fmt::Display for VggTiming {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let g = self.forward_flops * 1e-9;
+        write!(
+            f,
+            "VGG relu3 at {}×{} on {} threads: forward {:.1} ms ({:.1} GFLOP/s of {g:.2} GFLOP), backward {:.1} ms ({:.1} GFLOP/s, {:.2}× forward)",
+            self.size.0,
+            self.size.1,
+            rayon::current_num_threads(),
+            self.forward_s * 1e3,
+            g / self.forward_s,
+            self.backward_s * 1e3,
+            g / self.backward_s,
+            self.backward_s / self.forward_s
+        )?;
+        if let Some((cf, cb)) = self.cpu_s {
+            write!(f, "; per CPU-second: forward {:.1}, backward {:.1} GFLOP/s", g / cf, g / cb)?;
+        }
+        Ok(())
+    }
+}
+
+/// Times forward and backward at `h × w` (best of `reps` after a warm-up run)
+/// on a smooth test image; the backward has about the forward's FLOPs.
+pub fn bench(vgg: &Vgg, h: usize, w: usize, reps: usize) -> VggTiming {
+    let rgb: Vec<f32> = (0..h * w * 3).map(|i| 0.5 + 0.4 * ((i as f32) * 0.37).sin()).collect();
+    let (f, state) = vgg.forward(&rgb, h, w);
+    let v: Vec<f32> = (0..f.data.len()).map(|i| ((i as f32) * 0.11).cos()).collect();
+    let _ = vgg.backward(&state, &v);
+    let (mut fwd, mut bwd) = (f64::INFINITY, f64::INFINITY);
+    let (mut cpu_f, mut cpu_b) = (f64::INFINITY, f64::INFINITY);
+    let reps = reps.max(1);
+    for _ in 0..reps {
+        let (c0, t) = (process_cpu_seconds(), std::time::Instant::now());
+        let (_, state) = vgg.forward(&rgb, h, w);
+        fwd = fwd.min(t.elapsed().as_secs_f64());
+        let (c1, t) = (process_cpu_seconds(), std::time::Instant::now());
+        let _ = vgg.backward(&state, &v);
+        bwd = bwd.min(t.elapsed().as_secs_f64());
+        if let (Some(c0), Some(c1), Some(c2)) = (c0, c1, process_cpu_seconds()) {
+            cpu_f = cpu_f.min(c1 - c0);
+            cpu_b = cpu_b.min(c2 - c1);
+        }
+    }
+    let cpu_s = (cpu_f.is_finite() && cpu_f > 0.0 && cpu_b > 0.0).then_some((cpu_f, cpu_b));
+    VggTiming { size: (h, w), forward_s: fwd, backward_s: bwd, forward_flops: vgg.forward_flops(h, w), cpu_s }
+}
+
+#[cfg(test)]
+#[path = "vgg_tests.rs"]
+mod tests;

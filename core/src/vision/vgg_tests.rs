@@ -1,0 +1,151 @@
+//! Finite-difference check of [`Vgg::backward`] and a speed print.
+
+use super::*;
+use crate::vision::weights::{CONV_SHAPES, ConvWeights};
+
+/// Deterministic values in [-1, 1).
+fn noise(n: usize, seed: u64) -> Vec<f32> {
+    let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    (0..n)
+        .map(|_| {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        })
+        .collect()
+}
+
+/// He-initialised random weights, so activations keep their scale through the layers.
+fn random_vgg(seed: u64) -> Vgg {
+    let convs = CONV_SHAPES
+        .iter()
+        .enumerate()
+        .map(|(i, &(c_out, c_in))| {
+            let scale = (6.0 / (c_in * 9) as f32).sqrt();
+            ConvWeights {
+                c_out,
+                c_in,
+                weight: noise(c_out * c_in * 9, seed + 2 * i as u64).iter().map(|v| v * scale).collect(),
+                bias: noise(c_out, seed + 2 * i as u64 + 1).iter().map(|v| 0.1 * v).collect(),
+            }
+        })
+        .collect();
+    Vgg::from_weights(VggWeights { convs })
+}
+
+fn functional(vgg: &Vgg, rgb: &[f32], h: usize, w: usize, r: &[f32]) -> f64 {
+    vgg.features(rgb, h, w).data.iter().zip(r).map(|(a, b)| *a as f64 * *b as f64).sum()
+}
+
+/// Central differences on the real (kinked) network. A random network has so
+/// many ReLUs near their switch that a step of one input crosses some of them
+/// (see the exact linearised test below for the strict check), so this one
+/// asks that the large majority of inputs agree and prints the others.
+#[test]
+fn backward_matches_finite_differences_mostly() {
+    let mut failures = Vec::new();
+    let mut checked = 0;
+    for (h, w, seed) in [(16, 16, 1u64), (17, 22, 7)] {
+        let vgg = random_vgg(seed);
+        let rgb: Vec<f32> = noise(h * w * 3, seed + 100).iter().map(|v| 0.5 + 0.4 * v).collect();
+        let (f, state) = vgg.forward(&rgb, h, w);
+        assert_eq!((f.h, f.w), (h / 4, w / 4));
+        let r = noise(f.data.len(), seed + 200);
+        let grad = vgg.backward(&state, &r);
+        let picks = noise(64, seed + 300);
+        for p in picks {
+            let i = (((p + 1.0) * 0.5 * (h * w * 3) as f32) as usize).min(h * w * 3 - 1);
+            checked += 1;
+            let fd = |eps: f32| {
+                let mut x = rgb.clone();
+                x[i] = rgb[i] + eps;
+                let up = functional(&vgg, &x, h, w, &r);
+                x[i] = rgb[i] - eps;
+                let down = functional(&vgg, &x, h, w, &r);
+                (up - down) / (2.0 * eps as f64)
+            };
+            let g = grad[i] as f64;
+            let tol = |fd: f64| 2e-2 + 1e-2 * fd.abs();
+            let d1 = fd(1e-2);
+            if (d1 - g).abs() > tol(d1) {
+                let d2 = fd(1e-2 / 16.0);
+                if (d2 - g).abs() > tol(d2) * 4.0 {
+                    failures.push(format!("{h}×{w} input {i}: backward {g:.5}, differences {d1:.5} / {d2:.5}"));
+                }
+            }
+        }
+    }
+    println!("{} of {checked} inputs cross a ReLU/pool switch within the step:\n{}", failures.len(), failures.join("\n"));
+    assert!(failures.len() * 5 <= checked, "{} of {checked} gradient checks failed:\n{}", failures.len(), failures.join("\n"));
+}
+
+/// The network with its ReLU pattern and pool winners frozen at `state`: a
+/// linear map (plus a constant) whose gradient [`Vgg::backward`] must equal
+/// exactly, so central differences check it with no kinks in the way.
+fn frozen_features(vgg: &Vgg, state: &VggState, rgb: &[f32], h: usize, w: usize) -> Vec<f32> {
+    use crate::vision::conv::conv_affine;
+    let dims = [(h, w), (h / 2, w / 2), (h / 4, w / 4)];
+    let n = h * w;
+    let mut x = vec![0.0; 3 * n];
+    for (p, px) in rgb.chunks_exact(3).enumerate() {
+        for ch in 0..3 {
+            x[ch * n + p] = (px[ch] - IMAGENET_MEAN[ch]) / IMAGENET_STD[ch];
+        }
+    }
+    let mut scratch = Vec::new();
+    let mut feats = Vec::new();
+    for (layer, c) in vgg.weights.convs.iter().enumerate() {
+        let (lh, lw) = dims[STAGE[layer]];
+        let mut y = vec![0.0; c.c_out * lh * lw];
+        conv_affine(&x, (c.c_in, lh, lw), &c.weight, &c.bias, &mut y, &mut scratch);
+        y.iter_mut().zip(&state.relu_open[layer]).for_each(|(v, &open)| *v = if open { *v } else { 0.0 });
+        x = y;
+        if layer >= 4 {
+            feats.extend_from_slice(&x);
+        }
+        if layer == 1 || layer == 3 {
+            let (ph, pw) = dims[STAGE[layer] + 1];
+            let arg = &state.pool_argmax[layer / 2];
+            x = (0..c.c_out * ph * pw).map(|i| x[(i / (ph * pw)) * lh * lw + arg[i] as usize]).collect();
+        }
+    }
+    feats
+}
+
+#[test]
+fn backward_is_the_exact_gradient_of_the_linearised_network() {
+    let mut failures = Vec::new();
+    let mut checked = 0;
+    for (h, w, seed) in [(16, 16, 1u64), (17, 22, 7)] {
+        let vgg = random_vgg(seed);
+        let rgb: Vec<f32> = noise(h * w * 3, seed + 100).iter().map(|v| 0.5 + 0.4 * v).collect();
+        let (f, state) = vgg.forward(&rgb, h, w);
+        let frozen = frozen_features(&vgg, &state, &rgb, h, w);
+        let same = f.data.iter().zip(&frozen).all(|(a, b)| (a - b).abs() <= 1e-4 * a.abs().max(1.0));
+        assert!(same, "{h}×{w}: frozen network differs from the forward at the same point");
+        let r = noise(f.data.len(), seed + 200);
+        let grad = vgg.backward(&state, &r);
+        let value = |x: &[f32]| -> f64 {
+            frozen_features(&vgg, &state, x, h, w).iter().zip(&r).map(|(a, b)| *a as f64 * *b as f64).sum()
+        };
+        for i in (0..h * w * 3).step_by(5) {
+            checked += 1;
+            let eps = 0.05;
+            let mut x = rgb.clone();
+            x[i] = rgb[i] + eps;
+            let up = value(&x);
+            x[i] = rgb[i] - eps;
+            let fd = (up - value(&x)) / (2.0 * eps as f64);
+            let g = grad[i] as f64;
+            if (fd - g).abs() > 1e-3 + 1e-3 * fd.abs() {
+                failures.push(format!("{h}×{w} input {i}: backward {g:.6}, differences {fd:.6}"));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{} of {checked} gradient checks failed:\n{}", failures.len(), failures.join("\n"));
+}
+
+#[test]
+fn speed_at_128() {
+    let vgg = random_vgg(3);
+    println!("{}", bench(&vgg, 128, 128, 5));
+}
