@@ -10,9 +10,11 @@ pub mod color_transfer;
 pub mod content;
 pub mod gcfm;
 pub mod regularizers;
+pub mod stage1;
 pub mod step;
 pub mod tv;
 
 pub use color_transfer::ColorTransfer;
 pub use gcfm::{GcfmOutput, Matches, StyleFeatures};
-pub use step::{FeatureNet, LossWeights, StepLoss, StyleTargets, step_loss};
+pub use stage1::{StyleMaps, style_maps};
+pub use step::{FeatureNet, LossWeights, RenderedMaps, StepLoss, StyleTargets, step_loss};

@@ -200,6 +200,13 @@ pub fn style_edges(jet_rgb: &[u8], h: usize, w: usize) -> Vec<f32> {
         .collect()
 }
 
+/// Style edges straight from a normalised style depth map (`h × w`, [0, 1]):
+/// re-normalised and truncated to 8-bit, JET-coloured, then [`style_edges`].
+pub fn style_edges_from_depth(depth: &[f32], h: usize, w: usize) -> Vec<f32> {
+    use super::colormap::{apply_jet, to_u8_truncating};
+    style_edges(&apply_jet(&to_u8_truncating(depth)), h, w)
+}
+
 /// Render edges: the render (HWC, 3 channels) min-max normalised over the whole
 /// image and truncated to 8-bit (`(x − min)/(max − min)·255`, `astype(uint8)`),
 /// Canny(25, 200) per channel, averaged over channels. `h × w`, values in
