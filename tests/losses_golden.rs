@@ -158,3 +158,43 @@ fn gcfm_and_content_match_golden() {
     assert!(e_content < 1e-4, "content loss relative error {e_content}");
     assert!(e_grad_content < 1e-3, "content gradient error {e_grad_content}");
 }
+
+/// Timing of one full step at realistic sizes (a 256×256 render against a
+/// 256×384 style): `cargo test -p gast-tests --test losses_golden bench -- --ignored --nocapture`.
+#[test]
+#[ignore = "benchmark"]
+fn bench_step_loss() {
+    let Some(wp) = shared_file("data/weights/vgg19-conv3.safetensors") else { return };
+    let vgg = Vgg::from_weights(VggWeights::load(&wp).expect("load VGG weights"));
+    let noise = |n: usize, seed: u64| -> Vec<f32> {
+        let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        (0..n)
+            .map(|i| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                // Smooth-ish content plus noise so VGG sees structure.
+                0.5 + 0.3 * ((i as f32 * 0.01).sin()) + 0.2 * ((x >> 40) as f32 / (1u64 << 24) as f32 - 0.5)
+            })
+            .collect()
+    };
+    let (hs, ws) = (256, 384);
+    let t = std::time::Instant::now();
+    let style = StyleTargets::new(&vgg, &noise(hs * ws * 3, 1), &noise(hs * ws, 2), &noise(hs * ws, 3), hs, ws);
+    let t_style = t.elapsed();
+    let (h, w) = (256, 256);
+    let rgb = noise(h * w * 3, 4);
+    let inv_depth = noise(h * w, 5);
+    let edge = vec![0.0; h * w];
+    let content = content_target(&vgg, &noise(h * w * 3, 6), h, w);
+    let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
+    let t = std::time::Instant::now();
+    let out = step_loss(&vgg, &style, maps, Some(&content), Some(&inv_depth), &LossWeights::default());
+    let t_step = t.elapsed();
+    eprintln!(
+        "style targets {hs}×{ws}: {:.0} ms; step_loss {h}×{w} (1024 vs 6144 positions): {:.0} ms (total {})",
+        t_style.as_secs_f64() * 1e3,
+        t_step.as_secs_f64() * 1e3,
+        out.total
+    );
+}
