@@ -3,7 +3,7 @@
 //! weights and torchvision normalisation).
 
 use anyhow::{Context, Result, bail};
-use gast_core::vision::{Vgg, VggWeights};
+use gast_core::vision::Vgg;
 use gast_tests::shared_file;
 use safetensors::SafeTensors;
 
@@ -20,7 +20,7 @@ fn relu3_features_match_golden() -> Result<()> {
     else {
         return Ok(());
     };
-    let vgg = Vgg::from_weights(VggWeights::load(&wp)?);
+    let vgg = Vgg::load(&wp)?;
     let bytes = std::fs::read(&gp)?;
     let st = SafeTensors::deserialize(&bytes)?;
     let (shape, rgb) = f64s(&st, "render_rgb")?;
@@ -32,7 +32,9 @@ fn relu3_features_match_golden() -> Result<()> {
     let max_mag = golden.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let max_err = f.data.iter().zip(&golden).fold(0.0f64, |m, (a, b)| m.max((*a as f64 - b).abs()));
     let rel = max_err / max_mag;
-    println!("VGG relu3 vs golden ({h}×{w}): max |err| {max_err:.3e}, largest |value| {max_mag:.3e}, relative {rel:.3e}");
+    println!(
+        "VGG relu3 vs golden ({h}×{w}): max |err| {max_err:.3e}, largest |value| {max_mag:.3e}, relative {rel:.3e}"
+    );
     if rel > 1e-4 {
         bail!("relu3 features differ from golden: relative error {rel:.3e} > 1e-4");
     }

@@ -34,11 +34,8 @@ fn matmul(
     assert!((m - 1) * lhs_rs + (k - 1) * lhs_cs < lhs.len(), "matmul: lhs too small");
     assert!((k - 1) * rhs_rs + n <= rhs.len(), "matmul: rhs too small");
     let threads = rayon::current_num_threads();
-    let par = if threads > 1 && m * n * k > 1 << 16 {
-        gemm::Parallelism::Rayon(threads)
-    } else {
-        gemm::Parallelism::None
-    };
+    let par =
+        if threads > 1 && m * n * k > 1 << 16 { gemm::Parallelism::Rayon(threads) } else { gemm::Parallelism::None };
     // SAFETY: the asserts above keep every element gemm touches, at the
     // strides given, inside the three slices; dst is borrowed mutably, so it
     // aliases neither input.
@@ -328,11 +325,8 @@ mod tests {
             let v = noise(c_out * h * w, 4);
             let mut v_in = vec![0.0; c_in * h * w];
             conv_backward_banded(&v, (c_in, h, w), &wt, c_out, &mut v_in, &mut scratch, band);
-            let lhs: f64 = reference
-                .iter()
-                .enumerate()
-                .map(|(i, r)| (r - bias[i / (h * w)] as f64) * v[i] as f64)
-                .sum();
+            let lhs: f64 =
+                reference.iter().enumerate().map(|(i, r)| (r - bias[i / (h * w)] as f64) * v[i] as f64).sum();
             let rhs: f64 = x.iter().zip(&v_in).map(|(a, b)| *a as f64 * *b as f64).sum();
             if (lhs - rhs).abs() > 1e-4 * lhs.abs().max(1.0) {
                 failures.push(format!("{c_in}x{h}x{w} adjoint: {lhs} vs {rhs}"));
@@ -352,9 +346,14 @@ mod tests {
             for y in 0..2 {
                 for xx in 0..3 {
                     let p = &x[ci * h * w..];
-                    let m = [p[2 * y * w + 2 * xx], p[2 * y * w + 2 * xx + 1], p[(2 * y + 1) * w + 2 * xx], p[(2 * y + 1) * w + 2 * xx + 1]]
-                        .into_iter()
-                        .fold(f32::MIN, f32::max);
+                    let m = [
+                        p[2 * y * w + 2 * xx],
+                        p[2 * y * w + 2 * xx + 1],
+                        p[(2 * y + 1) * w + 2 * xx],
+                        p[(2 * y + 1) * w + 2 * xx + 1],
+                    ]
+                    .into_iter()
+                    .fold(f32::MIN, f32::max);
                     assert_eq!(out[(ci * 2 + y) * 3 + xx], m);
                 }
             }

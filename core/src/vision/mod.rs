@@ -22,5 +22,6 @@ pub mod style_depth;
 pub mod vgg;
 pub mod weights;
 
+pub use download::resolve_weights;
 pub use vgg::{Features, Vgg, VggState};
 pub use weights::{VggWeights, WeightsError};

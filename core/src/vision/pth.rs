@@ -83,7 +83,7 @@ fn read_zip(path: &Path, file: File, wanted: &[String]) -> Result<HashMap<String
     }
     let refs = tensor_refs(path, &mut pkl.as_slice(), wanted)?;
     let mut out = HashMap::new();
-    for (name, t) in refs {
+    for (name, t) in refs.wanted {
         let entry = format!("{prefix}data/{}", t.key);
         let mut bytes = Vec::new();
         zip.by_name(&entry)
@@ -100,9 +100,14 @@ fn read_legacy(
     wanted: &[String],
 ) -> Result<HashMap<String, RawTensor>, WeightsError> {
     let io = |e| WeightsError::io(path, e);
+    let file_len = r.get_ref().metadata().map_err(io)?.len();
     let magic = unpickle(path, &mut r)?;
     if !matches!(magic, Value::Int(0x1950a86a20f9469cfc6c)) {
-        return Err(WeightsError::format(path, "a PyTorch checkpoint (zip, or pickle with torch's magic number)", format!("{magic:?}")));
+        return Err(WeightsError::format(
+            path,
+            "a PyTorch checkpoint (zip, or pickle with torch's magic number)",
+            format!("{magic:?}"),
+        ));
     }
     let _protocol = unpickle(path, &mut r)?;
     let _sys_info = unpickle(path, &mut r)?;
@@ -111,11 +116,14 @@ fn read_legacy(
         return Err(WeightsError::format(path, "the list of storage keys", "something else"));
     };
     let mut by_key: HashMap<&str, Vec<(&String, &TensorRef)>> = HashMap::new();
-    for (name, t) in &refs {
+    for (name, t) in &refs.wanted {
         by_key.entry(t.key.as_str()).or_default().push((name, t));
     }
     let mut out = HashMap::new();
     for key in keys {
+        if out.len() == refs.wanted.len() {
+            break;
+        }
         let Value::Str(key) = key else {
             return Err(WeightsError::format(path, "string storage keys", format!("{key:?}")));
         };
@@ -123,14 +131,19 @@ fn read_legacy(
         r.read_exact(&mut count).map_err(io)?;
         let count = u64::from_le_bytes(count);
         let users = by_key.get(key.as_str());
-        let elem = match users.and_then(|u| u.first()) {
-            Some((_, t)) => element_size(&t.storage_type),
-            None => refs_type_size(&refs, &key).or(Some(4)),
-        };
-        let Some(elem) = elem else {
-            return Err(WeightsError::format(path, "a known storage type", format!("storage {key}")));
+        let ty = refs.storage_types.get(&key).map_or("an unreferenced storage", String::as_str);
+        let Some(elem) = element_size(ty) else {
+            return Err(WeightsError::format(path, "a known storage type", format!("{ty} for storage {key}")));
         };
         let len = count.saturating_mul(elem as u64);
+        let at = r.stream_position().map_err(io)?;
+        if at.saturating_add(len) > file_len {
+            return Err(WeightsError::format(
+                path,
+                format!("storage {key} of {len} bytes at offset {at}"),
+                format!("a file of {file_len} bytes (truncated download?)"),
+            ));
+        }
         match users {
             Some(users) => {
                 let mut bytes = vec![0u8; usize::try_from(len).unwrap_or(usize::MAX)];
@@ -145,10 +158,6 @@ fn read_legacy(
     Ok(out)
 }
 
-fn refs_type_size(refs: &HashMap<String, TensorRef>, key: &str) -> Option<usize> {
-    refs.values().find(|t| t.key == key).and_then(|t| element_size(&t.storage_type))
-}
-
 fn element_size(storage_type: &str) -> Option<usize> {
     Some(match storage_type {
         "DoubleStorage" | "LongStorage" => 8,
@@ -159,24 +168,39 @@ fn element_size(storage_type: &str) -> Option<usize> {
     })
 }
 
+/// The wanted tensors of a state dict, and the element type of every storage
+/// any of its tensors uses (to step over the unwanted ones in a legacy file).
+struct Refs {
+    wanted: HashMap<String, TensorRef>,
+    storage_types: HashMap<String, String>,
+}
+
 /// Unpickles the state dict and returns the wanted tensors' references.
-fn tensor_refs(path: &Path, r: &mut impl Read, wanted: &[String]) -> Result<HashMap<String, TensorRef>, WeightsError> {
-    let root = unpickle(path, r)?;
-    // Some checkpoints wrap the state dict: {"state_dict": {...}} or {"model": {...}}.
-    let dict = match root {
+fn tensor_refs(path: &Path, r: &mut impl Read, wanted: &[String]) -> Result<Refs, WeightsError> {
+    let mut dict = match unpickle(path, r)? {
         Value::Dict(d) => d,
         other => return Err(WeightsError::format(path, "a state dict (a dict of tensors)", format!("{other:?}"))),
     };
-    let mut out = HashMap::new();
+    // Training checkpoints wrap the state dict: {"state_dict": {...}} or {"model": {...}}.
+    let inner = dict
+        .iter()
+        .position(|(k, v)| matches!((k, v), (Value::Str(k), Value::Dict(_)) if k == "state_dict" || k == "model"));
+    if let Some(i) = inner
+        && let (_, Value::Dict(d)) = dict.swap_remove(i)
+    {
+        dict = d;
+    }
+    let mut refs = Refs { wanted: HashMap::new(), storage_types: HashMap::new() };
     for (k, v) in dict {
         if let (Value::Str(k), Value::Tensor(t)) = (k, v) {
+            refs.storage_types.insert(t.key.clone(), t.storage_type.clone());
             let k = k.strip_prefix("module.").map(str::to_owned).unwrap_or(k);
             if wanted.contains(&k) {
-                out.insert(k, t);
+                refs.wanted.insert(k, t);
             }
         }
     }
-    Ok(out)
+    Ok(refs)
 }
 
 /// Copies a (possibly strided) f32 tensor out of its storage bytes.
@@ -256,10 +280,10 @@ fn unpickle(path: &Path, r: &mut impl Read) -> Result<Value, WeightsError> {
     loop {
         let op = bytes!(1)[0];
         match op {
-            0x80 => drop(bytes!(1)),       // PROTO
-            0x95 => drop(bytes!(8)),       // FRAME
+            0x80 => drop(bytes!(1)),                                                 // PROTO
+            0x95 => drop(bytes!(8)),                                                 // FRAME
             b'.' => return stack.pop().ok_or_else(|| bad("an empty pickle".into())), // STOP
-            b'(' => marks.push(stack.len()), // MARK
+            b'(' => marks.push(stack.len()),                                         // MARK
             b'N' => stack.push(Value::None),
             0x88 => stack.push(Value::Bool(true)),
             0x89 => stack.push(Value::Bool(false)),
@@ -372,8 +396,24 @@ fn unpickle(path: &Path, r: &mut impl Read) -> Result<Value, WeightsError> {
                 let _cls = pop!();
                 stack.push(Value::Opaque);
             }
-            b'b' => drop(pop!()), // BUILD: state is ignored, the object stays
-            other => return Err(bad(format!("pickle opcode 0x{other:02x}, which torch.save does not write for a state dict"))),
+            b'b' => {
+                // BUILD: state is ignored, the object stays, except for a tensor
+                // class built from (storage, offset, size, stride) as very old torch did.
+                let state = pop!();
+                if let Some(Value::Global(m, n)) = stack.last()
+                    && m == "torch"
+                    && n.ends_with("Tensor")
+                    && let Value::Tensor(t) =
+                        reduce(Value::Global("torch._utils".into(), "_rebuild_tensor".into()), state)
+                {
+                    *stack.last_mut().ok_or_else(|| bad("BUILD on an empty stack".into()))? = Value::Tensor(t);
+                }
+            }
+            other => {
+                return Err(bad(format!(
+                    "pickle opcode 0x{other:02x}, which torch.save does not write for a state dict"
+                )));
+            }
         }
     }
 }
@@ -427,8 +467,16 @@ fn reduce(func: Value, args: Value) -> Value {
             else {
                 return Value::Opaque;
             };
-            Value::Tensor(TensorRef { key: key.clone(), storage_type: ty.clone(), offset: offset + view_offset, shape, stride })
+            Value::Tensor(TensorRef {
+                key: key.clone(),
+                storage_type: ty.clone(),
+                offset: offset + view_offset,
+                shape,
+                stride,
+            })
         }
+        // torch.FloatTensor() etc.: filled in by the BUILD that follows.
+        ("torch", n) if n.ends_with("Tensor") && args.is_empty() => Value::Global(module.clone(), name.clone()),
         ("torch._utils", "_rebuild_parameter" | "_rebuild_parameter_with_state") => {
             args.into_iter().next().unwrap_or(Value::Opaque)
         }

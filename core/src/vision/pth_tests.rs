@@ -42,13 +42,25 @@ fn int_tuple(out: &mut Vec<u8>, v: &[usize]) {
 }
 
 /// The state-dict pickle, as torch writes it (protocol 2, memoised globals).
+/// `legacy` writes what 2017's torch did: 6-field persistent ids, tensors as
+/// `torch.FloatTensor()` plus BUILD, the dict wrapped as `{"state_dict": …}`.
 fn state_dict_pickle(storages: &[Storage], entries: &[Entry], legacy: bool) -> Vec<u8> {
     let mut p = vec![0x80, 2];
+    if legacy {
+        p.extend(b"}(");
+        unicode(&mut p, "epoch");
+        int(&mut p, 90);
+        unicode(&mut p, "state_dict");
+    }
     p.extend(b"ccollections\nOrderedDict\nq\x00)Rq\x01(");
     let mut first_storage_global = true;
     for e in entries {
         unicode(&mut p, &e.name);
-        p.extend(b"ctorch._utils\n_rebuild_tensor_v2\nq\x02(");
+        if legacy {
+            p.extend(b"ctorch\nFloatTensor\n)R(");
+        } else {
+            p.extend(b"ctorch._utils\n_rebuild_tensor_v2\nq\x02(");
+        }
         // Persistent id tuple.
         p.push(b'(');
         unicode(&mut p, "storage");
@@ -68,11 +80,19 @@ fn state_dict_pickle(storages: &[Storage], entries: &[Entry], legacy: bool) -> V
         int(&mut p, e.offset);
         int_tuple(&mut p, &e.shape);
         int_tuple(&mut p, &e.stride);
-        p.push(0x89);
-        p.extend(b"h\x00)R");
-        p.extend(b"tR");
+        if legacy {
+            p.extend(b"tb");
+        } else {
+            p.push(0x89);
+            p.extend(b"h\x00)R");
+            p.extend(b"tR");
+        }
     }
-    p.extend(b"u.");
+    p.extend(b"u");
+    if legacy {
+        p.extend(b"u");
+    }
+    p.push(b'.');
     p
 }
 

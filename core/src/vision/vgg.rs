@@ -9,8 +9,10 @@
 //! saved state is small: a ReLU mask per convolution and the winners of the
 //! two max-pools.
 //!
-//! Convolutions are im2col + `gemm` (see [`super::conv`]); the ImageNet
+//! Convolutions are im2col + `gemm` (see `conv.rs`); the ImageNet
 //! normalisation torchvision's weights expect happens inside.
+
+use rayon::prelude::*;
 
 use super::conv::{conv_backward, conv_relu, max_pool, max_pool_backward};
 use super::weights::VggWeights;
@@ -62,11 +64,24 @@ impl Vgg {
         Self { weights }
     }
 
+    /// Loads the weights from a `.safetensors` or `.pth` file (see
+    /// [`super::resolve_weights`] for finding one).
+    pub fn load(path: &std::path::Path) -> Result<Self, super::WeightsError> {
+        VggWeights::load(path).map(Self::from_weights)
+    }
+
+    /// The convolution weights.
+    pub fn weights(&self) -> &VggWeights {
+        &self.weights
+    }
+
     /// The relu3 features of an RGB image (`h × w × 3`, HWC, values in [0, 1]),
     /// saving nothing for a backward pass.
     ///
+    /// An image smaller than 4×4 has an empty feature map (`h` or `w` 0), as in torch.
+    ///
     /// # Panics
-    /// If `rgb.len() != h·w·3` or the image is smaller than 4×4.
+    /// If `rgb.len() != h·w·3`.
     pub fn features(&self, rgb: &[f32], h: usize, w: usize) -> Features {
         self.run(rgb, h, w, None)
     }
@@ -89,6 +104,9 @@ impl Vgg {
         let dims = [(h, w), (h / 2, w / 2), (h / 4, w / 4)];
         let n3 = dims[2].0 * dims[2].1;
         assert_eq!(v_features.len(), FEATURE_CHANNELS * n3, "backward: v_features has the wrong size");
+        if n3 == 0 {
+            return vec![0.0; h * w * 3];
+        }
         let convs = &self.weights.convs;
         let mut scratch = Vec::new();
         // v holds the gradient of the current layer's output (post-ReLU).
@@ -100,9 +118,9 @@ impl Vgg {
             if layer == 5 || layer == 4 {
                 // relu3_2 and relu3_1 are features themselves as well as the next layer's input.
                 let block = &v_features[(layer - 4) * 256 * n3..(layer - 3) * 256 * n3];
-                v.iter_mut().zip(block).for_each(|(a, b)| *a += b);
+                v.par_iter_mut().zip(block).for_each(|(a, b)| *a += b);
             }
-            v.iter_mut().zip(&state.relu_open[layer]).for_each(|(g, &open)| {
+            v.par_iter_mut().zip(&state.relu_open[layer]).for_each(|(g, &open)| {
                 if !open {
                     *g = 0.0;
                 }
@@ -133,18 +151,20 @@ impl Vgg {
 
     fn run(&self, rgb: &[f32], h: usize, w: usize, mut save: Option<&mut VggState>) -> Features {
         assert_eq!(rgb.len(), h * w * 3, "VGG input must be h·w·3 RGB values");
-        assert!(h >= 4 && w >= 4, "VGG input must be at least 4×4, got {h}×{w}");
         let dims = [(h, w), (h / 2, w / 2), (h / 4, w / 4)];
+        if let Some(s) = save.as_deref_mut() {
+            s.size = (h, w);
+            s.relu_open.clear();
+        }
+        if dims[2].0 == 0 || dims[2].1 == 0 {
+            return Features { c: FEATURE_CHANNELS, h: dims[2].0, w: dims[2].1, data: Vec::new() };
+        }
         let n = h * w;
         let mut x = vec![0.0; 3 * n];
         for (p, px) in rgb.chunks_exact(3).enumerate() {
             for ch in 0..3 {
                 x[ch * n + p] = (px[ch] - IMAGENET_MEAN[ch]) / IMAGENET_STD[ch];
             }
-        }
-        if let Some(s) = save.as_deref_mut() {
-            s.size = (h, w);
-            s.relu_open.clear();
         }
         let convs = &self.weights.convs;
         let mut scratch = Vec::new();
@@ -157,7 +177,7 @@ impl Vgg {
             y.resize(c.c_out * lh * lw, 0.0);
             conv_relu(&x, (c.c_in, lh, lw), &c.weight, &c.bias, &mut y, &mut scratch);
             if let Some(s) = save.as_deref_mut() {
-                s.relu_open.push(y.iter().map(|&v| v > 0.0).collect());
+                s.relu_open.push(y.par_iter().map(|&v| v > 0.0).collect());
             }
             std::mem::swap(&mut x, &mut y);
             if layer == 1 || layer == 3 {
@@ -180,7 +200,7 @@ impl Vgg {
         conv_relu(f2, (c.c_in, h3, w3), &c.weight, &c.bias, f3, &mut scratch);
         if let Some(s) = save {
             for f in [&*f1, &*f2, &*f3] {
-                s.relu_open.push(f.iter().map(|&v| v > 0.0).collect());
+                s.relu_open.push(f.par_iter().map(|&v| v > 0.0).collect());
             }
         }
         Features { c: FEATURE_CHANNELS, h: h3, w: w3, data: feats }
@@ -198,7 +218,7 @@ impl Vgg {
     }
 }
 
-/// Timings of [`bench`].
+/// Timings of [`bench()`].
 #[derive(Clone, Copy, Debug)]
 pub struct VggTiming {
     /// Image height and width.

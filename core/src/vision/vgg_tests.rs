@@ -74,8 +74,17 @@ fn backward_matches_finite_differences_mostly() {
             }
         }
     }
-    println!("{} of {checked} inputs cross a ReLU/pool switch within the step:\n{}", failures.len(), failures.join("\n"));
-    assert!(failures.len() * 5 <= checked, "{} of {checked} gradient checks failed:\n{}", failures.len(), failures.join("\n"));
+    println!(
+        "{} of {checked} inputs cross a ReLU/pool switch within the step:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
+    assert!(
+        failures.len() * 5 <= checked,
+        "{} of {checked} gradient checks failed:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
 }
 
 /// The network with its ReLU pattern and pool winners frozen at `state`: a
@@ -148,4 +157,14 @@ fn backward_is_the_exact_gradient_of_the_linearised_network() {
 fn speed_at_128() {
     let vgg = random_vgg(3);
     println!("{}", bench(&vgg, 128, 128, 5));
+}
+
+#[test]
+fn tiny_images_have_empty_features() {
+    let vgg = random_vgg(5);
+    for (h, w) in [(3, 9), (9, 2), (1, 1)] {
+        let (f, state) = vgg.forward(&vec![0.5; h * w * 3], h, w);
+        assert!(f.data.is_empty() && (f.h == 0 || f.w == 0), "{h}×{w}");
+        assert_eq!(vgg.backward(&state, &[]), vec![0.0; h * w * 3]);
+    }
 }

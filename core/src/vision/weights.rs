@@ -18,15 +18,8 @@ use super::pth;
 pub const CONV_INDICES: [usize; 7] = [0, 2, 5, 7, 10, 12, 14];
 
 /// `(out_channels, in_channels)` of the seven convolutions, all 3×3.
-pub const CONV_SHAPES: [(usize, usize); 7] = [
-    (64, 3),
-    (64, 64),
-    (128, 64),
-    (128, 128),
-    (256, 128),
-    (256, 256),
-    (256, 256),
-];
+pub const CONV_SHAPES: [(usize, usize); 7] =
+    [(64, 3), (64, 64), (128, 64), (128, 128), (256, 128), (256, 256), (256, 256)];
 
 /// Where the network torchvision publishes can be downloaded from (see [`super::download`]).
 pub const HOW_TO_GET: &str = "download https://download.pytorch.org/models/vgg16-397923af.pth \
@@ -61,7 +54,9 @@ pub enum WeightsError {
         found: String,
     },
     /// A tensor the network needs is absent.
-    #[error("{path}: tensor `{name}` is missing (expected a torchvision VGG state dict with features.0 … features.14); to get a good file, {HOW_TO_GET}")]
+    #[error(
+        "{path}: tensor `{name}` is missing (expected a torchvision VGG state dict with features.0 … features.14); to get a good file, {HOW_TO_GET}"
+    )]
     MissingTensor {
         /// The file.
         path: PathBuf,
@@ -141,10 +136,7 @@ pub(crate) struct RawTensor {
 
 /// The parameter names this module reads, in network order: weight then bias.
 pub(crate) fn needed_names() -> Vec<String> {
-    CONV_INDICES
-        .iter()
-        .flat_map(|i| [format!("features.{i}.weight"), format!("features.{i}.bias")])
-        .collect()
+    CONV_INDICES.iter().flat_map(|i| [format!("features.{i}.weight"), format!("features.{i}.bias")]).collect()
 }
 
 impl VggWeights {
@@ -206,22 +198,18 @@ impl VggWeights {
 
 fn read_safetensors(path: &Path) -> Result<std::collections::HashMap<String, RawTensor>, WeightsError> {
     let bytes = std::fs::read(path).map_err(|e| WeightsError::io(path, e))?;
-    let st = SafeTensors::deserialize(&bytes).map_err(|e| {
-        WeightsError::format(path, "a safetensors or PyTorch .pth file", format!("neither ({e})"))
-    })?;
+    let st = SafeTensors::deserialize(&bytes)
+        .map_err(|e| WeightsError::format(path, "a safetensors or PyTorch .pth file", format!("neither ({e})")))?;
     let mut out = std::collections::HashMap::new();
     for name in needed_names() {
         let Ok(view) = st.tensor(&name) else { continue };
         let data = match view.dtype() {
-            Dtype::F32 => Some(
-                view.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect(),
-            ),
+            Dtype::F32 => {
+                Some(view.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
+            }
             _ => None,
         };
-        out.insert(
-            name,
-            RawTensor { shape: view.shape().to_vec(), dtype: format!("{:?}", view.dtype()), data },
-        );
+        out.insert(name, RawTensor { shape: view.shape().to_vec(), dtype: format!("{:?}", view.dtype()), data });
     }
     Ok(out)
 }
