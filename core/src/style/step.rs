@@ -46,11 +46,24 @@ impl FeatureNet for crate::vision::Vgg {
     type State = crate::vision::VggState;
     fn features(&self, rgb: &[f32], h: usize, w: usize) -> FeatureMap {
         let f = crate::vision::Vgg::features(self, rgb, h, w);
-        FeatureMap { channels: f.c, height: f.h, width: f.w, data: f.data }
+        FeatureMap {
+            channels: f.c,
+            height: f.h,
+            width: f.w,
+            data: f.data,
+        }
     }
     fn forward(&self, rgb: &[f32], h: usize, w: usize) -> (FeatureMap, Self::State) {
         let (f, s) = crate::vision::Vgg::forward(self, rgb, h, w);
-        (FeatureMap { channels: f.c, height: f.h, width: f.w, data: f.data }, s)
+        (
+            FeatureMap {
+                channels: f.c,
+                height: f.h,
+                width: f.w,
+                data: f.data,
+            },
+            s,
+        )
     }
     fn backward(&self, state: &Self::State, v_features: &[f32]) -> Vec<f32> {
         crate::vision::Vgg::backward(self, state, v_features)
@@ -72,7 +85,12 @@ pub struct LossWeights {
 
 impl Default for LossWeights {
     fn default() -> Self {
-        Self { gcfm: 2.0, content: 1e-3, tv: 0.02, depth: 10.0 }
+        Self {
+            gcfm: 2.0,
+            content: 1e-3,
+            tv: 0.02,
+            depth: 10.0,
+        }
     }
 }
 
@@ -92,22 +110,39 @@ pub fn replicate3(map: &[f32]) -> Vec<f32> {
 impl StyleTargets {
     /// Features of the style maps at their final size (no downscale): `rgb`
     /// HWC, `depth` and `edge` `h × w` (depth in [0, 1], edges in {0, 1}).
-    pub fn new<N: FeatureNet>(net: &N, rgb: &[f32], depth: &[f32], edge: &[f32], h: usize, w: usize) -> Self {
+    pub fn new<N: FeatureNet>(
+        net: &N,
+        rgb: &[f32],
+        depth: &[f32],
+        edge: &[f32],
+        h: usize,
+        w: usize,
+    ) -> Self {
         let inputs = [rgb.to_vec(), replicate3(depth), replicate3(edge)];
         let maps: Vec<FeatureMap> = {
             use rayon::prelude::*;
-            inputs.par_iter().map(|img| net.features(img, h, w)).collect()
+            inputs
+                .par_iter()
+                .map(|img| net.features(img, h, w))
+                .collect()
         };
         let (c, fh, fw) = (maps[0].channels, maps[0].height, maps[0].width);
         let mut it = maps.into_iter().map(|m| m.data);
         let feats = std::array::from_fn(|_| it.next().unwrap_or_default());
-        Self { features: StyleFeatures::new(feats, c, fh, fw) }
+        Self {
+            features: StyleFeatures::new(feats, c, fh, fw),
+        }
     }
 }
 
 /// The content target: features of the colour-matched render, downscaled 0.5×
 /// like the rendered image.
-pub fn content_target<N: FeatureNet>(net: &N, content_rgb: &[f32], h: usize, w: usize) -> FeatureMap {
+pub fn content_target<N: FeatureNet>(
+    net: &N,
+    content_rgb: &[f32],
+    h: usize,
+    w: usize,
+) -> FeatureMap {
     let (small, sh, sw) = downscale_half(content_rgb, h, w, 3);
     net.features(&small, sh, sw)
 }
@@ -154,7 +189,9 @@ pub struct StepLoss {
 fn min_max_backward(d: &[f32], v: &[f32]) -> Vec<f32> {
     let (lo, hi) = d
         .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
     let r = f64::from(hi - lo) + 1e-8;
     let (mut sum_v, mut sum_vd) = (0f64, 0f64);
     for (&x, &g) in d.iter().zip(v) {
@@ -202,11 +239,20 @@ pub fn step_loss<N: FeatureNet>(
     let (lo, hi) = maps
         .inv_depth
         .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
     let r = hi - lo + 1e-8;
     let depth_n: Vec<f32> = maps.inv_depth.iter().map(|&x| (x - lo) / r).collect();
-    let images = [maps.rgb.to_vec(), replicate3(&depth_n), replicate3(maps.edge)];
-    let downs: Vec<(Vec<f32>, usize, usize)> = images.iter().map(|im| downscale_half(im, h, w, 3)).collect();
+    let images = [
+        maps.rgb.to_vec(),
+        replicate3(&depth_n),
+        replicate3(maps.edge),
+    ];
+    let downs: Vec<(Vec<f32>, usize, usize)> = images
+        .iter()
+        .map(|im| downscale_half(im, h, w, 3))
+        .collect();
     let (sh, sw) = (downs[0].1, downs[0].2);
 
     // Features: RGB and depth need a backward pass, edges do not.
@@ -224,7 +270,11 @@ pub fn step_loss<N: FeatureNet>(
         })
         .collect();
     let n = fwd[0].0.height * fwd[0].0.width;
-    let out = gcfm_loss(&style.features, [&fwd[0].0.data, &fwd[1].0.data, &fwd[2].0.data], n);
+    let out = gcfm_loss(
+        &style.features,
+        [&fwd[0].0.data, &fwd[1].0.data, &fwd[2].0.data],
+        n,
+    );
 
     // RGB features' gradient: GCFM plus content.
     let mut v_feat_rgb: Vec<f32> = out.v_rendered[0].iter().map(|v| v * weights.gcfm).collect();
@@ -241,9 +291,22 @@ pub fn step_loss<N: FeatureNet>(
         || fwd[0].1.as_ref().map(|s| net.backward(s, &v_feat_rgb)),
         || fwd[1].1.as_ref().map(|s| net.backward(s, &v_feat_depth)),
     );
-    let mut v_rgb = downscale_half_backward(&v_small_rgb.unwrap_or_else(|| vec![0.0; sh * sw * 3]), h, w, 3);
-    let v_depth3 = downscale_half_backward(&v_small_depth.unwrap_or_else(|| vec![0.0; sh * sw * 3]), h, w, 3);
-    let v_depth_n: Vec<f32> = v_depth3.chunks_exact(3).map(|p| p[0] + p[1] + p[2]).collect();
+    let mut v_rgb = downscale_half_backward(
+        &v_small_rgb.unwrap_or_else(|| vec![0.0; sh * sw * 3]),
+        h,
+        w,
+        3,
+    );
+    let v_depth3 = downscale_half_backward(
+        &v_small_depth.unwrap_or_else(|| vec![0.0; sh * sw * 3]),
+        h,
+        w,
+        3,
+    );
+    let v_depth_n: Vec<f32> = v_depth3
+        .chunks_exact(3)
+        .map(|p| p[0] + p[1] + p[2])
+        .collect();
     let mut v_inv_depth = min_max_backward(maps.inv_depth, &v_depth_n);
 
     let (tv, v_tv) = tv_loss(maps.rgb, h, w, 3);
@@ -258,7 +321,10 @@ pub fn step_loss<N: FeatureNet>(
             *a += weights.depth * b;
         }
     }
-    let total = weights.gcfm * out.loss + weights.content * content_value + weights.tv * tv + weights.depth * depth_value;
+    let total = weights.gcfm * out.loss
+        + weights.content * content_value
+        + weights.tv * tv
+        + weights.depth * depth_value;
     StepLoss {
         gcfm: out.loss,
         content: content_value,

@@ -29,7 +29,11 @@ pub struct CannyParams {
 impl Default for CannyParams {
     /// The algorithm's thresholds: low 25, high 200, no blur.
     fn default() -> Self {
-        Self { low: 25.0, high: 200.0, blur_sigma: None }
+        Self {
+            low: 25.0,
+            high: 200.0,
+            blur_sigma: None,
+        }
     }
 }
 
@@ -153,7 +157,11 @@ fn sobel_max_channel(img: &[u8], h: usize, w: usize, c: usize) -> (Vec<i32>, Vec
 
 /// Separable Gaussian blur of an 8-bit image with replicated borders, rounded.
 fn gaussian_blur_u8(img: &[u8], h: usize, w: usize, c: usize, sigma: f32) -> Vec<u8> {
-    let radius = if sigma <= 1.1 { 2 } else { (3.0 * sigma).ceil() as isize };
+    let radius = if sigma <= 1.1 {
+        2
+    } else {
+        (3.0 * sigma).ceil() as isize
+    };
     let mut k: Vec<f32> = (-radius..=radius)
         .map(|t| (-(t * t) as f32 / (2.0 * sigma * sigma)).exp())
         .collect();
@@ -193,7 +201,10 @@ fn gaussian_blur_u8(img: &[u8], h: usize, w: usize, c: usize, sigma: f32) -> Vec
 /// values {0, 1}. The channels are visited in OpenCV's BGR order so that ties
 /// between channels resolve as in the reference.
 pub fn style_edges(jet_rgb: &[u8], h: usize, w: usize) -> Vec<f32> {
-    let bgr: Vec<u8> = jet_rgb.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]]).collect();
+    let bgr: Vec<u8> = jet_rgb
+        .chunks_exact(3)
+        .flat_map(|p| [p[2], p[1], p[0]])
+        .collect();
     canny(&bgr, h, w, 3, &CannyParams::default())
         .into_iter()
         .map(f32::from)
@@ -215,7 +226,9 @@ pub fn render_edges(rgb: &[f32], h: usize, w: usize) -> Vec<f32> {
     assert_eq!(rgb.len(), h * w * 3, "render_edges: image size mismatch");
     let (lo, hi) = rgb
         .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
     let range = hi - lo;
     let to_u8 = |v: f32| {
         if range > 0.0 {
@@ -266,10 +279,22 @@ mod tests {
         }
         // Every side of the square carries an edge near its border.
         for t in 10..22 {
-            assert!((7..=8).any(|i| e[i * w + t] == 1), "top edge missing at column {t}");
-            assert!((23..=24).any(|i| e[i * w + t] == 1), "bottom edge missing at column {t}");
-            assert!((7..=8).any(|j| e[t * w + j] == 1), "left edge missing at row {t}");
-            assert!((23..=24).any(|j| e[t * w + j] == 1), "right edge missing at row {t}");
+            assert!(
+                (7..=8).any(|i| e[i * w + t] == 1),
+                "top edge missing at column {t}"
+            );
+            assert!(
+                (23..=24).any(|i| e[i * w + t] == 1),
+                "bottom edge missing at column {t}"
+            );
+            assert!(
+                (7..=8).any(|j| e[t * w + j] == 1),
+                "left edge missing at row {t}"
+            );
+            assert!(
+                (23..=24).any(|j| e[t * w + j] == 1),
+                "right edge missing at row {t}"
+            );
         }
         // Thin edges: one pixel across per side (non-maximum suppression).
         let row: u32 = (0..h).map(|i| u32::from(e[i * w + 16])).sum();
@@ -282,13 +307,25 @@ mod tests {
         // A step of 12 gives |gx| = 48 on the edge: above 25, below 200: weak only.
         let weak = canny(&square(h, w, 100, 112), h, w, 1, &CannyParams::default());
         assert!(weak.iter().all(|&v| v == 0));
-        let low = CannyParams { low: 10.0, high: 40.0, blur_sigma: None };
+        let low = CannyParams {
+            low: 10.0,
+            high: 40.0,
+            blur_sigma: None,
+        };
         let strong = canny(&square(h, w, 100, 112), h, w, 1, &low);
         assert!(strong.contains(&1));
         // A straight step of 6 (|gx| = 24) stays below low = 25 even with high
         // lowered; one of 7 (|gx| = 28) passes.
-        let p = CannyParams { low: 25.0, high: 26.0, blur_sigma: None };
-        let step = |d: u8| -> Vec<u8> { (0..h * w).map(|i| if i % w >= 16 { 100 + d } else { 100 }).collect() };
+        let p = CannyParams {
+            low: 25.0,
+            high: 26.0,
+            blur_sigma: None,
+        };
+        let step = |d: u8| -> Vec<u8> {
+            (0..h * w)
+                .map(|i| if i % w >= 16 { 100 + d } else { 100 })
+                .collect()
+        };
         assert!(canny(&step(6), h, w, 1, &p).iter().all(|&v| v == 0));
         let e = canny(&step(7), h, w, 1, &p);
         assert!((0..h).all(|i| e[i * w + 15] == 1));
@@ -334,7 +371,10 @@ mod tests {
     #[test]
     fn blur_option_runs_and_keeps_strong_edges() {
         let (h, w) = (32, 32);
-        let p = CannyParams { blur_sigma: Some(1.0), ..CannyParams::default() };
+        let p = CannyParams {
+            blur_sigma: Some(1.0),
+            ..CannyParams::default()
+        };
         let e = canny(&square(h, w, 0, 255), h, w, 1, &p);
         assert!(e.contains(&1));
     }

@@ -88,7 +88,9 @@ pub fn apply_jet(grey: &[u8]) -> Vec<u8> {
 pub fn to_u8_truncating(map: &[f32]) -> Vec<u8> {
     let (lo, hi) = map
         .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
     let range = hi - lo + 1e-8;
     map.iter()
         .map(|&v| (((v - lo) / range) * 255.0).clamp(0.0, 255.0) as u8)
