@@ -1,8 +1,26 @@
-//! The style engine: colour transfer, the losses, the optimiser and its schedule.
+//! The style engine: Stage 0 colour transfer, the style-side maps (Stage 1),
+//! the GCFM contrastive feature matching, content, total variation and the
+//! geometry regularisers (each with its gradient), the per-step loss that ties
+//! them to the VGG features of the rendered maps, and the optimiser with its
+//! K-cycle schedule.
+//!
+//! Definitions follow `ALGORITHM.md` of the shared data; the golden numbers in
+//! `golden/losses_seed1.safetensors` and `golden/color_seed1.safetensors` check them.
 
 pub mod adam;
+pub mod color_transfer;
 pub mod config;
+pub mod content;
+pub mod gcfm;
+pub mod regularizers;
 pub mod schedule;
+pub mod stage1;
+pub mod step;
+pub mod tv;
 
+pub use color_transfer::ColorTransfer;
 pub use config::StyleConfig;
+pub use gcfm::{GcfmOutput, Matches, StyleFeatures};
 pub use schedule::{Mode, Phase, Schedule};
+pub use stage1::{StyleMaps, style_maps};
+pub use step::{FeatureNet, RenderedMaps, StepLoss, StyleTargets, step_loss};

@@ -1,13 +1,24 @@
-//! Vision: the VGG feature extractor that the style losses compare images with.
+//! Vision: the VGG feature extractor that the style losses compare images
+//! with, and the image operations around it.
 //!
 //! GAST measures style and content in the relu3 feature space of an
 //! ImageNet-trained VGG (ALGORITHM.md, Stage 1 and the GCFM loss). This module
 //! finds and loads those weights ([`weights`], [`download`]), and runs the
-//! network forward and backward on the CPU ([`vgg`]).
+//! network forward and backward on the CPU ([`vgg`]). Around it: Canny edges as
+//! OpenCV computes them ([`canny`]), the JET colour map ([`colormap`]), area and
+//! bilinear resizing with the adjoint of the bilinear one ([`resize`]), and
+//! style-image depth ([`style_depth`]).
+//!
+//! Images are row-major HWC `f32` unless a function says otherwise; the golden
+//! files and the rasterizer use the same layout.
 
+pub mod canny;
+pub mod colormap;
 mod conv;
 pub mod download;
 mod pth;
+pub mod resize;
+pub mod style_depth;
 pub mod vgg;
 pub mod weights;
 

@@ -1,0 +1,110 @@
+//! Tests of the GCFM matching and loss: tiled against dense, finite differences, timing.
+
+use super::*;
+
+fn feats(c: usize, n: usize, seed: u64) -> Vec<f32> {
+    let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    (0..c * n)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            // ReLU-like: non-negative with some zeros.
+            (((x >> 11) as f64 / (1u64 << 53) as f64) as f32 - 0.3).max(0.0)
+        })
+        .collect()
+}
+
+fn style(c: usize, hs: usize, ws: usize) -> StyleFeatures {
+    let m = hs * ws;
+    StyleFeatures::new([feats(c, m, 1), feats(c, m, 2), feats(c, m, 3)], c, hs, ws)
+}
+
+#[test]
+fn tiled_matching_equals_dense() {
+    let (c, n) = (24, 300);
+    let st = style(c, 9, 13);
+    let r = [feats(c, n, 4), feats(c, n, 5), feats(c, n, 6)];
+    let rr = [&r[0][..], &r[1][..], &r[2][..]];
+    assert_eq!(match_features(&st, rr, n), match_features_dense(&st, rr, n));
+}
+
+#[test]
+fn exact_copy_matches_itself() {
+    let (c, hs, ws) = (16, 5, 7);
+    let st = style(c, hs, ws);
+    let m = hs * ws;
+    // Rendered = style columns 3, 10, 20.
+    let pick = [3usize, 10, 20];
+    let r: [Vec<f32>; 3] = std::array::from_fn(|k| {
+        let s = st.modality(k);
+        (0..c)
+            .flat_map(|ch| pick.iter().map(move |&y| s[ch * m + y]))
+            .collect()
+    });
+    let mt = match_features(&st, [&r[0], &r[1], &r[2]], pick.len());
+    assert_eq!(mt.best, vec![3, 10, 20]);
+    let out = gcfm_loss(&st, [&r[0], &r[1], &r[2]], pick.len());
+    // Attract terms vanish: each modality contributes mean(1 + cos⁻) only.
+    assert!(out.loss >= 0.0 && out.loss < 6.0);
+}
+
+/// Timing at realistic sizes: `cargo test -p gast-core --lib bench_matching -- --ignored --nocapture`.
+#[test]
+#[ignore = "benchmark"]
+fn bench_matching() {
+    let c = 768;
+    for &(n, hs, ws) in &[
+        (64 * 64, 64usize, 96usize),
+        (32 * 32, 64, 96),
+        (64 * 64, 32, 48),
+    ] {
+        let st = style(c, hs, ws);
+        let r = [feats(c, n, 4), feats(c, n, 5), feats(c, n, 6)];
+        let t = std::time::Instant::now();
+        let mt = match_features(&st, [&r[0], &r[1], &r[2]], n);
+        let t_match = t.elapsed();
+        let t = std::time::Instant::now();
+        let out = gcfm_loss_with_matches(&st, [&r[0], &r[1], &r[2]], n, mt);
+        let t_loss = t.elapsed();
+        let flops = 2.0 * (n * hs * ws * 3 * c) as f64;
+        eprintln!(
+            "{n} rendered × {} style positions: matching {:.1} ms ({:.1} GFLOP/s), loss+gradient {:.1} ms (loss {:.3})",
+            hs * ws,
+            t_match.as_secs_f64() * 1e3,
+            flops / t_match.as_secs_f64() / 1e9,
+            t_loss.as_secs_f64() * 1e3,
+            out.loss
+        );
+    }
+}
+
+#[test]
+fn gradient_matches_finite_differences() {
+    let (c, n) = (8, 6);
+    let st = style(c, 3, 4);
+    let r: [Vec<f32>; 3] = std::array::from_fn(|k| {
+        feats(c, n, 10 + k as u64)
+            .iter()
+            .map(|v| v + 0.05)
+            .collect()
+    });
+    let base = gcfm_loss(&st, [&r[0], &r[1], &r[2]], n);
+    let mut bad = Vec::new();
+    for k in 0..3 {
+        for i in 0..c * n {
+            let eval = |d: f32| {
+                let mut p = r.clone();
+                p[k][i] += d;
+                gcfm_loss_with_matches(&st, [&p[0], &p[1], &p[2]], n, base.matches.clone()).loss
+            };
+            let h = 1e-3;
+            let fd = (eval(h) - eval(-h)) / (2.0 * h);
+            let an = base.v_rendered[k][i];
+            if (fd - an).abs() > 2e-3 + 1e-2 * an.abs() {
+                bad.push(format!("modality {k} element {i}: fd {fd} analytic {an}"));
+            }
+        }
+    }
+    assert!(bad.is_empty(), "{}", bad.join("\n"));
+}

@@ -1,0 +1,342 @@
+//! The per-step stylisation loss, from rendered maps to pixel gradients.
+//!
+//! One function ([`step_loss`]) that the optimiser calls every step and that
+//! `gast check golden` reuses: it downscales the render 0.5× (bilinear), builds
+//! the depth map (inverse depth, min-max normalised per image, replicated to 3
+//! channels) and the edge map (a constant, replicated), runs the feature network
+//! on the three, computes GCFM and the content loss on the features, TV and the
+//! optional depth regulariser on the maps, and returns each term with the
+//! weighted gradients w.r.t. the rendered RGB and inverse depth. The network is
+//! behind [`FeatureNet`] so the loss does not depend on how VGG is implemented
+//! (and tests can use a small stand-in).
+
+use super::content::content_loss;
+use super::gcfm::{Matches, StyleFeatures, gcfm_loss};
+use super::regularizers::depth_l1;
+use super::tv::tv_loss;
+use crate::vision::resize::{downscale_half, downscale_half_backward};
+
+/// A CHW feature map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FeatureMap {
+    /// Channels.
+    pub channels: usize,
+    /// Height.
+    pub height: usize,
+    /// Width.
+    pub width: usize,
+    /// `channels · height · width` values, channel-major.
+    pub data: Vec<f32>,
+}
+
+/// A frozen feature extractor with an input gradient (VGG relu3_1..3).
+pub trait FeatureNet: Sync {
+    /// What [`FeatureNet::backward`] needs from a forward pass.
+    type State: Send + Sync;
+    /// Features of an RGB image (HWC, `h × w × 3`, values in [0, 1]).
+    fn features(&self, rgb: &[f32], h: usize, w: usize) -> FeatureMap;
+    /// Features plus the saved state for the backward pass.
+    fn forward(&self, rgb: &[f32], h: usize, w: usize) -> (FeatureMap, Self::State);
+    /// Gradient w.r.t. the input image (HWC) given the features' gradient.
+    fn backward(&self, state: &Self::State, v_features: &[f32]) -> Vec<f32>;
+}
+
+/// The studio's network: VGG relu3_1..3 ([`crate::vision::Vgg`]).
+impl FeatureNet for crate::vision::Vgg {
+    type State = crate::vision::VggState;
+    fn features(&self, rgb: &[f32], h: usize, w: usize) -> FeatureMap {
+        let f = crate::vision::Vgg::features(self, rgb, h, w);
+        FeatureMap {
+            channels: f.c,
+            height: f.h,
+            width: f.w,
+            data: f.data,
+        }
+    }
+    fn forward(&self, rgb: &[f32], h: usize, w: usize) -> (FeatureMap, Self::State) {
+        let (f, s) = crate::vision::Vgg::forward(self, rgb, h, w);
+        (
+            FeatureMap {
+                channels: f.c,
+                height: f.h,
+                width: f.w,
+                data: f.data,
+            },
+            s,
+        )
+    }
+    fn backward(&self, state: &Self::State, v_features: &[f32]) -> Vec<f32> {
+        crate::vision::Vgg::backward(self, state, v_features)
+    }
+}
+
+/// Loss weights (ALGORITHM.md defaults).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LossWeights {
+    /// GCFM, λ_GC.
+    pub gcfm: f32,
+    /// Content, λ_cont.
+    pub content: f32,
+    /// Total variation, λ_TV.
+    pub tv: f32,
+    /// Depth regulariser `mean|D − D^c|`, λ_d (only when a reference depth is given).
+    pub depth: f32,
+}
+
+impl Default for LossWeights {
+    fn default() -> Self {
+        Self {
+            gcfm: 2.0,
+            content: 1e-3,
+            tv: 0.02,
+            depth: 10.0,
+        }
+    }
+}
+
+/// Everything about the style the per-step loss needs, computed once per
+/// style image and scale.
+#[derive(Clone, Debug)]
+pub struct StyleTargets {
+    /// Features of the style RGB, depth and edge maps.
+    pub features: StyleFeatures,
+}
+
+/// Replicates a single-channel map to 3 interleaved channels.
+pub fn replicate3(map: &[f32]) -> Vec<f32> {
+    map.iter().flat_map(|&v| [v, v, v]).collect()
+}
+
+impl StyleTargets {
+    /// Features of the style maps at their final size (no downscale): `rgb`
+    /// HWC, `depth` and `edge` `h × w` (depth in [0, 1], edges in {0, 1}).
+    pub fn new<N: FeatureNet>(
+        net: &N,
+        rgb: &[f32],
+        depth: &[f32],
+        edge: &[f32],
+        h: usize,
+        w: usize,
+    ) -> Self {
+        let inputs = [rgb.to_vec(), replicate3(depth), replicate3(edge)];
+        let maps: Vec<FeatureMap> = {
+            use rayon::prelude::*;
+            inputs
+                .par_iter()
+                .map(|img| net.features(img, h, w))
+                .collect()
+        };
+        let (c, fh, fw) = (maps[0].channels, maps[0].height, maps[0].width);
+        let mut it = maps.into_iter().map(|m| m.data);
+        let feats = std::array::from_fn(|_| it.next().unwrap_or_default());
+        Self {
+            features: StyleFeatures::new(feats, c, fh, fw),
+        }
+    }
+}
+
+/// The content target: features of the colour-matched render, downscaled 0.5×
+/// like the rendered image.
+pub fn content_target<N: FeatureNet>(
+    net: &N,
+    content_rgb: &[f32],
+    h: usize,
+    w: usize,
+) -> FeatureMap {
+    let (small, sh, sw) = downscale_half(content_rgb, h, w, 3);
+    net.features(&small, sh, sw)
+}
+
+/// The rendered maps of one step (all `h × w`, RGB HWC).
+#[derive(Clone, Copy, Debug)]
+pub struct RenderedMaps<'a> {
+    /// Rendered colour, clamped to [0, 1].
+    pub rgb: &'a [f32],
+    /// Rendered inverse depth `Σ α T / z`.
+    pub inv_depth: &'a [f32],
+    /// Edge map of the render ([`crate::vision::canny::render_edges`]), a constant.
+    pub edge: &'a [f32],
+    /// Height.
+    pub height: usize,
+    /// Width.
+    pub width: usize,
+}
+
+/// The per-step loss: each term unweighted, the weighted total, and the
+/// gradients of the weighted total.
+#[derive(Clone, Debug)]
+pub struct StepLoss {
+    /// GCFM (unweighted).
+    pub gcfm: f32,
+    /// Content (unweighted; 0 without a content target).
+    pub content: f32,
+    /// TV (unweighted).
+    pub tv: f32,
+    /// Depth regulariser (unweighted; 0 without a reference depth).
+    pub depth: f32,
+    /// `Σ weight · term`.
+    pub total: f32,
+    /// Gradient of `total` w.r.t. the rendered RGB (HWC).
+    pub v_rgb: Vec<f32>,
+    /// Gradient of `total` w.r.t. the rendered inverse depth (`h × w`).
+    pub v_inv_depth: Vec<f32>,
+    /// GCFM matches (flat indices into the style feature map).
+    pub matches: Matches,
+}
+
+/// Min-max normalisation `(d − min)/(max − min + 1e-8)` and its adjoint
+/// (ties at the min or max share the gradient equally, as autodiff does).
+fn min_max_backward(d: &[f32], v: &[f32]) -> Vec<f32> {
+    let (lo, hi) = d
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
+    let r = f64::from(hi - lo) + 1e-8;
+    let (mut sum_v, mut sum_vd) = (0f64, 0f64);
+    for (&x, &g) in d.iter().zip(v) {
+        let dn = f64::from(x - lo) / r;
+        sum_v += f64::from(g);
+        sum_vd += f64::from(g) * dn;
+    }
+    let n_lo = d.iter().filter(|&&x| x == lo).count().max(1) as f64;
+    let n_hi = d.iter().filter(|&&x| x == hi).count().max(1) as f64;
+    // ∂/∂max = −Σ g·d̃ / r ; ∂/∂min = (Σ g·d̃ − Σ g) / r.
+    let g_hi = -sum_vd / r / n_hi;
+    let g_lo = (sum_vd - sum_v) / r / n_lo;
+    d.iter()
+        .zip(v)
+        .map(|(&x, &g)| {
+            let mut o = f64::from(g) / r;
+            if x == hi {
+                o += g_hi;
+            }
+            if x == lo {
+                o += g_lo;
+            }
+            o as f32
+        })
+        .collect()
+}
+
+/// The whole per-step loss from rendered maps. `content` is the content target
+/// ([`content_target`]) and `depth_ref` the inverse depth of `G^c` from the same
+/// view (geometry phase); either may be `None`.
+pub fn step_loss<N: FeatureNet>(
+    net: &N,
+    style: &StyleTargets,
+    maps: RenderedMaps<'_>,
+    content: Option<&FeatureMap>,
+    depth_ref: Option<&[f32]>,
+    weights: &LossWeights,
+) -> StepLoss {
+    let (h, w) = (maps.height, maps.width);
+    assert_eq!(maps.rgb.len(), h * w * 3, "step_loss: rgb size");
+    assert_eq!(maps.inv_depth.len(), h * w, "step_loss: inverse depth size");
+    assert_eq!(maps.edge.len(), h * w, "step_loss: edge size");
+
+    // Depth map: min-max normalised, replicated to 3 channels.
+    let (lo, hi) = maps
+        .inv_depth
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
+    let r = hi - lo + 1e-8;
+    let depth_n: Vec<f32> = maps.inv_depth.iter().map(|&x| (x - lo) / r).collect();
+    let images = [
+        maps.rgb.to_vec(),
+        replicate3(&depth_n),
+        replicate3(maps.edge),
+    ];
+    let downs: Vec<(Vec<f32>, usize, usize)> = images
+        .iter()
+        .map(|im| downscale_half(im, h, w, 3))
+        .collect();
+    let (sh, sw) = (downs[0].1, downs[0].2);
+
+    // Features: RGB and depth need a backward pass, edges do not.
+    use rayon::prelude::*;
+    let fwd: Vec<(FeatureMap, Option<N::State>)> = downs
+        .par_iter()
+        .enumerate()
+        .map(|(k, (img, _, _))| {
+            if k < 2 {
+                let (f, s) = net.forward(img, sh, sw);
+                (f, Some(s))
+            } else {
+                (net.features(img, sh, sw), None)
+            }
+        })
+        .collect();
+    let n = fwd[0].0.height * fwd[0].0.width;
+    let out = gcfm_loss(
+        &style.features,
+        [&fwd[0].0.data, &fwd[1].0.data, &fwd[2].0.data],
+        n,
+    );
+
+    // RGB features' gradient: GCFM plus content.
+    let mut v_feat_rgb: Vec<f32> = out.v_rendered[0].iter().map(|v| v * weights.gcfm).collect();
+    let mut content_value = 0.0;
+    if let Some(ct) = content {
+        let (l, g) = content_loss(&fwd[0].0.data, &ct.data);
+        content_value = l;
+        for (a, b) in v_feat_rgb.iter_mut().zip(g) {
+            *a += weights.content * b;
+        }
+    }
+    let v_feat_depth: Vec<f32> = out.v_rendered[1].iter().map(|v| v * weights.gcfm).collect();
+    let (v_small_rgb, v_small_depth) = rayon::join(
+        || fwd[0].1.as_ref().map(|s| net.backward(s, &v_feat_rgb)),
+        || fwd[1].1.as_ref().map(|s| net.backward(s, &v_feat_depth)),
+    );
+    let mut v_rgb = downscale_half_backward(
+        &v_small_rgb.unwrap_or_else(|| vec![0.0; sh * sw * 3]),
+        h,
+        w,
+        3,
+    );
+    let v_depth3 = downscale_half_backward(
+        &v_small_depth.unwrap_or_else(|| vec![0.0; sh * sw * 3]),
+        h,
+        w,
+        3,
+    );
+    let v_depth_n: Vec<f32> = v_depth3
+        .chunks_exact(3)
+        .map(|p| p[0] + p[1] + p[2])
+        .collect();
+    let mut v_inv_depth = min_max_backward(maps.inv_depth, &v_depth_n);
+
+    let (tv, v_tv) = tv_loss(maps.rgb, h, w, 3);
+    for (a, b) in v_rgb.iter_mut().zip(v_tv) {
+        *a += weights.tv * b;
+    }
+    let mut depth_value = 0.0;
+    if let Some(dref) = depth_ref {
+        let (l, g) = depth_l1(maps.inv_depth, dref);
+        depth_value = l;
+        for (a, b) in v_inv_depth.iter_mut().zip(g) {
+            *a += weights.depth * b;
+        }
+    }
+    let total = weights.gcfm * out.loss
+        + weights.content * content_value
+        + weights.tv * tv
+        + weights.depth * depth_value;
+    StepLoss {
+        gcfm: out.loss,
+        content: content_value,
+        tv,
+        depth: depth_value,
+        total,
+        v_rgb,
+        v_inv_depth,
+        matches: out.matches,
+    }
+}
+
+#[cfg(test)]
+#[path = "step_tests.rs"]
+mod tests;

@@ -1,0 +1,320 @@
+//! Image resizing with the conventions of the reference's libraries.
+//!
+//! - Shrinking the style image to height `S` uses OpenCV's `INTER_AREA`
+//!   (area-weighted averages; [`resize_area`], [`resize_area_u8`]).
+//! - Enlargement and resizing of depth maps use bilinear interpolation with
+//!   half-pixel centres, PyTorch `F.interpolate(mode='bilinear',
+//!   align_corners=False)` (same as OpenCV `INTER_LINEAR` in floating point).
+//! - Rendered maps are downscaled by 0.5 before VGG with
+//!   `F.interpolate(scale_factor=0.5, mode='bilinear')`; with the scale factor
+//!   given, PyTorch samples at `2·i + 0.5`, i.e. the 2×2 average (odd sizes
+//!   drop the last row/column). The loss needs its adjoint,
+//!   [`downscale_half_backward`].
+//!
+//! All images are HWC `f32` (or `u8`) with `c` interleaved channels.
+
+/// Output size of the style image for texture scale `s`: height `s`, width
+/// `floor(w · s / h)` (the reference's `int(w * (s / h))`).
+pub fn size_for_height(h: usize, w: usize, s: usize) -> (usize, usize) {
+    let ratio = s as f64 / h as f64;
+    (s, ((w as f64 * ratio) as usize).max(1))
+}
+
+/// OpenCV's area-interpolation table along one axis: for each output index the
+/// list of `(source index, weight)`, weights summing to one.
+fn area_table(src: usize, dst: usize) -> Vec<Vec<(usize, f64)>> {
+    let scale = src as f64 / dst as f64;
+    (0..dst)
+        .map(|d| {
+            let fsx1 = d as f64 * scale;
+            let fsx2 = fsx1 + scale;
+            let mut sx1 = fsx1.ceil() as usize;
+            let sx2 = (fsx2.floor() as usize).min(src - 1);
+            sx1 = sx1.min(sx2);
+            let cell = scale.min(src as f64 - fsx1);
+            let mut taps = Vec::new();
+            if sx1 as f64 - fsx1 > 1e-3 {
+                taps.push((sx1 - 1, (sx1 as f64 - fsx1) / cell));
+            }
+            for s in sx1..sx2 {
+                taps.push((s, 1.0 / cell));
+            }
+            if fsx2 - sx2 as f64 > 1e-3 {
+                taps.push((sx2, (fsx2 - sx2 as f64).min(1.0).min(cell) / cell));
+            }
+            taps
+        })
+        .collect()
+}
+
+/// Area resize (OpenCV `INTER_AREA`) of an `f32` image to `oh × ow`. Meant for
+/// shrinking; when either side grows it falls back to [`resize_bilinear`]
+/// (OpenCV's area mode is then close to, not exactly, bilinear).
+pub fn resize_area(src: &[f32], h: usize, w: usize, c: usize, oh: usize, ow: usize) -> Vec<f32> {
+    assert_eq!(src.len(), h * w * c, "resize_area: image size mismatch");
+    if oh > h || ow > w {
+        return resize_bilinear(src, h, w, c, oh, ow);
+    }
+    let ty = area_table(h, oh);
+    let tx = area_table(w, ow);
+    // Horizontal pass (h × ow), then vertical, accumulated in f64.
+    let mut tmp = vec![0f64; h * ow * c];
+    for i in 0..h {
+        for (j, taps) in tx.iter().enumerate() {
+            for &(s, wt) in taps {
+                for k in 0..c {
+                    tmp[(i * ow + j) * c + k] += wt * f64::from(src[(i * w + s) * c + k]);
+                }
+            }
+        }
+    }
+    let mut out = vec![0f32; oh * ow * c];
+    for (i, taps) in ty.iter().enumerate() {
+        for j in 0..ow {
+            for k in 0..c {
+                let v: f64 = taps
+                    .iter()
+                    .map(|&(s, wt)| wt * tmp[(s * ow + j) * c + k])
+                    .sum();
+                out[(i * ow + j) * c + k] = v as f32;
+            }
+        }
+    }
+    out
+}
+
+/// Area resize of an 8-bit image as `cv2.resize(.., INTER_AREA)`: integer
+/// factors average blocks with round-half-up (OpenCV's fast path), other
+/// factors use the area weights and round half to even.
+pub fn resize_area_u8(src: &[u8], h: usize, w: usize, c: usize, oh: usize, ow: usize) -> Vec<u8> {
+    assert_eq!(src.len(), h * w * c, "resize_area_u8: image size mismatch");
+    let integer =
+        oh > 0 && ow > 0 && h.is_multiple_of(oh) && w.is_multiple_of(ow) && oh <= h && ow <= w;
+    if integer {
+        let (fy, fx) = (h / oh, w / ow);
+        let area = (fy * fx) as u32;
+        let mut out = vec![0u8; oh * ow * c];
+        for i in 0..oh {
+            for j in 0..ow {
+                for k in 0..c {
+                    let mut s = 0u32;
+                    for a in 0..fy {
+                        for b in 0..fx {
+                            s += u32::from(src[((i * fy + a) * w + j * fx + b) * c + k]);
+                        }
+                    }
+                    out[(i * ow + j) * c + k] = ((s + area / 2) / area) as u8;
+                }
+            }
+        }
+        return out;
+    }
+    let f: Vec<f32> = src.iter().map(|&v| f32::from(v)).collect();
+    resize_area(&f, h, w, c, oh, ow)
+        .into_iter()
+        .map(|v| v.round_ties_even().clamp(0.0, 255.0) as u8)
+        .collect()
+}
+
+/// Source taps of PyTorch's bilinear (`align_corners=False`) along one axis,
+/// with `scale` source pixels per output pixel: `(i0, i1, w0, w1)`.
+fn bilinear_taps(src: usize, dst: usize, scale: f64) -> Vec<(usize, usize, f32, f32)> {
+    (0..dst)
+        .map(|d| {
+            let x = ((d as f64 + 0.5) * scale - 0.5).max(0.0);
+            let i0 = (x.floor() as usize).min(src - 1);
+            let i1 = if i0 < src - 1 { i0 + 1 } else { i0 };
+            let l1 = (x - i0 as f64).clamp(0.0, 1.0) as f32;
+            (i0, i1, 1.0 - l1, l1)
+        })
+        .collect()
+}
+
+/// Bilinear resize to `oh × ow` as `F.interpolate(size=(oh, ow),
+/// mode='bilinear', align_corners=False)` (no antialiasing).
+pub fn resize_bilinear(
+    src: &[f32],
+    h: usize,
+    w: usize,
+    c: usize,
+    oh: usize,
+    ow: usize,
+) -> Vec<f32> {
+    resize_bilinear_scaled(
+        src,
+        h,
+        w,
+        c,
+        oh,
+        ow,
+        h as f64 / oh as f64,
+        w as f64 / ow as f64,
+    )
+}
+
+/// Bilinear resize with explicit source-pixels-per-output-pixel scales (what
+/// PyTorch uses when `scale_factor` is given: `1 / scale_factor`).
+#[allow(clippy::too_many_arguments)]
+pub fn resize_bilinear_scaled(
+    src: &[f32],
+    h: usize,
+    w: usize,
+    c: usize,
+    oh: usize,
+    ow: usize,
+    scale_h: f64,
+    scale_w: f64,
+) -> Vec<f32> {
+    assert_eq!(src.len(), h * w * c, "resize_bilinear: image size mismatch");
+    let ty = bilinear_taps(h, oh, scale_h);
+    let tx = bilinear_taps(w, ow, scale_w);
+    let mut out = vec![0f32; oh * ow * c];
+    for (i, &(y0, y1, wy0, wy1)) in ty.iter().enumerate() {
+        for (j, &(x0, x1, wx0, wx1)) in tx.iter().enumerate() {
+            for k in 0..c {
+                let p = |y: usize, x: usize| src[(y * w + x) * c + k];
+                out[(i * ow + j) * c + k] = wy0 * (wx0 * p(y0, x0) + wx1 * p(y0, x1))
+                    + wy1 * (wx0 * p(y1, x0) + wx1 * p(y1, x1));
+            }
+        }
+    }
+    out
+}
+
+/// Adjoint of [`resize_bilinear_scaled`]: scatters `v_out` (`oh × ow × c`) back
+/// to the `h × w × c` input.
+#[allow(clippy::too_many_arguments)]
+pub fn resize_bilinear_scaled_backward(
+    v_out: &[f32],
+    h: usize,
+    w: usize,
+    c: usize,
+    oh: usize,
+    ow: usize,
+    scale_h: f64,
+    scale_w: f64,
+) -> Vec<f32> {
+    assert_eq!(
+        v_out.len(),
+        oh * ow * c,
+        "resize_bilinear_backward: size mismatch"
+    );
+    let ty = bilinear_taps(h, oh, scale_h);
+    let tx = bilinear_taps(w, ow, scale_w);
+    let mut v = vec![0f32; h * w * c];
+    for (i, &(y0, y1, wy0, wy1)) in ty.iter().enumerate() {
+        for (j, &(x0, x1, wx0, wx1)) in tx.iter().enumerate() {
+            for k in 0..c {
+                let g = v_out[(i * ow + j) * c + k];
+                v[(y0 * w + x0) * c + k] += wy0 * wx0 * g;
+                v[(y0 * w + x1) * c + k] += wy0 * wx1 * g;
+                v[(y1 * w + x0) * c + k] += wy1 * wx0 * g;
+                v[(y1 * w + x1) * c + k] += wy1 * wx1 * g;
+            }
+        }
+    }
+    v
+}
+
+/// The 0.5× bilinear downscale of `F.interpolate(scale_factor=0.5,
+/// mode='bilinear', align_corners=False)`. Returns the image and its size
+/// `(floor(h/2), floor(w/2))`.
+pub fn downscale_half(src: &[f32], h: usize, w: usize, c: usize) -> (Vec<f32>, usize, usize) {
+    let (oh, ow) = (h / 2, w / 2);
+    (
+        resize_bilinear_scaled(src, h, w, c, oh, ow, 2.0, 2.0),
+        oh,
+        ow,
+    )
+}
+
+/// Adjoint of [`downscale_half`]: `v_out` is `floor(h/2) × floor(w/2) × c`.
+pub fn downscale_half_backward(v_out: &[f32], h: usize, w: usize, c: usize) -> Vec<f32> {
+    resize_bilinear_scaled_backward(v_out, h, w, c, h / 2, w / 2, 2.0, 2.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp(h: usize, w: usize, c: usize) -> Vec<f32> {
+        (0..h * w * c)
+            .map(|i| ((i * 37) % 101) as f32 / 100.0)
+            .collect()
+    }
+
+    #[test]
+    fn half_downscale_is_two_by_two_average() {
+        let (h, w, c) = (6, 8, 3);
+        let img = ramp(h, w, c);
+        let (out, oh, ow) = downscale_half(&img, h, w, c);
+        assert_eq!((oh, ow), (3, 4));
+        for i in 0..oh {
+            for j in 0..ow {
+                for k in 0..c {
+                    let p = |y: usize, x: usize| img[(y * w + x) * c + k];
+                    let avg = (p(2 * i, 2 * j)
+                        + p(2 * i + 1, 2 * j)
+                        + p(2 * i, 2 * j + 1)
+                        + p(2 * i + 1, 2 * j + 1))
+                        / 4.0;
+                    assert!((out[(i * ow + j) * c + k] - avg).abs() < 1e-6);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn backward_is_the_adjoint() {
+        for &(h, w, oh, ow) in &[
+            (7usize, 9usize, 3usize, 4usize),
+            (5, 6, 11, 13),
+            (8, 8, 4, 4),
+        ] {
+            let c = 2;
+            let x = ramp(h, w, c);
+            let y: Vec<f32> = (0..oh * ow * c)
+                .map(|i| ((i * 13) % 17) as f32 / 7.0 - 1.0)
+                .collect();
+            let (sh, sw) = (h as f64 / oh as f64, w as f64 / ow as f64);
+            let ax = resize_bilinear_scaled(&x, h, w, c, oh, ow, sh, sw);
+            let aty = resize_bilinear_scaled_backward(&y, h, w, c, oh, ow, sh, sw);
+            let lhs: f64 = ax.iter().zip(&y).map(|(a, b)| f64::from(a * b)).sum();
+            let rhs: f64 = x.iter().zip(&aty).map(|(a, b)| f64::from(a * b)).sum();
+            assert!(
+                (lhs - rhs).abs() < 1e-4 * lhs.abs().max(1.0),
+                "{lhs} vs {rhs}"
+            );
+        }
+    }
+
+    #[test]
+    fn area_resize_integer_and_fractional() {
+        // Integer factor: block means.
+        let img: Vec<f32> = (0..16).map(|v| v as f32).collect();
+        let out = resize_area(&img, 4, 4, 1, 2, 2);
+        assert_eq!(out, vec![2.5, 4.5, 10.5, 12.5]);
+        // 3 -> 2: weights 2/3, 1/3 and 1/3, 2/3.
+        let row = vec![0.0, 3.0, 6.0];
+        let out = resize_area(&row, 1, 3, 1, 1, 2);
+        assert!(
+            (out[0] - 1.0).abs() < 1e-6 && (out[1] - 5.0).abs() < 1e-6,
+            "{out:?}"
+        );
+        // Constant images stay constant.
+        let cst = vec![0.7f32; 7 * 11 * 3];
+        assert!(
+            resize_area(&cst, 7, 11, 3, 3, 5)
+                .iter()
+                .all(|v| (v - 0.7).abs() < 1e-6)
+        );
+        let u = resize_area_u8(&[10, 20, 30, 41], 2, 2, 1, 1, 1);
+        assert_eq!(u, vec![25]);
+    }
+
+    #[test]
+    fn style_size_follows_the_reference() {
+        assert_eq!(size_for_height(1000, 1500, 256), (256, 384));
+        assert_eq!(size_for_height(300, 401, 256), (256, 342));
+    }
+}
