@@ -215,21 +215,147 @@ pub fn widen(values: &[f32]) -> Vec<f64> {
 /// What checking a file may need besides the file itself.
 #[derive(Clone, Debug, Default)]
 pub struct CheckContext {
-    /// VGG weights for the `losses_*` files.
+    /// VGG weights for the `losses_*` files (else the usual resolution: `$GAST_WEIGHTS`,
+    /// the caches, a download).
     pub weights: Option<PathBuf>,
 }
 
 /// Reads a golden file, runs the project's code on its inputs and compares every output.
 pub fn check_file(path: &Path, ctx: &CheckContext) -> Result<Vec<OutputCheck>, GoldenError> {
     let file = GoldenFile::read(path)?;
-    let _ = ctx;
     match file.kind() {
-        Some(kind) => Err(GoldenError::Run { path: path.to_path_buf(), message: format!("{kind:?} files are not wired yet") }),
+        Some(GoldenKind::Raster) => check_raster(&file),
+        Some(GoldenKind::Losses) => check_losses(&file, ctx),
+        Some(GoldenKind::Color) => check_color(&file),
         None => Err(GoldenError::Format {
             path: path.to_path_buf(),
             what: "tensor names".into(),
-            expected: "a raster (out_rgb, means, …), losses (gcfm_loss, …) or colour (content_pixels, A, …) golden file".into(),
+            expected: "a raster (out_rgb, means, …), losses (gcfm_loss, …) or colour (content_pixels, A, …) golden file"
+                .into(),
             found: file.tensors.keys().cloned().collect::<Vec<_>>().join(", "),
         }),
     }
+}
+
+/// Loss values: within 1e-4 of their own magnitude.
+const LOSS_TOL: Tolerance = Tolerance::RelToMax(1e-4);
+/// Gradients: within 1e-3 of the tensor's largest magnitude.
+const GRAD_TOL: Tolerance = Tolerance::RelToMax(1e-3);
+
+/// Inputs of `losses_*` files stored in width-major memory order.
+///
+/// The golden README declares every image `(H, W, C)` row-major, and most
+/// tensors of `losses_seed1` are. These three are not: their bytes are an
+/// `(W, H, …)` array reshaped to `(H, W, …)`. Read as declared, the reference's
+/// GCFM matches and content loss cannot be reproduced (35 of 80 best matches
+/// agree); read width-major, an independent float64 JAX implementation of
+/// ALGORITHM.md reproduces `gcfm_loss`, `content_loss`, all 160 matches and
+/// all gradients to 1e-13, and so does this project's code to the tolerances.
+/// The outputs (gradients included) are stored as declared.
+pub const LOSSES_WIDTH_MAJOR: [&str; 3] = ["content_rgb", "render_inv_depth", "style_depth"];
+
+/// A `(H, W, C…)` tensor whose bytes are a `(W, H, C…)` array, reordered to `(H, W, C…)`.
+pub fn from_width_major(t: &Tensor) -> Tensor {
+    if t.shape.len() < 2 {
+        return t.clone();
+    }
+    let (h, w) = (t.shape[0], t.shape[1]);
+    let c: usize = t.shape[2..].iter().product();
+    let mut data = vec![0.0; t.data.len()];
+    for i in 0..h {
+        for j in 0..w {
+            let src = (j * h + i) * c;
+            let dst = (i * w + j) * c;
+            data[dst..dst + c].copy_from_slice(&t.data[src..src + c]);
+        }
+    }
+    Tensor { shape: t.shape.clone(), data }
+}
+
+fn check_losses(file: &GoldenFile, ctx: &CheckContext) -> Result<Vec<OutputCheck>, GoldenError> {
+    use crate::style::config::LossWeights;
+    use crate::style::step::{RenderedMaps, StyleTargets, content_target, step_loss};
+    use crate::vision::Vgg;
+
+    let run_err = |message: String| GoldenError::Run { path: file.path.clone(), message };
+    let input = |name: &str| -> Result<Tensor, GoldenError> {
+        let t = file.get(name)?;
+        Ok(if LOSSES_WIDTH_MAJOR.contains(&name) { from_width_major(t) } else { t.clone() })
+    };
+    let rgb_t = input("render_rgb")?;
+    let [h, w, 3] = rgb_t.shape[..] else {
+        return Err(GoldenError::Format {
+            path: file.path.clone(),
+            what: "tensor render_rgb".into(),
+            expected: "shape (H, W, 3)".into(),
+            found: format!("{:?}", rgb_t.shape),
+        });
+    };
+    let style_t = input("style_rgb")?;
+    let [hs, ws, 3] = style_t.shape[..] else {
+        return Err(GoldenError::Format {
+            path: file.path.clone(),
+            what: "tensor style_rgb".into(),
+            expected: "shape (h, w, 3)".into(),
+            found: format!("{:?}", style_t.shape),
+        });
+    };
+    let weights_path = crate::vision::download::resolve_weights(ctx.weights.as_deref(), &mut |_, _| {})
+        .map_err(|e| run_err(format!("VGG weights: {e}")))?;
+    let vgg = Vgg::load(&weights_path).map_err(|e| run_err(format!("VGG weights: {e}")))?;
+
+    let rgb = rgb_t.to_f32();
+    let mut checks = Vec::new();
+    if let Ok(want) = file.get("vgg_relu3_of_render_rgb") {
+        let f = vgg.features(&rgb, h, w);
+        checks.push(compare("vgg_relu3_of_render_rgb", &widen(&f.data), want, Tolerance::RelToMax(1e-4)));
+    }
+    let style = StyleTargets::new(
+        &vgg,
+        &style_t.to_f32(),
+        &input("style_depth")?.to_f32(),
+        &input("style_edge")?.to_f32(),
+        hs,
+        ws,
+    );
+    let inv_depth = input("render_inv_depth")?.to_f32();
+    let edge = input("render_edge")?.to_f32();
+    let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
+    let none = LossWeights { gcfm: 0.0, content: 0.0, tv: 0.0, depth: 0.0, ..LossWeights::default() };
+
+    let g = step_loss(&vgg, &style, maps, None, None, &LossWeights { gcfm: 1.0, ..none }, true);
+    checks.push(compare("gcfm_loss", &[f64::from(g.gcfm)], file.get("gcfm_loss")?, LOSS_TOL));
+    checks.push(compare("grad_gcfm_rgb", &widen(&g.v_rgb), file.get("grad_gcfm_rgb")?, GRAD_TOL));
+    checks.push(compare("grad_gcfm_inv_depth", &widen(&g.v_inv_depth), file.get("grad_gcfm_inv_depth")?, GRAD_TOL));
+    let as_f64 = |v: &[u32]| v.iter().map(|&i| f64::from(i)).collect::<Vec<_>>();
+    checks.push(compare("match_best", &as_f64(&g.matches.best), file.get("match_best")?, Tolerance::Exact));
+    checks.push(compare("match_worst", &as_f64(&g.matches.worst), file.get("match_worst")?, Tolerance::Exact));
+
+    let content = content_target(&vgg, &input("content_rgb")?.to_f32(), h, w);
+    let c = step_loss(&vgg, &style, maps, Some(&content), None, &LossWeights { content: 1.0, ..none }, false);
+    checks.push(compare("content_loss", &[f64::from(c.content)], file.get("content_loss")?, LOSS_TOL));
+    checks.push(compare("grad_content_rgb", &widen(&c.v_rgb), file.get("grad_content_rgb")?, GRAD_TOL));
+
+    let t = step_loss(&vgg, &style, maps, None, None, &LossWeights { tv: 1.0, ..none }, false);
+    checks.push(compare("tv_loss", &[f64::from(t.tv)], file.get("tv_loss")?, LOSS_TOL));
+    // With every other weight zero, `v_rgb` is exactly ∂TV/∂rgb.
+    checks.push(compare("grad_tv_rgb", &widen(&t.v_rgb), file.get("grad_tv_rgb")?, GRAD_TOL));
+    Ok(checks)
+}
+
+fn check_color(file: &GoldenFile) -> Result<Vec<OutputCheck>, GoldenError> {
+    use crate::style::color_transfer::ColorTransfer;
+    let content = file.get("content_pixels")?.to_f32();
+    let style = file.get("style_pixels")?.to_f32();
+    let t = ColorTransfer::fit(&content, &style);
+    let a: Vec<f64> = t.a.iter().flatten().map(|&v| f64::from(v)).collect();
+    let b: Vec<f64> = t.b.iter().map(|&v| f64::from(v)).collect();
+    Ok(vec![
+        compare("A", &a, file.get_shaped("A", &[3, 3])?, Tolerance::Abs(1e-4)),
+        compare("b", &b, file.get_shaped("b", &[3])?, Tolerance::Abs(1e-4)),
+    ])
+}
+
+fn check_raster(file: &GoldenFile) -> Result<Vec<OutputCheck>, GoldenError> {
+    Err(GoldenError::Run { path: file.path.clone(), message: "the rasterizer is not merged yet".into() })
 }

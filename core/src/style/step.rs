@@ -12,6 +12,7 @@
 
 use super::content::content_loss;
 use super::gcfm::{Matches, StyleFeatures, gcfm_loss};
+use super::config::LossWeights;
 use super::regularizers::depth_l1;
 use super::tv::tv_loss;
 use crate::vision::resize::{downscale_half, downscale_half_backward};
@@ -70,29 +71,6 @@ impl FeatureNet for crate::vision::Vgg {
     }
 }
 
-/// Loss weights (ALGORITHM.md defaults).
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct LossWeights {
-    /// GCFM, λ_GC.
-    pub gcfm: f32,
-    /// Content, λ_cont.
-    pub content: f32,
-    /// Total variation, λ_TV.
-    pub tv: f32,
-    /// Depth regulariser `mean|D − D^c|`, λ_d (only when a reference depth is given).
-    pub depth: f32,
-}
-
-impl Default for LossWeights {
-    fn default() -> Self {
-        Self {
-            gcfm: 2.0,
-            content: 1e-3,
-            tv: 0.02,
-            depth: 10.0,
-        }
-    }
-}
 
 /// Everything about the style the per-step loss needs, computed once per
 /// style image and scale.
@@ -166,6 +144,8 @@ pub struct RenderedMaps<'a> {
 /// gradients of the weighted total.
 #[derive(Clone, Debug)]
 pub struct StepLoss {
+    /// Where the time went.
+    pub timings: StepLossTimings,
     /// GCFM (unweighted).
     pub gcfm: f32,
     /// Content (unweighted; 0 without a content target).
@@ -182,6 +162,17 @@ pub struct StepLoss {
     pub v_inv_depth: Vec<f32>,
     /// GCFM matches (flat indices into the style feature map).
     pub matches: Matches,
+}
+
+/// Milliseconds spent in the parts of [`step_loss`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepLossTimings {
+    /// Downscale and VGG forward of the three rendered maps.
+    pub features_ms: f32,
+    /// Joint nearest/farthest matching and the feature-space losses.
+    pub matching_ms: f32,
+    /// VGG backward of the RGB (and depth) maps and the image-space adjoints.
+    pub backward_ms: f32,
 }
 
 /// Min-max normalisation `(d − min)/(max − min + 1e-8)` and its adjoint
@@ -221,7 +212,11 @@ fn min_max_backward(d: &[f32], v: &[f32]) -> Vec<f32> {
 
 /// The whole per-step loss from rendered maps. `content` is the content target
 /// ([`content_target`]) and `depth_ref` the inverse depth of `G^c` from the same
-/// view (geometry phase); either may be `None`.
+/// view (geometry phase); either may be `None`. The depth map's VGG backward
+/// runs only when `depth_grad` is set (a colour step does not use it; its
+/// `v_inv_depth` then holds only the depth regulariser's gradient, if any).
+/// Only `gcfm`, `content`, `tv` and `depth` of `weights` are used here; the
+/// parameter regularisers act on the Gaussians, not on the maps.
 pub fn step_loss<N: FeatureNet>(
     net: &N,
     style: &StyleTargets,
@@ -229,39 +224,31 @@ pub fn step_loss<N: FeatureNet>(
     content: Option<&FeatureMap>,
     depth_ref: Option<&[f32]>,
     weights: &LossWeights,
+    depth_grad: bool,
 ) -> StepLoss {
+    use rayon::prelude::*;
     let (h, w) = (maps.height, maps.width);
     assert_eq!(maps.rgb.len(), h * w * 3, "step_loss: rgb size");
     assert_eq!(maps.inv_depth.len(), h * w, "step_loss: inverse depth size");
     assert_eq!(maps.edge.len(), h * w, "step_loss: edge size");
+    let mut timings = StepLossTimings::default();
+    let t = std::time::Instant::now();
 
     // Depth map: min-max normalised, replicated to 3 channels.
-    let (lo, hi) = maps
-        .inv_depth
-        .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| {
-            (a.min(x), b.max(x))
-        });
+    let (lo, hi) = maps.inv_depth.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
     let r = hi - lo + 1e-8;
     let depth_n: Vec<f32> = maps.inv_depth.iter().map(|&x| (x - lo) / r).collect();
-    let images = [
-        maps.rgb.to_vec(),
-        replicate3(&depth_n),
-        replicate3(maps.edge),
-    ];
-    let downs: Vec<(Vec<f32>, usize, usize)> = images
-        .iter()
-        .map(|im| downscale_half(im, h, w, 3))
-        .collect();
+    let images = [maps.rgb.to_vec(), replicate3(&depth_n), replicate3(maps.edge)];
+    let downs: Vec<(Vec<f32>, usize, usize)> = images.iter().map(|im| downscale_half(im, h, w, 3)).collect();
     let (sh, sw) = (downs[0].1, downs[0].2);
 
-    // Features: RGB and depth need a backward pass, edges do not.
-    use rayon::prelude::*;
+    // Features: RGB (and depth, when its gradient is wanted) keep their state
+    // for the backward pass; edges are a constant.
     let fwd: Vec<(FeatureMap, Option<N::State>)> = downs
         .par_iter()
         .enumerate()
         .map(|(k, (img, _, _))| {
-            if k < 2 {
+            if k == 0 || (k == 1 && depth_grad) {
                 let (f, s) = net.forward(img, sh, sw);
                 (f, Some(s))
             } else {
@@ -269,12 +256,10 @@ pub fn step_loss<N: FeatureNet>(
             }
         })
         .collect();
+    timings.features_ms = t.elapsed().as_secs_f32() * 1e3;
+    let t = std::time::Instant::now();
     let n = fwd[0].0.height * fwd[0].0.width;
-    let out = gcfm_loss(
-        &style.features,
-        [&fwd[0].0.data, &fwd[1].0.data, &fwd[2].0.data],
-        n,
-    );
+    let out = gcfm_loss(&style.features, [&fwd[0].0.data, &fwd[1].0.data, &fwd[2].0.data], n);
 
     // RGB features' gradient: GCFM plus content.
     let mut v_feat_rgb: Vec<f32> = out.v_rendered[0].iter().map(|v| v * weights.gcfm).collect();
@@ -287,27 +272,22 @@ pub fn step_loss<N: FeatureNet>(
         }
     }
     let v_feat_depth: Vec<f32> = out.v_rendered[1].iter().map(|v| v * weights.gcfm).collect();
+    timings.matching_ms = t.elapsed().as_secs_f32() * 1e3;
+    let t = std::time::Instant::now();
     let (v_small_rgb, v_small_depth) = rayon::join(
         || fwd[0].1.as_ref().map(|s| net.backward(s, &v_feat_rgb)),
         || fwd[1].1.as_ref().map(|s| net.backward(s, &v_feat_depth)),
     );
-    let mut v_rgb = downscale_half_backward(
-        &v_small_rgb.unwrap_or_else(|| vec![0.0; sh * sw * 3]),
-        h,
-        w,
-        3,
-    );
-    let v_depth3 = downscale_half_backward(
-        &v_small_depth.unwrap_or_else(|| vec![0.0; sh * sw * 3]),
-        h,
-        w,
-        3,
-    );
-    let v_depth_n: Vec<f32> = v_depth3
-        .chunks_exact(3)
-        .map(|p| p[0] + p[1] + p[2])
-        .collect();
-    let mut v_inv_depth = min_max_backward(maps.inv_depth, &v_depth_n);
+    let mut v_rgb = downscale_half_backward(&v_small_rgb.unwrap_or_else(|| vec![0.0; sh * sw * 3]), h, w, 3);
+    let mut v_inv_depth = match v_small_depth {
+        Some(v) => {
+            let v_depth3 = downscale_half_backward(&v, h, w, 3);
+            let v_depth_n: Vec<f32> = v_depth3.chunks_exact(3).map(|p| p[0] + p[1] + p[2]).collect();
+            min_max_backward(maps.inv_depth, &v_depth_n)
+        }
+        None => vec![0.0; h * w],
+    };
+    timings.backward_ms = t.elapsed().as_secs_f32() * 1e3;
 
     let (tv, v_tv) = tv_loss(maps.rgb, h, w, 3);
     for (a, b) in v_rgb.iter_mut().zip(v_tv) {
@@ -321,11 +301,10 @@ pub fn step_loss<N: FeatureNet>(
             *a += weights.depth * b;
         }
     }
-    let total = weights.gcfm * out.loss
-        + weights.content * content_value
-        + weights.tv * tv
-        + weights.depth * depth_value;
+    let total =
+        weights.gcfm * out.loss + weights.content * content_value + weights.tv * tv + weights.depth * depth_value;
     StepLoss {
+        timings,
         gcfm: out.loss,
         content: content_value,
         tv,

@@ -137,12 +137,7 @@ fn step_loss_gradients_match_finite_differences() {
     let edge = vec![0.0f32; h * w];
     let content = content_target(&net, &noise(h * w * 3, 7, 0.0, 1.0), h, w);
     let dref = noise(h * w, 8, 0.3, 1.0);
-    let weights = LossWeights {
-        gcfm: 2.0,
-        content: 0.5,
-        tv: 0.02,
-        depth: 0.1,
-    };
+    let weights = LossWeights { gcfm: 2.0, content: 0.5, tv: 0.02, depth: 0.1, ..LossWeights::default() };
     let eval = |rgb: &[f32], d: &[f32]| {
         let maps = RenderedMaps {
             rgb,
@@ -151,7 +146,7 @@ fn step_loss_gradients_match_finite_differences() {
             height: h,
             width: w,
         };
-        step_loss(&net, &st, maps, Some(&content), Some(&dref), &weights)
+        step_loss(&net, &st, maps, Some(&content), Some(&dref), &weights, true)
     };
     let base = eval(&rgb, &inv_depth);
     let mut bad = Vec::new();
