@@ -6,6 +6,7 @@
 //! the losses and the decoupled colour/geometry optimisation.
 
 pub mod camera;
+pub mod eval;
 pub mod golden;
 pub mod io;
 pub mod raster;

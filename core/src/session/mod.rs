@@ -6,10 +6,18 @@
 //! between steps.
 
 mod events;
+mod prepare;
+mod run;
 mod slot;
+mod worker;
 
 pub use events::{Command, Event, LossTerms, StepReport, StepTimings};
+pub use prepare::{
+    PreparedStyle, StyleDepthSource, StyleImage, fit_color_transfer, prepare_style, scatter, seen_by_any, subset,
+};
+pub use run::{Session, SessionError, SessionInputs, at_resolution};
 pub use slot::Slot;
+pub use worker::{SessionHandle, run_loop, spawn};
 
 /// The newest state of the Gaussians, for viewers and exports.
 #[derive(Clone, Debug)]

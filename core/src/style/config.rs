@@ -7,18 +7,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::adam::AdamConfig;
+pub use crate::vision::style_depth::DepthPolarity;
 use super::schedule::{Mode, Schedule};
-
-/// Which way the style image's depth estimate points.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum DepthPolarity {
-    /// Near = bright on both sides, like the rendered inverse depth (our default).
-    #[default]
-    NearBright,
-    /// The reference implementation's behaviour: the style estimate is inverted (near = dark).
-    Reference,
-}
 
 /// Loss weights (λ of ALGORITHM.md).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

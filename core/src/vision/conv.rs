@@ -65,6 +65,24 @@ fn matmul(
     }
 }
 
+/// The measured rate of the matrix product every convolution runs on, in
+/// GFLOP/s (best of `reps`, `m × k` by `k × n`, all rayon threads): the floor
+/// against which the VGG passes are judged.
+pub fn gemm_gflops(m: usize, n: usize, k: usize, reps: usize) -> f64 {
+    let a: Vec<f32> = (0..m * k).map(|i| ((i % 17) as f32 - 8.0) * 0.01).collect();
+    let b: Vec<f32> = (0..k * n).map(|i| ((i % 13) as f32 - 6.0) * 0.01).collect();
+    let mut c = vec![0.0f32; m * n];
+    matmul(&mut c, n, (&a, k, 1), (&b, n), (m, n, k), false);
+    let mut best = f64::INFINITY;
+    for _ in 0..reps.max(1) {
+        let t = std::time::Instant::now();
+        matmul(&mut c, n, (&a, k, 1), (&b, n), (m, n, k), false);
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    std::hint::black_box(&c);
+    2.0 * (m * n * k) as f64 / best / 1e9
+}
+
 /// Fills `cols` (`c_in·9 × (y1−y0)·w`) with the 3×3 zero-padded neighbourhoods
 /// of output rows `y0..y1`.
 fn im2col(input: &[f32], c_in: usize, h: usize, w: usize, y0: usize, y1: usize, cols: &mut [f32]) {

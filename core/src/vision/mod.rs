@@ -22,6 +22,7 @@ pub mod style_depth;
 pub mod vgg;
 pub mod weights;
 
+pub use conv::gemm_gflops;
 pub use download::resolve_weights;
 pub use vgg::{Features, Vgg, VggState};
 pub use weights::{VggWeights, WeightsError};

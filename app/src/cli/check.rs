@@ -1,0 +1,53 @@
+//! `gast check golden`: the project's numerics against reference files.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Args;
+use gast_core::golden::{CheckContext, check_file};
+
+/// Arguments of `gast check golden`.
+#[derive(Args, Debug)]
+pub struct GoldenArgs {
+    /// Golden files (safetensors, float64): raster_*, losses_*, color_*.
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    /// VGG weights for losses_* files (else $GAST_WEIGHTS, the caches, or a download).
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+}
+
+/// Checks every file and prints one line per output; fails when any output is out of tolerance.
+pub fn run_golden(args: GoldenArgs) -> anyhow::Result<ExitCode> {
+    let ctx = CheckContext { weights: args.weights.clone() };
+    let mut failed = 0usize;
+    let mut total = 0usize;
+    for file in &args.files {
+        println!("{}", file.display());
+        match check_file(file, &ctx) {
+            Ok(checks) => {
+                for c in checks {
+                    total += 1;
+                    if !c.passed {
+                        failed += 1;
+                    }
+                    println!(
+                        "  {:<28} max abs {:>10.3e}  max |ref| {:>10.3e}  rel {:>10.3e}  ({:<12}) {}",
+                        c.name,
+                        c.max_abs,
+                        c.max_ref,
+                        c.rel,
+                        c.tolerance.to_string(),
+                        if c.passed { "ok" } else { "FAIL" }
+                    );
+                }
+            }
+            Err(e) => {
+                failed += 1;
+                println!("  error: {e}");
+            }
+        }
+    }
+    println!("{} passed, {} failed", total.saturating_sub(failed), failed);
+    Ok(if failed == 0 { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+}

@@ -1,0 +1,116 @@
+//! Command-line definitions (clap) and dispatch to one module per subcommand.
+
+mod bench;
+mod check;
+mod render;
+mod stylize;
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::{Args, Parser, Subcommand};
+use gast_core::camera::{OrbitOptions, orbit_cameras};
+use gast_core::{Camera, Gaussians};
+
+/// GAST Studio: geometry-aware style transfer for 3D Gaussian Splatting scenes.
+#[derive(Parser, Debug)]
+#[command(name = "gast", version, about, long_about = None)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Render a scene from its cameras or from generated orbit views: PNG colour,
+    /// PNG and EXR inverse depth per view.
+    Render(render::RenderArgs),
+    /// Stylize a scene with a style image: colour matching, then the K-cycle
+    /// colour/geometry optimisation; writes the stylized .ply, before/after
+    /// renders with depth, and report.json.
+    Stylize(Box<stylize::StylizeArgs>),
+    /// Compare the project's numerics with reference files.
+    #[command(subcommand)]
+    Check(CheckCommand),
+    /// Benchmarks that print figures (milliseconds, throughput, memory).
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+/// `gast check …`
+#[derive(Subcommand, Debug)]
+pub enum CheckCommand {
+    /// Run the project's code on the inputs of golden files (safetensors, float64)
+    /// and print, per output, the worst absolute error and the error relative to the
+    /// largest magnitude. Exits non-zero when any output is beyond its tolerance.
+    Golden(check::GoldenArgs),
+}
+
+/// `gast bench …`
+#[derive(Subcommand, Debug)]
+pub enum BenchCommand {
+    /// Forward and backward rasterizer timings on real scenes from orbit views.
+    Raster(bench::RasterArgs),
+    /// Per-step breakdown of the optimisation, the whole schedule's time, peak memory.
+    Step(bench::StepArgs),
+}
+
+/// Where the views come from: a camera file, or an orbit generated around the scene.
+#[derive(Args, Debug, Clone)]
+pub struct ViewArgs {
+    /// Camera file or folder (COLMAP sparse/0, cameras.json, transforms.json).
+    /// Without it, views are generated on an orbit around the scene.
+    #[arg(long)]
+    pub cameras: Option<PathBuf>,
+    /// Number of generated orbit views (ignored with --cameras).
+    #[arg(long, default_value_t = 8)]
+    pub views: usize,
+    /// Longer side of the rendered images in pixels (camera intrinsics are rescaled).
+    #[arg(long, default_value_t = 512)]
+    pub size: u32,
+    /// Vertical field of view of generated views, in degrees.
+    #[arg(long, default_value_t = 50.0)]
+    pub fov: f32,
+}
+
+/// Runs the parsed command line.
+pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    match cli.command {
+        Command::Render(args) => render::run(args),
+        Command::Check(CheckCommand::Golden(args)) => check::run_golden(args),
+        Command::Bench(BenchCommand::Raster(args)) => bench::run_raster(args),
+        Command::Bench(BenchCommand::Step(args)) => bench::run_step(args),
+        Command::Stylize(args) => stylize::run(*args),
+    }
+}
+
+/// Loads a scene with its path in the error.
+pub fn load_scene(path: &Path) -> anyhow::Result<Gaussians> {
+    gast_core::scene::load(path).with_context(|| format!("could not load the scene {}", path.display()))
+}
+
+/// The views of `args` for `scene`: the camera file rescaled to `--size`, or an orbit.
+pub fn views_for(scene: &Gaussians, args: &ViewArgs) -> anyhow::Result<Vec<Camera>> {
+    let size = args.size.max(1);
+    if let Some(path) = &args.cameras {
+        let set = gast_core::camera::load(path).with_context(|| format!("could not load the cameras {}", path.display()))?;
+        for w in &set.warnings {
+            eprintln!("warning: {w}");
+        }
+        Ok(set.cameras.iter().map(|c| with_longer_side(c, size)).collect())
+    } else {
+        let opts = OrbitOptions { count: args.views.max(1), width: size, height: size, fov_y_degrees: args.fov, ..OrbitOptions::default() };
+        Ok(orbit_cameras(&scene.means, &opts))
+    }
+}
+
+/// The camera rescaled so that its longer image side is `size` pixels (aspect kept).
+pub fn with_longer_side(cam: &Camera, size: u32) -> Camera {
+    let long = cam.width.max(cam.height).max(1) as f64;
+    let w = ((cam.width as f64 * size as f64 / long).round() as u32).max(1);
+    let h = ((cam.height as f64 * size as f64 / long).round() as u32).max(1);
+    cam.scaled_to(w, h)
+}

@@ -1,0 +1,63 @@
+//! `gast render`: PNG colour, PNG + EXR inverse depth of chosen or generated views.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::Args;
+use gast_core::io::{write_exr_depth, write_png_gray_normalized, write_png_rgb};
+use gast_core::raster::{self, RenderOptions};
+
+use super::{ViewArgs, load_scene, views_for};
+use crate::progress;
+
+/// Arguments of `gast render`.
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// The scene: INRIA .ply, PlayCanvas .compressed.ply, .spz, or a SOG folder / meta.json.
+    pub scene: PathBuf,
+    /// Output folder (created; existing files are replaced atomically).
+    #[arg(long)]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub views: ViewArgs,
+    /// Background colour as r,g,b in [0, 1].
+    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [0.0, 0.0, 0.0])]
+    pub background: Vec<f32>,
+}
+
+/// Renders every view and writes `NAME.png`, `NAME_depth.png` and `NAME_depth.exr`.
+pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
+    let scene = load_scene(&args.scene)?;
+    let cameras = views_for(&scene, &args.views)?;
+    let opts = RenderOptions { background: [args.background[0], args.background[1], args.background[2]] };
+    let pb = progress::bar(cameras.len() as u64, "render");
+    let start = std::time::Instant::now();
+    for cam in &cameras {
+        pb.set_message(cam.name.clone());
+        let img = raster::render(&scene, cam, &opts);
+        let stem = sanitize(&cam.name);
+        write_png_rgb(&args.out.join(format!("{stem}.png")), img.width, img.height, &img.rgb)?;
+        write_png_gray_normalized(&args.out.join(format!("{stem}_depth.png")), img.width, img.height, &img.inv_depth)?;
+        write_exr_depth(&args.out.join(format!("{stem}_depth.exr")), img.width, img.height, &img.inv_depth)
+            .with_context(|| format!("writing the depth of view {}", cam.name))?;
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    eprintln!(
+        "rendered {} views of {} ({} Gaussians) into {} in {:.2} s",
+        cameras.len(),
+        args.scene.display(),
+        scene.len(),
+        args.out.display(),
+        start.elapsed().as_secs_f64()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A file stem from a camera name (image names may hold folders and extensions).
+fn sanitize(name: &str) -> String {
+    let base = std::path::Path::new(name).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let s: String = base.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
+    if s.is_empty() { "view".into() } else { s }
+}

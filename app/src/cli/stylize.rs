@@ -1,0 +1,318 @@
+//! `gast stylize`: one stylization run from the command line, with a progress
+//! bar, then the stylized `.ply`, before/after renders and `report.json`.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::Args;
+use gast_core::Camera;
+use gast_core::eval::{inverse_depth_change, mean_std_distance, nn_cosine_distance};
+use gast_core::io::{atomic_write, write_exr_depth, write_png_gray_normalized, write_png_rgb};
+use gast_core::raster::{self, RenderOptions};
+use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource, StyleImage};
+use gast_core::style::{Mode, StyleConfig};
+use gast_core::vision::Vgg;
+use gast_core::vision::style_depth::DepthImage;
+use serde::Serialize;
+
+use super::{ViewArgs, load_scene, views_for};
+use crate::progress;
+
+/// Arguments of `gast stylize`.
+#[derive(Args, Debug)]
+pub struct StylizeArgs {
+    /// The scene: INRIA .ply, .compressed.ply, .spz, or a SOG folder.
+    pub scene: PathBuf,
+    /// The style image (PNG, JPEG, WebP).
+    pub style: PathBuf,
+    /// Output folder.
+    #[arg(long, default_value = "out/stylize")]
+    pub out: PathBuf,
+    /// Optimisation cameras (COLMAP sparse/0, cameras.json, transforms.json);
+    /// without it, `--views` orbit views are generated around the scene.
+    #[arg(long)]
+    pub cameras: Option<PathBuf>,
+    /// Number of generated orbit views (without --cameras).
+    #[arg(long, default_value_t = 36)]
+    pub views: usize,
+    /// Vertical field of view of generated views, degrees.
+    #[arg(long, default_value_t = 50.0)]
+    pub fov: f32,
+    /// A preset file (JSON StyleConfig); flags below override it.
+    #[arg(long)]
+    pub preset: Option<PathBuf>,
+    /// Write the effective configuration to this preset file and continue.
+    #[arg(long)]
+    pub save_preset: Option<PathBuf>,
+    /// VGG weights (.safetensors or .pth); else $GAST_WEIGHTS, the caches, or a download.
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+    /// A depth image for the style (PNG 8/16-bit or EXR); else a built-in estimate.
+    #[arg(long)]
+    pub style_depth: Option<PathBuf>,
+    /// Cycles K.
+    #[arg(long)]
+    pub cycles: Option<u32>,
+    /// Steps per cycle N_c + N_g.
+    #[arg(long)]
+    pub steps_per_cycle: Option<u32>,
+    /// Geometry share of a cycle N_g / (N_c + N_g).
+    #[arg(long)]
+    pub ratio_geo: Option<f32>,
+    /// decoupled, joint, color-only or geometry-only.
+    #[arg(long)]
+    pub mode: Option<Mode>,
+    /// Texture scale: the style's height in pixels (128, 256, 512 = 0.5x, 1x, 2x).
+    #[arg(long)]
+    pub texture_scale: Option<u32>,
+    /// Working resolution: longer side of the optimisation renders.
+    #[arg(long)]
+    pub resolution: Option<u32>,
+    /// λ_GC.
+    #[arg(long)]
+    pub lambda_gc: Option<f32>,
+    /// λ_cont.
+    #[arg(long)]
+    pub lambda_content: Option<f32>,
+    /// λ_TV.
+    #[arg(long)]
+    pub lambda_tv: Option<f32>,
+    /// λ_d.
+    #[arg(long)]
+    pub lambda_depth: Option<f32>,
+    /// Seed of the view order.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Views rendered before/after into the output folder.
+    #[arg(long, default_value_t = 4)]
+    pub preview_views: usize,
+}
+
+impl StylizeArgs {
+    /// The preset (if any) with the flags applied.
+    pub fn config(&self) -> anyhow::Result<StyleConfig> {
+        let mut c = match &self.preset {
+            Some(p) => {
+                let text = std::fs::read_to_string(p).with_context(|| format!("could not read the preset {}", p.display()))?;
+                StyleConfig::from_json(&text).with_context(|| format!("{}: expected a StyleConfig JSON preset", p.display()))?
+            }
+            None => StyleConfig::default(),
+        };
+        macro_rules! set {
+            ($flag:expr, $field:expr) => {
+                if let Some(v) = $flag {
+                    $field = v;
+                }
+            };
+        }
+        set!(self.cycles, c.cycles);
+        set!(self.steps_per_cycle, c.steps_per_cycle);
+        set!(self.ratio_geo, c.ratio_geo);
+        set!(self.mode, c.mode);
+        set!(self.texture_scale, c.texture_scale);
+        set!(self.resolution, c.resolution);
+        set!(self.lambda_gc, c.weights.gcfm);
+        set!(self.lambda_content, c.weights.content);
+        set!(self.lambda_tv, c.weights.tv);
+        set!(self.lambda_depth, c.weights.depth);
+        set!(self.seed, c.seed);
+        let problems = c.problems();
+        anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
+        Ok(c)
+    }
+}
+
+/// Loads the VGG weights the usual way, with a progress bar for a download.
+pub fn load_vgg(explicit: Option<&Path>) -> anyhow::Result<Vgg> {
+    let pb = progress::bytes_bar("weights");
+    let path = gast_core::vision::download::resolve_weights(explicit, &mut |done, total| {
+        if let Some(t) = total {
+            pb.set_length(t);
+        }
+        pb.set_position(done);
+    })?;
+    pb.finish_and_clear();
+    let w = gast_core::vision::weights::VggWeights::load(&path)?;
+    Ok(Vgg::from_weights(w))
+}
+
+#[derive(Serialize)]
+struct Report {
+    scene: String,
+    style: String,
+    config: StyleConfig,
+    gaussians_total: usize,
+    gaussians_optimised: usize,
+    views: usize,
+    stages_s: Vec<(String, f64)>,
+    optimisation_s: f64,
+    steps: Vec<StepReport>,
+    preview: Vec<PreviewMetrics>,
+    summary: Summary,
+}
+
+#[derive(Serialize, Clone, Copy)]
+struct PreviewMetrics {
+    view: usize,
+    mean_std_before: f32,
+    mean_std_after: f32,
+    nn_distance_before: f32,
+    nn_distance_after: f32,
+    inverse_depth_change: f32,
+}
+
+#[derive(Serialize, Default)]
+struct Summary {
+    mean_std_before: f32,
+    mean_std_after: f32,
+    nn_distance_before: f32,
+    nn_distance_after: f32,
+    inverse_depth_change: f32,
+}
+
+/// Runs the stylization and writes the outputs.
+pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
+    let t_all = Instant::now();
+    let config = args.config()?;
+    if let Some(p) = &args.save_preset {
+        atomic_write(p, |w| std::io::Write::write_all(w, config.to_json().as_bytes()))?;
+    }
+    let scene = load_scene(&args.scene)?;
+    let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
+    let style_depth = match &args.style_depth {
+        Some(p) => StyleDepthSource::Image(DepthImage::from_file(p)?),
+        None => StyleDepthSource::Heuristic,
+    };
+    let cameras = views_for(&scene, &ViewArgs { cameras: args.cameras.clone(), views: args.views, size: config.resolution, fov: args.fov })?;
+    let vgg = Arc::new(load_vgg(args.weights.as_deref())?);
+    eprintln!(
+        "{}: {} Gaussians (SH degree {}), {} views; style {} ({}x{})",
+        args.scene.display(),
+        scene.len(),
+        scene.sh_degree,
+        cameras.len(),
+        args.style.display(),
+        style.width,
+        style.height
+    );
+
+    let mut stages = Vec::new();
+    let mut culled = (scene.len(), scene.len());
+    let inputs = SessionInputs { scene: scene.clone(), cameras: cameras.clone(), style, style_depth, vgg: vgg.clone(), config: config.clone() };
+    let mut session = Session::prepare(inputs, &mut |e| match e {
+        Event::Stage { name, seconds } => {
+            eprintln!("  {name}: {seconds:.2} s");
+            stages.push((name, seconds));
+        }
+        Event::Culled { total, kept } => {
+            eprintln!("  optimising {kept} of {total} Gaussians ({} never visible from the cameras)", total - kept);
+            culled = (total, kept);
+        }
+        _ => {}
+    })?;
+
+    let total = session.total_steps();
+    let pb = progress::bar(total as u64, "stylize");
+    let mut steps = Vec::with_capacity(total as usize);
+    while let Some(r) = session.step() {
+        pb.set_message(format!("cycle {}/{} {:?} loss {:.4}", r.cycle + 1, config.cycles, r.phase, r.losses.total));
+        pb.inc(1);
+        if !r.losses.total.is_finite() {
+            pb.abandon();
+            anyhow::bail!("step {}: the loss became {}; stopping (try lower learning rates)", r.iter, r.losses.total);
+        }
+        steps.push(r);
+    }
+    pb.finish_and_clear();
+    let optimisation_s = session.elapsed_s();
+    eprintln!("  optimisation: {total} steps in {optimisation_s:.1} s ({:.2} s/step)", optimisation_s / total.max(1) as f64);
+
+    let result = session.result();
+    std::fs::create_dir_all(&args.out).with_context(|| format!("could not create {}", args.out.display()))?;
+    gast_core::scene::save_ply(&args.out.join("stylized.ply"), &result)?;
+    let preview = write_previews(&args.out, &scene, session.colour_matched(), &result, session.cameras(), &session, &vgg, args.preview_views)?;
+    let mut summary = Summary::default();
+    let n = preview.len().max(1) as f32;
+    for p in &preview {
+        summary.mean_std_before += p.mean_std_before / n;
+        summary.mean_std_after += p.mean_std_after / n;
+        summary.nn_distance_before += p.nn_distance_before / n;
+        summary.nn_distance_after += p.nn_distance_after / n;
+        summary.inverse_depth_change += p.inverse_depth_change / n;
+    }
+    eprintln!(
+        "  style distance (mean-std of VGG relu3) {:.4} -> {:.4}; nearest-neighbour {:.4} -> {:.4}; inverse depth changed by {:.1}%",
+        summary.mean_std_before,
+        summary.mean_std_after,
+        summary.nn_distance_before,
+        summary.nn_distance_after,
+        100.0 * summary.inverse_depth_change
+    );
+    let report = Report {
+        scene: args.scene.display().to_string(),
+        style: args.style.display().to_string(),
+        config,
+        gaussians_total: culled.0,
+        gaussians_optimised: culled.1,
+        views: cameras.len(),
+        stages_s: stages,
+        optimisation_s,
+        steps,
+        preview,
+        summary,
+    };
+    let json = serde_json::to_string_pretty(&report)?;
+    atomic_write(&args.out.join("report.json"), |w| std::io::Write::write_all(w, json.as_bytes()))?;
+    eprintln!("wrote {} in {:.1} s", args.out.display(), t_all.elapsed().as_secs_f64());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Renders a few views before (input scene) and after, with depth, and measures them.
+#[allow(clippy::too_many_arguments)]
+fn write_previews(
+    out: &Path,
+    input: &gast_core::Gaussians,
+    colour_matched: &gast_core::Gaussians,
+    result: &gast_core::Gaussians,
+    cameras: &[Camera],
+    session: &Session,
+    vgg: &Vgg,
+    count: usize,
+) -> anyhow::Result<Vec<PreviewMetrics>> {
+    let opts = RenderOptions { background: session.config().background };
+    let style = &session.style().maps;
+    let style_feats = vgg.features(&style.rgb, style.height, style.width);
+    let step = (cameras.len() / count.max(1)).max(1);
+    let mut metrics = Vec::new();
+    write_png_rgb(&out.join("style.png"), style.width as u32, style.height as u32, &style.rgb)?;
+    write_png_gray_normalized(&out.join("style_depth.png"), style.width as u32, style.height as u32, &style.depth)?;
+    write_png_gray_normalized(&out.join("style_edge.png"), style.width as u32, style.height as u32, &style.edge)?;
+    for (k, cam) in cameras.iter().step_by(step).take(count).enumerate() {
+        let (w, h) = (cam.width, cam.height);
+        let before = raster::render(input, cam, &opts);
+        let matched = raster::render(colour_matched, cam, &opts);
+        let after = raster::render(result, cam, &opts);
+        for (tag, img) in [("before", &before), ("colour_matched", &matched), ("after", &after)] {
+            write_png_rgb(&out.join(format!("view{k}_{tag}.png")), w, h, &img.rgb)?;
+            write_png_gray_normalized(&out.join(format!("view{k}_{tag}_depth.png")), w, h, &img.inv_depth)?;
+            write_exr_depth(&out.join(format!("view{k}_{tag}_depth.exr")), w, h, &img.inv_depth)?;
+        }
+        let feats = |img: &raster::Render| {
+            let rgb: Vec<f32> = img.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+            vgg.features(&rgb, h as usize, w as usize)
+        };
+        let (fb, fa) = (feats(&before), feats(&after));
+        metrics.push(PreviewMetrics {
+            view: k,
+            mean_std_before: mean_std_distance(&fb.data, &style_feats.data, fb.c),
+            mean_std_after: mean_std_distance(&fa.data, &style_feats.data, fa.c),
+            nn_distance_before: nn_cosine_distance(&fb.data, &style_feats.data, fb.c),
+            nn_distance_after: nn_cosine_distance(&fa.data, &style_feats.data, fa.c),
+            inverse_depth_change: inverse_depth_change(&matched.inv_depth, &after.inv_depth, &matched.alpha, &after.alpha),
+        });
+    }
+    Ok(metrics)
+}

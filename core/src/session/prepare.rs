@@ -1,0 +1,173 @@
+//! Preparing a run: the style image, colour matching of the scene, and setting
+//! aside the Gaussians that no optimisation camera can see.
+
+use std::path::Path;
+
+use rayon::prelude::*;
+
+use crate::camera::Camera;
+use crate::raster::{self, RenderOptions};
+use crate::scene::Gaussians;
+use crate::style::color_transfer::ColorTransfer;
+use crate::style::stage1::{StyleMaps, style_maps};
+use crate::style::step::StyleTargets;
+use crate::vision::Vgg;
+use crate::vision::style_depth::{DepthImage, DepthPolarity, HeuristicDepth};
+
+/// An 8-bit RGB image (the style), row-major HWC.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StyleImage {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// `width · height · 3` bytes.
+    pub rgb: Vec<u8>,
+}
+
+impl StyleImage {
+    /// Reads any image the `image` crate decodes (PNG, JPEG, WebP) as RGB.
+    pub fn open(path: &Path) -> Result<Self, String> {
+        let img = image::open(path)
+            .map_err(|e| format!("{}: expected an RGB image (PNG, JPEG or WebP), found: {e}", path.display()))?;
+        let rgb = img.to_rgb8();
+        let (w, h) = rgb.dimensions();
+        if w < 4 || h < 4 {
+            return Err(format!("{}: expected an image of at least 4x4 pixels, found {w}x{h}", path.display()));
+        }
+        Ok(Self { width: w as usize, height: h as usize, rgb: rgb.into_raw() })
+    }
+
+    /// The pixels as floats in [0, 1].
+    pub fn to_f32(&self) -> Vec<f32> {
+        self.rgb.iter().map(|&v| f32::from(v) / 255.0).collect()
+    }
+}
+
+/// Where the style image's depth comes from.
+#[derive(Clone, Debug, Default)]
+pub enum StyleDepthSource {
+    /// The built-in estimate that needs no weights ([`HeuristicDepth`]).
+    #[default]
+    Heuristic,
+    /// A depth image the user supplied for this style.
+    Image(DepthImage),
+}
+
+/// The style's maps at texture scale and their features.
+#[derive(Clone, Debug)]
+pub struct PreparedStyle {
+    /// RGB, depth and edge maps (for display and reports).
+    pub maps: StyleMaps,
+    /// Their VGG features, ready for matching.
+    pub targets: StyleTargets,
+}
+
+/// Stage 1: the style's three maps at height `scale` and their features.
+pub fn prepare_style(
+    vgg: &Vgg,
+    style: &StyleImage,
+    scale: u32,
+    depth: &StyleDepthSource,
+    polarity: DepthPolarity,
+) -> PreparedStyle {
+    let maps = match depth {
+        StyleDepthSource::Heuristic => {
+            style_maps(&style.rgb, style.height, style.width, scale as usize, &HeuristicDepth::default(), polarity)
+        }
+        StyleDepthSource::Image(img) => style_maps(&style.rgb, style.height, style.width, scale as usize, img, polarity),
+    };
+    let targets = maps.targets(vgg);
+    PreparedStyle { maps, targets }
+}
+
+/// Fits the linear colour transfer from the scene's renders to the style's pixels.
+///
+/// Content statistics use the pixels of the renders that the scene covers
+/// (alpha ≥ 0.5): the background is not scene content, and with a black
+/// background it would otherwise pull the content mean towards black.
+pub fn fit_color_transfer(g: &Gaussians, cameras: &[Camera], opts: &RenderOptions, style: &StyleImage) -> ColorTransfer {
+    let per_view: Vec<Vec<f32>> = cameras
+        .par_iter()
+        .map(|cam| {
+            let r = raster::render(g, cam, opts);
+            let mut px = Vec::new();
+            for (i, &a) in r.alpha.iter().enumerate() {
+                if a >= 0.5 {
+                    px.extend_from_slice(&r.rgb[3 * i..3 * i + 3]);
+                }
+            }
+            px
+        })
+        .collect();
+    ColorTransfer::fit(&per_view.concat(), &style.to_f32())
+}
+
+/// For each Gaussian, whether any camera composites it into some pixel with
+/// α ≥ 1/255 before the pixel's transmittance runs out.
+pub fn seen_by_any(g: &Gaussians, cameras: &[Camera], opts: &RenderOptions) -> Vec<bool> {
+    cameras.par_iter().map(|cam| raster::contributing(g, cam, opts)).reduce(
+        || vec![false; g.len()],
+        |mut a, b| {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x |= y);
+            a
+        },
+    )
+}
+
+/// The Gaussians at `keep` (in order), a new set.
+pub fn subset(g: &Gaussians, keep: &[u32]) -> Gaussians {
+    let k = g.sh_coeffs() * 3;
+    let mut out = Gaussians::with_capacity(keep.len(), g.sh_degree);
+    for &i in keep {
+        let i = i as usize;
+        out.means.push(g.means[i]);
+        out.log_scales.push(g.log_scales[i]);
+        out.quats.push(g.quats[i]);
+        out.opacity_logits.push(g.opacity_logits[i]);
+        out.sh.extend_from_slice(&g.sh[i * k..(i + 1) * k]);
+    }
+    out
+}
+
+/// Writes the Gaussians of `part` back to positions `keep` of `full`.
+pub fn scatter(full: &mut Gaussians, keep: &[u32], part: &Gaussians) {
+    let k = full.sh_coeffs() * 3;
+    for (j, &i) in keep.iter().enumerate() {
+        let i = i as usize;
+        full.means[i] = part.means[j];
+        full.log_scales[i] = part.log_scales[j];
+        full.quats[i] = part.quats[j];
+        full.opacity_logits[i] = part.opacity_logits[j];
+        full.sh[i * k..(i + 1) * k].copy_from_slice(&part.sh[j * k..(j + 1) * k]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn subset_then_scatter_restores_the_scene() {
+        let mut g = Gaussians::with_capacity(4, 1);
+        for i in 0..4 {
+            let f = i as f32;
+            g.means.push([f, 0.0, 1.0]);
+            g.log_scales.push([-f; 3]);
+            g.quats.push([1.0, f, 0.0, 0.0]);
+            g.opacity_logits.push(f);
+            g.sh.extend((0..12).map(|k| f + k as f32 * 0.01));
+        }
+        let keep = [1u32, 3];
+        let mut part = subset(&g, &keep);
+        assert_eq!(part.len(), 2);
+        assert_eq!(part.means[1], [3.0, 0.0, 1.0]);
+        part.opacity_logits[0] = 42.0;
+        part.sh[12] = -1.0;
+        let mut full = g.clone();
+        scatter(&mut full, &keep, &part);
+        assert_eq!(full.opacity_logits, vec![0.0, 42.0, 2.0, 3.0]);
+        assert_eq!(full.sh[3 * 12], -1.0);
+        assert_eq!(full.sh[..12], g.sh[..12]);
+    }
+}

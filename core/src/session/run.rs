@@ -1,0 +1,384 @@
+//! The optimisation loop of one stylization run (Stage 2 of ALGORITHM.md).
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use super::events::{Event, LossTerms, StepReport, StepTimings};
+use super::prepare::{PreparedStyle, StyleDepthSource, StyleImage, fit_color_transfer, prepare_style, scatter, seen_by_any, subset};
+use crate::camera::{Camera, scene_extent};
+use crate::raster::{self, RenderOptions};
+use crate::scene::Gaussians;
+use crate::style::adam::Adam;
+use crate::style::regularizers::l2_distance;
+use crate::style::step::{FeatureMap, RenderedMaps, content_target, step_loss};
+use crate::style::{Phase, StyleConfig};
+use crate::vision::Vgg;
+use crate::vision::canny::render_edges;
+
+/// Why a run could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError {
+    /// The configuration is unusable.
+    #[error("invalid configuration: {}", .0.join("; "))]
+    Config(Vec<String>),
+    /// There is nothing to optimise from.
+    #[error("{0}")]
+    Input(String),
+}
+
+/// Everything a run starts from.
+#[derive(Clone)]
+pub struct SessionInputs {
+    /// The scene as loaded.
+    pub scene: Gaussians,
+    /// Optimisation cameras (any resolution: they are rescaled to the working resolution).
+    pub cameras: Vec<Camera>,
+    /// The style image.
+    pub style: StyleImage,
+    /// Where the style's depth comes from.
+    pub style_depth: StyleDepthSource,
+    /// The VGG feature network.
+    pub vgg: Arc<Vgg>,
+    /// The run's parameters.
+    pub config: StyleConfig,
+}
+
+/// Per-view targets computed once from the colour-matched scene `G^c`.
+struct ViewTarget {
+    content: FeatureMap,
+    inv_depth: Vec<f32>,
+}
+
+/// Optimiser state, one Adam per parameter group, per phase (kept across cycles).
+struct Optimisers {
+    color: Adam,
+    means: Adam,
+    scales: Adam,
+    quats: Adam,
+    opacity: Adam,
+}
+
+/// One stylization run, stepped by its caller (the CLI or the studio's worker).
+pub struct Session {
+    config: StyleConfig,
+    inputs_style: StyleImage,
+    style_depth: StyleDepthSource,
+    vgg: Arc<Vgg>,
+    /// The whole colour-matched scene; optimised Gaussians are scattered into it on export.
+    full: Gaussians,
+    /// Indices into `full` of the optimised Gaussians.
+    keep: Vec<u32>,
+    /// The optimised Gaussians (current).
+    g: Gaussians,
+    /// `G^c` restricted to `keep`: the frozen reference.
+    g_ref: Gaussians,
+    base_cameras: Vec<Camera>,
+    cameras: Vec<Camera>,
+    extent: f32,
+    style: PreparedStyle,
+    targets: Vec<Option<ViewTarget>>,
+    opt: Optimisers,
+    sampler: ViewSampler,
+    step: u32,
+    elapsed_s: f64,
+}
+
+impl Session {
+    /// Prepares a run: colour matching, culling, style features. Reports each stage.
+    pub fn prepare(inputs: SessionInputs, on_event: &mut dyn FnMut(Event)) -> Result<Self, SessionError> {
+        let SessionInputs { scene, cameras, style, style_depth, vgg, config } = inputs;
+        let problems = config.problems();
+        if !problems.is_empty() {
+            return Err(SessionError::Config(problems));
+        }
+        if scene.is_empty() {
+            return Err(SessionError::Input("the scene has no Gaussians".into()));
+        }
+        if cameras.is_empty() {
+            return Err(SessionError::Input("no optimisation cameras".into()));
+        }
+        let opts = RenderOptions { background: config.background };
+        let work_cams: Vec<Camera> = cameras.iter().map(|c| at_resolution(c, config.resolution)).collect();
+
+        let t = Instant::now();
+        let ct = fit_color_transfer(&scene, &work_cams, &opts, &style);
+        let mut full = scene;
+        ct.apply_to_gaussians(&mut full);
+        on_event(Event::Stage { name: "colour matching".into(), seconds: t.elapsed().as_secs_f64() });
+
+        let t = Instant::now();
+        let seen = seen_by_any(&full, &work_cams, &opts);
+        let keep: Vec<u32> = seen.iter().enumerate().filter(|(_, s)| **s).map(|(i, _)| i as u32).collect();
+        if keep.is_empty() {
+            return Err(SessionError::Input(format!(
+                "none of the {} Gaussians is visible from the {} optimisation cameras",
+                full.len(),
+                work_cams.len()
+            )));
+        }
+        let g_ref = subset(&full, &keep);
+        on_event(Event::Culled { total: full.len(), kept: keep.len() });
+        on_event(Event::Stage { name: "visibility culling".into(), seconds: t.elapsed().as_secs_f64() });
+
+        let t = Instant::now();
+        let style_maps_ = prepare_style(&vgg, &style, config.texture_scale, &style_depth, config.depth_polarity);
+        on_event(Event::Stage { name: "style features".into(), seconds: t.elapsed().as_secs_f64() });
+
+        let n = keep.len();
+        let opt = Optimisers {
+            color: Adam::new(n * 3, config.adam),
+            means: Adam::new(n * 3, config.adam),
+            scales: Adam::new(n * 3, config.adam),
+            quats: Adam::new(n * 4, config.adam),
+            opacity: Adam::new(n, config.adam),
+        };
+        let extent = scene_extent(&work_cams);
+        let sampler = ViewSampler::new(work_cams.len(), config.seed);
+        Ok(Self {
+            targets: (0..work_cams.len()).map(|_| None).collect(),
+            base_cameras: cameras,
+            cameras: work_cams,
+            g: g_ref.clone(),
+            g_ref,
+            full,
+            keep,
+            extent,
+            style: style_maps_,
+            inputs_style: style,
+            style_depth,
+            vgg,
+            opt,
+            sampler,
+            step: 0,
+            elapsed_s: 0.0,
+            config,
+        })
+    }
+
+    /// The parameters in use.
+    pub fn config(&self) -> &StyleConfig {
+        &self.config
+    }
+
+    /// Steps done.
+    pub fn steps_done(&self) -> u32 {
+        self.step
+    }
+
+    /// The whole step budget under the current configuration.
+    pub fn total_steps(&self) -> u32 {
+        self.config.schedule().total_steps()
+    }
+
+    /// Whether every scheduled step has run.
+    pub fn is_done(&self) -> bool {
+        self.step >= self.total_steps()
+    }
+
+    /// Seconds spent stepping.
+    pub fn elapsed_s(&self) -> f64 {
+        self.elapsed_s
+    }
+
+    /// The optimisation cameras at the working resolution.
+    pub fn cameras(&self) -> &[Camera] {
+        &self.cameras
+    }
+
+    /// The style's maps at texture scale and their features (for inspection).
+    pub fn style(&self) -> &PreparedStyle {
+        &self.style
+    }
+
+    /// The colour-matched scene before optimisation (`G^c`, whole).
+    pub fn colour_matched(&self) -> &Gaussians {
+        &self.full
+    }
+
+    /// Number of Gaussians being optimised.
+    pub fn optimised_count(&self) -> usize {
+        self.keep.len()
+    }
+
+    /// The whole scene with the current optimised Gaussians in place.
+    pub fn result(&self) -> Gaussians {
+        let mut out = self.full.clone();
+        scatter(&mut out, &self.keep, &self.g);
+        out
+    }
+
+    /// Takes new parameters from the next step on. A new texture scale or depth
+    /// polarity recomputes the style features; a new resolution the cameras and
+    /// per-view targets. Adam state is kept.
+    pub fn set_config(&mut self, config: StyleConfig) -> Result<(), SessionError> {
+        let problems = config.problems();
+        if !problems.is_empty() {
+            return Err(SessionError::Config(problems));
+        }
+        if config.texture_scale != self.config.texture_scale || config.depth_polarity != self.config.depth_polarity {
+            self.style = prepare_style(&self.vgg, &self.inputs_style, config.texture_scale, &self.style_depth, config.depth_polarity);
+        }
+        if config.resolution != self.config.resolution || config.background != self.config.background {
+            self.cameras = self.base_cameras.iter().map(|c| at_resolution(c, config.resolution)).collect();
+            self.targets.iter_mut().for_each(|t| *t = None);
+        }
+        self.config = config;
+        Ok(())
+    }
+
+    /// Runs the next scheduled step; `None` when the schedule is complete.
+    pub fn step(&mut self) -> Option<StepReport> {
+        let schedule = self.config.schedule();
+        let (cycle, phase) = schedule.at(self.step)?;
+        let started = Instant::now();
+        let view = self.sampler.next();
+        let opts = RenderOptions { background: self.config.background };
+        let cam = self.cameras[view].clone();
+        let (h, w) = (cam.height as usize, cam.width as usize);
+        let mut timings = StepTimings::default();
+
+        if self.targets[view].is_none() {
+            let r = raster::render(&self.g_ref, &cam, &opts);
+            let rgb: Vec<f32> = r.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+            self.targets[view] = Some(ViewTarget { content: content_target(&*self.vgg, &rgb, h, w), inv_depth: r.inv_depth });
+        }
+
+        let t = Instant::now();
+        let (img, state) = raster::forward(&self.g, &cam, &opts);
+        timings.render_ms = ms(t);
+        let rgb: Vec<f32> = img.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+        let edge = render_edges(&rgb, h, w);
+        let target = self.targets[view].as_ref()?;
+        let geometry = phase.updates_geometry();
+        let loss = step_loss(
+            &*self.vgg,
+            &self.style.targets,
+            RenderedMaps { rgb: &rgb, inv_depth: &img.inv_depth, edge: &edge, height: h, width: w },
+            Some(&target.content),
+            geometry.then_some(target.inv_depth.as_slice()),
+            &self.config.weights,
+            geometry,
+        );
+        timings.features_ms = loss.timings.features_ms;
+        timings.matching_ms = loss.timings.matching_ms;
+        timings.vgg_backward_ms = loss.timings.backward_ms;
+
+        // The clamp to [0, 1] passes no gradient outside the range.
+        let mut v_rgb = loss.v_rgb;
+        for (g, &raw) in v_rgb.iter_mut().zip(&img.rgb) {
+            if !(0.0..=1.0).contains(&raw) {
+                *g = 0.0;
+            }
+        }
+        let t = Instant::now();
+        let grads = raster::backward(&self.g, &cam, &opts, &state, &v_rgb, &loss.v_inv_depth);
+        timings.raster_backward_ms = ms(t);
+
+        let t = Instant::now();
+        let mut terms = LossTerms { gcfm: loss.gcfm, content: loss.content, tv: loss.tv, depth: loss.depth, total: loss.total, ..LossTerms::default() };
+        let lr = self.config.lr;
+        let wts = self.config.weights;
+        if phase.updates_color() {
+            let k = self.g.sh_coeffs() * 3;
+            let mut dc: Vec<f32> = (0..self.g.len()).flat_map(|i| [self.g.sh[i * k], self.g.sh[i * k + 1], self.g.sh[i * k + 2]]).collect();
+            let v_dc: Vec<f32> = (0..self.g.len()).flat_map(|i| [grads.v_sh[i * k], grads.v_sh[i * k + 1], grads.v_sh[i * k + 2]]).collect();
+            self.opt.color.step(&mut dc, &v_dc, lr.color);
+            for i in 0..self.g.len() {
+                self.g.sh[i * k..i * k + 3].copy_from_slice(&dc[3 * i..3 * i + 3]);
+            }
+        }
+        if geometry {
+            let (l_o, mut v_o) = l2_distance(&self.g.opacity_logits, &self.g_ref.opacity_logits);
+            let (l_s, mut v_s) = l2_distance(flat(&self.g.log_scales), flat(&self.g_ref.log_scales));
+            let (l_q, mut v_q) = l2_distance(flat(&self.g.quats), flat(&self.g_ref.quats));
+            terms.reg_opacity = l_o;
+            terms.reg_scale = l_s;
+            terms.reg_rotation = l_q;
+            terms.total += wts.opacity * l_o + wts.scale * l_s + wts.rotation * l_q;
+            add_scaled(&mut v_o, &grads.v_opacity_logits, wts.opacity);
+            add_scaled(&mut v_s, flat(&grads.v_log_scales), wts.scale);
+            add_scaled(&mut v_q, flat(&grads.v_quats), wts.rotation);
+            self.opt.means.step(flat_mut(&mut self.g.means), flat(&grads.v_means), lr.means_per_extent * self.extent);
+            self.opt.scales.step(flat_mut(&mut self.g.log_scales), &v_s, lr.scales);
+            self.opt.quats.step(flat_mut(&mut self.g.quats), &v_q, lr.quats);
+            self.opt.opacity.step(&mut self.g.opacity_logits, &v_o, lr.opacity);
+        }
+        timings.update_ms = ms(t);
+
+        self.elapsed_s += started.elapsed().as_secs_f64();
+        let report = StepReport {
+            iter: self.step,
+            total: schedule.total_steps(),
+            cycle,
+            phase,
+            view: view as u32,
+            losses: terms,
+            timings,
+            elapsed_s: self.elapsed_s,
+        };
+        self.step += 1;
+        Some(report)
+    }
+}
+
+/// `(x − x^c)/‖x − x^c‖` scaled by λ, plus the loss gradient: `reg ← λ·reg + loss`.
+fn add_scaled(reg: &mut [f32], loss_grad: &[f32], lambda: f32) {
+    for (r, &g) in reg.iter_mut().zip(loss_grad) {
+        *r = lambda * *r + g;
+    }
+}
+
+fn flat<const N: usize>(v: &[[f32; N]]) -> &[f32] {
+    v.as_flattened()
+}
+
+fn flat_mut<const N: usize>(v: &mut [[f32; N]]) -> &mut [f32] {
+    v.as_flattened_mut()
+}
+
+fn ms(t: Instant) -> f32 {
+    t.elapsed().as_secs_f32() * 1e3
+}
+
+/// The camera rescaled so that its longer side is `resolution` pixels.
+pub fn at_resolution(cam: &Camera, resolution: u32) -> Camera {
+    let long = cam.width.max(cam.height).max(1) as f64;
+    let s = resolution as f64 / long;
+    let w = ((cam.width as f64 * s).round() as u32).max(1);
+    let h = ((cam.height as f64 * s).round() as u32).max(1);
+    cam.scaled_to(w, h)
+}
+
+/// Views in shuffled order without replacement, refilled when empty (seeded).
+struct ViewSampler {
+    order: Vec<usize>,
+    n: usize,
+    rng: u64,
+}
+
+impl ViewSampler {
+    fn new(n: usize, seed: u64) -> Self {
+        Self { order: Vec::new(), n, rng: seed ^ 0x9E37_79B9_7F4A_7C15 }
+    }
+
+    fn next_u64(&mut self) -> u64 {
+        // SplitMix64.
+        self.rng = self.rng.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.rng;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    fn next(&mut self) -> usize {
+        if self.order.is_empty() {
+            self.order = (0..self.n).collect();
+            for i in (1..self.order.len()).rev() {
+                let j = (self.next_u64() % (i as u64 + 1)) as usize;
+                self.order.swap(i, j);
+            }
+            self.order.reverse();
+        }
+        self.order.pop().unwrap_or(0)
+    }
+}

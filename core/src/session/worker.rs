@@ -1,0 +1,158 @@
+//! Running a session on its own thread: commands in, events out, the newest
+//! Gaussians in a latest-value slot. The front end is woken through a closure
+//! it hands in (e.g. `ctx.request_repaint()`), so the core never depends on a UI.
+
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::{Receiver, Sender, TryRecvError};
+
+use super::events::{Command, Event};
+use super::run::{Session, SessionInputs};
+use super::slot::Slot;
+use super::Snapshot;
+use crate::scene::Gaussians;
+
+/// How often at most a snapshot of the whole scene is published.
+const SNAPSHOT_INTERVAL: Duration = Duration::from_millis(500);
+
+/// The front end's side of a running session.
+pub struct SessionHandle {
+    /// Commands to the worker.
+    pub commands: Sender<Command>,
+    /// Events from the worker.
+    pub events: Receiver<Event>,
+    /// The newest snapshot of the scene.
+    pub snapshots: Arc<Slot<Snapshot>>,
+    thread: Option<JoinHandle<Option<Gaussians>>>,
+}
+
+impl SessionHandle {
+    /// Asks the worker to stop and waits for the result (the scene so far), if any.
+    pub fn stop_and_join(mut self) -> Option<Gaussians> {
+        let _ = self.commands.send(Command::Stop);
+        self.thread.take().and_then(|t| t.join().ok().flatten())
+    }
+
+    /// Whether the worker thread has ended.
+    pub fn is_finished(&self) -> bool {
+        self.thread.as_ref().is_none_or(|t| t.is_finished())
+    }
+}
+
+impl Drop for SessionHandle {
+    fn drop(&mut self) {
+        let _ = self.commands.send(Command::Stop);
+    }
+}
+
+/// Starts a worker thread that prepares the session and steps it to the end,
+/// applying commands between steps.
+pub fn spawn(inputs: SessionInputs, waker: Arc<dyn Fn() + Send + Sync>) -> SessionHandle {
+    let (cmd_tx, cmd_rx) = crossbeam_channel::unbounded();
+    let (ev_tx, ev_rx) = crossbeam_channel::unbounded();
+    let slot = Arc::new(Slot::default());
+    let slot_w = slot.clone();
+    let thread = std::thread::Builder::new()
+        .name("gast-session".into())
+        .spawn(move || worker(inputs, cmd_rx, ev_tx, slot_w, waker))
+        .ok();
+    SessionHandle { commands: cmd_tx, events: ev_rx, snapshots: slot, thread }
+}
+
+fn worker(
+    inputs: SessionInputs,
+    commands: Receiver<Command>,
+    events: Sender<Event>,
+    slot: Arc<Slot<Snapshot>>,
+    waker: Arc<dyn Fn() + Send + Sync>,
+) -> Option<Gaussians> {
+    let emit = |e: Event| {
+        let _ = events.send(e);
+        waker();
+    };
+    let mut session = match Session::prepare(inputs, &mut |e| emit(e)) {
+        Ok(s) => s,
+        Err(e) => {
+            emit(Event::Failed(e.to_string()));
+            return None;
+        }
+    };
+    slot.put(Snapshot { step: 0, gaussians: session.result() });
+    waker();
+    run_loop(&mut session, &commands, &emit, &slot, &*waker);
+    let result = session.result();
+    slot.put(Snapshot { step: session.steps_done(), gaussians: result.clone() });
+    emit(Event::Finished { completed: session.is_done(), steps: session.steps_done(), seconds: session.elapsed_s() });
+    Some(result)
+}
+
+/// Steps until the schedule ends or a `Stop` arrives; `Pause` blocks on the
+/// command channel (no busy waiting).
+pub fn run_loop(
+    session: &mut Session,
+    commands: &Receiver<Command>,
+    emit: &dyn Fn(Event),
+    slot: &Slot<Snapshot>,
+    waker: &dyn Fn(),
+) {
+    let mut paused = false;
+    let mut last_snapshot = Instant::now();
+    loop {
+        let cmd = if paused {
+            match commands.recv() {
+                Ok(c) => Some(c),
+                Err(_) => return,
+            }
+        } else {
+            match commands.try_recv() {
+                Ok(c) => Some(c),
+                Err(TryRecvError::Empty) => None,
+                Err(TryRecvError::Disconnected) => return,
+            }
+        };
+        match cmd {
+            Some(Command::Stop) => return,
+            Some(Command::Pause) => {
+                if !paused {
+                    paused = true;
+                    slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
+                    emit(Event::Paused);
+                }
+                continue;
+            }
+            Some(Command::Resume) => {
+                if paused {
+                    paused = false;
+                    emit(Event::Resumed);
+                }
+                continue;
+            }
+            Some(Command::SetConfig(c)) => {
+                match session.set_config(*c) {
+                    Ok(()) => emit(Event::ConfigApplied),
+                    Err(e) => emit(Event::Warning(format!("parameters not applied: {e}"))),
+                }
+                continue;
+            }
+            None => {}
+        }
+        match session.step() {
+            Some(report) => {
+                let bad = !report.losses.total.is_finite();
+                emit(Event::Step(report));
+                if bad {
+                    emit(Event::Warning(format!("step {}: the loss is not finite; stopping", report.iter)));
+                    return;
+                }
+                if last_snapshot.elapsed() >= SNAPSHOT_INTERVAL {
+                    slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
+                    last_snapshot = Instant::now();
+                    waker();
+                }
+            }
+            None => return,
+        }
+    }
+}
