@@ -87,13 +87,27 @@ pub fn backward(
         .enumerate()
         .for_each(|(i, (v_mean, v_log_scale, v_quat, v_opacity_logit, v_sh))| {
             let k = slot[i];
-            if k == u32::MAX {
+            // Invisible, or visible but never composited (occluded): zero.
+            if k == u32::MAX || splat_grads[k as usize] == [0.0; 10] {
                 return;
             }
             let grad = GaussianGrad { v_mean, v_log_scale, v_quat, v_opacity_logit, v_sh };
             project_backward(&gaussian_ref(g, i), &cc, &splat_grads[k as usize], grad);
         });
     out
+}
+
+/// One pixel's state walking back to front.
+#[derive(Clone, Copy)]
+struct Px {
+    /// Transmittance in front of the current splat once it is divided out.
+    t: f32,
+    /// Colour and inverse depth seen behind the current splat, per unit transmittance.
+    behind: [f32; 4],
+    /// `∂L/∂rgb` and `∂L/∂inv_depth` of the pixel.
+    cot: [f32; 4],
+    /// The pixel's list length from the forward pass.
+    n_contrib: u32,
 }
 
 /// What every tile's backward reads.
@@ -116,47 +130,55 @@ impl TileCtx<'_> {
 
         // Per pixel: transmittance, colour and depth behind the current splat,
         // the pixel's cotangents and its list length.
-        let mut tr = [0.0f32; TILE_PX];
-        let mut behind = [[0.0f32; 4]; TILE_PX];
-        let mut cot = [[0.0f32; 4]; TILE_PX];
-        let mut nc = [0u32; TILE_PX];
+        let mut px = [Px { t: 0.0, behind: [0.0; 4], cot: [0.0; 4], n_contrib: 0 }; TILE_PX];
         let mut max_nc = 0;
         for y in y0..y1 {
             for x in x0..x1 {
-                let p = ((y - y0) * TILE + (x - x0)) as usize;
                 let q = y as usize * w as usize + x as usize;
-                tr[p] = st.final_t[q];
-                behind[p] = [self.bg[0], self.bg[1], self.bg[2], 0.0];
-                cot[p] = [self.v_rgb[3 * q], self.v_rgb[3 * q + 1], self.v_rgb[3 * q + 2], self.v_inv_depth[q]];
-                nc[p] = st.n_contrib[q];
-                max_nc = max_nc.max(nc[p]);
+                let p = &mut px[((y - y0) * TILE + (x - x0)) as usize];
+                p.t = st.final_t[q];
+                p.behind = [self.bg[0], self.bg[1], self.bg[2], 0.0];
+                p.cot = [self.v_rgb[3 * q], self.v_rgb[3 * q + 1], self.v_rgb[3 * q + 2], self.v_inv_depth[q]];
+                p.n_contrib = st.n_contrib[q];
+                max_nc = max_nc.max(p.n_contrib);
             }
         }
 
+        let mut falloff = [0.0f32; TILE as usize];
         for k in (0..max_nc as usize).rev() {
             let s = &st.splats[list[k] as usize];
             let feat = [s.color[0], s.color[1], s.color[2], s.inv_z];
             let [ca, cb, cc] = s.conic;
             let mut acc: SplatGrad = [0.0; 10];
-            let (ja, jb, ia, ib) = s.pixel_rect(x0, x1, y0, y1);
+            let (_, _, ia, ib) = s.pixel_rect(x0, x1, y0, y1);
             for i in ia..=ib {
-                let row = (i as u32 - y0) * TILE;
-                for j in ja..=jb {
-                    let p = (row + (j as u32 - x0)) as usize;
-                    if k as u32 >= nc[p] {
+                let (ja, jb) = s.row_span(i, x0, x1);
+                if ja > jb {
+                    continue;
+                }
+                let row = (i as u32 - y0) as usize * TILE as usize;
+                let pixels = &mut px[row + (ja as u32 - x0) as usize..=row + (jb as u32 - x0) as usize];
+                let falloff = &mut falloff[..pixels.len()];
+                let py = i as f32 + 0.5;
+                s.falloff_row(ja as f32 + 0.5, py, falloff);
+                let dy = py - s.xy[1];
+                let dx0 = ja as f32 + 0.5 - s.xy[0];
+                for (m, (p, &gauss)) in pixels.iter_mut().zip(falloff.iter()).enumerate() {
+                    let dx = dx0 + m as f32;
+                    if k as u32 >= p.n_contrib {
                         continue;
                     }
-                    let Some((alpha, gauss, dx, dy)) = s.eval(j as f32 + 0.5, i as f32 + 0.5) else { continue };
-                    let t_i = tr[p] / (1.0 - alpha);
+                    let Some(alpha) = s.alpha(gauss) else { continue };
+                    let t_i = p.t / (1.0 - alpha);
                     let wgt = alpha * t_i;
                     let mut v_alpha = 0.0;
                     for c in 0..4 {
-                        acc[6 + c] += wgt * cot[p][c];
-                        v_alpha += (feat[c] - behind[p][c]) * cot[p][c];
-                        behind[p][c] = alpha * feat[c] + (1.0 - alpha) * behind[p][c];
+                        acc[6 + c] += wgt * p.cot[c];
+                        v_alpha += (feat[c] - p.behind[c]) * p.cot[c];
+                        p.behind[c] = alpha * feat[c] + (1.0 - alpha) * p.behind[c];
                     }
                     v_alpha *= t_i;
-                    tr[p] = t_i;
+                    p.t = t_i;
                     if s.opacity * gauss <= ALPHA_MAX {
                         acc[5] += v_alpha * gauss;
                         let v_power = v_alpha * alpha;

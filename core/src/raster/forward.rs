@@ -26,12 +26,15 @@ pub fn forward(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> (Render, Fo
         panic!("raster::forward: {e}");
     }
     let cc = CamConsts::new(cam);
-    let (splats, ids) = project_all(g, &cc);
+    let t0 = std::time::Instant::now();
+    let (splats, ids) = project_sorted(g, &cc);
+    let t1 = std::time::Instant::now();
     let tiles_x = cam.width.div_ceil(TILE);
     let tiles_y = cam.height.div_ceil(TILE);
     let (tile_starts, tile_list) = bin(&splats, cam.width, cam.height, tiles_x, tiles_y);
 
     let n_tiles = (tiles_x * tiles_y) as usize;
+    let t2 = std::time::Instant::now();
     let outs: Vec<TileOut> = (0..n_tiles)
         .into_par_iter()
         .map(|t| {
@@ -40,6 +43,8 @@ pub fn forward(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> (Render, Fo
         })
         .collect();
 
+    let t3 = std::time::Instant::now();
+    if std::env::var_os("GAST_TIMING").is_some() { eprintln!("project {:?} bin {:?} composite {:?}", t1-t0, t2-t1, t3-t2); }
     let (w, h) = (cam.width as usize, cam.height as usize);
     let mut out = Render::zeros(cam.width, cam.height);
     let mut final_t = vec![1.0f32; w * h];
@@ -49,16 +54,15 @@ pub fn forward(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> (Render, Fo
         let (x0, y0) = ((t as u32 % tiles_x) * TILE, (t as u32 / tiles_x) * TILE);
         for ly in 0..TILE.min(cam.height - y0) {
             for lx in 0..TILE.min(cam.width - x0) {
-                let p = (ly * TILE + lx) as usize;
+                let p = &o.px[(ly * TILE + lx) as usize];
                 let q = (y0 + ly) as usize * w + (x0 + lx) as usize;
-                let tf = o.t[p];
                 for c in 0..3 {
-                    out.rgb[3 * q + c] = o.rgb[3 * p + c] + tf * bg[c];
+                    out.rgb[3 * q + c] = p.acc[c] + p.t * bg[c];
                 }
-                out.inv_depth[q] = o.inv_depth[p];
-                out.alpha[q] = 1.0 - tf;
-                final_t[q] = tf;
-                n_contrib[q] = o.n_contrib[p];
+                out.inv_depth[q] = p.acc[3];
+                out.alpha[q] = 1.0 - p.t;
+                final_t[q] = p.t;
+                n_contrib[q] = p.n_contrib;
             }
         }
     }
@@ -88,14 +92,22 @@ pub(crate) fn gaussian_ref(g: &Gaussians, i: usize) -> GaussianRef<'_> {
     }
 }
 
-/// Projects every Gaussian in parallel, keeping those that can touch a pixel.
-fn project_all(g: &Gaussians, cc: &CamConsts) -> (Vec<Splat>, Vec<u32>) {
+/// Projects every Gaussian in parallel, keeping those that can touch a pixel,
+/// and returns them sorted front to back with their Gaussian indices.
+///
+/// Sorting the splats themselves (not a list of indices) makes every later
+/// pass read them in order: the tile lists become increasing indices.
+fn project_sorted(g: &Gaussians, cc: &CamConsts) -> (Vec<Splat>, Vec<u32>) {
     let kept: Vec<(u32, Splat)> = (0..g.len())
         .into_par_iter()
         .with_min_len(1024)
         .filter_map(|i| project(&gaussian_ref(g, i), cc).map(|s| (i as u32, s)))
         .collect();
-    kept.into_iter().map(|(i, s)| (s, i)).unzip()
+    // Depth is positive, so its bits order like the float; ties go by index.
+    let mut keys: Vec<u64> =
+        kept.par_iter().enumerate().map(|(k, (_, s))| (u64::from(s.depth.to_bits()) << 32) | k as u64).collect();
+    keys.par_sort_unstable();
+    keys.par_iter().map(|&k| kept[(k & 0xffff_ffff) as usize]).map(|(i, s)| (s, i)).unzip()
 }
 
 /// Whether the ellipse `power ≥ −cut` of a splat reaches a pixel centre in the
@@ -134,33 +146,30 @@ fn for_each_tile(s: &Splat, w: u32, h: u32, tiles_x: u32, mut f: impl FnMut(usiz
     }
 }
 
-/// Sorts the splats by depth and lists, for every tile, the splats that reach
-/// it, front to back. Returns `(tile_starts, tile_list)`.
+/// Lists, for every tile, the (depth-sorted) splats that reach it, front to
+/// back. Returns `(tile_starts, tile_list)`.
 fn bin(splats: &[Splat], w: u32, h: u32, tiles_x: u32, tiles_y: u32) -> (Vec<u32>, Vec<u32>) {
     let n_tiles = (tiles_x * tiles_y) as usize;
-    // Depth is positive, so its bits order like the float; ties go by index.
-    let mut keys: Vec<u64> =
-        splats.par_iter().enumerate().map(|(k, s)| (u64::from(s.depth.to_bits()) << 32) | k as u64).collect();
-    keys.par_sort_unstable();
-
-    // Each chunk of the depth order makes its own per-tile lists (a counting
-    // sort), then every tile concatenates its pieces chunk by chunk.
-    let chunk = keys.len().div_ceil(rayon::current_num_threads() * 4).max(4096);
-    let pieces: Vec<(Vec<u32>, Vec<u32>)> = keys
+    // Each chunk of splats makes its own per-tile lists (a counting sort),
+    // then every tile concatenates its pieces chunk by chunk.
+    let chunk = splats.len().div_ceil(rayon::current_num_threads() * 4).max(4096);
+    let pieces: Vec<(Vec<u32>, Vec<u32>)> = splats
         .par_chunks(chunk)
-        .map(|ks| {
+        .enumerate()
+        .map(|(c, ss)| {
+            let base = (c * chunk) as u32;
             let mut starts = vec![0u32; n_tiles + 1];
-            for &k in ks {
-                for_each_tile(&splats[(k & 0xffff_ffff) as usize], w, h, tiles_x, |t| starts[t + 1] += 1);
+            for s in ss {
+                for_each_tile(s, w, h, tiles_x, |t| starts[t + 1] += 1);
             }
             for t in 0..n_tiles {
                 starts[t + 1] += starts[t];
             }
             let mut fill = starts.clone();
             let mut list = vec![0u32; starts[n_tiles] as usize];
-            for &k in ks {
-                let idx = (k & 0xffff_ffff) as u32;
-                for_each_tile(&splats[idx as usize], w, h, tiles_x, |t| {
+            for (k, s) in ss.iter().enumerate() {
+                let idx = base + k as u32;
+                for_each_tile(s, w, h, tiles_x, |t| {
                     list[fill[t] as usize] = idx;
                     fill[t] += 1;
                 });
@@ -193,46 +202,62 @@ fn bin(splats: &[Splat], w: u32, h: u32, tiles_x: u32, tiles_y: u32) -> (Vec<u32
     (tile_starts, tile_list)
 }
 
+/// One pixel's running compositing state.
+#[derive(Clone, Copy)]
+struct Px {
+    /// Transmittance so far.
+    t: f32,
+    /// Colour and inverse depth accumulated so far.
+    acc: [f32; 4],
+    /// One past the list position of the last splat composited.
+    n_contrib: u32,
+    /// Transmittance would have fallen below `T_MIN`: nothing more is added.
+    done: bool,
+}
+
 /// One tile's composited pixels (local row-major, `TILE` wide).
 struct TileOut {
-    rgb: [f32; 3 * TILE_PX],
-    inv_depth: [f32; TILE_PX],
-    t: [f32; TILE_PX],
-    n_contrib: [u32; TILE_PX],
+    px: [Px; TILE_PX],
 }
 
 /// Composites one tile front to back, splat-major: each splat visits only the
-/// pixels of its extent that are not finished yet.
+/// pixels of its ellipse that are not finished yet.
 fn composite_tile(tile: u32, tiles_x: u32, w: u32, h: u32, splats: &[Splat], list: &[u32]) -> TileOut {
     let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
     let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-    let mut o = TileOut { rgb: [0.0; 3 * TILE_PX], inv_depth: [0.0; TILE_PX], t: [1.0; TILE_PX], n_contrib: [0; TILE_PX] };
-    let mut done = [false; TILE_PX];
+    let mut o = TileOut { px: [Px { t: 1.0, acc: [0.0; 4], n_contrib: 0, done: false }; TILE_PX] };
     let mut remaining = (x1 - x0) * (y1 - y0);
+    let mut falloff = [0.0f32; TILE as usize];
     for (k, &si) in list.iter().enumerate() {
         let s = &splats[si as usize];
-        let (ja, jb, ia, ib) = s.pixel_rect(x0, x1, y0, y1);
+        let feat = [s.color[0], s.color[1], s.color[2], s.inv_z];
+        let (_, _, ia, ib) = s.pixel_rect(x0, x1, y0, y1);
         for i in ia..=ib {
-            let row = (i as u32 - y0) * TILE;
-            for j in ja..=jb {
-                let p = (row + (j as u32 - x0)) as usize;
-                if done[p] {
+            let (ja, jb) = s.row_span(i, x0, x1);
+            if ja > jb {
+                continue;
+            }
+            let row = (i as u32 - y0) as usize * TILE as usize;
+            let pixels = &mut o.px[row + (ja as u32 - x0) as usize..=row + (jb as u32 - x0) as usize];
+            let falloff = &mut falloff[..pixels.len()];
+            s.falloff_row(ja as f32 + 0.5, i as f32 + 0.5, falloff);
+            for (p, &g) in pixels.iter_mut().zip(falloff.iter()) {
+                if p.done {
                     continue;
                 }
-                let Some((alpha, ..)) = s.eval(j as f32 + 0.5, i as f32 + 0.5) else { continue };
-                let test_t = o.t[p] * (1.0 - alpha);
+                let Some(alpha) = s.alpha(g) else { continue };
+                let test_t = p.t * (1.0 - alpha);
                 if test_t < T_MIN {
-                    done[p] = true;
+                    p.done = true;
                     remaining -= 1;
                     continue;
                 }
-                let wgt = alpha * o.t[p];
-                for c in 0..3 {
-                    o.rgb[3 * p + c] += wgt * s.color[c];
+                let wgt = alpha * p.t;
+                for (a, f) in p.acc.iter_mut().zip(feat) {
+                    *a += wgt * f;
                 }
-                o.inv_depth[p] += wgt * s.inv_z;
-                o.t[p] = test_t;
-                o.n_contrib[p] = k as u32 + 1;
+                p.t = test_t;
+                p.n_contrib = k as u32 + 1;
             }
         }
         if remaining == 0 {

@@ -14,13 +14,13 @@ pub struct ForwardState {
     pub(crate) height: u32,
     /// Tiles per row.
     pub(crate) tiles_x: u32,
-    /// Projected Gaussians that can touch a pixel, in Gaussian order.
+    /// Projected Gaussians that can touch a pixel, front to back.
     pub(crate) splats: Vec<Splat>,
     /// For each splat, the index of its Gaussian.
     pub(crate) ids: Vec<u32>,
     /// Per tile, the start of its list in `tile_list`; one extra end entry.
     pub(crate) tile_starts: Vec<u32>,
-    /// Splat indices, grouped by tile, each group sorted front to back.
+    /// Splat indices, grouped by tile, each group increasing (front to back).
     pub(crate) tile_list: Vec<u32>,
     /// Transmittance left at each pixel after compositing.
     pub(crate) final_t: Vec<f32>,

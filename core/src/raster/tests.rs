@@ -259,3 +259,15 @@ fn backward_is_deterministic() {
     let b = backward(&g, &cam, &opts, &state, &vec![0.5; 3 * npx], &vec![-0.25; npx]);
     assert_eq!(a, b);
 }
+
+#[test]
+fn exp_neg_is_accurate() {
+    let mut worst = 0.0f64;
+    for k in 0..=200_000 {
+        let x = -20.0 * k as f32 / 200_000.0;
+        let want = f64::from(x).exp();
+        worst = worst.max((f64::from(super::project::exp_neg(x)) - want).abs() / want);
+    }
+    assert!(worst < 3e-7, "exp_neg relative error {worst:.3e}");
+    assert_eq!(super::project::exp_neg(0.0), 1.0);
+}
