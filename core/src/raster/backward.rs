@@ -12,7 +12,7 @@
 use rayon::prelude::*;
 
 use super::forward::{TILE_PX, gaussian_ref};
-use super::project::{ALPHA_MAX, CamConsts, GaussianGrad, SplatGrad, project_backward};
+use super::project::{ALPHA_MAX, CamConsts, LANE, GaussianGrad, SplatGrad, project_backward};
 use super::state::ForwardState;
 use super::{Grads, RenderOptions, TILE};
 use crate::camera::Camera;
@@ -157,14 +157,13 @@ impl TileCtx<'_> {
                     continue;
                 }
                 let row = (i as u32 - y0) as usize * TILE as usize;
-                let pixels = &mut px[row + (ja as u32 - x0) as usize..=row + (jb as u32 - x0) as usize];
-                let falloff = &mut falloff[..pixels.len()];
+                let (ja, jb) = ((ja as u32 - x0) as usize, (jb as u32 - x0) as usize);
                 let py = i as f32 + 0.5;
-                s.falloff_row(ja as f32 + 0.5, py, falloff);
+                s.falloff_row(x0 as f32 + 0.5, py, &mut falloff);
                 let dy = py - s.xy[1];
-                let dx0 = ja as f32 + 0.5 - s.xy[0];
-                for (m, (p, &gauss)) in pixels.iter_mut().zip(falloff.iter()).enumerate() {
-                    let dx = dx0 + m as f32;
+                let dx0 = x0 as f32 + 0.5 - s.xy[0];
+                for ((p, &gauss), &m) in px[row + ja..=row + jb].iter_mut().zip(&falloff[ja..=jb]).zip(&LANE[ja..=jb]) {
+                    let dx = dx0 + m;
                     if k as u32 >= p.n_contrib {
                         continue;
                     }

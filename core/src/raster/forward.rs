@@ -238,10 +238,9 @@ fn composite_tile(tile: u32, tiles_x: u32, w: u32, h: u32, splats: &[Splat], lis
                 continue;
             }
             let row = (i as u32 - y0) as usize * TILE as usize;
-            let pixels = &mut o.px[row + (ja as u32 - x0) as usize..=row + (jb as u32 - x0) as usize];
-            let falloff = &mut falloff[..pixels.len()];
-            s.falloff_row(ja as f32 + 0.5, i as f32 + 0.5, falloff);
-            for (p, &g) in pixels.iter_mut().zip(falloff.iter()) {
+            let (ja, jb) = ((ja as u32 - x0) as usize, (jb as u32 - x0) as usize);
+            s.falloff_row(x0 as f32 + 0.5, i as f32 + 0.5, &mut falloff);
+            for (p, &g) in o.px[row + ja..=row + jb].iter_mut().zip(&falloff[ja..=jb]) {
                 if p.done {
                     continue;
                 }

@@ -7,6 +7,7 @@
 
 use glam::{Mat3, Vec3};
 
+use super::TILE;
 use crate::camera::Camera;
 
 /// Real SH basis constants of 3DGS, band 0.
@@ -74,6 +75,10 @@ impl CamConsts {
     }
 }
 
+/// Offsets `0, 1, …` of the pixels in a row run, as floats (a zip with this
+/// vectorises where an integer-to-float conversion of the index does not).
+pub(crate) const LANE: [f32; TILE as usize] = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0];
+
 /// A Gaussian on screen: all that compositing reads.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Splat {
@@ -96,21 +101,22 @@ pub(crate) struct Splat {
 }
 
 impl Splat {
-    /// The falloff `exp(power)` at the pixel centres `(x_first + k, py)` of a
-    /// row run, written to `out[k]`, or 0 where the Gaussian is skipped
+    /// The falloff `exp(power)` at the `TILE` pixel centres `(x_first + k, py)`
+    /// of a tile row, written to `out[k]`, or 0 where the Gaussian is skipped
     /// (`power > 0`, or `power` so low that α < 1/255 for sure).
     ///
-    /// Branch-free so that it vectorises; the caller forms
-    /// `α = min(0.99, opacity·g)` and applies the exact `α < 1/255` test.
+    /// Branch-free and of fixed length so that it vectorises whole (the row
+    /// runs themselves are short); the caller forms `α = min(0.99, opacity·g)`
+    /// and applies the exact `α < 1/255` test.
     #[inline(always)]
-    pub fn falloff_row(&self, x_first: f32, py: f32, out: &mut [f32]) {
+    pub fn falloff_row(&self, x_first: f32, py: f32, out: &mut [f32; TILE as usize]) {
         let dy = py - self.xy[1];
         let [a, b, c] = self.conic;
         let (cdy, bdy) = (c * dy * dy, b * dy);
         let floor = -self.cut - POWER_SLACK;
         let dx0 = x_first - self.xy[0];
-        for (k, o) in out.iter_mut().enumerate() {
-            let dx = dx0 + k as f32;
+        for (o, &k) in out.iter_mut().zip(&LANE) {
+            let dx = dx0 + k;
             let power = -0.5 * (a * dx * dx + cdy) - bdy * dx;
             let g = exp_neg(power);
             *o = if power > 0.0 || power < floor { 0.0 } else { g };
