@@ -5,9 +5,9 @@
 use std::time::Instant;
 
 use gast_core::camera::Camera;
-use glam::{Mat3, Vec3};
 use gast_core::raster::{RenderOptions, backward, forward, render};
 use gast_core::scene::Gaussians;
+use glam::{Mat3, Vec3};
 
 /// A pinhole camera at `eye` looking at `target` (world +y up, image y down).
 fn look_at(eye: Vec3, target: Vec3, width: u32, height: u32, focal: f32) -> Camera {

@@ -12,7 +12,7 @@
 use rayon::prelude::*;
 
 use super::forward::{TILE_PX, gaussian_ref};
-use super::project::{ALPHA_MAX, CamConsts, LANE, GaussianGrad, SplatGrad, project_backward};
+use super::project::{ALPHA_MAX, CamConsts, GaussianGrad, LANE, SplatGrad, project_backward};
 use super::state::ForwardState;
 use super::{Grads, RenderOptions, TILE};
 use crate::camera::Camera;

@@ -26,15 +26,12 @@ pub fn forward(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> (Render, Fo
         panic!("raster::forward: {e}");
     }
     let cc = CamConsts::new(cam);
-    let t0 = std::time::Instant::now();
     let (splats, ids) = project_sorted(g, &cc);
-    let t1 = std::time::Instant::now();
     let tiles_x = cam.width.div_ceil(TILE);
     let tiles_y = cam.height.div_ceil(TILE);
     let (tile_starts, tile_list) = bin(&splats, cam.width, cam.height, tiles_x, tiles_y);
 
     let n_tiles = (tiles_x * tiles_y) as usize;
-    let t2 = std::time::Instant::now();
     let outs: Vec<TileOut> = (0..n_tiles)
         .into_par_iter()
         .map(|t| {
@@ -43,8 +40,6 @@ pub fn forward(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> (Render, Fo
         })
         .collect();
 
-    let t3 = std::time::Instant::now();
-    if std::env::var_os("GAST_TIMING").is_some() { eprintln!("project {:?} bin {:?} composite {:?}", t1-t0, t2-t1, t3-t2); }
     let (w, h) = (cam.width as usize, cam.height as usize);
     let mut out = Render::zeros(cam.width, cam.height);
     let mut final_t = vec![1.0f32; w * h];
@@ -56,8 +51,8 @@ pub fn forward(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> (Render, Fo
             for lx in 0..TILE.min(cam.width - x0) {
                 let p = &o.px[(ly * TILE + lx) as usize];
                 let q = (y0 + ly) as usize * w + (x0 + lx) as usize;
-                for c in 0..3 {
-                    out.rgb[3 * q + c] = p.acc[c] + p.t * bg[c];
+                for ((o, acc), bg) in out.rgb[3 * q..3 * q + 3].iter_mut().zip(p.acc).zip(bg) {
+                    *o = acc + p.t * bg;
                 }
                 out.inv_depth[q] = p.acc[3];
                 out.alpha[q] = 1.0 - p.t;

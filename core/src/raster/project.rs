@@ -77,7 +77,8 @@ impl CamConsts {
 
 /// Offsets `0, 1, …` of the pixels in a row run, as floats (a zip with this
 /// vectorises where an integer-to-float conversion of the index does not).
-pub(crate) const LANE: [f32; TILE as usize] = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0];
+pub(crate) const LANE: [f32; TILE as usize] =
+    [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0];
 
 /// A Gaussian on screen: all that compositing reads.
 #[derive(Clone, Copy, Debug, Default)]
@@ -492,7 +493,8 @@ pub(crate) fn project_backward(g: &GaussianRef, cc: &CamConsts, vs: &SplatGrad, 
             - 2.0 * x * e(2, 2)),
         2.0 * (-2.0 * y * e(0, 0) + x * e(0, 1) + r * e(0, 2) + x * e(1, 0) + z * e(1, 2) - r * e(2, 0) + z * e(2, 1)
             - 2.0 * y * e(2, 2)),
-        2.0 * (-2.0 * z * e(0, 0) - r * e(0, 1) + x * e(0, 2) + r * e(1, 0) - 2.0 * z * e(1, 1) + y * e(1, 2)
+        2.0 * (-2.0 * z * e(0, 0) - r * e(0, 1) + x * e(0, 2) + r * e(1, 0) - 2.0 * z * e(1, 1)
+            + y * e(1, 2)
             + x * e(2, 0)
             + y * e(2, 1)),
     ];
