@@ -41,6 +41,11 @@ pub fn backward(
         cam.width,
         cam.height
     );
+    assert!(
+        state.ids.last().is_none_or(|&i| (i as usize) < g.len()),
+        "raster::backward: state is for more Gaussians than the {} given",
+        g.len()
+    );
     assert_eq!(v_rgb.len(), 3 * npx, "raster::backward: v_rgb length");
     assert_eq!(v_inv_depth.len(), npx, "raster::backward: v_inv_depth length");
 
@@ -159,7 +164,7 @@ impl TileCtx<'_> {
                 let row = (i as u32 - y0) as usize * TILE as usize;
                 let (ja, jb) = ((ja as u32 - x0) as usize, (jb as u32 - x0) as usize);
                 let py = i as f32 + 0.5;
-                s.falloff_row(x0 as f32 + 0.5, py, &mut falloff);
+                s.falloff_row(x0 as f32 + 0.5, py, ja, jb, &mut falloff);
                 let dy = py - s.xy[1];
                 let dx0 = x0 as f32 + 0.5 - s.xy[0];
                 for ((p, &gauss), &m) in px[row + ja..=row + jb].iter_mut().zip(&falloff[ja..=jb]).zip(&LANE[ja..=jb]) {

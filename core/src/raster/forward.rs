@@ -234,7 +234,7 @@ fn composite_tile(tile: u32, tiles_x: u32, w: u32, h: u32, splats: &[Splat], lis
             }
             let row = (i as u32 - y0) as usize * TILE as usize;
             let (ja, jb) = ((ja as u32 - x0) as usize, (jb as u32 - x0) as usize);
-            s.falloff_row(x0 as f32 + 0.5, i as f32 + 0.5, &mut falloff);
+            s.falloff_row(x0 as f32 + 0.5, i as f32 + 0.5, ja, jb, &mut falloff);
             for (p, &g) in o.px[row + ja..=row + jb].iter_mut().zip(&falloff[ja..=jb]) {
                 if p.done {
                     continue;

@@ -102,25 +102,37 @@ pub(crate) struct Splat {
 }
 
 impl Splat {
-    /// The falloff `exp(power)` at the `TILE` pixel centres `(x_first + k, py)`
-    /// of a tile row, written to `out[k]`, or 0 where the Gaussian is skipped
-    /// (`power > 0`, or `power` so low that α < 1/255 for sure).
+    /// The falloff `exp(power)` at the pixel centres `(x_first + k, py)` of
+    /// a tile row for `k` in `lo..=hi`, written to `out[k]`, or 0 where the
+    /// Gaussian is skipped (`power > 0`, or `power` so low that α < 1/255 for
+    /// sure). Other entries of `out` are left unspecified.
     ///
-    /// Branch-free and of fixed length so that it vectorises whole (the row
-    /// runs themselves are short); the caller forms `α = min(0.99, opacity·g)`
-    /// and applies the exact `α < 1/255` test.
+    /// Branch-free: long runs compute the whole fixed-width row, which
+    /// vectorises; short runs (most splats are a few pixels wide) compute only
+    /// their pixels. Both give bit-identical values (Rust does not contract
+    /// to FMA). The caller forms `α = min(0.99, opacity·g)` and applies the
+    /// exact `α < 1/255` test.
     #[inline(always)]
-    pub fn falloff_row(&self, x_first: f32, py: f32, out: &mut [f32; TILE as usize]) {
+    pub fn falloff_row(&self, x_first: f32, py: f32, lo: usize, hi: usize, out: &mut [f32; TILE as usize]) {
         let dy = py - self.xy[1];
         let [a, b, c] = self.conic;
         let (cdy, bdy) = (c * dy * dy, b * dy);
         let floor = -self.cut - POWER_SLACK;
         let dx0 = x_first - self.xy[0];
-        for (o, &k) in out.iter_mut().zip(&LANE) {
+        let lane = |k: f32| {
             let dx = dx0 + k;
             let power = -0.5 * (a * dx * dx + cdy) - bdy * dx;
             let g = exp_neg(power);
-            *o = if power > 0.0 || power < floor { 0.0 } else { g };
+            if power > 0.0 || power < floor { 0.0 } else { g }
+        };
+        if hi - lo < 4 {
+            for (o, &k) in out[lo..=hi].iter_mut().zip(&LANE[lo..=hi]) {
+                *o = lane(k);
+            }
+        } else {
+            for (o, &k) in out.iter_mut().zip(&LANE) {
+                *o = lane(k);
+            }
         }
     }
 
@@ -302,6 +314,7 @@ struct Proj {
     cov: [f32; 3],
 }
 
+#[inline(always)]
 fn proj_common(g: &GaussianRef, cc: &CamConsts) -> Option<Proj> {
     let t = cc.rot * Vec3::from(g.mean) + cc.trans;
     if t.z <= NEAR_Z {
@@ -346,6 +359,7 @@ fn sigmoid(x: f32) -> f32 {
 }
 
 /// Raw colour `0.5 + SH·Y(d)` (before the clamp) and the basis used.
+#[inline(always)]
 fn sh_color(g: &GaussianRef, cc: &CamConsts) -> ([f32; 3], [f32; 16], Vec3, f32) {
     let v = Vec3::from(g.mean) - cc.center;
     let len = v.length();
