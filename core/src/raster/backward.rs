@@ -41,11 +41,6 @@ pub fn backward(
         cam.width,
         cam.height
     );
-    assert!(
-        state.ids.last().is_none_or(|&i| (i as usize) < g.len()),
-        "raster::backward: state is for more Gaussians than the {} given",
-        g.len()
-    );
     assert_eq!(v_rgb.len(), 3 * npx, "raster::backward: v_rgb length");
     assert_eq!(v_inv_depth.len(), npx, "raster::backward: v_inv_depth length");
 
@@ -75,7 +70,10 @@ pub fn backward(
     // 3. Per Gaussian.
     let mut slot = vec![u32::MAX; g.len()];
     for (k, &i) in state.ids.iter().enumerate() {
-        slot[i as usize] = k as u32;
+        let Some(s) = slot.get_mut(i as usize) else {
+            panic!("raster::backward: the state holds Gaussian {i}, only {} are given", g.len())
+        };
+        *s = k as u32;
     }
     let cc = CamConsts::new(cam);
     let mut out = Grads::zeros_like(g);
