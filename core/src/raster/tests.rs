@@ -154,7 +154,11 @@ fn empty_and_offscreen_scenes_render_background() {
 /// well separated depths, all inside the view, so that at every pixel every
 /// Gaussian has 1/255 < α < 0.99, the transmittance stays far above 1e-4,
 /// colours stay positive and the Jacobian clamp is inactive.
-fn fd_scene(seed: u64, deg: u32) -> (Gaussians, Camera) {
+///
+/// With `beyond_clamp`, the first Gaussian sits right of the view at
+/// `x/z = 1.7·tan(half-fov)`, where the Jacobian clamps `x/z` to 1.3, and is
+/// made large enough to cover the whole image.
+fn fd_scene(seed: u64, deg: u32, beyond_clamp: bool) -> (Gaussians, Camera) {
     let mut rng = Rng(seed);
     let cam = look_at(Vec3::new(0.2, 0.1, -3.0), Vec3::ZERO, 40, 36, 30.0);
     let n = 6;
@@ -164,6 +168,10 @@ fn fd_scene(seed: u64, deg: u32) -> (Gaussians, Camera) {
     for (k, m) in g.means.iter_mut().enumerate() {
         let mut c = cam.world_to_camera(Vec3::from(*m));
         c *= (2.0 + 0.35 * k as f32) / c.z;
+        if beyond_clamp && k == 0 {
+            c.x = 1.7 * cam.tan_half_fov().0 * c.z;
+            g.log_scales[0] = [2.0, 1.9, 2.1];
+        }
         *m = (inv * (c - cam.translation)).to_array();
     }
     (g, cam)
@@ -197,8 +205,8 @@ fn param(g: &mut Gaussians, group: Group, k: usize) -> &mut f32 {
     }
 }
 
-fn check_fd(seed: u64, deg: u32, background: [f32; 3]) -> Vec<String> {
-    let (g, cam) = fd_scene(seed, deg);
+fn check_fd(seed: u64, deg: u32, background: [f32; 3], beyond_clamp: bool) -> Vec<String> {
+    let (g, cam) = fd_scene(seed, deg, beyond_clamp);
     let opts = RenderOptions { background };
     let npx = (cam.width * cam.height) as usize;
     let mut rng = Rng(seed ^ 0xabc);
@@ -243,15 +251,21 @@ fn check_fd(seed: u64, deg: u32, background: [f32; 3]) -> Vec<String> {
 #[test]
 fn backward_matches_finite_differences() {
     let mut failures = Vec::new();
-    for (seed, deg, bg) in [(1, 0, [0.0; 3]), (2, 3, [0.3, 0.6, 0.9]), (3, 1, [1.0, 0.0, 0.5]), (4, 3, [0.0; 3])] {
-        failures.extend(check_fd(seed, deg, bg));
+    for (seed, deg, bg, clamp) in [
+        (1, 0, [0.0; 3], false),
+        (2, 3, [0.3, 0.6, 0.9], false),
+        (3, 1, [1.0, 0.0, 0.5], false),
+        (4, 3, [0.0; 3], false),
+        (5, 2, [0.2; 3], true),
+    ] {
+        failures.extend(check_fd(seed, deg, bg, clamp));
     }
     assert!(failures.is_empty(), "{} gradient entries disagree:\n{}", failures.len(), failures.join("\n"));
 }
 
 #[test]
 fn backward_is_deterministic() {
-    let (g, cam) = fd_scene(7, 3);
+    let (g, cam) = fd_scene(7, 3, false);
     let opts = RenderOptions::default();
     let npx = (cam.width * cam.height) as usize;
     let (_, state) = forward(&g, &cam, &opts);
