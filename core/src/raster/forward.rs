@@ -105,22 +105,6 @@ fn project_sorted(g: &Gaussians, cc: &CamConsts) -> (Vec<Splat>, Vec<u32>) {
     keys.par_iter().map(|&k| kept[(k & 0xffff_ffff) as usize]).map(|(i, s)| (s, i)).unzip()
 }
 
-/// Whether the ellipse `power ≥ −cut` of a splat reaches a pixel centre in the
-/// pixel rectangle `[x0, x1) × [y0, y1)` (conservatively).
-fn touches_rect(s: &Splat, x0: u32, x1: u32, y0: u32, y1: u32) -> bool {
-    let (xa, xb) = (x0 as f32 + 0.5 - s.xy[0], x1 as f32 - 0.5 - s.xy[0]);
-    let (ya, yb) = (y0 as f32 + 0.5 - s.xy[1], y1 as f32 - 0.5 - s.xy[1]);
-    if xa <= 0.0 && xb >= 0.0 && ya <= 0.0 && yb >= 0.0 {
-        return true;
-    }
-    let [a, b, c] = s.conic;
-    let q = |dx: f32, dy: f32| a * dx * dx + 2.0 * b * dx * dy + c * dy * dy;
-    let on_x_edge = |dx: f32| q(dx, (-b * dx / c).clamp(ya, yb));
-    let on_y_edge = |dy: f32| q((-b * dy / a).clamp(xa, xb), dy);
-    let m = on_x_edge(xa).min(on_x_edge(xb)).min(on_y_edge(ya)).min(on_y_edge(yb));
-    m <= 2.0 * (s.cut + 2e-3) * 1.001
-}
-
 /// Calls `f(tile)` for every tile the splat's α ≥ 1/255 region reaches.
 #[inline]
 fn for_each_tile(s: &Splat, w: u32, h: u32, tiles_x: u32, mut f: impl FnMut(usize)) {
@@ -134,7 +118,7 @@ fn for_each_tile(s: &Splat, w: u32, h: u32, tiles_x: u32, mut f: impl FnMut(usiz
     for ty in ty0..=ty1 {
         for tx in tx0..=tx1 {
             let (x0, y0) = (tx * TILE, ty * TILE);
-            if single || touches_rect(s, x0, (x0 + TILE).min(w), y0, (y0 + TILE).min(h)) {
+            if single || s.touches_rect(x0, (x0 + TILE).min(w), y0, (y0 + TILE).min(h)) {
                 f((ty * tiles_x + tx) as usize);
             }
         }

@@ -152,13 +152,38 @@ impl Splat {
         (ja, jb, ia, ib)
     }
 
+    /// The ellipse of pixels that can reach α ≥ 1/255, with slack, as
+    /// `A dx² + 2B dx dy + C dy² ≤ reach` (that is `power ≥ −cut − slack`).
+    #[inline(always)]
+    fn reach(&self) -> f32 {
+        2.0 * (self.cut + POWER_SLACK)
+    }
+
+    /// Whether the ellipse [`Self::reach`] contains a pixel centre of the
+    /// pixel rectangle `[x0, x1) × [y0, y1)`, conservatively: the minimum of
+    /// the quadratic form over the rectangle of centres, found on its edges
+    /// when the mean lies outside it.
+    pub fn touches_rect(&self, x0: u32, x1: u32, y0: u32, y1: u32) -> bool {
+        let (xa, xb) = (x0 as f32 + 0.5 - self.xy[0], x1 as f32 - 0.5 - self.xy[0]);
+        let (ya, yb) = (y0 as f32 + 0.5 - self.xy[1], y1 as f32 - 0.5 - self.xy[1]);
+        if xa <= 0.0 && xb >= 0.0 && ya <= 0.0 && yb >= 0.0 {
+            return true;
+        }
+        let [a, b, c] = self.conic;
+        let q = |dx: f32, dy: f32| a * dx * dx + 2.0 * b * dx * dy + c * dy * dy;
+        let on_x_edge = |dx: f32| q(dx, (-b * dx / c).clamp(ya, yb));
+        let on_y_edge = |dy: f32| q((-b * dy / a).clamp(xa, xb), dy);
+        let m = on_x_edge(xa).min(on_x_edge(xb)).min(on_y_edge(ya)).min(on_y_edge(yb));
+        m <= self.reach() * (1.0 + EXTENT_REL)
+    }
+
     /// Inclusive pixel columns `[lo, hi]` of row `i` whose centres the
-    /// ellipse `power ≥ −cut` (with slack) covers, clipped to `[x0, x1)`.
+    /// ellipse [`Self::reach`] covers, clipped to `[x0, x1)`.
     #[inline(always)]
     pub fn row_span(&self, i: i64, x0: u32, x1: u32) -> (i64, i64) {
         let [a, b, c] = self.conic;
         let dy = i as f32 + 0.5 - self.xy[1];
-        let r = 2.0 * (self.cut + POWER_SLACK);
+        let r = self.reach();
         let disc = a * r - (a * c - b * b) * dy * dy;
         if disc < 0.0 {
             return (1, 0);

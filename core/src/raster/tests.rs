@@ -285,3 +285,33 @@ fn exp_neg_is_accurate() {
     assert!(worst < 3e-7, "exp_neg relative error {worst:.3e}");
     assert_eq!(super::project::exp_neg(0.0), 1.0);
 }
+
+#[test]
+fn tile_test_and_row_spans_cover_every_reachable_pixel() {
+    // Random splats of every shape against one tile: wherever a pixel can reach
+    // α ≥ 1/255, the tile test must say yes and the row span must include it.
+    let mut rng = Rng(99);
+    let cam = look_at(Vec3::new(0.0, 0.0, -3.0), Vec3::ZERO, 64, 64, 50.0);
+    let cc = CamConsts::new(&cam);
+    let g = random_scene(&mut rng, &cam, 3000, 0, (1.0, 5.0), (-5.0, -0.5), (-5.0, 6.0), 1.5);
+    let (x0, x1, y0, y1) = (16, 32, 32, 48);
+    let mut misses = Vec::new();
+    for i in 0..g.len() {
+        let Some(s) = project(&gaussian_ref(&g, i), &cc) else { continue };
+        let touches = s.touches_rect(x0, x1, y0, y1);
+        for y in y0..y1 {
+            let (ja, jb) = s.row_span(i64::from(y), x0, x1);
+            for x in x0..x1 {
+                let (dx, dy) = (x as f32 + 0.5 - s.xy[0], y as f32 + 0.5 - s.xy[1]);
+                let power = -0.5 * (s.conic[0] * dx * dx + s.conic[2] * dy * dy) - s.conic[1] * dx * dy;
+                if s.opacity * f64::from(power).exp() as f32 >= 1.0 / 255.0 {
+                    let in_span = (ja..=jb).contains(&i64::from(x));
+                    if !touches || !in_span {
+                        misses.push(format!("Gaussian {i} pixel ({x}, {y}): tile {touches}, span {in_span}"));
+                    }
+                }
+            }
+        }
+    }
+    assert!(misses.is_empty(), "{} reachable pixels missed:\n{}", misses.len(), misses.join("\n"));
+}
