@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 use super::forward::{TILE_PX, gaussian_ref};
 use super::project::{ALPHA_MAX, CamConsts, GaussianGrad, LANE, SplatGrad, project_backward};
-use super::state::ForwardState;
+use super::state::{ForwardState, split_by_tile};
 use super::{Grads, RenderOptions, TILE};
 use crate::camera::Camera;
 use crate::scene::Gaussians;
@@ -46,16 +46,11 @@ pub fn backward(
 
     // 1. Per-pair gradients, one disjoint slice per tile.
     let mut pair_grads: Vec<SplatGrad> = vec![[0.0; 10]; state.tile_list.len()];
-    let n_tiles = state.tile_starts.len() - 1;
-    let mut slices = Vec::with_capacity(n_tiles);
-    let mut rest = pair_grads.as_mut_slice();
-    for t in 0..n_tiles {
-        let (a, b) = rest.split_at_mut(state.tile_range(t).len());
-        slices.push(a);
-        rest = b;
-    }
     let ctx = TileCtx { state, v_rgb, v_inv_depth, bg: opts.background };
-    slices.into_par_iter().enumerate().for_each(|(t, dst)| ctx.tile(t, dst));
+    split_by_tile(&mut pair_grads, &state.tile_starts)
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(t, dst)| ctx.tile(t, dst));
 
     // 2. Sum per splat.
     let mut splat_grads: Vec<SplatGrad> = vec![[0.0; 10]; state.splats.len()];

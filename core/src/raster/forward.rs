@@ -3,7 +3,7 @@
 use rayon::prelude::*;
 
 use super::project::{CamConsts, GaussianRef, Splat, T_MIN, project};
-use super::state::ForwardState;
+use super::state::{ForwardState, split_by_tile};
 use super::{Render, RenderOptions, TILE};
 use crate::camera::Camera;
 use crate::scene::Gaussians;
@@ -163,14 +163,7 @@ fn bin(splats: &[Splat], w: u32, h: u32, tiles_x: u32, tiles_y: u32) -> (Vec<u32
         tile_starts[t + 1] = tile_starts[t] + n;
     }
     let mut tile_list = vec![0u32; tile_starts[n_tiles] as usize];
-    let mut slices = Vec::with_capacity(n_tiles);
-    let mut rest = tile_list.as_mut_slice();
-    for t in 0..n_tiles {
-        let (a, b) = rest.split_at_mut((tile_starts[t + 1] - tile_starts[t]) as usize);
-        slices.push(a);
-        rest = b;
-    }
-    slices.into_par_iter().enumerate().for_each(|(t, dst)| {
+    split_by_tile(&mut tile_list, &tile_starts).into_par_iter().enumerate().for_each(|(t, dst)| {
         let mut at = 0;
         for (s, l) in &pieces {
             let src = &l[s[t] as usize..s[t + 1] as usize];

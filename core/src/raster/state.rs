@@ -44,3 +44,16 @@ impl ForwardState {
         self.tile_starts[t] as usize..self.tile_starts[t + 1] as usize
     }
 }
+
+/// Splits `v` into the consecutive pieces `starts[t]..starts[t + 1]`, one per
+/// tile, so that tiles can fill their own pieces in parallel.
+pub(crate) fn split_by_tile<'a, T>(v: &'a mut [T], starts: &[u32]) -> Vec<&'a mut [T]> {
+    let mut pieces = Vec::with_capacity(starts.len().saturating_sub(1));
+    let mut rest = v;
+    for w in starts.windows(2) {
+        let (a, b) = rest.split_at_mut((w[1] - w[0]) as usize);
+        pieces.push(a);
+        rest = b;
+    }
+    pieces
+}
