@@ -403,7 +403,7 @@ fn sh_color(g: &GaussianRef, cc: &CamConsts) -> ([f32; 3], [f32; 16], Vec3, f32)
 /// (behind the near plane, too transparent, or off screen).
 pub(crate) fn project(g: &GaussianRef, cc: &CamConsts) -> Option<Splat> {
     let opacity = sigmoid(g.opacity_logit);
-    if opacity < ALPHA_MIN {
+    if opacity < ALPHA_MIN || opacity.is_nan() {
         return None;
     }
     let p = proj_common(g, cc)?;

@@ -315,3 +315,17 @@ fn tile_test_and_row_spans_cover_every_reachable_pixel() {
     }
     assert!(misses.is_empty(), "{} reachable pixels missed:\n{}", misses.len(), misses.join("\n"));
 }
+
+#[test]
+fn non_finite_gaussians_are_skipped() {
+    let cam = look_at(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, 32, 32, 30.0);
+    let mut rng = Rng(5);
+    let mut g = random_scene(&mut rng, &cam, 4, 0, (2.0, 3.0), (-2.0, -1.0), (0.0, 2.0), 0.5);
+    g.opacity_logits[0] = f32::NAN;
+    g.means[1][0] = f32::NAN;
+    g.log_scales[2][1] = f32::INFINITY;
+    g.quats[3] = [0.0; 4];
+    let (img, state) = forward(&g, &cam, &RenderOptions::default());
+    assert_eq!(state.visible(), 0);
+    assert!(img.rgb.iter().chain(&img.alpha).all(|&v| v == 0.0));
+}
