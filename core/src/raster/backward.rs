@@ -23,7 +23,8 @@ use crate::scene::Gaussians;
 /// and the state of the [`super::forward`] call with the same inputs.
 ///
 /// # Panics
-/// When the cotangents or the state do not match the camera's image size.
+/// When the arrays of `g` are inconsistent, or the cotangents or the state do
+/// not match the camera's image size and the Gaussians (caller bugs).
 pub fn backward(
     g: &Gaussians,
     cam: &Camera,
@@ -32,6 +33,9 @@ pub fn backward(
     v_rgb: &[f32],
     v_inv_depth: &[f32],
 ) -> Grads {
+    if let Err(e) = g.check_consistent() {
+        panic!("raster::backward: {e}");
+    }
     let npx = cam.width as usize * cam.height as usize;
     assert!(
         state.width == cam.width && state.height == cam.height,
@@ -62,37 +66,58 @@ pub fn backward(
     }
     drop(pair_grads);
 
-    // 3. Per Gaussian.
-    let mut slot = vec![u32::MAX; g.len()];
-    for (k, &i) in state.ids.iter().enumerate() {
-        let Some(s) = slot.get_mut(i as usize) else {
-            panic!("raster::backward: the state holds Gaussian {i}, only {} are given", g.len())
-        };
-        *s = k as u32;
+    // 3. Per Gaussian, for the splats that received a gradient (the others
+    // are off screen or hidden behind others): compute in parallel, then
+    // scatter into the Gaussian-ordered arrays.
+    if let Some(&i) = state.ids.iter().find(|&&i| i as usize >= g.len()) {
+        panic!("raster::backward: the state holds Gaussian {i}, only {} are given", g.len());
     }
     let cc = CamConsts::new(cam);
-    let mut out = Grads::zeros_like(g);
     let ksh = g.sh_coeffs() * 3;
-    (
-        out.v_means.par_iter_mut(),
-        out.v_log_scales.par_iter_mut(),
-        out.v_quats.par_iter_mut(),
-        out.v_opacity_logits.par_iter_mut(),
-        out.v_sh.par_chunks_mut(ksh),
-    )
+    let per_gaussian: Vec<(u32, ParamGrad)> = (0..state.splats.len())
         .into_par_iter()
         .with_min_len(1024)
-        .enumerate()
-        .for_each(|(i, (v_mean, v_log_scale, v_quat, v_opacity_logit, v_sh))| {
-            let k = slot[i];
-            // Invisible, or visible but never composited (occluded): zero.
-            if k == u32::MAX || splat_grads[k as usize] == [0.0; 10] {
-                return;
-            }
-            let grad = GaussianGrad { v_mean, v_log_scale, v_quat, v_opacity_logit, v_sh };
-            project_backward(&gaussian_ref(g, i), &cc, &splat_grads[k as usize], grad);
-        });
+        .filter(|&k| splat_grads[k] != [0.0; 10])
+        .map(|k| {
+            let i = state.ids[k];
+            let mut p = ParamGrad::default();
+            let grad = GaussianGrad {
+                v_mean: &mut p.v_mean,
+                v_log_scale: &mut p.v_log_scale,
+                v_quat: &mut p.v_quat,
+                v_opacity_logit: &mut p.v_opacity_logit,
+                v_sh: &mut p.v_sh[..ksh],
+            };
+            project_backward(&gaussian_ref(g, i as usize), &cc, &splat_grads[k], grad);
+            (i, p)
+        })
+        .collect();
+    let mut out = Grads::zeros_like(g);
+    for (i, p) in per_gaussian {
+        let i = i as usize;
+        out.v_means[i] = p.v_mean;
+        out.v_log_scales[i] = p.v_log_scale;
+        out.v_quats[i] = p.v_quat;
+        out.v_opacity_logits[i] = p.v_opacity_logit;
+        out.v_sh[i * ksh..(i + 1) * ksh].copy_from_slice(&p.v_sh[..ksh]);
+    }
     out
+}
+
+/// One Gaussian's parameter gradients, SH sized for degree 3.
+#[derive(Clone, Copy)]
+struct ParamGrad {
+    v_mean: [f32; 3],
+    v_log_scale: [f32; 3],
+    v_quat: [f32; 4],
+    v_opacity_logit: f32,
+    v_sh: [f32; 48],
+}
+
+impl Default for ParamGrad {
+    fn default() -> Self {
+        Self { v_mean: [0.0; 3], v_log_scale: [0.0; 3], v_quat: [0.0; 4], v_opacity_logit: 0.0, v_sh: [0.0; 48] }
+    }
 }
 
 /// One pixel's state walking back to front.
@@ -119,6 +144,7 @@ struct TileCtx<'a> {
 impl TileCtx<'_> {
     /// Backward of one tile; `dst[k]` receives the gradient of the tile's
     /// `k`-th splat from this tile's pixels.
+    #[inline(never)]
     fn tile(&self, t: usize, dst: &mut [SplatGrad]) {
         let st = self.state;
         let (w, h) = (st.width, st.height);

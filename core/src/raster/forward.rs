@@ -137,21 +137,23 @@ fn bin(splats: &[Splat], w: u32, h: u32, tiles_x: u32, tiles_y: u32) -> (Vec<u32
         .enumerate()
         .map(|(c, ss)| {
             let base = (c * chunk) as u32;
+            // (tile, splat) pairs in depth order, then a counting sort by tile.
+            let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(2 * ss.len());
+            for (k, s) in ss.iter().enumerate() {
+                for_each_tile(s, w, h, tiles_x, |t| pairs.push((t as u32, base + k as u32)));
+            }
             let mut starts = vec![0u32; n_tiles + 1];
-            for s in ss {
-                for_each_tile(s, w, h, tiles_x, |t| starts[t + 1] += 1);
+            for &(t, _) in &pairs {
+                starts[t as usize + 1] += 1;
             }
             for t in 0..n_tiles {
                 starts[t + 1] += starts[t];
             }
             let mut fill = starts.clone();
-            let mut list = vec![0u32; starts[n_tiles] as usize];
-            for (k, s) in ss.iter().enumerate() {
-                let idx = base + k as u32;
-                for_each_tile(s, w, h, tiles_x, |t| {
-                    list[fill[t] as usize] = idx;
-                    fill[t] += 1;
-                });
+            let mut list = vec![0u32; pairs.len()];
+            for &(t, idx) in &pairs {
+                list[fill[t as usize] as usize] = idx;
+                fill[t as usize] += 1;
             }
             (starts, list)
         })
@@ -194,6 +196,7 @@ struct TileOut {
 
 /// Composites one tile front to back, splat-major: each splat visits only the
 /// pixels of its ellipse that are not finished yet.
+#[inline(never)]
 fn composite_tile(tile: u32, tiles_x: u32, w: u32, h: u32, splats: &[Splat], list: &[u32]) -> TileOut {
     let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
     let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
