@@ -93,16 +93,16 @@ pub(crate) fn gaussian_ref(g: &Gaussians, i: usize) -> GaussianRef<'_> {
 /// Sorting the splats themselves (not a list of indices) makes every later
 /// pass read them in order: the tile lists become increasing indices.
 fn project_sorted(g: &Gaussians, cc: &CamConsts) -> (Vec<Splat>, Vec<u32>) {
-    let kept: Vec<(u32, Splat)> = (0..g.len())
+    let (ids, splats): (Vec<u32>, Vec<Splat>) = (0..g.len())
         .into_par_iter()
         .with_min_len(1024)
         .filter_map(|i| project(&gaussian_ref(g, i), cc).map(|s| (i as u32, s)))
-        .collect();
+        .unzip();
     // Depth is positive, so its bits order like the float; ties go by index.
     let mut keys: Vec<u64> =
-        kept.par_iter().enumerate().map(|(k, (_, s))| (u64::from(s.depth.to_bits()) << 32) | k as u64).collect();
+        splats.par_iter().enumerate().map(|(k, s)| (u64::from(s.depth.to_bits()) << 32) | k as u64).collect();
     keys.par_sort_unstable();
-    keys.par_iter().map(|&k| kept[(k & 0xffff_ffff) as usize]).map(|(i, s)| (s, i)).unzip()
+    keys.par_iter().map(|&k| (k & 0xffff_ffff) as usize).map(|k| (splats[k], ids[k])).unzip()
 }
 
 /// Calls `f(tile)` for every tile the splat's α ≥ 1/255 region reaches.

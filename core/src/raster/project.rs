@@ -80,8 +80,9 @@ impl CamConsts {
 pub(crate) const LANE: [f32; TILE as usize] =
     [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0];
 
-/// A Gaussian on screen: all that compositing reads.
+/// A Gaussian on screen: all that compositing reads (64 bytes).
 #[derive(Clone, Copy, Debug, Default)]
+#[repr(C)]
 pub(crate) struct Splat {
     /// Projected mean in pixels.
     pub xy: [f32; 2],
@@ -99,7 +100,13 @@ pub(crate) struct Splat {
     pub cut: f32,
     /// Half-widths (x, y) of the box around the ellipse `power ≥ −cut`, with slack.
     pub ext: [f32; 2],
+    /// `1 / A`, for the row spans.
+    pub inv_a: f32,
+    /// The determinant `A C − B²` of the conic, for the row spans.
+    pub det_conic: f32,
 }
+
+const _: () = assert!(std::mem::size_of::<Splat>() == 64);
 
 impl Splat {
     /// The falloff `exp(power)` at the pixel centres `(x_first + k, py)` of
@@ -181,15 +188,15 @@ impl Splat {
     /// ellipse [`Self::reach`] covers, clipped to `[x0, x1)`.
     #[inline(always)]
     pub fn row_span(&self, i: i64, x0: u32, x1: u32) -> (i64, i64) {
-        let [a, b, c] = self.conic;
+        let [a, b, _] = self.conic;
         let dy = i as f32 + 0.5 - self.xy[1];
         let r = self.reach();
-        let disc = a * r - (a * c - b * b) * dy * dy;
+        let disc = a * r - self.det_conic * dy * dy;
         if disc < 0.0 {
             return (1, 0);
         }
-        let half = disc.sqrt() / a;
-        let mid = self.xy[0] - b * dy / a;
+        let half = disc.sqrt() * self.inv_a;
+        let mid = self.xy[0] - b * dy * self.inv_a;
         let slack = EXTENT_ABS + EXTENT_REL * half;
         centre_span(mid - half - slack, mid + half + slack, x0, x1)
     }
@@ -422,7 +429,18 @@ pub(crate) fn project(g: &GaussianRef, cc: &CamConsts) -> Option<Splat> {
         (2.0 * cut * a).sqrt() * (1.0 + EXTENT_REL) + EXTENT_ABS,
         (2.0 * cut * c).sqrt() * (1.0 + EXTENT_REL) + EXTENT_ABS,
     ];
-    let mut splat = Splat { xy, conic, opacity, color: [0.0; 3], inv_z: 1.0 / p.t.z, depth: p.t.z, cut, ext };
+    let mut splat = Splat {
+        xy,
+        conic,
+        opacity,
+        color: [0.0; 3],
+        inv_z: 1.0 / p.t.z,
+        depth: p.t.z,
+        cut,
+        ext,
+        inv_a: 1.0 / conic[0],
+        det_conic: conic[0] * conic[2] - conic[1] * conic[1],
+    };
     let (ja, jb, ia, ib) = splat.pixel_rect(0, cc.width, 0, cc.height);
     if ja > jb || ia > ib {
         return None;
