@@ -173,7 +173,8 @@ impl TileCtx<'_> {
             let s = &st.splats[list[k] as usize];
             let feat = [s.color[0], s.color[1], s.color[2], s.inv_z];
             let [ca, cb, cc] = s.conic;
-            let mut acc: SplatGrad = [0.0; 10];
+            // ∂L/∂(x, y), ∂L/∂(A, B, C), ∂L/∂opacity, ∂L/∂(r, g, b, inv_z).
+            let (mut v_xy, mut v_conic, mut v_op, mut v_feat) = ([0.0f32; 2], [0.0f32; 3], 0.0f32, [0.0f32; 4]);
             let (_, _, ia, ib) = s.pixel_rect(x0, x1, y0, y1);
             for i in ia..=ib {
                 let (ja, jb) = s.row_span(i, x0, x1);
@@ -195,25 +196,28 @@ impl TileCtx<'_> {
                     let t_i = p.t / (1.0 - alpha);
                     let wgt = alpha * t_i;
                     let mut v_alpha = 0.0;
-                    for c in 0..4 {
-                        acc[6 + c] += wgt * p.cot[c];
-                        v_alpha += (feat[c] - p.behind[c]) * p.cot[c];
-                        p.behind[c] = alpha * feat[c] + (1.0 - alpha) * p.behind[c];
+                    for (((vf, &f), b), &ct) in v_feat.iter_mut().zip(&feat).zip(p.behind.iter_mut()).zip(&p.cot) {
+                        *vf += wgt * ct;
+                        v_alpha += (f - *b) * ct;
+                        *b = alpha * f + (1.0 - alpha) * *b;
                     }
                     v_alpha *= t_i;
                     p.t = t_i;
                     if s.opacity * gauss <= ALPHA_MAX {
-                        acc[5] += v_alpha * gauss;
+                        v_op += v_alpha * gauss;
                         let v_power = v_alpha * alpha;
-                        acc[2] += -0.5 * v_power * dx * dx;
-                        acc[3] += -v_power * dx * dy;
-                        acc[4] += -0.5 * v_power * dy * dy;
-                        acc[0] += v_power * (ca * dx + cb * dy);
-                        acc[1] += v_power * (cb * dx + cc * dy);
+                        v_conic[0] += -0.5 * v_power * dx * dx;
+                        v_conic[1] += -v_power * dx * dy;
+                        v_conic[2] += -0.5 * v_power * dy * dy;
+                        v_xy[0] += v_power * (ca * dx + cb * dy);
+                        v_xy[1] += v_power * (cb * dx + cc * dy);
                     }
                 }
             }
-            dst[k] = acc;
+            let [x, y] = v_xy;
+            let [a, b, c] = v_conic;
+            let [r, g, bl, d] = v_feat;
+            dst[k] = [x, y, a, b, c, v_op, r, g, bl, d];
         }
     }
 }
