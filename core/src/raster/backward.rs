@@ -12,7 +12,8 @@
 use rayon::prelude::*;
 
 use super::forward::{TILE_PX, gaussian_ref};
-use super::project::{ALPHA_MAX, CamConsts, GaussianGrad, LANE, SplatGrad, project_backward};
+use super::project::{CamConsts, GaussianGrad, SplatGrad, project_backward};
+use super::splat::{ALPHA_MAX, LANE};
 use super::state::{ForwardState, split_by_tile};
 use super::{Grads, RenderOptions, TILE};
 use crate::camera::Camera;

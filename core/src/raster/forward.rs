@@ -2,7 +2,8 @@
 
 use rayon::prelude::*;
 
-use super::project::{CamConsts, GaussianRef, Splat, T_MIN, project};
+use super::project::{CamConsts, GaussianRef, project};
+use super::splat::{Splat, T_MIN};
 use super::state::{ForwardState, split_by_tile};
 use super::{Render, RenderOptions, TILE};
 use crate::camera::Camera;

@@ -37,6 +37,7 @@ pub mod dense;
 mod forward;
 pub mod golden;
 mod project;
+mod splat;
 mod state;
 
 use crate::scene::Gaussians;

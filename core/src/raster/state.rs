@@ -1,6 +1,6 @@
 //! What [`super::forward`] saves for [`super::backward`].
 
-use super::project::Splat;
+use super::splat::Splat;
 
 /// The forward pass's saved state: the visible splats, the per-tile lists in
 /// depth order, and per pixel the final transmittance and how far along its
