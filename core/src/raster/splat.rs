@@ -78,7 +78,7 @@ impl Splat {
             let g = exp_neg(power);
             if power > 0.0 || power < floor { 0.0 } else { g }
         };
-        if hi - lo < 4 {
+        if hi - lo < 8 {
             for (o, &k) in out[lo..=hi].iter_mut().zip(&LANE[lo..=hi]) {
                 *o = lane(k);
             }
