@@ -31,30 +31,27 @@ pub fn mean_std_distance(a: &[f32], b: &[f32], channels: usize) -> f32 {
     (d / channels as f64) as f32
 }
 
-/// `(1/N) Σ_x min_y (1 − cos(a(x), b(y)))` for CHW feature maps.
+/// `(1/N) Σ_x min_y (1 − cos(a(x), b(y)))` for CHW feature maps of `channels`
+/// channels. The nearest style feature is found by the same tiled matrix
+/// products as the GCFM matching (the other two modalities left empty, so the
+/// joint cosine is the cosine of `a` and `b`).
 pub fn nn_cosine_distance(a: &[f32], b: &[f32], channels: usize) -> f32 {
+    use crate::style::gcfm::{StyleFeatures, match_features};
     if channels == 0 || a.is_empty() || b.is_empty() {
         return 0.0;
     }
     let (na, nb) = (a.len() / channels, b.len() / channels);
-    let col = |x: &[f32], n: usize, i: usize| -> Vec<f32> { (0..channels).map(|c| x[c * n + i]).collect() };
-    let norm = |v: &[f32]| v.iter().map(|x| x * x).sum::<f32>().sqrt() + 1e-8;
-    let bs: Vec<(Vec<f32>, f32)> = (0..nb).map(|j| {
-        let v = col(b, nb, j);
-        let n = norm(&v);
-        (v, n)
-    }).collect();
-    use rayon::prelude::*;
-    let total: f64 = (0..na)
-        .into_par_iter()
-        .map(|i| {
-            let v = col(a, na, i);
-            let n = norm(&v);
-            let best = bs
-                .iter()
-                .map(|(u, m)| v.iter().zip(u).map(|(p, q)| p * q).sum::<f32>() / (n * m))
-                .fold(f32::NEG_INFINITY, f32::max);
-            (1.0 - best) as f64
+    let style = StyleFeatures::new([b.to_vec(), vec![0.0; b.len()], vec![0.0; b.len()]], channels, 1, nb);
+    let zeros = vec![0.0; a.len()];
+    let best = match_features(&style, [a, &zeros, &zeros], na).best;
+    let norm = |x: &[f32], n: usize, i: usize| (0..channels).map(|c| x[c * n + i].powi(2)).sum::<f32>().sqrt() + 1e-8;
+    let total: f64 = best
+        .iter()
+        .enumerate()
+        .map(|(i, &j)| {
+            let j = j as usize;
+            let dot: f32 = (0..channels).map(|c| a[c * na + i] * b[c * nb + j]).sum();
+            f64::from(1.0 - dot / (norm(a, na, i) * norm(b, nb, j)))
         })
         .sum();
     (total / na as f64) as f32

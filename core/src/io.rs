@@ -88,6 +88,20 @@ pub fn write_png_gray_normalized(path: &Path, width: u32, height: u32, values: &
     write_png(path, width, height, image::ColorType::L8, &bytes)
 }
 
+/// Writes an inverse-depth map as 8-bit grey PNG, min-max normalised over the
+/// pixels the scene covers (`alpha ≥ 0.5`, near = bright); uncovered pixels are black.
+pub fn write_depth_png(path: &Path, width: u32, height: u32, inv_depth: &[f32], alpha: &[f32]) -> Result<(), OutputError> {
+    let covered: Vec<f32> = inv_depth.iter().zip(alpha).filter(|(_, a)| **a >= 0.5).map(|(d, _)| *d).collect();
+    let (lo, hi) = finite_range(&covered);
+    let scale = if hi > lo { 1.0 / (hi - lo) } else { 0.0 };
+    let bytes: Vec<u8> = inv_depth
+        .iter()
+        .zip(alpha)
+        .map(|(&d, &a)| if a >= 0.5 && d.is_finite() { to_u8(0.1 + 0.9 * (d - lo) * scale) } else { 0 })
+        .collect();
+    write_png(path, width, height, image::ColorType::L8, &bytes)
+}
+
 fn write_png(path: &Path, width: u32, height: u32, color: image::ColorType, bytes: &[u8]) -> Result<(), OutputError> {
     let expected = width as usize * height as usize * color.channel_count() as usize;
     if bytes.len() != expected {

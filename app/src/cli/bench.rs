@@ -68,12 +68,18 @@ pub fn run_raster(args: RasterArgs) -> anyhow::Result<ExitCode> {
         "scene", "gaussians", "size", "forward ms", "backward ms", "Mgaussians/s", "peak MiB", "load s"
     );
     let opts = RenderOptions::default();
+    let mut small = None;
     for path in &scenes {
         reset_peak_memory();
         let t = Instant::now();
         let scene = load_scene(path)?;
         let load_s = t.elapsed().as_secs_f64();
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        if small.is_none() {
+            let step = (scene.len() / 2_000).max(1);
+            let keep: Vec<u32> = (0..scene.len() as u32).step_by(step).take(2_000).collect();
+            small = Some((name.clone(), gast_core::session::subset(&scene, &keep)));
+        }
         for &size in &args.sizes {
             let views = views_for(&scene, &ViewArgs { cameras: None, views: args.views, size, fov: 50.0 })?;
             let (fwd, bwd) = time_views(&scene, &views, &opts);
@@ -91,7 +97,9 @@ pub fn run_raster(args: RasterArgs) -> anyhow::Result<ExitCode> {
             );
         }
     }
-    dense_ratio();
+    if let Some((name, scene)) = small {
+        dense_ratio(&name, &scene)?;
+    }
     Ok(ExitCode::SUCCESS)
 }
 
@@ -117,22 +125,25 @@ fn time_views(scene: &gast_core::Gaussians, views: &[Camera], opts: &RenderOptio
     (median(fwd), median(bwd))
 }
 
-/// The dense reference against the tiled path on a small scene.
-fn dense_ratio() {
-    let scene = gast_core::raster::synthetic_scene(2_000, 3, 7);
-    let cam = gast_core::raster::synthetic_camera(96, 96);
+/// The dense reference against the tiled path on a small scene (every n-th
+/// Gaussian of a real one), from an orbit view at 96².
+fn dense_ratio(name: &str, scene: &gast_core::Gaussians) -> anyhow::Result<()> {
+    let views = views_for(scene, &ViewArgs { cameras: None, views: 1, size: 96, fov: 50.0 })?;
+    let cam = &views[0];
     let opts = RenderOptions::default();
     let t = Instant::now();
-    let tiled = raster::render(&scene, &cam, &opts);
+    let tiled = raster::render(scene, cam, &opts);
     let t_tiled = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
-    let dense = raster::dense::render(&scene, &cam, &opts);
+    let dense = raster::dense::render(scene, cam, &opts);
     let t_dense = t.elapsed().as_secs_f64() * 1e3;
     let diff = tiled.rgb.iter().zip(&dense.rgb).fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
     println!(
-        "dense reference, 2,000 Gaussians at 96x96: dense {t_dense:.1} ms, tiled {t_tiled:.2} ms, ratio {:.0}x, max |diff| {diff:.1e}",
+        "dense reference, {} Gaussians of {name} at 96x96: dense {t_dense:.1} ms, tiled {t_tiled:.2} ms, ratio {:.0}x, max |diff| {diff:.1e}",
+        scene.len(),
         t_dense / t_tiled.max(1e-6)
     );
+    Ok(())
 }
 
 /// Arguments of `gast bench step`.

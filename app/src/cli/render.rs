@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::Args;
-use gast_core::io::{write_exr_depth, write_png_gray_normalized, write_png_rgb};
+use gast_core::io::{write_depth_png, write_exr_depth, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
 
 use super::{ViewArgs, load_scene, views_for};
@@ -38,7 +38,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
         let img = raster::render(&scene, cam, &opts);
         let stem = sanitize(&cam.name);
         write_png_rgb(&args.out.join(format!("{stem}.png")), img.width, img.height, &img.rgb)?;
-        write_png_gray_normalized(&args.out.join(format!("{stem}_depth.png")), img.width, img.height, &img.inv_depth)?;
+        write_depth_png(&args.out.join(format!("{stem}_depth.png")), img.width, img.height, &img.inv_depth, &img.alpha)?;
         write_exr_depth(&args.out.join(format!("{stem}_depth.exr")), img.width, img.height, &img.inv_depth)
             .with_context(|| format!("writing the depth of view {}", cam.name))?;
         pb.inc(1);

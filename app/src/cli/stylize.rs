@@ -10,7 +10,7 @@ use anyhow::Context;
 use clap::Args;
 use gast_core::Camera;
 use gast_core::eval::{inverse_depth_change, mean_std_distance, nn_cosine_distance};
-use gast_core::io::{atomic_write, write_exr_depth, write_png_gray_normalized, write_png_rgb};
+use gast_core::io::{atomic_write, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
 use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::{Mode, StyleConfig};
@@ -297,7 +297,7 @@ fn write_previews(
         let after = raster::render(result, cam, &opts);
         for (tag, img) in [("before", &before), ("colour_matched", &matched), ("after", &after)] {
             write_png_rgb(&out.join(format!("view{k}_{tag}.png")), w, h, &img.rgb)?;
-            write_png_gray_normalized(&out.join(format!("view{k}_{tag}_depth.png")), w, h, &img.inv_depth)?;
+            write_depth_png(&out.join(format!("view{k}_{tag}_depth.png")), w, h, &img.inv_depth, &img.alpha)?;
             write_exr_depth(&out.join(format!("view{k}_{tag}_depth.exr")), w, h, &img.inv_depth)?;
         }
         let feats = |img: &raster::Render| {

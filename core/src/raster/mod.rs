@@ -39,12 +39,14 @@ pub mod golden;
 mod project;
 mod splat;
 mod state;
+mod visibility;
 
 use crate::scene::Gaussians;
 
 pub use backward::backward;
 pub use forward::{forward, render};
 pub use state::ForwardState;
+pub use visibility::contributing;
 
 /// Side of a square screen tile in pixels.
 pub const TILE: u32 = 16;

@@ -11,7 +11,7 @@ use crate::scene::Gaussians;
 use crate::style::adam::Adam;
 use crate::style::regularizers::l2_distance;
 use crate::style::step::{FeatureMap, RenderedMaps, content_target, step_loss};
-use crate::style::{Phase, StyleConfig};
+use crate::style::StyleConfig;
 use crate::vision::Vgg;
 use crate::vision::canny::render_edges;
 
