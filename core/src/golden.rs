@@ -357,5 +357,19 @@ fn check_color(file: &GoldenFile) -> Result<Vec<OutputCheck>, GoldenError> {
 }
 
 fn check_raster(file: &GoldenFile) -> Result<Vec<OutputCheck>, GoldenError> {
-    Err(GoldenError::Run { path: file.path.clone(), message: "the rasterizer is not merged yet".into() })
+    let case = crate::raster::golden::load_case(&file.path)
+        .map_err(|message| GoldenError::Run { path: file.path.clone(), message })?;
+    Ok(case
+        .compare()
+        .into_iter()
+        .map(|c| {
+            let tolerance = if c.name.contains("out_") {
+                Tolerance::Abs(crate::raster::golden::IMAGE_TOL)
+            } else {
+                Tolerance::RelToMax(crate::raster::golden::GRAD_REL_TOL)
+            };
+            let rel = if c.ref_max_abs > 0.0 { c.max_abs_err / c.ref_max_abs } else { c.max_abs_err };
+            OutputCheck { passed: c.passed(), name: c.name, max_abs: c.max_abs_err, max_ref: c.ref_max_abs, rel, tolerance }
+        })
+        .collect())
 }
