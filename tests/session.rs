@@ -1,0 +1,125 @@
+//! The session worker: commands between steps, events out, the newest
+//! snapshot in the slot, the waker called; on a real scene and style at a
+//! small working resolution.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Duration;
+
+use gast_core::session::{Command, Event, SessionInputs, StyleDepthSource, StyleImage, spawn};
+use gast_core::style::{Mode, StyleConfig};
+use gast_core::vision::Vgg;
+use gast_tests::shared_file;
+
+fn inputs(config: StyleConfig) -> Option<SessionInputs> {
+    let scene = gast_core::scene::load(shared_file("data/scenes/guitar.compressed.ply")?).expect("scene");
+    let style = StyleImage::open(&shared_file("data/styles/mosaic.jpg")?).expect("style");
+    let vgg = Arc::new(Vgg::load(&shared_file("data/weights/vgg19-conv3.safetensors")?).expect("weights"));
+    let opts = gast_core::camera::OrbitOptions { count: 6, width: 48, height: 48, ..Default::default() };
+    let cameras = gast_core::camera::orbit_cameras(&scene.means, &opts);
+    Some(SessionInputs { scene, cameras, style, style_depth: StyleDepthSource::Heuristic, vgg, config })
+}
+
+fn next(events: &crossbeam_channel::Receiver<Event>) -> Event {
+    events.recv_timeout(Duration::from_secs(120)).expect("an event within two minutes")
+}
+
+#[test]
+fn worker_obeys_commands_and_reports_every_step() {
+    let config =
+        StyleConfig { cycles: 4, steps_per_cycle: 4, ratio_geo: 0.5, resolution: 48, texture_scale: 48, ..Default::default() };
+    let Some(inputs) = inputs(config.clone()) else { return };
+    let wakes = Arc::new(AtomicUsize::new(0));
+    let w = wakes.clone();
+    let handle = spawn(inputs, Arc::new(move || {
+        w.fetch_add(1, Ordering::SeqCst);
+    }));
+
+    // Preparation stages, culling, then steps.
+    let mut stages = Vec::new();
+    let first_step = loop {
+        match next(&handle.events) {
+            Event::Stage { name, .. } => stages.push(name),
+            Event::Culled { total, kept } => assert!(kept > 0 && kept <= total),
+            Event::Step(r) => break r,
+            other => panic!("unexpected event before the first step: {other:?}"),
+        }
+    };
+    assert_eq!(stages, ["colour matching", "visibility culling", "style features"]);
+    assert_eq!((first_step.iter, first_step.total), (0, 16));
+    assert!(handle.snapshots.latest().is_some(), "a snapshot is published before the first step");
+
+    // Pause: a Paused event, then no step until Resume.
+    handle.commands.send(Command::Pause).expect("send");
+    let mut steps = vec![first_step.iter];
+    loop {
+        match next(&handle.events) {
+            Event::Step(r) => steps.push(r.iter),
+            Event::Paused => break,
+            other => panic!("unexpected {other:?}"),
+        }
+    }
+    assert!(handle.events.recv_timeout(Duration::from_millis(500)).is_err(), "stepped while paused");
+    let paused_at = handle.snapshots.latest().expect("snapshot").step;
+    assert_eq!(paused_at as usize, steps.len(), "the pause snapshot holds every step so far");
+
+    // New parameters while paused: geometry-only for the rest; then resume.
+    let new = StyleConfig { mode: Mode::GeometryOnly, ..config };
+    handle.commands.send(Command::SetConfig(Box::new(new))).expect("send");
+    assert_eq!(next(&handle.events), Event::ConfigApplied);
+    handle.commands.send(Command::Resume).expect("send");
+    assert_eq!(next(&handle.events), Event::Resumed);
+    let mut phases_after = Vec::new();
+    let finished = loop {
+        match next(&handle.events) {
+            Event::Step(r) => {
+                steps.push(r.iter);
+                phases_after.push(r.phase);
+                assert!(r.losses.total.is_finite());
+            }
+            Event::Finished { completed, steps: n, .. } => break (completed, n),
+            other => panic!("unexpected {other:?}"),
+        }
+    };
+    assert_eq!(steps, (0..16).collect::<Vec<_>>(), "every step reported once, in order");
+    assert!(phases_after.iter().all(|p| *p == gast_core::style::Phase::Geometry));
+    assert_eq!(finished, (true, 16));
+    assert_eq!(handle.snapshots.latest().expect("final snapshot").step, 16);
+    assert!(wakes.load(Ordering::SeqCst) >= 16, "the waker is called for every event");
+    let result = handle.stop_and_join().expect("result");
+    assert_eq!(result.len(), 90_854);
+}
+
+#[test]
+fn stop_ends_the_run_early_with_the_result_so_far() {
+    let config = StyleConfig { cycles: 30, resolution: 32, texture_scale: 32, ..Default::default() };
+    let Some(inputs) = inputs(config) else { return };
+    let handle = spawn(inputs, Arc::new(|| {}));
+    loop {
+        if let Event::Step(r) = next(&handle.events) {
+            if r.iter == 2 {
+                break;
+            }
+        }
+    }
+    handle.commands.send(Command::Stop).expect("send");
+    let finished = loop {
+        if let Event::Finished { completed, steps, .. } = next(&handle.events) {
+            break (completed, steps);
+        }
+    };
+    assert!(!finished.0 && finished.1 >= 3 && finished.1 < 3000, "{finished:?}");
+    assert!(handle.stop_and_join().is_some());
+}
+
+#[test]
+fn a_bad_configuration_fails_with_a_message() {
+    let config = StyleConfig { ratio_geo: f32::NAN, ..Default::default() };
+    let Some(inputs) = inputs(config) else { return };
+    let handle = spawn(inputs, Arc::new(|| {}));
+    match next(&handle.events) {
+        Event::Failed(msg) => assert!(msg.contains("ratio_geo"), "{msg}"),
+        other => panic!("expected a failure, got {other:?}"),
+    }
+    assert!(handle.stop_and_join().is_none());
+}
