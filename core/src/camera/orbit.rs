@@ -4,7 +4,7 @@
 //!
 //! Trained splats carry floaters and far background Gaussians, so the plain
 //! bounding box is useless: the bounds are the 2nd–98th percentile box per
-//! axis and the target is the per-axis median, which a few far outliers
+//! axis and the target is the midpoint of that box, which a few far outliers
 //! cannot move.
 
 use glam::Vec3;
@@ -71,14 +71,17 @@ impl Default for OrbitOptions {
     }
 }
 
-/// Robust bounds of a point set: per-axis percentiles and median.
+/// Robust bounds of a point set: per-axis percentiles and the box's midpoint.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RobustBounds {
     /// Per-axis 2nd percentile.
     pub min: Vec3,
     /// Per-axis 98th percentile.
     pub max: Vec3,
-    /// Per-axis median, the orbit target.
+    /// Midpoint of the box, the orbit target. (The per-axis median sits off
+    /// centre on tall or lopsided objects, and the sphere about it that holds
+    /// the box is then larger than needed: a guitar filled half the frame
+    /// height about its median and three quarters about the midpoint.)
     pub center: Vec3,
 }
 
@@ -114,21 +117,18 @@ pub fn robust_bounds(means: &[[f32; 3]]) -> Option<RobustBounds> {
     if finite.is_empty() {
         return None;
     }
-    let mut out = [[0.0f32; 3]; 3]; // [min, max, median] per axis
+    let mut out = [[0.0f32; 3]; 2]; // [min, max] per axis
     let mut axis: Vec<f32> = Vec::with_capacity(finite.len());
     for a in 0..3 {
         axis.clear();
         axis.extend(finite.iter().map(|p| p[a]));
-        for (slot, q) in [0.02f64, 0.98, 0.5].into_iter().enumerate() {
+        for (slot, q) in [0.02f64, 0.98].into_iter().enumerate() {
             let k = (q * (axis.len() - 1) as f64).round() as usize;
             out[slot][a] = *axis.select_nth_unstable_by(k, f32::total_cmp).1;
         }
     }
-    Some(RobustBounds {
-        min: Vec3::from(out[0]),
-        max: Vec3::from(out[1]),
-        center: Vec3::from(out[2]),
-    })
+    let (min, max) = (Vec3::from(out[0]), Vec3::from(out[1]));
+    Some(RobustBounds { min, max, center: 0.5 * (min + max) })
 }
 
 /// `count` cameras looking at the robust centre of `means` (see the module
