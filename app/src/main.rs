@@ -1,5 +1,9 @@
-//! `gast`: the GAST Studio command line (and, later, the studio itself).
+//! `gast`: the GAST Studio command line and the studio itself. With no
+//! arguments it opens the studio on the demo scene and style.
+
+mod cli;
+mod studio;
 
 fn main() -> anyhow::Result<()> {
-    Ok(())
+    cli::run()
 }

@@ -1,0 +1,720 @@
+//! GAST Studio: the desktop window around a stylization run.
+//!
+//! A central wgpu splat viewport (orbit, pan, zoom, fly), a side panel with the
+//! run's parameters, presets and buttons, an inspection strip (RGB, inverse
+//! depth, edges of the current view, computed on the CPU off the UI thread) and
+//! a bottom panel where every error is shown. Files arrive by drag and drop or
+//! through dialogs; a bad file explains itself and the previous scene stays.
+//!
+//! Test switches: `GAST_STUDIO_EXIT_AFTER_FRAMES=N` closes the window after N
+//! frames, `GAST_STUDIO_SCREENSHOT=path` saves a screenshot of the window first.
+
+pub mod assets;
+pub mod controls;
+pub mod inspect;
+pub mod scene_io;
+pub mod session_link;
+pub mod view;
+pub mod viewport;
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+
+use anyhow::Context as _;
+use egui::{Color32, RichText, Ui};
+use gast_core::session::Command;
+use gast_core::style::StyleConfig;
+use gast_core::{Camera, Gaussians};
+
+use session_link::{RunMonitor, RunStatus, SessionStarter, StartRequest};
+use view::{UpAxis, ViewState};
+use viewport::{FrameStats, SceneRef, ViewportCallback, ViewportResources};
+
+/// What `gast studio` was asked to open.
+#[derive(Clone, Debug, Default)]
+pub struct StudioArgs {
+    /// A scene file; the demo scene when absent.
+    pub scene: Option<PathBuf>,
+    /// A style image; the first demo style when absent.
+    pub style: Option<PathBuf>,
+}
+
+/// A loaded scene.
+struct LoadedScene {
+    name: String,
+    scene: SceneRef,
+}
+
+/// A style image and its thumbnail.
+struct LoadedStyle {
+    path: PathBuf,
+    texture: egui::TextureHandle,
+    size: [usize; 2],
+}
+
+/// Where the previous frame's screenshot request stands.
+#[derive(Default)]
+struct ScreenshotState {
+    requested: bool,
+    done: Arc<AtomicBool>,
+}
+
+/// The studio's state. One struct, updated only on the UI thread; workers talk
+/// to it through channels and the snapshot slot.
+pub struct StudioApp {
+    scene: Option<LoadedScene>,
+    snapshot: Option<SceneRef>,
+    next_version: u64,
+    styles: Vec<LoadedStyle>,
+    style: Option<usize>,
+    /// The run's parameters, edited by the side panel.
+    pub config: StyleConfig,
+    view: ViewState,
+    cameras: Vec<Camera>,
+    split: f32,
+    background: [f32; 3],
+    /// Messages shown in the bottom panel, newest last.
+    pub errors: Vec<String>,
+    notice: String,
+    run: RunMonitor,
+    starter: Option<SessionStarter>,
+    stats: Arc<Mutex<FrameStats>>,
+    jobs: inspect::Jobs,
+    maps: Option<[egui::TextureHandle; 3]>,
+    auto_inspect: bool,
+    inspected_view: Option<(ViewState, u64, u64)>,
+    viewport_px: [u32; 2],
+    ctx: egui::Context,
+    frames: u64,
+    exit_after: Option<u64>,
+    screenshot_path: Option<PathBuf>,
+    screenshot: ScreenshotState,
+}
+
+/// Opens the studio window and runs until it is closed.
+pub fn run(args: StudioArgs) -> anyhow::Result<()> {
+    let icon = assets::icon();
+    let options = eframe::NativeOptions {
+        viewport: egui::ViewportBuilder::default()
+            .with_title("GAST Studio")
+            .with_inner_size([1280.0, 800.0])
+            .with_drag_and_drop(true)
+            .with_icon(egui::IconData { width: icon.width(), height: icon.height(), rgba: icon.into_raw() }),
+        ..Default::default()
+    };
+    eframe::run_native(
+        "GAST Studio",
+        options,
+        Box::new(move |cc| {
+            let Some(rs) = cc.wgpu_render_state.as_ref() else {
+                return Err("the studio needs the wgpu renderer, which did not start".into());
+            };
+            let resources = ViewportResources::new(&rs.device, rs.target_format);
+            rs.renderer.write().callback_resources.insert(resources);
+            Ok(Box::new(StudioApp::new(cc.egui_ctx.clone(), args)))
+        }),
+    )
+    .map_err(|e| anyhow::anyhow!("the studio window failed: {e}"))
+}
+
+impl eframe::App for StudioApp {
+    fn ui(&mut self, ui: &mut Ui, _frame: &mut eframe::Frame) {
+        self.show(ui);
+    }
+}
+
+fn env_u64(name: &str) -> Option<u64> {
+    std::env::var(name).ok().and_then(|v| v.trim().parse().ok())
+}
+
+impl StudioApp {
+    /// The studio with `args` opened (the demo scene and style when absent).
+    pub fn new(ctx: egui::Context, args: StudioArgs) -> Self {
+        let waker_ctx = ctx.clone();
+        let waker: Arc<dyn Fn() + Send + Sync> = Arc::new(move || waker_ctx.request_repaint());
+        let mut app = Self {
+            scene: None,
+            snapshot: None,
+            next_version: 1,
+            styles: Vec::new(),
+            style: None,
+            config: StyleConfig::default(),
+            view: ViewState::default(),
+            cameras: Vec::new(),
+            split: 0.5,
+            background: [0.0; 3],
+            errors: Vec::new(),
+            notice: String::new(),
+            run: RunMonitor::default(),
+            starter: None,
+            stats: Arc::default(),
+            jobs: inspect::Jobs::new(waker),
+            maps: None,
+            auto_inspect: true,
+            inspected_view: None,
+            viewport_px: [640, 480],
+            ctx,
+            frames: 0,
+            exit_after: env_u64("GAST_STUDIO_EXIT_AFTER_FRAMES"),
+            screenshot_path: std::env::var_os("GAST_STUDIO_SCREENSHOT").map(PathBuf::from),
+            screenshot: ScreenshotState::default(),
+        };
+        match &args.scene {
+            Some(p) => app.open_scene(p),
+            None => app.open_demo_scene(),
+        }
+        let style = args.style.clone().or_else(|| {
+            let p = assets::source_assets_dir().join(assets::DEMO_STYLES[0]);
+            p.exists().then_some(p)
+        });
+        match style {
+            Some(p) => app.open_style(&p),
+            None => app.open_generated_styles(),
+        }
+        app
+    }
+
+    /// Connects the code that spawns session workers; until then Start is disabled.
+    #[allow(dead_code)] // the wiring point for the session runner (see session_link.rs)
+    pub fn set_session_starter(&mut self, starter: SessionStarter) {
+        self.starter = Some(starter);
+    }
+
+    /// Shows an error in the bottom panel (and keeps everything else as it was).
+    pub fn report(&mut self, err: anyhow::Error) {
+        self.errors.push(format!("{err:#}"));
+        if self.errors.len() > 20 {
+            self.errors.remove(0);
+        }
+    }
+
+    /// The Gaussians shown as "current": the newest snapshot, else the scene.
+    fn current(&self) -> Option<Arc<Gaussians>> {
+        self.snapshot.as_ref().or(self.scene.as_ref().map(|s| &s.scene)).map(|s| s.gaussians.clone())
+    }
+
+    fn set_scene(&mut self, name: String, g: Gaussians) {
+        let g = Arc::new(g);
+        self.view.fit(&g);
+        self.cameras = view::orbit_ring(&g, self.view.up, 12, 800, 600);
+        self.scene = Some(LoadedScene { name, scene: SceneRef { version: self.next_version, gaussians: g } });
+        self.next_version += 1;
+        self.snapshot = None;
+        self.maps = None;
+        self.inspected_view = None;
+    }
+
+    /// Loads a scene file; on failure the error is shown and the previous scene stays.
+    pub fn open_scene(&mut self, path: &Path) {
+        match scene_io::load(path) {
+            Ok(g) if g.is_empty() => self.report(anyhow::anyhow!("{}: the scene holds no Gaussians; keeping the previous scene", path.display())),
+            Ok(g) => {
+                let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+                self.notice = format!("opened {} ({} Gaussians, SH degree {})", path.display(), g.len(), g.sh_degree);
+                self.set_scene(name, g);
+            }
+            Err(e) => self.report(e.context("keeping the previous scene")),
+        }
+    }
+
+    fn open_demo_scene(&mut self) {
+        let path = assets::source_assets_dir().join(assets::DEMO_SCENE);
+        if path.exists() {
+            self.open_scene(&path);
+        } else {
+            self.set_scene("demo scene (generated)".into(), assets::demo_scene());
+        }
+    }
+
+    fn add_style(&mut self, path: PathBuf, img: image::RgbImage) {
+        let thumb = image::imageops::thumbnail(&img, 96, (96 * img.height() / img.width().max(1)).max(1));
+        let color = egui::ColorImage::from_rgb([thumb.width() as usize, thumb.height() as usize], thumb.as_raw());
+        let texture = self.ctx.load_texture(format!("style {}", path.display()), color, egui::TextureOptions::LINEAR);
+        self.styles.retain(|s| s.path != path);
+        self.styles.insert(0, LoadedStyle { path, texture, size: [img.width() as usize, img.height() as usize] });
+        self.styles.truncate(8);
+        self.style = Some(0);
+    }
+
+    /// Loads a style image; on failure the error is shown and the previous style stays.
+    pub fn open_style(&mut self, path: &Path) {
+        match image::open(path).with_context(|| format!("{}: not an image this build can read (PNG, JPEG, WebP); keeping the previous style", path.display())) {
+            Ok(img) => self.add_style(path.to_path_buf(), img.to_rgb8()),
+            Err(e) => self.report(e),
+        }
+    }
+
+    fn open_generated_styles(&mut self) {
+        for (name, img) in assets::demo_styles().into_iter().rev() {
+            self.add_style(PathBuf::from(name), img);
+        }
+    }
+
+    /// Opens a file by its extension: a scene or a style image.
+    pub fn open_any(&mut self, path: &Path) {
+        let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+        match ext.as_str() {
+            "png" | "jpg" | "jpeg" | "webp" => self.open_style(path),
+            "json" => self.load_preset(path),
+            _ => self.open_scene(path),
+        }
+    }
+
+    /// Loads a preset file into the configuration.
+    pub fn load_preset(&mut self, path: &Path) {
+        let result = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read the preset", path.display()))
+            .and_then(|t| StyleConfig::from_json(&t).with_context(|| format!("{}: not a style preset", path.display())));
+        match result {
+            Ok(c) => {
+                let problems = c.problems();
+                if problems.is_empty() {
+                    self.config = c;
+                    self.notice = format!("preset {} loaded", path.display());
+                } else {
+                    self.report(anyhow::anyhow!("{}: {}; keeping the current parameters", path.display(), problems.join("; ")));
+                }
+            }
+            Err(e) => self.report(e),
+        }
+    }
+
+    /// Saves the configuration as a preset (atomically).
+    pub fn save_preset(&mut self, path: &Path) {
+        use std::io::Write as _;
+        let json = self.config.to_json();
+        match gast_core::io::atomic_write(path, |w| w.write_all(json.as_bytes())) {
+            Ok(()) => self.notice = format!("preset saved to {}", path.display()),
+            Err(e) => self.report(anyhow::Error::new(e).context("saving the preset")),
+        }
+    }
+
+    fn viewport_camera(&self) -> Camera {
+        self.view.camera(self.viewport_px[0], self.viewport_px[1])
+    }
+
+    fn poll_workers(&mut self) {
+        if let Some(snap) = self.run.poll() {
+            self.snapshot = Some(SceneRef { version: self.next_version, gaussians: Arc::new(snap.gaussians.clone()) });
+            self.next_version += 1;
+        }
+        if let RunStatus::Failed(msg) = &self.run.status {
+            let msg = format!("the run failed: {msg}");
+            if self.errors.last() != Some(&msg) {
+                self.errors.push(msg);
+            }
+        }
+        for done in self.jobs.poll() {
+            match done {
+                inspect::JobDone::Maps(m) => {
+                    let opts = egui::TextureOptions::LINEAR;
+                    self.maps = Some([
+                        self.ctx.load_texture("inspect rgb", m.rgb, opts),
+                        self.ctx.load_texture("inspect depth", m.depth, opts),
+                        self.ctx.load_texture("inspect edges", m.edges, opts),
+                    ]);
+                }
+                inspect::JobDone::Exported(p) => self.notice = format!("wrote {}", p.display()),
+                inspect::JobDone::Failed(e) => self.errors.push(e),
+            }
+        }
+    }
+
+    fn handle_drops(&mut self, ui: &Ui) {
+        let dropped: Vec<PathBuf> = ui.input(|i| i.raw.dropped_files.iter().map(|f| f.path().to_path_buf()).filter(|p| !p.as_os_str().is_empty()).collect());
+        for p in dropped {
+            self.open_any(&p);
+        }
+    }
+
+    /// The whole window.
+    pub fn show(&mut self, ui: &mut Ui) {
+        self.frames += 1;
+        self.poll_workers();
+        self.handle_drops(ui);
+        egui::Panel::top("menu").show(ui, |ui| self.menu_bar(ui));
+        egui::Panel::bottom("status").resizable(true).default_size(90.0).show(ui, |ui| self.status_panel(ui));
+        egui::Panel::right("controls").resizable(true).default_size(330.0).show(ui, |ui| {
+            egui::ScrollArea::vertical().show(ui, |ui| self.side_panel(ui));
+        });
+        egui::Panel::bottom("inspect").resizable(true).default_size(170.0).show(ui, |ui| self.inspect_panel(ui));
+        egui::CentralPanel::default().show(ui, |ui| self.viewport(ui));
+        self.test_switches(ui.ctx());
+    }
+
+    fn test_switches(&mut self, ctx: &egui::Context) {
+        let Some(n) = self.exit_after else { return };
+        ctx.request_repaint();
+        if let Some(path) = self.screenshot_path.clone()
+            && !self.screenshot.requested
+            && self.frames + 2 >= n
+        {
+            self.screenshot.requested = true;
+            let done = self.screenshot.done.clone();
+            ctx.send_viewport_cmd(egui::ViewportCommand::Screenshot(egui::ScreenshotCallback::new(move |img| {
+                let rgb: Vec<f32> = img.pixels.iter().flat_map(|c| [c.r(), c.g(), c.b()].map(|v| v as f32 / 255.0)).collect();
+                match gast_core::io::write_png_rgb(&path, img.size[0] as u32, img.size[1] as u32, &rgb) {
+                    Ok(()) => eprintln!("studio: screenshot saved to {}", path.display()),
+                    Err(e) => eprintln!("studio: screenshot failed: {e}"),
+                }
+                done.store(true, Ordering::SeqCst);
+            })));
+        }
+        let shot_pending = self.screenshot.requested && !self.screenshot.done.load(Ordering::SeqCst);
+        if self.frames >= n && !shot_pending {
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+        }
+        if self.frames >= n + 600 {
+            eprintln!("studio: the screenshot never arrived; closing");
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+        }
+    }
+
+    fn menu_bar(&mut self, ui: &mut Ui) {
+        ui.horizontal(|ui| {
+            ui.label(RichText::new("GAST Studio").strong());
+            ui.separator();
+            if ui.button("Open scene…").clicked()
+                && let Some(p) = rfd::FileDialog::new().add_filter("Gaussian splats", &["ply"]).pick_file()
+            {
+                self.open_scene(&p);
+            }
+            if ui.button("Open style…").clicked()
+                && let Some(p) = rfd::FileDialog::new().add_filter("Images", &["png", "jpg", "jpeg", "webp"]).pick_file()
+            {
+                self.open_style(&p);
+            }
+            ui.menu_button("Export", |ui| self.export_menu(ui));
+            ui.separator();
+            ui.weak("drop scenes, style images or presets onto the window");
+        });
+    }
+
+    fn export_menu(&mut self, ui: &mut Ui) {
+        let current = self.current();
+        let cam = self.viewport_camera();
+        ui.add_enabled_ui(current.is_some(), |ui| {
+            let Some(g) = current else { return };
+            if ui.button("Current Gaussians as .ply…").clicked()
+                && let Some(p) = rfd::FileDialog::new().add_filter("PLY", &["ply"]).set_file_name("stylized.ply").save_file()
+            {
+                self.jobs.export_ply(g.clone(), p);
+            }
+            if ui.button("Current view as PNG…").clicked()
+                && let Some(p) = rfd::FileDialog::new().add_filter("PNG", &["png"]).set_file_name("view.png").save_file()
+            {
+                self.jobs.export_png(g.clone(), cam.clone(), self.background, p);
+            }
+            if ui.button("Current view's inverse depth as EXR…").clicked()
+                && let Some(p) = rfd::FileDialog::new().add_filter("OpenEXR", &["exr"]).set_file_name("depth.exr").save_file()
+            {
+                self.jobs.export_depth(g.clone(), cam.clone(), p);
+            }
+        });
+    }
+
+    fn status_panel(&mut self, ui: &mut Ui) {
+        let stats = self.stats.lock().map(|s| *s).unwrap_or_default();
+        ui.horizontal(|ui| {
+            match &self.scene {
+                Some(s) => ui.label(format!("{}: {} Gaussians", s.name, s.scene.gaussians.len())),
+                None => ui.label("no scene"),
+            };
+            ui.separator();
+            ui.label(format!("drawn {}  sort {:.1} ms  prepare {:.1} ms", stats.drawn, stats.sort_ms, stats.prepare_ms));
+            if self.jobs.running > 0 {
+                ui.separator();
+                ui.spinner();
+                ui.label(format!("{} background job(s)", self.jobs.running));
+            }
+            if !self.notice.is_empty() {
+                ui.separator();
+                ui.weak(&self.notice);
+            }
+        });
+        if !self.errors.is_empty() {
+            ui.horizontal(|ui| {
+                ui.label(RichText::new(format!("{} error(s)", self.errors.len())).color(Color32::from_rgb(255, 110, 90)).strong());
+                if ui.small_button("clear").clicked() {
+                    self.errors.clear();
+                }
+            });
+            egui::ScrollArea::vertical().stick_to_bottom(true).show(ui, |ui| {
+                for e in &self.errors {
+                    ui.label(RichText::new(e).color(Color32::from_rgb(255, 130, 110)));
+                }
+            });
+        }
+        for line in self.run.log.iter().rev().take(3) {
+            ui.weak(line);
+        }
+    }
+
+    fn side_panel(&mut self, ui: &mut Ui) {
+        ui.heading("Style");
+        ui.horizontal_wrapped(|ui| {
+            let mut pick = None;
+            for (k, s) in self.styles.iter().enumerate() {
+                let selected = self.style == Some(k);
+                let img = egui::Image::new(&s.texture).fit_to_exact_size(egui::vec2(64.0, 64.0 * s.size[1] as f32 / s.size[0].max(1) as f32));
+                let r = ui.add(egui::Button::image(img).selected(selected)).on_hover_text(s.path.display().to_string());
+                if r.clicked() {
+                    pick = Some(k);
+                }
+            }
+            if pick.is_some() {
+                self.style = pick;
+            }
+        });
+        if let Some(s) = self.style.and_then(|k| self.styles.get(k)) {
+            ui.weak(format!("{} ({}×{})", s.path.display(), s.size[0], s.size[1]));
+        }
+
+        ui.separator();
+        ui.heading("Run");
+        self.run_buttons(ui);
+        controls::loss_chart(ui, &self.run.steps);
+        if let Some((p, eta)) = self.run.progress() {
+            ui.add(egui::ProgressBar::new(p).text(format!("{:.0}%  ETA {:.0} s", p * 100.0, eta)));
+        }
+        if let Some(g) = self.current() {
+            ui.weak(format!("current: {} Gaussians", g.len()));
+        }
+
+        ui.separator();
+        ui.heading("Parameters");
+        if controls::config_editor(ui, &mut self.config) && self.run.is_live() {
+            self.run.send(Command::SetConfig(Box::new(self.config.clone())));
+        }
+        ui.horizontal(|ui| {
+            if ui.button("Save preset…").clicked()
+                && let Some(p) = rfd::FileDialog::new().add_filter("Preset", &["json"]).set_file_name("preset.json").save_file()
+            {
+                self.save_preset(&p);
+            }
+            if ui.button("Load preset…").clicked()
+                && let Some(p) = rfd::FileDialog::new().add_filter("Preset", &["json"]).pick_file()
+            {
+                self.load_preset(&p);
+            }
+            if ui.button("Defaults").clicked() {
+                self.config = StyleConfig::default();
+            }
+        });
+        for p in self.config.problems() {
+            ui.colored_label(Color32::from_rgb(255, 130, 110), p);
+        }
+
+        ui.separator();
+        ui.heading("View");
+        self.view_controls(ui);
+    }
+
+    fn run_buttons(&mut self, ui: &mut Ui) {
+        let live = self.run.is_live();
+        let paused = self.run.status == RunStatus::Paused;
+        ui.horizontal(|ui| {
+            let can_start = self.starter.is_some() && !live && self.scene.is_some() && self.style.is_some();
+            let why = if self.starter.is_none() {
+                "no session runner is connected to this build yet"
+            } else if live {
+                "a run is in progress"
+            } else {
+                "open a scene and a style first"
+            };
+            if ui.add_enabled(can_start, egui::Button::new("Start")).on_disabled_hover_text(why).clicked() {
+                self.start_run();
+            }
+            let not_live = "no run in progress";
+            if ui.add_enabled(live && !paused, egui::Button::new("Pause")).on_disabled_hover_text(not_live).clicked() {
+                self.run.send(Command::Pause);
+            }
+            if ui.add_enabled(live && paused, egui::Button::new("Resume")).on_disabled_hover_text(not_live).clicked() {
+                self.run.send(Command::Resume);
+            }
+            if ui.add_enabled(live, egui::Button::new("Stop")).on_disabled_hover_text(not_live).clicked() {
+                self.run.send(Command::Stop);
+            }
+        });
+        let status = match &self.run.status {
+            RunStatus::Idle => "idle".to_string(),
+            RunStatus::Running => "running".into(),
+            RunStatus::Paused => "paused".into(),
+            RunStatus::Finished { completed: true } => "finished".into(),
+            RunStatus::Finished { completed: false } => "stopped".into(),
+            RunStatus::Failed(m) => format!("failed: {m}"),
+        };
+        ui.weak(format!("status: {status}"));
+    }
+
+    fn start_run(&mut self) {
+        let (Some(starter), Some(scene), Some(style)) = (&self.starter, &self.scene, self.style.and_then(|k| self.styles.get(k))) else { return };
+        let problems = self.config.problems();
+        if !problems.is_empty() {
+            self.report(anyhow::anyhow!("cannot start: {}", problems.join("; ")));
+            return;
+        }
+        let ctx = self.ctx.clone();
+        let request = StartRequest {
+            scene: scene.scene.gaussians.clone(),
+            style: style.path.clone(),
+            config: self.config.clone(),
+            waker: Arc::new(move || ctx.request_repaint()),
+        };
+        match starter(request) {
+            Ok(link) => self.run.attach(link),
+            Err(e) => self.report(e.context("starting the run")),
+        }
+    }
+
+    fn view_controls(&mut self, ui: &mut Ui) {
+        ui.horizontal(|ui| {
+            if ui.button("Fit").on_hover_text("frame the scene's robust bounds (F)").clicked()
+                && let Some(g) = self.current()
+            {
+                self.view.fit(&g);
+            }
+            if ui.button("Reset").clicked() {
+                let up = self.view.up;
+                self.view = ViewState { up, ..ViewState::default() };
+                if let Some(g) = self.current() {
+                    self.view.fit(&g);
+                }
+            }
+            egui::ComboBox::from_id_salt("up").selected_text(format!("up {:?}", self.view.up)).show_ui(ui, |ui| {
+                for up in [UpAxis::NegY, UpAxis::PosY, UpAxis::PosZ] {
+                    ui.selectable_value(&mut self.view.up, up, format!("{up:?}"));
+                }
+            });
+        });
+        let mut fov = self.view.fov_y.to_degrees();
+        if ui.add(egui::Slider::new(&mut fov, 10.0..=120.0).text("vertical fov°")).changed() {
+            self.view.fov_y = fov.to_radians();
+        }
+        ui.add(egui::Slider::new(&mut self.split, 0.0..=1.0).text("before | after")).on_hover_text("left of the line: the scene as loaded");
+        let mut bg = self.background;
+        ui.horizontal(|ui| {
+            ui.label("background");
+            if ui.color_edit_button_rgb(&mut bg).changed() {
+                self.background = bg;
+            }
+        });
+        egui::CollapsingHeader::new(format!("Cameras ({})", self.cameras.len())).show(ui, |ui| {
+            let mut snap = None;
+            for (k, c) in self.cameras.iter().enumerate() {
+                if ui.selectable_label(false, &c.name).clicked() {
+                    snap = Some(k);
+                }
+            }
+            if let Some(k) = snap {
+                let focus = self.current().map(|g| view::Bounds::robust(&g).center());
+                let cam = self.cameras[k].clone();
+                self.view.snap_to(&cam, focus);
+            }
+        });
+        ui.weak("left drag: orbit · right/middle drag: pan · wheel: zoom · hold right + WASD/QE: fly");
+    }
+
+    fn inspect_panel(&mut self, ui: &mut Ui) {
+        ui.horizontal(|ui| {
+            ui.label(RichText::new("Inspect").strong());
+            ui.checkbox(&mut self.auto_inspect, "follow the view");
+            if ui.button("Refresh").clicked() {
+                self.inspected_view = None;
+                self.request_inspection(true);
+            }
+            ui.weak("RGB · inverse depth · edges of the current view (CPU rasterizer)");
+        });
+        let h = (ui.available_height() - 4.0).max(32.0);
+        ui.horizontal(|ui| match &self.maps {
+            Some(maps) => {
+                for (t, name) in maps.iter().zip(["RGB", "inverse depth", "edges"]) {
+                    let [w, th] = t.size();
+                    let size = egui::vec2(h * w as f32 / th.max(1) as f32, h);
+                    ui.add(egui::Image::new(t).fit_to_exact_size(size)).on_hover_text(name);
+                }
+            }
+            None => {
+                ui.weak("no maps yet");
+            }
+        });
+        if self.auto_inspect {
+            self.request_inspection(false);
+        }
+    }
+
+    fn request_inspection(&mut self, force: bool) {
+        let Some(g) = self.current() else { return };
+        let scene_v = self.scene.as_ref().map(|s| s.scene.version).unwrap_or(0);
+        let snap_v = self.snapshot.as_ref().map(|s| s.version).unwrap_or(0);
+        let key = (self.view.clone(), scene_v, snap_v);
+        let moving = self.ctx.input(|i| i.pointer.any_down());
+        if self.jobs.running > 0 || (!force && (moving || self.inspected_view.as_ref() == Some(&key))) {
+            return;
+        }
+        self.inspected_view = Some(key);
+        let cam = inspect::scaled(&self.viewport_camera(), 240);
+        self.jobs.inspect(g, cam, self.background);
+    }
+
+    fn viewport(&mut self, ui: &mut Ui) {
+        let size = ui.available_size();
+        let (rect, response) = ui.allocate_exact_size(size, egui::Sense::click_and_drag());
+        let ppp = ui.ctx().pixels_per_point();
+        self.viewport_px = [(rect.width() * ppp).round().max(1.0) as u32, (rect.height() * ppp).round().max(1.0) as u32];
+        self.handle_view_input(ui, &response, rect);
+        let callback = ViewportCallback {
+            camera: self.viewport_camera(),
+            before: self.scene.as_ref().map(|s| s.scene.clone()),
+            after: self.snapshot.clone(),
+            split: self.split,
+            background: self.background,
+            stats: self.stats.clone(),
+        };
+        ui.painter().add(egui_wgpu::Callback::new_paint_callback(rect, callback));
+        if self.snapshot.is_some() && self.split > 0.0 && self.split < 1.0 {
+            let x = rect.left() + rect.width() * self.split;
+            ui.painter().text(egui::pos2(x - 6.0, rect.top() + 6.0), egui::Align2::RIGHT_TOP, "before", egui::FontId::proportional(13.0), Color32::WHITE);
+            ui.painter().text(egui::pos2(x + 6.0, rect.top() + 6.0), egui::Align2::LEFT_TOP, "after", egui::FontId::proportional(13.0), Color32::WHITE);
+        }
+        if self.scene.is_none() {
+            ui.painter().text(rect.center(), egui::Align2::CENTER_CENTER, "drop a scene (.ply) here", egui::FontId::proportional(18.0), Color32::GRAY);
+        }
+    }
+
+    fn handle_view_input(&mut self, ui: &Ui, response: &egui::Response, rect: egui::Rect) {
+        let delta = response.drag_delta();
+        if response.dragged_by(egui::PointerButton::Primary) {
+            self.view.orbit(delta.x * 0.006, -delta.y * 0.006);
+        }
+        if response.dragged_by(egui::PointerButton::Secondary) || response.dragged_by(egui::PointerButton::Middle) {
+            self.view.pan(delta.x, delta.y, rect.height());
+        }
+        if response.hovered() {
+            let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+            if scroll != 0.0 {
+                self.view.zoom(scroll);
+            }
+            if ui.input(|i| i.key_pressed(egui::Key::F))
+                && let Some(g) = self.current()
+            {
+                self.view.fit(&g);
+            }
+        }
+        let flying = ui.input(|i| i.pointer.secondary_down()) && (response.hovered() || response.dragged());
+        if flying {
+            let (dt, keys) = ui.input(|i| {
+                let k = |key| if i.key_down(key) { 1.0f32 } else { 0.0 };
+                (i.stable_dt.min(0.1), [k(egui::Key::D) - k(egui::Key::A), k(egui::Key::E) - k(egui::Key::Q), k(egui::Key::W) - k(egui::Key::S)])
+            });
+            if keys != [0.0; 3] {
+                self.view.fly(keys[0], keys[1], keys[2], dt);
+                ui.ctx().request_repaint();
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

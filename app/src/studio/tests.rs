@@ -1,0 +1,184 @@
+//! Studio tests that need no window: shader validation, the GPU viewport
+//! against the CPU reference (lavapipe), and UI logic through egui_kittest.
+
+use std::path::PathBuf;
+
+use egui_kittest::kittest::{NodeT as _, Queryable as _};
+use std::sync::Arc;
+
+use super::viewport::{Side, SplatRenderer, bench, cpu_reference, read_target};
+use super::*;
+
+/// Whether tests that need lavapipe/Xvfb must fail (CI) rather than skip.
+fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true" || v == "1")
+}
+
+/// A headless device, or `None` (loudly) when there is none outside CI.
+fn device_or_skip(test: &str) -> Option<(wgpu::Device, wgpu::Queue, String)> {
+    match bench::headless_device() {
+        Ok(d) => Some(d),
+        Err(e) if !in_ci() => {
+            eprintln!("SKIPPED {test}: {e:#}");
+            None
+        }
+        Err(e) => panic!("{test}: {e:#} (CI=true, so this is a failure)"),
+    }
+}
+
+fn shader_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("shaders")
+}
+
+#[test]
+fn every_wgsl_file_validates_with_naga() {
+    let mut checked = 0;
+    let mut failures = Vec::new();
+    for entry in std::fs::read_dir(shader_dir()).expect("shaders/ folder") {
+        let path = entry.expect("entry").path();
+        if path.extension().is_none_or(|e| e != "wgsl") {
+            continue;
+        }
+        let src = std::fs::read_to_string(&path).expect("read shader");
+        let result = naga::front::wgsl::parse_str(&src).map_err(|e| e.emit_to_string(&src)).and_then(|module| {
+            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
+                .validate(&module)
+                .map(|_| ())
+                .map_err(|e| format!("{e:?}"))
+        });
+        if let Err(e) = result {
+            failures.push(format!("{}: {e}", path.display()));
+        }
+        checked += 1;
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+    assert!(checked >= 3, "only {checked} shaders found");
+}
+
+#[test]
+fn sh_packing_round_trips_through_f16() {
+    let g = bench::synthetic_scene(10);
+    let (words, per) = super::viewport::pack_sh_f16(&g);
+    assert_eq!(per, 24);
+    let back = viewport::f16_to_f32((words[0] & 0xffff) as u16);
+    assert!((back - g.sh[0]).abs() < 1e-3);
+}
+
+fn demo_camera(g: &Gaussians, w: u32, h: u32) -> Camera {
+    let mut v = ViewState::default();
+    v.fit(g);
+    v.orbit(0.4, 0.1);
+    v.camera(w, h)
+}
+
+#[test]
+fn gpu_viewport_matches_the_cpu_reference() {
+    let Some((device, queue, adapter)) = device_or_skip("gpu_viewport_matches_the_cpu_reference") else { return };
+    let g = Arc::new(assets::demo_scene());
+    let (w, h) = (320, 240);
+    let cam = demo_camera(&g, w, h);
+    let mut r = SplatRenderer::new(&device);
+    r.set_scene(&device, Side::Before, 1, &g);
+    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+    assert!(r.render(&device, &queue, &mut encoder, Side::Before, &cam));
+    queue.submit([encoder.finish()]);
+    let (texture, _) = r.target(Side::Before).expect("target");
+    let gpu = read_target(&device, &queue, texture);
+    let cpu = cpu_reference::render(&g, &cam, [0.0; 3]);
+    let mut sum = 0.0f64;
+    let mut max = 0.0f32;
+    for (p, px) in gpu.iter().enumerate() {
+        for ch in 0..3 {
+            let d = (px[ch] - cpu.rgb[p * 3 + ch]).abs();
+            sum += d as f64;
+            max = max.max(d);
+        }
+    }
+    let mean = sum / (w * h * 3) as f64;
+    let coverage = cpu.alpha.iter().filter(|&&a| a > 0.5).count() as f32 / (w * h) as f32;
+    println!("GPU viewport vs CPU reference on {adapter}: mean |diff| {mean:.5}, max {max:.3}, coverage {coverage:.2}");
+    assert!(coverage > 0.1, "the demo scene covers only {coverage} of the view");
+    assert!(mean < 0.01, "mean abs difference {mean}");
+    // Save both for a look.
+    let out = std::env::temp_dir().join("gast-studio-gpu-vs-cpu");
+    let gpu_rgb: Vec<f32> = gpu.iter().flat_map(|p| [p[0], p[1], p[2]]).collect();
+    gast_core::io::write_png_rgb(&out.join("gpu.png"), w, h, &gpu_rgb).expect("png");
+    gast_core::io::write_png_rgb(&out.join("cpu.png"), w, h, &cpu.rgb).expect("png");
+    println!("wrote {}", out.display());
+}
+
+#[test]
+fn viewport_frame_time_500k() {
+    if std::env::var_os("GAST_BENCH").is_none() {
+        eprintln!("SKIPPED viewport_frame_time_500k: set GAST_BENCH=1 (takes a minute on lavapipe)");
+        return;
+    }
+    if device_or_skip("viewport_frame_time_500k").is_none() {
+        return;
+    }
+    println!("{}", bench::run(None, 500_000, 5).expect("bench"));
+}
+
+fn test_app() -> StudioApp {
+    let app = StudioApp::new(egui::Context::default(), StudioArgs::default());
+    assert!(app.scene.is_some(), "the demo scene opens with no arguments: {:?}", app.errors);
+    assert!(!app.styles.is_empty(), "a demo style opens with no arguments");
+    app
+}
+
+#[test]
+fn a_bad_scene_file_shows_an_error_and_keeps_the_scene() {
+    let dir = std::env::temp_dir().join(format!("gast-studio-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let bad = dir.join("broken.ply");
+    std::fs::write(&bad, b"ply\nformat ascii 1.0\nelement vertex 1\nend_header\n1 2 3\n").expect("write");
+    let mut app = test_app();
+    let before = app.scene.as_ref().map(|s| s.scene.version);
+    app.open_any(&bad);
+    assert_eq!(app.scene.as_ref().map(|s| s.scene.version), before, "the previous scene stays");
+    assert_eq!(app.errors.len(), 1);
+    assert!(app.errors[0].contains("broken.ply") && app.errors[0].contains("binary_little_endian"), "{}", app.errors[0]);
+    app.open_any(&dir.join("missing.png"));
+    assert_eq!(app.errors.len(), 2);
+
+    // The error is on screen, in the bottom panel.
+    let mut harness = egui_kittest::Harness::builder().with_size(egui::vec2(1280.0, 800.0)).build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    harness.run_steps(3);
+    harness.get_by_label_contains("broken.ply");
+    harness.get_by_label("2 error(s)");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn controls_edit_the_config_and_presets_round_trip() {
+    let app = test_app();
+    let mut harness = egui_kittest::Harness::builder().with_size(egui::vec2(1280.0, 1400.0)).build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    harness.run_steps(2);
+    // Texture scale buttons set the config.
+    harness.get_by_label("2×").click();
+    harness.run_steps(2);
+    assert_eq!(harness.state().config.texture_scale, 512);
+    // Mode menu.
+    harness.get_by_label("decoupled").click();
+    harness.run_steps(2);
+    harness.get_by_label("joint").click();
+    harness.run_steps(2);
+    assert_eq!(harness.state().config.mode, gast_core::style::Mode::Joint);
+    // Start is disabled without a session runner.
+    assert!(harness.get_by_label("Start").accesskit_node().is_disabled());
+
+    let path = std::env::temp_dir().join(format!("gast-preset-{}.json", std::process::id()));
+    let app = harness.state_mut();
+    app.config.weights.tv = 0.125;
+    app.save_preset(&path);
+    app.config = StyleConfig::default();
+    app.load_preset(&path);
+    assert_eq!(app.config.weights.tv, 0.125);
+    assert_eq!(app.config.texture_scale, 512);
+    assert!(app.errors.is_empty(), "{:?}", app.errors);
+    std::fs::write(&path, r#"{"ratio_geo": 3.0}"#).expect("write");
+    app.load_preset(&path);
+    assert_eq!(app.errors.len(), 1, "a preset with problems is refused");
+    assert_eq!(app.config.weights.tv, 0.125);
+    std::fs::remove_file(&path).ok();
+}
