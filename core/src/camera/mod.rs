@@ -1,11 +1,34 @@
 //! Pinhole cameras with the conventions of the golden files, and the camera
-//! files users bring (COLMAP, INRIA `cameras.json`, NeRF `transforms.json`).
+//! files users bring (COLMAP, INRIA `cameras.json`, NeRF `transforms.json`),
+//! or cameras generated around a scene that came without any.
 //!
-//! Convention: world-to-camera `x_c = R x_w + t`; the camera looks down +z with
-//! x right and y down; `u = fx·x/z + cx`, `v = fy·y/z + cy`; pixel (row i, col j)
-//! has its centre at `(j + 0.5, i + 0.5)`.
+//! Every reader converts to one convention so the rasterizer and the losses
+//! never need to know where a camera came from: world-to-camera
+//! `x_c = R x_w + t`; the camera looks down +z with x right and y down;
+//! `u = fx·x/z + cx`, `v = fy·y/z + cy`; pixel (row i, col j) has its centre at
+//! `(j + 0.5, i + 0.5)`. Lens distortion is not modelled: distorted COLMAP
+//! models load as pinholes with a warning in [`CameraSet::warnings`].
 
-use glam::{Mat3, Vec3};
+mod colmap;
+mod colmap_bin;
+mod colmap_write;
+mod error;
+mod inria;
+mod orbit;
+#[cfg(test)]
+mod tests;
+mod transforms;
+
+use std::path::{Path, PathBuf};
+
+use glam::{Mat3, Vec2, Vec3};
+
+pub use colmap::load_colmap;
+pub use colmap_write::{write_colmap_binary, write_colmap_text};
+pub use error::CameraError;
+pub use inria::load_inria;
+pub use orbit::{OrbitLayout, OrbitOptions, RobustBounds, orbit_cameras, robust_bounds};
+pub use transforms::load_transforms;
 
 /// A pinhole camera (distortion-free), world-to-camera.
 #[derive(Clone, Debug, PartialEq)]
@@ -43,6 +66,302 @@ impl Camera {
 
     /// `tan` of half the horizontal and vertical field of view.
     pub fn tan_half_fov(&self) -> (f32, f32) {
-        (0.5 * self.width as f32 / self.fx, 0.5 * self.height as f32 / self.fy)
+        (
+            0.5 * self.width as f32 / self.fx,
+            0.5 * self.height as f32 / self.fy,
+        )
     }
 }
+
+impl Camera {
+    /// A camera from a camera-to-world pose: `c2w` has the camera's x (right),
+    /// y (down) and z (forward) axes as columns, `center` is its position.
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_camera_to_world(
+        name: impl Into<String>,
+        width: u32,
+        height: u32,
+        fx: f32,
+        fy: f32,
+        cx: f32,
+        cy: f32,
+        c2w: Mat3,
+        center: Vec3,
+    ) -> Self {
+        let rotation = c2w.transpose();
+        Self {
+            name: name.into(),
+            width,
+            height,
+            fx,
+            fy,
+            cx,
+            cy,
+            rotation,
+            translation: -(rotation * center),
+        }
+    }
+
+    /// A camera at `eye` looking at `target`, with `up` pointing up on screen
+    /// (the camera's y axis, which points down, is as close to `−up` as the
+    /// view direction allows). Square pixels, principal point at the image
+    /// centre, vertical field of view `fov_y_degrees`. When `up` is parallel to
+    /// the view direction another perpendicular is chosen.
+    pub fn look_at(
+        name: impl Into<String>,
+        eye: Vec3,
+        target: Vec3,
+        up: Vec3,
+        width: u32,
+        height: u32,
+        fov_y_degrees: f32,
+    ) -> Self {
+        let z = (target - eye).try_normalize().unwrap_or(Vec3::Z);
+        let down = -up.try_normalize().unwrap_or(Vec3::NEG_Y);
+        let x = down
+            .cross(z)
+            .try_normalize()
+            .unwrap_or_else(|| z.any_orthonormal_vector());
+        let y = z.cross(x);
+        let fy = 0.5 * height as f32 / (0.5 * fov_y_degrees.to_radians()).tan();
+        let (w, h) = (width as f32, height as f32);
+        Self::from_camera_to_world(
+            name,
+            width,
+            height,
+            fy,
+            fy,
+            0.5 * w,
+            0.5 * h,
+            Mat3::from_cols(x, y, z),
+            eye,
+        )
+    }
+
+    /// The pixel position of a world point, or `None` when it is at or behind
+    /// the camera plane (`z ≤ 0`). The position may lie outside the image.
+    pub fn project(&self, p: Vec3) -> Option<Vec2> {
+        let c = self.world_to_camera(p);
+        (c.z > 0.0).then(|| Vec2::new(self.fx * c.x / c.z + self.cx, self.fy * c.y / c.z + self.cy))
+    }
+
+    /// The same camera at another resolution: focal lengths and principal
+    /// point scale with the image, so the field of view is unchanged.
+    pub fn scaled_to(&self, width: u32, height: u32) -> Self {
+        let sx = width as f32 / self.width.max(1) as f32;
+        let sy = height as f32 / self.height.max(1) as f32;
+        Self {
+            width,
+            height,
+            fx: self.fx * sx,
+            fy: self.fy * sy,
+            cx: self.cx * sx,
+            cy: self.cy * sy,
+            ..self.clone()
+        }
+    }
+
+    /// The camera at a working resolution whose longer side is at most
+    /// `max_side`, keeping the aspect ratio (sides rounded, at least 1 pixel).
+    /// A camera already small enough is returned unchanged, never enlarged.
+    pub fn downscaled_to_max_side(&self, max_side: u32) -> Self {
+        let longest = self.width.max(self.height);
+        if longest <= max_side || longest == 0 {
+            return self.clone();
+        }
+        let s = f64::from(max_side) / f64::from(longest);
+        let side = |v: u32| ((f64::from(v) * s).round() as u32).max(1);
+        self.scaled_to(side(self.width), side(self.height))
+    }
+}
+
+/// Cameras read from a file, with what the reader had to approximate.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CameraSet {
+    /// The cameras, in the file's order (COLMAP: sorted by image name).
+    pub cameras: Vec<Camera>,
+    /// Things the user should know (ignored distortion, re-orthonormalised
+    /// poses, …), one line each, naming the file.
+    pub warnings: Vec<String>,
+}
+
+/// The scene extent used to scale the geometry learning rate (ALGORITHM.md,
+/// as in 3DGS): 1.1 × the largest distance of a camera centre from the
+/// centroid of the camera centres. With no cameras, or all centres at one
+/// point (a single camera), there is no spread to measure and the result is 1.1
+/// (a unit radius), so learning rates stay finite and non-zero.
+pub fn scene_extent(cameras: &[Camera]) -> f32 {
+    if cameras.is_empty() {
+        return 1.1;
+    }
+    let centers: Vec<Vec3> = cameras.iter().map(Camera::center).collect();
+    let centroid = centers.iter().copied().sum::<Vec3>() / centers.len() as f32;
+    let radius = centers
+        .iter()
+        .map(|c| c.distance(centroid))
+        .fold(0.0f32, f32::max);
+    if radius.is_finite() && radius > 1e-6 {
+        1.1 * radius
+    } else {
+        1.1
+    }
+}
+
+/// Reads cameras from any supported source, detecting the format from the path:
+/// - a folder holding `sparse/0/` (or `sparse/`) with COLMAP files, or the
+///   COLMAP folder itself (`cameras.{bin,txt}` and `images.{bin,txt}`);
+/// - a folder holding `cameras.json` (INRIA 3DGS trainer output);
+/// - a folder holding `transforms.json` or, failing that, `transforms_train.json`
+///   or another `transforms*.json` (NeRF / nerfstudio);
+/// - a `.json` file, told apart by content (a list is `cameras.json`, an object
+///   with `frames` is `transforms.json`);
+/// - a COLMAP `cameras`/`images` `.bin` or `.txt` file (its sibling is read too).
+pub fn load(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
+    let path = path.as_ref();
+    if path.is_dir() {
+        return load_dir(path);
+    }
+    if !path.exists() {
+        return Err(CameraError::NotFound {
+            path: path.to_path_buf(),
+            expected: EXPECTED.into(),
+        });
+    }
+    match path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
+        Some("json") => load_json(path),
+        Some("bin" | "txt") => load_colmap(path),
+        other => Err(CameraError::format(
+            path,
+            "file name",
+            "a .json, .bin or .txt camera file",
+            other.map_or("no extension".to_string(), |e| format!("a .{e} file")),
+        )),
+    }
+}
+
+const EXPECTED: &str = "sparse/0/{cameras,images}.{bin,txt}, cameras.json or transforms*.json";
+
+fn load_dir(dir: &Path) -> Result<CameraSet, CameraError> {
+    for d in [dir.join("sparse/0"), dir.join("sparse"), dir.to_path_buf()] {
+        if colmap::has_colmap_files(&d) {
+            return load_colmap(&d);
+        }
+    }
+    let inria = dir.join("cameras.json");
+    if inria.is_file() {
+        return load_inria(&inria);
+    }
+    if let Some(t) = find_transforms(dir) {
+        return load_transforms(&t);
+    }
+    Err(CameraError::NotFound {
+        path: dir.to_path_buf(),
+        expected: EXPECTED.into(),
+    })
+}
+
+/// `transforms.json`, else `transforms_train.json`, else the first `transforms*.json` by name.
+fn find_transforms(dir: &Path) -> Option<PathBuf> {
+    for name in ["transforms.json", "transforms_train.json"] {
+        let p = dir.join(name);
+        if p.is_file() {
+            return Some(p);
+        }
+    }
+    let mut found: Vec<PathBuf> = std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.is_file()
+                && p.file_name()
+                    .and_then(|n| n.to_str())
+                    .is_some_and(|n| n.starts_with("transforms") && n.ends_with(".json"))
+        })
+        .collect();
+    found.sort();
+    found.into_iter().next()
+}
+
+fn load_json(path: &Path) -> Result<CameraSet, CameraError> {
+    let text = std::fs::read_to_string(path).map_err(|e| CameraError::io(path, e))?;
+    let value: serde_json::Value =
+        serde_json::from_str(&text).map_err(|source| CameraError::Json {
+            path: path.to_path_buf(),
+            record: "document".into(),
+            source,
+        })?;
+    match &value {
+        serde_json::Value::Array(_) => inria::from_value(path, value),
+        serde_json::Value::Object(o) if o.contains_key("frames") => {
+            transforms::from_value(path, value)
+        }
+        other => Err(CameraError::format(
+            path,
+            "document",
+            "a list of cameras (cameras.json) or an object with `frames` (transforms.json)",
+            json_kind(other),
+        )),
+    }
+}
+
+/// A short description of a JSON value's kind, for error messages.
+pub(crate) fn json_kind(v: &serde_json::Value) -> &'static str {
+    match v {
+        serde_json::Value::Null => "null",
+        serde_json::Value::Bool(_) => "a boolean",
+        serde_json::Value::Number(_) => "a number",
+        serde_json::Value::String(_) => "a string",
+        serde_json::Value::Array(_) => "a list",
+        serde_json::Value::Object(_) => "an object without `frames`",
+    }
+}
+
+/// A rotation made (Gram–Schmidt on the columns) from a pose matrix read
+/// from a file, with how far the file's matrix was from it (largest entry
+/// difference). Scaled or sheared poses are corrected, reflections and
+/// non-finite matrices are errors.
+pub(crate) fn rotation_from(
+    path: &Path,
+    record: &str,
+    m: glam::DMat3,
+) -> Result<(Mat3, f64), CameraError> {
+    let bad = || {
+        CameraError::format(
+            path,
+            record,
+            "a 3x3 rotation (orthonormal, determinant +1)",
+            format!("{m:?}"),
+        )
+    };
+    if !m.is_finite() || m.determinant() <= 1e-9 {
+        return Err(bad());
+    }
+    let x = m.x_axis.try_normalize().ok_or_else(bad)?;
+    let y = (m.y_axis - x * x.dot(m.y_axis))
+        .try_normalize()
+        .ok_or_else(bad)?;
+    let r = glam::DMat3::from_cols(x, y, x.cross(y));
+    let dev = (r - m)
+        .to_cols_array()
+        .iter()
+        .fold(0.0f64, |a, v| a.max(v.abs()));
+    Ok((r.as_mat3(), dev))
+}
+
+/// A warning for poses that had to be re-orthonormalised, or `None`.
+pub(crate) fn orthonormal_warning(path: &Path, corrected: usize, worst: f64) -> Option<String> {
+    (corrected > 0).then(|| {
+        format!(
+            "{}: {corrected} camera rotation(s) were not orthonormal (largest entry off by {worst:.2e}) and were re-orthonormalised (Gram–Schmidt on the columns)",
+            path.display()
+        )
+    })
+}
+
+/// Above this entry difference a pose's rotation is reported as corrected.
+pub(crate) const ORTHONORMAL_TOLERANCE: f64 = 1e-3;

@@ -1,0 +1,125 @@
+//! The INRIA 3DGS trainer's `cameras.json`, written next to every trained
+//! `point_cloud.ply`: often the only cameras that travel with a scene.
+//!
+//! Convention, verified against the trainer's `camera_to_JSON`
+//! (`utils/camera_utils.py`): it builds the world-to-camera matrix `[R_w2c | t]`,
+//! inverts it, and writes the inverse's translation as `position` (the camera
+//! centre) and its 3x3 block row by row as `rotation`, i.e. the
+//! camera-to-world rotation whose columns are the camera's x (right), y (down)
+//! and z (forward) axes in world space — already our camera axes, since the
+//! trainer uses COLMAP's. `fx`/`fy` come from the field of view; the principal
+//! point is the image centre (the trainer assumes it).
+
+use std::path::Path;
+
+use glam::{DMat3, DVec3};
+use serde::Deserialize;
+
+use super::{CameraError, CameraSet, ORTHONORMAL_TOLERANCE, orthonormal_warning, rotation_from};
+use crate::Camera;
+
+#[derive(Deserialize)]
+struct Entry {
+    img_name: String,
+    width: u32,
+    height: u32,
+    position: [f64; 3],
+    rotation: [[f64; 3]; 3],
+    fx: f64,
+    fy: f64,
+}
+
+/// Reads an INRIA 3DGS `cameras.json` (a list of
+/// `{id, img_name, width, height, position, rotation, fx, fy}`), in file order.
+pub fn load_inria(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
+    let path = path.as_ref();
+    let text = std::fs::read_to_string(path).map_err(|e| CameraError::io(path, e))?;
+    let value = serde_json::from_str(&text).map_err(|source| CameraError::Json {
+        path: path.to_path_buf(),
+        record: "document".into(),
+        source,
+    })?;
+    from_value(path, value)
+}
+
+/// Reads a parsed `cameras.json` document.
+pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<CameraSet, CameraError> {
+    let serde_json::Value::Array(items) = value else {
+        return Err(CameraError::format(
+            path,
+            "document",
+            "a list of cameras",
+            super::json_kind(&value),
+        ));
+    };
+    if items.is_empty() {
+        return Err(CameraError::format(
+            path,
+            "document",
+            "at least one camera",
+            "an empty list",
+        ));
+    }
+    let (mut corrected, mut worst) = (0, 0.0f64);
+    let mut cameras = Vec::with_capacity(items.len());
+    for (i, item) in items.into_iter().enumerate() {
+        let record = format!("cameras[{i}]");
+        let e: Entry = serde_json::from_value(item).map_err(|source| CameraError::Json {
+            path: path.to_path_buf(),
+            record: record.clone(),
+            source,
+        })?;
+        let rec = |f: &str| format!("{record} ({}).{f}", e.img_name);
+        if e.width == 0 || e.height == 0 {
+            let found = format!("{}x{}", e.width, e.height);
+            return Err(CameraError::format(
+                path,
+                rec("width/height"),
+                "a positive image size",
+                found,
+            ));
+        }
+        for (name, f) in [("fx", e.fx), ("fy", e.fy)] {
+            if !(f.is_finite() && f > 0.0) {
+                return Err(CameraError::format(
+                    path,
+                    rec(name),
+                    "a positive focal length",
+                    f.to_string(),
+                ));
+            }
+        }
+        let center = DVec3::from_array(e.position);
+        if !center.is_finite() {
+            return Err(CameraError::format(
+                path,
+                rec("position"),
+                "finite numbers",
+                format!("{:?}", e.position),
+            ));
+        }
+        // `rotation` is written row by row; glam builds matrices from columns.
+        let c2w = DMat3::from_cols_array_2d(&e.rotation).transpose();
+        let (c2w, dev) = rotation_from(path, &rec("rotation"), c2w)?;
+        if dev > ORTHONORMAL_TOLERANCE {
+            corrected += 1;
+            worst = worst.max(dev);
+        }
+        let (w, h) = (e.width as f32, e.height as f32);
+        cameras.push(Camera::from_camera_to_world(
+            e.img_name,
+            e.width,
+            e.height,
+            e.fx as f32,
+            e.fy as f32,
+            0.5 * w,
+            0.5 * h,
+            c2w,
+            center.as_vec3(),
+        ));
+    }
+    let warnings = orthonormal_warning(path, corrected, worst)
+        .into_iter()
+        .collect();
+    Ok(CameraSet { cameras, warnings })
+}

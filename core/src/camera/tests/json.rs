@@ -1,0 +1,181 @@
+//! INRIA `cameras.json` and NeRF `transforms.json`: conventions on hand-made
+//! poses, detection by `load`, and errors for malformed documents.
+
+use glam::{Vec2, Vec3};
+use serde_json::json;
+
+use super::{assert_close, temp_dir};
+use crate::camera::{Camera, CameraError, load, load_inria, load_transforms};
+
+/// A cameras.json entry the way the 3DGS trainer writes it: invert [R|t] and
+/// write the inverse's rotation rows and translation.
+fn inria_entry(id: usize, c: &Camera) -> serde_json::Value {
+    let c2w = c.rotation.transpose();
+    let rows: Vec<[f32; 3]> = (0..3).map(|i| c2w.row(i).to_array()).collect();
+    json!({"id": id, "img_name": c.name, "width": c.width, "height": c.height,
+           "position": c.center().to_array(), "rotation": rows, "fy": c.fy, "fx": c.fx})
+}
+
+#[test]
+fn inria_by_hand_and_round_trip() {
+    let d = temp_dir("inria");
+    // At +x looking at the origin in a y-down world: right is +z, forward −x.
+    let hand = json!([{"id": 0, "img_name": "side", "width": 40, "height": 30,
+        "position": [5.0, 0.0, 0.0], "rotation": [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]],
+        "fx": 50.0, "fy": 55.0}]);
+    std::fs::write(d.join("hand.json"), hand.to_string()).expect("write");
+    let set = load_inria(d.join("hand.json")).expect("hand-made cameras.json");
+    let c = &set.cameras[0];
+    assert_eq!((c.cx, c.cy, c.fx, c.fy), (20.0, 15.0, 50.0, 55.0));
+    assert!(
+        c.world_to_camera(Vec3::ZERO)
+            .abs_diff_eq(Vec3::new(0.0, 0.0, 5.0), 1e-6)
+    );
+    assert!(
+        c.project(Vec3::new(0.0, 0.0, 1.0)).expect("front").x > 20.0,
+        "+z is to the right"
+    );
+    assert!(
+        c.project(Vec3::new(0.0, -1.0, 0.0)).expect("front").y < 15.0,
+        "−y is up"
+    );
+
+    let cams: Vec<Camera> = (0..5)
+        .map(|i| {
+            let eye = Vec3::new(i as f32 - 2.0, -1.5, 4.0 + 0.5 * i as f32);
+            Camera::look_at(
+                format!("{i:05}"),
+                eye,
+                Vec3::new(0.2, 0.0, -0.1),
+                Vec3::NEG_Y,
+                320,
+                240,
+                45.0,
+            )
+        })
+        .collect();
+    let doc = serde_json::Value::Array(
+        cams.iter()
+            .enumerate()
+            .map(|(i, c)| inria_entry(i, c))
+            .collect(),
+    );
+    std::fs::create_dir_all(d.join("out")).expect("mkdir");
+    std::fs::write(d.join("out/cameras.json"), doc.to_string()).expect("write");
+    let set = load(d.join("out")).expect("detected in a folder");
+    assert!(set.warnings.is_empty(), "{:?}", set.warnings);
+    for (a, b) in cams.iter().zip(&set.cameras) {
+        assert_close(a, b, 1e-5);
+    }
+    assert_eq!(
+        load(d.join("out/cameras.json")).expect("detected by content"),
+        set
+    );
+}
+
+#[test]
+fn transforms_convention_and_intrinsics() {
+    let d = temp_dir("transforms");
+    // Camera at +z (OpenGL: looking down −z with y up) towards the origin.
+    let doc = json!({"camera_angle_x": 1.0, "w": 64, "h": 48, "frames": [
+        {"file_path": "./a", "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]]},
+        {"file_path": "b.png", "fl_x": 70.0, "cy": 20.0,
+         "transform_matrix": [[0,0,1,4],[0,1,0,0],[-1,0,0,0]]}
+    ]});
+    std::fs::write(d.join("transforms.json"), doc.to_string()).expect("write");
+    let set = load(&d).expect("transforms in a folder");
+    let (a, b) = (&set.cameras[0], &set.cameras[1]);
+    assert_eq!((a.name.as_str(), a.width, a.height), ("a", 64, 48));
+    let f = 32.0 / 0.5f32.tan();
+    assert!(
+        (a.fx - f).abs() < 1e-3 && (a.fy - f).abs() < 1e-3,
+        "fy defaults to fx"
+    );
+    assert!(
+        a.world_to_camera(Vec3::ZERO)
+            .abs_diff_eq(Vec3::new(0.0, 0.0, 4.0), 1e-6)
+    );
+    assert!(
+        a.project(Vec3::ZERO)
+            .expect("front")
+            .abs_diff_eq(Vec2::new(32.0, 24.0), 1e-4)
+    );
+    assert!(
+        a.project(Vec3::new(0.0, 1.0, 0.0)).expect("front").y < 24.0,
+        "world +y (up) is up"
+    );
+    assert!(
+        a.project(Vec3::new(1.0, 0.0, 0.0)).expect("front").x > 32.0,
+        "world +x is right"
+    );
+    assert_eq!((b.fx, b.fy, b.cx, b.cy), (70.0, 70.0, 32.0, 20.0));
+    assert!(b.center().abs_diff_eq(Vec3::new(4.0, 0.0, 0.0), 1e-6));
+    assert!(b.world_to_camera(Vec3::ZERO).z > 3.99);
+}
+
+#[test]
+fn transforms_reads_missing_sizes_from_image_headers() {
+    let d = temp_dir("transforms-img");
+    std::fs::create_dir_all(d.join("train")).expect("mkdir");
+    image::RgbImage::new(7, 5)
+        .save(d.join("train/r_0.png"))
+        .expect("png");
+    let m = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 0, 1]];
+    let doc = json!({"camera_angle_x": 0.5, "camera_angle_y": 0.4,
+        "frames": [{"file_path": "./train/r_0", "transform_matrix": m}]});
+    std::fs::write(d.join("transforms_train.json"), doc.to_string()).expect("write");
+    let set = load(d.join("transforms_train.json")).expect("size from the png header");
+    let c = &set.cameras[0];
+    assert_eq!((c.width, c.height, c.cx, c.cy), (7, 5, 3.5, 2.5));
+    assert!((c.fy - 2.5 / 0.2f32.tan()).abs() < 1e-4);
+
+    let doc = json!({"camera_angle_x": 0.5, "frames": [{"file_path": "./train/r_9", "transform_matrix": m}]});
+    std::fs::write(d.join("transforms_val.json"), doc.to_string()).expect("write");
+    let e = load_transforms(d.join("transforms_val.json")).expect_err("missing image");
+    assert!(
+        matches!(e, CameraError::NotFound { .. }) && e.to_string().contains("frames[0]"),
+        "{e}"
+    );
+}
+
+#[test]
+fn malformed_json_gives_errors_naming_the_field() {
+    let d = temp_dir("json-bad");
+    let m = json!([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 0, 1]]);
+    let cases: Vec<(String, &str)> = vec![
+        ("{\"frames\": [".into(), "document"),
+        (json!({"w": 4, "h": 4, "frames": [{"transform_matrix": m}]}).to_string(), "focal length"),
+        (json!({"camera_angle_x": 1, "w": 4, "h": 4, "frames": [{"file_path": "x"}]}).to_string(), "transform_matrix"),
+        (json!({"camera_angle_x": 1, "w": 4, "h": 4, "frames": []}).to_string(), "at least one frame"),
+        (json!({"camera_angle_x": 1, "w": 4, "h": 4, "frames": [{"transform_matrix": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}]}).to_string(), "4x4"),
+        (json!({"camera_angle_x": 1, "w": 4.5, "h": 4, "frames": [{"transform_matrix": m}]}).to_string(), "frames[0].w"),
+        (json!({"camera_angle_x": 1, "w": 4, "h": 4, "frames": [{"transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 4]]}]}).to_string(), "rotation"),
+        (json!({"camera_angle_x": "wide", "w": 4, "h": 4, "frames": [{"transform_matrix": m}]}).to_string(), "invalid type"),
+        (json!([{"id": 0, "img_name": "a", "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": 2}]).to_string(), "`fy`"),
+        (json!([{"id": 0, "img_name": "a", "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0]], "fx": 2, "fy": 2}]).to_string(), "cameras[0]"),
+        (json!([{"id": 0, "img_name": "a", "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": -2, "fy": 2}]).to_string(), "a).fx"),
+        (json!([]).to_string(), "at least one camera"),
+        ("7".into(), "a number"),
+    ];
+    for (text, needle) in cases {
+        std::fs::write(d.join("c.json"), &text).expect("write");
+        let e = load(d.join("c.json")).expect_err(&text);
+        let msg = e.to_string();
+        assert!(
+            msg.contains(needle) && msg.contains("c.json"),
+            "{text}\n  → {msg}"
+        );
+    }
+}
+
+#[test]
+fn scaled_poses_are_orthonormalised_with_a_warning() {
+    let d = temp_dir("json-scale");
+    let doc = json!({"camera_angle_x": 1, "w": 4, "h": 4,
+        "frames": [{"transform_matrix": [[2, 0, 0, 0], [0, 2, 0, 0], [0, 0, 2, 4], [0, 0, 0, 1]]}]});
+    std::fs::write(d.join("transforms.json"), doc.to_string()).expect("write");
+    let set = load(&d).expect("scaled pose");
+    assert_eq!(set.warnings.len(), 1, "{:?}", set.warnings);
+    assert!((set.cameras[0].rotation.determinant() - 1.0).abs() < 1e-6);
+    assert_eq!(set.cameras[0].name, "frame_0000");
+}
