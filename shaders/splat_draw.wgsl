@@ -1,4 +1,5 @@
-// Draws the projected Gaussians as instanced screen-space quads, back to front
+// Draws the projected Gaussians as instanced screen-space quads (the α ≥ 1/255
+// box of each), back to front
 // in the order the CPU depth sort produced, with premultiplied alpha "over"
 // blending into a transparent target (the background is composited by the
 // viewport blit). Launched by app/src/studio/viewport/splat_draw.rs.
@@ -16,9 +17,9 @@ struct View {
 };
 
 struct Projected {
-    center_radius_depth: vec4<f32>,
+    center_extent: vec4<f32>,
     conic_opacity: vec4<f32>,
-    color: vec4<f32>,
+    color_depth: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> view: View;
@@ -36,19 +37,19 @@ struct VsOut {
 fn vs_main(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> VsOut {
     var out: VsOut;
     let p = projected[order[ii]];
-    let radius = p.center_radius_depth.z;
+    let ext = p.center_extent.zw;
     let corner = vec2<f32>(f32(vi & 1u), f32((vi >> 1u) & 1u)) * 2.0 - vec2<f32>(1.0);
-    let offset = corner * radius;
-    let pixel = p.center_radius_depth.xy + offset;
+    let offset = corner * ext;
+    let pixel = p.center_extent.xy + offset;
     let size = view.size_tan.xy;
-    if (radius <= 0.0) {
+    if (ext.x <= 0.0) {
         out.position = vec4<f32>(2.0, 2.0, 2.0, 1.0); // outside the clip volume
     } else {
         out.position = vec4<f32>(pixel.x / size.x * 2.0 - 1.0, 1.0 - pixel.y / size.y * 2.0, 0.0, 1.0);
     }
     out.offset = offset;
     out.conic_opacity = p.conic_opacity;
-    out.color = p.color.rgb;
+    out.color = p.color_depth.rgb;
     return out;
 }
 

@@ -1,7 +1,10 @@
-// Projects every Gaussian into screen space once per frame: EWA 2D covariance
-// with the 0.3 px low-pass and the 1.3·tan(half-fov) Jacobian clamp, 3-sigma
-// extent, sigmoid opacity and view-dependent SH colour (degree ≤ 3), exactly as
-// the CPU rasterizer does. Launched by app/src/studio/viewport/splat_project.rs.
+// Projects every Gaussian into screen space once per frame, with the rules of
+// the CPU rasterizer (core/src/raster/project.rs): near plane z > 0.2, EWA 2D
+// covariance with the 0.3 px low-pass and the 1.3·tan(half-fov) Jacobian clamp,
+// sigmoid opacity (skipped below 1/255), the screen extent of the α ≥ 1/255
+// ellipse (half-widths sqrt(2·ln(255·o)·Σ_xx), sqrt(2·ln(255·o)·Σ_yy)) and
+// view-dependent SH colour (degree ≤ 3).
+// Launched by app/src/studio/viewport/splat_project.rs.
 
 struct View {
     rot0: vec4<f32>,        // rows of the world-to-camera rotation R
@@ -16,10 +19,15 @@ struct View {
 };
 
 struct Projected {
-    center_radius_depth: vec4<f32>, // u, v (pixels), radius (px, 0 = culled), view depth
-    conic_opacity: vec4<f32>,       // conic xx, xy, yy, opacity
-    color: vec4<f32>,               // rgb, unused
+    center_extent: vec4<f32>, // u, v (pixels), half-extents x, y (pixels; 0 = culled)
+    conic_opacity: vec4<f32>, // conic xx, xy, yy, opacity
+    color_depth: vec4<f32>,   // rgb, view depth
 };
+
+const NEAR_Z: f32 = 0.2;
+const ALPHA_MIN: f32 = 0.00392156862745098; // 1/255
+const EXTENT_REL: f32 = 1e-3;
+const EXTENT_ABS: f32 = 1e-2;
 
 @group(0) @binding(0) var<uniform> view: View;
 // Per Gaussian three vec4: (mean, opacity logit), (log scale, 0), quaternion (w, x, y, z).
@@ -80,9 +88,9 @@ fn sh_color(i: u32, deg: u32, d: vec3<f32>) -> vec3<f32> {
 
 fn culled() -> Projected {
     var p: Projected;
-    p.center_radius_depth = vec4<f32>(0.0);
+    p.center_extent = vec4<f32>(0.0);
     p.conic_opacity = vec4<f32>(0.0);
-    p.color = vec4<f32>(0.0);
+    p.color_depth = vec4<f32>(0.0);
     return p;
 }
 
@@ -102,7 +110,8 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     let r1 = view.rot1.xyz;
     let r2 = view.rot2.xyz;
     let tc = vec3<f32>(dot(r0, mean), dot(r1, mean), dot(r2, mean)) + view.translation.xyz;
-    if (tc.z <= 0.01) {
+    let opacity = 1.0 / (1.0 + exp(-g0.w));
+    if (tc.z <= NEAR_Z || opacity < ALPHA_MIN) {
         projected[i] = culled();
         return;
     }
@@ -145,20 +154,19 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
         return;
     }
     let inv_det = 1.0 / det;
-    let mid = 0.5 * (a + c);
-    let lambda = mid + sqrt(max(0.1, mid * mid - det));
-    let radius = ceil(3.0 * sqrt(lambda));
+    let cut = max(log(255.0 * opacity), 0.0);
+    let ext = vec2<f32>(sqrt(2.0 * cut * a), sqrt(2.0 * cut * c)) * (1.0 + EXTENT_REL) + vec2<f32>(EXTENT_ABS);
     let u = fx * tc.x * iz + cx;
     let v = fy * tc.y * iz + cy;
-    if (u + radius < 0.0 || v + radius < 0.0 || u - radius > view.size_tan.x || v - radius > view.size_tan.y) {
+    if (u + ext.x < 0.0 || v + ext.y < 0.0 || u - ext.x > view.size_tan.x || v - ext.y > view.size_tan.y) {
         projected[i] = culled();
         return;
     }
 
     let dir = normalize(mean - view.cam_pos.xyz);
     var p: Projected;
-    p.center_radius_depth = vec4<f32>(u, v, radius, tc.z);
-    p.conic_opacity = vec4<f32>(c * inv_det, -b * inv_det, a * inv_det, 1.0 / (1.0 + exp(-g0.w)));
-    p.color = vec4<f32>(sh_color(i, view.counts.y, dir), 1.0);
+    p.center_extent = vec4<f32>(u, v, ext);
+    p.conic_opacity = vec4<f32>(c * inv_det, -b * inv_det, a * inv_det, opacity);
+    p.color_depth = vec4<f32>(sh_color(i, view.counts.y, dir), tc.z);
     projected[i] = p;
 }

@@ -21,7 +21,8 @@ pub const ICON: &str = "icon.png";
 
 /// The committed assets folder of this source tree.
 pub fn source_assets_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("assets")
+    let app = Path::new(env!("CARGO_MANIFEST_DIR"));
+    app.parent().unwrap_or(app).join("assets")
 }
 
 /// A small deterministic generator (SplitMix64), so the assets need no RNG crate.
@@ -224,20 +225,15 @@ where
     Ok(out)
 }
 
-/// Every asset as `(file name, bytes)`.
-pub fn all_assets() -> anyhow::Result<Vec<(String, Vec<u8>)>> {
-    let mut out = vec![(DEMO_SCENE.to_string(), super::scene_io::ply_bytes(&demo_scene()))];
-    for (name, img) in demo_styles() {
-        out.push((name.to_string(), png_bytes(&img)?));
-    }
-    out.push((ICON.to_string(), png_bytes(&icon())?));
-    Ok(out)
-}
-
-/// Writes every asset into `dir` (atomically, one file at a time); returns the paths.
+/// Writes every asset into `dir` (each file atomically); returns the paths.
 pub fn generate(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    let mut paths = Vec::new();
-    for (name, bytes) in all_assets()? {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let scene = dir.join(DEMO_SCENE);
+    gast_core::scene::save_ply(&scene, &demo_scene())?;
+    let mut paths = vec![scene];
+    let mut images: Vec<(String, Vec<u8>)> = demo_styles().into_iter().map(|(n, img)| Ok((n.to_string(), png_bytes(&img)?))).collect::<anyhow::Result<_>>()?;
+    images.push((ICON.to_string(), png_bytes(&icon())?));
+    for (name, bytes) in images {
         let path = dir.join(&name);
         gast_core::io::atomic_write(&path, |w| w.write_all(&bytes)).with_context(|| format!("writing {}", path.display()))?;
         paths.push(path);
@@ -254,13 +250,16 @@ mod tests {
     #[test]
     fn committed_assets_are_reproducible() {
         let dir = source_assets_dir();
+        let fresh = std::env::temp_dir().join(format!("gast-assets-{}", std::process::id()));
         let mut total = 0;
-        for (name, bytes) in all_assets().expect("generate") {
-            let path = dir.join(&name);
+        for made in generate(&fresh).expect("generate") {
+            let bytes = std::fs::read(&made).expect("read generated");
+            let path = dir.join(made.file_name().expect("name"));
             let committed = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}; run `cargo run -p gast -- assets`", path.display()));
             assert!(committed == bytes, "{} differs from the generator's output; run `cargo run -p gast -- assets`", path.display());
             total += bytes.len();
         }
+        std::fs::remove_dir_all(&fresh).ok();
         println!("assets: {total} bytes");
         assert!(total < 2 << 20, "assets too large: {total} bytes");
     }

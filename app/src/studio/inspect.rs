@@ -8,7 +8,7 @@ use std::sync::Arc;
 use crossbeam_channel::{Receiver, Sender};
 use gast_core::{Camera, Gaussians};
 
-use super::viewport::cpu_reference;
+use gast_core::raster::{RenderOptions, render};
 
 /// The three maps of one view, as 8-bit images ready for textures.
 pub struct Maps {
@@ -16,7 +16,7 @@ pub struct Maps {
     pub rgb: egui::ColorImage,
     /// Inverse depth, min-max normalised (near = bright).
     pub depth: egui::ColorImage,
-    /// Sobel edges of the render.
+    /// Sobel edges of the render (until `gast_core::vision` Canny is merged in).
     pub edges: egui::ColorImage,
 }
 
@@ -56,8 +56,8 @@ fn rgb_image(w: u32, h: u32, rgb: &[f32]) -> egui::ColorImage {
 
 /// The inspection maps of `g` from `cam`.
 pub fn maps(g: &Gaussians, cam: &Camera, background: [f32; 3]) -> Maps {
-    let r = cpu_reference::render(g, cam, background);
-    let edges = cpu_reference::sobel_edges(r.width, r.height, &r.rgb);
+    let r = render(g, cam, &RenderOptions { background });
+    let edges = sobel_edges(r.width, r.height, &r.rgb);
     Maps { rgb: rgb_image(r.width, r.height, &r.rgb), depth: gray_image(r.width, r.height, &r.inv_depth), edges: gray_image(r.width, r.height, &edges) }
 }
 
@@ -99,7 +99,7 @@ impl Jobs {
     /// Renders a view and writes it as PNG.
     pub fn export_png(&mut self, g: Arc<Gaussians>, cam: Camera, background: [f32; 3], path: PathBuf) {
         self.spawn(move || {
-            let r = cpu_reference::render(&g, &cam, background);
+            let r = render(&g, &cam, &RenderOptions { background });
             match gast_core::io::write_png_rgb(&path, r.width, r.height, &r.rgb) {
                 Ok(()) => JobDone::Exported(path),
                 Err(e) => JobDone::Failed(format!("exporting the view: {e}")),
@@ -110,7 +110,7 @@ impl Jobs {
     /// Renders a view's inverse depth and writes it as EXR.
     pub fn export_depth(&mut self, g: Arc<Gaussians>, cam: Camera, path: PathBuf) {
         self.spawn(move || {
-            let r = cpu_reference::render(&g, &cam, [0.0; 3]);
+            let r = render(&g, &cam, &RenderOptions::default());
             match gast_core::io::write_exr_depth(&path, r.width, r.height, &r.inv_depth) {
                 Ok(()) => JobDone::Exported(path),
                 Err(e) => JobDone::Failed(format!("exporting the depth: {e}")),
@@ -120,9 +120,9 @@ impl Jobs {
 
     /// Writes Gaussians as `.ply`.
     pub fn export_ply(&mut self, g: Arc<Gaussians>, path: PathBuf) {
-        self.spawn(move || match super::scene_io::save_ply(&path, &g) {
+        self.spawn(move || match gast_core::scene::save_ply(&path, &g) {
             Ok(()) => JobDone::Exported(path),
-            Err(e) => JobDone::Failed(format!("{e:#}")),
+            Err(e) => JobDone::Failed(format!("exporting the scene: {e}")),
         });
     }
 
@@ -132,4 +132,26 @@ impl Jobs {
         self.running = self.running.saturating_sub(done.len());
         done
     }
+}
+
+/// Gradient magnitude (Sobel) of the luminance of an RGB image, normalised to [0, 1].
+pub fn sobel_edges(width: u32, height: u32, rgb: &[f32]) -> Vec<f32> {
+    let (w, h) = (width as usize, height as usize);
+    let lum: Vec<f32> = rgb.chunks_exact(3).map(|c| 0.299 * c[0] + 0.587 * c[1] + 0.114 * c[2]).collect();
+    let at = |x: isize, y: isize| lum[(y.clamp(0, h as isize - 1) as usize) * w + x.clamp(0, w as isize - 1) as usize];
+    let mut out = vec![0.0f32; w * h];
+    let mut max = 0.0f32;
+    for y in 0..h as isize {
+        for x in 0..w as isize {
+            let gx = at(x + 1, y - 1) + 2.0 * at(x + 1, y) + at(x + 1, y + 1) - at(x - 1, y - 1) - 2.0 * at(x - 1, y) - at(x - 1, y + 1);
+            let gy = at(x - 1, y + 1) + 2.0 * at(x, y + 1) + at(x + 1, y + 1) - at(x - 1, y - 1) - 2.0 * at(x, y - 1) - at(x + 1, y - 1);
+            let m = (gx * gx + gy * gy).sqrt();
+            max = max.max(m);
+            out[y as usize * w + x as usize] = m;
+        }
+    }
+    if max > 0.0 {
+        out.iter_mut().for_each(|v| *v /= max);
+    }
+    out
 }

@@ -12,7 +12,6 @@
 pub mod assets;
 pub mod controls;
 pub mod inspect;
-pub mod scene_io;
 pub mod session_link;
 pub mod view;
 pub mod viewport;
@@ -207,7 +206,7 @@ impl StudioApp {
 
     /// Loads a scene file; on failure the error is shown and the previous scene stays.
     pub fn open_scene(&mut self, path: &Path) {
-        match scene_io::load(path) {
+        match gast_core::scene::load(path).map_err(anyhow::Error::new) {
             Ok(g) if g.is_empty() => self.report(anyhow::anyhow!("{}: the scene holds no Gaussians; keeping the previous scene", path.display())),
             Ok(g) => {
                 let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
@@ -582,7 +581,7 @@ impl StudioApp {
                     self.view.fit(&g);
                 }
             }
-            egui::ComboBox::from_id_salt("up").selected_text(format!("up {:?}", self.view.up)).show_ui(ui, |ui| {
+            egui::ComboBox::new("up", "up axis").selected_text(format!("{:?}", self.view.up)).show_ui(ui, |ui| {
                 for up in [UpAxis::NegY, UpAxis::PosY, UpAxis::PosZ] {
                     ui.selectable_value(&mut self.view.up, up, format!("{up:?}"));
                 }
@@ -608,7 +607,7 @@ impl StudioApp {
                 }
             }
             if let Some(k) = snap {
-                let focus = self.current().map(|g| view::Bounds::robust(&g).center());
+                let focus = self.current().and_then(|g| gast_core::camera::robust_bounds(&g.means)).map(|b| b.center);
                 let cam = self.cameras[k].clone();
                 self.view.snap_to(&cam, focus);
             }

@@ -6,7 +6,8 @@ use std::path::PathBuf;
 use egui_kittest::kittest::{NodeT as _, Queryable as _};
 use std::sync::Arc;
 
-use super::viewport::{Side, SplatRenderer, bench, cpu_reference, read_target};
+use super::viewport::{Side, SplatRenderer, bench, read_target};
+use gast_core::raster::{RenderOptions, render};
 use super::*;
 
 /// Whether tests that need lavapipe/Xvfb must fail (CI) rather than skip.
@@ -84,7 +85,7 @@ fn gpu_viewport_matches_the_cpu_reference() {
     queue.submit([encoder.finish()]);
     let (texture, _) = r.target(Side::Before).expect("target");
     let gpu = read_target(&device, &queue, texture);
-    let cpu = cpu_reference::render(&g, &cam, [0.0; 3]);
+    let cpu = render(&g, &cam, &RenderOptions::default());
     let mut sum = 0.0f64;
     let mut max = 0.0f32;
     for (p, px) in gpu.iter().enumerate() {
@@ -96,7 +97,7 @@ fn gpu_viewport_matches_the_cpu_reference() {
     }
     let mean = sum / (w * h * 3) as f64;
     let coverage = cpu.alpha.iter().filter(|&&a| a > 0.5).count() as f32 / (w * h) as f32;
-    println!("GPU viewport vs CPU reference on {adapter}: mean |diff| {mean:.5}, max {max:.3}, coverage {coverage:.2}");
+    println!("GPU viewport vs CPU rasterizer on {adapter}: mean |diff| {mean:.5}, max {max:.3}, coverage {coverage:.2}");
     assert!(coverage > 0.1, "the demo scene covers only {coverage} of the view");
     assert!(mean < 0.01, "mean abs difference {mean}");
     // Save both for a look.
@@ -137,7 +138,7 @@ fn a_bad_scene_file_shows_an_error_and_keeps_the_scene() {
     app.open_any(&bad);
     assert_eq!(app.scene.as_ref().map(|s| s.scene.version), before, "the previous scene stays");
     assert_eq!(app.errors.len(), 1);
-    assert!(app.errors[0].contains("broken.ply") && app.errors[0].contains("binary_little_endian"), "{}", app.errors[0]);
+    assert!(app.errors[0].contains("broken.ply") && app.errors[0].contains("keeping the previous scene"), "{}", app.errors[0]);
     app.open_any(&dir.join("missing.png"));
     assert_eq!(app.errors.len(), 2);
 
@@ -159,7 +160,7 @@ fn controls_edit_the_config_and_presets_round_trip() {
     harness.run_steps(2);
     assert_eq!(harness.state().config.texture_scale, 512);
     // Mode menu.
-    harness.get_by_label("decoupled").click();
+    harness.get_by_label("mode").click();
     harness.run_steps(2);
     harness.get_by_label("joint").click();
     harness.run_steps(2);

@@ -3,6 +3,7 @@
 //! zoom (wheel), fly (WASD + QE while the right button is held), fit to the
 //! scene's robust bounds, reset, and snap to a listed camera.
 
+use gast_core::camera::{OrbitOptions, orbit_cameras, robust_bounds};
 use gast_core::{Camera, Gaussians};
 use glam::{Mat3, Vec3};
 
@@ -25,47 +26,6 @@ impl UpAxis {
             UpAxis::PosY => Vec3::Y,
             UpAxis::PosZ => Vec3::Z,
         }
-    }
-}
-
-/// Robust bounds of a scene: per-axis 2nd..98th percentiles of the centres.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Bounds {
-    /// Lower corner.
-    pub min: Vec3,
-    /// Upper corner.
-    pub max: Vec3,
-}
-
-impl Bounds {
-    /// The robust bounds of the Gaussians' centres (a unit box around the origin when empty).
-    pub fn robust(g: &Gaussians) -> Self {
-        if g.is_empty() {
-            return Self { min: Vec3::splat(-1.0), max: Vec3::splat(1.0) };
-        }
-        let mut lo = [0.0f32; 3];
-        let mut hi = [0.0f32; 3];
-        for axis in 0..3 {
-            let mut v: Vec<f32> = g.means.iter().map(|m| m[axis]).filter(|x| x.is_finite()).collect();
-            if v.is_empty() {
-                continue;
-            }
-            let n = v.len();
-            let (a, b) = ((n as f32 * 0.02) as usize, ((n as f32 * 0.98) as usize).min(n - 1));
-            lo[axis] = *v.select_nth_unstable_by(a, f32::total_cmp).1;
-            hi[axis] = *v.select_nth_unstable_by(b, f32::total_cmp).1;
-        }
-        Self { min: Vec3::from_array(lo), max: Vec3::from_array(hi) }
-    }
-
-    /// Centre of the box.
-    pub fn center(&self) -> Vec3 {
-        0.5 * (self.min + self.max)
-    }
-
-    /// Half the diagonal (at least a small positive number).
-    pub fn radius(&self) -> f32 {
-        (0.5 * (self.max - self.min).length()).max(1e-3)
     }
 }
 
@@ -123,12 +83,16 @@ impl ViewState {
         self.cam_to_world = Mat3::from_cols(right, down, forward);
     }
 
-    /// Frames the robust bounds of `g` from a pleasant three-quarter view.
+    /// Frames the robust bounds of `g` (2nd–98th percentiles, median centre) from a
+    /// three-quarter view.
     pub fn fit(&mut self, g: &Gaussians) {
-        let b = Bounds::robust(g);
-        self.target = b.center();
-        self.distance = 1.1 * b.radius() / (0.5 * self.fov_y).tan();
-        self.fly_speed = b.radius();
+        let (center, radius) = match robust_bounds(&g.means) {
+            Some(b) => (b.center, b.radius().max(1e-3)),
+            None => (Vec3::ZERO, 1.0),
+        };
+        self.target = center;
+        self.distance = 0.9 * radius / (0.5 * self.fov_y).tan();
+        self.fly_speed = radius;
         let up = self.up.vector();
         let side = up.any_orthonormal_vector();
         self.look_from_direction((side * 0.8 + up.cross(side) * 0.6 + up * 0.45).normalize());
@@ -196,25 +160,11 @@ impl ViewState {
     }
 }
 
-/// A ring of `n` cameras around the robust bounds of `g`, looking at its centre
-/// (a stand-in for `gast_core::camera::orbit_cameras` until branch `camera` lands).
+/// `n` orbit cameras around the robust bounds of `g` (`gast_core::camera::orbit_cameras`
+/// on a sphere band), the list the view can snap to.
 pub fn orbit_ring(g: &Gaussians, up: UpAxis, n: usize, width: u32, height: u32) -> Vec<Camera> {
-    let b = Bounds::robust(g);
-    let mut v = ViewState { up, ..ViewState::default() };
-    v.target = b.center();
-    v.distance = 1.2 * b.radius() / (0.5 * v.fov_y).tan();
-    let upv = up.vector();
-    let a = upv.any_orthonormal_vector();
-    let c = upv.cross(a);
-    (0..n)
-        .map(|k| {
-            let t = k as f32 / n as f32 * std::f32::consts::TAU;
-            v.look_from_direction((a * t.cos() + c * t.sin()) * 0.9 + upv * 0.4);
-            let mut cam = v.camera(width, height);
-            cam.name = format!("orbit_{k:03}");
-            cam
-        })
-        .collect()
+    let opts = OrbitOptions { count: n, width, height, up: up.vector().to_array(), ..OrbitOptions::default() };
+    orbit_cameras(&g.means, &opts)
 }
 
 #[cfg(test)]

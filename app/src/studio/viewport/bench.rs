@@ -49,7 +49,7 @@ pub fn synthetic_scene(n: usize) -> Gaussians {
 /// Times `frames` viewport frames (sort, upload, projection, draw, wait) at 1280×720.
 pub fn run(scene: Option<&Path>, count: usize, frames: u32) -> anyhow::Result<String> {
     let g = match scene {
-        Some(p) => crate::studio::scene_io::load(p)?,
+        Some(p) => gast_core::scene::load(p)?,
         None => synthetic_scene(count),
     };
     let g = Arc::new(g);

@@ -54,12 +54,12 @@ impl ViewUniform {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct ProjectedSplat {
-    /// u, v (pixels), radius (pixels, 0 when culled), view depth.
-    pub center_radius_depth: [f32; 4],
+    /// u, v (pixels), half-extents x, y (pixels, 0 when culled).
+    pub center_extent: [f32; 4],
     /// Conic (inverse 2D covariance) xx, xy, yy and opacity.
     pub conic_opacity: [f32; 4],
-    /// RGB, w unused.
-    pub color: [f32; 4],
+    /// RGB and view depth.
+    pub color_depth: [f32; 4],
 }
 const _: () = assert!(std::mem::size_of::<ProjectedSplat>() == 48);
 

@@ -7,7 +7,6 @@
 
 pub mod bench;
 pub mod blit;
-pub mod cpu_reference;
 pub mod gpu_types;
 pub mod sort;
 pub mod splat_draw;

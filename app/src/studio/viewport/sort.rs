@@ -3,8 +3,9 @@
 
 use glam::Vec3;
 
-/// Near plane below which Gaussians are left out (same as splat_project.wgsl).
-pub const NEAR: f32 = 0.01;
+/// Near plane below which Gaussians are left out (same as splat_project.wgsl and
+/// the CPU rasterizer).
+pub const NEAR: f32 = 0.2;
 
 /// Indices of the Gaussians in front of the camera, farthest first.
 pub fn back_to_front(means: &[[f32; 3]], rotation_row_z: Vec3, translation_z: f32) -> Vec<u32> {
@@ -56,7 +57,7 @@ mod tests {
 
     #[test]
     fn farthest_first_and_behind_dropped() {
-        let means = [[0.0, 0.0, 2.0], [0.0, 0.0, -1.0], [0.0, 0.0, 5.0], [1.0, 0.0, 0.5], [0.0, 0.0, 2.0]];
+        let means = [[0.0, 0.0, 2.0], [0.0, 0.0, 0.1], [0.0, 0.0, 5.0], [1.0, 0.0, 0.5], [0.0, 0.0, 2.0]];
         let order = back_to_front(&means, Vec3::Z, 0.0);
         assert_eq!(order, vec![2, 0, 4, 3]);
     }
