@@ -39,10 +39,17 @@ pub struct Jobs {
     pub running: usize,
 }
 
-fn gray_image(w: u32, h: u32, v: &[f32]) -> egui::ColorImage {
-    let (lo, hi) = gast_core::io::finite_range(v);
+/// A grey image of `v`, min-max normalised over the pixels where `mask` is set
+/// (the rest black), so that empty background does not flatten the contrast.
+fn gray_image(w: u32, h: u32, v: &[f32], mask: impl Fn(usize) -> bool) -> egui::ColorImage {
+    let inside: Vec<f32> = v.iter().enumerate().filter(|(i, _)| mask(*i)).map(|(_, &x)| x).collect();
+    let (lo, hi) = gast_core::io::finite_range(&inside);
     let s = if hi > lo { 1.0 / (hi - lo) } else { 0.0 };
-    let px = v.iter().map(|&x| egui::Color32::from_gray(((x - lo) * s * 255.0).clamp(0.0, 255.0) as u8)).collect();
+    let px = v
+        .iter()
+        .enumerate()
+        .map(|(i, &x)| if mask(i) { egui::Color32::from_gray((16.0 + (x - lo) * s * 239.0).clamp(0.0, 255.0) as u8) } else { egui::Color32::BLACK })
+        .collect();
     egui::ColorImage::new([w as usize, h as usize], px)
 }
 
@@ -58,7 +65,13 @@ fn rgb_image(w: u32, h: u32, rgb: &[f32]) -> egui::ColorImage {
 pub fn maps(g: &Gaussians, cam: &Camera, background: [f32; 3]) -> Maps {
     let r = render(g, cam, &RenderOptions { background });
     let edges = sobel_edges(r.width, r.height, &r.rgb);
-    Maps { rgb: rgb_image(r.width, r.height, &r.rgb), depth: gray_image(r.width, r.height, &r.inv_depth), edges: gray_image(r.width, r.height, &edges) }
+    // Inverse depth is Σ wᵢ/zᵢ: divide by the opacity to get the covered pixels' own depth.
+    let depth: Vec<f32> = r.inv_depth.iter().zip(&r.alpha).map(|(d, a)| if *a > 0.05 { d / a } else { 0.0 }).collect();
+    Maps {
+        rgb: rgb_image(r.width, r.height, &r.rgb),
+        depth: gray_image(r.width, r.height, &depth, |i| r.alpha[i] > 0.05),
+        edges: gray_image(r.width, r.height, &edges, |_| true),
+    }
 }
 
 /// The camera scaled so its longer side is `long_side` pixels.

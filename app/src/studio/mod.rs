@@ -337,7 +337,7 @@ impl StudioApp {
         egui::Panel::right("controls").resizable(true).default_size(330.0).show(ui, |ui| {
             egui::ScrollArea::vertical().show(ui, |ui| self.side_panel(ui));
         });
-        egui::Panel::bottom("inspect").resizable(true).default_size(170.0).show(ui, |ui| self.inspect_panel(ui));
+        egui::Panel::bottom("inspect").resizable(false).exact_size(190.0).show(ui, |ui| self.inspect_panel(ui));
         egui::CentralPanel::default().show(ui, |ui| self.viewport(ui));
         self.test_switches(ui.ctx());
     }
@@ -625,7 +625,7 @@ impl StudioApp {
             }
             ui.weak("RGB · inverse depth · edges of the current view (CPU rasterizer)");
         });
-        let h = (ui.available_height() - 4.0).max(32.0);
+        let h = 150.0;
         ui.horizontal(|ui| match &self.maps {
             Some(maps) => {
                 for (t, name) in maps.iter().zip(["RGB", "inverse depth", "edges"]) {
@@ -662,9 +662,16 @@ impl StudioApp {
         let (rect, response) = ui.allocate_exact_size(size, egui::Sense::click_and_drag());
         let ppp = ui.ctx().pixels_per_point();
         self.viewport_px = [(rect.width() * ppp).round().max(1.0) as u32, (rect.height() * ppp).round().max(1.0) as u32];
-        self.handle_view_input(ui, &response, rect);
+        let interacting = self.handle_view_input(ui, &response, rect);
+        let full = self.viewport_camera();
+        // Half resolution while the view moves keeps big scenes responsive on software GPUs.
+        let camera = if interacting && self.scene.as_ref().is_some_and(|s| s.scene.gaussians.len() > 200_000) {
+            inspect::scaled(&full, full.width.max(full.height) / 2)
+        } else {
+            full
+        };
         let callback = ViewportCallback {
-            camera: self.viewport_camera(),
+            camera,
             before: self.scene.as_ref().map(|s| s.scene.clone()),
             after: self.snapshot.clone(),
             split: self.split,
@@ -682,7 +689,8 @@ impl StudioApp {
         }
     }
 
-    fn handle_view_input(&mut self, ui: &Ui, response: &egui::Response, rect: egui::Rect) {
+    /// Applies the mouse and keyboard to the view; true while the view is being moved.
+    fn handle_view_input(&mut self, ui: &Ui, response: &egui::Response, rect: egui::Rect) -> bool {
         let delta = response.drag_delta();
         if response.dragged_by(egui::PointerButton::Primary) {
             self.view.orbit(delta.x * 0.006, -delta.y * 0.006);
@@ -712,6 +720,7 @@ impl StudioApp {
                 ui.ctx().request_repaint();
             }
         }
+        response.dragged() || flying
     }
 }
 
