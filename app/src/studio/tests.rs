@@ -317,3 +317,37 @@ fn blit_composites_the_before_after_split() {
     println!("left RGB sums {l:?}, right {r:?}");
     assert!(l[0] > r[0] * 1.2, "the right (after) side should be less red");
 }
+
+/// A file "dropped" onto the window in tests.
+#[derive(Debug)]
+struct TestDrop(PathBuf);
+
+impl egui::DroppedFile for TestDrop {
+    fn path(&self) -> &std::path::Path {
+        &self.0
+    }
+    fn bytes(&self) -> Result<Vec<u8>, String> {
+        std::fs::read(&self.0).map_err(|e| e.to_string())
+    }
+}
+
+#[test]
+fn dropped_styles_and_scenes_open() {
+    let app = test_app();
+    let styles_before = app.styles.len();
+    let mut harness = egui_kittest::Harness::builder().with_size(egui::vec2(1280.0, 900.0)).build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    harness.run_steps(1);
+    let dir = assets::source_assets_dir();
+    let dropped: Vec<egui::DroppedFileHandle> =
+        vec![Arc::new(TestDrop(dir.join(assets::DEMO_STYLES[1]))), Arc::new(TestDrop(dir.join(assets::DEMO_SCENE))), Arc::new(TestDrop(dir.join("no-such-file.ply")))];
+    harness.input_mut().dropped_files = dropped;
+    harness.step();
+    harness.run_steps(2);
+    let app = harness.state();
+    assert_eq!(app.styles.len(), styles_before + 1, "the dropped style joins the recent strip");
+    assert_eq!(app.style, Some(0), "and becomes the current style");
+    assert!(app.styles[0].path.ends_with(assets::DEMO_STYLES[1]));
+    assert_eq!(app.errors.len(), 1, "{:?}", app.errors);
+    assert!(app.errors[0].contains("no-such-file.ply"), "{}", app.errors[0]);
+    assert!(app.scene.is_some());
+}
