@@ -41,6 +41,12 @@ pub enum Commands {
         /// Frames to time.
         #[arg(long, default_value_t = 10)]
         frames: u32,
+        /// Frame width in pixels.
+        #[arg(long, default_value_t = 1280)]
+        width: u32,
+        /// Frame height in pixels.
+        #[arg(long, default_value_t = 720)]
+        height: u32,
     },
 }
 
@@ -56,8 +62,8 @@ pub fn run() -> anyhow::Result<()> {
             }
             Ok(())
         }
-        Some(Commands::ViewportBench { scene, count, frames }) => {
-            let report = studio::viewport::bench::run(scene.as_deref(), count, frames)?;
+        Some(Commands::ViewportBench { scene, count, frames, width, height }) => {
+            let report = studio::viewport::bench::run(scene.as_deref(), count, frames, width, height)?;
             println!("{report}");
             Ok(())
         }

@@ -117,7 +117,7 @@ fn viewport_frame_time_500k() {
     if device_or_skip("viewport_frame_time_500k").is_none() {
         return;
     }
-    println!("{}", bench::run(None, 500_000, 5).expect("bench"));
+    println!("{}", bench::run(None, 500_000, 5, 1280, 720).expect("bench"));
 }
 
 fn test_app() -> StudioApp {

@@ -46,8 +46,9 @@ pub fn synthetic_scene(n: usize) -> Gaussians {
     g
 }
 
-/// Times `frames` viewport frames (sort, upload, projection, draw, wait) at 1280×720.
-pub fn run(scene: Option<&Path>, count: usize, frames: u32) -> anyhow::Result<String> {
+/// Times `frames` viewport frames (sort, upload, projection, draw, wait) at `width × height`,
+/// orbiting a little between frames so every frame sorts.
+pub fn run(scene: Option<&Path>, count: usize, frames: u32, width: u32, height: u32) -> anyhow::Result<String> {
     let g = match scene {
         Some(p) => gast_core::scene::load(p)?,
         None => synthetic_scene(count),
@@ -65,7 +66,7 @@ pub fn run(scene: Option<&Path>, count: usize, frames: u32) -> anyhow::Result<St
     let mut sort = 0.0;
     for k in 0..frames + 1 {
         view.orbit(0.02, 0.0);
-        let cam = view.camera(1280, 720);
+        let cam = view.camera(width, height);
         let t = Instant::now();
         r.begin_frame();
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("bench") });
@@ -80,7 +81,7 @@ pub fn run(scene: Option<&Path>, count: usize, frames: u32) -> anyhow::Result<St
     let mean = times.iter().sum::<f64>() / times.len().max(1) as f64;
     let min = times.iter().copied().fold(f64::INFINITY, f64::min);
     Ok(format!(
-        "viewport frame time on {adapter}: {} Gaussians (SH {}) at 1280x720: mean {mean:.1} ms, best {min:.1} ms over {} frames (CPU sort {:.1} ms/frame, upload once {upload_ms:.0} ms)",
+        "viewport frame time on {adapter}: {} Gaussians (SH {}) at {width}x{height}: mean {mean:.1} ms, best {min:.1} ms over {} frames (CPU sort {:.1} ms/frame, upload once {upload_ms:.0} ms)",
         g.len(),
         g.sh_degree,
         times.len(),

@@ -31,6 +31,8 @@ struct GpuScene {
     draw_bind: wgpu::BindGroup,
     sh_words: u32,
     sh_split: u32,
+    /// The depth axis (row z of R, t.z) the order buffer was sorted for, and how many are in front.
+    sorted_for: Option<([f32; 4], u32)>,
     /// Kept alive for the bind groups.
     _buffers: Vec<wgpu::Buffer>,
 }
@@ -168,6 +170,7 @@ impl SplatRenderer {
             draw_bind,
             sh_words: words,
             sh_split: split as u32,
+            sorted_for: None,
             _buffers: vec![geom, sh_a, sh_b, projected],
         });
     }
@@ -207,21 +210,32 @@ impl SplatRenderer {
         let started = Instant::now();
         let (w, h) = (cam.width.max(1), cam.height.max(1));
         self.ensure_target(device, side, w, h);
-        let Some(scene) = &self.scenes[side as usize] else { return false };
+        let Some(scene) = &mut self.scenes[side as usize] else { return false };
         let g = &scene.gaussians;
         let row_z = cam.rotation.row(2);
-        let sort_start = Instant::now();
-        let order = sort::back_to_front(&g.means, Vec3::new(row_z.x, row_z.y, row_z.z), cam.translation.z);
-        self.stats.sort_ms += sort_start.elapsed().as_secs_f32() * 1e3;
-        if !order.is_empty() {
-            queue.write_buffer(&scene.order, 0, bytemuck::cast_slice(&order));
-        }
+        let axis = [row_z.x, row_z.y, row_z.z, cam.translation.z];
+        // A still camera (most repaints) keeps the previous order.
+        let visible = match scene.sorted_for {
+            Some((a, n)) if a == axis => n,
+            _ => {
+                let sort_start = Instant::now();
+                let order = sort::back_to_front(&g.means, Vec3::new(row_z.x, row_z.y, row_z.z), cam.translation.z);
+                self.stats.sort_ms += sort_start.elapsed().as_secs_f32() * 1e3;
+                if !order.is_empty() {
+                    queue.write_buffer(&scene.order, 0, bytemuck::cast_slice(&order));
+                }
+                scene.sorted_for = Some((axis, order.len() as u32));
+                order.len() as u32
+            }
+        };
+        let scene = &self.scenes[side as usize].as_ref().expect("scene checked above");
+        let g = &scene.gaussians;
         let uniform = ViewUniform::new(cam, g.len() as u32, g.sh_degree, scene.sh_words, scene.sh_split, [0.0; 3]);
         queue.write_buffer(&scene.view, 0, bytemuck::bytes_of(&uniform));
         self.project.dispatch(encoder, &scene.project_bind, g.len() as u32);
         let Some(target) = &self.targets[side as usize] else { return false };
-        self.draw.draw(encoder, &target.view, &scene.draw_bind, order.len() as u32);
-        self.stats.drawn += order.len();
+        self.draw.draw(encoder, &target.view, &scene.draw_bind, visible);
+        self.stats.drawn += visible as usize;
         self.stats.prepare_ms += started.elapsed().as_secs_f32() * 1e3;
         true
     }

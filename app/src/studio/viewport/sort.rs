@@ -72,4 +72,13 @@ mod tests {
         assert_eq!(keys, want.iter().map(|p| p.0).collect::<Vec<_>>());
         assert_eq!(vals, want.iter().map(|p| p.1).collect::<Vec<_>>());
     }
+
+    #[test]
+    fn sort_time_500k() {
+        let means: Vec<[f32; 3]> = (0..500_000u32).map(|i| [0.0, 0.0, 1.0 + (i.wrapping_mul(2_654_435_761) % 100_000) as f32 * 1e-3]).collect();
+        let t = std::time::Instant::now();
+        let order = back_to_front(&means, Vec3::Z, 0.0);
+        println!("back_to_front of 500k: {:.1} ms", t.elapsed().as_secs_f64() * 1e3);
+        assert_eq!(order.len(), 500_000);
+    }
 }
