@@ -80,7 +80,8 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
         painter.text(rect.center(), egui::Align2::CENTER_CENTER, "loss chart: no steps yet", egui::FontId::proportional(12.0), ui.visuals().weak_text_color());
         return;
     }
-    let series: [(&str, Color32, fn(&StepReport) -> f32); 2] =
+    type Series = (&'static str, Color32, fn(&StepReport) -> f32);
+    let series: [Series; 2] =
         [("total", Color32::from_rgb(250, 200, 60), |s| s.losses.total), ("GCFM", Color32::from_rgb(90, 170, 250), |s| s.losses.gcfm)];
     let all = steps.iter().flat_map(|s| [s.losses.total, s.losses.gcfm]).filter(|v| v.is_finite());
     let (lo, hi) = all.fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));

@@ -71,6 +71,7 @@ pub struct StudioApp {
     pub config: StyleConfig,
     view: ViewState,
     cameras: Vec<Camera>,
+    camera_source: String,
     split: f32,
     background: [f32; 3],
     /// Messages shown in the bottom panel, newest last.
@@ -141,6 +142,7 @@ impl StudioApp {
             config: StyleConfig::default(),
             view: ViewState::default(),
             cameras: Vec::new(),
+            camera_source: String::new(),
             split: 0.5,
             background: [0.0; 3],
             errors: Vec::new(),
@@ -197,6 +199,7 @@ impl StudioApp {
         let g = Arc::new(g);
         self.view.fit(&g);
         self.cameras = view::orbit_ring(&g, self.view.up, 12, 800, 600);
+        self.camera_source = "orbit".into();
         self.scene = Some(LoadedScene { name, scene: SceneRef { version: self.next_version, gaussians: g } });
         self.next_version += 1;
         self.snapshot = None;
@@ -212,6 +215,13 @@ impl StudioApp {
                 let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
                 self.notice = format!("opened {} ({} Gaussians, SH degree {})", path.display(), g.len(), g.sh_degree);
                 self.set_scene(name, g);
+                // Training cameras beside the scene (COLMAP, cameras.json, transforms.json), when there are any.
+                if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
+                    && let Ok(set) = gast_core::camera::load(dir)
+                    && !set.cameras.is_empty()
+                {
+                    self.set_cameras(set, dir);
+                }
             }
             Err(e) => self.report(e.context("keeping the previous scene")),
         }
@@ -250,12 +260,45 @@ impl StudioApp {
         }
     }
 
-    /// Opens a file by its extension: a scene or a style image.
+    fn set_cameras(&mut self, set: gast_core::camera::CameraSet, from: &Path) {
+        self.cameras = set.cameras;
+        self.camera_source = from.display().to_string();
+        for w in set.warnings {
+            self.run.log.push(format!("cameras: {w}"));
+        }
+    }
+
+    /// Loads optimisation cameras (COLMAP, `cameras.json`, `transforms.json`) for the snap list.
+    pub fn open_cameras(&mut self, path: &Path) {
+        match gast_core::camera::load(path) {
+            Ok(set) if set.cameras.is_empty() => self.report(anyhow::anyhow!("{}: no cameras in the file", path.display())),
+            Ok(set) => {
+                self.notice = format!("{} cameras from {}", set.cameras.len(), path.display());
+                self.set_cameras(set, path);
+            }
+            Err(e) => self.report(anyhow::Error::new(e).context("keeping the current camera list")),
+        }
+    }
+
+    /// Opens a file by what it is: a style image, a preset, cameras or a scene.
     pub fn open_any(&mut self, path: &Path) {
         let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
         match ext.as_str() {
             "png" | "jpg" | "jpeg" | "webp" => self.open_style(path),
-            "json" => self.load_preset(path),
+            "bin" | "txt" => self.open_cameras(path),
+            "json" => {
+                // cameras.json is a list, transforms.json has frames, SOG's meta.json has means; the rest are presets.
+                let text = std::fs::read_to_string(path).unwrap_or_default();
+                let value: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
+                if value.is_array() || value.get("frames").is_some() {
+                    self.open_cameras(path);
+                } else if value.get("means").is_some() {
+                    self.open_scene(path);
+                } else {
+                    self.load_preset(path);
+                }
+            }
+            _ if path.is_dir() && !path.join("meta.json").exists() => self.open_cameras(path),
             _ => self.open_scene(path),
         }
     }
@@ -599,7 +642,7 @@ impl StudioApp {
                 self.background = bg;
             }
         });
-        egui::CollapsingHeader::new(format!("Cameras ({})", self.cameras.len())).show(ui, |ui| {
+        egui::CollapsingHeader::new(format!("Cameras ({}, {})", self.cameras.len(), self.camera_source)).show(ui, |ui| {
             let mut snap = None;
             for (k, c) in self.cameras.iter().enumerate() {
                 if ui.selectable_label(false, &c.name).clicked() {

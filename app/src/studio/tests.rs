@@ -89,8 +89,8 @@ fn gpu_viewport_matches_the_cpu_reference() {
     let mut sum = 0.0f64;
     let mut max = 0.0f32;
     for (p, px) in gpu.iter().enumerate() {
-        for ch in 0..3 {
-            let d = (px[ch] - cpu.rgb[p * 3 + ch]).abs();
+        for (ch, &v) in px.iter().take(3).enumerate() {
+            let d = (v - cpu.rgb[p * 3 + ch]).abs();
             sum += d as f64;
             max = max.max(d);
         }
@@ -306,8 +306,8 @@ fn blit_composites_the_before_after_split() {
         let mut s = [0f64; 3];
         for y in 0..h {
             for x in x0..x1 {
-                for c in 0..3 {
-                    s[c] += img.get_pixel(x, y).0[c] as f64;
+                for (acc, v) in s.iter_mut().zip(img.get_pixel(x, y).0) {
+                    *acc += v as f64;
                 }
             }
         }

@@ -173,8 +173,7 @@ mod tests {
 
     #[test]
     fn target_projects_to_the_centre_and_up_is_up() {
-        let mut v = ViewState::default();
-        v.target = Vec3::new(1.0, 2.0, 3.0);
+        let mut v = ViewState { target: Vec3::new(1.0, 2.0, 3.0), ..ViewState::default() };
         v.orbit(0.3, 0.2);
         let cam = v.camera(200, 100);
         let p = cam.world_to_camera(v.target);
