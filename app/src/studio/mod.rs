@@ -28,7 +28,7 @@ use gast_core::{Camera, Gaussians};
 
 use session_link::{RunMonitor, RunStatus, SessionStarter, StartRequest};
 use view::{UpAxis, ViewState};
-use viewport::{FrameStats, SceneRef, ViewportCallback, ViewportResources};
+use viewport::{FrameStats, SceneRef, ViewportCallback, ViewportNotes, ViewportResources};
 
 /// What `gast studio` was asked to open.
 #[derive(Clone, Debug, Default)]
@@ -80,6 +80,7 @@ pub struct StudioApp {
     run: RunMonitor,
     starter: Option<SessionStarter>,
     stats: Arc<Mutex<FrameStats>>,
+    viewport_notes: Arc<Mutex<ViewportNotes>>,
     jobs: inspect::Jobs,
     maps: Option<[egui::TextureHandle; 3]>,
     auto_inspect: bool,
@@ -150,6 +151,7 @@ impl StudioApp {
             run: RunMonitor::default(),
             starter: None,
             stats: Arc::default(),
+            viewport_notes: Arc::default(),
             jobs: inspect::Jobs::new(waker),
             maps: None,
             auto_inspect: true,
@@ -337,6 +339,10 @@ impl StudioApp {
     }
 
     fn poll_workers(&mut self) {
+        if let Ok(mut notes) = self.viewport_notes.lock() {
+            self.errors.append(&mut notes.errors);
+            self.run.log.append(&mut notes.warnings);
+        }
         if let Some(snap) = self.run.poll() {
             self.snapshot = Some(SceneRef { version: self.next_version, gaussians: Arc::new(snap.gaussians.clone()) });
             self.next_version += 1;
@@ -720,6 +726,7 @@ impl StudioApp {
             split: self.split,
             background: self.background,
             stats: self.stats.clone(),
+            notes: self.viewport_notes.clone(),
         };
         ui.painter().add(egui_wgpu::Callback::new_paint_callback(rect, callback));
         if self.snapshot.is_some() && self.split > 0.0 && self.split < 1.0 {

@@ -59,7 +59,7 @@ fn every_wgsl_file_validates_with_naga() {
 #[test]
 fn sh_packing_round_trips_through_f16() {
     let g = bench::synthetic_scene(10);
-    let (words, per) = super::viewport::pack_sh_f16(&g);
+    let (words, per) = super::viewport::pack_sh_f16(&g, 3);
     assert_eq!(per, 24);
     let back = viewport::f16_to_f32((words[0] & 0xffff) as u16);
     assert!((back - g.sh[0]).abs() < 1e-3);
@@ -79,7 +79,7 @@ fn gpu_viewport_matches_the_cpu_reference() {
     let (w, h) = (320, 240);
     let cam = demo_camera(&g, w, h);
     let mut r = SplatRenderer::new(&device);
-    r.set_scene(&device, Side::Before, 1, &g);
+    r.set_scene(&device, Side::Before, 1, &g).expect("upload");
     let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
     assert!(r.render(&device, &queue, &mut encoder, Side::Before, &cam));
     queue.submit([encoder.finish()]);
@@ -237,8 +237,8 @@ fn blit_composites_the_before_after_split() {
     let (w, h) = (320u32, 240u32);
     let cam = demo_camera(&before, w, h);
     let mut r = SplatRenderer::new(&device);
-    r.set_scene(&device, Side::Before, 1, &before);
-    r.set_scene(&device, Side::After, 2, &after);
+    r.set_scene(&device, Side::Before, 1, &before).expect("upload");
+    r.set_scene(&device, Side::After, 2, &after).expect("upload");
     let format = wgpu::TextureFormat::Rgba8Unorm;
     let blit = viewport::blit::BlitPipeline::new(&device, format);
     let out = device.create_texture(&wgpu::TextureDescriptor {
@@ -350,4 +350,30 @@ fn dropped_styles_and_scenes_open() {
     assert_eq!(app.errors.len(), 1, "{:?}", app.errors);
     assert!(app.errors[0].contains("no-such-file.ply"), "{}", app.errors[0]);
     assert!(app.scene.is_some());
+}
+
+#[test]
+fn sh_split_across_two_bindings_renders_the_same() {
+    let Some((device, queue, _)) = device_or_skip("sh_split_across_two_bindings_renders_the_same") else { return };
+    let g = Arc::new(bench::synthetic_scene(3000));
+    let cam = demo_camera(&g, 160, 120);
+    let mut images = Vec::new();
+    for limit in [None, Some(1500 * 24 * 4)] {
+        let mut r = SplatRenderer::new(&device);
+        // Lowered: 1500 Gaussians in each binding.
+        r.sh_binding_limit = limit;
+        assert_eq!(r.set_scene(&device, Side::Before, 1, &g), Ok(None));
+        let mut encoder = device.create_command_encoder(&Default::default());
+        r.render(&device, &queue, &mut encoder, Side::Before, &cam);
+        queue.submit([encoder.finish()]);
+        images.push(read_target(&device, &queue, r.target(Side::Before).expect("target").0));
+    }
+    let lit = images[0].iter().filter(|p| p[3] > 0.1).count();
+    assert!(lit > 1000, "only {lit} pixels drawn");
+    assert!(images[0] == images[1], "splitting the SH bindings changed the render");
+    // Two bindings of 1000 cannot hold 3000 Gaussians of SH3: degree 2 is drawn, and said.
+    let mut r = SplatRenderer::new(&device);
+    r.sh_binding_limit = Some(1000 * 24 * 4);
+    let note = r.set_scene(&device, Side::Before, 1, &g).expect("upload").expect("a note");
+    assert!(note.contains("SH degree 2 of 3"), "{note}");
 }

@@ -57,7 +57,9 @@ pub fn run(scene: Option<&Path>, count: usize, frames: u32, width: u32, height: 
     let (device, queue, adapter) = headless_device()?;
     let mut r = SplatRenderer::new(&device);
     let upload = Instant::now();
-    r.set_scene(&device, Side::Before, 1, &g);
+    if let Some(note) = r.set_scene(&device, Side::Before, 1, &g).map_err(anyhow::Error::msg)? {
+        eprintln!("{note}");
+    }
     let _ = device.poll(wgpu::PollType::wait_indefinitely());
     let upload_ms = upload.elapsed().as_secs_f64() * 1e3;
     let mut view = ViewState::default();

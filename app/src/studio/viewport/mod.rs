@@ -31,6 +31,8 @@ struct GpuScene {
     draw_bind: wgpu::BindGroup,
     sh_words: u32,
     sh_split: u32,
+    /// The SH degree drawn (lower than the scene's when the coefficients do not fit).
+    sh_degree: u32,
     /// The depth axis (row z of R, t.z) the order buffer was sorted for, and how many are in front.
     sorted_for: Option<([f32; 4], u32)>,
     /// Kept alive for the bind groups.
@@ -54,13 +56,26 @@ pub struct FrameStats {
     pub prepare_ms: f32,
 }
 
-/// Packs the SH coefficients of `g` as f16 pairs, `words` u32 per Gaussian.
-pub fn pack_sh_f16(g: &Gaussians) -> (Vec<u32>, u32) {
-    let per = g.sh_coeffs() * 3;
+/// What the viewport has to tell the user about the scenes it was given
+/// (a scene it cannot draw, a lowered SH degree); the UI shows it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ViewportNotes {
+    /// Scene versions the notes are about.
+    pub versions: [u64; 2],
+    /// Errors (the scene is not drawn).
+    pub errors: Vec<String>,
+    /// Warnings (drawn with a limitation).
+    pub warnings: Vec<String>,
+}
+
+/// Packs the SH coefficients of `g` up to `degree` (≤ the scene's) as f16 pairs,
+/// `words` u32 per Gaussian.
+pub fn pack_sh_f16(g: &Gaussians, degree: u32) -> (Vec<u32>, u32) {
+    let per = gast_core::scene::sh_coeffs_for_degree(degree.min(g.sh_degree)) * 3;
     let words = per.div_ceil(2);
     let mut out = vec![0u32; g.len() * words];
     for i in 0..g.len() {
-        let sh = g.sh_of(i);
+        let sh = &g.sh_of(i)[..per];
         for (k, pair) in sh.chunks(2).enumerate() {
             let lo = half::f16::from_f32(pair[0]).to_bits() as u32;
             let hi = pair.get(1).map(|&v| half::f16::from_f32(v).to_bits() as u32).unwrap_or(0);
@@ -104,6 +119,8 @@ pub struct SplatRenderer {
     targets: [Option<Target>; 2],
     /// Statistics of the last [`SplatRenderer::render`] calls since [`SplatRenderer::begin_frame`].
     pub stats: FrameStats,
+    /// Bytes one SH binding may hold; the device's limit unless a test lowers it.
+    pub sh_binding_limit: Option<usize>,
 }
 
 /// Which scene slot: the original Gaussians or the current (optimised) ones.
@@ -124,19 +141,37 @@ impl SplatRenderer {
             scenes: [None, None],
             targets: [None, None],
             stats: FrameStats::default(),
+            sh_binding_limit: None,
         }
     }
 
-    /// Uploads `g` into `side` unless that version is already there.
-    pub fn set_scene(&mut self, device: &wgpu::Device, side: Side, version: u64, g: &Arc<Gaussians>) {
+    /// Uploads `g` into `side` unless that version is already there. A scene whose
+    /// geometry does not fit one storage binding is refused; SH coefficients that
+    /// do not fit two bindings are drawn at a lower degree (both said in the result).
+    pub fn set_scene(&mut self, device: &wgpu::Device, side: Side, version: u64, g: &Arc<Gaussians>) -> Result<Option<String>, String> {
         if self.scenes[side as usize].as_ref().is_some_and(|s| s.version == version) {
-            return;
+            return Ok(None);
         }
+        self.scenes[side as usize] = None;
         let n = g.len();
+        let device_limit = device.limits().max_storage_buffer_binding_size as usize;
+        if n * std::mem::size_of::<ProjectedSplat>() > device_limit {
+            return Err(format!(
+                "{n} Gaussians need {} MB per storage binding, this GPU allows {} MB; the viewport cannot draw the scene",
+                n * std::mem::size_of::<ProjectedSplat>() >> 20,
+                device_limit >> 20
+            ));
+        }
+        // One binding holds at most max_storage_buffer_binding_size bytes: the SH go in two.
+        let limit = self.sh_binding_limit.unwrap_or(device_limit);
+        let mut degree = g.sh_degree;
+        let bytes_per = |d: u32| (gast_core::scene::sh_coeffs_for_degree(d) * 3).div_ceil(2) * 4;
+        while degree > 0 && n * bytes_per(degree) > 2 * (limit / bytes_per(degree)) * bytes_per(degree) {
+            degree -= 1;
+        }
+        let note = (degree < g.sh_degree).then(|| format!("the viewport draws SH degree {degree} of {}: the coefficients of {n} Gaussians do not fit the GPU's storage bindings", g.sh_degree));
         let geom = storage_init(device, "splat geometry", bytemuck::cast_slice(&pack_geometry(g)));
-        let (sh, words) = pack_sh_f16(g);
-        // One binding holds at most max_storage_buffer_binding_size bytes: split the SH in two.
-        let limit = device.limits().max_storage_buffer_binding_size as usize;
+        let (sh, words) = pack_sh_f16(g, degree);
         let bytes_per = words as usize * 4;
         let split = if n * bytes_per <= limit { n } else { (limit / bytes_per).min(n) };
         let sh_a = storage_init(device, "splat sh a", bytemuck::cast_slice(&sh[..split * words as usize]));
@@ -170,9 +205,11 @@ impl SplatRenderer {
             draw_bind,
             sh_words: words,
             sh_split: split as u32,
+            sh_degree: degree,
             sorted_for: None,
             _buffers: vec![geom, sh_a, sh_b, projected],
         });
+        Ok(note)
     }
 
     /// Forgets the scene of `side`.
@@ -230,7 +267,7 @@ impl SplatRenderer {
         };
         let scene = &self.scenes[side as usize].as_ref().expect("scene checked above");
         let g = &scene.gaussians;
-        let uniform = ViewUniform::new(cam, g.len() as u32, g.sh_degree, scene.sh_words, scene.sh_split, [0.0; 3]);
+        let uniform = ViewUniform::new(cam, g.len() as u32, scene.sh_degree, scene.sh_words, scene.sh_split, [0.0; 3]);
         queue.write_buffer(&scene.view, 0, bytemuck::bytes_of(&uniform));
         self.project.dispatch(encoder, &scene.project_bind, g.len() as u32);
         let Some(target) = &self.targets[side as usize] else { return false };
@@ -284,6 +321,8 @@ pub struct ViewportCallback {
     pub background: [f32; 3],
     /// Where the frame's statistics go.
     pub stats: Arc<Mutex<FrameStats>>,
+    /// Where problems with the scenes go.
+    pub notes: Arc<Mutex<ViewportNotes>>,
 }
 
 impl egui_wgpu::CallbackTrait for ViewportCallback {
@@ -298,13 +337,23 @@ impl egui_wgpu::CallbackTrait for ViewportCallback {
         let Some(res) = resources.get_mut::<ViewportResources>() else { return Vec::new() };
         let r = &mut res.renderer;
         r.begin_frame();
-        match &self.before {
-            Some(s) => r.set_scene(device, Side::Before, s.version, &s.gaussians),
-            None => r.clear_scene(Side::Before),
-        }
-        match &self.after {
-            Some(s) => r.set_scene(device, Side::After, s.version, &s.gaussians),
-            None => r.clear_scene(Side::After),
+        for (side, scene) in [(Side::Before, &self.before), (Side::After, &self.after)] {
+            match scene {
+                Some(s) => {
+                    let result = r.set_scene(device, side, s.version, &s.gaussians);
+                    if let Ok(mut notes) = self.notes.lock()
+                        && notes.versions[side as usize] != s.version
+                    {
+                        notes.versions[side as usize] = s.version;
+                        match result {
+                            Ok(Some(w)) => notes.warnings.push(w),
+                            Ok(None) => {}
+                            Err(e) => notes.errors.push(e),
+                        }
+                    }
+                }
+                None => r.clear_scene(side),
+            }
         }
         // Draw the "before" side even without a scene so that the target exists (and is clear).
         r.render(device, queue, encoder, Side::Before, &self.camera);
