@@ -158,7 +158,7 @@ impl SplatRenderer {
         if n * std::mem::size_of::<ProjectedSplat>() > device_limit {
             return Err(format!(
                 "{n} Gaussians need {} MB per storage binding, this GPU allows {} MB; the viewport cannot draw the scene",
-                n * std::mem::size_of::<ProjectedSplat>() >> 20,
+                (n * std::mem::size_of::<ProjectedSplat>()) >> 20,
                 device_limit >> 20
             ));
         }
