@@ -84,7 +84,7 @@ pub struct StudioApp {
     jobs: inspect::Jobs,
     maps: Option<[egui::TextureHandle; 3]>,
     auto_inspect: bool,
-    inspected_view: Option<(ViewState, u64, u64)>,
+    inspected_view: Option<(ViewState, [u32; 2], u64, u64)>,
     viewport_px: [u32; 2],
     ctx: egui::Context,
     frames: u64,
@@ -696,7 +696,7 @@ impl StudioApp {
         let Some(g) = self.current() else { return };
         let scene_v = self.scene.as_ref().map(|s| s.scene.version).unwrap_or(0);
         let snap_v = self.snapshot.as_ref().map(|s| s.version).unwrap_or(0);
-        let key = (self.view.clone(), scene_v, snap_v);
+        let key = (self.view.clone(), self.viewport_px, scene_v, snap_v);
         let moving = self.ctx.input(|i| i.pointer.any_down());
         if self.jobs.running > 0 || (!force && (moving || self.inspected_view.as_ref() == Some(&key))) {
             return;
