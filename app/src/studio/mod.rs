@@ -48,6 +48,7 @@ struct LoadedScene {
 /// A style image and its thumbnail.
 struct LoadedStyle {
     path: PathBuf,
+    thumb: egui::ColorImage,
     texture: egui::TextureHandle,
     size: [usize; 2],
 }
@@ -241,9 +242,9 @@ impl StudioApp {
     fn add_style(&mut self, path: PathBuf, img: image::RgbImage) {
         let thumb = image::imageops::thumbnail(&img, 96, (96 * img.height() / img.width().max(1)).max(1));
         let color = egui::ColorImage::from_rgb([thumb.width() as usize, thumb.height() as usize], thumb.as_raw());
-        let texture = self.ctx.load_texture(format!("style {}", path.display()), color, egui::TextureOptions::LINEAR);
+        let texture = self.ctx.load_texture(format!("style {}", path.display()), color.clone(), egui::TextureOptions::LINEAR);
         self.styles.retain(|s| s.path != path);
-        self.styles.insert(0, LoadedStyle { path, texture, size: [img.width() as usize, img.height() as usize] });
+        self.styles.insert(0, LoadedStyle { path, thumb: color, texture, size: [img.width() as usize, img.height() as usize] });
         self.styles.truncate(8);
         self.style = Some(0);
     }
@@ -376,8 +377,20 @@ impl StudioApp {
         }
     }
 
+    /// Adopts the context the window draws with (a test harness brings its own)
+    /// and moves the style thumbnails onto it.
+    fn adopt_context(&mut self, ctx: &egui::Context) {
+        self.ctx = ctx.clone();
+        for s in &mut self.styles {
+            s.texture = ctx.load_texture(format!("style {}", s.path.display()), s.thumb.clone(), egui::TextureOptions::LINEAR);
+        }
+    }
+
     /// The whole window.
     pub fn show(&mut self, ui: &mut Ui) {
+        if self.frames == 0 {
+            self.adopt_context(ui.ctx());
+        }
         self.frames += 1;
         self.poll_workers();
         self.handle_drops(ui);
