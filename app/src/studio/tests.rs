@@ -273,6 +273,102 @@ fn headless_screenshot_of_a_run_in_progress() {
     assert!(yellow.count() >= 1, "no split line in the viewport");
 }
 
+#[test]
+fn blit_composites_the_before_after_split() {
+    let Some((device, queue, _)) = device_or_skip("blit_composites_the_before_after_split") else { return };
+    let before = Arc::new(assets::demo_scene());
+    let mut dark = (*before).clone();
+    // Recolour the "after" side blue so the halves are easy to tell apart.
+    let k = dark.sh_coeffs() * 3;
+    for dc in dark.sh.chunks_exact_mut(k) {
+        dc[0] -= 1.0;
+        dc[1] -= 0.3;
+    }
+    let after = Arc::new(dark);
+    let (w, h) = (320u32, 240u32);
+    let cam = demo_camera(&before, w, h);
+    let mut r = SplatRenderer::new(&device);
+    r.set_scene(&device, Side::Before, 1, &before).expect("upload");
+    r.set_scene(&device, Side::After, 2, &after).expect("upload");
+    let format = wgpu::TextureFormat::Rgba8Unorm;
+    let blit = viewport::blit::BlitPipeline::new(&device, format);
+    let out = device.create_texture(&wgpu::TextureDescriptor {
+        label: None,
+        size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    });
+    let out_view = out.create_view(&Default::default());
+    let mut encoder = device.create_command_encoder(&Default::default());
+    r.render(&device, &queue, &mut encoder, Side::Before, &cam);
+    r.render(&device, &queue, &mut encoder, Side::After, &cam);
+    let params = viewport::gpu_types::BlitUniform { background: [0.1, 0.1, 0.12, 1.0], split: [0.5, 0.0, 0.0, 0.0] };
+    let bind = blit.prepare(&device, &queue, params, r.target(Side::Before).expect("before").1, r.target(Side::After).expect("after").1);
+    {
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: None,
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &out_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::RED), store: wgpu::StoreOp::Store },
+            })],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        blit.draw(&mut pass, &bind);
+    }
+    queue.submit([encoder.finish()]);
+    // Read back (4 bytes a texel, rows padded to 256).
+    let row = (w * 4).div_ceil(256) * 256;
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor { label: None, size: (row * h) as u64, usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ, mapped_at_creation: false });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    encoder.copy_texture_to_buffer(
+        out.as_image_copy(),
+        wgpu::TexelCopyBufferInfo { buffer: &buffer, layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) } },
+        wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+    );
+    queue.submit([encoder.finish()]);
+    buffer.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+    let _ = device.poll(wgpu::PollType::wait_indefinitely());
+    let data = buffer.slice(..).get_mapped_range().expect("mapped");
+    let mut img = image::RgbImage::new(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            let o = (y * row + x * 4) as usize;
+            img.put_pixel(x, y, image::Rgb([data[o], data[o + 1], data[o + 2]]));
+        }
+    }
+    let path = std::env::temp_dir().join("gast-studio-gpu-vs-cpu").join("split.png");
+    std::fs::create_dir_all(path.parent().expect("parent")).expect("dir");
+    img.save(&path).expect("save");
+    println!("wrote {}", path.display());
+    // The background fills the corners, the split line is drawn, halves differ in colour.
+    assert_eq!(img.get_pixel(2, 2).0, [26, 26, 31]);
+    let line = img.get_pixel(w / 2, h / 2).0;
+    assert!(line[0] > 200 && line[2] < 100, "split line {line:?}");
+    let mean = |x0: u32, x1: u32| {
+        let mut s = [0f64; 3];
+        for y in 0..h {
+            for x in x0..x1 {
+                for (acc, v) in s.iter_mut().zip(img.get_pixel(x, y).0) {
+                    *acc += v as f64;
+                }
+            }
+        }
+        s
+    };
+    let (l, r) = (mean(0, w / 2 - 2), mean(w / 2 + 2, w));
+    println!("left RGB sums {l:?}, right {r:?}");
+    assert!(l[0] > r[0] * 1.2, "the right (after) side should be less red");
+}
+
 /// A file "dropped" onto the window in tests.
 #[derive(Debug)]
 struct TestDrop(PathBuf);
