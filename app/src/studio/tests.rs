@@ -8,6 +8,7 @@ use std::sync::Arc;
 
 use super::viewport::{Side, SplatRenderer, bench, read_target};
 use gast_core::raster::{RenderOptions, render};
+use gast_core::session::Command;
 use super::*;
 
 /// Whether tests that need lavapipe/Xvfb must fail (CI) rather than skip.
