@@ -20,8 +20,28 @@ pub struct Maps {
     pub edges: egui::ColorImage,
 }
 
+/// A scene file as read: its Gaussians and the training cameras found beside it.
+pub struct SceneFile {
+    /// The Gaussians.
+    pub gaussians: Gaussians,
+    /// Cameras from the scene's folder (COLMAP, `cameras.json`, `transforms.json`) and that folder.
+    pub cameras: Option<(gast_core::camera::CameraSet, PathBuf)>,
+}
+
+/// Reads a scene and looks for training cameras beside it.
+pub fn read_scene_file(path: &std::path::Path) -> anyhow::Result<SceneFile> {
+    let gaussians = gast_core::scene::load(path)?;
+    let cameras = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .and_then(|dir| gast_core::camera::load(dir).ok().filter(|set| !set.cameras.is_empty()).map(|set| (set, dir.to_path_buf())));
+    Ok(SceneFile { gaussians, cameras })
+}
+
 /// What a finished job reports.
 pub enum JobDone {
+    /// A scene file was read (or not).
+    Scene(PathBuf, anyhow::Result<SceneFile>),
     /// Inspection maps are ready.
     Maps(Box<Maps>),
     /// A file was written.
@@ -101,6 +121,14 @@ impl Jobs {
         std::thread::spawn(move || {
             let _ = tx.send(job());
             waker();
+        });
+    }
+
+    /// Reads a scene file.
+    pub fn load_scene(&mut self, path: PathBuf) {
+        self.spawn(move || {
+            let result = read_scene_file(&path);
+            JobDone::Scene(path, result)
         });
     }
 

@@ -87,6 +87,8 @@ pub struct StudioApp {
     auto_inspect: bool,
     inspected_view: Option<(ViewState, [u32; 2], u64, u64)>,
     viewport_px: [u32; 2],
+    /// Scene files load on a worker thread (off while the command line's files open).
+    load_in_background: bool,
     ctx: egui::Context,
     frames: u64,
     exit_after: Option<u64>,
@@ -158,6 +160,7 @@ impl StudioApp {
             auto_inspect: true,
             inspected_view: None,
             viewport_px: [640, 480],
+            load_in_background: false,
             ctx,
             frames: 0,
             exit_after: env_u64("GAST_STUDIO_EXIT_AFTER_FRAMES"),
@@ -176,6 +179,7 @@ impl StudioApp {
             Some(p) => app.open_style(&p),
             None => app.open_generated_styles(),
         }
+        app.load_in_background = true;
         app
     }
 
@@ -210,20 +214,28 @@ impl StudioApp {
         self.inspected_view = None;
     }
 
-    /// Loads a scene file; on failure the error is shown and the previous scene stays.
+    /// Loads a scene file (on a worker thread once the window runs); on failure
+    /// the error is shown and the previous scene stays.
     pub fn open_scene(&mut self, path: &Path) {
-        match gast_core::scene::load(path).map_err(anyhow::Error::new) {
-            Ok(g) if g.is_empty() => self.report(anyhow::anyhow!("{}: the scene holds no Gaussians; keeping the previous scene", path.display())),
-            Ok(g) => {
+        if self.load_in_background {
+            self.notice = format!("loading {}…", path.display());
+            self.jobs.load_scene(path.to_path_buf());
+        } else {
+            let result = inspect::read_scene_file(path);
+            self.finish_open_scene(path, result);
+        }
+    }
+
+    fn finish_open_scene(&mut self, path: &Path, result: anyhow::Result<inspect::SceneFile>) {
+        match result {
+            Ok(f) if f.gaussians.is_empty() => self.report(anyhow::anyhow!("{}: the scene holds no Gaussians; keeping the previous scene", path.display())),
+            Ok(f) => {
+                let g = f.gaussians;
                 let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
                 self.notice = format!("opened {} ({} Gaussians, SH degree {})", path.display(), g.len(), g.sh_degree);
                 self.set_scene(name, g);
-                // Training cameras beside the scene (COLMAP, cameras.json, transforms.json), when there are any.
-                if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
-                    && let Ok(set) = gast_core::camera::load(dir)
-                    && !set.cameras.is_empty()
-                {
-                    self.set_cameras(set, dir);
+                if let Some((set, dir)) = f.cameras {
+                    self.set_cameras(set, &dir);
                 }
             }
             Err(e) => self.report(e.context("keeping the previous scene")),
@@ -364,6 +376,7 @@ impl StudioApp {
                         self.ctx.load_texture("inspect edges", m.edges, opts),
                     ]);
                 }
+                inspect::JobDone::Scene(path, result) => self.finish_open_scene(&path, result),
                 inspect::JobDone::Exported(p) => self.notice = format!("wrote {}", p.display()),
                 inspect::JobDone::Failed(e) => self.errors.push(e),
             }

@@ -122,7 +122,8 @@ fn viewport_frame_time_500k() {
 }
 
 fn test_app() -> StudioApp {
-    let app = StudioApp::new(egui::Context::default(), StudioArgs::default());
+    let mut app = StudioApp::new(egui::Context::default(), StudioArgs::default());
+    app.load_in_background = false;
     assert!(app.scene.is_some(), "the demo scene opens with no arguments: {:?}", app.errors);
     assert!(!app.styles.is_empty(), "a demo style opens with no arguments");
     app
@@ -392,8 +393,17 @@ fn dropped_styles_and_scenes_open() {
     let dir = assets::source_assets_dir();
     let dropped: Vec<egui::DroppedFileHandle> =
         vec![Arc::new(TestDrop(dir.join(assets::DEMO_STYLES[1]))), Arc::new(TestDrop(dir.join(assets::DEMO_SCENE))), Arc::new(TestDrop(dir.join("no-such-file.ply")))];
+    harness.state_mut().load_in_background = true;
     harness.input_mut().dropped_files = dropped;
     harness.step();
+    // Scenes load on a worker thread: wait for both results.
+    for _ in 0..200 {
+        if harness.state().jobs.running == 0 {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        harness.step();
+    }
     harness.run_steps(2);
     let app = harness.state();
     assert_eq!(app.styles.len(), styles_before + 1, "the dropped style joins the recent strip");
@@ -401,7 +411,7 @@ fn dropped_styles_and_scenes_open() {
     assert!(app.styles[0].path.ends_with(assets::DEMO_STYLES[1]));
     assert_eq!(app.errors.len(), 1, "{:?}", app.errors);
     assert!(app.errors[0].contains("no-such-file.ply"), "{}", app.errors[0]);
-    assert!(app.scene.is_some());
+    assert!(app.scene.as_ref().is_some_and(|s| s.scene.version > 1), "the dropped scene replaced the first one");
 }
 
 #[test]
