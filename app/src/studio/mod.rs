@@ -53,6 +53,9 @@ struct LoadedStyle {
     size: [usize; 2],
 }
 
+/// What the inspection maps were computed for: view, viewport size, scene and snapshot versions.
+type InspectKey = (ViewState, [u32; 2], u64, u64);
+
 /// Where the previous frame's screenshot request stands.
 #[derive(Default)]
 struct ScreenshotState {
@@ -85,7 +88,8 @@ pub struct StudioApp {
     jobs: inspect::Jobs,
     maps: Option<[egui::TextureHandle; 3]>,
     auto_inspect: bool,
-    inspected_view: Option<(ViewState, [u32; 2], u64, u64)>,
+    inspected_view: Option<InspectKey>,
+    inspect_pending: Option<(InspectKey, std::time::Instant)>,
     viewport_px: [u32; 2],
     /// Scene files load on a worker thread (off while the command line's files open).
     load_in_background: bool,
@@ -159,6 +163,7 @@ impl StudioApp {
             maps: None,
             auto_inspect: true,
             inspected_view: None,
+            inspect_pending: None,
             viewport_px: [640, 480],
             load_in_background: false,
             ctx,
@@ -414,6 +419,10 @@ impl StudioApp {
         });
         egui::Panel::bottom("inspect").resizable(false).exact_size(190.0).show(ui, |ui| self.inspect_panel(ui));
         egui::CentralPanel::default().show(ui, |ui| self.viewport(ui));
+        // After the viewport took this frame's input, so the maps follow the newest view.
+        if self.auto_inspect {
+            self.request_inspection(false);
+        }
         self.test_switches(ui.ctx());
     }
 

@@ -281,21 +281,33 @@ impl StudioApp {
                 ui.weak("no maps yet");
             }
         });
-        if self.auto_inspect {
-            self.request_inspection(false);
-        }
     }
 
+    /// Starts the inspection maps of the current view once it has been still for
+    /// a moment (or at once when `force`); while waiting, asks egui to look again.
     pub(super) fn request_inspection(&mut self, force: bool) {
         let Some(g) = self.current() else { return };
         let scene_v = self.scene.as_ref().map(|s| s.scene.version).unwrap_or(0);
         let snap_v = self.snapshot.as_ref().map(|s| s.version).unwrap_or(0);
         let key = (self.view.clone(), self.viewport_px, scene_v, snap_v);
-        let moving = self.ctx.input(|i| i.pointer.any_down());
-        if self.jobs.running > 0 || (!force && (moving || self.inspected_view.as_ref() == Some(&key))) {
+        if !force && self.inspected_view.as_ref() == Some(&key) {
+            return;
+        }
+        let now = std::time::Instant::now();
+        let still_since = match &self.inspect_pending {
+            Some((k, t)) if *k == key => *t,
+            _ => {
+                self.inspect_pending = Some((key.clone(), now));
+                now
+            }
+        };
+        let settle = std::time::Duration::from_millis(150);
+        if self.jobs.running > 0 || (!force && now.duration_since(still_since) < settle) {
+            self.ctx.request_repaint_after(settle);
             return;
         }
         self.inspected_view = Some(key);
+        self.inspect_pending = None;
         let cam = inspect::scaled(&self.viewport_camera(), 240);
         self.jobs.inspect(g, cam, self.background);
     }
