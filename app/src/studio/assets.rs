@@ -206,7 +206,8 @@ pub fn icon() -> RgbaImage {
         let mut c = [0.10, 0.11, 0.15];
         for &(bx, by, r, col) in &blobs {
             let d2 = (fx - bx).powi(2) + (fy - by).powi(2);
-            let w = 0.85 * (-d2 / (2.0 * (r * 0.55) * (r * 0.55))).exp();
+            let q = d2 / (r * r * 0.55);
+            let w = 0.92 * (-0.5 * q * q).exp();
             c = lerp3(c, col, w);
         }
         let p = to_rgb8(c).0;

@@ -118,7 +118,10 @@ fn viewport_frame_time_500k() {
     if device_or_skip("viewport_frame_time_500k").is_none() {
         return;
     }
-    println!("{}", bench::run(None, 500_000, 5, 1280, 720).expect("bench"));
+    // The shared 500k scene when it is there, a synthetic one of the same size otherwise.
+    let playbot = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/scenes/playbot-sog");
+    let scene = playbot.exists().then_some(playbot.as_path());
+    println!("{}", bench::run(scene, 500_000, 5, 1280, 720).expect("bench"));
 }
 
 fn test_app() -> StudioApp {
