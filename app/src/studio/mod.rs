@@ -233,7 +233,10 @@ impl StudioApp {
 
     fn finish_open_scene(&mut self, path: &Path, result: anyhow::Result<inspect::SceneFile>) {
         match result {
-            Ok(f) if f.gaussians.is_empty() => self.report(anyhow::anyhow!("{}: the scene holds no Gaussians; keeping the previous scene", path.display())),
+            Ok(f) if f.gaussians.is_empty() => {
+                let keep = self.keeping_scene();
+                self.report(anyhow::anyhow!("{}: the scene holds no Gaussians; {keep}", path.display()))
+            }
             Ok(f) => {
                 let g = f.gaussians;
                 let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
@@ -243,8 +246,16 @@ impl StudioApp {
                     self.set_cameras(set, &dir);
                 }
             }
-            Err(e) => self.report(e.context("keeping the previous scene")),
+            Err(e) => {
+                let keep = self.keeping_scene();
+                self.report(anyhow::anyhow!("{e:#}; {keep}"))
+            }
         }
+    }
+
+    /// What a failed open leaves on screen, for the end of its message.
+    fn keeping_scene(&self) -> &'static str {
+        if self.scene.is_some() { "keeping the previous scene" } else { "no scene is open" }
     }
 
     fn open_demo_scene(&mut self) {
@@ -268,9 +279,12 @@ impl StudioApp {
 
     /// Loads a style image; on failure the error is shown and the previous style stays.
     pub fn open_style(&mut self, path: &Path) {
-        match image::open(path).with_context(|| format!("{}: not an image this build can read (PNG, JPEG, WebP); keeping the previous style", path.display())) {
+        match image::open(path) {
             Ok(img) => self.add_style(path.to_path_buf(), img.to_rgb8()),
-            Err(e) => self.report(e),
+            Err(e) => {
+                let keep = if self.styles.is_empty() { "no style is open" } else { "keeping the previous style" };
+                self.report(anyhow::anyhow!("{}: not a style image this build can read (PNG, JPEG, WebP): {e}; {keep}", path.display()))
+            }
         }
     }
 
@@ -296,7 +310,7 @@ impl StudioApp {
                 self.notice = format!("{} cameras from {}", set.cameras.len(), path.display());
                 self.set_cameras(set, path);
             }
-            Err(e) => self.report(anyhow::Error::new(e).context("keeping the current camera list")),
+            Err(e) => self.report(anyhow::anyhow!("{e}; keeping the current camera list")),
         }
     }
 
