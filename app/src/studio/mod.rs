@@ -100,8 +100,13 @@ pub struct StudioApp {
     screenshot: ScreenshotState,
 }
 
-/// Opens the studio window and runs until it is closed.
+/// Opens the studio window and runs until it is closed (no session runner: Start stays disabled).
 pub fn run(args: StudioArgs) -> anyhow::Result<()> {
+    run_with(args, None)
+}
+
+/// Opens the studio window with `starter` connected to the Start button.
+pub fn run_with(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Result<()> {
     let icon = assets::icon();
     let options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
@@ -120,7 +125,11 @@ pub fn run(args: StudioArgs) -> anyhow::Result<()> {
             };
             let resources = ViewportResources::new(&rs.device, rs.target_format);
             rs.renderer.write().callback_resources.insert(resources);
-            Ok(Box::new(StudioApp::new(cc.egui_ctx.clone(), args)))
+            let mut app = StudioApp::new(cc.egui_ctx.clone(), args);
+            if let Some(starter) = starter {
+                app.set_session_starter(starter);
+            }
+            Ok(Box::new(app))
         }),
     )
     .map_err(|e| anyhow::anyhow!("the studio window failed: {e}"))
@@ -189,7 +198,6 @@ impl StudioApp {
     }
 
     /// Connects the code that spawns session workers; until then Start is disabled.
-    #[allow(dead_code)] // the wiring point for the session runner (see session_link.rs)
     pub fn set_session_starter(&mut self, starter: SessionStarter) {
         self.starter = Some(starter);
     }

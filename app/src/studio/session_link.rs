@@ -3,10 +3,11 @@
 //! and what the studio learns from the events. The studio never drives the
 //! optimisation; it only sends [`Command`]s and reads.
 //!
-//! Wiring a worker: give [`super::StudioApp::set_session_starter`] a
-//! [`SessionStarter`] that spawns the session thread for a [`StartRequest`] and
-//! returns its [`SessionLink`]; the worker calls `request.waker` after every
-//! event or snapshot so the window repaints.
+//! Wiring a worker: call [`super::run_with`] (or
+//! [`super::StudioApp::set_session_starter`]) with a [`SessionStarter`] that
+//! spawns the session thread for a [`StartRequest`] and returns its
+//! [`SessionLink`]; the worker calls `request.waker` after every event or
+//! snapshot so the window repaints.
 
 use std::sync::Arc;
 
