@@ -12,7 +12,12 @@ fn load_timed(rel: &str) -> Option<Gaussians> {
     let path = shared_file(rel)?;
     let t = Instant::now();
     let g = scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
-    eprintln!("loaded {rel}: {} Gaussians, degree {}, in {:.1} ms", g.len(), g.sh_degree, t.elapsed().as_secs_f64() * 1e3);
+    eprintln!(
+        "loaded {rel}: {} Gaussians, degree {}, in {:.1} ms",
+        g.len(),
+        g.sh_degree,
+        t.elapsed().as_secs_f64() * 1e3
+    );
     Some(g)
 }
 
@@ -30,7 +35,9 @@ fn summary(name: &str, g: &Gaussians) {
     let dc_mean: f32 = (0..g.len()).map(|i| 0.5 + SH_C0 * g.sh_of(i)[0]).sum::<f32>() / g.len() as f32;
     let ls_min = g.log_scales.iter().flatten().fold(f32::INFINITY, |a, &b| a.min(b));
     let ls_max = g.log_scales.iter().flatten().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
-    eprintln!("{name}: bounds {lo:?}..{hi:?}, mean opacity {mean_op:.3}, mean red {dc_mean:.3}, log-scales {ls_min:.2}..{ls_max:.2}");
+    eprintln!(
+        "{name}: bounds {lo:?}..{hi:?}, mean opacity {mean_op:.3}, mean red {dc_mean:.3}, log-scales {ls_min:.2}..{ls_max:.2}"
+    );
 }
 
 /// Plausibility of a decoded real scene: the readers already reject
@@ -102,7 +109,8 @@ fn playbot_sog_directory_and_meta_json() {
 /// each (plus float rounding).
 #[test]
 fn biker_ply_and_spz_agree_within_quantisation() {
-    let (Some(a), Some(b)) = (load_timed("data/scenes/biker.compressed.ply"), load_timed("data/scenes/biker.spz")) else {
+    let (Some(a), Some(b)) = (load_timed("data/scenes/biker.compressed.ply"), load_timed("data/scenes/biker.spz"))
+    else {
         return;
     };
     assert_eq!(a.len(), b.len());
@@ -122,7 +130,8 @@ fn biker_ply_and_spz_agree_within_quantisation() {
     for c in 0..n.div_ceil(256) {
         let rows = c * 256..((c + 1) * 256).min(n);
         let range = |f: &dyn Fn(usize) -> f32| {
-            let (lo, hi) = rows.clone().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), i| (l.min(f(i)), h.max(f(i))));
+            let (lo, hi) =
+                rows.clone().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), i| (l.min(f(i)), h.max(f(i))));
             hi - lo
         };
         let bits = [2047.0, 1023.0, 2047.0];
@@ -134,20 +143,35 @@ fn biker_ply_and_spz_agree_within_quantisation() {
                 let tol = 0.5 * pos_step[k] + spz_pos + eps;
                 let err = (a.means[i][k] - b.means[i][k]).abs();
                 worst[0] = worst[0].max(err / tol);
-                assert!(err <= tol, "Gaussian {i} position {k}: ply {} spz {} (tolerance {tol})", a.means[i][k], b.means[i][k]);
+                assert!(
+                    err <= tol,
+                    "Gaussian {i} position {k}: ply {} spz {} (tolerance {tol})",
+                    a.means[i][k],
+                    b.means[i][k]
+                );
 
                 let expect = a.log_scales[i][k].clamp(-10.0, 5.9375);
                 let tol = 0.5 * scale_step[k] + spz_scale + eps;
                 let err = (expect - b.log_scales[i][k]).abs();
                 worst[1] = worst[1].max(err / tol);
-                assert!(err <= tol, "Gaussian {i} log-scale {k}: ply {} spz {} (tolerance {tol})", a.log_scales[i][k], b.log_scales[i][k]);
+                assert!(
+                    err <= tol,
+                    "Gaussian {i} log-scale {k}: ply {} spz {} (tolerance {tol})",
+                    a.log_scales[i][k],
+                    b.log_scales[i][k]
+                );
 
                 let limit = 0.5 / 0.15;
                 let expect = a.sh_of(i)[k].clamp(-limit, limit);
                 let tol = 0.5 * dc_step[k] + spz_dc + eps;
                 let err = (expect - b.sh_of(i)[k]).abs();
                 worst[2] = worst[2].max(err / tol);
-                assert!(err <= tol, "Gaussian {i} f_dc {k}: ply {} spz {} (tolerance {tol})", a.sh_of(i)[k], b.sh_of(i)[k]);
+                assert!(
+                    err <= tol,
+                    "Gaussian {i} f_dc {k}: ply {} spz {} (tolerance {tol})",
+                    a.sh_of(i)[k],
+                    b.sh_of(i)[k]
+                );
             }
             let sig = |o: f32| 1.0 / (1.0 + (-o).exp());
             let tol = 1.0 / 255.0 + eps;
@@ -167,7 +191,10 @@ fn biker_ply_and_spz_agree_within_quantisation() {
             assert!(err <= tol, "Gaussian {i} quaternion: ply {qa:?} spz {qb:?} (tolerance {tol})");
         }
     }
-    eprintln!("worst error / tolerance: position {:.2}, log-scale {:.2}, f_dc {:.2}, alpha {:.2}, quaternion {:.2}", worst[0], worst[1], worst[2], worst[3], worst[4]);
+    eprintln!(
+        "worst error / tolerance: position {:.2}, log-scale {:.2}, f_dc {:.2}, alpha {:.2}, quaternion {:.2}",
+        worst[0], worst[1], worst[2], worst[3], worst[4]
+    );
 }
 
 /// A real scene (the SOG one: degree 2, so the f_rest transpose is exercised)

@@ -181,7 +181,8 @@ pub(crate) fn read_compressed_ply(path: &Path, bytes: &[u8], header: &Header) ->
             row[15 + j] = ccols.get(3 + j).map_or(1.0, |col| col.get(c) as f32);
         }
         if let Some(j) = row.iter().position(|v| !v.is_finite()) {
-            let name = CHUNK_BOUNDS.get(j).or_else(|| j.checked_sub(12).and_then(|c| CHUNK_COLOUR.get(c))).unwrap_or(&"?");
+            let name =
+                CHUNK_BOUNDS.get(j).or_else(|| j.checked_sub(12).and_then(|c| CHUNK_COLOUR.get(c))).unwrap_or(&"?");
             return Err(SceneError::format(path, format!("chunk {c}: {name}"), "a finite value", row[j].to_string()));
         }
         table.push(row);
@@ -191,7 +192,8 @@ pub(crate) fn read_compressed_ply(path: &Path, bytes: &[u8], header: &Header) ->
     let mut g = Gaussians::with_capacity(n, degree);
     g.sh.resize(n * k * 3, 0.0);
     let pc: Vec<_> = packed.iter().map(|&p| body.column(vi, p)).collect();
-    let shc: Vec<_> = sh.as_ref().map(|(si, _, cols)| cols.iter().map(|&p| body.column(*si, p)).collect()).unwrap_or_default();
+    let shc: Vec<_> =
+        sh.as_ref().map(|(si, _, cols)| cols.iter().map(|&p| body.column(*si, p)).collect()).unwrap_or_default();
     for i in 0..n {
         let t = &table[i / CHUNK_SIZE];
         let word = |j: usize| pc[j].get(i) as u32;

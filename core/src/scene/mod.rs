@@ -8,10 +8,12 @@
 //!
 //! [`load`] recognises a file by its contents, not its name: a PLY header with
 //! `packed_*` properties is PlayCanvas's compressed PLY, any other PLY is
-//! INRIA's, gzip or `NGSP` bytes are Niantic's `.spz`, and a directory or a
-//! `meta.json` or a zip archive is PlayCanvas's SOG. Every reader checks counts against the
-//! bytes that are really there before allocating, and every decoded scene is
-//! validated (finite values, non-zero quaternions) before it is returned.
+//! INRIA's, gzip or `NGSP` bytes are Niantic's `.spz`, and a directory, a
+//! `meta.json` or a zip archive is PlayCanvas's SOG. Every reader checks
+//! counts against the bytes that are really there before allocating, and
+//! every decoded scene is validated (finite values, non-zero quaternions)
+//! before it is returned; [`save_ply`] applies the same check, so whatever it
+//! writes [`load`] reads back.
 
 mod compressed_ply;
 mod error;
@@ -134,9 +136,8 @@ pub fn load_from_bytes(path: impl AsRef<Path>, bytes: &[u8]) -> Result<Gaussians
     let path = path.as_ref();
     if bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r\n") {
         let header = ply_header::parse_header(path, bytes)?;
-        let compressed = header
-            .element("vertex")
-            .is_some_and(|(_, v)| v.props.iter().any(|p| p.name.starts_with("packed_")));
+        let compressed =
+            header.element("vertex").is_some_and(|(_, v)| v.props.iter().any(|p| p.name.starts_with("packed_")));
         return if compressed {
             compressed_ply::read_compressed_ply(path, bytes, &header)
         } else {
@@ -170,7 +171,9 @@ pub fn load_from_bytes(path: impl AsRef<Path>, bytes: &[u8]) -> Result<Gaussians
 /// Writes `g` as an INRIA binary little-endian `.ply` with the original
 /// trainer's property names and order. The file is written to a temporary
 /// file beside `path` and renamed over it, so an existing file is never left
-/// half-overwritten. Reading it back with [`load`] is bit-exact.
+/// half-overwritten. Reading it back with [`load`] is bit-exact. Scenes with
+/// non-finite values or zero quaternions are refused (the error names the
+/// Gaussian), since no reader would accept the file.
 pub fn save_ply(path: impl AsRef<Path>, g: &Gaussians) -> Result<(), SceneError> {
     ply::save_ply(path.as_ref(), g)
 }
@@ -225,9 +228,9 @@ pub(crate) fn atomic_write(
     path: &Path,
     write: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
 ) -> Result<(), SceneError> {
-    let name = path.file_name().ok_or_else(|| {
-        SceneError::io(path, std::io::Error::new(std::io::ErrorKind::InvalidInput, "no file name"))
-    })?;
+    let name = path
+        .file_name()
+        .ok_or_else(|| SceneError::io(path, std::io::Error::new(std::io::ErrorKind::InvalidInput, "no file name")))?;
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),

@@ -16,8 +16,8 @@ use super::{Gaussians, SceneError, sh_coeffs_for_degree, validate};
 
 /// Properties every INRIA file must have, in the groups we read them.
 const REQUIRED: [&str; 14] = [
-    "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1",
-    "rot_2", "rot_3",
+    "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2",
+    "rot_3",
 ];
 
 /// SH degree for a number of `f_rest_*` properties (0, 9, 24, 45).
@@ -117,10 +117,8 @@ fn check_float(path: &Path, name: &str, ty: Scalar) -> Result<(), SceneError> {
 fn header_text(n: usize, degree: u32) -> String {
     let rest = (sh_coeffs_for_degree(degree) - 1) * 3;
     let mut h = format!("ply\nformat binary_little_endian 1.0\nelement vertex {n}\n");
-    let mut names: Vec<String> = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
+    let mut names: Vec<String> =
+        ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"].iter().map(|s| s.to_string()).collect();
     names.extend((0..rest).map(|j| format!("f_rest_{j}")));
     names.extend(
         ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"].iter().map(|s| s.to_string()),
@@ -172,7 +170,7 @@ pub(crate) fn write_ply_to(out: &mut impl Write, g: &Gaussians) -> std::io::Resu
 /// Writes `g` to `path` as an INRIA `.ply`, atomically (temporary file in the
 /// same directory, then rename).
 pub(crate) fn save_ply(path: &Path, g: &Gaussians) -> Result<(), SceneError> {
-    g.check_consistent().map_err(|e| SceneError::format(path, "gaussians", "consistent arrays", e))?;
+    validate(path, g)?;
     super::atomic_write(path, |w| write_ply_to(w, g))
 }
 

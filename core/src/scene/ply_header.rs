@@ -184,9 +184,8 @@ pub(crate) fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, SceneErr
                         "a list property".to_string(),
                     ));
                 }
-                let ty = Scalar::parse(ty).ok_or_else(|| {
-                    fmt(&format!("{}.{name}", el.name), "a PLY scalar type", format!("type {ty:?}"))
-                })?;
+                let ty = Scalar::parse(ty)
+                    .ok_or_else(|| fmt(&format!("{}.{name}", el.name), "a PLY scalar type", format!("type {ty:?}")))?;
                 if el.find(name).is_some() {
                     return Err(fmt(&format!("{}.{name}", el.name), "unique property names", "a duplicate".into()));
                 }

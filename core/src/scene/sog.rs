@@ -270,7 +270,12 @@ fn decode(path: &Path, bytes: &[u8], src: &Source<'_>) -> Result<Gaussians, Scen
 
         let q = quats.texel(i);
         let largest = q[3].checked_sub(252).filter(|&m| m < 4).ok_or_else(|| {
-            fmt(path, &format!("quats texel {i}"), "alpha 252 to 255 (index of the largest component)", q[3].to_string())
+            fmt(
+                path,
+                &format!("quats texel {i}"),
+                "alpha 252 to 255 (index of the largest component)",
+                q[3].to_string(),
+            )
         })? as usize;
         let mut rot = [0.0f32; 4];
         let mut others = q[..3].iter();

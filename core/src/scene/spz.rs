@@ -169,7 +169,10 @@ fn read_v4(path: &Path, bytes: &[u8]) -> Result<Gaussians, SceneError> {
         return Err(fmt(
             path,
             "header.num_streams",
-            format!("{want_streams} (positions, alphas, colours, scales, rotations{})", if want_streams == 6 { ", SH" } else { "" }),
+            format!(
+                "{want_streams} (positions, alphas, colours, scales, rotations{})",
+                if want_streams == 6 { ", SH" } else { "" }
+            ),
             num_streams.to_string(),
         ));
     }
@@ -230,7 +233,8 @@ fn unpack_rotation_v3(b: &[u8]) -> [f32; 4] {
 const SH_FLIP: [f32; 15] = [
     -1.0, -1.0, 1.0, // y, z, x
     -1.0, 1.0, 1.0, -1.0, 1.0, // xy, yz, 3z²−1, xz, x²−y²
-    -1.0, 1.0, -1.0, -1.0, 1.0, -1.0, 1.0, // y(3x²−y²), xyz, y(5z²−1), z(5z²−3), x(5z²−1), z(x²−y²), x(x²−3y²)
+    -1.0, 1.0, -1.0, -1.0, 1.0, -1.0,
+    1.0, // y(3x²−y²), xyz, y(5z²−1), z(5z²−3), x(5z²−1), z(x²−y²), x(x²−3y²)
 ];
 
 fn decode(path: &Path, lay: &Layout, parts: &[Vec<u8>]) -> Result<Gaussians, SceneError> {

@@ -11,8 +11,10 @@ use super::{Gaussians, SceneError, atomic_write, load, save_ply};
 
 /// The 14 properties of a degree-0 INRIA file, in a non-trainer order, plus
 /// normals and an unknown extra.
-pub(super) const PROPS: [&str; 14] =
-    ["x", "y", "z", "opacity", "f_dc_0", "f_dc_1", "f_dc_2", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"];
+pub(super) const PROPS: [&str; 14] = [
+    "x", "y", "z", "opacity", "f_dc_0", "f_dc_1", "f_dc_2", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2",
+    "rot_3",
+];
 
 fn row(i: usize) -> [f64; 14] {
     let f = i as f64;
@@ -111,7 +113,9 @@ fn unknown_properties_and_elements_are_ignored() {
     props.extend(float_props());
     let mut b = header("binary_little_endian", 2, &props).into_bytes();
     // An extra element after the vertices.
-    let h = String::from_utf8(b.clone()).expect("utf8").replace("end_header\n", "element extra 1\nproperty int k\nend_header\n");
+    let h = String::from_utf8(b.clone())
+        .expect("utf8")
+        .replace("end_header\n", "element extra 1\nproperty int k\nend_header\n");
     b = h.into_bytes();
     for i in 0..2 {
         b.extend_from_slice(&9.0f32.to_le_bytes());
@@ -172,7 +176,8 @@ fn missing_misnamed_and_mistyped_properties() {
     let b = header("binary_little_endian", 0, &props);
     expect_err(&write(&dir, "uchar.ply", b.as_bytes()), &["vertex.opacity", "float or double", "uchar"]);
 
-    let b = header("binary_little_endian", 0, &float_props()).replace("property float x\n", "property list uchar int x\n");
+    let b =
+        header("binary_little_endian", 0, &float_props()).replace("property float x\n", "property list uchar int x\n");
     expect_err(&write(&dir, "list.ply", b.as_bytes()), &["vertex.x", "list"]);
 
     let b = header("binary_little_endian", 0, &float_props()).replace("property float y\n", "property float16 y\n");
@@ -269,13 +274,20 @@ fn save_ply_never_half_overwrites() {
     .expect_err("must fail");
     assert!(err.to_string().contains("scene.ply") && err.to_string().contains("disk full"), "{err}");
     assert_eq!(std::fs::read(&p).expect("read"), before);
-    let leftovers: Vec<_> = std::fs::read_dir(&dir).expect("ls").filter_map(|e| e.ok()).map(|e| e.file_name()).collect();
+    let leftovers: Vec<_> =
+        std::fs::read_dir(&dir).expect("ls").filter_map(|e| e.ok()).map(|e| e.file_name()).collect();
     assert_eq!(leftovers.len(), 1, "temporary file left behind: {leftovers:?}");
 
     // Inconsistent Gaussians are refused before anything is written.
     let mut bad = sample(3, 0);
     bad.quats.pop();
     assert!(save_ply(&p, &bad).is_err());
+    assert_eq!(std::fs::read(&p).expect("read"), before);
+    // So are scenes no reader would accept.
+    let mut nan = sample(3, 0);
+    nan.log_scales[2][1] = f32::NAN;
+    let e = save_ply(&p, &nan).expect_err("NaN refused").to_string();
+    assert!(e.contains("vertex 2") && e.contains("scale_1"), "{e}");
     assert_eq!(std::fs::read(&p).expect("read"), before);
 
     // A successful save replaces the file.

@@ -1,19 +1,35 @@
 //! Synthetic compressed PLY, SPZ (gzip v3 and zstd v4) and SOG files: exact
 //! decoding of known values, and the ways each container can be broken.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use super::super::spz::encode_for_test;
-use super::super::test_util::scratch;
+use super::super::test_util::{Scratch, scratch};
 use super::super::{SH_C0, SceneError, load, load_from_bytes};
 use super::{expect_err, write};
 
 // ---------------------------------------------------------------- compressed PLY
 
 const CHUNK_PROPS: [&str; 18] = [
-    "min_x", "min_y", "min_z", "max_x", "max_y", "max_z", "min_scale_x", "min_scale_y", "min_scale_z", "max_scale_x",
-    "max_scale_y", "max_scale_z", "min_r", "min_g", "min_b", "max_r", "max_g", "max_b",
+    "min_x",
+    "min_y",
+    "min_z",
+    "max_x",
+    "max_y",
+    "max_z",
+    "min_scale_x",
+    "min_scale_y",
+    "min_scale_z",
+    "max_scale_x",
+    "max_scale_y",
+    "max_scale_z",
+    "min_r",
+    "min_g",
+    "min_b",
+    "max_r",
+    "max_g",
+    "max_b",
 ];
 
 /// One chunk, two vertices, optional degree-1 `sh` element.
@@ -32,7 +48,8 @@ fn compressed(chunks: usize, position_type: &str, sh_props: usize) -> Vec<u8> {
     }
     h.push_str("end_header\n");
     let mut b = h.into_bytes();
-    let bounds: [f32; 18] = [-1.0, -2.0, -3.0, 1.0, 2.0, 3.0, -5.0, -6.0, -7.0, -1.0, -2.0, -3.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0];
+    let bounds: [f32; 18] =
+        [-1.0, -2.0, -3.0, 1.0, 2.0, 3.0, -5.0, -6.0, -7.0, -1.0, -2.0, -3.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0];
     for _ in 0..chunks {
         b.extend(bounds.iter().flat_map(|v| v.to_le_bytes()));
     }
@@ -71,8 +88,14 @@ fn compressed_ply_decodes_known_values() {
 #[test]
 fn compressed_ply_structure_errors() {
     let dir = scratch("cply_bad");
-    expect_err(&write(&dir, "chunks.ply", &compressed(2, "uint", 0)), &["element chunk", "1 chunks for 2 vertices", "2 chunks"]);
-    expect_err(&write(&dir, "type.ply", &compressed(1, "float", 0)), &["vertex.packed_position", "type uint", "type float"]);
+    expect_err(
+        &write(&dir, "chunks.ply", &compressed(2, "uint", 0)),
+        &["element chunk", "1 chunks for 2 vertices", "2 chunks"],
+    );
+    expect_err(
+        &write(&dir, "type.ply", &compressed(1, "float", 0)),
+        &["vertex.packed_position", "type uint", "type float"],
+    );
     expect_err(&write(&dir, "sh.ply", &compressed(1, "uint", 10)), &["element sh", "10 properties"]);
     let mut b = compressed(1, "uint", 0);
     b.truncate(b.len() - 3);
@@ -192,7 +215,7 @@ fn sog_meta(count: usize, palette: usize) -> String {
 }
 
 /// A two-Gaussian SOG directory; `quat_tag` and `label1` let tests break it.
-fn sog_dir(name: &str, quat_tag: u8, label1: u8) -> PathBuf {
+fn sog_dir(name: &str, quat_tag: u8, label1: u8) -> Scratch {
     let dir = scratch(name);
     webp(&dir, "means_l.webp", 2, 1, &[255, 0, 0, 255, 0, 255, 0, 255]);
     webp(&dir, "means_u.webp", 2, 1, &[255, 0, 128, 255, 0, 255, 0, 255]);
@@ -329,7 +352,16 @@ fn sog_zip_bundle() {
     use std::io::Write;
     let dir = sog_dir("sog_zip", 252, 0);
     let want = load(&dir).expect("directory");
-    let names = ["meta.json", "means_l.webp", "means_u.webp", "quats.webp", "scales.webp", "sh0.webp", "shN_centroids.webp", "shN_labels.webp"];
+    let names = [
+        "meta.json",
+        "means_l.webp",
+        "means_u.webp",
+        "quats.webp",
+        "scales.webp",
+        "sh0.webp",
+        "shN_centroids.webp",
+        "shN_labels.webp",
+    ];
     let bundle = |method: zip::CompressionMethod, skip: &str| {
         let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
         let opts = zip::write::SimpleFileOptions::default().compression_method(method);
@@ -343,8 +375,14 @@ fn sog_zip_bundle() {
         let p = write(&dir, "scene.sog", &bundle(method, ""));
         assert_eq!(load(&p).expect("bundle"), want);
     }
-    expect_err(&write(&dir, "no_meta.sog", &bundle(zip::CompressionMethod::Stored, "meta.json")), &["meta.json", "zip entry"]);
-    expect_err(&write(&dir, "no_quats.sog", &bundle(zip::CompressionMethod::Stored, "quats.webp")), &["quats.webp", "zip entry"]);
+    expect_err(
+        &write(&dir, "no_meta.sog", &bundle(zip::CompressionMethod::Stored, "meta.json")),
+        &["meta.json", "zip entry"],
+    );
+    expect_err(
+        &write(&dir, "no_quats.sog", &bundle(zip::CompressionMethod::Stored, "quats.webp")),
+        &["quats.webp", "zip entry"],
+    );
     expect_err(&write(&dir, "broken.sog", b"PK\x03\x04 this is not a zip archive"), &["zip archive"]);
     // Truncated bundles fail without panicking.
     let b = bundle(zip::CompressionMethod::Deflated, "");
