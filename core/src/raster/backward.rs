@@ -12,8 +12,9 @@
 use rayon::prelude::*;
 
 use super::forward::{TILE_PX, gaussian_ref};
-use super::project::{ALPHA_MAX, CamConsts, GaussianGrad, SplatGrad, project_backward};
-use super::state::ForwardState;
+use super::project::{CamConsts, GaussianGrad, SplatGrad, project_backward};
+use super::splat::{ALPHA_MAX, LANE};
+use super::state::{ForwardState, split_by_tile};
 use super::{Grads, RenderOptions, TILE};
 use crate::camera::Camera;
 use crate::scene::Gaussians;
@@ -23,7 +24,8 @@ use crate::scene::Gaussians;
 /// and the state of the [`super::forward`] call with the same inputs.
 ///
 /// # Panics
-/// When the cotangents or the state do not match the camera's image size.
+/// When the arrays of `g` are inconsistent, or the cotangents or the state do
+/// not match the camera's image size and the Gaussians (caller bugs).
 pub fn backward(
     g: &Gaussians,
     cam: &Camera,
@@ -32,6 +34,9 @@ pub fn backward(
     v_rgb: &[f32],
     v_inv_depth: &[f32],
 ) -> Grads {
+    if let Err(e) = g.check_consistent() {
+        panic!("raster::backward: {e}");
+    }
     let npx = cam.width as usize * cam.height as usize;
     assert!(
         state.width == cam.width && state.height == cam.height,
@@ -46,16 +51,11 @@ pub fn backward(
 
     // 1. Per-pair gradients, one disjoint slice per tile.
     let mut pair_grads: Vec<SplatGrad> = vec![[0.0; 10]; state.tile_list.len()];
-    let n_tiles = state.tile_starts.len() - 1;
-    let mut slices = Vec::with_capacity(n_tiles);
-    let mut rest = pair_grads.as_mut_slice();
-    for t in 0..n_tiles {
-        let (a, b) = rest.split_at_mut(state.tile_range(t).len());
-        slices.push(a);
-        rest = b;
-    }
     let ctx = TileCtx { state, v_rgb, v_inv_depth, bg: opts.background };
-    slices.into_par_iter().enumerate().for_each(|(t, dst)| ctx.tile(t, dst));
+    split_by_tile(&mut pair_grads, &state.tile_starts)
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(t, dst)| ctx.tile(t, dst));
 
     // 2. Sum per splat.
     let mut splat_grads: Vec<SplatGrad> = vec![[0.0; 10]; state.splats.len()];
@@ -67,33 +67,61 @@ pub fn backward(
     }
     drop(pair_grads);
 
-    // 3. Per Gaussian.
-    let mut slot = vec![u32::MAX; g.len()];
-    for (k, &i) in state.ids.iter().enumerate() {
-        slot[i as usize] = k as u32;
+    // 3. Per Gaussian, for the splats that received a gradient (the others
+    // are hidden behind others), in Gaussian order.
+    if let Some(&i) = state.ids.iter().find(|&&i| i as usize >= g.len()) {
+        panic!("raster::backward: the state holds Gaussian {i}, only {} are given", g.len());
     }
     let cc = CamConsts::new(cam);
-    let mut out = Grads::zeros_like(g);
     let ksh = g.sh_coeffs() * 3;
-    (
-        out.v_means.par_iter_mut(),
-        out.v_log_scales.par_iter_mut(),
-        out.v_quats.par_iter_mut(),
-        out.v_opacity_logits.par_iter_mut(),
-        out.v_sh.par_chunks_mut(ksh),
-    )
+    let mut contributing: Vec<(u32, u32)> = (0..state.splats.len())
         .into_par_iter()
         .with_min_len(1024)
+        .filter(|&k| splat_grads[k] != [0.0; 10])
+        .map(|k| (state.ids[k], k as u32))
+        .collect();
+    contributing.par_sort_unstable();
+    let mut out = Grads::zeros_like(g);
+    // Chunks of Gaussians in parallel, each writing its own slices.
+    const CHUNK: usize = 4096;
+    (
+        out.v_means.par_chunks_mut(CHUNK),
+        out.v_log_scales.par_chunks_mut(CHUNK),
+        out.v_quats.par_chunks_mut(CHUNK),
+        out.v_opacity_logits.par_chunks_mut(CHUNK),
+        out.v_sh.par_chunks_mut(CHUNK * ksh),
+    )
+        .into_par_iter()
         .enumerate()
-        .for_each(|(i, (v_mean, v_log_scale, v_quat, v_opacity_logit, v_sh))| {
-            let k = slot[i];
-            if k == u32::MAX {
-                return;
+        .for_each(|(c, (v_means, v_log_scales, v_quats, v_opacity_logits, v_sh))| {
+            let (lo, hi) = (c * CHUNK, c * CHUNK + v_means.len());
+            let first = contributing.partition_point(|&(i, _)| (i as usize) < lo);
+            for &(i, k) in contributing[first..].iter().take_while(|&&(i, _)| (i as usize) < hi) {
+                let j = i as usize - lo;
+                let grad = GaussianGrad {
+                    v_mean: &mut v_means[j],
+                    v_log_scale: &mut v_log_scales[j],
+                    v_quat: &mut v_quats[j],
+                    v_opacity_logit: &mut v_opacity_logits[j],
+                    v_sh: &mut v_sh[j * ksh..(j + 1) * ksh],
+                };
+                project_backward(&gaussian_ref(g, i as usize), &cc, &splat_grads[k as usize], grad);
             }
-            let grad = GaussianGrad { v_mean, v_log_scale, v_quat, v_opacity_logit, v_sh };
-            project_backward(&gaussian_ref(g, i), &cc, &splat_grads[k as usize], grad);
         });
     out
+}
+
+/// One pixel's state walking back to front.
+#[derive(Clone, Copy)]
+struct Px {
+    /// Transmittance in front of the current splat once it is divided out.
+    t: f32,
+    /// Colour and inverse depth seen behind the current splat, per unit transmittance.
+    behind: [f32; 4],
+    /// `∂L/∂rgb` and `∂L/∂inv_depth` of the pixel.
+    cot: [f32; 4],
+    /// The pixel's list length from the forward pass.
+    n_contrib: u32,
 }
 
 /// What every tile's backward reads.
@@ -107,6 +135,7 @@ struct TileCtx<'a> {
 impl TileCtx<'_> {
     /// Backward of one tile; `dst[k]` receives the gradient of the tile's
     /// `k`-th splat from this tile's pixels.
+    #[inline(never)]
     fn tile(&self, t: usize, dst: &mut [SplatGrad]) {
         let st = self.state;
         let (w, h) = (st.width, st.height);
@@ -116,59 +145,70 @@ impl TileCtx<'_> {
 
         // Per pixel: transmittance, colour and depth behind the current splat,
         // the pixel's cotangents and its list length.
-        let mut tr = [0.0f32; TILE_PX];
-        let mut behind = [[0.0f32; 4]; TILE_PX];
-        let mut cot = [[0.0f32; 4]; TILE_PX];
-        let mut nc = [0u32; TILE_PX];
+        let mut px = [Px { t: 0.0, behind: [0.0; 4], cot: [0.0; 4], n_contrib: 0 }; TILE_PX];
         let mut max_nc = 0;
         for y in y0..y1 {
             for x in x0..x1 {
-                let p = ((y - y0) * TILE + (x - x0)) as usize;
                 let q = y as usize * w as usize + x as usize;
-                tr[p] = st.final_t[q];
-                behind[p] = [self.bg[0], self.bg[1], self.bg[2], 0.0];
-                cot[p] = [self.v_rgb[3 * q], self.v_rgb[3 * q + 1], self.v_rgb[3 * q + 2], self.v_inv_depth[q]];
-                nc[p] = st.n_contrib[q];
-                max_nc = max_nc.max(nc[p]);
+                let p = &mut px[((y - y0) * TILE + (x - x0)) as usize];
+                p.t = st.final_t[q];
+                p.behind = [self.bg[0], self.bg[1], self.bg[2], 0.0];
+                p.cot = [self.v_rgb[3 * q], self.v_rgb[3 * q + 1], self.v_rgb[3 * q + 2], self.v_inv_depth[q]];
+                p.n_contrib = st.n_contrib[q];
+                max_nc = max_nc.max(p.n_contrib);
             }
         }
 
+        let mut falloff = [0.0f32; TILE as usize];
         for k in (0..max_nc as usize).rev() {
             let s = &st.splats[list[k] as usize];
             let feat = [s.color[0], s.color[1], s.color[2], s.inv_z];
             let [ca, cb, cc] = s.conic;
-            let mut acc: SplatGrad = [0.0; 10];
-            let (ja, jb, ia, ib) = s.pixel_rect(x0, x1, y0, y1);
+            // ∂L/∂(x, y), ∂L/∂(A, B, C), ∂L/∂opacity, ∂L/∂(r, g, b, inv_z).
+            let (mut v_xy, mut v_conic, mut v_op, mut v_feat) = ([0.0f32; 2], [0.0f32; 3], 0.0f32, [0.0f32; 4]);
+            let (_, _, ia, ib) = s.pixel_rect(x0, x1, y0, y1);
             for i in ia..=ib {
-                let row = (i as u32 - y0) * TILE;
-                for j in ja..=jb {
-                    let p = (row + (j as u32 - x0)) as usize;
-                    if k as u32 >= nc[p] {
+                let (ja, jb) = s.row_span(i, x0, x1);
+                if ja > jb {
+                    continue;
+                }
+                let row = (i as u32 - y0) as usize * TILE as usize;
+                let (ja, jb) = ((ja as u32 - x0) as usize, (jb as u32 - x0) as usize);
+                let py = i as f32 + 0.5;
+                s.falloff_row(x0 as f32 + 0.5, py, ja, jb, &mut falloff);
+                let dy = py - s.xy[1];
+                let dx0 = x0 as f32 + 0.5 - s.xy[0];
+                for ((p, &gauss), &m) in px[row + ja..=row + jb].iter_mut().zip(&falloff[ja..=jb]).zip(&LANE[ja..=jb]) {
+                    let dx = dx0 + m;
+                    if k as u32 >= p.n_contrib {
                         continue;
                     }
-                    let Some((alpha, gauss, dx, dy)) = s.eval(j as f32 + 0.5, i as f32 + 0.5) else { continue };
-                    let t_i = tr[p] / (1.0 - alpha);
+                    let Some(alpha) = s.alpha(gauss) else { continue };
+                    let t_i = p.t / (1.0 - alpha);
                     let wgt = alpha * t_i;
                     let mut v_alpha = 0.0;
-                    for c in 0..4 {
-                        acc[6 + c] += wgt * cot[p][c];
-                        v_alpha += (feat[c] - behind[p][c]) * cot[p][c];
-                        behind[p][c] = alpha * feat[c] + (1.0 - alpha) * behind[p][c];
+                    for (((vf, &f), b), &ct) in v_feat.iter_mut().zip(&feat).zip(p.behind.iter_mut()).zip(&p.cot) {
+                        *vf += wgt * ct;
+                        v_alpha += (f - *b) * ct;
+                        *b = alpha * f + (1.0 - alpha) * *b;
                     }
                     v_alpha *= t_i;
-                    tr[p] = t_i;
+                    p.t = t_i;
                     if s.opacity * gauss <= ALPHA_MAX {
-                        acc[5] += v_alpha * gauss;
+                        v_op += v_alpha * gauss;
                         let v_power = v_alpha * alpha;
-                        acc[2] += -0.5 * v_power * dx * dx;
-                        acc[3] += -v_power * dx * dy;
-                        acc[4] += -0.5 * v_power * dy * dy;
-                        acc[0] += v_power * (ca * dx + cb * dy);
-                        acc[1] += v_power * (cb * dx + cc * dy);
+                        v_conic[0] += -0.5 * v_power * dx * dx;
+                        v_conic[1] += -v_power * dx * dy;
+                        v_conic[2] += -0.5 * v_power * dy * dy;
+                        v_xy[0] += v_power * (ca * dx + cb * dy);
+                        v_xy[1] += v_power * (cb * dx + cc * dy);
                     }
                 }
             }
-            dst[k] = acc;
+            let [x, y] = v_xy;
+            let [a, b, c] = v_conic;
+            let [r, g, bl, d] = v_feat;
+            dst[k] = [x, y, a, b, c, v_op, r, g, bl, d];
         }
     }
 }

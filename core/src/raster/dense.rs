@@ -170,15 +170,15 @@ pub fn render_f64(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> DenseRen
                 if next_t < 1e-4 {
                     break;
                 }
-                for c in 0..3 {
-                    rgb[c] += alpha * t * s.color[c];
+                for (acc, col) in rgb.iter_mut().zip(s.color) {
+                    *acc += alpha * t * col;
                 }
                 inv_depth += alpha * t / s.z;
                 t = next_t;
             }
             let q = i * w + j;
-            for c in 0..3 {
-                out.rgb[3 * q + c] = rgb[c] + t * f64::from(opts.background[c]);
+            for ((o, col), bg) in out.rgb[3 * q..3 * q + 3].iter_mut().zip(rgb).zip(opts.background) {
+                *o = col + t * f64::from(bg);
             }
             out.inv_depth[q] = inv_depth;
             out.alpha[q] = 1.0 - t;

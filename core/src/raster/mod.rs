@@ -19,18 +19,25 @@
 //! (the [`dense`] module) and the independent reference, not just nearly.
 //!
 //! The fast path ([`forward`], [`backward`]) works in `f32` on 16×16 tiles:
-//! project and cull in parallel, sort once by depth, bin into tiles in depth
-//! order, composite the tiles in parallel. The backward pass walks each pixel's
-//! list in reverse as the 3DGS CUDA kernel does, accumulates per (tile,
-//! Gaussian) pair without sharing, reduces per Gaussian, then runs the
-//! per-Gaussian chain (conic → covariance → quaternion/scale, projection, SH)
-//! in parallel.
+//! project and cull in parallel, sort the splats once by depth, bin them into
+//! the tiles their ellipse reaches, and composite the tiles in parallel, each
+//! splat visiting only the pixels of its ellipse, row by row. The backward
+//! pass walks each pixel's list in reverse as the 3DGS CUDA kernel does,
+//! accumulates per (tile, Gaussian) pair without sharing, reduces per
+//! Gaussian, then runs the per-Gaussian chain (conic → covariance →
+//! quaternion/scale, projection, SH) in parallel.
+//!
+//! `f32` and `f64` can only disagree where a pixel sits within rounding of a
+//! cut-off (α at 1/255, T at 1e-4); the tests count such ties separately.
+//! [`golden`] loads the independent reference cases and compares against them
+//! (the integration test and `gast check golden` share it).
 
 mod backward;
 pub mod dense;
 mod forward;
 pub mod golden;
 mod project;
+mod splat;
 mod state;
 
 use crate::scene::Gaussians;

@@ -7,6 +7,7 @@
 
 use glam::{Mat3, Vec3};
 
+use super::splat::{ALPHA_MIN, EXTENT_ABS, EXTENT_REL, Splat};
 use crate::camera::Camera;
 
 /// Real SH basis constants of 3DGS, band 0.
@@ -25,19 +26,6 @@ pub(crate) const LOW_PASS: f32 = 0.3;
 pub(crate) const NEAR_Z: f32 = 0.2;
 /// The Jacobian clamps `x/z`, `y/z` to this multiple of `tan(half-fov)`.
 pub(crate) const FOV_CLAMP: f32 = 1.3;
-/// Smallest α that counts.
-pub(crate) const ALPHA_MIN: f32 = 1.0 / 255.0;
-/// Largest α.
-pub(crate) const ALPHA_MAX: f32 = 0.99;
-/// Compositing stops before the transmittance would fall below this.
-pub(crate) const T_MIN: f32 = 1e-4;
-
-/// Relative and absolute slack on the screen extent, so that `f32` rounding
-/// can only make it larger than the exact α ≥ 1/255 region, never smaller.
-const EXTENT_REL: f32 = 1e-3;
-const EXTENT_ABS: f32 = 1e-2;
-/// A pixel with `power < −cut − POWER_SLACK` has α < 1/255 without asking `exp`.
-const POWER_SLACK: f32 = 1e-3;
 
 /// The camera quantities every Gaussian needs.
 #[derive(Clone, Copy, Debug)]
@@ -71,62 +59,6 @@ impl CamConsts {
             width: cam.width,
             height: cam.height,
         }
-    }
-}
-
-/// A Gaussian on screen: all that compositing reads.
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct Splat {
-    /// Projected mean in pixels.
-    pub xy: [f32; 2],
-    /// Inverse 2D covariance `(A, B, C)`: `power = −½(A dx² + C dy²) − B dx dy`.
-    pub conic: [f32; 3],
-    /// `σ(opacity logit)`.
-    pub opacity: f32,
-    /// Colour after the `max(0, ·)` clamp.
-    pub color: [f32; 3],
-    /// `1 / z`.
-    pub inv_z: f32,
-    /// Camera `z`, the sort key.
-    pub depth: f32,
-    /// `ln(255·opacity)`: α ≥ 1/255 needs `power ≥ −cut`.
-    pub cut: f32,
-    /// Half-widths (x, y) of the box around the ellipse `power ≥ −cut`, with slack.
-    pub ext: [f32; 2],
-}
-
-impl Splat {
-    /// α of this splat at a pixel centre, with `(α, exp(power), dx, dy)`, or
-    /// `None` where the Gaussian is skipped (`power > 0` or `α < 1/255`).
-    #[inline(always)]
-    pub fn eval(&self, px: f32, py: f32) -> Option<(f32, f32, f32, f32)> {
-        let dx = px - self.xy[0];
-        let dy = py - self.xy[1];
-        let [a, b, c] = self.conic;
-        let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
-        if power > 0.0 || power < -self.cut - POWER_SLACK {
-            return None;
-        }
-        let g = power.exp();
-        let alpha = (self.opacity * g).min(ALPHA_MAX);
-        if alpha < ALPHA_MIN {
-            return None;
-        }
-        Some((alpha, g, dx, dy))
-    }
-
-    /// Inclusive pixel columns and rows `[lo, hi]` whose centres the extent
-    /// covers, clipped to `[x0, x1) × [y0, y1)`; empty when `lo > hi`.
-    #[inline(always)]
-    pub fn pixel_rect(&self, x0: u32, x1: u32, y0: u32, y1: u32) -> (i64, i64, i64, i64) {
-        let span = |c: f32, e: f32, lo: u32, hi: u32| {
-            let a = ((c - e - 0.5).ceil() as i64).max(lo as i64);
-            let b = ((c + e - 0.5).floor() as i64).min(hi as i64 - 1);
-            (a, b)
-        };
-        let (ja, jb) = span(self.xy[0], self.ext[0], x0, x1);
-        let (ia, ib) = span(self.xy[1], self.ext[1], y0, y1);
-        (ja, jb, ia, ib)
     }
 }
 
@@ -238,6 +170,7 @@ struct Proj {
     cov: [f32; 3],
 }
 
+#[inline(always)]
 fn proj_common(g: &GaussianRef, cc: &CamConsts) -> Option<Proj> {
     let t = cc.rot * Vec3::from(g.mean) + cc.trans;
     if t.z <= NEAR_Z {
@@ -282,6 +215,7 @@ fn sigmoid(x: f32) -> f32 {
 }
 
 /// Raw colour `0.5 + SH·Y(d)` (before the clamp) and the basis used.
+#[inline(always)]
 fn sh_color(g: &GaussianRef, cc: &CamConsts) -> ([f32; 3], [f32; 16], Vec3, f32) {
     let v = Vec3::from(g.mean) - cc.center;
     let len = v.length();
@@ -300,7 +234,7 @@ fn sh_color(g: &GaussianRef, cc: &CamConsts) -> ([f32; 3], [f32; 16], Vec3, f32)
 /// (behind the near plane, too transparent, or off screen).
 pub(crate) fn project(g: &GaussianRef, cc: &CamConsts) -> Option<Splat> {
     let opacity = sigmoid(g.opacity_logit);
-    if opacity < ALPHA_MIN {
+    if opacity < ALPHA_MIN || opacity.is_nan() {
         return None;
     }
     let p = proj_common(g, cc)?;
@@ -311,12 +245,26 @@ pub(crate) fn project(g: &GaussianRef, cc: &CamConsts) -> Option<Splat> {
     }
     let conic = [c / det, -b / det, a / det];
     let xy = [cc.fx * p.t.x / p.t.z + cc.cx, cc.fy * p.t.y / p.t.z + cc.cy];
+    if !(xy[0].is_finite() && xy[1].is_finite()) {
+        return None;
+    }
     let cut = (255.0 * opacity).ln().max(0.0);
     let ext = [
         (2.0 * cut * a).sqrt() * (1.0 + EXTENT_REL) + EXTENT_ABS,
         (2.0 * cut * c).sqrt() * (1.0 + EXTENT_REL) + EXTENT_ABS,
     ];
-    let mut splat = Splat { xy, conic, opacity, color: [0.0; 3], inv_z: 1.0 / p.t.z, depth: p.t.z, cut, ext };
+    let mut splat = Splat {
+        xy,
+        conic,
+        opacity,
+        color: [0.0; 3],
+        inv_z: 1.0 / p.t.z,
+        depth: p.t.z,
+        cut,
+        ext,
+        inv_a: 1.0 / conic[0],
+        det_conic: conic[0] * conic[2] - conic[1] * conic[1],
+    };
     let (ja, jb, ia, ib) = splat.pixel_rect(0, cc.width, 0, cc.height);
     if ja > jb || ia > ib {
         return None;
@@ -426,7 +374,8 @@ pub(crate) fn project_backward(g: &GaussianRef, cc: &CamConsts, vs: &SplatGrad, 
             - 2.0 * x * e(2, 2)),
         2.0 * (-2.0 * y * e(0, 0) + x * e(0, 1) + r * e(0, 2) + x * e(1, 0) + z * e(1, 2) - r * e(2, 0) + z * e(2, 1)
             - 2.0 * y * e(2, 2)),
-        2.0 * (-2.0 * z * e(0, 0) - r * e(0, 1) + x * e(0, 2) + r * e(1, 0) - 2.0 * z * e(1, 1) + y * e(1, 2)
+        2.0 * (-2.0 * z * e(0, 0) - r * e(0, 1) + x * e(0, 2) + r * e(1, 0) - 2.0 * z * e(1, 1)
+            + y * e(1, 2)
             + x * e(2, 0)
             + y * e(2, 1)),
     ];

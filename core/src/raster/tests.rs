@@ -154,7 +154,11 @@ fn empty_and_offscreen_scenes_render_background() {
 /// well separated depths, all inside the view, so that at every pixel every
 /// Gaussian has 1/255 < α < 0.99, the transmittance stays far above 1e-4,
 /// colours stay positive and the Jacobian clamp is inactive.
-fn fd_scene(seed: u64, deg: u32) -> (Gaussians, Camera) {
+///
+/// With `beyond_clamp`, the first Gaussian sits right of the view at
+/// `x/z = 1.7·tan(half-fov)`, where the Jacobian clamps `x/z` to 1.3, and is
+/// made large enough to cover the whole image.
+fn fd_scene(seed: u64, deg: u32, beyond_clamp: bool) -> (Gaussians, Camera) {
     let mut rng = Rng(seed);
     let cam = look_at(Vec3::new(0.2, 0.1, -3.0), Vec3::ZERO, 40, 36, 30.0);
     let n = 6;
@@ -164,6 +168,10 @@ fn fd_scene(seed: u64, deg: u32) -> (Gaussians, Camera) {
     for (k, m) in g.means.iter_mut().enumerate() {
         let mut c = cam.world_to_camera(Vec3::from(*m));
         c *= (2.0 + 0.35 * k as f32) / c.z;
+        if beyond_clamp && k == 0 {
+            c.x = 1.7 * cam.tan_half_fov().0 * c.z;
+            g.log_scales[0] = [2.0, 1.9, 2.1];
+        }
         *m = (inv * (c - cam.translation)).to_array();
     }
     (g, cam)
@@ -197,8 +205,8 @@ fn param(g: &mut Gaussians, group: Group, k: usize) -> &mut f32 {
     }
 }
 
-fn check_fd(seed: u64, deg: u32, background: [f32; 3]) -> Vec<String> {
-    let (g, cam) = fd_scene(seed, deg);
+fn check_fd(seed: u64, deg: u32, background: [f32; 3], beyond_clamp: bool) -> Vec<String> {
+    let (g, cam) = fd_scene(seed, deg, beyond_clamp);
     let opts = RenderOptions { background };
     let npx = (cam.width * cam.height) as usize;
     let mut rng = Rng(seed ^ 0xabc);
@@ -243,19 +251,113 @@ fn check_fd(seed: u64, deg: u32, background: [f32; 3]) -> Vec<String> {
 #[test]
 fn backward_matches_finite_differences() {
     let mut failures = Vec::new();
-    for (seed, deg, bg) in [(1, 0, [0.0; 3]), (2, 3, [0.3, 0.6, 0.9]), (3, 1, [1.0, 0.0, 0.5]), (4, 3, [0.0; 3])] {
-        failures.extend(check_fd(seed, deg, bg));
+    for (seed, deg, bg, clamp) in [
+        (1, 0, [0.0; 3], false),
+        (2, 3, [0.3, 0.6, 0.9], false),
+        (3, 1, [1.0, 0.0, 0.5], false),
+        (4, 3, [0.0; 3], false),
+        (5, 2, [0.2; 3], true),
+    ] {
+        failures.extend(check_fd(seed, deg, bg, clamp));
     }
     assert!(failures.is_empty(), "{} gradient entries disagree:\n{}", failures.len(), failures.join("\n"));
 }
 
 #[test]
 fn backward_is_deterministic() {
-    let (g, cam) = fd_scene(7, 3);
+    let (g, cam) = fd_scene(7, 3, false);
     let opts = RenderOptions::default();
     let npx = (cam.width * cam.height) as usize;
     let (_, state) = forward(&g, &cam, &opts);
     let a = backward(&g, &cam, &opts, &state, &vec![0.5; 3 * npx], &vec![-0.25; npx]);
     let b = backward(&g, &cam, &opts, &state, &vec![0.5; 3 * npx], &vec![-0.25; npx]);
     assert_eq!(a, b);
+}
+
+#[test]
+fn exp_neg_is_accurate() {
+    let mut worst = 0.0f64;
+    for k in 0..=200_000 {
+        let x = -20.0 * k as f32 / 200_000.0;
+        let want = f64::from(x).exp();
+        worst = worst.max((f64::from(super::splat::exp_neg(x)) - want).abs() / want);
+    }
+    assert!(worst < 3e-7, "exp_neg relative error {worst:.3e}");
+    assert_eq!(super::splat::exp_neg(0.0), 1.0);
+}
+
+#[test]
+fn tile_test_and_row_spans_cover_every_reachable_pixel() {
+    // Random splats of every shape against one tile: wherever a pixel can reach
+    // α ≥ 1/255, the tile test must say yes and the row span must include it.
+    let mut rng = Rng(99);
+    let cam = look_at(Vec3::new(0.0, 0.0, -3.0), Vec3::ZERO, 64, 64, 50.0);
+    let cc = CamConsts::new(&cam);
+    let g = random_scene(&mut rng, &cam, 3000, 0, (1.0, 5.0), (-5.0, -0.5), (-5.0, 6.0), 1.5);
+    let (x0, x1, y0, y1) = (16, 32, 32, 48);
+    let mut misses = Vec::new();
+    for i in 0..g.len() {
+        let Some(s) = project(&gaussian_ref(&g, i), &cc) else { continue };
+        let touches = s.touches_rect(x0, x1, y0, y1);
+        for y in y0..y1 {
+            let (ja, jb) = s.row_span(i64::from(y), x0, x1);
+            for x in x0..x1 {
+                let (dx, dy) = (x as f32 + 0.5 - s.xy[0], y as f32 + 0.5 - s.xy[1]);
+                let power = -0.5 * (s.conic[0] * dx * dx + s.conic[2] * dy * dy) - s.conic[1] * dx * dy;
+                if s.opacity * f64::from(power).exp() as f32 >= 1.0 / 255.0 {
+                    let in_span = (ja..=jb).contains(&i64::from(x));
+                    if !touches || !in_span {
+                        misses.push(format!("Gaussian {i} pixel ({x}, {y}): tile {touches}, span {in_span}"));
+                    }
+                }
+            }
+        }
+    }
+    assert!(misses.is_empty(), "{} reachable pixels missed:\n{}", misses.len(), misses.join("\n"));
+}
+
+#[test]
+fn non_finite_gaussians_are_skipped() {
+    let cam = look_at(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, 32, 32, 30.0);
+    let mut rng = Rng(5);
+    let mut g = random_scene(&mut rng, &cam, 4, 0, (2.0, 3.0), (-2.0, -1.0), (0.0, 2.0), 0.5);
+    g.opacity_logits[0] = f32::NAN;
+    g.means[1][0] = f32::NAN;
+    g.log_scales[2][1] = f32::INFINITY;
+    g.quats[3] = [0.0; 4];
+    let (img, state) = forward(&g, &cam, &RenderOptions::default());
+    assert_eq!(state.visible(), 0);
+    assert!(img.rgb.iter().chain(&img.alpha).all(|&v| v == 0.0));
+}
+
+#[test]
+fn gradients_follow_their_gaussians_when_the_order_changes() {
+    // Enough Gaussians to span several parallel chunks of the per-Gaussian
+    // pass; reversing their order must reverse the gradients, bit for bit
+    // (compositing order is by depth, not by index).
+    let mut rng = Rng(2024);
+    let cam = look_at(Vec3::new(0.4, -0.3, -4.0), Vec3::ZERO, 64, 48, 50.0);
+    let g = random_scene(&mut rng, &cam, 10_000, 1, (1.0, 6.0), (-4.5, -2.5), (-3.0, 3.0), 1.1);
+    let mut rev = g.clone();
+    rev.means.reverse();
+    rev.log_scales.reverse();
+    rev.quats.reverse();
+    rev.opacity_logits.reverse();
+    rev.sh = g.sh.chunks_exact(12).rev().flatten().copied().collect();
+    let opts = RenderOptions { background: [0.1, 0.2, 0.3] };
+    let npx = 64 * 48;
+    let v_rgb: Vec<f32> = (0..3 * npx).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    let v_d: Vec<f32> = (0..npx).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    let (img, state) = forward(&g, &cam, &opts);
+    let (img_rev, state_rev) = forward(&rev, &cam, &opts);
+    assert_eq!(img, img_rev);
+    let a = backward(&g, &cam, &opts, &state, &v_rgb, &v_d);
+    let mut b = backward(&rev, &cam, &opts, &state_rev, &v_rgb, &v_d);
+    b.v_means.reverse();
+    b.v_log_scales.reverse();
+    b.v_quats.reverse();
+    b.v_opacity_logits.reverse();
+    b.v_sh = b.v_sh.chunks_exact(12).rev().flatten().copied().collect();
+    assert_eq!(a, b);
+    assert!(a.v_means.iter().filter(|m| **m != [0.0; 3]).count() > 1000, "too few Gaussians got a gradient");
 }
