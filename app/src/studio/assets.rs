@@ -86,7 +86,15 @@ pub fn demo_scene() -> Gaussians {
         let a = i as f32 / 240.0 * tau;
         for k in 0..2 {
             let y = 0.05 + 0.08 * k as f32;
-            push(&mut g, [1.62 * a.cos(), y, 1.62 * a.sin()], [0.045, 0.045, 0.02], quat_z_to([a.cos(), 0.0, a.sin()]), 0.9, [0.15, 0.18, 0.24], 0.0);
+            push(
+                &mut g,
+                [1.62 * a.cos(), y, 1.62 * a.sin()],
+                [0.045, 0.045, 0.02],
+                quat_z_to([a.cos(), 0.0, a.sin()]),
+                0.9,
+                [0.15, 0.18, 0.24],
+                0.0,
+            );
         }
     }
     // Stem: a slightly bulging cylinder, cream.
@@ -117,7 +125,15 @@ pub fn demo_scene() -> Gaussians {
     for i in 0..500 {
         let r = 0.3 + 0.62 * ((i as f32 + 0.5) / 500.0).sqrt();
         let a = i as f32 * 2.399_963;
-        push(&mut g, [r * a.cos(), -0.97, r * a.sin()], [0.05, 0.012, 0.05], [1.0, 0.0, 0.0, 0.0], 0.9, [0.78, 0.66, 0.50], 0.0);
+        push(
+            &mut g,
+            [r * a.cos(), -0.97, r * a.sin()],
+            [0.05, 0.012, 0.05],
+            [1.0, 0.0, 0.0, 0.0],
+            0.9,
+            [0.78, 0.66, 0.50],
+            0.0,
+        );
     }
     g
 }
@@ -195,7 +211,11 @@ pub fn demo_styles() -> Vec<(&'static str, RgbImage)> {
 /// The app icon: three overlapping soft splats on a rounded dark square.
 pub fn icon() -> RgbaImage {
     const S: u32 = 128;
-    let blobs = [(48.0, 52.0, 26.0, [0.92, 0.25, 0.20]), (80.0, 56.0, 24.0, [0.20, 0.55, 0.95]), (64.0, 84.0, 25.0, [0.98, 0.80, 0.20])];
+    let blobs = [
+        (48.0, 52.0, 26.0, [0.92, 0.25, 0.20]),
+        (80.0, 56.0, 24.0, [0.20, 0.55, 0.95]),
+        (64.0, 84.0, 25.0, [0.98, 0.80, 0.20]),
+    ];
     RgbaImage::from_fn(S, S, |x, y| {
         let (fx, fy) = (x as f32 + 0.5, y as f32 + 0.5);
         // Rounded-square mask.
@@ -221,8 +241,14 @@ where
 {
     use image::EncodableLayout as _;
     let mut out = Vec::new();
-    image::ImageEncoder::write_image(image::codecs::png::PngEncoder::new(&mut out), img.as_raw().as_bytes(), img.width(), img.height(), P::COLOR_TYPE)
-        .context("encoding a PNG")?;
+    image::ImageEncoder::write_image(
+        image::codecs::png::PngEncoder::new(&mut out),
+        img.as_raw().as_bytes(),
+        img.width(),
+        img.height(),
+        P::COLOR_TYPE,
+    )
+    .context("encoding a PNG")?;
     Ok(out)
 }
 
@@ -232,11 +258,15 @@ pub fn generate(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let scene = dir.join(DEMO_SCENE);
     gast_core::scene::save_ply(&scene, &demo_scene())?;
     let mut paths = vec![scene];
-    let mut images: Vec<(String, Vec<u8>)> = demo_styles().into_iter().map(|(n, img)| Ok((n.to_string(), png_bytes(&img)?))).collect::<anyhow::Result<_>>()?;
+    let mut images: Vec<(String, Vec<u8>)> = demo_styles()
+        .into_iter()
+        .map(|(n, img)| Ok((n.to_string(), png_bytes(&img)?)))
+        .collect::<anyhow::Result<_>>()?;
     images.push((ICON.to_string(), png_bytes(&icon())?));
     for (name, bytes) in images {
         let path = dir.join(&name);
-        gast_core::io::atomic_write(&path, |w| w.write_all(&bytes)).with_context(|| format!("writing {}", path.display()))?;
+        gast_core::io::atomic_write(&path, |w| w.write_all(&bytes))
+            .with_context(|| format!("writing {}", path.display()))?;
         paths.push(path);
     }
     Ok(paths)
@@ -256,8 +286,13 @@ mod tests {
         for made in generate(&fresh).expect("generate") {
             let bytes = std::fs::read(&made).expect("read generated");
             let path = dir.join(made.file_name().expect("name"));
-            let committed = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}; run `cargo run -p gast -- assets`", path.display()));
-            assert!(committed == bytes, "{} differs from the generator's output; run `cargo run -p gast -- assets`", path.display());
+            let committed = std::fs::read(&path)
+                .unwrap_or_else(|e| panic!("{}: {e}; run `cargo run -p gast -- assets`", path.display()));
+            assert!(
+                committed == bytes,
+                "{} differs from the generator's output; run `cargo run -p gast -- assets`",
+                path.display()
+            );
             total += bytes.len();
         }
         std::fs::remove_dir_all(&fresh).ok();

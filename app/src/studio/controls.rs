@@ -16,7 +16,9 @@ pub fn mode_label(m: Mode) -> &'static str {
 }
 
 fn weight(ui: &mut Ui, value: &mut f32, max: f32, label: &str, hover: &str) -> bool {
-    ui.add(egui::Slider::new(value, 0.0..=max).logarithmic(true).smallest_positive(1e-5).text(label)).on_hover_text(hover).changed()
+    ui.add(egui::Slider::new(value, 0.0..=max).logarithmic(true).smallest_positive(1e-5).text(label))
+        .on_hover_text(hover)
+        .changed()
 }
 
 /// Edits `c` in place; returns true when anything changed.
@@ -46,14 +48,22 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
         .on_hover_text("geometry share of each cycle")
         .changed();
     let s = c.schedule();
-    ui.weak(format!("N_c = {}, N_g = {}, {} steps", s.color_steps, s.geometry_steps, s.cycles * (s.color_steps + s.geometry_steps)));
+    ui.weak(format!(
+        "N_c = {}, N_g = {}, {} steps",
+        s.color_steps,
+        s.geometry_steps,
+        s.cycles * (s.color_steps + s.geometry_steps)
+    ));
 
     ui.separator();
     ui.label(egui::RichText::new("Texture and resolution").strong());
     ui.horizontal(|ui| {
         ui.label("texture scale");
         for (px, name) in [(128, "0.5×"), (256, "1×"), (512, "2×")] {
-            changed |= ui.selectable_value(&mut c.texture_scale, px, name).on_hover_text(format!("style image height {px} px")).changed();
+            changed |= ui
+                .selectable_value(&mut c.texture_scale, px, name)
+                .on_hover_text(format!("style image height {px} px"))
+                .changed();
         }
     });
     changed |= ui.add(egui::Slider::new(&mut c.texture_scale, 16..=1024).text("style height (px)")).changed();
@@ -63,7 +73,8 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
     egui::CollapsingHeader::new("Learning rates").default_open(false).show(ui, |ui| {
         let lr = &mut c.lr;
         changed |= weight(ui, &mut lr.color, 1.0, "colour", "SH DC (colour steps)");
-        changed |= weight(ui, &mut lr.means_per_extent, 0.01, "means / extent", "position learning rate per scene extent");
+        changed |=
+            weight(ui, &mut lr.means_per_extent, 0.01, "means / extent", "position learning rate per scene extent");
         changed |= weight(ui, &mut lr.scales, 0.1, "scales", "log-scales");
         changed |= weight(ui, &mut lr.quats, 0.1, "rotations", "quaternions");
         changed |= weight(ui, &mut lr.opacity, 1.0, "opacity", "opacity logits");
@@ -77,12 +88,20 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
     let painter = ui.painter_at(rect);
     painter.rect_filled(rect, 4.0, ui.visuals().extreme_bg_color);
     if steps.len() < 2 {
-        painter.text(rect.center(), egui::Align2::CENTER_CENTER, "loss chart: no steps yet", egui::FontId::proportional(12.0), ui.visuals().weak_text_color());
+        painter.text(
+            rect.center(),
+            egui::Align2::CENTER_CENTER,
+            "loss chart: no steps yet",
+            egui::FontId::proportional(12.0),
+            ui.visuals().weak_text_color(),
+        );
         return;
     }
     type Series = (&'static str, Color32, fn(&StepReport) -> f32);
-    let series: [Series; 2] =
-        [("total", Color32::from_rgb(250, 200, 60), |s| s.losses.total), ("GCFM", Color32::from_rgb(90, 170, 250), |s| s.losses.gcfm)];
+    let series: [Series; 2] = [
+        ("total", Color32::from_rgb(250, 200, 60), |s| s.losses.total),
+        ("GCFM", Color32::from_rgb(90, 170, 250), |s| s.losses.gcfm),
+    ];
     let all = steps.iter().flat_map(|s| [s.losses.total, s.losses.gcfm]).filter(|v| v.is_finite());
     let (lo, hi) = all.fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
     let span = (hi - lo).max(1e-12);
@@ -91,11 +110,34 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
         let pts: Vec<egui::Pos2> = steps
             .iter()
             .enumerate()
-            .map(|(i, s)| egui::pos2(rect.left() + rect.width() * i as f32 / n, rect.bottom() - 4.0 - (rect.height() - 8.0) * (get(s) - lo) / span))
+            .map(|(i, s)| {
+                egui::pos2(
+                    rect.left() + rect.width() * i as f32 / n,
+                    rect.bottom() - 4.0 - (rect.height() - 8.0) * (get(s) - lo) / span,
+                )
+            })
             .collect();
         painter.add(egui::Shape::line(pts, egui::Stroke::new(1.5, *color)));
-        painter.text(rect.left_top() + egui::vec2(6.0, 4.0 + 14.0 * k as f32), egui::Align2::LEFT_TOP, *name, egui::FontId::proportional(11.0), *color);
+        painter.text(
+            rect.left_top() + egui::vec2(6.0, 4.0 + 14.0 * k as f32),
+            egui::Align2::LEFT_TOP,
+            *name,
+            egui::FontId::proportional(11.0),
+            *color,
+        );
     }
-    painter.text(rect.right_top() + egui::vec2(-6.0, 4.0), egui::Align2::RIGHT_TOP, format!("{hi:.4}"), egui::FontId::monospace(10.0), ui.visuals().weak_text_color());
-    painter.text(rect.right_bottom() + egui::vec2(-6.0, -4.0), egui::Align2::RIGHT_BOTTOM, format!("{lo:.4}"), egui::FontId::monospace(10.0), ui.visuals().weak_text_color());
+    painter.text(
+        rect.right_top() + egui::vec2(-6.0, 4.0),
+        egui::Align2::RIGHT_TOP,
+        format!("{hi:.4}"),
+        egui::FontId::monospace(10.0),
+        ui.visuals().weak_text_color(),
+    );
+    painter.text(
+        rect.right_bottom() + egui::vec2(-6.0, -4.0),
+        egui::Align2::RIGHT_BOTTOM,
+        format!("{lo:.4}"),
+        egui::FontId::monospace(10.0),
+        ui.visuals().weak_text_color(),
+    );
 }

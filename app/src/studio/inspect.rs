@@ -31,10 +31,9 @@ pub struct SceneFile {
 /// Reads a scene and looks for training cameras beside it.
 pub fn read_scene_file(path: &std::path::Path) -> anyhow::Result<SceneFile> {
     let gaussians = gast_core::scene::load(path)?;
-    let cameras = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .and_then(|dir| gast_core::camera::load(dir).ok().filter(|set| !set.cameras.is_empty()).map(|set| (set, dir.to_path_buf())));
+    let cameras = path.parent().filter(|d| !d.as_os_str().is_empty()).and_then(|dir| {
+        gast_core::camera::load(dir).ok().filter(|set| !set.cameras.is_empty()).map(|set| (set, dir.to_path_buf()))
+    });
     Ok(SceneFile { gaussians, cameras })
 }
 
@@ -68,7 +67,13 @@ fn gray_image(w: u32, h: u32, v: &[f32], mask: impl Fn(usize) -> bool) -> egui::
     let px = v
         .iter()
         .enumerate()
-        .map(|(i, &x)| if mask(i) { egui::Color32::from_gray((16.0 + (x - lo) * s * 239.0).clamp(0.0, 255.0) as u8) } else { egui::Color32::BLACK })
+        .map(|(i, &x)| {
+            if mask(i) {
+                egui::Color32::from_gray((16.0 + (x - lo) * s * 239.0).clamp(0.0, 255.0) as u8)
+            } else {
+                egui::Color32::BLACK
+            }
+        })
         .collect();
     egui::ColorImage::new([w as usize, h as usize], px)
 }
@@ -184,8 +189,14 @@ pub fn sobel_edges(width: u32, height: u32, rgb: &[f32]) -> Vec<f32> {
     let mut max = 0.0f32;
     for y in 0..h as isize {
         for x in 0..w as isize {
-            let gx = at(x + 1, y - 1) + 2.0 * at(x + 1, y) + at(x + 1, y + 1) - at(x - 1, y - 1) - 2.0 * at(x - 1, y) - at(x - 1, y + 1);
-            let gy = at(x - 1, y + 1) + 2.0 * at(x, y + 1) + at(x + 1, y + 1) - at(x - 1, y - 1) - 2.0 * at(x, y - 1) - at(x + 1, y - 1);
+            let gx = at(x + 1, y - 1) + 2.0 * at(x + 1, y) + at(x + 1, y + 1)
+                - at(x - 1, y - 1)
+                - 2.0 * at(x - 1, y)
+                - at(x - 1, y + 1);
+            let gy = at(x - 1, y + 1) + 2.0 * at(x, y + 1) + at(x + 1, y + 1)
+                - at(x - 1, y - 1)
+                - 2.0 * at(x, y - 1)
+                - at(x + 1, y - 1);
             let m = (gx * gx + gy * gy).sqrt();
             max = max.max(m);
             out[y as usize * w + x as usize] = m;

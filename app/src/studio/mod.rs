@@ -278,9 +278,13 @@ impl StudioApp {
     fn add_style(&mut self, path: PathBuf, img: image::RgbImage) {
         let thumb = image::imageops::thumbnail(&img, 96, (96 * img.height() / img.width().max(1)).max(1));
         let color = egui::ColorImage::from_rgb([thumb.width() as usize, thumb.height() as usize], thumb.as_raw());
-        let texture = self.ctx.load_texture(format!("style {}", path.display()), color.clone(), egui::TextureOptions::LINEAR);
+        let texture =
+            self.ctx.load_texture(format!("style {}", path.display()), color.clone(), egui::TextureOptions::LINEAR);
         self.styles.retain(|s| s.path != path);
-        self.styles.insert(0, LoadedStyle { path, thumb: color, texture, size: [img.width() as usize, img.height() as usize] });
+        self.styles.insert(
+            0,
+            LoadedStyle { path, thumb: color, texture, size: [img.width() as usize, img.height() as usize] },
+        );
         self.styles.truncate(8);
         self.style = Some(0);
     }
@@ -291,7 +295,10 @@ impl StudioApp {
             Ok(img) => self.add_style(path.to_path_buf(), img.to_rgb8()),
             Err(e) => {
                 let keep = if self.styles.is_empty() { "no style is open" } else { "keeping the previous style" };
-                self.report(anyhow::anyhow!("{}: not a style image this build can read (PNG, JPEG, WebP): {e}; {keep}", path.display()))
+                self.report(anyhow::anyhow!(
+                    "{}: not a style image this build can read (PNG, JPEG, WebP): {e}; {keep}",
+                    path.display()
+                ))
             }
         }
     }
@@ -313,7 +320,9 @@ impl StudioApp {
     /// Loads optimisation cameras (COLMAP, `cameras.json`, `transforms.json`) for the snap list.
     pub fn open_cameras(&mut self, path: &Path) {
         match gast_core::camera::load(path) {
-            Ok(set) if set.cameras.is_empty() => self.report(anyhow::anyhow!("{}: no cameras in the file", path.display())),
+            Ok(set) if set.cameras.is_empty() => {
+                self.report(anyhow::anyhow!("{}: no cameras in the file", path.display()))
+            }
             Ok(set) => {
                 self.notice = format!("{} cameras from {}", set.cameras.len(), path.display());
                 self.set_cameras(set, path);
@@ -349,7 +358,9 @@ impl StudioApp {
     pub fn load_preset(&mut self, path: &Path) {
         let result = std::fs::read_to_string(path)
             .with_context(|| format!("{}: cannot read the preset", path.display()))
-            .and_then(|t| StyleConfig::from_json(&t).with_context(|| format!("{}: not a style preset", path.display())));
+            .and_then(|t| {
+                StyleConfig::from_json(&t).with_context(|| format!("{}: not a style preset", path.display()))
+            });
         match result {
             Ok(c) => {
                 let problems = c.problems();
@@ -357,7 +368,11 @@ impl StudioApp {
                     self.config = c;
                     self.notice = format!("preset {} loaded", path.display());
                 } else {
-                    self.report(anyhow::anyhow!("{}: {}; keeping the current parameters", path.display(), problems.join("; ")));
+                    self.report(anyhow::anyhow!(
+                        "{}: {}; keeping the current parameters",
+                        path.display(),
+                        problems.join("; ")
+                    ));
                 }
             }
             Err(e) => self.report(e),
@@ -411,7 +426,9 @@ impl StudioApp {
     }
 
     fn handle_drops(&mut self, ui: &Ui) {
-        let dropped: Vec<PathBuf> = ui.input(|i| i.raw.dropped_files.iter().map(|f| f.path().to_path_buf()).filter(|p| !p.as_os_str().is_empty()).collect());
+        let dropped: Vec<PathBuf> = ui.input(|i| {
+            i.raw.dropped_files.iter().map(|f| f.path().to_path_buf()).filter(|p| !p.as_os_str().is_empty()).collect()
+        });
         for p in dropped {
             self.open_any(&p);
         }
@@ -422,7 +439,8 @@ impl StudioApp {
     fn adopt_context(&mut self, ctx: &egui::Context) {
         self.ctx = ctx.clone();
         for s in &mut self.styles {
-            s.texture = ctx.load_texture(format!("style {}", s.path.display()), s.thumb.clone(), egui::TextureOptions::LINEAR);
+            s.texture =
+                ctx.load_texture(format!("style {}", s.path.display()), s.thumb.clone(), egui::TextureOptions::LINEAR);
         }
     }
 
@@ -458,7 +476,8 @@ impl StudioApp {
             self.screenshot.requested = true;
             let done = self.screenshot.done.clone();
             ctx.send_viewport_cmd(egui::ViewportCommand::Screenshot(egui::ScreenshotCallback::new(move |img| {
-                let rgb: Vec<f32> = img.pixels.iter().flat_map(|c| [c.r(), c.g(), c.b()].map(|v| v as f32 / 255.0)).collect();
+                let rgb: Vec<f32> =
+                    img.pixels.iter().flat_map(|c| [c.r(), c.g(), c.b()].map(|v| v as f32 / 255.0)).collect();
                 match gast_core::io::write_png_rgb(&path, img.size[0] as u32, img.size[1] as u32, &rgb) {
                     Ok(()) => eprintln!("studio: screenshot saved to {}", path.display()),
                     Err(e) => eprintln!("studio: screenshot failed: {e}"),
@@ -480,7 +499,8 @@ impl StudioApp {
         let size = ui.available_size();
         let (rect, response) = ui.allocate_exact_size(size, egui::Sense::click_and_drag());
         let ppp = ui.ctx().pixels_per_point();
-        self.viewport_px = [(rect.width() * ppp).round().max(1.0) as u32, (rect.height() * ppp).round().max(1.0) as u32];
+        self.viewport_px =
+            [(rect.width() * ppp).round().max(1.0) as u32, (rect.height() * ppp).round().max(1.0) as u32];
         let interacting = self.handle_view_input(ui, &response, rect);
         let full = self.viewport_camera();
         // Half resolution while the view moves keeps big scenes responsive on software GPUs.
@@ -501,11 +521,29 @@ impl StudioApp {
         ui.painter().add(egui_wgpu::Callback::new_paint_callback(rect, callback));
         if self.snapshot.is_some() && self.split > 0.0 && self.split < 1.0 {
             let x = rect.left() + rect.width() * self.split;
-            ui.painter().text(egui::pos2(x - 6.0, rect.top() + 6.0), egui::Align2::RIGHT_TOP, "before", egui::FontId::proportional(13.0), Color32::WHITE);
-            ui.painter().text(egui::pos2(x + 6.0, rect.top() + 6.0), egui::Align2::LEFT_TOP, "after", egui::FontId::proportional(13.0), Color32::WHITE);
+            ui.painter().text(
+                egui::pos2(x - 6.0, rect.top() + 6.0),
+                egui::Align2::RIGHT_TOP,
+                "before",
+                egui::FontId::proportional(13.0),
+                Color32::WHITE,
+            );
+            ui.painter().text(
+                egui::pos2(x + 6.0, rect.top() + 6.0),
+                egui::Align2::LEFT_TOP,
+                "after",
+                egui::FontId::proportional(13.0),
+                Color32::WHITE,
+            );
         }
         if self.scene.is_none() {
-            ui.painter().text(rect.center(), egui::Align2::CENTER_CENTER, "drop a scene (.ply) here", egui::FontId::proportional(18.0), Color32::GRAY);
+            ui.painter().text(
+                rect.center(),
+                egui::Align2::CENTER_CENTER,
+                "drop a scene (.ply) here",
+                egui::FontId::proportional(18.0),
+                Color32::GRAY,
+            );
         }
     }
 
@@ -533,7 +571,14 @@ impl StudioApp {
         if flying {
             let (dt, keys) = ui.input(|i| {
                 let k = |key| if i.key_down(key) { 1.0f32 } else { 0.0 };
-                (i.stable_dt.min(0.1), [k(egui::Key::D) - k(egui::Key::A), k(egui::Key::E) - k(egui::Key::Q), k(egui::Key::W) - k(egui::Key::S)])
+                (
+                    i.stable_dt.min(0.1),
+                    [
+                        k(egui::Key::D) - k(egui::Key::A),
+                        k(egui::Key::E) - k(egui::Key::Q),
+                        k(egui::Key::W) - k(egui::Key::S),
+                    ],
+                )
             });
             if keys != [0.0; 3] {
                 self.view.fly(keys[0], keys[1], keys[2], dt);

@@ -23,7 +23,8 @@ impl StudioApp {
                 self.open_scene(&p);
             }
             if ui.button("Open style…").clicked()
-                && let Some(p) = rfd::FileDialog::new().add_filter("Images", &["png", "jpg", "jpeg", "webp"]).pick_file()
+                && let Some(p) =
+                    rfd::FileDialog::new().add_filter("Images", &["png", "jpg", "jpeg", "webp"]).pick_file()
             {
                 self.open_style(&p);
             }
@@ -39,17 +40,20 @@ impl StudioApp {
         ui.add_enabled_ui(current.is_some(), |ui| {
             let Some(g) = current else { return };
             if ui.button("Current Gaussians as .ply…").clicked()
-                && let Some(p) = rfd::FileDialog::new().add_filter("PLY", &["ply"]).set_file_name("stylized.ply").save_file()
+                && let Some(p) =
+                    rfd::FileDialog::new().add_filter("PLY", &["ply"]).set_file_name("stylized.ply").save_file()
             {
                 self.jobs.export_ply(g.clone(), p);
             }
             if ui.button("Current view as PNG…").clicked()
-                && let Some(p) = rfd::FileDialog::new().add_filter("PNG", &["png"]).set_file_name("view.png").save_file()
+                && let Some(p) =
+                    rfd::FileDialog::new().add_filter("PNG", &["png"]).set_file_name("view.png").save_file()
             {
                 self.jobs.export_png(g.clone(), cam.clone(), self.background, p);
             }
             if ui.button("Current view's inverse depth as EXR…").clicked()
-                && let Some(p) = rfd::FileDialog::new().add_filter("OpenEXR", &["exr"]).set_file_name("depth.exr").save_file()
+                && let Some(p) =
+                    rfd::FileDialog::new().add_filter("OpenEXR", &["exr"]).set_file_name("depth.exr").save_file()
             {
                 self.jobs.export_depth(g.clone(), cam.clone(), p);
             }
@@ -64,7 +68,10 @@ impl StudioApp {
                 None => ui.label("no scene"),
             };
             ui.separator();
-            ui.label(format!("drawn {}  sort {:.1} ms  prepare {:.1} ms", stats.drawn, stats.sort_ms, stats.prepare_ms));
+            ui.label(format!(
+                "drawn {}  sort {:.1} ms  prepare {:.1} ms",
+                stats.drawn, stats.sort_ms, stats.prepare_ms
+            ));
             if self.jobs.running > 0 {
                 ui.separator();
                 ui.spinner();
@@ -77,7 +84,11 @@ impl StudioApp {
         });
         if !self.errors.is_empty() {
             ui.horizontal(|ui| {
-                ui.label(RichText::new(format!("{} error(s)", self.errors.len())).color(Color32::from_rgb(255, 110, 90)).strong());
+                ui.label(
+                    RichText::new(format!("{} error(s)", self.errors.len()))
+                        .color(Color32::from_rgb(255, 110, 90))
+                        .strong(),
+                );
                 if ui.small_button("clear").clicked() {
                     self.errors.clear();
                 }
@@ -99,7 +110,8 @@ impl StudioApp {
             let mut pick = None;
             for (k, s) in self.styles.iter().enumerate() {
                 let selected = self.style == Some(k);
-                let img = egui::Image::new(&s.texture).fit_to_exact_size(egui::vec2(64.0, 64.0 * s.size[1] as f32 / s.size[0].max(1) as f32));
+                let img = egui::Image::new(&s.texture)
+                    .fit_to_exact_size(egui::vec2(64.0, 64.0 * s.size[1] as f32 / s.size[0].max(1) as f32));
                 let r = ui.add(egui::Button::image(img).selected(selected)).on_hover_text(s.path.display().to_string());
                 if r.clicked() {
                     pick = Some(k);
@@ -131,7 +143,8 @@ impl StudioApp {
         }
         ui.horizontal(|ui| {
             if ui.button("Save preset…").clicked()
-                && let Some(p) = rfd::FileDialog::new().add_filter("Preset", &["json"]).set_file_name("preset.json").save_file()
+                && let Some(p) =
+                    rfd::FileDialog::new().add_filter("Preset", &["json"]).set_file_name("preset.json").save_file()
             {
                 self.save_preset(&p);
             }
@@ -191,7 +204,11 @@ impl StudioApp {
     }
 
     pub(super) fn start_run(&mut self) {
-        let (Some(starter), Some(scene), Some(style)) = (&self.starter, &self.scene, self.style.and_then(|k| self.styles.get(k))) else { return };
+        let (Some(starter), Some(scene), Some(style)) =
+            (&self.starter, &self.scene, self.style.and_then(|k| self.styles.get(k)))
+        else {
+            return;
+        };
         let problems = self.config.problems();
         if !problems.is_empty() {
             self.report(anyhow::anyhow!("cannot start: {}", problems.join("; ")));
@@ -234,7 +251,8 @@ impl StudioApp {
         if ui.add(egui::Slider::new(&mut fov, 10.0..=120.0).text("vertical fov°")).changed() {
             self.view.fov_y = fov.to_radians();
         }
-        ui.add(egui::Slider::new(&mut self.split, 0.0..=1.0).text("before | after")).on_hover_text("left of the line: the scene as loaded");
+        ui.add(egui::Slider::new(&mut self.split, 0.0..=1.0).text("before | after"))
+            .on_hover_text("left of the line: the scene as loaded");
         let mut bg = self.background;
         ui.horizontal(|ui| {
             ui.label("background");
@@ -242,19 +260,23 @@ impl StudioApp {
                 self.background = bg;
             }
         });
-        egui::CollapsingHeader::new(format!("Cameras ({}, {})", self.cameras.len(), self.camera_source)).show(ui, |ui| {
-            let mut snap = None;
-            for (k, c) in self.cameras.iter().enumerate() {
-                if ui.selectable_label(false, &c.name).clicked() {
-                    snap = Some(k);
+        egui::CollapsingHeader::new(format!("Cameras ({}, {})", self.cameras.len(), self.camera_source)).show(
+            ui,
+            |ui| {
+                let mut snap = None;
+                for (k, c) in self.cameras.iter().enumerate() {
+                    if ui.selectable_label(false, &c.name).clicked() {
+                        snap = Some(k);
+                    }
                 }
-            }
-            if let Some(k) = snap {
-                let focus = self.current().and_then(|g| gast_core::camera::robust_bounds(&g.means)).map(|b| b.center);
-                let cam = self.cameras[k].clone();
-                self.view.snap_to(&cam, focus);
-            }
-        });
+                if let Some(k) = snap {
+                    let focus =
+                        self.current().and_then(|g| gast_core::camera::robust_bounds(&g.means)).map(|b| b.center);
+                    let cam = self.cameras[k].clone();
+                    self.view.snap_to(&cam, focus);
+                }
+            },
+        );
         ui.weak("left drag: orbit · right/middle drag: pan · wheel: zoom · hold right + WASD/QE: fly");
     }
 

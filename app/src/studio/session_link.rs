@@ -115,14 +115,19 @@ impl RunMonitor {
         match event {
             Event::Step(r) => self.steps.push(r),
             Event::Stage { name, seconds } => self.log.push(format!("{name}: {seconds:.2} s")),
-            Event::Culled { total, kept } => self.log.push(format!("optimising {kept} of {total} Gaussians (the rest are seen by no camera)")),
+            Event::Culled { total, kept } => {
+                self.log.push(format!("optimising {kept} of {total} Gaussians (the rest are seen by no camera)"))
+            }
             Event::Warning(w) => self.log.push(format!("warning: {w}")),
             Event::Paused => self.status = RunStatus::Paused,
             Event::Resumed => self.status = RunStatus::Running,
             Event::ConfigApplied => self.log.push("new parameters applied".into()),
             Event::Finished { completed, steps, seconds } => {
                 self.status = RunStatus::Finished { completed };
-                self.log.push(format!("finished: {steps} steps in {seconds:.1} s{}", if completed { "" } else { " (stopped early)" }));
+                self.log.push(format!(
+                    "finished: {steps} steps in {seconds:.1} s{}",
+                    if completed { "" } else { " (stopped early)" }
+                ));
             }
             Event::Failed(msg) => self.status = RunStatus::Failed(msg),
         }

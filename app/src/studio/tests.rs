@@ -7,9 +7,9 @@ use egui_kittest::kittest::{NodeT as _, Queryable as _};
 use std::sync::Arc;
 
 use super::viewport::{Side, SplatRenderer, bench, read_target};
+use super::*;
 use gast_core::raster::{RenderOptions, render};
 use gast_core::session::Command;
-use super::*;
 
 /// Whether tests that need lavapipe/Xvfb must fail (CI) rather than skip.
 fn in_ci() -> bool {
@@ -98,7 +98,9 @@ fn gpu_viewport_matches_the_cpu_reference() {
     }
     let mean = sum / (w * h * 3) as f64;
     let coverage = cpu.alpha.iter().filter(|&&a| a > 0.5).count() as f32 / (w * h) as f32;
-    println!("GPU viewport vs CPU rasterizer on {adapter}: mean |diff| {mean:.5}, max {max:.3}, coverage {coverage:.2}");
+    println!(
+        "GPU viewport vs CPU rasterizer on {adapter}: mean |diff| {mean:.5}, max {max:.3}, coverage {coverage:.2}"
+    );
     assert!(coverage > 0.1, "the demo scene covers only {coverage} of the view");
     assert!(mean < 0.01, "mean abs difference {mean}");
     // Save both for a look.
@@ -143,12 +145,18 @@ fn a_bad_scene_file_shows_an_error_and_keeps_the_scene() {
     app.open_any(&bad);
     assert_eq!(app.scene.as_ref().map(|s| s.scene.version), before, "the previous scene stays");
     assert_eq!(app.errors.len(), 1);
-    assert!(app.errors[0].contains("broken.ply") && app.errors[0].contains("keeping the previous scene"), "{}", app.errors[0]);
+    assert!(
+        app.errors[0].contains("broken.ply") && app.errors[0].contains("keeping the previous scene"),
+        "{}",
+        app.errors[0]
+    );
     app.open_any(&dir.join("missing.png"));
     assert_eq!(app.errors.len(), 2);
 
     // The error is on screen, in the bottom panel.
-    let mut harness = egui_kittest::Harness::builder().with_size(egui::vec2(1280.0, 800.0)).build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
     harness.run_steps(3);
     harness.get_by_label_contains("broken.ply");
     harness.get_by_label("2 error(s)");
@@ -158,7 +166,9 @@ fn a_bad_scene_file_shows_an_error_and_keeps_the_scene() {
 #[test]
 fn controls_edit_the_config_and_presets_round_trip() {
     let app = test_app();
-    let mut harness = egui_kittest::Harness::builder().with_size(egui::vec2(1280.0, 1400.0)).build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 1400.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
     harness.run_steps(2);
     // Texture scale buttons set the config.
     harness.get_by_label("2×").click();
@@ -191,7 +201,9 @@ fn controls_edit_the_config_and_presets_round_trip() {
 
 /// The studio with a fake run attached: `steps` step events and a recoloured
 /// snapshot of the demo scene in the slot (standing in for a session worker).
-fn app_with_a_run(steps: u32) -> (StudioApp, crossbeam_channel::Receiver<Command>, crossbeam_channel::Sender<gast_core::session::Event>) {
+fn app_with_a_run(
+    steps: u32,
+) -> (StudioApp, crossbeam_channel::Receiver<Command>, crossbeam_channel::Sender<gast_core::session::Event>) {
     use gast_core::session::{Event, LossTerms, Slot, Snapshot, StepReport};
     let mut app = test_app();
     let (ctx, crx) = crossbeam_channel::unbounded();
@@ -200,8 +212,21 @@ fn app_with_a_run(steps: u32) -> (StudioApp, crossbeam_channel::Receiver<Command
     app.run.attach(session_link::SessionLink { commands: ctx, events: erx, snapshots: slot.clone() });
     for iter in 0..steps {
         let t = iter as f32 / steps as f32;
-        let losses = LossTerms { total: 2.0 - 1.2 * t + 0.1 * (iter as f32).sin(), gcfm: 1.5 - t + 0.05 * (iter as f32 * 1.7).cos(), ..LossTerms::default() };
-        let report = StepReport { iter, total: 4 * steps, cycle: 0, phase: gast_core::style::Phase::Color, view: 0, losses, timings: Default::default(), elapsed_s: iter as f64 * 0.5 + 0.5 };
+        let losses = LossTerms {
+            total: 2.0 - 1.2 * t + 0.1 * (iter as f32).sin(),
+            gcfm: 1.5 - t + 0.05 * (iter as f32 * 1.7).cos(),
+            ..LossTerms::default()
+        };
+        let report = StepReport {
+            iter,
+            total: 4 * steps,
+            cycle: 0,
+            phase: gast_core::style::Phase::Color,
+            view: 0,
+            losses,
+            timings: Default::default(),
+            elapsed_s: iter as f64 * 0.5 + 0.5,
+        };
         etx.send(Event::Step(report)).expect("send");
     }
     let mut g = (*app.scene.as_ref().expect("scene").scene.gaussians).clone();
@@ -218,7 +243,9 @@ fn app_with_a_run(steps: u32) -> (StudioApp, crossbeam_channel::Receiver<Command
 fn session_events_and_snapshots_reach_the_window() {
     use gast_core::session::Event;
     let (app, crx, etx) = app_with_a_run(5);
-    let mut harness = egui_kittest::Harness::builder().with_size(egui::vec2(1280.0, 1400.0)).build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 1400.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
     harness.run_steps(3);
     assert!(harness.state().snapshot.is_some(), "the snapshot is shown as the current scene");
     assert_eq!(harness.state().run.steps.len(), 5);
@@ -244,7 +271,10 @@ fn headless_screenshot_of_a_run_in_progress() {
     if device_or_skip("headless_screenshot_of_a_run_in_progress").is_none() {
         return;
     }
-    let rs = egui_kittest::wgpu::create_render_state(egui_kittest::wgpu::default_wgpu_setup(), egui_wgpu::RendererOptions::PREDICTABLE);
+    let rs = egui_kittest::wgpu::create_render_state(
+        egui_kittest::wgpu::default_wgpu_setup(),
+        egui_wgpu::RendererOptions::PREDICTABLE,
+    );
     let resources = ViewportResources::new(&rs.device, rs.target_format);
     rs.renderer.write().callback_resources.insert(resources);
     let renderer = egui_kittest::wgpu::WgpuTestRenderer::from_render_state(rs);
@@ -312,7 +342,13 @@ fn blit_composites_the_before_after_split() {
     r.render(&device, &queue, &mut encoder, Side::Before, &cam);
     r.render(&device, &queue, &mut encoder, Side::After, &cam);
     let params = viewport::gpu_types::BlitUniform { background: [0.1, 0.1, 0.12, 1.0], split: [0.5, 0.0, 0.0, 0.0] };
-    let bind = blit.prepare(&device, &queue, params, r.target(Side::Before).expect("before").1, r.target(Side::After).expect("after").1);
+    let bind = blit.prepare(
+        &device,
+        &queue,
+        params,
+        r.target(Side::Before).expect("before").1,
+        r.target(Side::After).expect("after").1,
+    );
     {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: None,
@@ -332,11 +368,19 @@ fn blit_composites_the_before_after_split() {
     queue.submit([encoder.finish()]);
     // Read back (4 bytes a texel, rows padded to 256).
     let row = (w * 4).div_ceil(256) * 256;
-    let buffer = device.create_buffer(&wgpu::BufferDescriptor { label: None, size: (row * h) as u64, usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ, mapped_at_creation: false });
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: (row * h) as u64,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
     let mut encoder = device.create_command_encoder(&Default::default());
     encoder.copy_texture_to_buffer(
         out.as_image_copy(),
-        wgpu::TexelCopyBufferInfo { buffer: &buffer, layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) } },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) },
+        },
         wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
     );
     queue.submit([encoder.finish()]);
@@ -391,11 +435,16 @@ impl egui::DroppedFile for TestDrop {
 fn dropped_styles_and_scenes_open() {
     let app = test_app();
     let styles_before = app.styles.len();
-    let mut harness = egui_kittest::Harness::builder().with_size(egui::vec2(1280.0, 900.0)).build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 900.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
     harness.run_steps(1);
     let dir = assets::source_assets_dir();
-    let dropped: Vec<egui::DroppedFileHandle> =
-        vec![Arc::new(TestDrop(dir.join(assets::DEMO_STYLES[1]))), Arc::new(TestDrop(dir.join(assets::DEMO_SCENE))), Arc::new(TestDrop(dir.join("no-such-file.ply")))];
+    let dropped: Vec<egui::DroppedFileHandle> = vec![
+        Arc::new(TestDrop(dir.join(assets::DEMO_STYLES[1]))),
+        Arc::new(TestDrop(dir.join(assets::DEMO_SCENE))),
+        Arc::new(TestDrop(dir.join("no-such-file.ply"))),
+    ];
     harness.state_mut().load_in_background = true;
     harness.input_mut().dropped_files = dropped;
     harness.step();

@@ -48,7 +48,14 @@ pub struct ViewState {
 
 impl Default for ViewState {
     fn default() -> Self {
-        let mut v = Self { target: Vec3::ZERO, distance: 4.0, cam_to_world: Mat3::IDENTITY, fov_y: 50f32.to_radians(), up: UpAxis::NegY, fly_speed: 1.0 };
+        let mut v = Self {
+            target: Vec3::ZERO,
+            distance: 4.0,
+            cam_to_world: Mat3::IDENTITY,
+            fov_y: 50f32.to_radians(),
+            up: UpAxis::NegY,
+            fly_speed: 1.0,
+        };
         v.look_from_direction(Vec3::new(0.6, -0.35, -1.0));
         v
     }
@@ -126,7 +133,9 @@ impl ViewState {
     /// Moves eye and target together: `right`, `up` and `forward` in units of `fly_speed · seconds`.
     pub fn fly(&mut self, right: f32, up: f32, forward: f32, seconds: f32) {
         let step = self.fly_speed * seconds;
-        self.target += (self.cam_to_world.x_axis * right - self.cam_to_world.y_axis * up + self.cam_to_world.z_axis * forward) * step;
+        self.target += (self.cam_to_world.x_axis * right - self.cam_to_world.y_axis * up
+            + self.cam_to_world.z_axis * forward)
+            * step;
     }
 
     /// Takes a listed camera's pose and vertical field of view; the target is put
@@ -156,7 +165,17 @@ impl ViewState {
         let fy = 0.5 * h as f32 / (0.5 * self.fov_y).tan();
         let rotation = self.cam_to_world.transpose();
         let translation = -(rotation * self.eye());
-        Camera { name: "viewport".into(), width: w, height: h, fx: fy, fy, cx: 0.5 * w as f32, cy: 0.5 * h as f32, rotation, translation }
+        Camera {
+            name: "viewport".into(),
+            width: w,
+            height: h,
+            fx: fy,
+            fy,
+            cx: 0.5 * w as f32,
+            cy: 0.5 * h as f32,
+            rotation,
+            translation,
+        }
     }
 }
 

@@ -18,7 +18,8 @@ pub fn headless_device() -> anyhow::Result<(wgpu::Device, wgpu::Queue, String)> 
     let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
         .context("no GPU adapter (install mesa-vulkan-drivers and libvulkan1 for lavapipe)")?;
     let info = adapter.get_info();
-    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default())).context("requesting a device")?;
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default()))
+        .context("requesting a device")?;
     Ok((device, queue, format!("{} ({:?})", info.name, info.backend)))
 }
 

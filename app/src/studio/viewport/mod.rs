@@ -108,7 +108,11 @@ fn storage_init(device: &wgpu::Device, label: &str, bytes: &[u8]) -> wgpu::Buffe
     } else {
         bytes
     };
-    device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST })
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+    })
 }
 
 /// The splat renderer: pipelines, up to two scenes ("before" and "after") and their targets.
@@ -148,7 +152,13 @@ impl SplatRenderer {
     /// Uploads `g` into `side` unless that version is already there. A scene whose
     /// geometry does not fit one storage binding is refused; SH coefficients that
     /// do not fit two bindings are drawn at a lower degree (both said in the result).
-    pub fn set_scene(&mut self, device: &wgpu::Device, side: Side, version: u64, g: &Arc<Gaussians>) -> Result<Option<String>, String> {
+    pub fn set_scene(
+        &mut self,
+        device: &wgpu::Device,
+        side: Side,
+        version: u64,
+        g: &Arc<Gaussians>,
+    ) -> Result<Option<String>, String> {
         if self.scenes[side as usize].as_ref().is_some_and(|s| s.version == version) {
             return Ok(None);
         }
@@ -234,7 +244,9 @@ impl SplatRenderer {
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
             format: splat_draw::TARGET_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
             view_formats: &[],
         });
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
@@ -243,7 +255,14 @@ impl SplatRenderer {
 
     /// Records the render of `side` from `cam` into its target (premultiplied
     /// RGBA, transparent where nothing was drawn). Returns false when `side` has no scene.
-    pub fn render(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, encoder: &mut wgpu::CommandEncoder, side: Side, cam: &Camera) -> bool {
+    pub fn render(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        side: Side,
+        cam: &Camera,
+    ) -> bool {
         let started = Instant::now();
         let (w, h) = (cam.width.max(1), cam.height.max(1));
         self.ensure_target(device, side, w, h);
@@ -293,7 +312,11 @@ pub struct ViewportResources {
 impl ViewportResources {
     /// Pipelines for a device and egui's output format.
     pub fn new(device: &wgpu::Device, target_format: wgpu::TextureFormat) -> Self {
-        Self { renderer: SplatRenderer::new(device), blit: blit::BlitPipeline::new(device, target_format), blit_bind: None }
+        Self {
+            renderer: SplatRenderer::new(device),
+            blit: blit::BlitPipeline::new(device, target_format),
+            blit_bind: None,
+        }
     }
 }
 
@@ -373,7 +396,12 @@ impl egui_wgpu::CallbackTrait for ViewportCallback {
         Vec::new()
     }
 
-    fn paint(&self, _info: egui::PaintCallbackInfo, pass: &mut wgpu::RenderPass<'static>, resources: &egui_wgpu::CallbackResources) {
+    fn paint(
+        &self,
+        _info: egui::PaintCallbackInfo,
+        pass: &mut wgpu::RenderPass<'static>,
+        resources: &egui_wgpu::CallbackResources,
+    ) {
         if let Some(res) = resources.get::<ViewportResources>()
             && let Some(bind) = &res.blit_bind
         {
@@ -403,7 +431,10 @@ pub fn read_target(device: &wgpu::Device, queue: &wgpu::Queue, texture: &wgpu::T
     let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
     encoder.copy_texture_to_buffer(
         texture.as_image_copy(),
-        wgpu::TexelCopyBufferInfo { buffer: &buffer, layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) } },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) },
+        },
         wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
     );
     queue.submit([encoder.finish()]);

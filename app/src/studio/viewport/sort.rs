@@ -75,7 +75,9 @@ mod tests {
 
     #[test]
     fn sort_time_500k() {
-        let means: Vec<[f32; 3]> = (0..500_000u32).map(|i| [0.0, 0.0, 1.0 + (i.wrapping_mul(2_654_435_761) % 100_000) as f32 * 1e-3]).collect();
+        let means: Vec<[f32; 3]> = (0..500_000u32)
+            .map(|i| [0.0, 0.0, 1.0 + (i.wrapping_mul(2_654_435_761) % 100_000) as f32 * 1e-3])
+            .collect();
         let t = std::time::Instant::now();
         let order = back_to_front(&means, Vec3::Z, 0.0);
         println!("back_to_front of 500k: {:.1} ms", t.elapsed().as_secs_f64() * 1e3);
