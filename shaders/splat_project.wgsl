@@ -158,7 +158,12 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     let ext = vec2<f32>(sqrt(2.0 * cut * a), sqrt(2.0 * cut * c)) * (1.0 + EXTENT_REL) + vec2<f32>(EXTENT_ABS);
     let u = fx * tc.x * iz + cx;
     let v = fy * tc.y * iz + cy;
-    if (u + ext.x < 0.0 || v + ext.y < 0.0 || u - ext.x > view.size_tan.x || v - ext.y > view.size_tan.y) {
+    // The pixel centres (j + 0.5, i + 0.5) inside the box, clamped to the screen: none
+    // means nothing to draw (the CPU rasterizer evaluates pixel centres only), which
+    // also drops the many sub-pixel splats of big scenes before the rasterizer sees them.
+    let first = max(ceil(vec2<f32>(u, v) - ext - vec2<f32>(0.5)), vec2<f32>(0.0));
+    let last = min(floor(vec2<f32>(u, v) + ext - vec2<f32>(0.5)), view.size_tan.xy - vec2<f32>(1.0));
+    if (any(last < first)) {
         projected[i] = culled();
         return;
     }
