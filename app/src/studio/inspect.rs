@@ -8,6 +8,8 @@ use std::sync::Arc;
 use crossbeam_channel::{Receiver, Sender};
 use gast_core::{Camera, Gaussians};
 
+use super::viewport::SharedGaussians;
+
 use gast_core::raster::{RenderOptions, render};
 
 /// The three maps of one view, as 8-bit images ready for textures.
@@ -138,12 +140,12 @@ impl Jobs {
     }
 
     /// Renders the inspection maps of a view.
-    pub fn inspect(&mut self, g: Arc<Gaussians>, cam: Camera, background: [f32; 3]) {
+    pub fn inspect(&mut self, g: SharedGaussians, cam: Camera, background: [f32; 3]) {
         self.spawn(move || JobDone::Maps(Box::new(maps(&g, &cam, background))));
     }
 
     /// Renders a view and writes it as PNG.
-    pub fn export_png(&mut self, g: Arc<Gaussians>, cam: Camera, background: [f32; 3], path: PathBuf) {
+    pub fn export_png(&mut self, g: SharedGaussians, cam: Camera, background: [f32; 3], path: PathBuf) {
         self.spawn(move || {
             let r = render(&g, &cam, &RenderOptions { background });
             match gast_core::io::write_png_rgb(&path, r.width, r.height, &r.rgb) {
@@ -154,7 +156,7 @@ impl Jobs {
     }
 
     /// Renders a view's inverse depth and writes it as EXR.
-    pub fn export_depth(&mut self, g: Arc<Gaussians>, cam: Camera, path: PathBuf) {
+    pub fn export_depth(&mut self, g: SharedGaussians, cam: Camera, path: PathBuf) {
         self.spawn(move || {
             let r = render(&g, &cam, &RenderOptions::default());
             match gast_core::io::write_exr_depth(&path, r.width, r.height, &r.inv_depth) {
@@ -165,7 +167,7 @@ impl Jobs {
     }
 
     /// Writes Gaussians as `.ply`.
-    pub fn export_ply(&mut self, g: Arc<Gaussians>, path: PathBuf) {
+    pub fn export_ply(&mut self, g: SharedGaussians, path: PathBuf) {
         self.spawn(move || match gast_core::scene::save_ply(&path, &g) {
             Ok(()) => JobDone::Exported(path),
             Err(e) => JobDone::Failed(format!("exporting the scene: {e}")),

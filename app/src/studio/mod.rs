@@ -28,7 +28,7 @@ use gast_core::{Camera, Gaussians};
 
 use session_link::{RunMonitor, RunStatus, SessionStarter};
 use view::ViewState;
-use viewport::{FrameStats, SceneRef, ViewportCallback, ViewportNotes, ViewportResources};
+use viewport::{FrameStats, SceneRef, SharedGaussians, ViewportCallback, ViewportNotes, ViewportResources};
 
 /// What `gast studio` was asked to open.
 #[derive(Clone, Debug, Default)]
@@ -211,7 +211,7 @@ impl StudioApp {
     }
 
     /// The Gaussians shown as "current": the newest snapshot, else the scene.
-    fn current(&self) -> Option<Arc<Gaussians>> {
+    fn current(&self) -> Option<SharedGaussians> {
         self.snapshot.as_ref().or(self.scene.as_ref().map(|s| &s.scene)).map(|s| s.gaussians.clone())
     }
 
@@ -220,7 +220,7 @@ impl StudioApp {
         self.view.fit(&g);
         self.cameras = view::orbit_ring(&g, self.view.up, 12, 800, 600);
         self.camera_source = "orbit".into();
-        self.scene = Some(LoadedScene { name, scene: SceneRef { version: self.next_version, gaussians: g } });
+        self.scene = Some(LoadedScene { name, scene: SceneRef { version: self.next_version, gaussians: g.into() } });
         self.next_version += 1;
         self.snapshot = None;
         self.maps = None;
@@ -399,7 +399,7 @@ impl StudioApp {
             self.run.log.append(&mut notes.warnings);
         }
         if let Some(snap) = self.run.poll() {
-            self.snapshot = Some(SceneRef { version: self.next_version, gaussians: Arc::new(snap.gaussians.clone()) });
+            self.snapshot = Some(SceneRef { version: self.next_version, gaussians: SharedGaussians::Snapshot(snap) });
             self.next_version += 1;
         }
         if let RunStatus::Failed(msg) = &self.run.status {

@@ -216,7 +216,7 @@ impl StudioApp {
         }
         let ctx = self.ctx.clone();
         let request = StartRequest {
-            scene: scene.scene.gaussians.clone(),
+            scene: scene.scene.gaussians.to_arc(),
             style: style.path.clone(),
             config: self.config.clone(),
             waker: Arc::new(move || ctx.request_repaint()),

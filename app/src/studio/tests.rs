@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use egui_kittest::kittest::{NodeT as _, Queryable as _};
 use std::sync::Arc;
 
-use super::viewport::{Side, SplatRenderer, bench, read_target};
+use super::viewport::{SharedGaussians, Side, SplatRenderer, bench, read_target};
 use super::*;
 use gast_core::raster::{RenderOptions, render};
 use gast_core::session::Command;
@@ -76,7 +76,7 @@ fn demo_camera(g: &Gaussians, w: u32, h: u32) -> Camera {
 #[test]
 fn gpu_viewport_matches_the_cpu_reference() {
     let Some((device, queue, adapter)) = device_or_skip("gpu_viewport_matches_the_cpu_reference") else { return };
-    let g = Arc::new(assets::demo_scene());
+    let g: SharedGaussians = Arc::new(assets::demo_scene()).into();
     let (w, h) = (320, 240);
     let cam = demo_camera(&g, w, h);
     let mut r = SplatRenderer::new(&device);
@@ -247,7 +247,10 @@ fn session_events_and_snapshots_reach_the_window() {
         .with_size(egui::vec2(1280.0, 1400.0))
         .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
     harness.run_steps(3);
-    assert!(harness.state().snapshot.is_some(), "the snapshot is shown as the current scene");
+    assert!(
+        harness.state().snapshot.as_ref().is_some_and(|s| matches!(s.gaussians, SharedGaussians::Snapshot(_))),
+        "the snapshot is shown as the current scene, without a copy"
+    );
     assert_eq!(harness.state().run.steps.len(), 5);
     harness.get_by_label_contains("ETA");
     harness.get_by_label("Pause").click();
@@ -311,7 +314,7 @@ fn headless_screenshot_of_a_run_in_progress() {
 #[test]
 fn blit_composites_the_before_after_split() {
     let Some((device, queue, _)) = device_or_skip("blit_composites_the_before_after_split") else { return };
-    let before = Arc::new(assets::demo_scene());
+    let before: SharedGaussians = Arc::new(assets::demo_scene()).into();
     let mut dark = (*before).clone();
     // Recolour the "after" side blue so the halves are easy to tell apart.
     let k = dark.sh_coeffs() * 3;
@@ -319,7 +322,7 @@ fn blit_composites_the_before_after_split() {
         dc[0] -= 1.0;
         dc[1] -= 0.3;
     }
-    let after = Arc::new(dark);
+    let after: SharedGaussians = Arc::new(dark).into();
     let (w, h) = (320u32, 240u32);
     let cam = demo_camera(&before, w, h);
     let mut r = SplatRenderer::new(&device);
@@ -469,7 +472,7 @@ fn dropped_styles_and_scenes_open() {
 #[test]
 fn sh_split_across_two_bindings_renders_the_same() {
     let Some((device, queue, _)) = device_or_skip("sh_split_across_two_bindings_renders_the_same") else { return };
-    let g = Arc::new(bench::synthetic_scene(3000));
+    let g: SharedGaussians = Arc::new(bench::synthetic_scene(3000)).into();
     let cam = demo_camera(&g, 160, 120);
     let mut images = Vec::new();
     for limit in [None, Some(1500 * 24 * 4)] {

@@ -54,7 +54,7 @@ pub fn run(scene: Option<&Path>, count: usize, frames: u32, width: u32, height: 
         Some(p) => gast_core::scene::load(p)?,
         None => synthetic_scene(count),
     };
-    let g = Arc::new(g);
+    let g: super::SharedGaussians = Arc::new(g).into();
     let (device, queue, adapter) = headless_device()?;
     let mut r = SplatRenderer::new(&device);
     let upload = Instant::now();

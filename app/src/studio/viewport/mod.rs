@@ -21,10 +21,46 @@ use wgpu::util::DeviceExt as _;
 
 use gpu_types::{BlitUniform, ProjectedSplat, ViewUniform};
 
+/// Gaussians shared without copying: a loaded scene, or a session snapshot as
+/// it came out of the slot (snapshots are large and arrive often).
+#[derive(Clone, Debug)]
+pub enum SharedGaussians {
+    /// Gaussians the studio owns (a loaded scene).
+    Owned(Arc<Gaussians>),
+    /// The Gaussians inside a session snapshot.
+    Snapshot(Arc<gast_core::session::Snapshot>),
+}
+
+impl std::ops::Deref for SharedGaussians {
+    type Target = Gaussians;
+    fn deref(&self) -> &Gaussians {
+        match self {
+            SharedGaussians::Owned(g) => g,
+            SharedGaussians::Snapshot(s) => &s.gaussians,
+        }
+    }
+}
+
+impl From<Arc<Gaussians>> for SharedGaussians {
+    fn from(g: Arc<Gaussians>) -> Self {
+        SharedGaussians::Owned(g)
+    }
+}
+
+impl SharedGaussians {
+    /// The Gaussians behind an `Arc` of their own (a copy only for snapshots).
+    pub fn to_arc(&self) -> Arc<Gaussians> {
+        match self {
+            SharedGaussians::Owned(g) => g.clone(),
+            SharedGaussians::Snapshot(s) => Arc::new(s.gaussians.clone()),
+        }
+    }
+}
+
 /// A scene's Gaussians in GPU buffers, with the buffers its passes write.
 struct GpuScene {
     version: u64,
-    gaussians: Arc<Gaussians>,
+    gaussians: SharedGaussians,
     view: wgpu::Buffer,
     order: wgpu::Buffer,
     project_bind: wgpu::BindGroup,
@@ -157,7 +193,7 @@ impl SplatRenderer {
         device: &wgpu::Device,
         side: Side,
         version: u64,
-        g: &Arc<Gaussians>,
+        g: &SharedGaussians,
     ) -> Result<Option<String>, String> {
         if self.scenes[side as usize].as_ref().is_some_and(|s| s.version == version) {
             return Ok(None);
@@ -327,7 +363,7 @@ pub struct SceneRef {
     /// Bumped by the owner on every change.
     pub version: u64,
     /// The Gaussians.
-    pub gaussians: Arc<Gaussians>,
+    pub gaussians: SharedGaussians,
 }
 
 /// One frame of the viewport, as an egui-wgpu paint callback.
