@@ -1,10 +1,12 @@
-//! `gast`: GAST Studio's command line.
+//! `gast`: GAST Studio, the desktop studio and its command line. With no
+//! arguments it opens the studio on the demo scene and style.
 //!
 //! Every subcommand drives the same `gast-core` code the studio uses; long work
 //! shows progress bars, and errors carry the file and what was expected.
 
 mod cli;
 mod progress;
+mod studio;
 
 use clap::Parser;
 

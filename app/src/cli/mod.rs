@@ -13,18 +13,36 @@ use clap::{Args, Parser, Subcommand};
 use gast_core::camera::{OrbitOptions, orbit_cameras};
 use gast_core::{Camera, Gaussians};
 
+use crate::studio;
+
 /// GAST Studio: geometry-aware style transfer for 3D Gaussian Splatting scenes.
+///
+/// Without a command, opens the studio on the demo scene and style.
 #[derive(Parser, Debug)]
 #[command(name = "gast", version, about, long_about = None)]
 pub struct Cli {
-    /// What to do.
+    /// What to do; the studio when absent.
     #[command(subcommand)]
-    pub command: Command,
+    pub command: Option<Command>,
 }
 
 /// The subcommands.
 #[derive(Subcommand, Debug)]
 pub enum Command {
+    /// Open the studio window, optionally with a scene and a style image
+    /// (drag files onto the window to open others).
+    Studio {
+        /// A scene (.ply, .compressed.ply, .spz, SOG); the demo scene when absent.
+        scene: Option<PathBuf>,
+        /// A style image; the first demo style when absent.
+        style: Option<PathBuf>,
+    },
+    /// Regenerate the demo assets (scene, styles, icon) into a folder.
+    Assets {
+        /// Destination folder.
+        #[arg(long, default_value = "assets")]
+        out: PathBuf,
+    },
     /// Render a scene from its cameras or from generated orbit views: PNG colour,
     /// PNG and EXR inverse depth per view.
     Render(render::RenderArgs),
@@ -56,6 +74,23 @@ pub enum BenchCommand {
     Raster(bench::RasterArgs),
     /// Per-step breakdown of the optimisation, the whole schedule's time, peak memory.
     Step(bench::StepArgs),
+    /// The studio viewport's frame time on the first GPU adapter (headless).
+    Viewport {
+        /// A scene; a synthetic scene of `--count` Gaussians when absent.
+        scene: Option<PathBuf>,
+        /// Gaussians in the synthetic scene.
+        #[arg(long, default_value_t = 500_000)]
+        count: usize,
+        /// Frames to time.
+        #[arg(long, default_value_t = 10)]
+        frames: u32,
+        /// Frame width in pixels.
+        #[arg(long, default_value_t = 1280)]
+        width: u32,
+        /// Frame height in pixels.
+        #[arg(long, default_value_t = 720)]
+        height: u32,
+    },
 }
 
 /// Where the views come from: a camera file, or an orbit generated around the scene.
@@ -78,13 +113,29 @@ pub struct ViewArgs {
 
 /// Runs the parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
-    match cli.command {
-        Command::Render(args) => render::run(args),
-        Command::Check(CheckCommand::Golden(args)) => check::run_golden(args),
-        Command::Bench(BenchCommand::Raster(args)) => bench::run_raster(args),
-        Command::Bench(BenchCommand::Step(args)) => bench::run_step(args),
-        Command::Stylize(args) => stylize::run(*args),
+    let Some(command) = cli.command else {
+        studio::run_with(studio::StudioArgs::default(), Some(studio::worker::starter()))?;
+        return Ok(ExitCode::SUCCESS);
+    };
+    match command {
+        Command::Studio { scene, style } => {
+            studio::run_with(studio::StudioArgs { scene, style }, Some(studio::worker::starter()))?;
+        }
+        Command::Assets { out } => {
+            for p in studio::assets::generate(&out)? {
+                println!("wrote {}", p.display());
+            }
+        }
+        Command::Render(args) => return render::run(args),
+        Command::Check(CheckCommand::Golden(args)) => return check::run_golden(args),
+        Command::Bench(BenchCommand::Raster(args)) => return bench::run_raster(args),
+        Command::Bench(BenchCommand::Step(args)) => return bench::run_step(args),
+        Command::Bench(BenchCommand::Viewport { scene, count, frames, width, height }) => {
+            println!("{}", studio::viewport::bench::run(scene.as_deref(), count, frames, width, height)?);
+        }
+        Command::Stylize(args) => return stylize::run(*args),
     }
+    Ok(ExitCode::SUCCESS)
 }
 
 /// Loads a scene with its path in the error.

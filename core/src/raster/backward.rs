@@ -68,57 +68,47 @@ pub fn backward(
     drop(pair_grads);
 
     // 3. Per Gaussian, for the splats that received a gradient (the others
-    // are off screen or hidden behind others): compute in parallel, then
-    // scatter into the Gaussian-ordered arrays.
+    // are hidden behind others), in Gaussian order.
     if let Some(&i) = state.ids.iter().find(|&&i| i as usize >= g.len()) {
         panic!("raster::backward: the state holds Gaussian {i}, only {} are given", g.len());
     }
     let cc = CamConsts::new(cam);
     let ksh = g.sh_coeffs() * 3;
-    let per_gaussian: Vec<(u32, ParamGrad)> = (0..state.splats.len())
+    let mut contributing: Vec<(u32, u32)> = (0..state.splats.len())
         .into_par_iter()
         .with_min_len(1024)
         .filter(|&k| splat_grads[k] != [0.0; 10])
-        .map(|k| {
-            let i = state.ids[k];
-            let mut p = ParamGrad::default();
-            let grad = GaussianGrad {
-                v_mean: &mut p.v_mean,
-                v_log_scale: &mut p.v_log_scale,
-                v_quat: &mut p.v_quat,
-                v_opacity_logit: &mut p.v_opacity_logit,
-                v_sh: &mut p.v_sh[..ksh],
-            };
-            project_backward(&gaussian_ref(g, i as usize), &cc, &splat_grads[k], grad);
-            (i, p)
-        })
+        .map(|k| (state.ids[k], k as u32))
         .collect();
+    contributing.par_sort_unstable();
     let mut out = Grads::zeros_like(g);
-    for (i, p) in per_gaussian {
-        let i = i as usize;
-        out.v_means[i] = p.v_mean;
-        out.v_log_scales[i] = p.v_log_scale;
-        out.v_quats[i] = p.v_quat;
-        out.v_opacity_logits[i] = p.v_opacity_logit;
-        out.v_sh[i * ksh..(i + 1) * ksh].copy_from_slice(&p.v_sh[..ksh]);
-    }
+    // Chunks of Gaussians in parallel, each writing its own slices.
+    const CHUNK: usize = 4096;
+    (
+        out.v_means.par_chunks_mut(CHUNK),
+        out.v_log_scales.par_chunks_mut(CHUNK),
+        out.v_quats.par_chunks_mut(CHUNK),
+        out.v_opacity_logits.par_chunks_mut(CHUNK),
+        out.v_sh.par_chunks_mut(CHUNK * ksh),
+    )
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(c, (v_means, v_log_scales, v_quats, v_opacity_logits, v_sh))| {
+            let (lo, hi) = (c * CHUNK, c * CHUNK + v_means.len());
+            let first = contributing.partition_point(|&(i, _)| (i as usize) < lo);
+            for &(i, k) in contributing[first..].iter().take_while(|&&(i, _)| (i as usize) < hi) {
+                let j = i as usize - lo;
+                let grad = GaussianGrad {
+                    v_mean: &mut v_means[j],
+                    v_log_scale: &mut v_log_scales[j],
+                    v_quat: &mut v_quats[j],
+                    v_opacity_logit: &mut v_opacity_logits[j],
+                    v_sh: &mut v_sh[j * ksh..(j + 1) * ksh],
+                };
+                project_backward(&gaussian_ref(g, i as usize), &cc, &splat_grads[k as usize], grad);
+            }
+        });
     out
-}
-
-/// One Gaussian's parameter gradients, SH sized for degree 3.
-#[derive(Clone, Copy)]
-struct ParamGrad {
-    v_mean: [f32; 3],
-    v_log_scale: [f32; 3],
-    v_quat: [f32; 4],
-    v_opacity_logit: f32,
-    v_sh: [f32; 48],
-}
-
-impl Default for ParamGrad {
-    fn default() -> Self {
-        Self { v_mean: [0.0; 3], v_log_scale: [0.0; 3], v_quat: [0.0; 4], v_opacity_logit: 0.0, v_sh: [0.0; 48] }
-    }
 }
 
 /// One pixel's state walking back to front.

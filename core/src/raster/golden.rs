@@ -92,7 +92,8 @@ fn triples<const K: usize>(v: &[f64]) -> Vec<[f32; K]> {
 /// # Errors
 /// A message naming the file and the tensor when the file cannot be read, a
 /// tensor is missing, or a dtype or shape is not what the format says.
-pub fn load_case(path: &Path) -> Result<GoldenRasterCase, String> {
+pub fn load_case(path: impl AsRef<Path>) -> Result<GoldenRasterCase, String> {
+    let path = path.as_ref();
     let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let st = SafeTensors::deserialize(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
     let mshape = shape_of(&st, path, "means")?;

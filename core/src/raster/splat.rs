@@ -92,8 +92,9 @@ impl Splat {
     /// `α = min(0.99, opacity·g)`, or `None` where it is below 1/255.
     #[inline(always)]
     pub fn alpha(&self, g: f32) -> Option<f32> {
-        let alpha = (self.opacity * g).min(ALPHA_MAX);
-        (alpha >= ALPHA_MIN).then_some(alpha)
+        // Tested before the clamp so that a NaN is skipped, not clamped to 0.99.
+        let alpha = self.opacity * g;
+        (alpha >= ALPHA_MIN).then(|| alpha.min(ALPHA_MAX))
     }
 
     /// Inclusive pixel columns and rows `[lo, hi]` whose centres the extent
@@ -167,7 +168,7 @@ fn centre_span(a: f32, b: f32, lo: u32, hi: u32) -> (i64, i64) {
 /// `exp(x)` for `x ≤ 0` (the Gaussian falloff), about 2e-7 relative error,
 /// inlined: `x = n·ln2 + r` with `|r| ≤ ln2/2`, `eʳ` by its degree-6 Taylor
 /// polynomial, `2ⁿ` built in the exponent bits. The libm call it replaces was
-/// a sixth of the compositing time. Results below `e⁻⁸⁷` flush to zero.
+/// a sixth of the compositing time. Inputs are clamped to `[−87, 0]`.
 #[inline(always)]
 pub(crate) fn exp_neg(x: f32) -> f32 {
     const LN2_HI: f32 = 0.693_359_4;

@@ -17,7 +17,7 @@ pub use prepare::{
 };
 pub use run::{Session, SessionError, SessionInputs, at_resolution};
 pub use slot::Slot;
-pub use worker::{SessionHandle, run_loop, spawn};
+pub use worker::{SessionHandle, run_loop, spawn, spawn_with};
 
 /// The newest state of the Gaussians, for viewers and exports.
 #[derive(Clone, Debug)]

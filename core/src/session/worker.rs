@@ -50,27 +50,48 @@ impl Drop for SessionHandle {
 /// Starts a worker thread that prepares the session and steps it to the end,
 /// applying commands between steps.
 pub fn spawn(inputs: SessionInputs, waker: Arc<dyn Fn() + Send + Sync>) -> SessionHandle {
+    spawn_with(move |_| Ok(inputs), waker)
+}
+
+/// Like [`spawn`], but the inputs are gathered on the worker thread by `load`
+/// (reading files, resolving or downloading weights), so a front end never
+/// waits for them. `load` may report stages through the event callback it is
+/// given; an error ends the run with [`Event::Failed`].
+pub fn spawn_with<F>(load: F, waker: Arc<dyn Fn() + Send + Sync>) -> SessionHandle
+where
+    F: FnOnce(&mut dyn FnMut(Event)) -> Result<SessionInputs, String> + Send + 'static,
+{
     let (cmd_tx, cmd_rx) = crossbeam_channel::unbounded();
     let (ev_tx, ev_rx) = crossbeam_channel::unbounded();
     let slot = Arc::new(Slot::default());
     let slot_w = slot.clone();
     let thread = std::thread::Builder::new()
         .name("gast-session".into())
-        .spawn(move || worker(inputs, cmd_rx, ev_tx, slot_w, waker))
+        .spawn(move || worker(load, cmd_rx, ev_tx, slot_w, waker))
         .ok();
     SessionHandle { commands: cmd_tx, events: ev_rx, snapshots: slot, thread }
 }
 
-fn worker(
-    inputs: SessionInputs,
+fn worker<F>(
+    load: F,
     commands: Receiver<Command>,
     events: Sender<Event>,
     slot: Arc<Slot<Snapshot>>,
     waker: Arc<dyn Fn() + Send + Sync>,
-) -> Option<Gaussians> {
+) -> Option<Gaussians>
+where
+    F: FnOnce(&mut dyn FnMut(Event)) -> Result<SessionInputs, String>,
+{
     let emit = |e: Event| {
         let _ = events.send(e);
         waker();
+    };
+    let inputs = match load(&mut |e| emit(e)) {
+        Ok(inputs) => inputs,
+        Err(e) => {
+            emit(Event::Failed(e));
+            return None;
+        }
     };
     let mut session = match Session::prepare(inputs, &mut |e| emit(e)) {
         Ok(s) => s,

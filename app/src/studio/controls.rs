@@ -1,0 +1,143 @@
+//! The side panel's widgets: the [`StyleConfig`] editor (the same struct as
+//! preset files and CLI flags), the run buttons and the loss chart.
+
+use egui::{Color32, Ui};
+use gast_core::session::StepReport;
+use gast_core::style::{Mode, StyleConfig};
+
+/// Label of a mode in menus.
+pub fn mode_label(m: Mode) -> &'static str {
+    match m {
+        Mode::Decoupled => "decoupled",
+        Mode::Joint => "joint",
+        Mode::ColorOnly => "colour only",
+        Mode::GeometryOnly => "geometry only",
+    }
+}
+
+fn weight(ui: &mut Ui, value: &mut f32, max: f32, label: &str, hover: &str) -> bool {
+    ui.add(egui::Slider::new(value, 0.0..=max).logarithmic(true).smallest_positive(1e-5).text(label))
+        .on_hover_text(hover)
+        .changed()
+}
+
+/// Edits `c` in place; returns true when anything changed.
+pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
+    let mut changed = false;
+    ui.label(egui::RichText::new("Loss weights").strong());
+    let w = &mut c.weights;
+    changed |= weight(ui, &mut w.gcfm, 20.0, "λ_GC", "geometry-aware contrastive feature matching");
+    changed |= weight(ui, &mut w.content, 1.0, "λ_cont", "content feature loss");
+    changed |= weight(ui, &mut w.tv, 1.0, "λ_TV", "total variation of the render");
+    changed |= weight(ui, &mut w.opacity, 10.0, "λ_α", "opacity regulariser (geometry steps)");
+    changed |= weight(ui, &mut w.scale, 10.0, "λ_s", "scale regulariser (geometry steps)");
+    changed |= weight(ui, &mut w.rotation, 10.0, "λ_r", "rotation regulariser (geometry steps)");
+    changed |= weight(ui, &mut w.depth, 100.0, "λ_d", "inverse-depth regulariser (geometry steps)");
+
+    ui.separator();
+    ui.label(egui::RichText::new("Schedule").strong());
+    egui::ComboBox::from_label("mode").selected_text(mode_label(c.mode)).show_ui(ui, |ui| {
+        for m in Mode::ALL {
+            changed |= ui.selectable_value(&mut c.mode, m, mode_label(m)).changed();
+        }
+    });
+    changed |= ui.add(egui::Slider::new(&mut c.cycles, 1..=100).text("K (cycles)")).changed();
+    changed |= ui.add(egui::Slider::new(&mut c.steps_per_cycle, 1..=500).text("steps per cycle")).changed();
+    changed |= ui
+        .add(egui::Slider::new(&mut c.ratio_geo, 0.0..=1.0).text("N_g / (N_c+N_g)"))
+        .on_hover_text("geometry share of each cycle")
+        .changed();
+    let s = c.schedule();
+    ui.weak(format!(
+        "N_c = {}, N_g = {}, {} steps",
+        s.color_steps,
+        s.geometry_steps,
+        s.cycles * (s.color_steps + s.geometry_steps)
+    ));
+
+    ui.separator();
+    ui.label(egui::RichText::new("Texture and resolution").strong());
+    ui.horizontal(|ui| {
+        ui.label("texture scale");
+        for (px, name) in [(128, "0.5×"), (256, "1×"), (512, "2×")] {
+            changed |= ui
+                .selectable_value(&mut c.texture_scale, px, name)
+                .on_hover_text(format!("style image height {px} px"))
+                .changed();
+        }
+    });
+    changed |= ui.add(egui::Slider::new(&mut c.texture_scale, 16..=1024).text("style height (px)")).changed();
+    changed |= ui.add(egui::Slider::new(&mut c.resolution, 64..=1024).text("working resolution")).changed();
+
+    ui.separator();
+    egui::CollapsingHeader::new("Learning rates").default_open(false).show(ui, |ui| {
+        let lr = &mut c.lr;
+        changed |= weight(ui, &mut lr.color, 1.0, "colour", "SH DC (colour steps)");
+        changed |=
+            weight(ui, &mut lr.means_per_extent, 0.01, "means / extent", "position learning rate per scene extent");
+        changed |= weight(ui, &mut lr.scales, 0.1, "scales", "log-scales");
+        changed |= weight(ui, &mut lr.quats, 0.1, "rotations", "quaternions");
+        changed |= weight(ui, &mut lr.opacity, 1.0, "opacity", "opacity logits");
+    });
+    changed
+}
+
+/// Draws the total loss (and GCFM) of the steps so far as lines.
+pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
+    let (rect, _) = ui.allocate_exact_size(egui::vec2(ui.available_width(), 110.0), egui::Sense::hover());
+    let painter = ui.painter_at(rect);
+    painter.rect_filled(rect, 4.0, ui.visuals().extreme_bg_color);
+    if steps.len() < 2 {
+        painter.text(
+            rect.center(),
+            egui::Align2::CENTER_CENTER,
+            "loss chart: no steps yet",
+            egui::FontId::proportional(12.0),
+            ui.visuals().weak_text_color(),
+        );
+        return;
+    }
+    type Series = (&'static str, Color32, fn(&StepReport) -> f32);
+    let series: [Series; 2] = [
+        ("total", Color32::from_rgb(250, 200, 60), |s| s.losses.total),
+        ("GCFM", Color32::from_rgb(90, 170, 250), |s| s.losses.gcfm),
+    ];
+    let all = steps.iter().flat_map(|s| [s.losses.total, s.losses.gcfm]).filter(|v| v.is_finite());
+    let (lo, hi) = all.fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+    let span = (hi - lo).max(1e-12);
+    let n = steps.len() as f32 - 1.0;
+    for (k, (name, color, get)) in series.iter().enumerate() {
+        let pts: Vec<egui::Pos2> = steps
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                egui::pos2(
+                    rect.left() + rect.width() * i as f32 / n,
+                    rect.bottom() - 4.0 - (rect.height() - 8.0) * (get(s) - lo) / span,
+                )
+            })
+            .collect();
+        painter.add(egui::Shape::line(pts, egui::Stroke::new(1.5, *color)));
+        painter.text(
+            rect.left_top() + egui::vec2(6.0, 4.0 + 14.0 * k as f32),
+            egui::Align2::LEFT_TOP,
+            *name,
+            egui::FontId::proportional(11.0),
+            *color,
+        );
+    }
+    painter.text(
+        rect.right_top() + egui::vec2(-6.0, 4.0),
+        egui::Align2::RIGHT_TOP,
+        format!("{hi:.4}"),
+        egui::FontId::monospace(10.0),
+        ui.visuals().weak_text_color(),
+    );
+    painter.text(
+        rect.right_bottom() + egui::vec2(-6.0, -4.0),
+        egui::Align2::RIGHT_BOTTOM,
+        format!("{lo:.4}"),
+        egui::FontId::monospace(10.0),
+        ui.visuals().weak_text_color(),
+    );
+}

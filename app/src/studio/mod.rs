@@ -1,0 +1,589 @@
+//! GAST Studio: the desktop window around a stylization run.
+//!
+//! A central wgpu splat viewport (orbit, pan, zoom, fly), a side panel with the
+//! run's parameters, presets and buttons, an inspection strip (RGB, inverse
+//! depth, edges of the current view, computed on the CPU off the UI thread) and
+//! a bottom panel where every error is shown. Files arrive by drag and drop or
+//! through dialogs; a bad file explains itself and the previous scene stays.
+//!
+//! Test switches: `GAST_STUDIO_EXIT_AFTER_FRAMES=N` closes the window after N
+//! frames, `GAST_STUDIO_SCREENSHOT=path` saves a screenshot of the window first.
+
+pub mod assets;
+pub mod controls;
+pub mod inspect;
+mod panels;
+pub mod session_link;
+pub mod view;
+pub mod viewport;
+pub mod worker;
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+
+use anyhow::Context as _;
+use egui::{Color32, Ui};
+use gast_core::style::StyleConfig;
+use gast_core::{Camera, Gaussians};
+
+use session_link::{RunMonitor, RunStatus, SessionStarter};
+use view::ViewState;
+use viewport::{FrameStats, SceneRef, SharedGaussians, ViewportCallback, ViewportNotes, ViewportResources};
+
+/// What `gast studio` was asked to open.
+#[derive(Clone, Debug, Default)]
+pub struct StudioArgs {
+    /// A scene file; the demo scene when absent.
+    pub scene: Option<PathBuf>,
+    /// A style image; the first demo style when absent.
+    pub style: Option<PathBuf>,
+}
+
+/// A loaded scene.
+struct LoadedScene {
+    name: String,
+    scene: SceneRef,
+}
+
+/// A style image and its thumbnail.
+struct LoadedStyle {
+    path: PathBuf,
+    thumb: egui::ColorImage,
+    texture: egui::TextureHandle,
+    size: [usize; 2],
+}
+
+/// What the inspection maps were computed for: view, viewport size, scene and snapshot versions.
+type InspectKey = (ViewState, [u32; 2], u64, u64);
+
+/// Where the previous frame's screenshot request stands.
+#[derive(Default)]
+struct ScreenshotState {
+    requested: bool,
+    done: Arc<AtomicBool>,
+}
+
+/// The studio's state. One struct, updated only on the UI thread; workers talk
+/// to it through channels and the snapshot slot.
+pub struct StudioApp {
+    scene: Option<LoadedScene>,
+    snapshot: Option<SceneRef>,
+    next_version: u64,
+    styles: Vec<LoadedStyle>,
+    style: Option<usize>,
+    /// The run's parameters, edited by the side panel.
+    pub config: StyleConfig,
+    view: ViewState,
+    cameras: Vec<Camera>,
+    camera_source: String,
+    split: f32,
+    background: [f32; 3],
+    /// Messages shown in the bottom panel, newest last.
+    pub errors: Vec<String>,
+    notice: String,
+    run: RunMonitor,
+    starter: Option<SessionStarter>,
+    stats: Arc<Mutex<FrameStats>>,
+    viewport_notes: Arc<Mutex<ViewportNotes>>,
+    jobs: inspect::Jobs,
+    maps: Option<[egui::TextureHandle; 3]>,
+    auto_inspect: bool,
+    inspected_view: Option<InspectKey>,
+    inspect_pending: Option<(InspectKey, std::time::Instant)>,
+    viewport_px: [u32; 2],
+    /// Scene files load on a worker thread (off while the command line's files open).
+    load_in_background: bool,
+    ctx: egui::Context,
+    frames: u64,
+    exit_after: Option<u64>,
+    screenshot_path: Option<PathBuf>,
+    screenshot: ScreenshotState,
+}
+
+/// Opens the studio window with `starter` connected to the Start button.
+pub fn run_with(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Result<()> {
+    let icon = assets::icon();
+    let options = eframe::NativeOptions {
+        viewport: egui::ViewportBuilder::default()
+            .with_title("GAST Studio")
+            .with_inner_size([1280.0, 800.0])
+            .with_drag_and_drop(true)
+            .with_icon(egui::IconData { width: icon.width(), height: icon.height(), rgba: icon.into_raw() }),
+        ..Default::default()
+    };
+    eframe::run_native(
+        "GAST Studio",
+        options,
+        Box::new(move |cc| {
+            let Some(rs) = cc.wgpu_render_state.as_ref() else {
+                return Err("the studio needs the wgpu renderer, which did not start".into());
+            };
+            let resources = ViewportResources::new(&rs.device, rs.target_format);
+            rs.renderer.write().callback_resources.insert(resources);
+            let mut app = StudioApp::new(cc.egui_ctx.clone(), args);
+            if let Some(starter) = starter {
+                app.set_session_starter(starter);
+            }
+            Ok(Box::new(app))
+        }),
+    )
+    .map_err(|e| anyhow::anyhow!("the studio window failed: {e}"))
+}
+
+impl eframe::App for StudioApp {
+    fn ui(&mut self, ui: &mut Ui, _frame: &mut eframe::Frame) {
+        self.show(ui);
+    }
+}
+
+fn env_u64(name: &str) -> Option<u64> {
+    std::env::var(name).ok().and_then(|v| v.trim().parse().ok())
+}
+
+impl StudioApp {
+    /// The studio with `args` opened (the demo scene and style when absent).
+    pub fn new(ctx: egui::Context, args: StudioArgs) -> Self {
+        let waker_ctx = ctx.clone();
+        let waker: Arc<dyn Fn() + Send + Sync> = Arc::new(move || waker_ctx.request_repaint());
+        let mut app = Self {
+            scene: None,
+            snapshot: None,
+            next_version: 1,
+            styles: Vec::new(),
+            style: None,
+            config: StyleConfig::default(),
+            view: ViewState::default(),
+            cameras: Vec::new(),
+            camera_source: String::new(),
+            split: 0.5,
+            background: [0.0; 3],
+            errors: Vec::new(),
+            notice: String::new(),
+            run: RunMonitor::default(),
+            starter: None,
+            stats: Arc::default(),
+            viewport_notes: Arc::default(),
+            jobs: inspect::Jobs::new(waker),
+            maps: None,
+            auto_inspect: true,
+            inspected_view: None,
+            inspect_pending: None,
+            viewport_px: [640, 480],
+            load_in_background: false,
+            ctx,
+            frames: 0,
+            exit_after: env_u64("GAST_STUDIO_EXIT_AFTER_FRAMES"),
+            screenshot_path: std::env::var_os("GAST_STUDIO_SCREENSHOT").map(PathBuf::from),
+            screenshot: ScreenshotState::default(),
+        };
+        match &args.scene {
+            Some(p) => app.open_scene(p),
+            None => app.open_demo_scene(),
+        }
+        let style = args.style.clone().or_else(|| {
+            let p = assets::source_assets_dir().join(assets::DEMO_STYLES[0]);
+            p.exists().then_some(p)
+        });
+        match style {
+            Some(p) => app.open_style(&p),
+            None => app.open_generated_styles(),
+        }
+        app.load_in_background = true;
+        app
+    }
+
+    /// Connects the code that spawns session workers; until then Start is disabled.
+    pub fn set_session_starter(&mut self, starter: SessionStarter) {
+        self.starter = Some(starter);
+    }
+
+    /// Shows an error in the bottom panel (and keeps everything else as it was).
+    pub fn report(&mut self, err: anyhow::Error) {
+        self.errors.push(format!("{err:#}"));
+        if self.errors.len() > 20 {
+            self.errors.remove(0);
+        }
+    }
+
+    /// The Gaussians shown as "current": the newest snapshot, else the scene.
+    fn current(&self) -> Option<SharedGaussians> {
+        self.snapshot.as_ref().or(self.scene.as_ref().map(|s| &s.scene)).map(|s| s.gaussians.clone())
+    }
+
+    fn set_scene(&mut self, name: String, g: Gaussians) {
+        let g = Arc::new(g);
+        self.view.fit(&g);
+        self.cameras = view::orbit_ring(&g, self.view.up, 12, 800, 600);
+        self.camera_source = "orbit".into();
+        self.scene = Some(LoadedScene { name, scene: SceneRef { version: self.next_version, gaussians: g.into() } });
+        self.next_version += 1;
+        self.snapshot = None;
+        self.maps = None;
+        self.inspected_view = None;
+    }
+
+    /// Loads a scene file (on a worker thread once the window runs); on failure
+    /// the error is shown and the previous scene stays.
+    pub fn open_scene(&mut self, path: &Path) {
+        if self.load_in_background {
+            self.notice = format!("loading {}…", path.display());
+            self.jobs.load_scene(path.to_path_buf());
+        } else {
+            let result = inspect::read_scene_file(path);
+            self.finish_open_scene(path, result);
+        }
+    }
+
+    fn finish_open_scene(&mut self, path: &Path, result: anyhow::Result<inspect::SceneFile>) {
+        match result {
+            Ok(f) if f.gaussians.is_empty() => {
+                let keep = self.keeping_scene();
+                self.report(anyhow::anyhow!("{}: the scene holds no Gaussians; {keep}", path.display()))
+            }
+            Ok(f) => {
+                let g = f.gaussians;
+                let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+                self.notice = format!("opened {} ({} Gaussians, SH degree {})", path.display(), g.len(), g.sh_degree);
+                self.set_scene(name, g);
+                if let Some((set, dir)) = f.cameras {
+                    self.set_cameras(set, &dir);
+                }
+            }
+            Err(e) => {
+                let keep = self.keeping_scene();
+                self.report(anyhow::anyhow!("{e:#}; {keep}"))
+            }
+        }
+    }
+
+    /// What a failed open leaves on screen, for the end of its message.
+    fn keeping_scene(&self) -> &'static str {
+        if self.scene.is_some() { "keeping the previous scene" } else { "no scene is open" }
+    }
+
+    fn open_demo_scene(&mut self) {
+        let path = assets::source_assets_dir().join(assets::DEMO_SCENE);
+        if path.exists() {
+            self.open_scene(&path);
+        } else {
+            self.set_scene("demo scene (generated)".into(), assets::demo_scene());
+        }
+    }
+
+    fn add_style(&mut self, path: PathBuf, img: image::RgbImage) {
+        let thumb = image::imageops::thumbnail(&img, 96, (96 * img.height() / img.width().max(1)).max(1));
+        let color = egui::ColorImage::from_rgb([thumb.width() as usize, thumb.height() as usize], thumb.as_raw());
+        let texture =
+            self.ctx.load_texture(format!("style {}", path.display()), color.clone(), egui::TextureOptions::LINEAR);
+        self.styles.retain(|s| s.path != path);
+        self.styles.insert(
+            0,
+            LoadedStyle { path, thumb: color, texture, size: [img.width() as usize, img.height() as usize] },
+        );
+        self.styles.truncate(8);
+        self.style = Some(0);
+    }
+
+    /// Loads a style image; on failure the error is shown and the previous style stays.
+    pub fn open_style(&mut self, path: &Path) {
+        match image::open(path) {
+            Ok(img) => self.add_style(path.to_path_buf(), img.to_rgb8()),
+            Err(e) => {
+                let keep = if self.styles.is_empty() { "no style is open" } else { "keeping the previous style" };
+                self.report(anyhow::anyhow!(
+                    "{}: not a style image this build can read (PNG, JPEG, WebP): {e}; {keep}",
+                    path.display()
+                ))
+            }
+        }
+    }
+
+    fn open_generated_styles(&mut self) {
+        for (name, img) in assets::demo_styles().into_iter().rev() {
+            self.add_style(PathBuf::from(name), img);
+        }
+    }
+
+    fn set_cameras(&mut self, set: gast_core::camera::CameraSet, from: &Path) {
+        self.cameras = set.cameras;
+        self.camera_source = from.display().to_string();
+        for w in set.warnings {
+            self.run.log.push(format!("cameras: {w}"));
+        }
+    }
+
+    /// Loads optimisation cameras (COLMAP, `cameras.json`, `transforms.json`) for the snap list.
+    pub fn open_cameras(&mut self, path: &Path) {
+        match gast_core::camera::load(path) {
+            Ok(set) if set.cameras.is_empty() => {
+                self.report(anyhow::anyhow!("{}: no cameras in the file", path.display()))
+            }
+            Ok(set) => {
+                self.notice = format!("{} cameras from {}", set.cameras.len(), path.display());
+                self.set_cameras(set, path);
+            }
+            Err(e) => self.report(anyhow::anyhow!("{e}; keeping the current camera list")),
+        }
+    }
+
+    /// Opens a file by what it is: a style image, a preset, cameras or a scene.
+    pub fn open_any(&mut self, path: &Path) {
+        let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+        match ext.as_str() {
+            "png" | "jpg" | "jpeg" | "webp" => self.open_style(path),
+            "bin" | "txt" => self.open_cameras(path),
+            "json" => {
+                // cameras.json is a list, transforms.json has frames, SOG's meta.json has means; the rest are presets.
+                let text = std::fs::read_to_string(path).unwrap_or_default();
+                let value: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
+                if value.is_array() || value.get("frames").is_some() {
+                    self.open_cameras(path);
+                } else if value.get("means").is_some() {
+                    self.open_scene(path);
+                } else {
+                    self.load_preset(path);
+                }
+            }
+            _ if path.is_dir() && !path.join("meta.json").exists() => self.open_cameras(path),
+            _ => self.open_scene(path),
+        }
+    }
+
+    /// Loads a preset file into the configuration.
+    pub fn load_preset(&mut self, path: &Path) {
+        let result = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read the preset", path.display()))
+            .and_then(|t| {
+                StyleConfig::from_json(&t).with_context(|| format!("{}: not a style preset", path.display()))
+            });
+        match result {
+            Ok(c) => {
+                let problems = c.problems();
+                if problems.is_empty() {
+                    self.config = c;
+                    self.notice = format!("preset {} loaded", path.display());
+                } else {
+                    self.report(anyhow::anyhow!(
+                        "{}: {}; keeping the current parameters",
+                        path.display(),
+                        problems.join("; ")
+                    ));
+                }
+            }
+            Err(e) => self.report(e),
+        }
+    }
+
+    /// Saves the configuration as a preset (atomically).
+    pub fn save_preset(&mut self, path: &Path) {
+        use std::io::Write as _;
+        let json = self.config.to_json();
+        match gast_core::io::atomic_write(path, |w| w.write_all(json.as_bytes())) {
+            Ok(()) => self.notice = format!("preset saved to {}", path.display()),
+            Err(e) => self.report(anyhow::Error::new(e).context("saving the preset")),
+        }
+    }
+
+    fn viewport_camera(&self) -> Camera {
+        self.view.camera(self.viewport_px[0], self.viewport_px[1])
+    }
+
+    fn poll_workers(&mut self) {
+        if let Ok(mut notes) = self.viewport_notes.lock() {
+            self.errors.append(&mut notes.errors);
+            self.run.log.append(&mut notes.warnings);
+        }
+        if let Some(snap) = self.run.poll() {
+            self.snapshot = Some(SceneRef { version: self.next_version, gaussians: SharedGaussians::Snapshot(snap) });
+            self.next_version += 1;
+        }
+        if let RunStatus::Failed(msg) = &self.run.status {
+            let msg = format!("the run failed: {msg}");
+            if self.errors.last() != Some(&msg) {
+                self.errors.push(msg);
+            }
+        }
+        for done in self.jobs.poll() {
+            match done {
+                inspect::JobDone::Maps(m) => {
+                    let opts = egui::TextureOptions::LINEAR;
+                    self.maps = Some([
+                        self.ctx.load_texture("inspect rgb", m.rgb, opts),
+                        self.ctx.load_texture("inspect depth", m.depth, opts),
+                        self.ctx.load_texture("inspect edges", m.edges, opts),
+                    ]);
+                }
+                inspect::JobDone::Scene(path, result) => self.finish_open_scene(&path, result),
+                inspect::JobDone::Exported(p) => self.notice = format!("wrote {}", p.display()),
+                inspect::JobDone::Failed(e) => self.errors.push(e),
+            }
+        }
+    }
+
+    fn handle_drops(&mut self, ui: &Ui) {
+        let dropped: Vec<PathBuf> = ui.input(|i| {
+            i.raw.dropped_files.iter().map(|f| f.path().to_path_buf()).filter(|p| !p.as_os_str().is_empty()).collect()
+        });
+        for p in dropped {
+            self.open_any(&p);
+        }
+    }
+
+    /// Adopts the context the window draws with (a test harness brings its own)
+    /// and moves the style thumbnails onto it.
+    fn adopt_context(&mut self, ctx: &egui::Context) {
+        self.ctx = ctx.clone();
+        for s in &mut self.styles {
+            s.texture =
+                ctx.load_texture(format!("style {}", s.path.display()), s.thumb.clone(), egui::TextureOptions::LINEAR);
+        }
+    }
+
+    /// The whole window.
+    pub fn show(&mut self, ui: &mut Ui) {
+        if self.frames == 0 {
+            self.adopt_context(ui.ctx());
+        }
+        self.frames += 1;
+        self.poll_workers();
+        self.handle_drops(ui);
+        egui::Panel::top("menu").show(ui, |ui| self.menu_bar(ui));
+        egui::Panel::bottom("status").resizable(true).default_size(90.0).show(ui, |ui| self.status_panel(ui));
+        egui::Panel::right("controls").resizable(true).default_size(330.0).show(ui, |ui| {
+            egui::ScrollArea::vertical().show(ui, |ui| self.side_panel(ui));
+        });
+        egui::Panel::bottom("inspect").resizable(false).exact_size(190.0).show(ui, |ui| self.inspect_panel(ui));
+        egui::CentralPanel::default().show(ui, |ui| self.viewport(ui));
+        // After the viewport took this frame's input, so the maps follow the newest view.
+        if self.auto_inspect {
+            self.request_inspection(false);
+        }
+        self.test_switches(ui.ctx());
+    }
+
+    fn test_switches(&mut self, ctx: &egui::Context) {
+        let Some(n) = self.exit_after else { return };
+        ctx.request_repaint();
+        if let Some(path) = self.screenshot_path.clone()
+            && !self.screenshot.requested
+            && self.frames + 2 >= n
+        {
+            self.screenshot.requested = true;
+            let done = self.screenshot.done.clone();
+            ctx.send_viewport_cmd(egui::ViewportCommand::Screenshot(egui::ScreenshotCallback::new(move |img| {
+                let rgb: Vec<f32> =
+                    img.pixels.iter().flat_map(|c| [c.r(), c.g(), c.b()].map(|v| v as f32 / 255.0)).collect();
+                match gast_core::io::write_png_rgb(&path, img.size[0] as u32, img.size[1] as u32, &rgb) {
+                    Ok(()) => eprintln!("studio: screenshot saved to {}", path.display()),
+                    Err(e) => eprintln!("studio: screenshot failed: {e}"),
+                }
+                done.store(true, Ordering::SeqCst);
+            })));
+        }
+        let shot_pending = self.screenshot.requested && !self.screenshot.done.load(Ordering::SeqCst);
+        if self.frames >= n && !shot_pending {
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+        }
+        if self.frames >= n + 600 {
+            eprintln!("studio: the screenshot never arrived; closing");
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+        }
+    }
+
+    fn viewport(&mut self, ui: &mut Ui) {
+        let size = ui.available_size();
+        let (rect, response) = ui.allocate_exact_size(size, egui::Sense::click_and_drag());
+        let ppp = ui.ctx().pixels_per_point();
+        self.viewport_px =
+            [(rect.width() * ppp).round().max(1.0) as u32, (rect.height() * ppp).round().max(1.0) as u32];
+        let interacting = self.handle_view_input(ui, &response, rect);
+        let full = self.viewport_camera();
+        // Half resolution while the view moves keeps big scenes responsive on software GPUs.
+        let camera = if interacting && self.scene.as_ref().is_some_and(|s| s.scene.gaussians.len() > 200_000) {
+            inspect::scaled(&full, full.width.max(full.height) / 2)
+        } else {
+            full
+        };
+        let callback = ViewportCallback {
+            camera,
+            before: self.scene.as_ref().map(|s| s.scene.clone()),
+            after: self.snapshot.clone(),
+            split: self.split,
+            background: self.background,
+            stats: self.stats.clone(),
+            notes: self.viewport_notes.clone(),
+        };
+        ui.painter().add(egui_wgpu::Callback::new_paint_callback(rect, callback));
+        if self.snapshot.is_some() && self.split > 0.0 && self.split < 1.0 {
+            let x = rect.left() + rect.width() * self.split;
+            ui.painter().text(
+                egui::pos2(x - 6.0, rect.top() + 6.0),
+                egui::Align2::RIGHT_TOP,
+                "before",
+                egui::FontId::proportional(13.0),
+                Color32::WHITE,
+            );
+            ui.painter().text(
+                egui::pos2(x + 6.0, rect.top() + 6.0),
+                egui::Align2::LEFT_TOP,
+                "after",
+                egui::FontId::proportional(13.0),
+                Color32::WHITE,
+            );
+        }
+        if self.scene.is_none() {
+            ui.painter().text(
+                rect.center(),
+                egui::Align2::CENTER_CENTER,
+                "drop a scene (.ply) here",
+                egui::FontId::proportional(18.0),
+                Color32::GRAY,
+            );
+        }
+    }
+
+    /// Applies the mouse and keyboard to the view; true while the view is being moved.
+    fn handle_view_input(&mut self, ui: &Ui, response: &egui::Response, rect: egui::Rect) -> bool {
+        let delta = response.drag_delta();
+        if response.dragged_by(egui::PointerButton::Primary) {
+            self.view.orbit(delta.x * 0.006, -delta.y * 0.006);
+        }
+        if response.dragged_by(egui::PointerButton::Secondary) || response.dragged_by(egui::PointerButton::Middle) {
+            self.view.pan(delta.x, delta.y, rect.height());
+        }
+        if response.hovered() {
+            let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+            if scroll != 0.0 {
+                self.view.zoom(scroll);
+            }
+            if ui.input(|i| i.key_pressed(egui::Key::F))
+                && let Some(g) = self.current()
+            {
+                self.view.fit(&g);
+            }
+        }
+        let flying = ui.input(|i| i.pointer.secondary_down()) && (response.hovered() || response.dragged());
+        if flying {
+            let (dt, keys) = ui.input(|i| {
+                let k = |key| if i.key_down(key) { 1.0f32 } else { 0.0 };
+                (
+                    i.stable_dt.min(0.1),
+                    [
+                        k(egui::Key::D) - k(egui::Key::A),
+                        k(egui::Key::E) - k(egui::Key::Q),
+                        k(egui::Key::W) - k(egui::Key::S),
+                    ],
+                )
+            });
+            if keys != [0.0; 3] {
+                self.view.fly(keys[0], keys[1], keys[2], dt);
+                ui.ctx().request_repaint();
+            }
+        }
+        response.dragged() || flying
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,337 @@
+//! The studio's panels around the viewport: menu bar, status and errors, the
+//! side panel (style strip, run buttons and chart, parameters, view), and the
+//! inspection strip.
+
+use std::sync::Arc;
+
+use egui::{Color32, RichText, Ui};
+use gast_core::session::Command;
+use gast_core::style::StyleConfig;
+
+use super::session_link::{RunStatus, StartRequest};
+use super::view::{UpAxis, ViewState};
+use super::{StudioApp, controls, inspect};
+
+impl StudioApp {
+    pub(super) fn menu_bar(&mut self, ui: &mut Ui) {
+        ui.horizontal(|ui| {
+            ui.label(RichText::new("GAST Studio").strong());
+            ui.separator();
+            if ui.button("Open scene…").clicked()
+                && let Some(p) = rfd::FileDialog::new().add_filter("Gaussian splats", &["ply"]).pick_file()
+            {
+                self.open_scene(&p);
+            }
+            if ui.button("Open style…").clicked()
+                && let Some(p) =
+                    rfd::FileDialog::new().add_filter("Images", &["png", "jpg", "jpeg", "webp"]).pick_file()
+            {
+                self.open_style(&p);
+            }
+            ui.menu_button("Export", |ui| self.export_menu(ui));
+            ui.separator();
+            ui.weak("drop scenes, style images or presets onto the window");
+        });
+    }
+
+    pub(super) fn export_menu(&mut self, ui: &mut Ui) {
+        let current = self.current();
+        let cam = self.viewport_camera();
+        ui.add_enabled_ui(current.is_some(), |ui| {
+            let Some(g) = current else { return };
+            if ui.button("Current Gaussians as .ply…").clicked()
+                && let Some(p) =
+                    rfd::FileDialog::new().add_filter("PLY", &["ply"]).set_file_name("stylized.ply").save_file()
+            {
+                self.jobs.export_ply(g.clone(), p);
+            }
+            if ui.button("Current view as PNG…").clicked()
+                && let Some(p) =
+                    rfd::FileDialog::new().add_filter("PNG", &["png"]).set_file_name("view.png").save_file()
+            {
+                self.jobs.export_png(g.clone(), cam.clone(), self.background, p);
+            }
+            if ui.button("Current view's inverse depth as EXR…").clicked()
+                && let Some(p) =
+                    rfd::FileDialog::new().add_filter("OpenEXR", &["exr"]).set_file_name("depth.exr").save_file()
+            {
+                self.jobs.export_depth(g.clone(), cam.clone(), p);
+            }
+        });
+    }
+
+    pub(super) fn status_panel(&mut self, ui: &mut Ui) {
+        let stats = self.stats.lock().map(|s| *s).unwrap_or_default();
+        ui.horizontal(|ui| {
+            match &self.scene {
+                Some(s) => ui.label(format!("{}: {} Gaussians", s.name, s.scene.gaussians.len())),
+                None => ui.label("no scene"),
+            };
+            ui.separator();
+            ui.label(format!(
+                "drawn {}  sort {:.1} ms  prepare {:.1} ms",
+                stats.drawn, stats.sort_ms, stats.prepare_ms
+            ));
+            if self.jobs.running > 0 {
+                ui.separator();
+                ui.spinner();
+                ui.label(format!("{} background job(s)", self.jobs.running));
+            }
+            if !self.notice.is_empty() {
+                ui.separator();
+                ui.weak(&self.notice);
+            }
+        });
+        if !self.errors.is_empty() {
+            ui.horizontal(|ui| {
+                ui.label(
+                    RichText::new(format!("{} error(s)", self.errors.len()))
+                        .color(Color32::from_rgb(255, 110, 90))
+                        .strong(),
+                );
+                if ui.small_button("clear").clicked() {
+                    self.errors.clear();
+                }
+            });
+            egui::ScrollArea::vertical().stick_to_bottom(true).show(ui, |ui| {
+                for e in &self.errors {
+                    ui.label(RichText::new(e).color(Color32::from_rgb(255, 130, 110)));
+                }
+            });
+        }
+        for line in self.run.log.iter().rev().take(3) {
+            ui.weak(line);
+        }
+    }
+
+    pub(super) fn side_panel(&mut self, ui: &mut Ui) {
+        ui.heading("Style");
+        ui.horizontal_wrapped(|ui| {
+            let mut pick = None;
+            for (k, s) in self.styles.iter().enumerate() {
+                let selected = self.style == Some(k);
+                let img = egui::Image::new(&s.texture)
+                    .fit_to_exact_size(egui::vec2(64.0, 64.0 * s.size[1] as f32 / s.size[0].max(1) as f32));
+                let r = ui.add(egui::Button::image(img).selected(selected)).on_hover_text(s.path.display().to_string());
+                if r.clicked() {
+                    pick = Some(k);
+                }
+            }
+            if pick.is_some() {
+                self.style = pick;
+            }
+        });
+        if let Some(s) = self.style.and_then(|k| self.styles.get(k)) {
+            ui.weak(format!("{} ({}×{})", s.path.display(), s.size[0], s.size[1]));
+        }
+
+        ui.separator();
+        ui.heading("Run");
+        self.run_buttons(ui);
+        controls::loss_chart(ui, &self.run.steps);
+        if let Some((p, eta)) = self.run.progress() {
+            ui.add(egui::ProgressBar::new(p).text(format!("{:.0}%  ETA {:.0} s", p * 100.0, eta)));
+        }
+        if let Some(g) = self.current() {
+            ui.weak(format!("current: {} Gaussians", g.len()));
+        }
+
+        ui.separator();
+        ui.heading("Parameters");
+        if controls::config_editor(ui, &mut self.config) && self.run.is_live() {
+            self.run.send(Command::SetConfig(Box::new(self.config.clone())));
+        }
+        ui.horizontal(|ui| {
+            if ui.button("Save preset…").clicked()
+                && let Some(p) =
+                    rfd::FileDialog::new().add_filter("Preset", &["json"]).set_file_name("preset.json").save_file()
+            {
+                self.save_preset(&p);
+            }
+            if ui.button("Load preset…").clicked()
+                && let Some(p) = rfd::FileDialog::new().add_filter("Preset", &["json"]).pick_file()
+            {
+                self.load_preset(&p);
+            }
+            if ui.button("Defaults").clicked() {
+                self.config = StyleConfig::default();
+            }
+        });
+        for p in self.config.problems() {
+            ui.colored_label(Color32::from_rgb(255, 130, 110), p);
+        }
+
+        ui.separator();
+        ui.heading("View");
+        self.view_controls(ui);
+    }
+
+    pub(super) fn run_buttons(&mut self, ui: &mut Ui) {
+        let live = self.run.is_live();
+        let paused = self.run.status == RunStatus::Paused;
+        ui.horizontal(|ui| {
+            let can_start = self.starter.is_some() && !live && self.scene.is_some() && self.style.is_some();
+            let why = if self.starter.is_none() {
+                "no session runner is connected to this build yet"
+            } else if live {
+                "a run is in progress"
+            } else {
+                "open a scene and a style first"
+            };
+            if ui.add_enabled(can_start, egui::Button::new("Start")).on_disabled_hover_text(why).clicked() {
+                self.start_run();
+            }
+            let not_live = "no run in progress";
+            if ui.add_enabled(live && !paused, egui::Button::new("Pause")).on_disabled_hover_text(not_live).clicked() {
+                self.run.send(Command::Pause);
+            }
+            if ui.add_enabled(live && paused, egui::Button::new("Resume")).on_disabled_hover_text(not_live).clicked() {
+                self.run.send(Command::Resume);
+            }
+            if ui.add_enabled(live, egui::Button::new("Stop")).on_disabled_hover_text(not_live).clicked() {
+                self.run.send(Command::Stop);
+            }
+        });
+        let status = match &self.run.status {
+            RunStatus::Idle => "idle".to_string(),
+            RunStatus::Running => "running".into(),
+            RunStatus::Paused => "paused".into(),
+            RunStatus::Finished { completed: true } => "finished".into(),
+            RunStatus::Finished { completed: false } => "stopped".into(),
+            RunStatus::Failed(m) => format!("failed: {m}"),
+        };
+        ui.weak(format!("status: {status}"));
+    }
+
+    pub(super) fn start_run(&mut self) {
+        let (Some(starter), Some(scene), Some(style)) =
+            (&self.starter, &self.scene, self.style.and_then(|k| self.styles.get(k)))
+        else {
+            return;
+        };
+        let problems = self.config.problems();
+        if !problems.is_empty() {
+            self.report(anyhow::anyhow!("cannot start: {}", problems.join("; ")));
+            return;
+        }
+        let ctx = self.ctx.clone();
+        let request = StartRequest {
+            scene: scene.scene.gaussians.to_arc(),
+            style: style.path.clone(),
+            config: self.config.clone(),
+            cameras: self.cameras.clone(),
+            waker: Arc::new(move || ctx.request_repaint()),
+        };
+        match starter(request) {
+            Ok(link) => self.run.attach(link),
+            Err(e) => self.report(e.context("starting the run")),
+        }
+    }
+
+    pub(super) fn view_controls(&mut self, ui: &mut Ui) {
+        ui.horizontal(|ui| {
+            if ui.button("Fit").on_hover_text("frame the scene's robust bounds (F)").clicked()
+                && let Some(g) = self.current()
+            {
+                self.view.fit(&g);
+            }
+            if ui.button("Reset").clicked() {
+                let up = self.view.up;
+                self.view = ViewState { up, ..ViewState::default() };
+                if let Some(g) = self.current() {
+                    self.view.fit(&g);
+                }
+            }
+            egui::ComboBox::new("up", "up axis").selected_text(format!("{:?}", self.view.up)).show_ui(ui, |ui| {
+                for up in [UpAxis::NegY, UpAxis::PosY, UpAxis::PosZ] {
+                    ui.selectable_value(&mut self.view.up, up, format!("{up:?}"));
+                }
+            });
+        });
+        let mut fov = self.view.fov_y.to_degrees();
+        if ui.add(egui::Slider::new(&mut fov, 10.0..=120.0).text("vertical fov°")).changed() {
+            self.view.fov_y = fov.to_radians();
+        }
+        ui.add(egui::Slider::new(&mut self.split, 0.0..=1.0).text("before | after"))
+            .on_hover_text("left of the line: the scene as loaded");
+        let mut bg = self.background;
+        ui.horizontal(|ui| {
+            ui.label("background");
+            if ui.color_edit_button_rgb(&mut bg).changed() {
+                self.background = bg;
+            }
+        });
+        egui::CollapsingHeader::new(format!("Cameras ({}, {})", self.cameras.len(), self.camera_source)).show(
+            ui,
+            |ui| {
+                let mut snap = None;
+                for (k, c) in self.cameras.iter().enumerate() {
+                    if ui.selectable_label(false, &c.name).clicked() {
+                        snap = Some(k);
+                    }
+                }
+                if let Some(k) = snap {
+                    let focus =
+                        self.current().and_then(|g| gast_core::camera::robust_bounds(&g.means)).map(|b| b.center);
+                    let cam = self.cameras[k].clone();
+                    self.view.snap_to(&cam, focus);
+                }
+            },
+        );
+        ui.weak("left drag: orbit · right/middle drag: pan · wheel: zoom · hold right + WASD/QE: fly");
+    }
+
+    pub(super) fn inspect_panel(&mut self, ui: &mut Ui) {
+        ui.horizontal(|ui| {
+            ui.label(RichText::new("Inspect").strong());
+            ui.checkbox(&mut self.auto_inspect, "follow the view");
+            if ui.button("Refresh").clicked() {
+                self.inspected_view = None;
+                self.request_inspection(true);
+            }
+            ui.weak("RGB · inverse depth · edges of the current view (CPU rasterizer)");
+        });
+        let h = 150.0;
+        ui.horizontal(|ui| match &self.maps {
+            Some(maps) => {
+                for (t, name) in maps.iter().zip(["RGB", "inverse depth", "edges"]) {
+                    let [w, th] = t.size();
+                    let size = egui::vec2(h * w as f32 / th.max(1) as f32, h);
+                    ui.add(egui::Image::new(t).fit_to_exact_size(size)).on_hover_text(name);
+                }
+            }
+            None => {
+                ui.weak("no maps yet");
+            }
+        });
+    }
+
+    /// Starts the inspection maps of the current view once it has been still for
+    /// a moment (or at once when `force`); while waiting, asks egui to look again.
+    pub(super) fn request_inspection(&mut self, force: bool) {
+        let Some(g) = self.current() else { return };
+        let scene_v = self.scene.as_ref().map(|s| s.scene.version).unwrap_or(0);
+        let snap_v = self.snapshot.as_ref().map(|s| s.version).unwrap_or(0);
+        let key = (self.view.clone(), self.viewport_px, scene_v, snap_v);
+        if !force && self.inspected_view.as_ref() == Some(&key) {
+            return;
+        }
+        let now = std::time::Instant::now();
+        let still_since = match &self.inspect_pending {
+            Some((k, t)) if *k == key => *t,
+            _ => {
+                self.inspect_pending = Some((key.clone(), now));
+                now
+            }
+        };
+        let settle = std::time::Duration::from_millis(150);
+        if self.jobs.running > 0 || (!force && now.duration_since(still_since) < settle) {
+            self.ctx.request_repaint_after(settle);
+            return;
+        }
+        self.inspected_view = Some(key);
+        self.inspect_pending = None;
+        let cam = inspect::scaled(&self.viewport_camera(), 240);
+        self.jobs.inspect(g, cam, self.background);
+    }
+}

@@ -1,0 +1,194 @@
+//! The studio's side of a stylization run: the three channels a session worker
+//! hands back (commands in, small events out, snapshots in a latest-value slot)
+//! and what the studio learns from the events. The studio never drives the
+//! optimisation; it only sends [`Command`]s and reads.
+//!
+//! Wiring a worker: call [`super::run_with`] (or
+//! [`super::StudioApp::set_session_starter`]) with a [`SessionStarter`] that
+//! spawns the session thread for a [`StartRequest`] and returns its
+//! [`SessionLink`]; the worker calls `request.waker` after every event or
+//! snapshot so the window repaints.
+
+use std::sync::Arc;
+
+use crossbeam_channel::{Receiver, Sender};
+use gast_core::Gaussians;
+use gast_core::session::{Command, Event, Slot, Snapshot, StepReport};
+use gast_core::style::StyleConfig;
+
+/// The channels of one running session.
+pub struct SessionLink {
+    /// Commands to the worker (applied between steps).
+    pub commands: Sender<Command>,
+    /// Events from the worker.
+    pub events: Receiver<Event>,
+    /// The newest Gaussians.
+    pub snapshots: Arc<Slot<Snapshot>>,
+    /// The worker thread, stopped when the link is dropped (`None` in tests
+    /// that play the worker's part themselves).
+    #[expect(dead_code, reason = "held for its Drop, which stops the worker")]
+    pub worker: Option<gast_core::session::SessionHandle>,
+}
+
+/// Everything a worker needs to start a run.
+pub struct StartRequest {
+    /// The scene as loaded.
+    pub scene: Arc<Gaussians>,
+    /// The style image file.
+    pub style: std::path::PathBuf,
+    /// The run's parameters.
+    pub config: StyleConfig,
+    /// Optimisation cameras (the scene's training cameras); orbit views around
+    /// the scene when empty.
+    pub cameras: Vec<gast_core::Camera>,
+    /// Wakes the UI; call after sending an event or putting a snapshot.
+    pub waker: Arc<dyn Fn() + Send + Sync>,
+}
+
+/// Starts a session worker (provided by whoever links the session runner in).
+pub type SessionStarter = Box<dyn Fn(StartRequest) -> anyhow::Result<SessionLink>>;
+
+/// Where a run stands, as far as the events tell.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RunStatus {
+    /// No run.
+    Idle,
+    /// Steps are being taken.
+    Running,
+    /// Paused by the user.
+    Paused,
+    /// Ended (all steps or stopped).
+    Finished {
+        /// Whether every scheduled step ran.
+        completed: bool,
+    },
+    /// Ended with an error.
+    Failed(String),
+}
+
+/// The studio's record of a run, built only from events.
+pub struct RunMonitor {
+    /// The channels, while connected.
+    pub link: Option<SessionLink>,
+    /// Status.
+    pub status: RunStatus,
+    /// Every step report so far (small; the loss chart reads them).
+    pub steps: Vec<StepReport>,
+    /// Stage and warning lines for the status panel.
+    pub log: Vec<String>,
+    /// Version of the newest snapshot taken from the slot.
+    pub snapshot_version: u64,
+}
+
+impl Default for RunMonitor {
+    fn default() -> Self {
+        Self { link: None, status: RunStatus::Idle, steps: Vec::new(), log: Vec::new(), snapshot_version: 0 }
+    }
+}
+
+impl RunMonitor {
+    /// Starts following a new run.
+    pub fn attach(&mut self, link: SessionLink) {
+        *self = Self { link: Some(link), status: RunStatus::Running, ..Self::default() };
+    }
+
+    /// Whether a worker is connected and has not ended.
+    pub fn is_live(&self) -> bool {
+        self.link.is_some() && matches!(self.status, RunStatus::Running | RunStatus::Paused)
+    }
+
+    /// Sends a command; false when no run is connected.
+    pub fn send(&self, command: Command) -> bool {
+        self.link.as_ref().is_some_and(|l| l.commands.send(command).is_ok())
+    }
+
+    /// Drains pending events; returns a newer snapshot when the slot holds one.
+    pub fn poll(&mut self) -> Option<Arc<Snapshot>> {
+        let Some(link) = &self.link else { return None };
+        let events: Vec<Event> = link.events.try_iter().collect();
+        let fresh = link.snapshots.newer_than(self.snapshot_version).map(|(v, s)| {
+            self.snapshot_version = v;
+            s
+        });
+        for e in events {
+            self.apply(e);
+        }
+        fresh
+    }
+
+    /// Updates the record with one event.
+    pub fn apply(&mut self, event: Event) {
+        match event {
+            Event::Step(r) => self.steps.push(r),
+            Event::Stage { name, seconds } => self.log.push(format!("{name}: {seconds:.2} s")),
+            Event::Culled { total, kept } => {
+                self.log.push(format!("optimising {kept} of {total} Gaussians (the rest are seen by no camera)"))
+            }
+            Event::Warning(w) => self.log.push(format!("warning: {w}")),
+            Event::Paused => self.status = RunStatus::Paused,
+            Event::Resumed => self.status = RunStatus::Running,
+            Event::ConfigApplied => self.log.push("new parameters applied".into()),
+            Event::Finished { completed, steps, seconds } => {
+                self.status = RunStatus::Finished { completed };
+                self.log.push(format!(
+                    "finished: {steps} steps in {seconds:.1} s{}",
+                    if completed { "" } else { " (stopped early)" }
+                ));
+            }
+            Event::Failed(msg) => self.status = RunStatus::Failed(msg),
+        }
+    }
+
+    /// Progress in [0, 1] and the estimated seconds left, from the last step.
+    pub fn progress(&self) -> Option<(f32, f64)> {
+        let last = self.steps.last()?;
+        let done = (last.iter + 1) as f64;
+        let total = last.total.max(1) as f64;
+        let eta = last.elapsed_s / done * (total - done);
+        Some(((done / total) as f32, eta.max(0.0)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gast_core::session::LossTerms;
+    use gast_core::style::Phase;
+
+    #[test]
+    fn monitor_follows_events_and_snapshots() {
+        let (ctx, crx) = crossbeam_channel::unbounded();
+        let (etx, erx) = crossbeam_channel::unbounded();
+        let slot = Arc::new(Slot::default());
+        let mut m = RunMonitor::default();
+        m.attach(SessionLink { commands: ctx, events: erx, snapshots: slot.clone(), worker: None });
+        assert!(m.send(Command::Pause));
+        assert_eq!(crx.try_recv().ok(), Some(Command::Pause));
+        let step = |iter| {
+            Event::Step(StepReport {
+                iter,
+                total: 10,
+                cycle: 0,
+                phase: Phase::Color,
+                view: 0,
+                losses: LossTerms { total: 1.0 / (iter + 1) as f32, ..LossTerms::default() },
+                timings: Default::default(),
+                elapsed_s: (iter + 1) as f64,
+            })
+        };
+        etx.send(step(0)).expect("send");
+        etx.send(step(1)).expect("send");
+        etx.send(Event::Paused).expect("send");
+        slot.put(Snapshot { step: 2, gaussians: Gaussians::default() });
+        let snap = m.poll().expect("snapshot");
+        assert_eq!(snap.step, 2);
+        assert!(m.poll().is_none(), "the same snapshot twice");
+        assert_eq!(m.steps.len(), 2);
+        assert_eq!(m.status, RunStatus::Paused);
+        let (p, eta) = m.progress().expect("progress");
+        assert!((p - 0.2).abs() < 1e-6 && (eta - 8.0).abs() < 1e-9);
+        etx.send(Event::Finished { completed: false, steps: 2, seconds: 2.0 }).expect("send");
+        m.poll();
+        assert!(!m.is_live());
+    }
+}

@@ -1,0 +1,496 @@
+//! Studio tests that need no window: shader validation, the GPU viewport
+//! against the CPU reference (lavapipe), and UI logic through egui_kittest.
+
+use std::path::PathBuf;
+
+use egui_kittest::kittest::{NodeT as _, Queryable as _};
+use std::sync::Arc;
+
+use super::viewport::{SharedGaussians, Side, SplatRenderer, bench, read_target};
+use super::*;
+use gast_core::raster::{RenderOptions, render};
+use gast_core::session::Command;
+
+/// Whether tests that need lavapipe/Xvfb must fail (CI) rather than skip.
+fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true" || v == "1")
+}
+
+/// A headless device, or `None` (loudly) when there is none outside CI.
+fn device_or_skip(test: &str) -> Option<(wgpu::Device, wgpu::Queue, String)> {
+    match bench::headless_device() {
+        Ok(d) => Some(d),
+        Err(e) if !in_ci() => {
+            eprintln!("SKIPPED {test}: {e:#}");
+            None
+        }
+        Err(e) => panic!("{test}: {e:#} (CI=true, so this is a failure)"),
+    }
+}
+
+fn shader_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("shaders")
+}
+
+#[test]
+fn every_wgsl_file_validates_with_naga() {
+    let mut checked = 0;
+    let mut failures = Vec::new();
+    for entry in std::fs::read_dir(shader_dir()).expect("shaders/ folder") {
+        let path = entry.expect("entry").path();
+        if path.extension().is_none_or(|e| e != "wgsl") {
+            continue;
+        }
+        let src = std::fs::read_to_string(&path).expect("read shader");
+        let result = naga::front::wgsl::parse_str(&src).map_err(|e| e.emit_to_string(&src)).and_then(|module| {
+            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
+                .validate(&module)
+                .map(|_| ())
+                .map_err(|e| format!("{e:?}"))
+        });
+        if let Err(e) = result {
+            failures.push(format!("{}: {e}", path.display()));
+        }
+        checked += 1;
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+    assert!(checked >= 3, "only {checked} shaders found");
+}
+
+#[test]
+fn sh_packing_round_trips_through_f16() {
+    let g = bench::synthetic_scene(10);
+    let (words, per) = super::viewport::pack_sh_f16(&g, 3);
+    assert_eq!(per, 24);
+    let back = viewport::f16_to_f32((words[0] & 0xffff) as u16);
+    assert!((back - g.sh[0]).abs() < 1e-3);
+}
+
+fn demo_camera(g: &Gaussians, w: u32, h: u32) -> Camera {
+    let mut v = ViewState::default();
+    v.fit(g);
+    v.orbit(0.4, 0.1);
+    v.camera(w, h)
+}
+
+#[test]
+fn gpu_viewport_matches_the_cpu_reference() {
+    let Some((device, queue, adapter)) = device_or_skip("gpu_viewport_matches_the_cpu_reference") else { return };
+    let g: SharedGaussians = Arc::new(assets::demo_scene()).into();
+    let (w, h) = (320, 240);
+    let cam = demo_camera(&g, w, h);
+    let mut r = SplatRenderer::new(&device);
+    r.set_scene(&device, Side::Before, 1, &g).expect("upload");
+    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+    assert!(r.render(&device, &queue, &mut encoder, Side::Before, &cam));
+    queue.submit([encoder.finish()]);
+    let (texture, _) = r.target(Side::Before).expect("target");
+    let gpu = read_target(&device, &queue, texture);
+    let cpu = render(&g, &cam, &RenderOptions::default());
+    let mut sum = 0.0f64;
+    let mut max = 0.0f32;
+    for (p, px) in gpu.iter().enumerate() {
+        for (ch, &v) in px.iter().take(3).enumerate() {
+            let d = (v - cpu.rgb[p * 3 + ch]).abs();
+            sum += d as f64;
+            max = max.max(d);
+        }
+    }
+    let mean = sum / (w * h * 3) as f64;
+    let coverage = cpu.alpha.iter().filter(|&&a| a > 0.5).count() as f32 / (w * h) as f32;
+    println!(
+        "GPU viewport vs CPU rasterizer on {adapter}: mean |diff| {mean:.5}, max {max:.3}, coverage {coverage:.2}"
+    );
+    assert!(coverage > 0.1, "the demo scene covers only {coverage} of the view");
+    assert!(mean < 0.01, "mean abs difference {mean}");
+    // Save both for a look.
+    let out = std::env::temp_dir().join("gast-studio-gpu-vs-cpu");
+    let gpu_rgb: Vec<f32> = gpu.iter().flat_map(|p| [p[0], p[1], p[2]]).collect();
+    gast_core::io::write_png_rgb(&out.join("gpu.png"), w, h, &gpu_rgb).expect("png");
+    gast_core::io::write_png_rgb(&out.join("cpu.png"), w, h, &cpu.rgb).expect("png");
+    println!("wrote {}", out.display());
+}
+
+#[test]
+fn viewport_frame_time_500k() {
+    if std::env::var_os("GAST_BENCH").is_none() {
+        eprintln!("SKIPPED viewport_frame_time_500k: set GAST_BENCH=1 (takes a minute on lavapipe)");
+        return;
+    }
+    if device_or_skip("viewport_frame_time_500k").is_none() {
+        return;
+    }
+    // The shared 500k scene when it is there, a synthetic one of the same size otherwise.
+    let playbot = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/scenes/playbot-sog");
+    let scene = playbot.exists().then_some(playbot.as_path());
+    println!("{}", bench::run(scene, 500_000, 5, 1280, 720).expect("bench"));
+}
+
+fn test_app() -> StudioApp {
+    let mut app = StudioApp::new(egui::Context::default(), StudioArgs::default());
+    app.load_in_background = false;
+    assert!(app.scene.is_some(), "the demo scene opens with no arguments: {:?}", app.errors);
+    assert!(!app.styles.is_empty(), "a demo style opens with no arguments");
+    app
+}
+
+#[test]
+fn a_bad_scene_file_shows_an_error_and_keeps_the_scene() {
+    let dir = std::env::temp_dir().join(format!("gast-studio-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let bad = dir.join("broken.ply");
+    std::fs::write(&bad, b"ply\nformat ascii 1.0\nelement vertex 1\nend_header\n1 2 3\n").expect("write");
+    let mut app = test_app();
+    let before = app.scene.as_ref().map(|s| s.scene.version);
+    app.open_any(&bad);
+    assert_eq!(app.scene.as_ref().map(|s| s.scene.version), before, "the previous scene stays");
+    assert_eq!(app.errors.len(), 1);
+    assert!(
+        app.errors[0].contains("broken.ply") && app.errors[0].contains("keeping the previous scene"),
+        "{}",
+        app.errors[0]
+    );
+    app.open_any(&dir.join("missing.png"));
+    assert_eq!(app.errors.len(), 2);
+
+    // The error is on screen, in the bottom panel.
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    harness.run_steps(3);
+    harness.get_by_label_contains("broken.ply");
+    harness.get_by_label("2 error(s)");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn controls_edit_the_config_and_presets_round_trip() {
+    let app = test_app();
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 1400.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    harness.run_steps(2);
+    // Texture scale buttons set the config.
+    harness.get_by_label("2×").click();
+    harness.run_steps(2);
+    assert_eq!(harness.state().config.texture_scale, 512);
+    // Mode menu.
+    harness.get_by_label("mode").click();
+    harness.run_steps(2);
+    harness.get_by_label("joint").click();
+    harness.run_steps(2);
+    assert_eq!(harness.state().config.mode, gast_core::style::Mode::Joint);
+    // Start is disabled without a session runner.
+    assert!(harness.get_by_label("Start").accesskit_node().is_disabled());
+
+    let path = std::env::temp_dir().join(format!("gast-preset-{}.json", std::process::id()));
+    let app = harness.state_mut();
+    app.config.weights.tv = 0.125;
+    app.save_preset(&path);
+    app.config = StyleConfig::default();
+    app.load_preset(&path);
+    assert_eq!(app.config.weights.tv, 0.125);
+    assert_eq!(app.config.texture_scale, 512);
+    assert!(app.errors.is_empty(), "{:?}", app.errors);
+    std::fs::write(&path, r#"{"ratio_geo": 3.0}"#).expect("write");
+    app.load_preset(&path);
+    assert_eq!(app.errors.len(), 1, "a preset with problems is refused");
+    assert_eq!(app.config.weights.tv, 0.125);
+    std::fs::remove_file(&path).ok();
+}
+
+/// The studio with a fake run attached: `steps` step events and a recoloured
+/// snapshot of the demo scene in the slot (standing in for a session worker).
+fn app_with_a_run(
+    steps: u32,
+) -> (StudioApp, crossbeam_channel::Receiver<Command>, crossbeam_channel::Sender<gast_core::session::Event>) {
+    use gast_core::session::{Event, LossTerms, Slot, Snapshot, StepReport};
+    let mut app = test_app();
+    let (ctx, crx) = crossbeam_channel::unbounded();
+    let (etx, erx) = crossbeam_channel::unbounded();
+    let slot = Arc::new(Slot::default());
+    app.run.attach(session_link::SessionLink { commands: ctx, events: erx, snapshots: slot.clone(), worker: None });
+    for iter in 0..steps {
+        let t = iter as f32 / steps as f32;
+        let losses = LossTerms {
+            total: 2.0 - 1.2 * t + 0.1 * (iter as f32).sin(),
+            gcfm: 1.5 - t + 0.05 * (iter as f32 * 1.7).cos(),
+            ..LossTerms::default()
+        };
+        let report = StepReport {
+            iter,
+            total: 4 * steps,
+            cycle: 0,
+            phase: gast_core::style::Phase::Color,
+            view: 0,
+            losses,
+            timings: Default::default(),
+            elapsed_s: iter as f64 * 0.5 + 0.5,
+        };
+        etx.send(Event::Step(report)).expect("send");
+    }
+    let mut g = (*app.scene.as_ref().expect("scene").scene.gaussians).clone();
+    let k = g.sh_coeffs() * 3;
+    for dc in g.sh.chunks_exact_mut(k) {
+        dc[0] -= 1.0;
+        dc[1] -= 0.3;
+    }
+    slot.put(Snapshot { step: steps, gaussians: g });
+    (app, crx, etx)
+}
+
+#[test]
+fn session_events_and_snapshots_reach_the_window() {
+    use gast_core::session::Event;
+    let (app, crx, etx) = app_with_a_run(5);
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 1400.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    harness.run_steps(3);
+    assert!(
+        harness.state().snapshot.as_ref().is_some_and(|s| matches!(s.gaussians, SharedGaussians::Snapshot(_))),
+        "the snapshot is shown as the current scene, without a copy"
+    );
+    assert_eq!(harness.state().run.steps.len(), 5);
+    harness.get_by_label_contains("ETA");
+    harness.get_by_label("Pause").click();
+    harness.run_steps(2);
+    assert_eq!(crx.try_recv().ok(), Some(Command::Pause));
+    etx.send(Event::Paused).expect("send");
+    harness.run_steps(2);
+    harness.get_by_label("Resume").click();
+    harness.run_steps(2);
+    assert_eq!(crx.try_recv().ok(), Some(Command::Resume));
+    etx.send(Event::Finished { completed: true, steps: 20, seconds: 20.0 }).expect("send");
+    harness.run_steps(2);
+    assert!(!harness.state().run.is_live());
+    assert!(harness.get_by_label("Start").accesskit_node().is_disabled());
+}
+
+/// The whole window rendered headless through egui-wgpu with the viewport's
+/// paint callback: a run in progress, the before/after split, the loss chart.
+#[test]
+fn headless_screenshot_of_a_run_in_progress() {
+    if device_or_skip("headless_screenshot_of_a_run_in_progress").is_none() {
+        return;
+    }
+    let rs = egui_kittest::wgpu::create_render_state(
+        egui_kittest::wgpu::default_wgpu_setup(),
+        egui_wgpu::RendererOptions::PREDICTABLE,
+    );
+    let resources = ViewportResources::new(&rs.device, rs.target_format);
+    rs.renderer.write().callback_resources.insert(resources);
+    let renderer = egui_kittest::wgpu::WgpuTestRenderer::from_render_state(rs);
+    let (app, _crx, _etx) = app_with_a_run(60);
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .renderer(renderer)
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    harness.run_steps(3);
+    // Let the inspection job finish, then draw again.
+    for _ in 0..100 {
+        if harness.state().maps.is_some() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        harness.step();
+    }
+    harness.run_steps(2);
+    let img = harness.render().expect("render");
+    let path = std::env::temp_dir().join("gast-studio-gpu-vs-cpu").join("studio_run.png");
+    std::fs::create_dir_all(path.parent().expect("parent")).expect("dir");
+    img.save(&path).expect("save");
+    println!("wrote {}", path.display());
+    // The split line is drawn across the middle of the viewport.
+    let app = harness.state();
+    assert!(app.snapshot.is_some() && app.maps.is_some());
+    let yellow = (0..img.width()).filter(|&x| {
+        let p = img.get_pixel(x, 300).0;
+        p[0] > 200 && p[1] > 180 && p[2] < 90
+    });
+    assert!(yellow.count() >= 1, "no split line in the viewport");
+}
+
+#[test]
+fn blit_composites_the_before_after_split() {
+    let Some((device, queue, _)) = device_or_skip("blit_composites_the_before_after_split") else { return };
+    let before: SharedGaussians = Arc::new(assets::demo_scene()).into();
+    let mut dark = (*before).clone();
+    // Recolour the "after" side blue so the halves are easy to tell apart.
+    let k = dark.sh_coeffs() * 3;
+    for dc in dark.sh.chunks_exact_mut(k) {
+        dc[0] -= 1.0;
+        dc[1] -= 0.3;
+    }
+    let after: SharedGaussians = Arc::new(dark).into();
+    let (w, h) = (320u32, 240u32);
+    let cam = demo_camera(&before, w, h);
+    let mut r = SplatRenderer::new(&device);
+    r.set_scene(&device, Side::Before, 1, &before).expect("upload");
+    r.set_scene(&device, Side::After, 2, &after).expect("upload");
+    let format = wgpu::TextureFormat::Rgba8Unorm;
+    let blit = viewport::blit::BlitPipeline::new(&device, format);
+    let out = device.create_texture(&wgpu::TextureDescriptor {
+        label: None,
+        size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    });
+    let out_view = out.create_view(&Default::default());
+    let mut encoder = device.create_command_encoder(&Default::default());
+    r.render(&device, &queue, &mut encoder, Side::Before, &cam);
+    r.render(&device, &queue, &mut encoder, Side::After, &cam);
+    let params = viewport::gpu_types::BlitUniform { background: [0.1, 0.1, 0.12, 1.0], split: [0.5, 0.0, 0.0, 0.0] };
+    let bind = blit.prepare(
+        &device,
+        &queue,
+        params,
+        r.target(Side::Before).expect("before").1,
+        r.target(Side::After).expect("after").1,
+    );
+    {
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: None,
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &out_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::RED), store: wgpu::StoreOp::Store },
+            })],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        blit.draw(&mut pass, &bind);
+    }
+    queue.submit([encoder.finish()]);
+    // Read back (4 bytes a texel, rows padded to 256).
+    let row = (w * 4).div_ceil(256) * 256;
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: (row * h) as u64,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    encoder.copy_texture_to_buffer(
+        out.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) },
+        },
+        wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+    );
+    queue.submit([encoder.finish()]);
+    buffer.slice(..).map_async(wgpu::MapMode::Read, |_| {});
+    let _ = device.poll(wgpu::PollType::wait_indefinitely());
+    let data = buffer.slice(..).get_mapped_range().expect("mapped");
+    let mut img = image::RgbImage::new(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            let o = (y * row + x * 4) as usize;
+            img.put_pixel(x, y, image::Rgb([data[o], data[o + 1], data[o + 2]]));
+        }
+    }
+    let path = std::env::temp_dir().join("gast-studio-gpu-vs-cpu").join("split.png");
+    std::fs::create_dir_all(path.parent().expect("parent")).expect("dir");
+    img.save(&path).expect("save");
+    println!("wrote {}", path.display());
+    // The background fills the corners, the split line is drawn, halves differ in colour.
+    assert_eq!(img.get_pixel(2, 2).0, [26, 26, 31]);
+    let line = img.get_pixel(w / 2, h / 2).0;
+    assert!(line[0] > 200 && line[2] < 100, "split line {line:?}");
+    let mean = |x0: u32, x1: u32| {
+        let mut s = [0f64; 3];
+        for y in 0..h {
+            for x in x0..x1 {
+                for (acc, v) in s.iter_mut().zip(img.get_pixel(x, y).0) {
+                    *acc += v as f64;
+                }
+            }
+        }
+        s
+    };
+    let (l, r) = (mean(0, w / 2 - 2), mean(w / 2 + 2, w));
+    println!("left RGB sums {l:?}, right {r:?}");
+    assert!(l[0] > r[0] * 1.2, "the right (after) side should be less red");
+}
+
+/// A file "dropped" onto the window in tests.
+#[derive(Debug)]
+struct TestDrop(PathBuf);
+
+impl egui::DroppedFile for TestDrop {
+    fn path(&self) -> &std::path::Path {
+        &self.0
+    }
+    fn bytes(&self) -> Result<Vec<u8>, String> {
+        std::fs::read(&self.0).map_err(|e| e.to_string())
+    }
+}
+
+#[test]
+fn dropped_styles_and_scenes_open() {
+    let app = test_app();
+    let styles_before = app.styles.len();
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 900.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    harness.run_steps(1);
+    let dir = assets::source_assets_dir();
+    let dropped: Vec<egui::DroppedFileHandle> = vec![
+        Arc::new(TestDrop(dir.join(assets::DEMO_STYLES[1]))),
+        Arc::new(TestDrop(dir.join(assets::DEMO_SCENE))),
+        Arc::new(TestDrop(dir.join("no-such-file.ply"))),
+    ];
+    harness.state_mut().load_in_background = true;
+    harness.input_mut().dropped_files = dropped;
+    harness.step();
+    // Scenes load on a worker thread: wait for both results.
+    for _ in 0..200 {
+        if harness.state().jobs.running == 0 {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        harness.step();
+    }
+    harness.run_steps(2);
+    let app = harness.state();
+    assert_eq!(app.styles.len(), styles_before + 1, "the dropped style joins the recent strip");
+    assert_eq!(app.style, Some(0), "and becomes the current style");
+    assert!(app.styles[0].path.ends_with(assets::DEMO_STYLES[1]));
+    assert_eq!(app.errors.len(), 1, "{:?}", app.errors);
+    assert!(app.errors[0].contains("no-such-file.ply"), "{}", app.errors[0]);
+    assert!(app.scene.as_ref().is_some_and(|s| s.scene.version > 1), "the dropped scene replaced the first one");
+}
+
+#[test]
+fn sh_split_across_two_bindings_renders_the_same() {
+    let Some((device, queue, _)) = device_or_skip("sh_split_across_two_bindings_renders_the_same") else { return };
+    let g: SharedGaussians = Arc::new(bench::synthetic_scene(3000)).into();
+    let cam = demo_camera(&g, 160, 120);
+    let mut images = Vec::new();
+    for limit in [None, Some(1500 * 24 * 4)] {
+        let mut r = SplatRenderer::new(&device);
+        // Lowered: 1500 Gaussians in each binding.
+        r.sh_binding_limit = limit;
+        assert_eq!(r.set_scene(&device, Side::Before, 1, &g), Ok(None));
+        let mut encoder = device.create_command_encoder(&Default::default());
+        r.render(&device, &queue, &mut encoder, Side::Before, &cam);
+        queue.submit([encoder.finish()]);
+        images.push(read_target(&device, &queue, r.target(Side::Before).expect("target").0));
+    }
+    let lit = images[0].iter().filter(|p| p[3] > 0.1).count();
+    assert!(lit > 1000, "only {lit} pixels drawn");
+    assert!(images[0] == images[1], "splitting the SH bindings changed the render");
+    // Two bindings of 1000 cannot hold 3000 Gaussians of SH3: degree 2 is drawn, and said.
+    let mut r = SplatRenderer::new(&device);
+    r.sh_binding_limit = Some(1000 * 24 * 4);
+    let note = r.set_scene(&device, Side::Before, 1, &g).expect("upload").expect("a note");
+    assert!(note.contains("SH degree 2 of 3"), "{note}");
+}

@@ -1,0 +1,60 @@
+//! Links the core session runner into the studio: a [`SessionStarter`] that
+//! spawns a worker thread which reads the style image, resolves the VGG
+//! weights (a download on first use, reported as a stage), builds the
+//! optimisation cameras and runs the session. Nothing here runs on the UI thread.
+
+use std::sync::Arc;
+
+use gast_core::camera::{OrbitOptions, orbit_cameras};
+use gast_core::session::{Event, SessionInputs, StyleDepthSource, StyleImage, spawn_with};
+use gast_core::vision::Vgg;
+
+use super::session_link::{SessionLink, SessionStarter, StartRequest};
+
+/// Orbit views used when the scene came without training cameras.
+const ORBIT_VIEWS: usize = 36;
+
+/// The studio's session starter.
+pub fn starter() -> SessionStarter {
+    Box::new(|req: StartRequest| {
+        let StartRequest { scene, style, config, cameras, waker } = req;
+        let handle = spawn_with(
+            move |emit: &mut dyn FnMut(Event)| {
+                let t = std::time::Instant::now();
+                let style = StyleImage::open(&style)?;
+                let mut last = 0u64;
+                let weights = gast_core::vision::resolve_weights(None, &mut |done, total| {
+                    // A download: report every 5 MB so the status panel shows progress.
+                    if done >= last + 5_000_000 {
+                        last = done;
+                        let of = total.map(|t| format!(" of {:.0} MB", t as f64 / 1e6)).unwrap_or_default();
+                        emit(Event::Warning(format!("downloading VGG weights: {:.0} MB{of}", done as f64 / 1e6)));
+                    }
+                })
+                .map_err(|e| e.to_string())?;
+                let vgg = Arc::new(Vgg::load(&weights).map_err(|e| e.to_string())?);
+                let scene = Arc::unwrap_or_clone(scene);
+                let cameras = if cameras.is_empty() {
+                    let opts = OrbitOptions {
+                        count: ORBIT_VIEWS,
+                        width: config.resolution,
+                        height: config.resolution,
+                        ..OrbitOptions::default()
+                    };
+                    orbit_cameras(&scene.means, &opts)
+                } else {
+                    cameras
+                };
+                emit(Event::Stage { name: "style image and weights".into(), seconds: t.elapsed().as_secs_f64() });
+                Ok(SessionInputs { scene, cameras, style, style_depth: StyleDepthSource::Heuristic, vgg, config })
+            },
+            waker,
+        );
+        Ok(SessionLink {
+            commands: handle.commands.clone(),
+            events: handle.events.clone(),
+            snapshots: handle.snapshots.clone(),
+            worker: Some(handle),
+        })
+    })
+}

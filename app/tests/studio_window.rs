@@ -1,0 +1,79 @@
+//! The real window: `gast studio` under Xvfb with the self-exit and screenshot
+//! switches, on the shared guitar scene when present (the demo scene otherwise).
+//! Needs `xvfb-run` and a Vulkan driver (lavapipe); without them the test skips
+//! loudly, or fails when `CI=true`.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true" || v == "1")
+}
+
+fn skip_or_fail(why: &str) {
+    if in_ci() {
+        panic!("studio window test cannot run: {why} (CI=true, so this is a failure)");
+    }
+    eprintln!("SKIPPED studio window test: {why}");
+}
+
+fn have(tool: &str) -> bool {
+    Command::new("sh").arg("-c").arg(format!("command -v {tool}")).output().is_ok_and(|o| o.status.success())
+}
+
+/// Standard deviation of the luminance inside a rectangle of an RGB image.
+fn spread(img: &image::RgbImage, x0: u32, y0: u32, x1: u32, y1: u32) -> f64 {
+    let mut n = 0.0;
+    let (mut s, mut s2) = (0.0, 0.0);
+    for y in y0..y1.min(img.height()) {
+        for x in x0..x1.min(img.width()) {
+            let p = img.get_pixel(x, y).0;
+            let l = 0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64;
+            s += l;
+            s2 += l * l;
+            n += 1.0;
+        }
+    }
+    (s2 / n - (s / n).powi(2)).max(0.0).sqrt()
+}
+
+#[test]
+fn studio_opens_a_scene_in_a_real_window() {
+    if !have("xvfb-run") {
+        return skip_or_fail("xvfb-run is not installed (apt-get install xvfb xauth)");
+    }
+    if !Path::new("/usr/share/vulkan/icd.d").exists() {
+        return skip_or_fail("no Vulkan driver (apt-get install mesa-vulkan-drivers libvulkan1)");
+    }
+    let guitar = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/scenes/guitar.compressed.ply");
+    let guitar = if guitar.exists() { guitar } else { PathBuf::from("/work/shared/data/scenes/guitar.compressed.ply") };
+    let shot = std::env::temp_dir().join(format!("gast-studio-window-{}.png", std::process::id()));
+    let _ = std::fs::remove_file(&shot);
+    let mut cmd = Command::new("xvfb-run");
+    cmd.args(["-a", "-s", "-screen 0 1280x800x24", env!("CARGO_BIN_EXE_gast"), "studio"]);
+    if guitar.exists() {
+        cmd.arg(&guitar);
+    } else {
+        eprintln!("guitar scene not found; the studio opens the demo scene");
+    }
+    let xdg = std::env::temp_dir().join(format!("gast-xdg-{}", std::process::id()));
+    std::fs::create_dir_all(&xdg).expect("runtime dir");
+    let started = std::time::Instant::now();
+    let out = cmd
+        .env("GAST_STUDIO_EXIT_AFTER_FRAMES", "30")
+        .env("GAST_STUDIO_SCREENSHOT", &shot)
+        .env("XDG_RUNTIME_DIR", &xdg)
+        .output()
+        .expect("run xvfb-run");
+    let log = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    println!("studio ran {:.1} s, exit {:?}\n{log}", started.elapsed().as_secs_f64(), out.status.code());
+    assert!(out.status.success(), "the studio exited with {:?}", out.status);
+    let img = image::open(&shot).unwrap_or_else(|e| panic!("{}: no screenshot ({e})", shot.display())).to_rgb8();
+    println!("screenshot {} ({}×{})", shot.display(), img.width(), img.height());
+    // The viewport is the upper-left region left of the side panel.
+    let (w, h) = (img.width(), img.height());
+    let viewport = spread(&img, w / 10, h / 10, w * 6 / 10, h * 6 / 10);
+    println!("luminance spread in the viewport: {viewport:.1}");
+    assert!(viewport > 8.0, "the viewport looks empty (luminance spread {viewport:.1})");
+    std::fs::remove_dir_all(&xdg).ok();
+}
