@@ -77,3 +77,70 @@ fn studio_opens_a_scene_in_a_real_window() {
     assert!(viewport > 8.0, "the viewport looks empty (luminance spread {viewport:.1})");
     std::fs::remove_dir_all(&xdg).ok();
 }
+
+/// The end-to-end run in a real window: open the guitar and a style,
+/// press Start (the scripted switch), let the worker run some steps, export the
+/// stylized scene, take a screenshot; the export must load and differ from
+/// the input, and the viewport must show something.
+#[test]
+fn studio_runs_steps_and_exports_in_a_real_window() {
+    if !have("xvfb-run") {
+        return skip_or_fail("xvfb-run is not installed (apt-get install xvfb xauth)");
+    }
+    if !Path::new("/usr/share/vulkan/icd.d").exists() {
+        return skip_or_fail("no Vulkan driver (apt-get install mesa-vulkan-drivers libvulkan1)");
+    }
+    let (Some(guitar), Some(style), Some(weights)) = (
+        gast_tests::shared_file("data/scenes/guitar.compressed.ply"),
+        gast_tests::shared_file("data/styles/starry.jpg"),
+        gast_tests::shared_file("data/weights/vgg19-conv3.safetensors"),
+    ) else {
+        return;
+    };
+    let dir = std::env::temp_dir().join(format!("gast-studio-run-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let (shot, export, preset) = (dir.join("shot.png"), dir.join("stylized.ply"), dir.join("preset.json"));
+    let config = gast_core::style::StyleConfig {
+        resolution: 64,
+        texture_scale: 64,
+        cycles: 2,
+        steps_per_cycle: 10,
+        ratio_geo: 0.5,
+        ..Default::default()
+    };
+    std::fs::write(&preset, config.to_json()).expect("preset");
+    let started = std::time::Instant::now();
+    let out = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1280x800x24", env!("CARGO_BIN_EXE_gast"), "studio"])
+        .arg(&guitar)
+        .arg(&style)
+        .env("GAST_WEIGHTS", &weights)
+        .env("GAST_STUDIO_PRESET", &preset)
+        .env("GAST_STUDIO_RUN_STEPS", "12")
+        .env("GAST_STUDIO_EXPORT", &export)
+        .env("GAST_STUDIO_EXIT_AFTER_FRAMES", "20")
+        .env("GAST_STUDIO_SCREENSHOT", &shot)
+        .env("XDG_RUNTIME_DIR", &dir)
+        .output()
+        .expect("run xvfb-run");
+    let log = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    println!("studio ran {:.1} s, exit {:?}\n{log}", started.elapsed().as_secs_f64(), out.status.code());
+    assert!(out.status.success(), "the studio exited with {:?}", out.status);
+    assert!(log.contains("scripted run paused after"), "the run never reached its steps:\n{log}");
+    let input = gast_core::scene::load(&guitar).expect("input");
+    let result = gast_core::scene::load(&export).unwrap_or_else(|e| panic!("the export does not load: {e}"));
+    assert_eq!(result.len(), input.len());
+    let recoloured = input.sh.iter().zip(&result.sh).filter(|(a, b)| a != b).count();
+    let moved = input.means.iter().zip(&result.means).filter(|(a, b)| a != b).count();
+    println!("export: {recoloured} SH values recoloured, {moved} means moved");
+    assert!(recoloured > input.len(), "the export is not colour-matched/stylized");
+    assert!(moved > 1000, "the geometry steps moved only {moved} means");
+    let img = image::open(&shot).unwrap_or_else(|e| panic!("{}: no screenshot ({e})", shot.display())).to_rgb8();
+    let (w, h) = (img.width(), img.height());
+    let viewport = spread(&img, w / 10, h / 10, w * 6 / 10, h * 6 / 10);
+    println!("screenshot {} ({w}×{h}), luminance spread in the viewport {viewport:.1}", shot.display());
+    assert!(viewport > 8.0, "the viewport looks empty (luminance spread {viewport:.1})");
+    if std::env::var_os("GAST_KEEP_SCREENSHOTS").is_none() {
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

@@ -8,6 +8,10 @@
 //!
 //! Test switches: `GAST_STUDIO_EXIT_AFTER_FRAMES=N` closes the window after N
 //! frames, `GAST_STUDIO_SCREENSHOT=path` saves a screenshot of the window first.
+//! `GAST_STUDIO_PRESET=path` loads a preset at start; `GAST_STUDIO_RUN_STEPS=N`
+//! presses Start once the scene and style are open, pauses after N steps and
+//! saves the current Gaussians to `GAST_STUDIO_EXPORT` (the frame count of the
+//! exit switch then starts from there), as a user would with the Export menu.
 
 pub mod assets;
 pub mod controls;
@@ -24,6 +28,7 @@ use std::sync::{Arc, Mutex};
 
 use anyhow::Context as _;
 use egui::{Color32, Ui};
+use gast_core::session::Command;
 use gast_core::style::StyleConfig;
 use gast_core::{Camera, Gaussians};
 
@@ -99,6 +104,15 @@ pub struct StudioApp {
     exit_after: Option<u64>,
     screenshot_path: Option<PathBuf>,
     screenshot: ScreenshotState,
+    script: Option<ScriptedRun>,
+}
+
+/// The `GAST_STUDIO_RUN_STEPS` test switch's progress.
+struct ScriptedRun {
+    steps: usize,
+    export: Option<PathBuf>,
+    started: bool,
+    done: bool,
 }
 
 /// Opens the studio window with `starter` connected to the Start button.
@@ -176,7 +190,16 @@ impl StudioApp {
             exit_after: env_u64("GAST_STUDIO_EXIT_AFTER_FRAMES"),
             screenshot_path: std::env::var_os("GAST_STUDIO_SCREENSHOT").map(PathBuf::from),
             screenshot: ScreenshotState::default(),
+            script: env_u64("GAST_STUDIO_RUN_STEPS").map(|n| ScriptedRun {
+                steps: n as usize,
+                export: std::env::var_os("GAST_STUDIO_EXPORT").map(PathBuf::from),
+                started: false,
+                done: false,
+            }),
         };
+        if let Some(p) = std::env::var_os("GAST_STUDIO_PRESET") {
+            app.load_preset(Path::new(&p));
+        }
         match &args.scene {
             Some(p) => app.open_scene(p),
             None => app.open_demo_scene(),
@@ -462,7 +485,45 @@ impl StudioApp {
         self.test_switches(ui.ctx());
     }
 
+    /// Drives the `GAST_STUDIO_RUN_STEPS` switch; true once it is done (or absent).
+    fn scripted_run(&mut self, ctx: &egui::Context) -> bool {
+        let Some(script) = &mut self.script else { return true };
+        if script.done {
+            return true;
+        }
+        ctx.request_repaint();
+        if !script.started {
+            if self.scene.is_some() && self.style.is_some() && self.starter.is_some() {
+                script.started = true;
+                self.start_run();
+            }
+            return false;
+        }
+        let finished = matches!(self.run.status, RunStatus::Finished { .. } | RunStatus::Failed(_));
+        let have_snapshot = self.snapshot.as_ref().is_some_and(|s| s.gaussians.len() > 0);
+        if (self.run.steps.len() >= script.steps && have_snapshot) || finished {
+            script.done = true;
+            let export = script.export.clone();
+            self.run.send(Command::Pause);
+            eprintln!("studio: scripted run paused after {} steps ({:?})", self.run.steps.len(), self.run.status);
+            if let (Some(path), Some(g)) = (export, self.current()) {
+                match gast_core::scene::save_ply(&path, &g) {
+                    Ok(()) => eprintln!("studio: exported {} Gaussians to {}", g.len(), path.display()),
+                    Err(e) => self.report(anyhow::Error::new(e).context("exporting the scripted run")),
+                }
+            }
+            if let Some(n) = self.exit_after {
+                self.exit_after = Some(self.frames + n);
+            }
+            return true;
+        }
+        false
+    }
+
     fn test_switches(&mut self, ctx: &egui::Context) {
+        if !self.scripted_run(ctx) {
+            return;
+        }
         let Some(n) = self.exit_after else { return };
         ctx.request_repaint();
         if let Some(path) = self.screenshot_path.clone()
