@@ -151,17 +151,9 @@ pub fn views_for(scene: &Gaussians, args: &ViewArgs) -> anyhow::Result<Vec<Camer
         for w in &set.warnings {
             eprintln!("warning: {w}");
         }
-        Ok(set.cameras.iter().map(|c| with_longer_side(c, size)).collect())
+        Ok(set.cameras.iter().map(|c| c.with_longer_side(size)).collect())
     } else {
         let opts = OrbitOptions { count: args.views.max(1), width: size, height: size, fov_y_degrees: args.fov, ..OrbitOptions::default() };
         Ok(orbit_cameras(&scene.means, &opts))
     }
-}
-
-/// The camera rescaled so that its longer image side is `size` pixels (aspect kept).
-pub fn with_longer_side(cam: &Camera, size: u32) -> Camera {
-    let long = cam.width.max(cam.height).max(1) as f64;
-    let w = ((cam.width as f64 * size as f64 / long).round() as u32).max(1);
-    let h = ((cam.height as f64 * size as f64 / long).round() as u32).max(1);
-    cam.scaled_to(w, h)
 }

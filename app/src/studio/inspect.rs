@@ -6,6 +6,8 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use crossbeam_channel::{Receiver, Sender};
+use gast_core::session::StyleImage;
+use gast_core::vision::style_depth::{DepthPolarity, HeuristicDepth};
 use gast_core::{Camera, Gaussians};
 
 use super::viewport::SharedGaussians;
@@ -18,7 +20,8 @@ pub struct Maps {
     pub rgb: egui::ColorImage,
     /// Inverse depth, min-max normalised (near = bright).
     pub depth: egui::ColorImage,
-    /// Sobel edges of the render (until `gast_core::vision` Canny is merged in).
+    /// Edges: Canny (25, 200) per channel of the render, averaged, as the
+    /// optimisation computes them (for the style: Canny of its JET-coloured depth).
     pub edges: egui::ColorImage,
 }
 
@@ -45,6 +48,8 @@ pub enum JobDone {
     Scene(PathBuf, anyhow::Result<SceneFile>),
     /// Inspection maps are ready.
     Maps(Box<Maps>),
+    /// The style's maps for a (style, texture scale, polarity) are ready.
+    StyleMaps(StyleMapsKey, Box<Maps>),
     /// A file was written.
     Exported(PathBuf),
     /// A job failed; the message names the file and the reason.
@@ -91,7 +96,8 @@ fn rgb_image(w: u32, h: u32, rgb: &[f32]) -> egui::ColorImage {
 /// The inspection maps of `g` from `cam`.
 pub fn maps(g: &Gaussians, cam: &Camera, background: [f32; 3]) -> Maps {
     let r = render(g, cam, &RenderOptions { background });
-    let edges = sobel_edges(r.width, r.height, &r.rgb);
+    let clamped: Vec<f32> = r.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+    let edges = gast_core::vision::canny::render_edges(&clamped, r.height as usize, r.width as usize);
     // Inverse depth is Σ wᵢ/zᵢ: divide by the opacity to get the covered pixels' own depth.
     let depth: Vec<f32> = r.inv_depth.iter().zip(&r.alpha).map(|(d, a)| if *a > 0.05 { d / a } else { 0.0 }).collect();
     Maps {
@@ -101,17 +107,26 @@ pub fn maps(g: &Gaussians, cam: &Camera, background: [f32; 3]) -> Maps {
     }
 }
 
-/// The camera scaled so its longer side is `long_side` pixels.
-pub fn scaled(cam: &Camera, long_side: u32) -> Camera {
-    let s = long_side as f32 / cam.width.max(cam.height).max(1) as f32;
-    let mut c = cam.clone();
-    c.width = ((cam.width as f32 * s).round() as u32).max(1);
-    c.height = ((cam.height as f32 * s).round() as u32).max(1);
-    c.fx *= c.width as f32 / cam.width.max(1) as f32;
-    c.fy *= c.height as f32 / cam.height.max(1) as f32;
-    c.cx *= c.width as f32 / cam.width.max(1) as f32;
-    c.cy *= c.height as f32 / cam.height.max(1) as f32;
-    c
+/// What the style maps were computed for: the style file, texture scale, depth polarity.
+pub type StyleMapsKey = (PathBuf, u32, DepthPolarity);
+
+/// The style's RGB, depth and edge maps at texture scale, as the optimisation
+/// sees them (built-in depth estimate; the run uses the same).
+pub fn style_maps(style: &StyleImage, scale: u32, polarity: DepthPolarity) -> Maps {
+    let m = gast_core::style::stage1::style_maps(
+        &style.rgb,
+        style.height,
+        style.width,
+        scale as usize,
+        &HeuristicDepth::default(),
+        polarity,
+    );
+    let (w, h) = (m.width as u32, m.height as u32);
+    Maps {
+        rgb: rgb_image(w, h, &m.rgb),
+        depth: gray_image(w, h, &m.depth, |_| true),
+        edges: gray_image(w, h, &m.edge, |_| true),
+    }
 }
 
 impl Jobs {
@@ -128,6 +143,14 @@ impl Jobs {
         std::thread::spawn(move || {
             let _ = tx.send(job());
             waker();
+        });
+    }
+
+    /// Computes the style's maps.
+    pub fn style_maps(&mut self, key: StyleMapsKey, style: Arc<StyleImage>) {
+        self.spawn(move || {
+            let maps = style_maps(&style, key.1, key.2);
+            JobDone::StyleMaps(key, Box::new(maps))
         });
     }
 
@@ -182,30 +205,3 @@ impl Jobs {
     }
 }
 
-/// Gradient magnitude (Sobel) of the luminance of an RGB image, normalised to [0, 1].
-pub fn sobel_edges(width: u32, height: u32, rgb: &[f32]) -> Vec<f32> {
-    let (w, h) = (width as usize, height as usize);
-    let lum: Vec<f32> = rgb.chunks_exact(3).map(|c| 0.299 * c[0] + 0.587 * c[1] + 0.114 * c[2]).collect();
-    let at = |x: isize, y: isize| lum[(y.clamp(0, h as isize - 1) as usize) * w + x.clamp(0, w as isize - 1) as usize];
-    let mut out = vec![0.0f32; w * h];
-    let mut max = 0.0f32;
-    for y in 0..h as isize {
-        for x in 0..w as isize {
-            let gx = at(x + 1, y - 1) + 2.0 * at(x + 1, y) + at(x + 1, y + 1)
-                - at(x - 1, y - 1)
-                - 2.0 * at(x - 1, y)
-                - at(x - 1, y + 1);
-            let gy = at(x - 1, y + 1) + 2.0 * at(x, y + 1) + at(x + 1, y + 1)
-                - at(x - 1, y - 1)
-                - 2.0 * at(x, y - 1)
-                - at(x + 1, y - 1);
-            let m = (gx * gx + gy * gy).sqrt();
-            max = max.max(m);
-            out[y as usize * w + x as usize] = m;
-        }
-    }
-    if max > 0.0 {
-        out.iter_mut().for_each(|v| *v /= max);
-    }
-    out
-}

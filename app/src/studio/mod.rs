@@ -54,6 +54,8 @@ struct LoadedScene {
 /// A style image and its thumbnail.
 struct LoadedStyle {
     path: PathBuf,
+    /// The whole image, handed to the worker when a run starts.
+    image: Arc<gast_core::session::StyleImage>,
     thumb: egui::ColorImage,
     texture: egui::TextureHandle,
     size: [usize; 2],
@@ -93,6 +95,9 @@ pub struct StudioApp {
     viewport_notes: Arc<Mutex<ViewportNotes>>,
     jobs: inspect::Jobs,
     maps: Option<[egui::TextureHandle; 3]>,
+    /// The selected style's maps at texture scale, and what they were made for.
+    style_maps: Option<(inspect::StyleMapsKey, [egui::TextureHandle; 3])>,
+    style_maps_requested: Option<inspect::StyleMapsKey>,
     auto_inspect: bool,
     inspected_view: Option<InspectKey>,
     inspect_pending: Option<(InspectKey, std::time::Instant)>,
@@ -180,6 +185,8 @@ impl StudioApp {
             viewport_notes: Arc::default(),
             jobs: inspect::Jobs::new(waker),
             maps: None,
+            style_maps: None,
+            style_maps_requested: None,
             auto_inspect: true,
             inspected_view: None,
             inspect_pending: None,
@@ -299,11 +306,10 @@ impl StudioApp {
         let color = egui::ColorImage::from_rgb([thumb.width() as usize, thumb.height() as usize], thumb.as_raw());
         let texture =
             self.ctx.load_texture(format!("style {}", path.display()), color.clone(), egui::TextureOptions::LINEAR);
+        let size = [img.width() as usize, img.height() as usize];
+        let image = Arc::new(gast_core::session::StyleImage { width: size[0], height: size[1], rgb: img.into_raw() });
         self.styles.retain(|s| s.path != path);
-        self.styles.insert(
-            0,
-            LoadedStyle { path, thumb: color, texture, size: [img.width() as usize, img.height() as usize] },
-        );
+        self.styles.insert(0, LoadedStyle { path, image, thumb: color, texture, size });
         self.styles.truncate(8);
         self.style = Some(0);
     }
@@ -437,6 +443,17 @@ impl StudioApp {
                         self.ctx.load_texture("inspect edges", m.edges, opts),
                     ]);
                 }
+                inspect::JobDone::StyleMaps(key, m) => {
+                    let opts = egui::TextureOptions::LINEAR;
+                    self.style_maps = Some((
+                        key,
+                        [
+                            self.ctx.load_texture("style rgb", m.rgb, opts),
+                            self.ctx.load_texture("style depth", m.depth, opts),
+                            self.ctx.load_texture("style edges", m.edges, opts),
+                        ],
+                    ));
+                }
                 inspect::JobDone::Scene(path, result) => self.finish_open_scene(&path, result),
                 inspect::JobDone::Exported(p) => self.notice = format!("wrote {}", p.display()),
                 inspect::JobDone::Failed(e) => self.errors.push(e),
@@ -482,6 +499,7 @@ impl StudioApp {
         if self.auto_inspect {
             self.request_inspection(false);
         }
+        self.request_style_maps();
         self.test_switches(ui.ctx());
     }
 
@@ -518,6 +536,20 @@ impl StudioApp {
             return true;
         }
         false
+    }
+
+    /// Starts the selected style's maps when the style, texture scale or depth
+    /// polarity changed since they were last made or asked for.
+    fn request_style_maps(&mut self) {
+        let Some(style) = self.style.and_then(|k| self.styles.get(k)) else { return };
+        let key = (style.path.clone(), self.config.texture_scale, self.config.depth_polarity);
+        let have = self.style_maps.as_ref().is_some_and(|(k, _)| *k == key);
+        if have || self.style_maps_requested.as_ref() == Some(&key) {
+            return;
+        }
+        self.style_maps_requested = Some(key.clone());
+        let image = style.image.clone();
+        self.jobs.style_maps(key, image);
     }
 
     fn test_switches(&mut self, ctx: &egui::Context) {
@@ -562,7 +594,7 @@ impl StudioApp {
         let full = self.viewport_camera();
         // Half resolution while the view moves keeps big scenes responsive on software GPUs.
         let camera = if interacting && self.scene.as_ref().is_some_and(|s| s.scene.gaussians.len() > 200_000) {
-            inspect::scaled(&full, full.width.max(full.height) / 2)
+            full.with_longer_side(full.width.max(full.height) / 2)
         } else {
             full
         };

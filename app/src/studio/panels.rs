@@ -10,7 +10,7 @@ use gast_core::style::StyleConfig;
 
 use super::session_link::{RunStatus, StartRequest};
 use super::view::{UpAxis, ViewState};
-use super::{StudioApp, controls, inspect};
+use super::{StudioApp, controls};
 
 impl StudioApp {
     pub(super) fn menu_bar(&mut self, ui: &mut Ui) {
@@ -217,7 +217,7 @@ impl StudioApp {
         let ctx = self.ctx.clone();
         let request = StartRequest {
             scene: scene.scene.gaussians.to_arc(),
-            style: style.path.clone(),
+            style: style.image.clone(),
             config: self.config.clone(),
             cameras: self.cameras.clone(),
             waker: Arc::new(move || ctx.request_repaint()),
@@ -289,19 +289,32 @@ impl StudioApp {
                 self.inspected_view = None;
                 self.request_inspection(true);
             }
-            ui.weak("RGB · inverse depth · edges of the current view (CPU rasterizer)");
+            ui.weak("RGB · inverse depth · edges: the current view (CPU rasterizer) | the style at texture scale");
         });
-        let h = 150.0;
-        ui.horizontal(|ui| match &self.maps {
-            Some(maps) => {
-                for (t, name) in maps.iter().zip(["RGB", "inverse depth", "edges"]) {
-                    let [w, th] = t.size();
-                    let size = egui::vec2(h * w as f32 / th.max(1) as f32, h);
-                    ui.add(egui::Image::new(t).fit_to_exact_size(size)).on_hover_text(name);
+        // One height for all six maps, so that they fit the strip side by side.
+        let aspect = |maps: &[egui::TextureHandle; 3]| {
+            maps.iter().map(|t| t.size()[0] as f32 / t.size()[1].max(1) as f32).sum::<f32>()
+        };
+        let total = self.maps.as_ref().map_or(0.0, aspect) + self.style_maps.as_ref().map_or(0.0, |(_, m)| aspect(m));
+        let room = ui.available_width() - 7.0 * ui.spacing().item_spacing.x - 8.0;
+        let h = if total > 0.0 { (room / total).clamp(40.0, 150.0) } else { 150.0 };
+        let show = |ui: &mut Ui, maps: &[egui::TextureHandle; 3], what: &str| {
+            for (t, name) in maps.iter().zip(["RGB", "inverse depth", "edges"]) {
+                let [w, th] = t.size();
+                let size = egui::vec2(h * w as f32 / th.max(1) as f32, h);
+                ui.add(egui::Image::new(t).fit_to_exact_size(size)).on_hover_text(format!("{what}: {name}"));
+            }
+        };
+        ui.horizontal(|ui| {
+            match &self.maps {
+                Some(maps) => show(ui, maps, "view"),
+                None => {
+                    ui.weak("no maps yet");
                 }
             }
-            None => {
-                ui.weak("no maps yet");
+            ui.separator();
+            if let Some((_, maps)) = &self.style_maps {
+                show(ui, maps, "style");
             }
         });
     }
@@ -331,7 +344,7 @@ impl StudioApp {
         }
         self.inspected_view = Some(key);
         self.inspect_pending = None;
-        let cam = inspect::scaled(&self.viewport_camera(), 240);
+        let cam = self.viewport_camera().with_longer_side(240);
         self.jobs.inspect(g, cam, self.background);
     }
 }

@@ -34,8 +34,8 @@ pub struct SessionLink {
 pub struct StartRequest {
     /// The scene as loaded.
     pub scene: Arc<Gaussians>,
-    /// The style image file.
-    pub style: std::path::PathBuf,
+    /// The style image.
+    pub style: Arc<gast_core::session::StyleImage>,
     /// The run's parameters.
     pub config: StyleConfig,
     /// Optimisation cameras (the scene's training cameras); orbit views around

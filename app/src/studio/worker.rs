@@ -1,12 +1,12 @@
 //! Links the core session runner into the studio: a [`SessionStarter`] that
-//! spawns a worker thread which reads the style image, resolves the VGG
+//! spawns a worker thread which resolves the VGG
 //! weights (a download on first use, reported as a stage), builds the
 //! optimisation cameras and runs the session. Nothing here runs on the UI thread.
 
 use std::sync::Arc;
 
 use gast_core::camera::{OrbitOptions, orbit_cameras};
-use gast_core::session::{Event, SessionInputs, StyleDepthSource, StyleImage, spawn_with};
+use gast_core::session::{Event, SessionInputs, StyleDepthSource, spawn_with};
 use gast_core::vision::Vgg;
 
 use super::session_link::{SessionLink, SessionStarter, StartRequest};
@@ -21,7 +21,7 @@ pub fn starter() -> SessionStarter {
         let handle = spawn_with(
             move |emit: &mut dyn FnMut(Event)| {
                 let t = std::time::Instant::now();
-                let style = StyleImage::open(&style)?;
+                let style = Arc::unwrap_or_clone(style);
                 let mut last = 0u64;
                 let weights = gast_core::vision::resolve_weights(None, &mut |done, total| {
                     // A download: report every 5 MB so the status panel shows progress.
@@ -45,7 +45,7 @@ pub fn starter() -> SessionStarter {
                 } else {
                     cameras
                 };
-                emit(Event::Stage { name: "style image and weights".into(), seconds: t.elapsed().as_secs_f64() });
+                emit(Event::Stage { name: "weights and cameras".into(), seconds: t.elapsed().as_secs_f64() });
                 Ok(SessionInputs { scene, cameras, style, style_depth: StyleDepthSource::Heuristic, vgg, config })
             },
             waker,

@@ -165,13 +165,23 @@ impl Camera {
     /// `max_side`, keeping the aspect ratio (sides rounded, at least 1 pixel).
     /// A camera already small enough is returned unchanged, never enlarged.
     pub fn downscaled_to_max_side(&self, max_side: u32) -> Self {
-        let longest = self.width.max(self.height);
-        if longest <= max_side || longest == 0 {
+        if self.width.max(self.height) <= max_side {
             return self.clone();
         }
-        let s = f64::from(max_side) / f64::from(longest);
-        let side = |v: u32| ((f64::from(v) * s).round() as u32).max(1);
-        self.scaled_to(side(self.width), side(self.height))
+        self.with_longer_side(max_side)
+    }
+
+    /// The camera rescaled so that its longer image side is `side` pixels
+    /// (larger or smaller), keeping the aspect ratio (sides rounded, at least 1
+    /// pixel): a working resolution for optimisation, inspection or export.
+    pub fn with_longer_side(&self, side: u32) -> Self {
+        let longest = self.width.max(self.height);
+        if longest == 0 {
+            return self.clone();
+        }
+        let s = f64::from(side) / f64::from(longest);
+        let px = |v: u32| ((f64::from(v) * s).round() as u32).max(1);
+        self.scaled_to(px(self.width), px(self.height))
     }
 }
 

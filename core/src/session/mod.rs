@@ -15,7 +15,7 @@ pub use events::{Command, Event, LossTerms, StepReport, StepTimings};
 pub use prepare::{
     PreparedStyle, StyleDepthSource, StyleImage, fit_color_transfer, prepare_style, scatter, seen_by_any, subset,
 };
-pub use run::{Session, SessionError, SessionInputs, at_resolution};
+pub use run::{Session, SessionError, SessionInputs};
 pub use slot::Slot;
 pub use worker::{SessionHandle, run_loop, spawn, spawn_with};
 

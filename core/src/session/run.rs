@@ -98,7 +98,7 @@ impl Session {
             return Err(SessionError::Input("no optimisation cameras".into()));
         }
         let opts = RenderOptions { background: config.background };
-        let work_cams: Vec<Camera> = cameras.iter().map(|c| at_resolution(c, config.resolution)).collect();
+        let work_cams: Vec<Camera> = cameras.iter().map(|c| c.with_longer_side(config.resolution)).collect();
 
         let t = Instant::now();
         let ct = fit_color_transfer(&scene, &work_cams, &opts, &style);
@@ -219,7 +219,7 @@ impl Session {
             self.style = prepare_style(&self.vgg, &self.inputs_style, config.texture_scale, &self.style_depth, config.depth_polarity);
         }
         if config.resolution != self.config.resolution || config.background != self.config.background {
-            self.cameras = self.base_cameras.iter().map(|c| at_resolution(c, config.resolution)).collect();
+            self.cameras = self.base_cameras.iter().map(|c| c.with_longer_side(config.resolution)).collect();
             self.targets.iter_mut().for_each(|t| *t = None);
         }
         self.config = config;
@@ -338,15 +338,6 @@ fn flat_mut<const N: usize>(v: &mut [[f32; N]]) -> &mut [f32] {
 
 fn ms(t: Instant) -> f32 {
     t.elapsed().as_secs_f32() * 1e3
-}
-
-/// The camera rescaled so that its longer side is `resolution` pixels.
-pub fn at_resolution(cam: &Camera, resolution: u32) -> Camera {
-    let long = cam.width.max(cam.height).max(1) as f64;
-    let s = resolution as f64 / long;
-    let w = ((cam.width as f64 * s).round() as u32).max(1);
-    let h = ((cam.height as f64 * s).round() as u32).max(1);
-    cam.scaled_to(w, h)
 }
 
 /// Views in shuffled order without replacement, refilled when empty (seeded).
