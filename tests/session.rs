@@ -26,14 +26,23 @@ fn next(events: &crossbeam_channel::Receiver<Event>) -> Event {
 
 #[test]
 fn worker_obeys_commands_and_reports_every_step() {
-    let config =
-        StyleConfig { cycles: 4, steps_per_cycle: 4, ratio_geo: 0.5, resolution: 48, texture_scale: 48, ..Default::default() };
+    let config = StyleConfig {
+        cycles: 4,
+        steps_per_cycle: 4,
+        ratio_geo: 0.5,
+        resolution: 48,
+        texture_scale: 48,
+        ..Default::default()
+    };
     let Some(inputs) = inputs(config.clone()) else { return };
     let wakes = Arc::new(AtomicUsize::new(0));
     let w = wakes.clone();
-    let handle = spawn(inputs, Arc::new(move || {
-        w.fetch_add(1, Ordering::SeqCst);
-    }));
+    let handle = spawn(
+        inputs,
+        Arc::new(move || {
+            w.fetch_add(1, Ordering::SeqCst);
+        }),
+    );
 
     // Preparation stages, culling, then steps.
     let mut stages = Vec::new();
@@ -96,10 +105,10 @@ fn stop_ends_the_run_early_with_the_result_so_far() {
     let Some(inputs) = inputs(config) else { return };
     let handle = spawn(inputs, Arc::new(|| {}));
     loop {
-        if let Event::Step(r) = next(&handle.events) {
-            if r.iter == 2 {
-                break;
-            }
+        if let Event::Step(r) = next(&handle.events)
+            && r.iter == 2
+        {
+            break;
         }
     }
     handle.commands.send(Command::Stop).expect("send");

@@ -56,7 +56,13 @@ fn check_golden_passes_on_the_shared_files_and_fails_on_others() {
     let dir = shared_dir().join("golden");
     let Some(weights) = shared_file("data/weights/vgg19-conv3.safetensors") else { return };
     let mut files: Vec<String> = std::fs::read_dir(&dir)
-        .map(|rd| rd.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "safetensors")).map(|p| p.display().to_string()).collect())
+        .map(|rd| {
+            rd.filter_map(|e| e.ok())
+                .map(|e| e.path())
+                .filter(|p| p.extension().is_some_and(|x| x == "safetensors"))
+                .map(|p| p.display().to_string())
+                .collect()
+        })
         .unwrap_or_default();
     if files.is_empty() {
         eprintln!("!!!!!!!! SKIPPED: no golden files under {} !!!!!!!!", dir.display());
@@ -86,9 +92,27 @@ fn stylize_writes_a_scene_renders_and_a_report() {
     };
     let out = temp("stylize");
     let o = gast(&[
-        "stylize", s(&scene), s(&style), "--weights", s(&weights), "--out", s(&out),
-        "--cycles", "2", "--steps-per-cycle", "3", "--ratio-geo", "0.67", "--resolution", "64",
-        "--texture-scale", "64", "--views", "4", "--preview-views", "1",
+        "stylize",
+        s(&scene),
+        s(&style),
+        "--weights",
+        s(&weights),
+        "--out",
+        s(&out),
+        "--cycles",
+        "2",
+        "--steps-per-cycle",
+        "3",
+        "--ratio-geo",
+        "0.67",
+        "--resolution",
+        "64",
+        "--texture-scale",
+        "64",
+        "--views",
+        "4",
+        "--preview-views",
+        "1",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let input = gast_core::scene::load(&scene).expect("input scene");

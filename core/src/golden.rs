@@ -89,7 +89,11 @@ impl GoldenFile {
                     found: format!("{:?}", view.dtype()),
                 });
             }
-            let data = view.data().chunks_exact(8).map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]])).collect();
+            let data = view
+                .data()
+                .chunks_exact(8)
+                .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
+                .collect();
             tensors.insert(name, Tensor { shape: view.shape().to_vec(), data });
         }
         Ok(Self { path: path.to_path_buf(), tensors })
@@ -230,8 +234,9 @@ pub fn check_file(path: &Path, ctx: &CheckContext) -> Result<Vec<OutputCheck>, G
         None => Err(GoldenError::Format {
             path: path.to_path_buf(),
             what: "tensor names".into(),
-            expected: "a raster (out_rgb, means, …), losses (gcfm_loss, …) or colour (content_pixels, A, …) golden file"
-                .into(),
+            expected:
+                "a raster (out_rgb, means, …), losses (gcfm_loss, …) or colour (content_pixels, A, …) golden file"
+                    .into(),
             found: file.tensors.keys().cloned().collect::<Vec<_>>().join(", "),
         }),
     }
@@ -369,7 +374,14 @@ fn check_raster(file: &GoldenFile) -> Result<Vec<OutputCheck>, GoldenError> {
                 Tolerance::RelToMax(crate::raster::golden::GRAD_REL_TOL)
             };
             let rel = if c.ref_max_abs > 0.0 { c.max_abs_err / c.ref_max_abs } else { c.max_abs_err };
-            OutputCheck { passed: c.passed(), name: c.name, max_abs: c.max_abs_err, max_ref: c.ref_max_abs, rel, tolerance }
+            OutputCheck {
+                passed: c.passed(),
+                name: c.name,
+                max_abs: c.max_abs_err,
+                max_ref: c.ref_max_abs,
+                rel,
+                tolerance,
+            }
         })
         .collect())
 }

@@ -90,7 +90,13 @@ pub fn write_png_gray_normalized(path: &Path, width: u32, height: u32, values: &
 
 /// Writes an inverse-depth map as 8-bit grey PNG, min-max normalised over the
 /// pixels the scene covers (`alpha ≥ 0.5`, near = bright); uncovered pixels are black.
-pub fn write_depth_png(path: &Path, width: u32, height: u32, inv_depth: &[f32], alpha: &[f32]) -> Result<(), OutputError> {
+pub fn write_depth_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    inv_depth: &[f32],
+    alpha: &[f32],
+) -> Result<(), OutputError> {
     let covered: Vec<f32> = inv_depth.iter().zip(alpha).filter(|(_, a)| **a >= 0.5).map(|(d, _)| *d).collect();
     let (lo, hi) = finite_range(&covered);
     let scale = if hi > lo { 1.0 / (hi - lo) } else { 0.0 };
@@ -128,14 +134,19 @@ pub fn write_exr_depth(path: &Path, width: u32, height: u32, values: &[f32]) -> 
         return Err(OutputError::Size { path: path.to_path_buf(), expected: w * h, found: values.len() });
     }
     let channel = AnyChannel::new("Z", FlatSamples::F32(values.to_vec()));
-    let layer = Layer::new((w, h), LayerAttributes::named("depth"), Encoding::SMALL_LOSSLESS, AnyChannels::sort(SmallVec::from_vec(vec![channel])));
+    let layer = Layer::new(
+        (w, h),
+        LayerAttributes::named("depth"),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(SmallVec::from_vec(vec![channel])),
+    );
     let image = Image::from_layer(layer);
     let mut encoded = std::io::Cursor::new(Vec::new());
-    image
-        .write()
-        .non_parallel()
-        .to_buffered(&mut encoded)
-        .map_err(|e| OutputError::Encode { path: path.to_path_buf(), format: "EXR", message: e.to_string() })?;
+    image.write().non_parallel().to_buffered(&mut encoded).map_err(|e| OutputError::Encode {
+        path: path.to_path_buf(),
+        format: "EXR",
+        message: e.to_string(),
+    })?;
     atomic_write(path, |w| w.write_all(encoded.get_ref()))
 }
 
@@ -168,7 +179,8 @@ mod tests {
         });
         assert!(err.is_err());
         assert_eq!(std::fs::read(&path).expect("read back"), b"old contents");
-        let leftovers: Vec<_> = std::fs::read_dir(&dir).expect("list").filter_map(|e| e.ok()).map(|e| e.file_name()).collect();
+        let leftovers: Vec<_> =
+            std::fs::read_dir(&dir).expect("list").filter_map(|e| e.ok()).map(|e| e.file_name()).collect();
         assert_eq!(leftovers.len(), 1, "temporary file left behind: {leftovers:?}");
         atomic_write(&path, |w| w.write_all(b"new")).expect("write");
         assert_eq!(std::fs::read(&path).expect("read back"), b"new");

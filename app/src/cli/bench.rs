@@ -62,7 +62,11 @@ pub fn run_raster(args: RasterArgs) -> anyhow::Result<ExitCode> {
     } else {
         args.scenes.clone()
     };
-    println!("rasterizer benchmark: {} threads, {} orbit views per row, median ms", rayon::current_num_threads(), args.views);
+    println!(
+        "rasterizer benchmark: {} threads, {} orbit views per row, median ms",
+        rayon::current_num_threads(),
+        args.views
+    );
     println!(
         "{:<24} {:>9} {:>6} {:>11} {:>12} {:>14} {:>10} {:>10}",
         "scene", "gaussians", "size", "forward ms", "backward ms", "Mgaussians/s", "peak MiB", "load s"

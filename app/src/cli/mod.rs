@@ -147,13 +147,20 @@ pub fn load_scene(path: &Path) -> anyhow::Result<Gaussians> {
 pub fn views_for(scene: &Gaussians, args: &ViewArgs) -> anyhow::Result<Vec<Camera>> {
     let size = args.size.max(1);
     if let Some(path) = &args.cameras {
-        let set = gast_core::camera::load(path).with_context(|| format!("could not load the cameras {}", path.display()))?;
+        let set =
+            gast_core::camera::load(path).with_context(|| format!("could not load the cameras {}", path.display()))?;
         for w in &set.warnings {
             eprintln!("warning: {w}");
         }
         Ok(set.cameras.iter().map(|c| c.with_longer_side(size)).collect())
     } else {
-        let opts = OrbitOptions { count: args.views.max(1), width: size, height: size, fov_y_degrees: args.fov, ..OrbitOptions::default() };
+        let opts = OrbitOptions {
+            count: args.views.max(1),
+            width: size,
+            height: size,
+            fov_y_degrees: args.fov,
+            ..OrbitOptions::default()
+        };
         Ok(orbit_cameras(&scene.means, &opts))
     }
 }

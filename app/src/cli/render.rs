@@ -38,7 +38,13 @@ pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
         let img = raster::render(&scene, cam, &opts);
         let stem = sanitize(&cam.name);
         write_png_rgb(&args.out.join(format!("{stem}.png")), img.width, img.height, &img.rgb)?;
-        write_depth_png(&args.out.join(format!("{stem}_depth.png")), img.width, img.height, &img.inv_depth, &img.alpha)?;
+        write_depth_png(
+            &args.out.join(format!("{stem}_depth.png")),
+            img.width,
+            img.height,
+            &img.inv_depth,
+            &img.alpha,
+        )?;
         write_exr_depth(&args.out.join(format!("{stem}_depth.exr")), img.width, img.height, &img.inv_depth)
             .with_context(|| format!("writing the depth of view {}", cam.name))?;
         pb.inc(1);
@@ -58,6 +64,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
 /// A file stem from a camera name (image names may hold folders and extensions).
 fn sanitize(name: &str) -> String {
     let base = std::path::Path::new(name).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    let s: String = base.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
+    let s: String =
+        base.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
     if s.is_empty() { "view".into() } else { s }
 }

@@ -96,8 +96,10 @@ impl StylizeArgs {
     pub fn config(&self) -> anyhow::Result<StyleConfig> {
         let mut c = match &self.preset {
             Some(p) => {
-                let text = std::fs::read_to_string(p).with_context(|| format!("could not read the preset {}", p.display()))?;
-                StyleConfig::from_json(&text).with_context(|| format!("{}: expected a StyleConfig JSON preset", p.display()))?
+                let text =
+                    std::fs::read_to_string(p).with_context(|| format!("could not read the preset {}", p.display()))?;
+                StyleConfig::from_json(&text)
+                    .with_context(|| format!("{}: expected a StyleConfig JSON preset", p.display()))?
             }
             None => StyleConfig::default(),
         };
@@ -186,7 +188,10 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         Some(p) => StyleDepthSource::Image(DepthImage::from_file(p)?),
         None => StyleDepthSource::Heuristic,
     };
-    let cameras = views_for(&scene, &ViewArgs { cameras: args.cameras.clone(), views: args.views, size: config.resolution, fov: args.fov })?;
+    let cameras = views_for(
+        &scene,
+        &ViewArgs { cameras: args.cameras.clone(), views: args.views, size: config.resolution, fov: args.fov },
+    )?;
     let vgg = Arc::new(load_vgg(args.weights.as_deref())?);
     eprintln!(
         "{}: {} Gaussians (SH degree {}), {} views; style {} ({}x{})",
@@ -201,7 +206,14 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
 
     let mut stages = Vec::new();
     let mut culled = (scene.len(), scene.len());
-    let inputs = SessionInputs { scene: scene.clone(), cameras: cameras.clone(), style, style_depth, vgg: vgg.clone(), config: config.clone() };
+    let inputs = SessionInputs {
+        scene: scene.clone(),
+        cameras: cameras.clone(),
+        style,
+        style_depth,
+        vgg: vgg.clone(),
+        config: config.clone(),
+    };
     let mut session = Session::prepare(inputs, &mut |e| match e {
         Event::Stage { name, seconds } => {
             eprintln!("  {name}: {seconds:.2} s");
@@ -228,12 +240,24 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     }
     pb.finish_and_clear();
     let optimisation_s = session.elapsed_s();
-    eprintln!("  optimisation: {total} steps in {optimisation_s:.1} s ({:.2} s/step)", optimisation_s / total.max(1) as f64);
+    eprintln!(
+        "  optimisation: {total} steps in {optimisation_s:.1} s ({:.2} s/step)",
+        optimisation_s / total.max(1) as f64
+    );
 
     let result = session.result();
     std::fs::create_dir_all(&args.out).with_context(|| format!("could not create {}", args.out.display()))?;
-    gast_core::scene::save_ply(&args.out.join("stylized.ply"), &result)?;
-    let preview = write_previews(&args.out, &scene, session.colour_matched(), &result, session.cameras(), &session, &vgg, args.preview_views)?;
+    gast_core::scene::save_ply(args.out.join("stylized.ply"), &result)?;
+    let preview = write_previews(
+        &args.out,
+        &scene,
+        session.colour_matched(),
+        &result,
+        session.cameras(),
+        &session,
+        &vgg,
+        args.preview_views,
+    )?;
     let mut summary = Summary::default();
     let n = preview.len().max(1) as f32;
     for p in &preview {
@@ -311,7 +335,12 @@ fn write_previews(
             mean_std_after: mean_std_distance(&fa.data, &style_feats.data, fa.c),
             nn_distance_before: nn_cosine_distance(&fb.data, &style_feats.data, fb.c),
             nn_distance_after: nn_cosine_distance(&fa.data, &style_feats.data, fa.c),
-            inverse_depth_change: inverse_depth_change(&matched.inv_depth, &after.inv_depth, &matched.alpha, &after.alpha),
+            inverse_depth_change: inverse_depth_change(
+                &matched.inv_depth,
+                &after.inv_depth,
+                &matched.alpha,
+                &after.alpha,
+            ),
         });
     }
     Ok(metrics)

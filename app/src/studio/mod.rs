@@ -518,7 +518,7 @@ impl StudioApp {
             return false;
         }
         let finished = matches!(self.run.status, RunStatus::Finished { .. } | RunStatus::Failed(_));
-        let have_snapshot = self.snapshot.as_ref().is_some_and(|s| s.gaussians.len() > 0);
+        let have_snapshot = self.snapshot.as_ref().is_some_and(|s| !s.gaussians.is_empty());
         if (self.run.steps.len() >= script.steps && have_snapshot) || finished {
             script.done = true;
             let export = script.export.clone();

@@ -50,12 +50,7 @@ pub(crate) const MODELS: [Model; 12] = [
 ];
 
 const fn model(id: i32, name: &'static str, params: usize, focal: Focal) -> Model {
-    Model {
-        id,
-        name,
-        params,
-        focal,
-    }
+    Model { id, name, params, focal }
 }
 
 pub(crate) fn known_models() -> String {
@@ -81,11 +76,7 @@ pub(crate) struct ColmapImage {
 
 /// Whether `dir` holds a COLMAP model (`cameras` and `images`, bin or txt).
 pub(crate) fn has_colmap_files(dir: &Path) -> bool {
-    let any = |stem: &str| {
-        ["bin", "txt"]
-            .iter()
-            .any(|e| dir.join(format!("{stem}.{e}")).is_file())
-    };
+    let any = |stem: &str| ["bin", "txt"].iter().any(|e| dir.join(format!("{stem}.{e}")).is_file());
     any("cameras") && any("images")
 }
 
@@ -97,10 +88,7 @@ pub fn load_colmap(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
     let path = path.as_ref();
     let (dir, prefer) = if path.is_file() {
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("bin");
-        (
-            path.parent().unwrap_or(Path::new(".")).to_path_buf(),
-            if ext == "txt" { "txt" } else { "bin" },
-        )
+        (path.parent().unwrap_or(Path::new(".")).to_path_buf(), if ext == "txt" { "txt" } else { "bin" })
     } else if path.join("sparse/0").is_dir() {
         (path.join("sparse/0"), "bin")
     } else {
@@ -113,11 +101,8 @@ pub fn load_colmap(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
     } else {
         read_cameras_txt(&cameras_path)?
     };
-    let images = if is_bin(&images_path) {
-        colmap_bin::read_images_bin(&images_path)?
-    } else {
-        read_images_txt(&images_path)?
-    };
+    let images =
+        if is_bin(&images_path) { colmap_bin::read_images_bin(&images_path)? } else { read_images_txt(&images_path)? };
     assemble(&cameras_path, &images_path, &cams, images)
 }
 
@@ -131,10 +116,7 @@ fn pick(dir: &Path, stem: &str, prefer: &str) -> Result<PathBuf, CameraError> {
         .iter()
         .map(|e| dir.join(format!("{stem}.{e}")))
         .find(|p| p.is_file())
-        .ok_or_else(|| CameraError::NotFound {
-            path: dir.to_path_buf(),
-            expected: format!("{stem}.bin or {stem}.txt"),
-        })
+        .ok_or_else(|| CameraError::NotFound { path: dir.to_path_buf(), expected: format!("{stem}.bin or {stem}.txt") })
 }
 
 fn assemble(
@@ -144,12 +126,7 @@ fn assemble(
     mut images: Vec<ColmapImage>,
 ) -> Result<CameraSet, CameraError> {
     if images.is_empty() {
-        return Err(CameraError::format(
-            images_path,
-            "images",
-            "at least one registered image",
-            "none",
-        ));
+        return Err(CameraError::format(images_path, "images", "at least one registered image", "none"));
     }
     let mut warnings = Vec::new();
     for (id, c) in cams {
@@ -209,17 +186,8 @@ fn check_camera(path: &Path, id: u32, c: &ColmapCamera) -> Result<(), CameraErro
     for (i, v) in c.params.iter().enumerate() {
         let bad = !v.is_finite() || (i < n_focal && *v <= 0.0);
         if bad {
-            let what = if i < n_focal {
-                "a positive finite focal length"
-            } else {
-                "a finite number"
-            };
-            return Err(CameraError::format(
-                path,
-                rec(&format!("params[{i}]")),
-                what,
-                v.to_string(),
-            ));
+            let what = if i < n_focal { "a positive finite focal length" } else { "a finite number" };
+            return Err(CameraError::format(path, rec(&format!("params[{i}]")), what, v.to_string()));
         }
     }
     Ok(())
@@ -230,20 +198,10 @@ pub(crate) fn check_image(path: &Path, im: &ColmapImage) -> Result<(), CameraErr
     let rec = |f: &str| format!("image {} ({}).{f}", im.id, im.name);
     let norm2: f64 = im.qvec.iter().map(|v| v * v).sum();
     if !(norm2.is_finite() && norm2 > 1e-12) {
-        return Err(CameraError::format(
-            path,
-            rec("qvec"),
-            "a finite non-zero quaternion",
-            format!("{:?}", im.qvec),
-        ));
+        return Err(CameraError::format(path, rec("qvec"), "a finite non-zero quaternion", format!("{:?}", im.qvec)));
     }
     if im.tvec.iter().any(|v| !v.is_finite()) {
-        return Err(CameraError::format(
-            path,
-            rec("tvec"),
-            "finite numbers",
-            format!("{:?}", im.tvec),
-        ));
+        return Err(CameraError::format(path, rec("tvec"), "finite numbers", format!("{:?}", im.tvec)));
     }
     Ok(())
 }
@@ -256,12 +214,7 @@ pub(crate) fn insert_camera(
 ) -> Result<(), CameraError> {
     check_camera(path, id, &cam)?;
     if map.insert(id, cam).is_some() {
-        return Err(CameraError::format(
-            path,
-            format!("camera {id}"),
-            "unique camera ids",
-            "a duplicate",
-        ));
+        return Err(CameraError::format(path, format!("camera {id}"), "unique camera ids", "a duplicate"));
     }
     Ok(())
 }
@@ -272,15 +225,9 @@ fn read_text(path: &Path) -> Result<String, CameraError> {
     std::fs::read_to_string(path).map_err(|e| CameraError::io(path, e))
 }
 
-fn parse<T: std::str::FromStr>(
-    path: &Path,
-    record: &str,
-    tok: Option<&str>,
-    what: &str,
-) -> Result<T, CameraError> {
+fn parse<T: std::str::FromStr>(path: &Path, record: &str, tok: Option<&str>, what: &str) -> Result<T, CameraError> {
     let tok = tok.ok_or_else(|| CameraError::format(path, record, what, "end of line"))?;
-    tok.parse()
-        .map_err(|_| CameraError::format(path, record, what, format!("{tok:?}")))
+    tok.parse().map_err(|_| CameraError::format(path, record, what, format!("{tok:?}")))
 }
 
 fn read_cameras_txt(path: &Path) -> Result<BTreeMap<u32, ColmapCamera>, CameraError> {
@@ -293,22 +240,14 @@ fn read_cameras_txt(path: &Path) -> Result<BTreeMap<u32, ColmapCamera>, CameraEr
         }
         let rec = format!("line {}", n + 1);
         let mut t = line.split_whitespace();
-        let id: u32 = parse(
-            path,
-            &format!("{rec}.CAMERA_ID"),
-            t.next(),
-            "an unsigned 32-bit camera id",
-        )?;
+        let id: u32 = parse(path, &format!("{rec}.CAMERA_ID"), t.next(), "an unsigned 32-bit camera id")?;
         let model_name = t.next().unwrap_or("");
-        let model = MODELS
-            .iter()
-            .find(|m| m.name == model_name)
-            .ok_or_else(|| CameraError::UnknownModel {
-                path: path.to_path_buf(),
-                camera_id: id.into(),
-                model: model_name.into(),
-                known: known_models(),
-            })?;
+        let model = MODELS.iter().find(|m| m.name == model_name).ok_or_else(|| CameraError::UnknownModel {
+            path: path.to_path_buf(),
+            camera_id: id.into(),
+            model: model_name.into(),
+            known: known_models(),
+        })?;
         let width: u32 = parse(path, &format!("{rec}.WIDTH"), t.next(), "a pixel width")?;
         let height: u32 = parse(path, &format!("{rec}.HEIGHT"), t.next(), "a pixel height")?;
         let params: Vec<&str> = t.collect();
@@ -323,26 +262,9 @@ fn read_cameras_txt(path: &Path) -> Result<BTreeMap<u32, ColmapCamera>, CameraEr
         let params = params
             .iter()
             .enumerate()
-            .map(|(i, s)| {
-                parse(
-                    path,
-                    &format!("{rec} (camera {id}).PARAMS[{i}]"),
-                    Some(s),
-                    "a number",
-                )
-            })
+            .map(|(i, s)| parse(path, &format!("{rec} (camera {id}).PARAMS[{i}]"), Some(s), "a number"))
             .collect::<Result<Vec<f64>, _>>()?;
-        insert_camera(
-            path,
-            &mut map,
-            id,
-            ColmapCamera {
-                model,
-                width,
-                height,
-                params,
-            },
-        )?;
+        insert_camera(path, &mut map, id, ColmapCamera { model, width, height, params })?;
     }
     Ok(map)
 }
@@ -367,43 +289,17 @@ fn read_images_txt(path: &Path) -> Result<Vec<ColmapImage>, CameraError> {
             ));
         }
         let field = |name: &str| format!("{rec}.{name}");
-        let id: u32 = parse(
-            path,
-            &field("IMAGE_ID"),
-            Some(toks[0]),
-            "an unsigned 32-bit image id",
-        )?;
+        let id: u32 = parse(path, &field("IMAGE_ID"), Some(toks[0]), "an unsigned 32-bit image id")?;
         let mut q = [0.0; 4];
         for (i, v) in q.iter_mut().enumerate() {
-            *v = parse(
-                path,
-                &field(&format!("QVEC[{i}]")),
-                Some(toks[1 + i]),
-                "a number",
-            )?;
+            *v = parse(path, &field(&format!("QVEC[{i}]")), Some(toks[1 + i]), "a number")?;
         }
         let mut tv = [0.0; 3];
         for (i, v) in tv.iter_mut().enumerate() {
-            *v = parse(
-                path,
-                &field(&format!("TVEC[{i}]")),
-                Some(toks[5 + i]),
-                "a number",
-            )?;
+            *v = parse(path, &field(&format!("TVEC[{i}]")), Some(toks[5 + i]), "a number")?;
         }
-        let camera_id: u32 = parse(
-            path,
-            &field("CAMERA_ID"),
-            Some(toks[8]),
-            "an unsigned 32-bit camera id",
-        )?;
-        let im = ColmapImage {
-            id,
-            qvec: q,
-            tvec: tv,
-            camera_id,
-            name: toks[9..].join(" "),
-        };
+        let camera_id: u32 = parse(path, &field("CAMERA_ID"), Some(toks[8]), "an unsigned 32-bit camera id")?;
+        let im = ColmapImage { id, qvec: q, tvec: tv, camera_id, name: toks[9..].join(" ") };
         check_image(path, &im)?;
         images.push(im);
         // The next line lists the image's 2D points (possibly empty): skip it.

@@ -26,12 +26,7 @@ impl BinReader {
     fn open(path: &Path) -> Result<Self, CameraError> {
         let file = File::open(path).map_err(|e| CameraError::io(path, e))?;
         let len = file.metadata().map_err(|e| CameraError::io(path, e))?.len();
-        Ok(Self {
-            path: path.to_path_buf(),
-            inner: BufReader::new(file),
-            pos: 0,
-            len,
-        })
+        Ok(Self { path: path.to_path_buf(), inner: BufReader::new(file), pos: 0, len })
     }
 
     fn remaining(&self) -> u64 {
@@ -54,9 +49,7 @@ impl BinReader {
     fn bytes<const N: usize>(&mut self, record: &str) -> Result<[u8; N], CameraError> {
         self.need(N as u64, record)?;
         let mut b = [0u8; N];
-        self.inner
-            .read_exact(&mut b)
-            .map_err(|e| CameraError::io(&self.path, e))?;
+        self.inner.read_exact(&mut b).map_err(|e| CameraError::io(&self.path, e))?;
         self.pos += N as u64;
         Ok(b)
     }
@@ -79,12 +72,9 @@ impl BinReader {
 
     fn skip(&mut self, n: u64, record: &str) -> Result<(), CameraError> {
         self.need(n, record)?;
-        let by = i64::try_from(n).map_err(|_| {
-            CameraError::format(&self.path, record, "a skippable size", n.to_string())
-        })?;
-        self.inner
-            .seek_relative(by)
-            .map_err(|e| CameraError::io(&self.path, e))?;
+        let by =
+            i64::try_from(n).map_err(|_| CameraError::format(&self.path, record, "a skippable size", n.to_string()))?;
+        self.inner.seek_relative(by).map_err(|e| CameraError::io(&self.path, e))?;
         self.pos += n;
         Ok(())
     }
@@ -104,9 +94,7 @@ impl BinReader {
     /// A record count, rejected when even minimal records would not fit.
     fn count(&mut self, record: &str, min_record_bytes: u64) -> Result<u64, CameraError> {
         let n = self.u64(record)?;
-        let fits = n
-            .checked_mul(min_record_bytes)
-            .is_some_and(|b| b <= self.remaining());
+        let fits = n.checked_mul(min_record_bytes).is_some_and(|b| b <= self.remaining());
         if !fits {
             return Err(CameraError::format(
                 &self.path,
@@ -123,9 +111,7 @@ impl BinReader {
 
     fn u32_of_u64(&mut self, record: &str) -> Result<u32, CameraError> {
         let v = self.u64(record)?;
-        u32::try_from(v).map_err(|_| {
-            CameraError::format(&self.path, record, "a value below 2^32", v.to_string())
-        })
+        u32::try_from(v).map_err(|_| CameraError::format(&self.path, record, "a value below 2^32", v.to_string()))
     }
 }
 
@@ -139,34 +125,18 @@ pub(crate) fn read_cameras_bin(path: &Path) -> Result<BTreeMap<u32, ColmapCamera
         let id = r.u32(&rec)?;
         let rec = format!("camera {id}");
         let model_id = r.i32(&format!("{rec}.model_id"))?;
-        let model =
-            MODELS
-                .iter()
-                .find(|m| m.id == model_id)
-                .ok_or_else(|| CameraError::UnknownModel {
-                    path: path.to_path_buf(),
-                    camera_id: id.into(),
-                    model: format!("model id {model_id}"),
-                    known: known_models(),
-                })?;
+        let model = MODELS.iter().find(|m| m.id == model_id).ok_or_else(|| CameraError::UnknownModel {
+            path: path.to_path_buf(),
+            camera_id: id.into(),
+            model: format!("model id {model_id}"),
+            known: known_models(),
+        })?;
         let width = r.u32_of_u64(&format!("{rec}.width"))?;
         let height = r.u32_of_u64(&format!("{rec}.height"))?;
         let prec = format!("{rec}.params ({} for {})", model.params, model.name);
         r.need(8 * model.params as u64, &prec)?;
-        let params = (0..model.params)
-            .map(|_| r.f64(&prec))
-            .collect::<Result<Vec<_>, _>>()?;
-        insert_camera(
-            path,
-            &mut map,
-            id,
-            ColmapCamera {
-                model,
-                width,
-                height,
-                params,
-            },
-        )?;
+        let params = (0..model.params).map(|_| r.f64(&prec)).collect::<Result<Vec<_>, _>>()?;
+        insert_camera(path, &mut map, id, ColmapCamera { model, width, height, params })?;
     }
     trailing(&r)?;
     Ok(map)
@@ -195,13 +165,7 @@ pub(crate) fn read_images_bin(path: &Path) -> Result<Vec<ColmapImage>, CameraErr
         // x f64, y f64, point3D_id i64 per 2D point.
         let points = r.count(&format!("{rec} ({name}).num_points2D"), 24)?;
         r.skip(points * 24, &format!("{rec} ({name}).points2D"))?;
-        let im = ColmapImage {
-            id,
-            qvec,
-            tvec,
-            camera_id,
-            name,
-        };
+        let im = ColmapImage { id, qvec, tvec, camera_id, name };
         check_image(path, &im)?;
         images.push(im);
     }

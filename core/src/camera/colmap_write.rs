@@ -48,34 +48,19 @@ pub fn write_colmap_text(dir: impl AsRef<Path>, cameras: &[Camera]) -> Result<()
             f64::from(c.cy)
         );
     }
-    w.write_all(out.as_bytes())
-        .and_then(|_| w.flush())
-        .map_err(|e| CameraError::io(&path, e))?;
+    w.write_all(out.as_bytes()).and_then(|_| w.flush()).map_err(|e| CameraError::io(&path, e))?;
 
     let (mut w, path) = create(dir, "images.txt")?;
     let mut out = String::from(
         "# Image list with two lines of data per image:\n#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n#   POINTS2D[] as (X, Y, POINT3D_ID)\n",
     );
-    out += &format!(
-        "# Number of images: {}, mean observations per image: 0\n",
-        cameras.len()
-    );
+    out += &format!("# Number of images: {}, mean observations per image: 0\n", cameras.len());
     for (k, c) in cameras.iter().enumerate() {
         let [qw, qx, qy, qz] = qvec(c);
         let t = c.translation.as_dvec3();
-        out += &format!(
-            "{} {qw} {qx} {qy} {qz} {} {} {} {} {}\n\n",
-            k + 1,
-            t.x,
-            t.y,
-            t.z,
-            k + 1,
-            c.name
-        );
+        out += &format!("{} {qw} {qx} {qy} {qz} {} {} {} {} {}\n\n", k + 1, t.x, t.y, t.z, k + 1, c.name);
     }
-    w.write_all(out.as_bytes())
-        .and_then(|_| w.flush())
-        .map_err(|e| CameraError::io(&path, e))
+    w.write_all(out.as_bytes()).and_then(|_| w.flush()).map_err(|e| CameraError::io(&path, e))
 }
 
 /// Writes `cameras.bin` and `images.bin` into `dir` (created if needed).
@@ -107,9 +92,7 @@ pub fn write_colmap_binary(dir: impl AsRef<Path>, cameras: &[Camera]) -> Result<
     }
     for (name, bytes) in [("cameras.bin", cams), ("images.bin", ims)] {
         let (mut w, path) = create(dir, name)?;
-        w.write_all(&bytes)
-            .and_then(|_| w.flush())
-            .map_err(|e| CameraError::io(&path, e))?;
+        w.write_all(&bytes).and_then(|_| w.flush()).map_err(|e| CameraError::io(&path, e))?;
     }
     Ok(())
 }

@@ -46,9 +46,7 @@ pub enum CameraError {
         found: String,
     },
     /// A binary file that ends inside a record.
-    #[error(
-        "{path}: {record}: truncated at byte {offset}: expected {needed} more bytes, found {available}"
-    )]
+    #[error("{path}: {record}: truncated at byte {offset}: expected {needed} more bytes, found {available}")]
     Truncated {
         /// The file.
         path: PathBuf,
@@ -62,9 +60,7 @@ pub enum CameraError {
         available: u64,
     },
     /// A COLMAP camera model the studio does not know.
-    #[error(
-        "{path}: camera {camera_id}: expected a known COLMAP camera model ({known}), found {model}"
-    )]
+    #[error("{path}: camera {camera_id}: expected a known COLMAP camera model ({known}), found {model}")]
     UnknownModel {
         /// The file.
         path: PathBuf,
@@ -85,19 +81,11 @@ impl CameraError {
         expected: impl Into<String>,
         found: impl Into<String>,
     ) -> Self {
-        Self::Format {
-            path: path.into(),
-            record: record.into(),
-            expected: expected.into(),
-            found: found.into(),
-        }
+        Self::Format { path: path.into(), record: record.into(), expected: expected.into(), found: found.into() }
     }
 
     /// Shorthand for [`CameraError::Io`].
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Self::Io {
-            path: path.into(),
-            source,
-        }
+        Self::Io { path: path.into(), source }
     }
 }

@@ -45,20 +45,10 @@ pub fn load_inria(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
 /// Reads a parsed `cameras.json` document.
 pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<CameraSet, CameraError> {
     let serde_json::Value::Array(items) = value else {
-        return Err(CameraError::format(
-            path,
-            "document",
-            "a list of cameras",
-            super::json_kind(&value),
-        ));
+        return Err(CameraError::format(path, "document", "a list of cameras", super::json_kind(&value)));
     };
     if items.is_empty() {
-        return Err(CameraError::format(
-            path,
-            "document",
-            "at least one camera",
-            "an empty list",
-        ));
+        return Err(CameraError::format(path, "document", "at least one camera", "an empty list"));
     }
     let (mut corrected, mut worst) = (0, 0.0f64);
     let mut cameras = Vec::with_capacity(items.len());
@@ -72,31 +62,16 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
         let rec = |f: &str| format!("{record} ({}).{f}", e.img_name);
         if e.width == 0 || e.height == 0 {
             let found = format!("{}x{}", e.width, e.height);
-            return Err(CameraError::format(
-                path,
-                rec("width/height"),
-                "a positive image size",
-                found,
-            ));
+            return Err(CameraError::format(path, rec("width/height"), "a positive image size", found));
         }
         for (name, f) in [("fx", e.fx), ("fy", e.fy)] {
             if !(f.is_finite() && f > 0.0) {
-                return Err(CameraError::format(
-                    path,
-                    rec(name),
-                    "a positive focal length",
-                    f.to_string(),
-                ));
+                return Err(CameraError::format(path, rec(name), "a positive focal length", f.to_string()));
             }
         }
         let center = DVec3::from_array(e.position);
         if !center.is_finite() {
-            return Err(CameraError::format(
-                path,
-                rec("position"),
-                "finite numbers",
-                format!("{:?}", e.position),
-            ));
+            return Err(CameraError::format(path, rec("position"), "finite numbers", format!("{:?}", e.position)));
         }
         // `rotation` is written row by row; glam builds matrices from columns.
         let c2w = DMat3::from_cols_array_2d(&e.rotation).transpose();
@@ -118,8 +93,6 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
             center.as_vec3(),
         ));
     }
-    let warnings = orthonormal_warning(path, corrected, worst)
-        .into_iter()
-        .collect();
+    let warnings = orthonormal_warning(path, corrected, worst).into_iter().collect();
     Ok(CameraSet { cameras, warnings })
 }

@@ -66,10 +66,7 @@ impl Camera {
 
     /// `tan` of half the horizontal and vertical field of view.
     pub fn tan_half_fov(&self) -> (f32, f32) {
-        (
-            0.5 * self.width as f32 / self.fx,
-            0.5 * self.height as f32 / self.fy,
-        )
+        (0.5 * self.width as f32 / self.fx, 0.5 * self.height as f32 / self.fy)
     }
 }
 
@@ -89,17 +86,7 @@ impl Camera {
         center: Vec3,
     ) -> Self {
         let rotation = c2w.transpose();
-        Self {
-            name: name.into(),
-            width,
-            height,
-            fx,
-            fy,
-            cx,
-            cy,
-            rotation,
-            translation: -(rotation * center),
-        }
+        Self { name: name.into(), width, height, fx, fy, cx, cy, rotation, translation: -(rotation * center) }
     }
 
     /// A camera at `eye` looking at `target`, with `up` pointing up on screen
@@ -118,24 +105,11 @@ impl Camera {
     ) -> Self {
         let z = (target - eye).try_normalize().unwrap_or(Vec3::Z);
         let down = -up.try_normalize().unwrap_or(Vec3::NEG_Y);
-        let x = down
-            .cross(z)
-            .try_normalize()
-            .unwrap_or_else(|| z.any_orthonormal_vector());
+        let x = down.cross(z).try_normalize().unwrap_or_else(|| z.any_orthonormal_vector());
         let y = z.cross(x);
         let fy = 0.5 * height as f32 / (0.5 * fov_y_degrees.to_radians()).tan();
         let (w, h) = (width as f32, height as f32);
-        Self::from_camera_to_world(
-            name,
-            width,
-            height,
-            fy,
-            fy,
-            0.5 * w,
-            0.5 * h,
-            Mat3::from_cols(x, y, z),
-            eye,
-        )
+        Self::from_camera_to_world(name, width, height, fy, fy, 0.5 * w, 0.5 * h, Mat3::from_cols(x, y, z), eye)
     }
 
     /// The pixel position of a world point, or `None` when it is at or behind
@@ -150,15 +124,7 @@ impl Camera {
     pub fn scaled_to(&self, width: u32, height: u32) -> Self {
         let sx = width as f32 / self.width.max(1) as f32;
         let sy = height as f32 / self.height.max(1) as f32;
-        Self {
-            width,
-            height,
-            fx: self.fx * sx,
-            fy: self.fy * sy,
-            cx: self.cx * sx,
-            cy: self.cy * sy,
-            ..self.clone()
-        }
+        Self { width, height, fx: self.fx * sx, fy: self.fy * sy, cx: self.cx * sx, cy: self.cy * sy, ..self.clone() }
     }
 
     /// The camera at a working resolution whose longer side is at most
@@ -206,15 +172,8 @@ pub fn scene_extent(cameras: &[Camera]) -> f32 {
     }
     let centers: Vec<Vec3> = cameras.iter().map(Camera::center).collect();
     let centroid = centers.iter().copied().sum::<Vec3>() / centers.len() as f32;
-    let radius = centers
-        .iter()
-        .map(|c| c.distance(centroid))
-        .fold(0.0f32, f32::max);
-    if radius.is_finite() && radius > 1e-6 {
-        1.1 * radius
-    } else {
-        1.1
-    }
+    let radius = centers.iter().map(|c| c.distance(centroid)).fold(0.0f32, f32::max);
+    if radius.is_finite() && radius > 1e-6 { 1.1 * radius } else { 1.1 }
 }
 
 /// Reads cameras from any supported source, detecting the format from the path:
@@ -232,17 +191,9 @@ pub fn load(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
         return load_dir(path);
     }
     if !path.exists() {
-        return Err(CameraError::NotFound {
-            path: path.to_path_buf(),
-            expected: EXPECTED.into(),
-        });
+        return Err(CameraError::NotFound { path: path.to_path_buf(), expected: EXPECTED.into() });
     }
-    match path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .as_deref()
-    {
+    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
         Some("json") => load_json(path),
         Some("bin" | "txt") => load_colmap(path),
         other => Err(CameraError::format(
@@ -269,10 +220,7 @@ fn load_dir(dir: &Path) -> Result<CameraSet, CameraError> {
     if let Some(t) = find_transforms(dir) {
         return load_transforms(&t);
     }
-    Err(CameraError::NotFound {
-        path: dir.to_path_buf(),
-        expected: EXPECTED.into(),
-    })
+    Err(CameraError::NotFound { path: dir.to_path_buf(), expected: EXPECTED.into() })
 }
 
 /// `transforms.json`, else `transforms_train.json`, else the first `transforms*.json` by name.
@@ -299,17 +247,14 @@ fn find_transforms(dir: &Path) -> Option<PathBuf> {
 
 fn load_json(path: &Path) -> Result<CameraSet, CameraError> {
     let text = std::fs::read_to_string(path).map_err(|e| CameraError::io(path, e))?;
-    let value: serde_json::Value =
-        serde_json::from_str(&text).map_err(|source| CameraError::Json {
-            path: path.to_path_buf(),
-            record: "document".into(),
-            source,
-        })?;
+    let value: serde_json::Value = serde_json::from_str(&text).map_err(|source| CameraError::Json {
+        path: path.to_path_buf(),
+        record: "document".into(),
+        source,
+    })?;
     match &value {
         serde_json::Value::Array(_) => inria::from_value(path, value),
-        serde_json::Value::Object(o) if o.contains_key("frames") => {
-            transforms::from_value(path, value)
-        }
+        serde_json::Value::Object(o) if o.contains_key("frames") => transforms::from_value(path, value),
         other => Err(CameraError::format(
             path,
             "document",
@@ -335,31 +280,15 @@ pub(crate) fn json_kind(v: &serde_json::Value) -> &'static str {
 /// from a file, with how far the file's matrix was from it (largest entry
 /// difference). Scaled or sheared poses are corrected, reflections and
 /// non-finite matrices are errors.
-pub(crate) fn rotation_from(
-    path: &Path,
-    record: &str,
-    m: glam::DMat3,
-) -> Result<(Mat3, f64), CameraError> {
-    let bad = || {
-        CameraError::format(
-            path,
-            record,
-            "a 3x3 rotation (orthonormal, determinant +1)",
-            format!("{m:?}"),
-        )
-    };
+pub(crate) fn rotation_from(path: &Path, record: &str, m: glam::DMat3) -> Result<(Mat3, f64), CameraError> {
+    let bad = || CameraError::format(path, record, "a 3x3 rotation (orthonormal, determinant +1)", format!("{m:?}"));
     if !m.is_finite() || m.determinant() <= 1e-9 {
         return Err(bad());
     }
     let x = m.x_axis.try_normalize().ok_or_else(bad)?;
-    let y = (m.y_axis - x * x.dot(m.y_axis))
-        .try_normalize()
-        .ok_or_else(bad)?;
+    let y = (m.y_axis - x * x.dot(m.y_axis)).try_normalize().ok_or_else(bad)?;
     let r = glam::DMat3::from_cols(x, y, x.cross(y));
-    let dev = (r - m)
-        .to_cols_array()
-        .iter()
-        .fold(0.0f64, |a, v| a.max(v.abs()));
+    let dev = (r - m).to_cols_array().iter().fold(0.0f64, |a, v| a.max(v.abs()));
     Ok((r.as_mat3(), dev))
 }
 

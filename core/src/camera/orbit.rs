@@ -62,10 +62,7 @@ impl Default for OrbitOptions {
             height: 256,
             fov_y_degrees: 50.0,
             up: [0.0, -1.0, 0.0],
-            layout: OrbitLayout::Sphere {
-                min_elevation_degrees: -30.0,
-                max_elevation_degrees: 30.0,
-            },
+            layout: OrbitLayout::Sphere { min_elevation_degrees: -30.0, max_elevation_degrees: 30.0 },
             margin: 1.1,
         }
     }
@@ -100,20 +97,14 @@ impl RobustBounds {
 
     /// Radius of the smallest sphere about `center` that holds the box.
     pub fn radius(&self) -> f32 {
-        self.corners()
-            .iter()
-            .map(|c| c.distance(self.center))
-            .fold(0.0, f32::max)
+        self.corners().iter().map(|c| c.distance(self.center)).fold(0.0, f32::max)
     }
 }
 
 /// The robust bounds of `means` (points with a non-finite coordinate are
 /// ignored), or `None` when no point is finite.
 pub fn robust_bounds(means: &[[f32; 3]]) -> Option<RobustBounds> {
-    let finite: Vec<&[f32; 3]> = means
-        .iter()
-        .filter(|p| p.iter().all(|v| v.is_finite()))
-        .collect();
+    let finite: Vec<&[f32; 3]> = means.iter().filter(|p| p.iter().all(|v| v.is_finite())).collect();
     if finite.is_empty() {
         return None;
     }
@@ -141,25 +132,13 @@ pub fn orbit_cameras(means: &[[f32; 3]], opts: &OrbitOptions) -> Vec<Camera> {
         Some(b) => (b.center, b.radius()),
         None => (Vec3::ZERO, 1.0),
     };
-    let radius = if radius.is_finite() && radius > 1e-6 {
-        radius
-    } else {
-        1.0
-    };
+    let radius = if radius.is_finite() && radius > 1e-6 { radius } else { 1.0 };
     let (w, h) = (opts.width.max(1), opts.height.max(1));
-    let fov_y = if opts.fov_y_degrees.is_finite() {
-        opts.fov_y_degrees.clamp(1.0, 170.0)
-    } else {
-        50.0
-    };
+    let fov_y = if opts.fov_y_degrees.is_finite() { opts.fov_y_degrees.clamp(1.0, 170.0) } else { 50.0 };
     let tan_y = (0.5 * fov_y.to_radians()).tan();
     let tan_x = tan_y * w as f32 / h as f32;
     let half_fov = tan_x.min(tan_y).atan();
-    let margin = if opts.margin.is_finite() {
-        opts.margin.max(1.0)
-    } else {
-        1.0
-    };
+    let margin = if opts.margin.is_finite() { opts.margin.max(1.0) } else { 1.0 };
     let distance = margin * radius / half_fov.sin();
 
     let up = Vec3::from(opts.up).try_normalize().unwrap_or(Vec3::NEG_Y);
@@ -174,14 +153,10 @@ pub fn orbit_cameras(means: &[[f32; 3]], opts: &OrbitOptions) -> Vec<Camera> {
     (0..opts.count)
         .map(|i| {
             let (sin_el, azimuth) = match opts.layout {
-                OrbitLayout::Ring { elevation_degrees } => (
-                    elevation_degrees.to_radians().sin(),
-                    std::f32::consts::TAU * i as f32 / opts.count as f32,
-                ),
-                OrbitLayout::Sphere {
-                    min_elevation_degrees: lo,
-                    max_elevation_degrees: hi,
-                } => {
+                OrbitLayout::Ring { elevation_degrees } => {
+                    (elevation_degrees.to_radians().sin(), std::f32::consts::TAU * i as f32 / opts.count as f32)
+                }
+                OrbitLayout::Sphere { min_elevation_degrees: lo, max_elevation_degrees: hi } => {
                     let s = (i as f32 + 0.5) / opts.count as f32;
                     let (lo, hi) = (lo.to_radians().sin(), hi.to_radians().sin());
                     (lo + (hi - lo) * s, golden * i as f32)

@@ -42,28 +42,11 @@ impl Intrinsics {
         macro_rules! pick {
             ($($f:ident),*) => { Intrinsics { $($f: self.$f.or(base.$f)),* } };
         }
-        pick!(
-            camera_angle_x,
-            camera_angle_y,
-            fl_x,
-            fl_y,
-            cx,
-            cy,
-            w,
-            h,
-            k1,
-            k2,
-            k3,
-            k4,
-            p1,
-            p2
-        )
+        pick!(camera_angle_x, camera_angle_y, fl_x, fl_y, cx, cy, w, h, k1, k2, k3, k4, p1, p2)
     }
 
     fn has_distortion(&self) -> bool {
-        [self.k1, self.k2, self.k3, self.k4, self.p1, self.p2]
-            .iter()
-            .any(|v| v.is_some_and(|v| v != 0.0))
+        [self.k1, self.k2, self.k3, self.k4, self.p1, self.p2].iter().any(|v| v.is_some_and(|v| v != 0.0))
     }
 }
 
@@ -102,12 +85,7 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
         source,
     })?;
     if doc.frames.is_empty() {
-        return Err(CameraError::format(
-            path,
-            "frames",
-            "at least one frame",
-            "an empty list",
-        ));
+        return Err(CameraError::format(path, "frames", "at least one frame", "an empty list"));
     }
     let base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let (mut corrected, mut worst, mut distorted) = (0, 0.0f64, 0);
@@ -128,10 +106,7 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
             .unwrap_or_else(|| format!("frame_{i:04}"));
 
         let (width, height) = match (intr.w, intr.h) {
-            (Some(w), Some(h)) => (
-                pixels(path, &format!("{record}.w"), w)?,
-                pixels(path, &format!("{record}.h"), h)?,
-            ),
+            (Some(w), Some(h)) => (pixels(path, &format!("{record}.w"), w)?, pixels(path, &format!("{record}.h"), h)?),
             _ => image_size(path, &base_dir, &record, frame.file_path.as_deref())?,
         };
         let (w, h) = (f64::from(width), f64::from(height));
@@ -149,10 +124,7 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
                     "none of them",
                 )
             })?;
-        let fy = intr
-            .fl_y
-            .or(intr.camera_angle_y.map(|a| from_angle(a, h)))
-            .unwrap_or(fx);
+        let fy = intr.fl_y.or(intr.camera_angle_y.map(|a| from_angle(a, h))).unwrap_or(fx);
         let (cx, cy) = (intr.cx.unwrap_or(0.5 * w), intr.cy.unwrap_or(0.5 * h));
         for (f, v) in [("fl_x", fx), ("fl_y", fy)] {
             if !(v.is_finite() && v > 0.0) {
@@ -166,12 +138,7 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
         }
         for (f, v) in [("cx", cx), ("cy", cy)] {
             if !v.is_finite() {
-                return Err(CameraError::format(
-                    path,
-                    format!("{record}.{f}"),
-                    "a finite number",
-                    v.to_string(),
-                ));
+                return Err(CameraError::format(path, format!("{record}.{f}"), "a finite number", v.to_string()));
             }
         }
 
@@ -195,9 +162,7 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
             center.as_vec3(),
         ));
     }
-    let mut warnings: Vec<String> = orthonormal_warning(path, corrected, worst)
-        .into_iter()
-        .collect();
+    let mut warnings: Vec<String> = orthonormal_warning(path, corrected, worst).into_iter().collect();
     if distorted > 0 {
         warnings.push(format!(
             "{}: {distorted} frame(s) have lens distortion coefficients (k1…k4, p1, p2); they are ignored and the images are treated as undistorted pinhole images",
@@ -209,20 +174,10 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
 
 /// The 3x3 rotation block and translation of a 4x4 (or 3x4) row-major matrix.
 fn pose(path: &Path, record: &str, m: &[Vec<f64>]) -> Result<(DMat3, DVec3), CameraError> {
-    let shape = |m: &[Vec<f64>]| {
-        format!(
-            "{} rows of lengths {:?}",
-            m.len(),
-            m.iter().map(Vec::len).collect::<Vec<_>>()
-        )
-    };
+    let shape =
+        |m: &[Vec<f64>]| format!("{} rows of lengths {:?}", m.len(), m.iter().map(Vec::len).collect::<Vec<_>>());
     if !(m.len() == 3 || m.len() == 4) || m.iter().take(3).any(|r| r.len() != 4) {
-        return Err(CameraError::format(
-            path,
-            format!("{record}.transform_matrix"),
-            "a 4x4 (or 3x4) matrix",
-            shape(m),
-        ));
+        return Err(CameraError::format(path, format!("{record}.transform_matrix"), "a 4x4 (or 3x4) matrix", shape(m)));
     }
     let col = |j: usize| DVec3::new(m[0][j], m[1][j], m[2][j]);
     let t = col(3);
@@ -241,30 +196,15 @@ fn pixels(path: &Path, record: &str, v: f64) -> Result<u32, CameraError> {
     if v.is_finite() && v >= 1.0 && v <= f64::from(u32::MAX) && v.fract() == 0.0 {
         Ok(v as u32)
     } else {
-        Err(CameraError::format(
-            path,
-            record,
-            "a positive whole number of pixels",
-            v.to_string(),
-        ))
+        Err(CameraError::format(path, record, "a positive whole number of pixels", v.to_string()))
     }
 }
 
 /// The size of a frame's image, read from its header. `file_path` is relative
 /// to the json's folder and may lack its extension.
-fn image_size(
-    path: &Path,
-    base: &Path,
-    record: &str,
-    file: Option<&str>,
-) -> Result<(u32, u32), CameraError> {
+fn image_size(path: &Path, base: &Path, record: &str, file: Option<&str>) -> Result<(u32, u32), CameraError> {
     let file = file.ok_or_else(|| {
-        CameraError::format(
-            path,
-            record,
-            "an image size (w and h) or a file_path to read it from",
-            "neither",
-        )
+        CameraError::format(path, record, "an image size (w and h) or a file_path to read it from", "neither")
     })?;
     let direct = base.join(file);
     let mut candidates = std::iter::once(direct.clone()).chain(

@@ -75,7 +75,9 @@ pub fn prepare_style(
         StyleDepthSource::Heuristic => {
             style_maps(&style.rgb, style.height, style.width, scale as usize, &HeuristicDepth::default(), polarity)
         }
-        StyleDepthSource::Image(img) => style_maps(&style.rgb, style.height, style.width, scale as usize, img, polarity),
+        StyleDepthSource::Image(img) => {
+            style_maps(&style.rgb, style.height, style.width, scale as usize, img, polarity)
+        }
     };
     let targets = maps.targets(vgg);
     PreparedStyle { maps, targets }
@@ -86,7 +88,12 @@ pub fn prepare_style(
 /// Content statistics use the pixels of the renders that the scene covers
 /// (alpha ≥ 0.5): the background is not scene content, and with a black
 /// background it would otherwise pull the content mean towards black.
-pub fn fit_color_transfer(g: &Gaussians, cameras: &[Camera], opts: &RenderOptions, style: &StyleImage) -> ColorTransfer {
+pub fn fit_color_transfer(
+    g: &Gaussians,
+    cameras: &[Camera],
+    opts: &RenderOptions,
+    style: &StyleImage,
+) -> ColorTransfer {
     let per_view: Vec<Vec<f32>> = cameras
         .par_iter()
         .map(|cam| {

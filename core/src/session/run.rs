@@ -4,14 +4,16 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use super::events::{Event, LossTerms, StepReport, StepTimings};
-use super::prepare::{PreparedStyle, StyleDepthSource, StyleImage, fit_color_transfer, prepare_style, scatter, seen_by_any, subset};
+use super::prepare::{
+    PreparedStyle, StyleDepthSource, StyleImage, fit_color_transfer, prepare_style, scatter, seen_by_any, subset,
+};
 use crate::camera::{Camera, scene_extent};
 use crate::raster::{self, RenderOptions};
 use crate::scene::Gaussians;
+use crate::style::StyleConfig;
 use crate::style::adam::Adam;
 use crate::style::regularizers::l2_distance;
 use crate::style::step::{FeatureMap, RenderedMaps, content_target, step_loss};
-use crate::style::StyleConfig;
 use crate::vision::Vgg;
 use crate::vision::canny::render_edges;
 
@@ -216,7 +218,13 @@ impl Session {
             return Err(SessionError::Config(problems));
         }
         if config.texture_scale != self.config.texture_scale || config.depth_polarity != self.config.depth_polarity {
-            self.style = prepare_style(&self.vgg, &self.inputs_style, config.texture_scale, &self.style_depth, config.depth_polarity);
+            self.style = prepare_style(
+                &self.vgg,
+                &self.inputs_style,
+                config.texture_scale,
+                &self.style_depth,
+                config.depth_polarity,
+            );
         }
         if config.resolution != self.config.resolution || config.background != self.config.background {
             self.cameras = self.base_cameras.iter().map(|c| c.with_longer_side(config.resolution)).collect();
@@ -240,7 +248,8 @@ impl Session {
         if self.targets[view].is_none() {
             let r = raster::render(&self.g_ref, &cam, &opts);
             let rgb: Vec<f32> = r.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
-            self.targets[view] = Some(ViewTarget { content: content_target(&*self.vgg, &rgb, h, w), inv_depth: r.inv_depth });
+            self.targets[view] =
+                Some(ViewTarget { content: content_target(&*self.vgg, &rgb, h, w), inv_depth: r.inv_depth });
         }
 
         let t = Instant::now();
@@ -275,13 +284,24 @@ impl Session {
         timings.raster_backward_ms = ms(t);
 
         let t = Instant::now();
-        let mut terms = LossTerms { gcfm: loss.gcfm, content: loss.content, tv: loss.tv, depth: loss.depth, total: loss.total, ..LossTerms::default() };
+        let mut terms = LossTerms {
+            gcfm: loss.gcfm,
+            content: loss.content,
+            tv: loss.tv,
+            depth: loss.depth,
+            total: loss.total,
+            ..LossTerms::default()
+        };
         let lr = self.config.lr;
         let wts = self.config.weights;
         if phase.updates_color() {
             let k = self.g.sh_coeffs() * 3;
-            let mut dc: Vec<f32> = (0..self.g.len()).flat_map(|i| [self.g.sh[i * k], self.g.sh[i * k + 1], self.g.sh[i * k + 2]]).collect();
-            let v_dc: Vec<f32> = (0..self.g.len()).flat_map(|i| [grads.v_sh[i * k], grads.v_sh[i * k + 1], grads.v_sh[i * k + 2]]).collect();
+            let mut dc: Vec<f32> = (0..self.g.len())
+                .flat_map(|i| [self.g.sh[i * k], self.g.sh[i * k + 1], self.g.sh[i * k + 2]])
+                .collect();
+            let v_dc: Vec<f32> = (0..self.g.len())
+                .flat_map(|i| [grads.v_sh[i * k], grads.v_sh[i * k + 1], grads.v_sh[i * k + 2]])
+                .collect();
             self.opt.color.step(&mut dc, &v_dc, lr.color);
             for i in 0..self.g.len() {
                 self.g.sh[i * k..i * k + 3].copy_from_slice(&dc[3 * i..3 * i + 3]);

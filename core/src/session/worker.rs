@@ -8,10 +8,10 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender, TryRecvError};
 
+use super::Snapshot;
 use super::events::{Command, Event};
 use super::run::{Session, SessionInputs};
 use super::slot::Slot;
-use super::Snapshot;
 use crate::scene::Gaussians;
 
 /// How often at most a snapshot of the whole scene is published.

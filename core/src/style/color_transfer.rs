@@ -25,10 +25,7 @@ const EIG_MAX: f64 = 1e8;
 impl ColorTransfer {
     /// The identity map.
     pub fn identity() -> Self {
-        Self {
-            a: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-            b: [0.0; 3],
-        }
+        Self { a: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], b: [0.0; 3] }
     }
 
     /// Fits the transfer from content pixels to style pixels (flat RGB triples):
@@ -123,9 +120,7 @@ fn matmul3(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
 fn sym_fn(m: &[[f64; 3]; 3], f: impl Fn(f64) -> f64) -> [[f64; 3]; 3] {
     let (s, u) = jacobi_eigen(m);
     let fs = s.map(f);
-    std::array::from_fn(|i| {
-        std::array::from_fn(|j| (0..3).map(|k| u[i][k] * fs[k] * u[j][k]).sum())
-    })
+    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| u[i][k] * fs[k] * u[j][k]).sum()))
 }
 
 /// Cyclic Jacobi eigen-decomposition of a symmetric 3×3 matrix: eigenvalues and
@@ -202,10 +197,7 @@ mod tests {
             .flat_map(|p| [0.8 * p[0] + 0.1, 0.2 * p[1] + 0.5 * p[2] + 0.3, 0.9 * p[2]])
             .collect();
         let t = ColorTransfer::fit(&content, &style);
-        let mapped: Vec<f32> = content
-            .chunks_exact(3)
-            .flat_map(|p| t.apply([p[0], p[1], p[2]]))
-            .collect();
+        let mapped: Vec<f32> = content.chunks_exact(3).flat_map(|p| t.apply([p[0], p[1], p[2]])).collect();
         let (mu_m, cov_m) = mean_cov(&mapped);
         let (mu_s, cov_s) = mean_cov(&style);
         for i in 0..3 {
@@ -218,10 +210,7 @@ mod tests {
 
     #[test]
     fn sh_application_matches_colour_map() {
-        let t = ColorTransfer {
-            a: [[0.9, 0.1, -0.2], [0.05, 1.1, 0.0], [0.3, -0.1, 0.7]],
-            b: [0.05, -0.1, 0.2],
-        };
+        let t = ColorTransfer { a: [[0.9, 0.1, -0.2], [0.05, 1.1, 0.0], [0.3, -0.1, 0.7]], b: [0.05, -0.1, 0.2] };
         let mut g = Gaussians::with_capacity(2, 0);
         for i in 0..2 {
             g.means.push([0.0; 3]);
@@ -246,10 +235,7 @@ mod tests {
 
     #[test]
     fn higher_bands_are_multiplied_by_a() {
-        let t = ColorTransfer {
-            a: [[2.0, 0.0, 0.0], [0.0, 1.0, 1.0], [0.0, 0.0, 0.5]],
-            b: [0.1, 0.0, 0.0],
-        };
+        let t = ColorTransfer { a: [[2.0, 0.0, 0.0], [0.0, 1.0, 1.0], [0.0, 0.0, 0.5]], b: [0.1, 0.0, 0.0] };
         let mut g = Gaussians::with_capacity(1, 1);
         g.means.push([0.0; 3]);
         g.log_scales.push([0.0; 3]);

@@ -7,8 +7,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::adam::AdamConfig;
-pub use crate::vision::style_depth::DepthPolarity;
 use super::schedule::{Mode, Schedule};
+pub use crate::vision::style_depth::DepthPolarity;
 
 /// Loss weights (λ of ALGORITHM.md).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -127,7 +127,10 @@ impl StyleConfig {
     pub fn problems(&self) -> Vec<String> {
         let mut out = Vec::new();
         if self.steps_per_cycle == 0 || self.cycles == 0 {
-            out.push(format!("cycles and steps per cycle must be positive (found {} and {})", self.cycles, self.steps_per_cycle));
+            out.push(format!(
+                "cycles and steps per cycle must be positive (found {} and {})",
+                self.cycles, self.steps_per_cycle
+            ));
         }
         if !(0.0..=1.0).contains(&self.ratio_geo) {
             out.push(format!("ratio_geo must lie in [0, 1], found {}", self.ratio_geo));
@@ -179,9 +182,11 @@ mod tests {
 
     #[test]
     fn presets_round_trip_and_fill_defaults() {
-        let mut c = StyleConfig::default();
-        c.mode = Mode::Joint;
-        c.weights.tv = 0.5;
+        let c = StyleConfig {
+            mode: Mode::Joint,
+            weights: LossWeights { tv: 0.5, ..LossWeights::default() },
+            ..StyleConfig::default()
+        };
         assert_eq!(StyleConfig::from_json(&c.to_json()).expect("parse"), c);
         let partial = StyleConfig::from_json(r#"{"cycles": 3, "weights": {"gcfm": 1.5}}"#).expect("parse");
         assert_eq!(partial.cycles, 3);

@@ -6,11 +6,7 @@
 /// Mean squared difference of two feature maps (any layout, same length) and
 /// its gradient with respect to `features`.
 pub fn content_loss(features: &[f32], content_features: &[f32]) -> (f32, Vec<f32>) {
-    assert_eq!(
-        features.len(),
-        content_features.len(),
-        "content_loss: feature sizes differ"
-    );
+    assert_eq!(features.len(), content_features.len(), "content_loss: feature sizes differ");
     let n = features.len().max(1) as f64;
     let mut sum = 0f64;
     let scale = (2.0 / n) as f32;

@@ -49,36 +49,17 @@ impl StyleFeatures {
     pub fn new(feats: [Vec<f32>; 3], channels: usize, height: usize, width: usize) -> Self {
         let m = height * width;
         for f in &feats {
-            assert_eq!(
-                f.len(),
-                channels * m,
-                "StyleFeatures: feature size mismatch"
-            );
+            assert_eq!(f.len(), channels * m, "StyleFeatures: feature size mismatch");
         }
-        let modal_sq: Vec<Vec<f64>> = feats
-            .iter()
-            .map(|f| column_sq_norms(f, channels, m))
-            .collect();
+        let modal_sq: Vec<Vec<f64>> = feats.iter().map(|f| column_sq_norms(f, channels, m)).collect();
         let joint_inv_norm = (0..m)
             .map(|y| {
                 let sq: f64 = modal_sq.iter().map(|s| s[y]).sum();
                 (1.0 / ((sq + EPS).sqrt() + EPS)) as f32
             })
             .collect();
-        let modal_inv_norm = std::array::from_fn(|k| {
-            modal_sq[k]
-                .iter()
-                .map(|&s| 1.0 / (s.sqrt() + EPS))
-                .collect()
-        });
-        Self {
-            channels,
-            height,
-            width,
-            feats,
-            joint_inv_norm,
-            modal_inv_norm,
-        }
+        let modal_inv_norm = std::array::from_fn(|k| modal_sq[k].iter().map(|&s| 1.0 / (s.sqrt() + EPS)).collect());
+        Self { channels, height, width, feats, joint_inv_norm, modal_inv_norm }
     }
 
     /// Number of style positions.
@@ -179,17 +160,10 @@ fn gemm_tile(
 pub fn match_features(style: &StyleFeatures, rendered: [&[f32]; 3], n: usize) -> Matches {
     let (c, m) = (style.channels, style.positions());
     for r in &rendered {
-        assert_eq!(
-            r.len(),
-            c * n,
-            "match_features: rendered feature size mismatch"
-        );
+        assert_eq!(r.len(), c * n, "match_features: rendered feature size mismatch");
     }
     if n == 0 || m == 0 {
-        return Matches {
-            best: vec![0; n],
-            worst: vec![0; n],
-        };
+        return Matches { best: vec![0; n], worst: vec![0; n] };
     }
     let joint_sq: Vec<f64> = {
         let per: Vec<Vec<f64>> = rendered.iter().map(|r| column_sq_norms(r, c, n)).collect();
@@ -214,20 +188,13 @@ pub fn match_features(style: &StyleFeatures, rendered: [&[f32]; 3], n: usize) ->
                     *s *= inv;
                 }
                 let margin = (TIE_MARGIN * joint_sq[x0 + i].sqrt()) as f32;
-                best.push(decide(row, margin, true, &mut cands, |y| {
-                    exact_score(style, &rendered, n, x0 + i, y)
-                }));
-                worst.push(decide(row, margin, false, &mut cands, |y| {
-                    exact_score(style, &rendered, n, x0 + i, y)
-                }));
+                best.push(decide(row, margin, true, &mut cands, |y| exact_score(style, &rendered, n, x0 + i, y)));
+                worst.push(decide(row, margin, false, &mut cands, |y| exact_score(style, &rendered, n, x0 + i, y)));
             }
             (best, worst)
         })
         .collect();
-    let mut out = Matches {
-        best: Vec::with_capacity(n),
-        worst: Vec::with_capacity(n),
-    };
+    let mut out = Matches { best: Vec::with_capacity(n), worst: Vec::with_capacity(n) };
     for (b, w) in parts {
         out.best.extend(b);
         out.worst.extend(w);
@@ -237,13 +204,7 @@ pub fn match_features(style: &StyleFeatures, rendered: [&[f32]; 3], n: usize) ->
 
 /// Index of the largest (`want_max`) or smallest score, the first on ties;
 /// candidates within `margin` of it are re-scored exactly.
-fn decide(
-    row: &[f32],
-    margin: f32,
-    want_max: bool,
-    cands: &mut Vec<usize>,
-    exact: impl Fn(usize) -> f64,
-) -> u32 {
+fn decide(row: &[f32], margin: f32, want_max: bool, cands: &mut Vec<usize>, exact: impl Fn(usize) -> f64) -> u32 {
     let better = |a: f32, b: f32| if want_max { a > b } else { a < b };
     let mut arg = 0;
     for (y, &s) in row.iter().enumerate() {
@@ -253,12 +214,7 @@ fn decide(
     }
     let top = row[arg];
     cands.clear();
-    cands.extend(
-        row.iter()
-            .enumerate()
-            .filter(|&(_, &s)| (s - top).abs() <= margin)
-            .map(|(y, _)| y),
-    );
+    cands.extend(row.iter().enumerate().filter(|&(_, &s)| (s - top).abs() <= margin).map(|(y, _)| y));
     if cands.len() <= 1 {
         return arg as u32;
     }
@@ -295,9 +251,7 @@ pub fn match_features_dense(style: &StyleFeatures, rendered: [&[f32]; 3], n: usi
     let m = style.positions();
     let mut out = Matches::default();
     for x in 0..n {
-        let scores: Vec<f64> = (0..m)
-            .map(|y| exact_score(style, &rendered, n, x, y))
-            .collect();
+        let scores: Vec<f64> = (0..m).map(|y| exact_score(style, &rendered, n, x, y)).collect();
         let mut b = 0;
         let mut w = 0;
         for y in 0..m {
@@ -322,31 +276,12 @@ pub fn gcfm_loss(style: &StyleFeatures, rendered: [&[f32]; 3], n: usize) -> Gcfm
 }
 
 /// [`gcfm_loss`] with given matches.
-pub fn gcfm_loss_with_matches(
-    style: &StyleFeatures,
-    rendered: [&[f32]; 3],
-    n: usize,
-    matches: Matches,
-) -> GcfmOutput {
+pub fn gcfm_loss_with_matches(style: &StyleFeatures, rendered: [&[f32]; 3], n: usize, matches: Matches) -> GcfmOutput {
     let (c, m) = (style.channels, style.positions());
-    assert_eq!(
-        matches.best.len(),
-        n,
-        "gcfm_loss: one match per rendered position"
-    );
+    assert_eq!(matches.best.len(), n, "gcfm_loss: one match per rendered position");
     let per: Vec<(f64, Vec<f32>)> = (0..3)
         .into_par_iter()
-        .map(|k| {
-            modality_loss(
-                rendered[k],
-                &style.feats[k],
-                &style.modal_inv_norm[k],
-                c,
-                n,
-                m,
-                &matches,
-            )
-        })
+        .map(|k| modality_loss(rendered[k], &style.feats[k], &style.modal_inv_norm[k], c, n, m, &matches))
         .collect();
     let mut terms = [0f32; 3];
     let mut total = 0f64;
@@ -358,24 +293,11 @@ pub fn gcfm_loss_with_matches(
     }
     let mut it = grads.into_iter();
     let v_rendered = std::array::from_fn(|_| it.next().unwrap_or_default());
-    GcfmOutput {
-        loss: total as f32,
-        terms,
-        v_rendered,
-        matches,
-    }
+    GcfmOutput { loss: total as f32, terms, v_rendered, matches }
 }
 
 /// One modality's `mean(1 − cos⁺) + mean(1 + cos⁻)` and its gradient.
-fn modality_loss(
-    r: &[f32],
-    s: &[f32],
-    s_inv: &[f64],
-    c: usize,
-    n: usize,
-    m: usize,
-    mt: &Matches,
-) -> (f64, Vec<f32>) {
+fn modality_loss(r: &[f32], s: &[f32], s_inv: &[f64], c: usize, n: usize, m: usize, mt: &Matches) -> (f64, Vec<f32>) {
     let (mut dot_b, mut dot_w, mut sq) = (vec![0f64; n], vec![0f64; n], vec![0f64; n]);
     for ch in 0..c {
         let rr = &r[ch * n..(ch + 1) * n];
@@ -413,9 +335,7 @@ fn modality_loss(
         let ss = &s[ch * m..(ch + 1) * m];
         let gg = &mut g[ch * n..(ch + 1) * n];
         for x in 0..n {
-            gg[x] = -alpha_b[x] * ss[mt.best[x] as usize]
-                + alpha_w[x] * ss[mt.worst[x] as usize]
-                + beta[x] * rr[x];
+            gg[x] = -alpha_b[x] * ss[mt.best[x] as usize] + alpha_w[x] * ss[mt.worst[x] as usize] + beta[x] * rr[x];
         }
     }
     (loss * inv_n, g)

@@ -38,9 +38,7 @@ fn exact_copy_matches_itself() {
     let pick = [3usize, 10, 20];
     let r: [Vec<f32>; 3] = std::array::from_fn(|k| {
         let s = st.modality(k);
-        (0..c)
-            .flat_map(|ch| pick.iter().map(move |&y| s[ch * m + y]))
-            .collect()
+        (0..c).flat_map(|ch| pick.iter().map(move |&y| s[ch * m + y])).collect()
     });
     let mt = match_features(&st, [&r[0], &r[1], &r[2]], pick.len());
     assert_eq!(mt.best, vec![3, 10, 20]);
@@ -54,11 +52,7 @@ fn exact_copy_matches_itself() {
 #[ignore = "benchmark"]
 fn bench_matching() {
     let c = 768;
-    for &(n, hs, ws) in &[
-        (64 * 64, 64usize, 96usize),
-        (32 * 32, 64, 96),
-        (64 * 64, 32, 48),
-    ] {
+    for &(n, hs, ws) in &[(64 * 64, 64usize, 96usize), (32 * 32, 64, 96), (64 * 64, 32, 48)] {
         let st = style(c, hs, ws);
         let r = [feats(c, n, 4), feats(c, n, 5), feats(c, n, 6)];
         let t = std::time::Instant::now();
@@ -83,12 +77,7 @@ fn bench_matching() {
 fn gradient_matches_finite_differences() {
     let (c, n) = (8, 6);
     let st = style(c, 3, 4);
-    let r: [Vec<f32>; 3] = std::array::from_fn(|k| {
-        feats(c, n, 10 + k as u64)
-            .iter()
-            .map(|v| v + 0.05)
-            .collect()
-    });
+    let r: [Vec<f32>; 3] = std::array::from_fn(|k| feats(c, n, 10 + k as u64).iter().map(|v| v + 0.05).collect());
     let base = gcfm_loss(&st, [&r[0], &r[1], &r[2]], n);
     let mut bad = Vec::new();
     for k in 0..3 {

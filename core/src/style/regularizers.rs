@@ -10,31 +10,20 @@
 /// `‖x − x_ref‖₂` over a flat parameter array and its gradient w.r.t. `x`.
 pub fn l2_distance(x: &[f32], x_ref: &[f32]) -> (f32, Vec<f32>) {
     assert_eq!(x.len(), x_ref.len(), "l2_distance: sizes differ");
-    let sq: f64 = x
-        .iter()
-        .zip(x_ref)
-        .map(|(&a, &b)| f64::from(a - b) * f64::from(a - b))
-        .sum();
+    let sq: f64 = x.iter().zip(x_ref).map(|(&a, &b)| f64::from(a - b) * f64::from(a - b)).sum();
     let norm = sq.sqrt();
     if norm == 0.0 {
         return (0.0, vec![0.0; x.len()]);
     }
     let inv = (1.0 / norm) as f32;
-    (
-        norm as f32,
-        x.iter().zip(x_ref).map(|(&a, &b)| (a - b) * inv).collect(),
-    )
+    (norm as f32, x.iter().zip(x_ref).map(|(&a, &b)| (a - b) * inv).collect())
 }
 
 /// `mean|d − d_ref|` and its subgradient w.r.t. `d`.
 pub fn depth_l1(d: &[f32], d_ref: &[f32]) -> (f32, Vec<f32>) {
     assert_eq!(d.len(), d_ref.len(), "depth_l1: sizes differ");
     let n = d.len().max(1) as f64;
-    let sum: f64 = d
-        .iter()
-        .zip(d_ref)
-        .map(|(&a, &b)| f64::from((a - b).abs()))
-        .sum();
+    let sum: f64 = d.iter().zip(d_ref).map(|(&a, &b)| f64::from((a - b).abs())).sum();
     let k = (1.0 / n) as f32;
     let grad = d
         .iter()

@@ -42,26 +42,13 @@ pub fn style_maps(
     let rgb: Vec<f32> = small.iter().map(|&v| f32::from(v) / 255.0).collect();
     let d = style_depth_map(depth, &rgb, sh, sw, polarity);
     let edge = style_edges_from_depth(&d, sh, sw);
-    StyleMaps {
-        height: sh,
-        width: sw,
-        rgb,
-        depth: d,
-        edge,
-    }
+    StyleMaps { height: sh, width: sw, rgb, depth: d, edge }
 }
 
 impl StyleMaps {
     /// The VGG features of the three maps, ready for the per-step loss.
     pub fn targets<N: FeatureNet>(&self, net: &N) -> StyleTargets {
-        StyleTargets::new(
-            net,
-            &self.rgb,
-            &self.depth,
-            &self.edge,
-            self.height,
-            self.width,
-        )
+        StyleTargets::new(net, &self.rgb, &self.depth, &self.edge, self.height, self.width)
     }
 }
 
@@ -73,17 +60,8 @@ mod tests {
     #[test]
     fn maps_have_the_target_size_and_ranges() {
         let (h, w) = (90, 120);
-        let img: Vec<u8> = (0..h * w * 3)
-            .map(|i| ((i / 3 % w) * 2 + (i / 3 / w)) as u8)
-            .collect();
-        let m = style_maps(
-            &img,
-            h,
-            w,
-            48,
-            &HeuristicDepth::default(),
-            DepthPolarity::NearBright,
-        );
+        let img: Vec<u8> = (0..h * w * 3).map(|i| ((i / 3 % w) * 2 + (i / 3 / w)) as u8).collect();
+        let m = style_maps(&img, h, w, 48, &HeuristicDepth::default(), DepthPolarity::NearBright);
         assert_eq!((m.height, m.width), (48, 64));
         assert_eq!(m.rgb.len(), 48 * 64 * 3);
         assert!(m.depth.iter().all(|v| (0.0..=1.0).contains(v)));

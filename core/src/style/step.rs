@@ -10,9 +10,9 @@
 //! behind [`FeatureNet`] so the loss does not depend on how VGG is implemented
 //! (and tests can use a small stand-in).
 
+use super::config::LossWeights;
 use super::content::content_loss;
 use super::gcfm::{Matches, StyleFeatures, gcfm_loss};
-use super::config::LossWeights;
 use super::regularizers::depth_l1;
 use super::tv::tv_loss;
 use crate::vision::resize::{downscale_half, downscale_half_backward};
@@ -47,30 +47,16 @@ impl FeatureNet for crate::vision::Vgg {
     type State = crate::vision::VggState;
     fn features(&self, rgb: &[f32], h: usize, w: usize) -> FeatureMap {
         let f = crate::vision::Vgg::features(self, rgb, h, w);
-        FeatureMap {
-            channels: f.c,
-            height: f.h,
-            width: f.w,
-            data: f.data,
-        }
+        FeatureMap { channels: f.c, height: f.h, width: f.w, data: f.data }
     }
     fn forward(&self, rgb: &[f32], h: usize, w: usize) -> (FeatureMap, Self::State) {
         let (f, s) = crate::vision::Vgg::forward(self, rgb, h, w);
-        (
-            FeatureMap {
-                channels: f.c,
-                height: f.h,
-                width: f.w,
-                data: f.data,
-            },
-            s,
-        )
+        (FeatureMap { channels: f.c, height: f.h, width: f.w, data: f.data }, s)
     }
     fn backward(&self, state: &Self::State, v_features: &[f32]) -> Vec<f32> {
         crate::vision::Vgg::backward(self, state, v_features)
     }
 }
-
 
 /// Everything about the style the per-step loss needs, computed once per
 /// style image and scale.
@@ -88,39 +74,22 @@ pub fn replicate3(map: &[f32]) -> Vec<f32> {
 impl StyleTargets {
     /// Features of the style maps at their final size (no downscale): `rgb`
     /// HWC, `depth` and `edge` `h × w` (depth in [0, 1], edges in {0, 1}).
-    pub fn new<N: FeatureNet>(
-        net: &N,
-        rgb: &[f32],
-        depth: &[f32],
-        edge: &[f32],
-        h: usize,
-        w: usize,
-    ) -> Self {
+    pub fn new<N: FeatureNet>(net: &N, rgb: &[f32], depth: &[f32], edge: &[f32], h: usize, w: usize) -> Self {
         let inputs = [rgb.to_vec(), replicate3(depth), replicate3(edge)];
         let maps: Vec<FeatureMap> = {
             use rayon::prelude::*;
-            inputs
-                .par_iter()
-                .map(|img| net.features(img, h, w))
-                .collect()
+            inputs.par_iter().map(|img| net.features(img, h, w)).collect()
         };
         let (c, fh, fw) = (maps[0].channels, maps[0].height, maps[0].width);
         let mut it = maps.into_iter().map(|m| m.data);
         let feats = std::array::from_fn(|_| it.next().unwrap_or_default());
-        Self {
-            features: StyleFeatures::new(feats, c, fh, fw),
-        }
+        Self { features: StyleFeatures::new(feats, c, fh, fw) }
     }
 }
 
 /// The content target: features of the colour-matched render, downscaled 0.5×
 /// like the rendered image.
-pub fn content_target<N: FeatureNet>(
-    net: &N,
-    content_rgb: &[f32],
-    h: usize,
-    w: usize,
-) -> FeatureMap {
+pub fn content_target<N: FeatureNet>(net: &N, content_rgb: &[f32], h: usize, w: usize) -> FeatureMap {
     let (small, sh, sw) = downscale_half(content_rgb, h, w, 3);
     net.features(&small, sh, sw)
 }
@@ -178,11 +147,7 @@ pub struct StepLossTimings {
 /// Min-max normalisation `(d − min)/(max − min + 1e-8)` and its adjoint
 /// (ties at the min or max share the gradient equally, as autodiff does).
 fn min_max_backward(d: &[f32], v: &[f32]) -> Vec<f32> {
-    let (lo, hi) = d
-        .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| {
-            (a.min(x), b.max(x))
-        });
+    let (lo, hi) = d.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
     let r = f64::from(hi - lo) + 1e-8;
     let (mut sum_v, mut sum_vd) = (0f64, 0f64);
     for (&x, &g) in d.iter().zip(v) {

@@ -11,9 +11,7 @@ struct ToyNet {
 
 impl ToyNet {
     fn new(c: usize) -> Self {
-        let w = (0..c * 48)
-            .map(|i| (((i * 7919) % 97) as f32 / 97.0 - 0.5) * 0.4)
-            .collect();
+        let w = (0..c * 48).map(|i| (((i * 7919) % 97) as f32 / 97.0 - 0.5) * 0.4).collect();
         Self { c, w }
     }
     fn pre(&self, rgb: &[f32], h: usize, w: usize) -> (Vec<f32>, usize, usize) {
@@ -26,8 +24,7 @@ impl ToyNet {
                     for a in 0..4 {
                         for b in 0..4 {
                             for k in 0..3 {
-                                s += self.w[ch * 48 + (a * 4 + b) * 3 + k]
-                                    * rgb[((4 * i + a) * w + 4 * j + b) * 3 + k];
+                                s += self.w[ch * 48 + (a * 4 + b) * 3 + k] * rgb[((4 * i + a) * w + 4 * j + b) * 3 + k];
                             }
                         }
                     }
@@ -47,15 +44,7 @@ impl FeatureNet for ToyNet {
     fn forward(&self, rgb: &[f32], h: usize, w: usize) -> (FeatureMap, Self::State) {
         let (pre, fh, fw) = self.pre(rgb, h, w);
         let data: Vec<f32> = pre.iter().map(|v| v.tanh()).collect();
-        (
-            FeatureMap {
-                channels: self.c,
-                height: fh,
-                width: fw,
-                data: data.clone(),
-            },
-            (data, h, w),
-        )
+        (FeatureMap { channels: self.c, height: fh, width: fw, data: data.clone() }, (data, h, w))
     }
     fn backward(&self, state: &Self::State, v: &[f32]) -> Vec<f32> {
         let (f, h, w) = (&state.0, state.1, state.2);
@@ -69,8 +58,7 @@ impl FeatureNet for ToyNet {
                     for a in 0..4 {
                         for b in 0..4 {
                             for k in 0..3 {
-                                g[((4 * i + a) * w + 4 * j + b) * 3 + k] +=
-                                    d * self.w[ch * 48 + (a * 4 + b) * 3 + k];
+                                g[((4 * i + a) * w + 4 * j + b) * 3 + k] += d * self.w[ch * 48 + (a * 4 + b) * 3 + k];
                             }
                         }
                     }
@@ -100,10 +88,7 @@ fn min_max_adjoint_matches_finite_differences() {
     let f = |d: &[f32]| -> f64 {
         let lo = d.iter().cloned().fold(f32::INFINITY, f32::min);
         let hi = d.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
-        d.iter()
-            .zip(&v)
-            .map(|(&x, &g)| f64::from((x - lo) / (hi - lo + 1e-8) * g))
-            .sum()
+        d.iter().zip(&v).map(|(&x, &g)| f64::from((x - lo) / (hi - lo + 1e-8) * g)).sum()
     };
     let an = min_max_backward(&d, &v);
     for i in 0..d.len() {
@@ -125,10 +110,7 @@ fn step_loss_gradients_match_finite_differences() {
         &net,
         &noise(hs * ws * 3, 1, 0.0, 1.0),
         &noise(hs * ws, 2, 0.0, 1.0),
-        &noise(hs * ws, 9, 0.0, 1.0)
-            .iter()
-            .map(|v| v.round())
-            .collect::<Vec<_>>(),
+        &noise(hs * ws, 9, 0.0, 1.0).iter().map(|v| v.round()).collect::<Vec<_>>(),
         hs,
         ws,
     );
@@ -139,13 +121,7 @@ fn step_loss_gradients_match_finite_differences() {
     let dref = noise(h * w, 8, 0.3, 1.0);
     let weights = LossWeights { gcfm: 2.0, content: 0.5, tv: 0.02, depth: 0.1, ..LossWeights::default() };
     let eval = |rgb: &[f32], d: &[f32]| {
-        let maps = RenderedMaps {
-            rgb,
-            inv_depth: d,
-            edge: &edge,
-            height: h,
-            width: w,
-        };
+        let maps = RenderedMaps { rgb, inv_depth: d, edge: &edge, height: h, width: w };
         step_loss(&net, &st, maps, Some(&content), Some(&dref), &weights, true)
     };
     let base = eval(&rgb, &inv_depth);
@@ -171,24 +147,13 @@ fn step_loss_gradients_match_finite_differences() {
         let mut m = inv_depth.clone();
         m[i] -= eps;
         let (lp, lm) = (eval(&rgb, &p), eval(&rgb, &m));
-        if lp.matches != base.matches
-            || lm.matches != base.matches
-            || (inv_depth[i] - dref[i]).abs() < 2.0 * eps
-        {
+        if lp.matches != base.matches || lm.matches != base.matches || (inv_depth[i] - dref[i]).abs() < 2.0 * eps {
             continue;
         }
         let fd = (lp.total - lm.total) / (2.0 * eps);
         if (fd - base.v_inv_depth[i]).abs() > 2e-3 + 2e-2 * fd.abs() {
-            bad.push(format!(
-                "inv_depth {i}: fd {fd} analytic {}",
-                base.v_inv_depth[i]
-            ));
+            bad.push(format!("inv_depth {i}: fd {fd} analytic {}", base.v_inv_depth[i]));
         }
     }
-    assert!(
-        bad.is_empty(),
-        "{} failures:\n{}",
-        bad.len(),
-        bad.join("\n")
-    );
+    assert!(bad.is_empty(), "{} failures:\n{}", bad.len(), bad.join("\n"));
 }

@@ -51,9 +51,7 @@ mod tests {
     #[test]
     fn finite_difference() {
         let (h, w, c) = (4, 5, 3);
-        let img: Vec<f32> = (0..h * w * c)
-            .map(|i| ((i * 29) % 31) as f32 / 31.0)
-            .collect();
+        let img: Vec<f32> = (0..h * w * c).map(|i| ((i * 29) % 31) as f32 / 31.0).collect();
         let (_, g) = tv_loss(&img, h, w, c);
         let mut bad = Vec::new();
         for i in 0..img.len() {

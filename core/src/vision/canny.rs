@@ -29,11 +29,7 @@ pub struct CannyParams {
 impl Default for CannyParams {
     /// The algorithm's thresholds: low 25, high 200, no blur.
     fn default() -> Self {
-        Self {
-            low: 25.0,
-            high: 200.0,
-            blur_sigma: None,
-        }
+        Self { low: 25.0, high: 200.0, blur_sigma: None }
     }
 }
 
@@ -61,11 +57,7 @@ pub fn canny(img: &[u8], h: usize, w: usize, channels: usize, params: &CannyPara
     let mut map = vec![1u8; h * w];
     let mut stack = Vec::new();
     let m_at = |i: isize, j: isize| -> i32 {
-        if i < 0 || j < 0 || i >= h as isize || j >= w as isize {
-            0
-        } else {
-            mag[i as usize * w + j as usize]
-        }
+        if i < 0 || j < 0 || i >= h as isize || j >= w as isize { 0 } else { mag[i as usize * w + j as usize] }
     };
     const SHIFT: i32 = 15;
     let tg22 = (0.414_213_562_373_095_05_f64 * f64::from(1 << SHIFT) + 0.5) as i64;
@@ -157,14 +149,8 @@ fn sobel_max_channel(img: &[u8], h: usize, w: usize, c: usize) -> (Vec<i32>, Vec
 
 /// Separable Gaussian blur of an 8-bit image with replicated borders, rounded.
 fn gaussian_blur_u8(img: &[u8], h: usize, w: usize, c: usize, sigma: f32) -> Vec<u8> {
-    let radius = if sigma <= 1.1 {
-        2
-    } else {
-        (3.0 * sigma).ceil() as isize
-    };
-    let mut k: Vec<f32> = (-radius..=radius)
-        .map(|t| (-(t * t) as f32 / (2.0 * sigma * sigma)).exp())
-        .collect();
+    let radius = if sigma <= 1.1 { 2 } else { (3.0 * sigma).ceil() as isize };
+    let mut k: Vec<f32> = (-radius..=radius).map(|t| (-(t * t) as f32 / (2.0 * sigma * sigma)).exp()).collect();
     let s: f32 = k.iter().sum();
     k.iter_mut().for_each(|v| *v /= s);
     let clampi = |v: isize, n: usize| v.clamp(0, n as isize - 1) as usize;
@@ -201,14 +187,8 @@ fn gaussian_blur_u8(img: &[u8], h: usize, w: usize, c: usize, sigma: f32) -> Vec
 /// values {0, 1}. The channels are visited in OpenCV's BGR order so that ties
 /// between channels resolve as in the reference.
 pub fn style_edges(jet_rgb: &[u8], h: usize, w: usize) -> Vec<f32> {
-    let bgr: Vec<u8> = jet_rgb
-        .chunks_exact(3)
-        .flat_map(|p| [p[2], p[1], p[0]])
-        .collect();
-    canny(&bgr, h, w, 3, &CannyParams::default())
-        .into_iter()
-        .map(f32::from)
-        .collect()
+    let bgr: Vec<u8> = jet_rgb.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]]).collect();
+    canny(&bgr, h, w, 3, &CannyParams::default()).into_iter().map(f32::from).collect()
 }
 
 /// Style edges straight from a normalised style depth map (`h × w`, [0, 1]):
@@ -224,18 +204,10 @@ pub fn style_edges_from_depth(depth: &[f32], h: usize, w: usize) -> Vec<f32> {
 /// {0, ⅓, ⅔, 1}. A constant for the optimiser (no gradient).
 pub fn render_edges(rgb: &[f32], h: usize, w: usize) -> Vec<f32> {
     assert_eq!(rgb.len(), h * w * 3, "render_edges: image size mismatch");
-    let (lo, hi) = rgb
-        .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
+    let (lo, hi) = rgb.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
     let range = hi - lo;
     let to_u8 = |v: f32| {
-        if range > 0.0 {
-            ((v - lo) / range * 255.0).clamp(0.0, 255.0) as u8
-        } else {
-            0
-        }
+        if range > 0.0 { ((v - lo) / range * 255.0).clamp(0.0, 255.0) as u8 } else { 0 }
     };
     let mut acc = vec![0f32; h * w];
     for ch in 0..3 {
@@ -279,22 +251,10 @@ mod tests {
         }
         // Every side of the square carries an edge near its border.
         for t in 10..22 {
-            assert!(
-                (7..=8).any(|i| e[i * w + t] == 1),
-                "top edge missing at column {t}"
-            );
-            assert!(
-                (23..=24).any(|i| e[i * w + t] == 1),
-                "bottom edge missing at column {t}"
-            );
-            assert!(
-                (7..=8).any(|j| e[t * w + j] == 1),
-                "left edge missing at row {t}"
-            );
-            assert!(
-                (23..=24).any(|j| e[t * w + j] == 1),
-                "right edge missing at row {t}"
-            );
+            assert!((7..=8).any(|i| e[i * w + t] == 1), "top edge missing at column {t}");
+            assert!((23..=24).any(|i| e[i * w + t] == 1), "bottom edge missing at column {t}");
+            assert!((7..=8).any(|j| e[t * w + j] == 1), "left edge missing at row {t}");
+            assert!((23..=24).any(|j| e[t * w + j] == 1), "right edge missing at row {t}");
         }
         // Thin edges: one pixel across per side (non-maximum suppression).
         let row: u32 = (0..h).map(|i| u32::from(e[i * w + 16])).sum();
@@ -307,25 +267,13 @@ mod tests {
         // A step of 12 gives |gx| = 48 on the edge: above 25, below 200: weak only.
         let weak = canny(&square(h, w, 100, 112), h, w, 1, &CannyParams::default());
         assert!(weak.iter().all(|&v| v == 0));
-        let low = CannyParams {
-            low: 10.0,
-            high: 40.0,
-            blur_sigma: None,
-        };
+        let low = CannyParams { low: 10.0, high: 40.0, blur_sigma: None };
         let strong = canny(&square(h, w, 100, 112), h, w, 1, &low);
         assert!(strong.contains(&1));
         // A straight step of 6 (|gx| = 24) stays below low = 25 even with high
         // lowered; one of 7 (|gx| = 28) passes.
-        let p = CannyParams {
-            low: 25.0,
-            high: 26.0,
-            blur_sigma: None,
-        };
-        let step = |d: u8| -> Vec<u8> {
-            (0..h * w)
-                .map(|i| if i % w >= 16 { 100 + d } else { 100 })
-                .collect()
-        };
+        let p = CannyParams { low: 25.0, high: 26.0, blur_sigma: None };
+        let step = |d: u8| -> Vec<u8> { (0..h * w).map(|i| if i % w >= 16 { 100 + d } else { 100 }).collect() };
         assert!(canny(&step(6), h, w, 1, &p).iter().all(|&v| v == 0));
         let e = canny(&step(7), h, w, 1, &p);
         assert!((0..h).all(|i| e[i * w + 15] == 1));
@@ -371,10 +319,7 @@ mod tests {
     #[test]
     fn blur_option_runs_and_keeps_strong_edges() {
         let (h, w) = (32, 32);
-        let p = CannyParams {
-            blur_sigma: Some(1.0),
-            ..CannyParams::default()
-        };
+        let p = CannyParams { blur_sigma: Some(1.0), ..CannyParams::default() };
         let e = canny(&square(h, w, 0, 255), h, w, 1, &p);
         assert!(e.contains(&1));
     }

@@ -86,15 +86,9 @@ pub fn apply_jet(grey: &[u8]) -> Vec<u8> {
 /// colouring: min-max again (`(d − min)/(max − min + 1e-8)`), times 255,
 /// truncated (`astype(uint8)`).
 pub fn to_u8_truncating(map: &[f32]) -> Vec<u8> {
-    let (lo, hi) = map
-        .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
+    let (lo, hi) = map.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
     let range = hi - lo + 1e-8;
-    map.iter()
-        .map(|&v| (((v - lo) / range) * 255.0).clamp(0.0, 255.0) as u8)
-        .collect()
+    map.iter().map(|&v| (((v - lo) / range) * 255.0).clamp(0.0, 255.0) as u8).collect()
 }
 
 #[cfg(test)]

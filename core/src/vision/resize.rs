@@ -72,10 +72,7 @@ pub fn resize_area(src: &[f32], h: usize, w: usize, c: usize, oh: usize, ow: usi
     for (i, taps) in ty.iter().enumerate() {
         for j in 0..ow {
             for k in 0..c {
-                let v: f64 = taps
-                    .iter()
-                    .map(|&(s, wt)| wt * tmp[(s * ow + j) * c + k])
-                    .sum();
+                let v: f64 = taps.iter().map(|&(s, wt)| wt * tmp[(s * ow + j) * c + k]).sum();
                 out[(i * ow + j) * c + k] = v as f32;
             }
         }
@@ -88,8 +85,7 @@ pub fn resize_area(src: &[f32], h: usize, w: usize, c: usize, oh: usize, ow: usi
 /// factors use the area weights and round half to even.
 pub fn resize_area_u8(src: &[u8], h: usize, w: usize, c: usize, oh: usize, ow: usize) -> Vec<u8> {
     assert_eq!(src.len(), h * w * c, "resize_area_u8: image size mismatch");
-    let integer =
-        oh > 0 && ow > 0 && h.is_multiple_of(oh) && w.is_multiple_of(ow) && oh <= h && ow <= w;
+    let integer = oh > 0 && ow > 0 && h.is_multiple_of(oh) && w.is_multiple_of(ow) && oh <= h && ow <= w;
     if integer {
         let (fy, fx) = (h / oh, w / ow);
         let area = (fy * fx) as u32;
@@ -110,10 +106,7 @@ pub fn resize_area_u8(src: &[u8], h: usize, w: usize, c: usize, oh: usize, ow: u
         return out;
     }
     let f: Vec<f32> = src.iter().map(|&v| f32::from(v)).collect();
-    resize_area(&f, h, w, c, oh, ow)
-        .into_iter()
-        .map(|v| v.round_ties_even().clamp(0.0, 255.0) as u8)
-        .collect()
+    resize_area(&f, h, w, c, oh, ow).into_iter().map(|v| v.round_ties_even().clamp(0.0, 255.0) as u8).collect()
 }
 
 /// Source taps of PyTorch's bilinear (`align_corners=False`) along one axis,
@@ -132,24 +125,8 @@ fn bilinear_taps(src: usize, dst: usize, scale: f64) -> Vec<(usize, usize, f32, 
 
 /// Bilinear resize to `oh × ow` as `F.interpolate(size=(oh, ow),
 /// mode='bilinear', align_corners=False)` (no antialiasing).
-pub fn resize_bilinear(
-    src: &[f32],
-    h: usize,
-    w: usize,
-    c: usize,
-    oh: usize,
-    ow: usize,
-) -> Vec<f32> {
-    resize_bilinear_scaled(
-        src,
-        h,
-        w,
-        c,
-        oh,
-        ow,
-        h as f64 / oh as f64,
-        w as f64 / ow as f64,
-    )
+pub fn resize_bilinear(src: &[f32], h: usize, w: usize, c: usize, oh: usize, ow: usize) -> Vec<f32> {
+    resize_bilinear_scaled(src, h, w, c, oh, ow, h as f64 / oh as f64, w as f64 / ow as f64)
 }
 
 /// Bilinear resize with explicit source-pixels-per-output-pixel scales (what
@@ -173,8 +150,8 @@ pub fn resize_bilinear_scaled(
         for (j, &(x0, x1, wx0, wx1)) in tx.iter().enumerate() {
             for k in 0..c {
                 let p = |y: usize, x: usize| src[(y * w + x) * c + k];
-                out[(i * ow + j) * c + k] = wy0 * (wx0 * p(y0, x0) + wx1 * p(y0, x1))
-                    + wy1 * (wx0 * p(y1, x0) + wx1 * p(y1, x1));
+                out[(i * ow + j) * c + k] =
+                    wy0 * (wx0 * p(y0, x0) + wx1 * p(y0, x1)) + wy1 * (wx0 * p(y1, x0) + wx1 * p(y1, x1));
             }
         }
     }
@@ -194,11 +171,7 @@ pub fn resize_bilinear_scaled_backward(
     scale_h: f64,
     scale_w: f64,
 ) -> Vec<f32> {
-    assert_eq!(
-        v_out.len(),
-        oh * ow * c,
-        "resize_bilinear_backward: size mismatch"
-    );
+    assert_eq!(v_out.len(), oh * ow * c, "resize_bilinear_backward: size mismatch");
     let ty = bilinear_taps(h, oh, scale_h);
     let tx = bilinear_taps(w, ow, scale_w);
     let mut v = vec![0f32; h * w * c];
@@ -221,11 +194,7 @@ pub fn resize_bilinear_scaled_backward(
 /// `(floor(h/2), floor(w/2))`.
 pub fn downscale_half(src: &[f32], h: usize, w: usize, c: usize) -> (Vec<f32>, usize, usize) {
     let (oh, ow) = (h / 2, w / 2);
-    (
-        resize_bilinear_scaled(src, h, w, c, oh, ow, 2.0, 2.0),
-        oh,
-        ow,
-    )
+    (resize_bilinear_scaled(src, h, w, c, oh, ow, 2.0, 2.0), oh, ow)
 }
 
 /// Adjoint of [`downscale_half`]: `v_out` is `floor(h/2) × floor(w/2) × c`.
@@ -238,9 +207,7 @@ mod tests {
     use super::*;
 
     fn ramp(h: usize, w: usize, c: usize) -> Vec<f32> {
-        (0..h * w * c)
-            .map(|i| ((i * 37) % 101) as f32 / 100.0)
-            .collect()
+        (0..h * w * c).map(|i| ((i * 37) % 101) as f32 / 100.0).collect()
     }
 
     #[test]
@@ -253,11 +220,8 @@ mod tests {
             for j in 0..ow {
                 for k in 0..c {
                     let p = |y: usize, x: usize| img[(y * w + x) * c + k];
-                    let avg = (p(2 * i, 2 * j)
-                        + p(2 * i + 1, 2 * j)
-                        + p(2 * i, 2 * j + 1)
-                        + p(2 * i + 1, 2 * j + 1))
-                        / 4.0;
+                    let avg =
+                        (p(2 * i, 2 * j) + p(2 * i + 1, 2 * j) + p(2 * i, 2 * j + 1) + p(2 * i + 1, 2 * j + 1)) / 4.0;
                     assert!((out[(i * ow + j) * c + k] - avg).abs() < 1e-6);
                 }
             }
@@ -266,25 +230,16 @@ mod tests {
 
     #[test]
     fn backward_is_the_adjoint() {
-        for &(h, w, oh, ow) in &[
-            (7usize, 9usize, 3usize, 4usize),
-            (5, 6, 11, 13),
-            (8, 8, 4, 4),
-        ] {
+        for &(h, w, oh, ow) in &[(7usize, 9usize, 3usize, 4usize), (5, 6, 11, 13), (8, 8, 4, 4)] {
             let c = 2;
             let x = ramp(h, w, c);
-            let y: Vec<f32> = (0..oh * ow * c)
-                .map(|i| ((i * 13) % 17) as f32 / 7.0 - 1.0)
-                .collect();
+            let y: Vec<f32> = (0..oh * ow * c).map(|i| ((i * 13) % 17) as f32 / 7.0 - 1.0).collect();
             let (sh, sw) = (h as f64 / oh as f64, w as f64 / ow as f64);
             let ax = resize_bilinear_scaled(&x, h, w, c, oh, ow, sh, sw);
             let aty = resize_bilinear_scaled_backward(&y, h, w, c, oh, ow, sh, sw);
             let lhs: f64 = ax.iter().zip(&y).map(|(a, b)| f64::from(a * b)).sum();
             let rhs: f64 = x.iter().zip(&aty).map(|(a, b)| f64::from(a * b)).sum();
-            assert!(
-                (lhs - rhs).abs() < 1e-4 * lhs.abs().max(1.0),
-                "{lhs} vs {rhs}"
-            );
+            assert!((lhs - rhs).abs() < 1e-4 * lhs.abs().max(1.0), "{lhs} vs {rhs}");
         }
     }
 
@@ -297,17 +252,10 @@ mod tests {
         // 3 -> 2: weights 2/3, 1/3 and 1/3, 2/3.
         let row = vec![0.0, 3.0, 6.0];
         let out = resize_area(&row, 1, 3, 1, 1, 2);
-        assert!(
-            (out[0] - 1.0).abs() < 1e-6 && (out[1] - 5.0).abs() < 1e-6,
-            "{out:?}"
-        );
+        assert!((out[0] - 1.0).abs() < 1e-6 && (out[1] - 5.0).abs() < 1e-6, "{out:?}");
         // Constant images stay constant.
         let cst = vec![0.7f32; 7 * 11 * 3];
-        assert!(
-            resize_area(&cst, 7, 11, 3, 3, 5)
-                .iter()
-                .all(|v| (v - 0.7).abs() < 1e-6)
-        );
+        assert!(resize_area(&cst, 7, 11, 3, 3, 5).iter().all(|v| (v - 0.7).abs() < 1e-6));
         let u = resize_area_u8(&[10, 20, 30, 41], 2, 2, 1, 1, 1);
         assert_eq!(u, vec![25]);
     }

@@ -31,9 +31,7 @@ pub enum StyleDepthError {
         source: exr::error::Error,
     },
     /// The file holds no usable channel.
-    #[error(
-        "depth image {path}: expected at least one channel and a non-empty image, found {found}"
-    )]
+    #[error("depth image {path}: expected at least one channel and a non-empty image, found {found}")]
     Empty {
         /// The file.
         path: String,
@@ -64,11 +62,7 @@ pub trait StyleDepthProvider {
 
 /// Min-max normalisation as the reference does it: `(d − min)/(max − min + 1e-8)`.
 pub fn min_max_normalise(d: &[f32]) -> Vec<f32> {
-    let (lo, hi) = d
-        .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
+    let (lo, hi) = d.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
     let r = hi - lo + 1e-8;
     d.iter().map(|&v| (v - lo) / r).collect()
 }
@@ -113,61 +107,33 @@ impl DepthImage {
     /// [`DepthImage::near_is_larger`] when a file says otherwise.
     pub fn from_file(path: &Path) -> Result<Self, StyleDepthError> {
         let shown = path.display().to_string();
-        let is_exr = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+        let is_exr = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("exr"));
         if is_exr {
             return Self::from_exr(path, shown);
         }
-        let img = image::open(path).map_err(|source| StyleDepthError::Image {
-            path: shown.clone(),
-            source,
-        })?;
+        let img = image::open(path).map_err(|source| StyleDepthError::Image { path: shown.clone(), source })?;
         let luma = img.to_luma16();
         let (width, height) = (luma.width() as usize, luma.height() as usize);
         if width == 0 || height == 0 {
-            return Err(StyleDepthError::Empty {
-                path: shown,
-                found: "an empty image".into(),
-            });
+            return Err(StyleDepthError::Empty { path: shown, found: "an empty image".into() });
         }
-        let values = luma
-            .as_raw()
-            .iter()
-            .map(|&v| f32::from(v) / 65535.0)
-            .collect();
-        Ok(Self {
-            values,
-            height,
-            width,
-            near_is_larger: true,
-        })
+        let values = luma.as_raw().iter().map(|&v| f32::from(v) / 65535.0).collect();
+        Ok(Self { values, height, width, near_is_larger: true })
     }
 
     fn from_exr(path: &Path, shown: String) -> Result<Self, StyleDepthError> {
         use exr::prelude::FlatSamples;
-        let img = exr::prelude::read_first_flat_layer_from_file(path).map_err(|source| {
-            StyleDepthError::Exr {
-                path: shown.clone(),
-                source,
-            }
-        })?;
+        let img = exr::prelude::read_first_flat_layer_from_file(path)
+            .map_err(|source| StyleDepthError::Exr { path: shown.clone(), source })?;
         let layer = &img.layer_data;
         let (width, height) = (layer.size.0, layer.size.1);
         let list = &layer.channel_data.list;
         let pick = ["Z", "depth", "Y", "R"]
             .iter()
-            .find_map(|n| {
-                list.iter()
-                    .find(|c| c.name.to_string().eq_ignore_ascii_case(n))
-            })
+            .find_map(|n| list.iter().find(|c| c.name.to_string().eq_ignore_ascii_case(n)))
             .or_else(|| list.first());
         let Some(ch) = pick else {
-            return Err(StyleDepthError::Empty {
-                path: shown,
-                found: "no channels".into(),
-            });
+            return Err(StyleDepthError::Empty { path: shown, found: "no channels".into() });
         };
         let values: Vec<f32> = match &ch.sample_data {
             FlatSamples::F16(v) => v.iter().map(|x| x.to_f32()).collect(),
@@ -180,12 +146,7 @@ impl DepthImage {
                 found: format!("{} samples for {width}×{height}", values.len()),
             });
         }
-        Ok(Self {
-            values,
-            height,
-            width,
-            near_is_larger: false,
-        })
+        Ok(Self { values, height, width, near_is_larger: false })
     }
 }
 
@@ -195,16 +156,9 @@ impl StyleDepthProvider for DepthImage {
         let finite = |v: f32| if v.is_finite() { v } else { f32::NAN };
         let sign = if self.near_is_larger { 1.0 } else { -1.0 };
         let vals: Vec<f32> = self.values.iter().map(|&v| finite(v) * sign).collect();
-        let far = vals
-            .iter()
-            .copied()
-            .filter(|v| !v.is_nan())
-            .fold(f32::INFINITY, f32::min);
+        let far = vals.iter().copied().filter(|v| !v.is_nan()).fold(f32::INFINITY, f32::min);
         let far = if far.is_finite() { far } else { 0.0 };
-        let vals: Vec<f32> = vals
-            .into_iter()
-            .map(|v| if v.is_nan() { far } else { v })
-            .collect();
+        let vals: Vec<f32> = vals.into_iter().map(|v| if v.is_nan() { far } else { v }).collect();
         if (self.height, self.width) == (h, w) {
             vals
         } else {
@@ -241,12 +195,7 @@ pub struct HeuristicDepth {
 
 impl Default for HeuristicDepth {
     fn default() -> Self {
-        Self {
-            position_weight: 0.5,
-            sharpness_weight: 0.3,
-            haze_weight: 0.2,
-            smoothing: 0.03,
-        }
+        Self { position_weight: 0.5, sharpness_weight: 0.3, haze_weight: 0.2, smoothing: 0.03 }
     }
 }
 
@@ -254,10 +203,7 @@ impl StyleDepthProvider for HeuristicDepth {
     fn estimate(&self, rgb: &[f32], h: usize, w: usize) -> Vec<f32> {
         assert_eq!(rgb.len(), h * w * 3, "HeuristicDepth: image size mismatch");
         let n = h * w;
-        let lum: Vec<f32> = rgb
-            .chunks_exact(3)
-            .map(|p| 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2])
-            .collect();
+        let lum: Vec<f32> = rgb.chunks_exact(3).map(|p| 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]).collect();
         // Local contrast: gradient magnitude of luminance, smoothed.
         let mut grad = vec![0f32; n];
         for i in 0..h {
@@ -283,16 +229,11 @@ impl StyleDepthProvider for HeuristicDepth {
         let haze = min_max_normalise(&box_blur(&haze, h, w, r));
         let mut d = vec![0f32; n];
         for i in 0..h {
-            let pos = if h > 1 {
-                i as f32 / (h - 1) as f32
-            } else {
-                0.5
-            };
+            let pos = if h > 1 { i as f32 / (h - 1) as f32 } else { 0.5 };
             for j in 0..w {
                 let p = i * w + j;
-                d[p] = self.position_weight * pos
-                    + self.sharpness_weight * sharp[p]
-                    + self.haze_weight * (1.0 - haze[p]);
+                d[p] =
+                    self.position_weight * pos + self.sharpness_weight * sharp[p] + self.haze_weight * (1.0 - haze[p]);
             }
         }
         box_blur(&d, h, w, r)
@@ -322,33 +263,20 @@ mod tests {
 
     #[test]
     fn normalised_and_polarity() {
-        let img = DepthImage {
-            values: vec![2.0, 4.0, 6.0, 8.0],
-            height: 2,
-            width: 2,
-            near_is_larger: true,
-        };
+        let img = DepthImage { values: vec![2.0, 4.0, 6.0, 8.0], height: 2, width: 2, near_is_larger: true };
         let d = style_depth_map(&img, &[0.0; 12], 2, 2, DepthPolarity::NearBright);
         assert!((d[0]).abs() < 1e-6 && (d[3] - 1.0).abs() < 1e-6);
         let d2 = style_depth_map(&img, &[0.0; 12], 2, 2, DepthPolarity::NearDark);
         assert!((d2[0] - 1.0).abs() < 1e-6 && d2[3].abs() < 1e-6);
         // Metric depth: small = near = bright after normalisation.
-        let metric = DepthImage {
-            near_is_larger: false,
-            ..img
-        };
+        let metric = DepthImage { near_is_larger: false, ..img };
         let d3 = style_depth_map(&metric, &[0.0; 12], 2, 2, DepthPolarity::NearBright);
         assert!((d3[0] - 1.0).abs() < 1e-6);
     }
 
     #[test]
     fn user_depth_is_resized() {
-        let img = DepthImage {
-            values: vec![0.0, 1.0, 0.0, 1.0],
-            height: 2,
-            width: 2,
-            near_is_larger: true,
-        };
+        let img = DepthImage { values: vec![0.0, 1.0, 0.0, 1.0], height: 2, width: 2, near_is_larger: true };
         let d = img.estimate(&[], 4, 6);
         assert_eq!(d.len(), 24);
         assert!(d[0] < d[5]);
@@ -359,9 +287,8 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("gast-depth-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("temp dir");
         let p = dir.join("d.png");
-        let buf = image::ImageBuffer::<image::Luma<u16>, _>::from_fn(4, 3, |x, y| {
-            image::Luma([(x * 1000 + y * 10) as u16])
-        });
+        let buf =
+            image::ImageBuffer::<image::Luma<u16>, _>::from_fn(4, 3, |x, y| image::Luma([(x * 1000 + y * 10) as u16]));
         buf.save(&p).expect("write png");
         let d = DepthImage::from_file(&p).expect("read png");
         assert_eq!((d.height, d.width), (3, 4));
@@ -372,16 +299,8 @@ mod tests {
     #[test]
     fn heuristic_prefers_the_bottom_and_stays_in_range() {
         let (h, w) = (32, 24);
-        let rgb: Vec<f32> = (0..h * w * 3)
-            .map(|i| ((i * 7) % 13) as f32 / 13.0)
-            .collect();
-        let d = style_depth_map(
-            &HeuristicDepth::default(),
-            &rgb,
-            h,
-            w,
-            DepthPolarity::NearBright,
-        );
+        let rgb: Vec<f32> = (0..h * w * 3).map(|i| ((i * 7) % 13) as f32 / 13.0).collect();
+        let d = style_depth_map(&HeuristicDepth::default(), &rgb, h, w, DepthPolarity::NearBright);
         assert!(d.iter().all(|v| (0.0..=1.0).contains(v)));
         let top: f32 = d[..w].iter().sum();
         let bottom: f32 = d[(h - 1) * w..].iter().sum();

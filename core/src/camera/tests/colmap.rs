@@ -6,9 +6,7 @@ use std::path::Path;
 use glam::{Mat3, Vec3};
 
 use super::{assert_close, temp_dir};
-use crate::camera::{
-    Camera, CameraError, load, load_colmap, write_colmap_binary, write_colmap_text,
-};
+use crate::camera::{Camera, CameraError, load, load_colmap, write_colmap_binary, write_colmap_text};
 
 /// Little-endian byte builder for synthetic `.bin` files.
 #[derive(Default)]
@@ -28,8 +26,7 @@ impl B {
         self
     }
     fn f64s(mut self, vs: &[f64]) -> Self {
-        vs.iter()
-            .for_each(|v| self.0.extend_from_slice(&v.to_le_bytes()));
+        vs.iter().for_each(|v| self.0.extend_from_slice(&v.to_le_bytes()));
         self
     }
     fn name(mut self, s: &str) -> Self {
@@ -116,20 +113,8 @@ fn text_and_binary_give_identical_cameras() {
     let d = temp_dir("colmap-both");
     let txt = d.join("txt/sparse/0");
     let bin = d.join("bin/sparse/0");
-    write(
-        &txt,
-        &[
-            ("cameras.txt", CAMERAS_TXT.as_bytes()),
-            ("images.txt", IMAGES_TXT.as_bytes()),
-        ],
-    );
-    write(
-        &bin,
-        &[
-            ("cameras.bin", &cameras_bin()),
-            ("images.bin", &images_bin()),
-        ],
-    );
+    write(&txt, &[("cameras.txt", CAMERAS_TXT.as_bytes()), ("images.txt", IMAGES_TXT.as_bytes())]);
+    write(&bin, &[("cameras.bin", &cameras_bin()), ("images.bin", &images_bin())]);
     let a = load_colmap(d.join("txt")).expect("text model");
     let b = load_colmap(d.join("bin")).expect("binary model");
     assert_eq!(a.cameras, b.cameras);
@@ -137,10 +122,7 @@ fn text_and_binary_give_identical_cameras() {
     let names: Vec<&str> = a.cameras.iter().map(|c| c.name.as_str()).collect();
     assert_eq!(names, ["a.png", "b.png", "c.jpg"], "sorted by image name");
     let [ca, cb, cc] = [&a.cameras[0], &a.cameras[1], &a.cameras[2]];
-    assert_eq!(
-        (ca.width, ca.height, ca.fx, ca.fy, ca.cx, ca.cy),
-        (640, 480, 500.5, 510.25, 320.0, 240.0)
-    );
+    assert_eq!((ca.width, ca.height, ca.fx, ca.fy, ca.cx, ca.cy), (640, 480, 500.5, 510.25, 320.0, 240.0));
     assert_eq!(ca.rotation, Mat3::IDENTITY);
     assert_eq!(ca.center(), Vec3::new(0.0, 0.0, -4.0));
     // q = (½,½,½,½): 120° about (1,1,1), x → y → z → x.
@@ -149,10 +131,7 @@ fn text_and_binary_give_identical_cameras() {
     assert_eq!(cb.translation, Vec3::new(1.0, 2.0, 3.0));
     assert_eq!((cb.fx, cb.fy, cb.cx, cb.cy), (700.0, 705.0, 401.5, 299.5));
     // SIMPLE_PINHOLE shares f; an unnormalised quaternion is normalised.
-    assert_eq!(
-        (cc.fx, cc.fy, cc.cx, cc.cy, cc.width),
-        (90.0, 90.0, 50.0, 25.0, 100)
-    );
+    assert_eq!((cc.fx, cc.fy, cc.cx, cc.cy, cc.width), (90.0, 90.0, 50.0, 25.0, 100));
     assert_eq!(cc.rotation, Mat3::IDENTITY);
     // The OPENCV camera warns once that distortion is ignored.
     assert_eq!(a.warnings.len(), 1, "{:?}", a.warnings);
@@ -163,45 +142,18 @@ fn text_and_binary_give_identical_cameras() {
 fn path_forms_are_all_accepted() {
     let d = temp_dir("colmap-paths");
     let m = d.join("sparse/0");
-    write(
-        &m,
-        &[
-            ("cameras.txt", CAMERAS_TXT.as_bytes()),
-            ("images.txt", IMAGES_TXT.as_bytes()),
-        ],
-    );
-    write(
-        &m,
-        &[
-            ("cameras.bin", &cameras_bin()),
-            ("images.bin", &images_bin()),
-        ],
-    );
+    write(&m, &[("cameras.txt", CAMERAS_TXT.as_bytes()), ("images.txt", IMAGES_TXT.as_bytes())]);
+    write(&m, &[("cameras.bin", &cameras_bin()), ("images.bin", &images_bin())]);
     let want = load_colmap(&d).expect("scene folder");
     for p in [m.clone(), m.join("cameras.txt"), m.join("images.bin")] {
-        assert_eq!(
-            load_colmap(&p).expect("colmap path").cameras,
-            want.cameras,
-            "{}",
-            p.display()
-        );
-        assert_eq!(
-            load(&p).expect("detected").cameras,
-            want.cameras,
-            "{}",
-            p.display()
-        );
+        assert_eq!(load_colmap(&p).expect("colmap path").cameras, want.cameras, "{}", p.display());
+        assert_eq!(load(&p).expect("detected").cameras, want.cameras, "{}", p.display());
     }
     assert_eq!(load(&d).expect("detected from the scene folder"), want);
     // A broken binary file is not silently replaced by the text one when asked for.
     std::fs::write(m.join("images.bin"), b"junk").expect("write");
     assert!(load_colmap(&d).is_err());
-    assert_eq!(
-        load_colmap(m.join("images.txt"))
-            .expect("text chosen")
-            .cameras,
-        want.cameras
-    );
+    assert_eq!(load_colmap(m.join("images.txt")).expect("text chosen").cameras, want.cameras);
 }
 
 fn sample_cameras() -> Vec<Camera> {
@@ -247,10 +199,7 @@ fn expect_err(d: &Path, files: &[(&str, &[u8])], what: &str) -> CameraError {
     let _ = std::fs::remove_dir_all(d);
     write(d, files);
     match load_colmap(d) {
-        Ok(set) => panic!(
-            "{what}: expected an error, got {} cameras",
-            set.cameras.len()
-        ),
+        Ok(set) => panic!("{what}: expected an error, got {} cameras", set.cameras.len()),
         Err(e) => e,
     }
 }
@@ -260,26 +209,14 @@ fn truncated_binary_files_fail_cleanly() {
     let d = temp_dir("colmap-trunc");
     let (cams, ims) = (cameras_bin(), images_bin());
     for cut in 0..cams.len() {
-        expect_err(
-            &d,
-            &[("cameras.bin", &cams[..cut]), ("images.bin", &ims)],
-            &format!("cameras cut at {cut}"),
-        );
+        expect_err(&d, &[("cameras.bin", &cams[..cut]), ("images.bin", &ims)], &format!("cameras cut at {cut}"));
     }
     for cut in 0..ims.len() {
-        expect_err(
-            &d,
-            &[("cameras.bin", &cams), ("images.bin", &ims[..cut])],
-            &format!("images cut at {cut}"),
-        );
+        expect_err(&d, &[("cameras.bin", &cams), ("images.bin", &ims[..cut])], &format!("images cut at {cut}"));
     }
     let mut longer = ims.clone();
     longer.push(0);
-    let e = expect_err(
-        &d,
-        &[("cameras.bin", &cams), ("images.bin", &longer)],
-        "trailing byte",
-    );
+    let e = expect_err(&d, &[("cameras.bin", &cams), ("images.bin", &longer)], "trailing byte");
     assert!(e.to_string().contains("1 more bytes"), "{e}");
 }
 
@@ -288,49 +225,22 @@ fn absurd_binary_counts_fail_at_once() {
     let d = temp_dir("colmap-counts");
     let ims = images_bin();
     let huge = B::default().u64(u64::MAX).0;
-    let e = expect_err(
-        &d,
-        &[("cameras.bin", &huge), ("images.bin", &ims)],
-        "camera count",
-    );
-    assert!(
-        e.to_string().contains("num_cameras") && e.to_string().contains(&u64::MAX.to_string()),
-        "{e}"
-    );
-    let e = expect_err(
-        &d,
-        &[
-            ("cameras.bin", &cameras_bin()),
-            ("images.bin", &B::default().u64(1 << 40).0),
-        ],
-        "image count",
-    );
+    let e = expect_err(&d, &[("cameras.bin", &huge), ("images.bin", &ims)], "camera count");
+    assert!(e.to_string().contains("num_cameras") && e.to_string().contains(&u64::MAX.to_string()), "{e}");
+    let e =
+        expect_err(&d, &[("cameras.bin", &cameras_bin()), ("images.bin", &B::default().u64(1 << 40).0)], "image count");
     assert!(e.to_string().contains("num_reg_images"), "{e}");
     // A 2D point count far beyond the file.
     let mut bad = images_bin();
     let at = 8 + 4 + 56 + 4 + "b.png".len() + 1;
     bad[at..at + 8].copy_from_slice(&(u64::MAX / 2).to_le_bytes());
-    let e = expect_err(
-        &d,
-        &[("cameras.bin", &cameras_bin()), ("images.bin", &bad)],
-        "points count",
-    );
-    assert!(
-        e.to_string().contains("num_points2D") && e.to_string().contains("b.png"),
-        "{e}"
-    );
+    let e = expect_err(&d, &[("cameras.bin", &cameras_bin()), ("images.bin", &bad)], "points count");
+    assert!(e.to_string().contains("num_points2D") && e.to_string().contains("b.png"), "{e}");
     // Unknown model id; a size beyond u32; a zero focal length.
     let mut bad = cameras_bin();
     bad[12..16].copy_from_slice(&99i32.to_le_bytes());
-    let e = expect_err(
-        &d,
-        &[("cameras.bin", &bad), ("images.bin", &ims)],
-        "model id",
-    );
-    assert!(
-        matches!(e, CameraError::UnknownModel { .. }) && e.to_string().contains("99"),
-        "{e}"
-    );
+    let e = expect_err(&d, &[("cameras.bin", &bad), ("images.bin", &ims)], "model id");
+    assert!(matches!(e, CameraError::UnknownModel { .. }) && e.to_string().contains("99"), "{e}");
     let mut bad = cameras_bin();
     bad[16..24].copy_from_slice(&(1u64 << 33).to_le_bytes());
     let e = expect_err(&d, &[("cameras.bin", &bad), ("images.bin", &ims)], "width");
@@ -346,39 +256,16 @@ fn malformed_text_files_name_the_line_and_field() {
     let d = temp_dir("colmap-text");
     let ims = IMAGES_TXT.as_bytes();
     let cases: [(&str, &str, &str); 5] = [
-        (
-            "1 PINHOLE 640 480 500 abc 320 240\n",
-            "\"abc\"",
-            "PARAMS[1]",
-        ),
-        (
-            "1 PINHOLE 640 480 500 500 320\n",
-            "4 parameters for PINHOLE",
-            "found 3",
-        ),
-        (
-            "1 FISHEYE_X 640 480 500 500 320 240\n",
-            "FISHEYE_X",
-            "OPENCV",
-        ),
+        ("1 PINHOLE 640 480 500 abc 320 240\n", "\"abc\"", "PARAMS[1]"),
+        ("1 PINHOLE 640 480 500 500 320\n", "4 parameters for PINHOLE", "found 3"),
+        ("1 FISHEYE_X 640 480 500 500 320 240\n", "FISHEYE_X", "OPENCV"),
         ("1 PINHOLE -640 480 500 500 320 240\n", "WIDTH", "\"-640\""),
-        (
-            "1 PINHOLE 640 480 500 500 320 240\n1 PINHOLE 640 480 500 500 320 240\n",
-            "unique camera ids",
-            "camera 1",
-        ),
+        ("1 PINHOLE 640 480 500 500 320 240\n1 PINHOLE 640 480 500 500 320 240\n", "unique camera ids", "camera 1"),
     ];
     for (cams, a, b) in cases {
-        let e = expect_err(
-            &d,
-            &[("cameras.txt", cams.as_bytes()), ("images.txt", ims)],
-            cams,
-        );
+        let e = expect_err(&d, &[("cameras.txt", cams.as_bytes()), ("images.txt", ims)], cams);
         let msg = e.to_string();
-        assert!(
-            msg.contains(a) && msg.contains(b) && msg.contains("cameras.txt"),
-            "{msg}"
-        );
+        assert!(msg.contains(a) && msg.contains(b) && msg.contains("cameras.txt"), "{msg}");
     }
     let cams = CAMERAS_TXT.as_bytes();
     let cases: [(&str, &str); 5] = [
@@ -389,20 +276,9 @@ fn malformed_text_files_name_the_line_and_field() {
         ("# nothing\n", "at least one registered image"),
     ];
     for (images, a) in cases {
-        let e = expect_err(
-            &d,
-            &[("cameras.txt", cams), ("images.txt", images.as_bytes())],
-            images,
-        );
-        assert!(
-            e.to_string().contains(a) && e.to_string().contains("images.txt"),
-            "{e}"
-        );
+        let e = expect_err(&d, &[("cameras.txt", cams), ("images.txt", images.as_bytes())], images);
+        assert!(e.to_string().contains(a) && e.to_string().contains("images.txt"), "{e}");
     }
     let e = expect_err(&d, &[("cameras.txt", cams)], "no images file");
-    assert!(
-        matches!(e, CameraError::NotFound { .. })
-            && e.to_string().contains("images.bin or images.txt"),
-        "{e}"
-    );
+    assert!(matches!(e, CameraError::NotFound { .. }) && e.to_string().contains("images.bin or images.txt"), "{e}");
 }

@@ -27,39 +27,17 @@ fn inria_by_hand_and_round_trip() {
     let set = load_inria(d.join("hand.json")).expect("hand-made cameras.json");
     let c = &set.cameras[0];
     assert_eq!((c.cx, c.cy, c.fx, c.fy), (20.0, 15.0, 50.0, 55.0));
-    assert!(
-        c.world_to_camera(Vec3::ZERO)
-            .abs_diff_eq(Vec3::new(0.0, 0.0, 5.0), 1e-6)
-    );
-    assert!(
-        c.project(Vec3::new(0.0, 0.0, 1.0)).expect("front").x > 20.0,
-        "+z is to the right"
-    );
-    assert!(
-        c.project(Vec3::new(0.0, -1.0, 0.0)).expect("front").y < 15.0,
-        "−y is up"
-    );
+    assert!(c.world_to_camera(Vec3::ZERO).abs_diff_eq(Vec3::new(0.0, 0.0, 5.0), 1e-6));
+    assert!(c.project(Vec3::new(0.0, 0.0, 1.0)).expect("front").x > 20.0, "+z is to the right");
+    assert!(c.project(Vec3::new(0.0, -1.0, 0.0)).expect("front").y < 15.0, "−y is up");
 
     let cams: Vec<Camera> = (0..5)
         .map(|i| {
             let eye = Vec3::new(i as f32 - 2.0, -1.5, 4.0 + 0.5 * i as f32);
-            Camera::look_at(
-                format!("{i:05}"),
-                eye,
-                Vec3::new(0.2, 0.0, -0.1),
-                Vec3::NEG_Y,
-                320,
-                240,
-                45.0,
-            )
+            Camera::look_at(format!("{i:05}"), eye, Vec3::new(0.2, 0.0, -0.1), Vec3::NEG_Y, 320, 240, 45.0)
         })
         .collect();
-    let doc = serde_json::Value::Array(
-        cams.iter()
-            .enumerate()
-            .map(|(i, c)| inria_entry(i, c))
-            .collect(),
-    );
+    let doc = serde_json::Value::Array(cams.iter().enumerate().map(|(i, c)| inria_entry(i, c)).collect());
     std::fs::create_dir_all(d.join("out")).expect("mkdir");
     std::fs::write(d.join("out/cameras.json"), doc.to_string()).expect("write");
     let set = load(d.join("out")).expect("detected in a folder");
@@ -67,10 +45,7 @@ fn inria_by_hand_and_round_trip() {
     for (a, b) in cams.iter().zip(&set.cameras) {
         assert_close(a, b, 1e-5);
     }
-    assert_eq!(
-        load(d.join("out/cameras.json")).expect("detected by content"),
-        set
-    );
+    assert_eq!(load(d.join("out/cameras.json")).expect("detected by content"), set);
 }
 
 #[test]
@@ -87,27 +62,11 @@ fn transforms_convention_and_intrinsics() {
     let (a, b) = (&set.cameras[0], &set.cameras[1]);
     assert_eq!((a.name.as_str(), a.width, a.height), ("a", 64, 48));
     let f = 32.0 / 0.5f32.tan();
-    assert!(
-        (a.fx - f).abs() < 1e-3 && (a.fy - f).abs() < 1e-3,
-        "fy defaults to fx"
-    );
-    assert!(
-        a.world_to_camera(Vec3::ZERO)
-            .abs_diff_eq(Vec3::new(0.0, 0.0, 4.0), 1e-6)
-    );
-    assert!(
-        a.project(Vec3::ZERO)
-            .expect("front")
-            .abs_diff_eq(Vec2::new(32.0, 24.0), 1e-4)
-    );
-    assert!(
-        a.project(Vec3::new(0.0, 1.0, 0.0)).expect("front").y < 24.0,
-        "world +y (up) is up"
-    );
-    assert!(
-        a.project(Vec3::new(1.0, 0.0, 0.0)).expect("front").x > 32.0,
-        "world +x is right"
-    );
+    assert!((a.fx - f).abs() < 1e-3 && (a.fy - f).abs() < 1e-3, "fy defaults to fx");
+    assert!(a.world_to_camera(Vec3::ZERO).abs_diff_eq(Vec3::new(0.0, 0.0, 4.0), 1e-6));
+    assert!(a.project(Vec3::ZERO).expect("front").abs_diff_eq(Vec2::new(32.0, 24.0), 1e-4));
+    assert!(a.project(Vec3::new(0.0, 1.0, 0.0)).expect("front").y < 24.0, "world +y (up) is up");
+    assert!(a.project(Vec3::new(1.0, 0.0, 0.0)).expect("front").x > 32.0, "world +x is right");
     assert_eq!((b.fx, b.fy, b.cx, b.cy), (70.0, 70.0, 32.0, 20.0));
     assert!(b.center().abs_diff_eq(Vec3::new(4.0, 0.0, 0.0), 1e-6));
     assert!(b.world_to_camera(Vec3::ZERO).z > 3.99);
@@ -117,9 +76,7 @@ fn transforms_convention_and_intrinsics() {
 fn transforms_reads_missing_sizes_from_image_headers() {
     let d = temp_dir("transforms-img");
     std::fs::create_dir_all(d.join("train")).expect("mkdir");
-    image::RgbImage::new(7, 5)
-        .save(d.join("train/r_0.png"))
-        .expect("png");
+    image::RgbImage::new(7, 5).save(d.join("train/r_0.png")).expect("png");
     let m = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 0, 1]];
     let doc = json!({"camera_angle_x": 0.5, "camera_angle_y": 0.4,
         "frames": [{"file_path": "./train/r_0", "transform_matrix": m}]});
@@ -132,10 +89,7 @@ fn transforms_reads_missing_sizes_from_image_headers() {
     let doc = json!({"camera_angle_x": 0.5, "frames": [{"file_path": "./train/r_9", "transform_matrix": m}]});
     std::fs::write(d.join("transforms_val.json"), doc.to_string()).expect("write");
     let e = load_transforms(d.join("transforms_val.json")).expect_err("missing image");
-    assert!(
-        matches!(e, CameraError::NotFound { .. }) && e.to_string().contains("frames[0]"),
-        "{e}"
-    );
+    assert!(matches!(e, CameraError::NotFound { .. }) && e.to_string().contains("frames[0]"), "{e}");
 }
 
 #[test]
@@ -161,10 +115,7 @@ fn malformed_json_gives_errors_naming_the_field() {
         std::fs::write(d.join("c.json"), &text).expect("write");
         let e = load(d.join("c.json")).expect_err(&text);
         let msg = e.to_string();
-        assert!(
-            msg.contains(needle) && msg.contains("c.json"),
-            "{text}\n  → {msg}"
-        );
+        assert!(msg.contains(needle) && msg.contains("c.json"), "{text}\n  → {msg}");
     }
 }
 
