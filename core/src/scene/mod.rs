@@ -5,8 +5,29 @@
 //! coefficients are stored band-major per Gaussian, `(N, (deg+1)², 3)`, the layout
 //! of the golden files; the INRIA `.ply` stores `f_rest_*` channel-major and the
 //! reader/writer transpose.
+//!
+//! [`load`] recognises a file by its contents, not its name: a PLY header with
+//! `packed_*` properties is PlayCanvas's compressed PLY, any other PLY is
+//! INRIA's, gzip or `NGSP` bytes are Niantic's `.spz`, and a directory, a
+//! `meta.json` or a zip archive is PlayCanvas's SOG. Every reader checks
+//! counts against the bytes that are really there before allocating, and
+//! every decoded scene is validated (finite values, non-zero quaternions)
+//! before it is returned; [`save_ply`] applies the same check, so whatever it
+//! writes [`load`] reads back.
 
+mod compressed_ply;
 mod error;
+mod ply;
+mod ply_header;
+mod sog;
+mod spz;
+#[cfg(test)]
+mod test_util;
+#[cfg(test)]
+mod tests;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
 
 pub use error::SceneError;
 
@@ -93,4 +114,148 @@ impl Gaussians {
         }
         Ok(())
     }
+}
+
+/// Reads a scene, recognising the format from the contents: INRIA `.ply`
+/// (ASCII or binary), PlayCanvas compressed `.ply`, Niantic `.spz` (gzip v2/v3
+/// or zstd v4), or a PlayCanvas SOG directory, its `meta.json`, or a `.sog`
+/// zip bundle.
+pub fn load(path: impl AsRef<Path>) -> Result<Gaussians, SceneError> {
+    let path = path.as_ref();
+    if path.is_dir() {
+        return sog::read_sog(&path.join("meta.json"));
+    }
+    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    load_from_bytes(path, &bytes)
+}
+
+/// Decodes a scene file already held in memory, recognising the format as
+/// [`load`] does. `path` names the file in errors; for a SOG `meta.json` the
+/// textures are read from beside it.
+pub fn load_from_bytes(path: impl AsRef<Path>, bytes: &[u8]) -> Result<Gaussians, SceneError> {
+    let path = path.as_ref();
+    if bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r\n") {
+        let header = ply_header::parse_header(path, bytes)?;
+        let compressed =
+            header.element("vertex").is_some_and(|(_, v)| v.props.iter().any(|p| p.name.starts_with("packed_")));
+        return if compressed {
+            compressed_ply::read_compressed_ply(path, bytes, &header)
+        } else {
+            ply::read_ply_bytes(path, bytes, &header)
+        };
+    }
+    if bytes.starts_with(&[0x1f, 0x8b]) || bytes.starts_with(b"NGSP") {
+        return spz::read_spz_bytes(path, bytes);
+    }
+    if bytes.starts_with(b"PK\x03\x04") {
+        return sog::read_sog_zip(path, bytes);
+    }
+    let first = bytes.iter().find(|b| !b.is_ascii_whitespace());
+    if first == Some(&b'{') {
+        return sog::read_sog_meta(path, bytes);
+    }
+    let ext = path.extension().map(|e| e.to_string_lossy().into_owned()).unwrap_or_default();
+    let head: Vec<String> = bytes.iter().take(8).map(|b| format!("{b:02x}")).collect();
+    Err(SceneError::UnknownFormat {
+        path: path.to_path_buf(),
+        expected: "INRIA .ply, PlayCanvas compressed .ply, Niantic .spz, or SOG (directory, meta.json or .sog bundle)"
+            .into(),
+        found: if bytes.is_empty() {
+            format!("an empty file (extension {ext:?})")
+        } else {
+            format!("extension {ext:?}, first bytes [{}]", head.join(" "))
+        },
+    })
+}
+
+/// Writes `g` as an INRIA binary little-endian `.ply` with the original
+/// trainer's property names and order. The file is written to a temporary
+/// file beside `path` and renamed over it, so an existing file is never left
+/// half-overwritten. Reading it back with [`load`] is bit-exact. Scenes with
+/// non-finite values or zero quaternions are refused (the error names the
+/// Gaussian), since no reader would accept the file.
+pub fn save_ply(path: impl AsRef<Path>, g: &Gaussians) -> Result<(), SceneError> {
+    ply::save_ply(path.as_ref(), g)
+}
+
+/// Checks a decoded scene: every value finite and every quaternion non-zero.
+/// The error names the field and the Gaussian's index.
+pub(crate) fn validate(path: &Path, g: &Gaussians) -> Result<(), SceneError> {
+    g.check_consistent().map_err(|e| SceneError::format(path, "gaussians", "consistent arrays", e))?;
+    let bad = |what: String, v: String| SceneError::format(path, what, "a finite value", v);
+    let k = g.sh_coeffs() * 3;
+    for i in 0..g.len() {
+        for (a, v) in g.means[i].iter().enumerate() {
+            if !v.is_finite() {
+                return Err(bad(format!("vertex {i}: position {}", ["x", "y", "z"][a]), v.to_string()));
+            }
+        }
+        for (a, v) in g.log_scales[i].iter().enumerate() {
+            if !v.is_finite() {
+                return Err(bad(format!("vertex {i}: scale_{a}"), v.to_string()));
+            }
+        }
+        for (a, v) in g.quats[i].iter().enumerate() {
+            if !v.is_finite() {
+                return Err(bad(format!("vertex {i}: rot_{a}"), v.to_string()));
+            }
+        }
+        if g.quats[i].iter().all(|&v| v == 0.0) {
+            return Err(SceneError::format(
+                path,
+                format!("vertex {i}: rotation"),
+                "a non-zero quaternion",
+                "(0, 0, 0, 0)",
+            ));
+        }
+        if !g.opacity_logits[i].is_finite() {
+            return Err(bad(format!("vertex {i}: opacity"), g.opacity_logits[i].to_string()));
+        }
+        for (j, v) in g.sh[i * k..(i + 1) * k].iter().enumerate() {
+            if !v.is_finite() {
+                let (coeff, ch) = (j / 3, j % 3);
+                return Err(bad(format!("vertex {i}: SH coefficient {coeff}, channel {ch}"), v.to_string()));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Writes a file through `write` into a temporary file beside `path`, then
+/// renames it over `path`. On any error the temporary file is removed and an
+/// existing `path` is untouched.
+pub(crate) fn atomic_write(
+    path: &Path,
+    write: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
+) -> Result<(), SceneError> {
+    let name = path
+        .file_name()
+        .ok_or_else(|| SceneError::io(path, std::io::Error::new(std::io::ErrorKind::InvalidInput, "no file name")))?;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), std::process::id()));
+    let result = (|| {
+        let file = std::fs::File::create(&tmp)?;
+        let mut w = std::io::BufWriter::new(file);
+        write(&mut w)?;
+        w.flush()?;
+        w.get_ref().sync_all()?;
+        drop(w);
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(SceneError::io(path, e));
+    }
+    Ok(())
+}
+
+/// Inverse sigmoid of a quantised opacity, clamped to [1e-6, 1 − 1e-6] so
+/// that stored alphas of exactly 0 or 1 decode to finite logits (±13.8), as
+/// PlayCanvas's readers do.
+pub(crate) fn alpha_to_logit(alpha: f64) -> f32 {
+    let a = alpha.clamp(1e-6, 1.0 - 1e-6);
+    (a / (1.0 - a)).ln() as f32
 }
