@@ -1,6 +1,8 @@
-//! Timings of the rasterizer on a large synthetic scene (and the real scenes
-//! when a scene loader is available). Ignored by default: run with
-//! `cargo test -p gast-tests --test raster_perf -- --ignored --nocapture`.
+//! Timings of the rasterizer on large synthetic scenes and on the real scenes
+//! of the shared data, from an orbit view at 256×256. Ignored by default: run
+//! with `cargo test --release -p gast-tests --test raster_perf -- --ignored --nocapture`
+//! (`GAST_PERF_RUNS`, `GAST_PERF_SIZES`, and `GAST_PERF_PPM=<dir>` to save the
+//! real-scene renders).
 
 use std::time::Instant;
 
@@ -136,5 +138,52 @@ fn raster_timing_synthetic() {
         let g = synthetic_scene(n);
         let cam = look_at(Vec3::new(2.2, 1.2, -2.2), Vec3::new(0.0, -0.2, 0.0), 256, 256, 256.0 / (2.0 * 0.45));
         bench(&format!("synthetic {n}"), &g, &cam);
+    }
+}
+
+/// A camera on an orbit around the scene: centred on the median of the means,
+/// at 2.2× the 75th-percentile distance of the means from that centre, 60°
+/// horizontal field of view, slightly above the horizon.
+fn orbit_camera(g: &Gaussians, width: u32, height: u32, azimuth: f32) -> Camera {
+    let median = |axis: usize| {
+        let mut v: Vec<f32> = g.means.iter().map(|m| m[axis]).collect();
+        v.sort_by(f32::total_cmp);
+        v[v.len() / 2]
+    };
+    let centre = Vec3::new(median(0), median(1), median(2));
+    let mut d: Vec<f32> = g.means.iter().map(|m| (Vec3::from(*m) - centre).length()).collect();
+    d.sort_by(f32::total_cmp);
+    let radius = 2.2 * d[d.len() * 3 / 4];
+    let eye = centre + radius * Vec3::new(azimuth.cos() * 0.94, -0.34, azimuth.sin() * 0.94);
+    look_at(eye, centre, width, height, width as f32 / (2.0 * (30f32).to_radians().tan()))
+}
+
+/// Writes an 8-bit binary PPM (for eyeballing the framing).
+fn write_ppm(path: &std::path::Path, img: &gast_core::raster::Render) {
+    let mut bytes = format!("P6 {} {} 255\n", img.width, img.height).into_bytes();
+    bytes.extend(img.rgb.iter().map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8));
+    if let Err(e) = std::fs::write(path, bytes) {
+        eprintln!("could not write {}: {e}", path.display());
+    }
+}
+
+#[test]
+#[ignore = "timing; run explicitly"]
+fn raster_timing_real_scenes() {
+    for rel in ["data/scenes/guitar.compressed.ply", "data/scenes/playbot-sog"] {
+        let Some(path) = gast_tests::shared_file(rel) else { continue };
+        let g = match gast_core::scene::load(&path) {
+            Ok(g) => g,
+            Err(e) => panic!("{}: {e}", path.display()),
+        };
+        let cam = orbit_camera(&g, 256, 256, 0.6);
+        if let Some(dir) = std::env::var_os("GAST_PERF_PPM") {
+            let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            write_ppm(
+                &std::path::Path::new(&dir).join(format!("{name}.ppm")),
+                &render(&g, &cam, &RenderOptions::default()),
+            );
+        }
+        bench(rel, &g, &cam);
     }
 }
