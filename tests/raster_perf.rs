@@ -11,10 +11,11 @@ use gast_core::raster::{RenderOptions, backward, forward, render};
 use gast_core::scene::Gaussians;
 use glam::{Mat3, Vec3};
 
-/// A pinhole camera at `eye` looking at `target` (world +y up, image y down).
-fn look_at(eye: Vec3, target: Vec3, width: u32, height: u32, focal: f32) -> Camera {
+/// A pinhole camera at `eye` looking at `target` with world `up` at the top
+/// of the image (image y down).
+fn look_at(eye: Vec3, target: Vec3, up: Vec3, width: u32, height: u32, focal: f32) -> Camera {
     let fwd = (target - eye).normalize();
-    let right = fwd.cross(Vec3::Y).normalize();
+    let right = fwd.cross(up).normalize();
     let down = fwd.cross(right);
     let rotation = Mat3::from_cols(right, down, fwd).transpose();
     Camera {
@@ -136,14 +137,16 @@ fn raster_timing_synthetic() {
         .unwrap_or_else(|| vec![90_000, 500_000]);
     for n in sizes {
         let g = synthetic_scene(n);
-        let cam = look_at(Vec3::new(2.2, 1.2, -2.2), Vec3::new(0.0, -0.2, 0.0), 256, 256, 256.0 / (2.0 * 0.45));
+        let cam =
+            look_at(Vec3::new(2.2, 1.2, -2.2), Vec3::new(0.0, -0.2, 0.0), Vec3::Y, 256, 256, 256.0 / (2.0 * 0.45));
         bench(&format!("synthetic {n}"), &g, &cam);
     }
 }
 
 /// A camera on an orbit around the scene: centred on the median of the means,
 /// at 2.2× the 75th-percentile distance of the means from that centre, 60°
-/// horizontal field of view, slightly above the horizon.
+/// horizontal field of view, slightly above the horizon. Captured scenes
+/// (COLMAP convention) have world −y up.
 fn orbit_camera(g: &Gaussians, width: u32, height: u32, azimuth: f32) -> Camera {
     let median = |axis: usize| {
         let mut v: Vec<f32> = g.means.iter().map(|m| m[axis]).collect();
@@ -155,7 +158,7 @@ fn orbit_camera(g: &Gaussians, width: u32, height: u32, azimuth: f32) -> Camera 
     d.sort_by(f32::total_cmp);
     let radius = 2.2 * d[d.len() * 3 / 4];
     let eye = centre + radius * Vec3::new(azimuth.cos() * 0.94, -0.34, azimuth.sin() * 0.94);
-    look_at(eye, centre, width, height, width as f32 / (2.0 * (30f32).to_radians().tan()))
+    look_at(eye, centre, Vec3::NEG_Y, width, height, width as f32 / (2.0 * (30f32).to_radians().tan()))
 }
 
 /// Writes an 8-bit binary PPM (for eyeballing the framing).
