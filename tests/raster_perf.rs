@@ -173,7 +173,11 @@ fn write_ppm(path: &std::path::Path, img: &gast_core::raster::Render) {
 #[test]
 #[ignore = "timing; run explicitly"]
 fn raster_timing_real_scenes() {
-    for rel in ["data/scenes/guitar.compressed.ply", "data/scenes/playbot-sog"] {
+    // GAST_PERF_SCENES=guitar keeps the scenes whose path contains that text.
+    let only = std::env::var("GAST_PERF_SCENES").unwrap_or_default();
+    for rel in
+        ["data/scenes/guitar.compressed.ply", "data/scenes/playbot-sog"].into_iter().filter(|r| r.contains(&only))
+    {
         let Some(path) = gast_tests::shared_file(rel) else { continue };
         let g = match gast_core::scene::load(&path) {
             Ok(g) => g,
