@@ -38,3 +38,13 @@ fn losses_match_golden() {
 fn colour_transfer_matches_golden() {
     check("golden/color_seed1.safetensors");
 }
+
+#[test]
+fn rasterizer_matches_golden_degree_0() {
+    check("golden/raster_deg0_seed1.safetensors");
+}
+
+#[test]
+fn rasterizer_matches_golden_degree_3() {
+    check("golden/raster_deg3_seed1.safetensors");
+}

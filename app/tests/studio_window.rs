@@ -3,7 +3,7 @@
 //! Needs `xvfb-run` and a Vulkan driver (lavapipe); without them the test skips
 //! loudly, or fails when `CI=true`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 fn in_ci() -> bool {
@@ -45,8 +45,7 @@ fn studio_opens_a_scene_in_a_real_window() {
     if !Path::new("/usr/share/vulkan/icd.d").exists() {
         return skip_or_fail("no Vulkan driver (apt-get install mesa-vulkan-drivers libvulkan1)");
     }
-    let guitar = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/scenes/guitar.compressed.ply");
-    let guitar = if guitar.exists() { guitar } else { PathBuf::from("/work/shared/data/scenes/guitar.compressed.ply") };
+    let guitar = gast_tests::shared_dir().join("data/scenes/guitar.compressed.ply");
     let shot = std::env::temp_dir().join(format!("gast-studio-window-{}.png", std::process::id()));
     let _ = std::fs::remove_file(&shot);
     let mut cmd = Command::new("xvfb-run");

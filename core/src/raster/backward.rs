@@ -11,7 +11,7 @@
 
 use rayon::prelude::*;
 
-use super::forward::{TILE_PX, gaussian_ref};
+use super::forward::{TILE_PX, gaussian_ref, span_mask};
 use super::project::{CamConsts, GaussianGrad, SplatGrad, project_backward};
 use super::splat::{ALPHA_MAX, LANE};
 use super::state::{ForwardState, split_by_tile};
@@ -159,31 +159,62 @@ impl TileCtx<'_> {
             }
         }
 
+        // Pixels by decreasing list length: walking back, pixel p joins when
+        // k drops below its n_contrib. Bit j of active[ly] marks the joined ones.
+        let mut order = [(0u32, 0u16); TILE_PX];
+        let mut n_px = 0;
+        for (p, q) in px.iter().enumerate() {
+            if q.n_contrib > 0 {
+                order[n_px] = (q.n_contrib, p as u16);
+                n_px += 1;
+            }
+        }
+        let order = &mut order[..n_px];
+        order.sort_unstable_by_key(|&(nc, _)| std::cmp::Reverse(nc));
+        let mut joined = 0;
+        let mut active = [0u32; TILE as usize];
+
         let mut falloff = [0.0f32; TILE as usize];
         for k in (0..max_nc as usize).rev() {
+            while joined < order.len() && order[joined].0 as usize > k {
+                let p = order[joined].1 as usize;
+                active[p / TILE as usize] |= 1 << (p % TILE as usize);
+                joined += 1;
+            }
             let s = &st.splats[list[k] as usize];
             let feat = [s.color[0], s.color[1], s.color[2], s.inv_z];
             let [ca, cb, cc] = s.conic;
             // ∂L/∂(x, y), ∂L/∂(A, B, C), ∂L/∂opacity, ∂L/∂(r, g, b, inv_z).
             let (mut v_xy, mut v_conic, mut v_op, mut v_feat) = ([0.0f32; 2], [0.0f32; 3], 0.0f32, [0.0f32; 4]);
-            let (_, _, ia, ib) = s.pixel_rect(x0, x1, y0, y1);
+            let (bja, bjb, ia, ib) = s.pixel_rect(x0, x1, y0, y1);
+            let box_mask =
+                if bja > bjb { 0 } else { span_mask((bja as u32 - x0) as usize, (bjb as u32 - x0) as usize) };
             for i in ia..=ib {
+                let ly = (i as u32 - y0) as usize;
+                if active[ly] & box_mask == 0 {
+                    continue;
+                }
                 let (ja, jb) = s.row_span(i, x0, x1);
                 if ja > jb {
                     continue;
                 }
-                let row = (i as u32 - y0) as usize * TILE as usize;
                 let (ja, jb) = ((ja as u32 - x0) as usize, (jb as u32 - x0) as usize);
+                let mut live = span_mask(ja, jb) & active[ly];
+                if live == 0 {
+                    continue;
+                }
                 let py = i as f32 + 0.5;
                 s.falloff_row(x0 as f32 + 0.5, py, ja, jb, &mut falloff);
                 let dy = py - s.xy[1];
                 let dx0 = x0 as f32 + 0.5 - s.xy[0];
-                for ((p, &gauss), &m) in px[row + ja..=row + jb].iter_mut().zip(&falloff[ja..=jb]).zip(&LANE[ja..=jb]) {
-                    let dx = dx0 + m;
-                    if k as u32 >= p.n_contrib {
-                        continue;
-                    }
+                let row = ly * TILE as usize;
+                while live != 0 {
+                    let j = live.trailing_zeros() as usize;
+                    live &= live - 1;
+                    let gauss = falloff[j];
                     let Some(alpha) = s.alpha(gauss) else { continue };
+                    let dx = dx0 + LANE[j];
+                    let p = &mut px[row + j];
                     let t_i = p.t / (1.0 - alpha);
                     let wgt = alpha * t_i;
                     let mut v_alpha = 0.0;

@@ -186,8 +186,6 @@ struct Px {
     acc: [f32; 4],
     /// One past the list position of the last splat composited.
     n_contrib: u32,
-    /// Transmittance would have fallen below `T_MIN`: nothing more is added.
-    done: bool,
 }
 
 /// One tile's composited pixels (local row-major, `TILE` wide).
@@ -195,35 +193,56 @@ struct TileOut {
     px: [Px; TILE_PX],
 }
 
+/// The bits `lo..=hi` of a tile row mask.
+#[inline(always)]
+pub(crate) fn span_mask(lo: usize, hi: usize) -> u32 {
+    ((1u32 << (hi + 1)) - 1) & !((1u32 << lo) - 1)
+}
+
 /// Composites one tile front to back, splat-major: each splat visits only the
-/// pixels of its ellipse that are not finished yet.
+/// pixels of its ellipse, row by row, that are not finished yet (a bit mask
+/// per tile row marks the finished ones, so saturated regions cost nothing).
 #[inline(never)]
 fn composite_tile(tile: u32, tiles_x: u32, w: u32, h: u32, splats: &[Splat], list: &[u32]) -> TileOut {
     let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
     let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-    let mut o = TileOut { px: [Px { t: 1.0, acc: [0.0; 4], n_contrib: 0, done: false }; TILE_PX] };
+    let mut o = TileOut { px: [Px { t: 1.0, acc: [0.0; 4], n_contrib: 0 }; TILE_PX] };
+    // Bit j of done[ly]: the transmittance of pixel (ly, j) would have fallen below T_MIN.
+    let mut done = [0u32; TILE as usize];
     let mut remaining = (x1 - x0) * (y1 - y0);
     let mut falloff = [0.0f32; TILE as usize];
     for (k, &si) in list.iter().enumerate() {
         let s = &splats[si as usize];
         let feat = [s.color[0], s.color[1], s.color[2], s.inv_z];
-        let (_, _, ia, ib) = s.pixel_rect(x0, x1, y0, y1);
+        let (bja, bjb, ia, ib) = s.pixel_rect(x0, x1, y0, y1);
+        if bja > bjb {
+            continue;
+        }
+        let box_mask = span_mask((bja as u32 - x0) as usize, (bjb as u32 - x0) as usize);
         for i in ia..=ib {
+            let ly = (i as u32 - y0) as usize;
+            if done[ly] & box_mask == box_mask {
+                continue;
+            }
             let (ja, jb) = s.row_span(i, x0, x1);
             if ja > jb {
                 continue;
             }
-            let row = (i as u32 - y0) as usize * TILE as usize;
             let (ja, jb) = ((ja as u32 - x0) as usize, (jb as u32 - x0) as usize);
+            let mut live = span_mask(ja, jb) & !done[ly];
+            if live == 0 {
+                continue;
+            }
             s.falloff_row(x0 as f32 + 0.5, i as f32 + 0.5, ja, jb, &mut falloff);
-            for (p, &g) in o.px[row + ja..=row + jb].iter_mut().zip(&falloff[ja..=jb]) {
-                if p.done {
-                    continue;
-                }
-                let Some(alpha) = s.alpha(g) else { continue };
+            let row = ly * TILE as usize;
+            while live != 0 {
+                let j = live.trailing_zeros() as usize;
+                live &= live - 1;
+                let Some(alpha) = s.alpha(falloff[j]) else { continue };
+                let p = &mut o.px[row + j];
                 let test_t = p.t * (1.0 - alpha);
                 if test_t < T_MIN {
-                    p.done = true;
+                    done[ly] |= 1 << j;
                     remaining -= 1;
                     continue;
                 }
