@@ -49,31 +49,6 @@ fn exact_copy_matches_itself() {
 
 /// Timing at realistic sizes: `cargo test -p gast-core --lib bench_matching -- --ignored --nocapture`.
 #[test]
-#[ignore = "benchmark"]
-fn bench_matching() {
-    let c = 768;
-    for &(n, hs, ws) in &[(64 * 64, 64usize, 96usize), (32 * 32, 64, 96), (64 * 64, 32, 48)] {
-        let st = style(c, hs, ws);
-        let r = [feats(c, n, 4), feats(c, n, 5), feats(c, n, 6)];
-        let t = std::time::Instant::now();
-        let mt = match_features(&st, [&r[0], &r[1], &r[2]], n);
-        let t_match = t.elapsed();
-        let t = std::time::Instant::now();
-        let out = gcfm_loss_with_matches(&st, [&r[0], &r[1], &r[2]], n, mt);
-        let t_loss = t.elapsed();
-        let flops = 2.0 * (n * hs * ws * 3 * c) as f64;
-        eprintln!(
-            "{n} rendered × {} style positions: matching {:.1} ms ({:.1} GFLOP/s), loss+gradient {:.1} ms (loss {:.3})",
-            hs * ws,
-            t_match.as_secs_f64() * 1e3,
-            flops / t_match.as_secs_f64() / 1e9,
-            t_loss.as_secs_f64() * 1e3,
-            out.loss
-        );
-    }
-}
-
-#[test]
 fn gradient_matches_finite_differences() {
     let (c, n) = (8, 6);
     let st = style(c, 3, 4);
