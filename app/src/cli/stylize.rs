@@ -15,7 +15,7 @@ use gast_core::raster::{self, RenderOptions};
 use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::{Mode, StyleConfig};
 use gast_core::vision::Vgg;
-use gast_core::vision::style_depth::DepthImage;
+use gast_core::vision::style_depth::{DepthImage, DepthPolarity};
 use serde::Serialize;
 
 use super::{ViewArgs, load_scene, views_for};
@@ -53,37 +53,65 @@ pub struct StylizeArgs {
     /// A depth image for the style (PNG 8/16-bit or EXR); else a built-in estimate.
     #[arg(long)]
     pub style_depth: Option<PathBuf>,
-    /// Cycles K.
+    /// Cycles K [default: 30].
     #[arg(long)]
     pub cycles: Option<u32>,
-    /// Steps per cycle N_c + N_g.
+    /// Steps per cycle N_c + N_g [default: 100].
     #[arg(long)]
     pub steps_per_cycle: Option<u32>,
-    /// Geometry share of a cycle N_g / (N_c + N_g).
+    /// Geometry share of a cycle N_g / (N_c + N_g) [default: 0.9].
     #[arg(long)]
     pub ratio_geo: Option<f32>,
-    /// decoupled, joint, color-only or geometry-only.
+    /// decoupled, joint, color-only or geometry-only [default: decoupled].
     #[arg(long)]
     pub mode: Option<Mode>,
-    /// Texture scale: the style's height in pixels (128, 256, 512 = 0.5x, 1x, 2x).
+    /// Texture scale: the style's height in pixels (128, 256, 512 = 0.5x, 1x, 2x) [default: 256].
     #[arg(long)]
     pub texture_scale: Option<u32>,
-    /// Working resolution: longer side of the optimisation renders.
+    /// Working resolution: longer side of the optimisation renders [default: 256].
     #[arg(long)]
     pub resolution: Option<u32>,
-    /// λ_GC.
+    /// λ_GC, contrastive feature matching [default: 2].
     #[arg(long)]
     pub lambda_gc: Option<f32>,
-    /// λ_cont.
+    /// λ_cont, content [default: 0.001].
     #[arg(long)]
     pub lambda_content: Option<f32>,
-    /// λ_TV.
+    /// λ_TV, total variation [default: 0.02].
     #[arg(long)]
     pub lambda_tv: Option<f32>,
-    /// λ_d.
+    /// λ_α, opacity regulariser [default: 1].
+    #[arg(long)]
+    pub lambda_opacity: Option<f32>,
+    /// λ_s, scale regulariser [default: 1].
+    #[arg(long)]
+    pub lambda_scale: Option<f32>,
+    /// λ_r, rotation regulariser [default: 1].
+    #[arg(long)]
+    pub lambda_rotation: Option<f32>,
+    /// λ_d, depth regulariser [default: 10].
     #[arg(long)]
     pub lambda_depth: Option<f32>,
-    /// Seed of the view order.
+    /// Learning rate of the SH DC colour [default: 0.01].
+    #[arg(long)]
+    pub lr_color: Option<f32>,
+    /// Learning rate of the means, times the scene extent [default: 1e-4].
+    #[arg(long)]
+    pub lr_means: Option<f32>,
+    /// Learning rate of the log-scales [default: 0.005].
+    #[arg(long)]
+    pub lr_scales: Option<f32>,
+    /// Learning rate of the quaternions [default: 0.001].
+    #[arg(long)]
+    pub lr_quats: Option<f32>,
+    /// Learning rate of the opacity logits [default: 0.05].
+    #[arg(long)]
+    pub lr_opacity: Option<f32>,
+    /// Style depth polarity: near-bright (like the rendered inverse depth) or
+    /// near-dark (the reference implementation's) [default: near-bright].
+    #[arg(long, value_parser = parse_polarity)]
+    pub depth_polarity: Option<DepthPolarity>,
+    /// Seed of the view order [default: 0].
     #[arg(long)]
     pub seed: Option<u64>,
     /// Views rendered before/after into the output folder.
@@ -119,11 +147,28 @@ impl StylizeArgs {
         set!(self.lambda_gc, c.weights.gcfm);
         set!(self.lambda_content, c.weights.content);
         set!(self.lambda_tv, c.weights.tv);
+        set!(self.lambda_opacity, c.weights.opacity);
+        set!(self.lambda_scale, c.weights.scale);
+        set!(self.lambda_rotation, c.weights.rotation);
         set!(self.lambda_depth, c.weights.depth);
+        set!(self.lr_color, c.lr.color);
+        set!(self.lr_means, c.lr.means_per_extent);
+        set!(self.lr_scales, c.lr.scales);
+        set!(self.lr_quats, c.lr.quats);
+        set!(self.lr_opacity, c.lr.opacity);
+        set!(self.depth_polarity, c.depth_polarity);
         set!(self.seed, c.seed);
         let problems = c.problems();
         anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
         Ok(c)
+    }
+}
+
+fn parse_polarity(s: &str) -> Result<DepthPolarity, String> {
+    match s {
+        "near-bright" => Ok(DepthPolarity::NearBright),
+        "near-dark" | "reference" => Ok(DepthPolarity::NearDark),
+        _ => Err(format!("expected near-bright or near-dark, found {s:?}")),
     }
 }
 
