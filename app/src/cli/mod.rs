@@ -2,6 +2,7 @@
 
 mod bench;
 mod check;
+mod fit;
 mod render;
 mod stylize;
 
@@ -32,6 +33,9 @@ pub enum Command {
     /// colour/geometry optimisation; writes the stylized .ply, before/after
     /// renders with depth, and report.json.
     Stylize(Box<stylize::StylizeArgs>),
+    /// Fit a 3DGS scene to posed images (transforms.json, COLMAP, cameras.json)
+    /// with the CPU rasterizer; writes the .ply and optional preview renders.
+    Fit(fit::FitArgs),
     /// Compare the project's numerics with reference files.
     #[command(subcommand)]
     Check(CheckCommand),
@@ -84,6 +88,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Bench(BenchCommand::Raster(args)) => bench::run_raster(args),
         Command::Bench(BenchCommand::Step(args)) => bench::run_step(args),
         Command::Stylize(args) => stylize::run(*args),
+        Command::Fit(args) => fit::run(args),
     }
 }
 
