@@ -44,15 +44,26 @@ pub struct FitArgs {
     /// Seed of the initial points and the view order.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// A preset file (JSON FitConfig, missing fields take their defaults); flags override it.
+    #[arg(long)]
+    pub preset: Option<PathBuf>,
     /// Write a few renders beside their ground truth into this folder.
     #[arg(long)]
     pub preview: Option<PathBuf>,
 }
 
 impl FitArgs {
-    /// The default configuration with the flags applied.
-    pub fn config(&self) -> FitConfig {
-        let mut c = FitConfig::default();
+    /// The preset (or the defaults) with the flags applied.
+    pub fn config(&self) -> anyhow::Result<FitConfig> {
+        let mut c = match &self.preset {
+            Some(p) => {
+                let text =
+                    std::fs::read_to_string(p).with_context(|| format!("could not read the preset {}", p.display()))?;
+                serde_json::from_str(&text)
+                    .with_context(|| format!("{}: expected a FitConfig JSON preset", p.display()))?
+            }
+            None => FitConfig::default(),
+        };
         if let Some(v) = self.iterations {
             c.iterations = v;
         }
@@ -68,14 +79,16 @@ impl FitArgs {
         if let Some(v) = self.seed {
             c.seed = v;
         }
-        c.densify.enabled = !self.no_densify;
-        c
+        if self.no_densify {
+            c.densify.enabled = false;
+        }
+        Ok(c)
     }
 }
 
 /// Loads the dataset, fits, writes the scene and the previews.
 pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
-    let cfg = args.config();
+    let cfg = args.config()?;
     let t0 = Instant::now();
     let data = load_posed_images(&args.dataset, cfg.resolution, args.views, cfg.background)
         .with_context(|| format!("could not load the posed images of {}", args.dataset.display()))?;

@@ -51,7 +51,8 @@ const EXTENSIONS: [&str; 7] = ["png", "jpg", "jpeg", "PNG", "JPG", "JPEG", "webp
 /// (transforms.json `file_path`), in `images/` (COLMAP, the INRIA layout), with
 /// or without an added extension. The first existing candidate wins.
 pub fn image_candidates(dataset: &Path, name: &str) -> Vec<PathBuf> {
-    let root = if dataset.is_dir() { dataset.to_path_buf() } else { dataset.parent().unwrap_or(Path::new(".")).to_path_buf() };
+    let root =
+        if dataset.is_dir() { dataset.to_path_buf() } else { dataset.parent().unwrap_or(Path::new(".")).to_path_buf() };
     let mut bases = vec![root.clone(), root.join("images")];
     // A COLMAP folder given directly (`…/sparse/0`): its images are two levels up.
     for up in root.ancestors().skip(1).take(2) {
@@ -70,14 +71,15 @@ pub fn image_candidates(dataset: &Path, name: &str) -> Vec<PathBuf> {
 
 /// Reads an image as RGB in `[0, 1]`, compositing any alpha channel on `background`.
 pub fn read_rgb(path: &Path, background: [f32; 3]) -> Result<(u32, u32, Vec<f32>), FitDataError> {
-    let img = image::open(path).map_err(|e| FitDataError::Image { path: path.to_path_buf(), message: e.to_string() })?;
+    let img =
+        image::open(path).map_err(|e| FitDataError::Image { path: path.to_path_buf(), message: e.to_string() })?;
     let rgba = img.to_rgba32f();
     let (w, h) = rgba.dimensions();
     let mut rgb = Vec::with_capacity(w as usize * h as usize * 3);
     for px in rgba.pixels() {
         let a = px.0[3].clamp(0.0, 1.0);
-        for c in 0..3 {
-            rgb.push(px.0[c].clamp(0.0, 1.0) * a + background[c] * (1.0 - a));
+        for (&v, &b) in px.0[..3].iter().zip(&background) {
+            rgb.push(v.clamp(0.0, 1.0) * a + b * (1.0 - a));
         }
     }
     Ok((w, h, rgb))
@@ -96,8 +98,11 @@ pub fn load_posed_images(
 ) -> Result<PosedImages, FitDataError> {
     let set = camera::load(dataset)?;
     let n = set.cameras.len();
-    let keep: Vec<usize> =
-        if max_views == 0 || max_views >= n { (0..n).collect() } else { (0..max_views).map(|i| i * n / max_views).collect() };
+    let keep: Vec<usize> = if max_views == 0 || max_views >= n {
+        (0..n).collect()
+    } else {
+        (0..max_views).map(|i| i * n / max_views).collect()
+    };
     let views = keep
         .par_iter()
         .map(|&i| {

@@ -88,7 +88,8 @@ pub fn look_at_region(cameras: &[Camera]) -> (Vec3, f32) {
 /// Whether every camera sees `p` (in front of it and inside its image).
 fn seen_by_all(cameras: &[Camera], p: Vec3) -> bool {
     cameras.iter().all(|cam| {
-        cam.project(p).is_some_and(|uv| uv.x >= 0.0 && uv.y >= 0.0 && uv.x < cam.width as f32 && uv.y < cam.height as f32)
+        cam.project(p)
+            .is_some_and(|uv| uv.x >= 0.0 && uv.y >= 0.0 && uv.x < cam.width as f32 && uv.y < cam.height as f32)
     })
 }
 
@@ -135,7 +136,8 @@ pub(crate) fn mean_knn_distance(points: &[Vec3], k: usize) -> Vec<f32> {
     if n < 2 {
         return vec![1e-3; n];
     }
-    let (lo, hi) = points.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(l, h), &p| (l.min(p), h.max(p)));
+    let (lo, hi) =
+        points.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(l, h), &p| (l.min(p), h.max(p)));
     let size = (hi - lo).max(Vec3::splat(1e-6));
     let cell = (size.x * size.y * size.z * 2.0 / n as f32).cbrt().max(size.max_element() / 1024.0);
     let dims = ((size / cell).floor().as_uvec3() + 1).min(glam::UVec3::splat(1024));
@@ -205,7 +207,8 @@ mod tests {
         let pts: Vec<Vec3> = (0..500).map(|_| Vec3::new(rng.uniform(), rng.uniform(), 2.0 * rng.uniform())).collect();
         let fast = mean_knn_distance(&pts, 3);
         for (i, p) in pts.iter().enumerate() {
-            let mut d: Vec<f32> = pts.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, q)| p.distance(*q)).collect();
+            let mut d: Vec<f32> =
+                pts.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, q)| p.distance(*q)).collect();
             d.sort_by(f32::total_cmp);
             let want = (d[0] + d[1] + d[2]) / 3.0;
             // Exact unless a neighbour lies beyond one cell side, where it is capped.

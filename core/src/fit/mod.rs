@@ -173,7 +173,12 @@ pub fn initial_scene(cameras: &[Camera], cfg: &FitConfig) -> Gaussians {
 /// When an image's size does not match its camera (a caller bug).
 pub fn fit(views: &[(Camera, Vec<f32>)], cfg: &FitConfig, progress: &mut dyn FnMut(FitProgress)) -> Gaussians {
     for (cam, img) in views {
-        assert_eq!(img.len(), 3 * cam.width as usize * cam.height as usize, "fit: image of {} has the wrong size", cam.name);
+        assert_eq!(
+            img.len(),
+            3 * cam.width as usize * cam.height as usize,
+            "fit: image of {} has the wrong size",
+            cam.name
+        );
     }
     let cameras: Vec<Camera> = views.iter().map(|(c, _)| c.clone()).collect();
     let mut g = initial_scene(&cameras, cfg);
@@ -227,7 +232,10 @@ pub fn fit(views: &[(Camera, Vec<f32>)], cfg: &FitConfig, progress: &mut dyn FnM
         opt.step(&mut g, &grads, cfg, lr_means);
 
         let done = it + 1;
-        if cfg.densify.enabled && done >= cfg.densify.from && done < densify_until && done % cfg.densify.interval.max(1) == 0
+        if cfg.densify.enabled
+            && done >= cfg.densify.from
+            && done < densify_until
+            && done % cfg.densify.interval.max(1) == 0
         {
             g = densify(&g, &stats, &cfg.densify, extent, &mut rng);
             opt = Optimisers::new(&g);

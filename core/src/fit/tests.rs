@@ -27,7 +27,15 @@ fn cameras() -> Vec<Camera> {
         .map(|i| {
             let a = i as f32 * std::f32::consts::TAU / 6.0;
             let y = if i % 2 == 0 { 1.2 } else { -0.8 };
-            Camera::look_at(format!("v{i}"), Vec3::new(3.0 * a.cos(), y, 3.0 * a.sin()), Vec3::ZERO, Vec3::Y, 32, 32, 45.0)
+            Camera::look_at(
+                format!("v{i}"),
+                Vec3::new(3.0 * a.cos(), y, 3.0 * a.sin()),
+                Vec3::ZERO,
+                Vec3::Y,
+                32,
+                32,
+                45.0,
+            )
         })
         .collect()
 }
