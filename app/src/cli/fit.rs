@@ -47,6 +47,10 @@ pub struct FitArgs {
     /// A preset file (JSON FitConfig, missing fields take their defaults); flags override it.
     #[arg(long)]
     pub preset: Option<PathBuf>,
+    /// Hold every K-th view out of the fit (as the 3DGS trainer's `--eval`, K = 8)
+    /// and report its PSNR apart; previews then show held-out views. 0: use all.
+    #[arg(long, default_value_t = 0)]
+    pub holdout_every: usize,
     /// Write a few renders beside their ground truth into this folder.
     #[arg(long)]
     pub preview: Option<PathBuf>,
@@ -95,11 +99,15 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     for w in &data.warnings {
         eprintln!("warning: {w}");
     }
-    let views = data.views;
-    let Some((first, _)) = views.first() else { anyhow::bail!("{}: no views", args.dataset.display()) };
+    let k = args.holdout_every;
+    let (held, views): (Vec<_>, Vec<_>) = data.views.into_iter().enumerate().partition(|(i, _)| k > 0 && i % k == 0);
+    let (held, views): (Vec<_>, Vec<_>) =
+        (held.into_iter().map(|v| v.1).collect(), views.into_iter().map(|v| v.1).collect());
+    let Some((first, _)) = views.first() else { anyhow::bail!("{}: no views to fit", args.dataset.display()) };
     eprintln!(
-        "loaded {} views of {} at {}×{} in {:.1} s; fitting {} iterations from {} Gaussians",
+        "loaded {} views ({} held out) of {} at {}×{} in {:.1} s; fitting {} iterations from {} Gaussians",
         views.len(),
+        held.len(),
         args.dataset.display(),
         first.width,
         first.height,
@@ -108,6 +116,7 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         cfg.initial_gaussians
     );
 
+    let t_fit = Instant::now();
     let pb = progress::bar(u64::from(cfg.iterations), "fit");
     let mut smoothed = None::<f32>;
     let scene = fit::fit(&views, &cfg, &mut |p| {
@@ -119,7 +128,7 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         }
     });
     pb.finish_and_clear();
-    let fit_s = t0.elapsed().as_secs_f64();
+    let fit_s = t_fit.elapsed().as_secs_f64();
 
     if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).with_context(|| format!("could not create the folder {}", parent.display()))?;
@@ -127,16 +136,23 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     gast_core::scene::save_ply(&args.out, &scene).with_context(|| format!("could not write {}", args.out.display()))?;
     let psnr_all = mean_psnr(&scene, &views, cfg.background);
     eprintln!(
-        "wrote {} ({} Gaussians) after {:.1} s; mean PSNR over the {} training views {:.2} dB",
+        "wrote {} ({} Gaussians) after fitting for {:.1} s; mean PSNR over the {} training views {:.2} dB",
         args.out.display(),
         scene.len(),
         fit_s,
         views.len(),
         psnr_all
     );
+    if !held.is_empty() {
+        eprintln!(
+            "mean PSNR over the {} held-out views {:.2} dB",
+            held.len(),
+            mean_psnr(&scene, &held, cfg.background)
+        );
+    }
 
     if let Some(dir) = &args.preview {
-        write_previews(dir, &scene, &views, cfg.background)?;
+        write_previews(dir, &scene, if held.is_empty() { &views } else { &held }, cfg.background)?;
     }
     Ok(ExitCode::SUCCESS)
 }
