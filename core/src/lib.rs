@@ -7,6 +7,7 @@
 
 pub mod camera;
 pub mod eval;
+pub mod fit;
 pub mod golden;
 pub mod io;
 pub mod raster;

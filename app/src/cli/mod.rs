@@ -2,6 +2,7 @@
 
 mod bench;
 mod check;
+mod fit;
 mod render;
 mod stylize;
 
@@ -50,6 +51,9 @@ pub enum Command {
     /// colour/geometry optimisation; writes the stylized .ply, before/after
     /// renders with depth, and report.json.
     Stylize(Box<stylize::StylizeArgs>),
+    /// Fit a 3DGS scene to posed images (transforms.json, COLMAP, cameras.json)
+    /// with the CPU rasterizer; writes the .ply and optional preview renders.
+    Fit(fit::FitArgs),
     /// Compare the project's numerics with reference files.
     #[command(subcommand)]
     Check(CheckCommand),
@@ -134,6 +138,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             println!("{}", studio::viewport::bench::run(scene.as_deref(), count, frames, width, height)?);
         }
         Command::Stylize(args) => return stylize::run(*args),
+        Command::Fit(args) => return fit::run(args),
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -1,0 +1,191 @@
+//! `gast fit`: a 3DGS scene fitted to a posed-image dataset (NeRF
+//! transforms.json, COLMAP, cameras.json), so that datasets without a Gaussian
+//! scene can be stylized.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::Args;
+use gast_core::fit::{self, FitConfig, load_posed_images, mean_psnr, psnr};
+use gast_core::io::write_png_rgb;
+use gast_core::raster::{self, RenderOptions};
+
+use crate::progress;
+
+/// Arguments of `gast fit`.
+#[derive(Args, Debug)]
+pub struct FitArgs {
+    /// The dataset: a folder with transforms*.json, COLMAP sparse/0 + images/, or
+    /// cameras.json + images/ (or the camera file itself).
+    pub dataset: PathBuf,
+    /// The fitted scene (INRIA .ply, written atomically).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Optimisation steps (one view each).
+    #[arg(long)]
+    pub iterations: Option<u32>,
+    /// Working resolution: longer image side in pixels.
+    #[arg(long)]
+    pub resolution: Option<u32>,
+    /// Initial number of Gaussians.
+    #[arg(long)]
+    pub gaussians: Option<usize>,
+    /// SH degree of the result (0 to 3).
+    #[arg(long)]
+    pub sh_degree: Option<u32>,
+    /// Use at most this many views, evenly spread (0: all).
+    #[arg(long, default_value_t = 0)]
+    pub views: usize,
+    /// Turn densification (clone/split) off; low-opacity pruning still happens at the end.
+    #[arg(long)]
+    pub no_densify: bool,
+    /// Seed of the initial points and the view order.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// A preset file (JSON FitConfig, missing fields take their defaults); flags override it.
+    #[arg(long)]
+    pub preset: Option<PathBuf>,
+    /// Hold every K-th view out of the fit (as the 3DGS trainer's `--eval`, K = 8)
+    /// and report its PSNR apart; previews then show held-out views. 0: use all.
+    #[arg(long, default_value_t = 0)]
+    pub holdout_every: usize,
+    /// Write a few renders beside their ground truth into this folder.
+    #[arg(long)]
+    pub preview: Option<PathBuf>,
+}
+
+impl FitArgs {
+    /// The preset (or the defaults) with the flags applied.
+    pub fn config(&self) -> anyhow::Result<FitConfig> {
+        let mut c = match &self.preset {
+            Some(p) => {
+                let text =
+                    std::fs::read_to_string(p).with_context(|| format!("could not read the preset {}", p.display()))?;
+                serde_json::from_str(&text)
+                    .with_context(|| format!("{}: expected a FitConfig JSON preset", p.display()))?
+            }
+            None => FitConfig::default(),
+        };
+        if let Some(v) = self.iterations {
+            c.iterations = v;
+        }
+        if let Some(v) = self.resolution {
+            c.resolution = v.max(1);
+        }
+        if let Some(v) = self.gaussians {
+            c.initial_gaussians = v.max(1);
+        }
+        if let Some(v) = self.sh_degree {
+            c.sh_degree = v.min(3);
+        }
+        if let Some(v) = self.seed {
+            c.seed = v;
+        }
+        if self.no_densify {
+            c.densify.enabled = false;
+        }
+        Ok(c)
+    }
+}
+
+/// Loads the dataset, fits, writes the scene and the previews.
+pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
+    let cfg = args.config()?;
+    let t0 = Instant::now();
+    let data = load_posed_images(&args.dataset, cfg.resolution, args.views, cfg.background)
+        .with_context(|| format!("could not load the posed images of {}", args.dataset.display()))?;
+    for w in &data.warnings {
+        eprintln!("warning: {w}");
+    }
+    let k = args.holdout_every;
+    let (held, views): (Vec<_>, Vec<_>) = data.views.into_iter().enumerate().partition(|(i, _)| k > 0 && i % k == 0);
+    let (held, views): (Vec<_>, Vec<_>) =
+        (held.into_iter().map(|v| v.1).collect(), views.into_iter().map(|v| v.1).collect());
+    let Some((first, _)) = views.first() else { anyhow::bail!("{}: no views to fit", args.dataset.display()) };
+    eprintln!(
+        "loaded {} views ({} held out) of {} at {}×{} in {:.1} s; fitting {} iterations from {} Gaussians",
+        views.len(),
+        held.len(),
+        args.dataset.display(),
+        first.width,
+        first.height,
+        t0.elapsed().as_secs_f64(),
+        cfg.iterations,
+        cfg.initial_gaussians
+    );
+
+    let t_fit = Instant::now();
+    let pb = progress::bar(u64::from(cfg.iterations), "fit");
+    let mut smoothed = None::<f32>;
+    let scene = fit::fit(&views, &cfg, &mut |p| {
+        let l = smoothed.map_or(p.loss, |s| 0.98 * s + 0.02 * p.loss);
+        smoothed = Some(l);
+        if p.iteration % 10 == 0 || p.iteration == p.iterations {
+            pb.set_position(u64::from(p.iteration));
+            pb.set_message(format!("L1 {l:.4}, {} Gaussians", p.gaussians));
+        }
+    });
+    pb.finish_and_clear();
+    let fit_s = t_fit.elapsed().as_secs_f64();
+
+    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).with_context(|| format!("could not create the folder {}", parent.display()))?;
+    }
+    gast_core::scene::save_ply(&args.out, &scene).with_context(|| format!("could not write {}", args.out.display()))?;
+    let psnr_all = mean_psnr(&scene, &views, cfg.background);
+    eprintln!(
+        "wrote {} ({} Gaussians) after fitting for {:.1} s; mean PSNR over the {} training views {:.2} dB",
+        args.out.display(),
+        scene.len(),
+        fit_s,
+        views.len(),
+        psnr_all
+    );
+    if !held.is_empty() {
+        eprintln!(
+            "mean PSNR over the {} held-out views {:.2} dB",
+            held.len(),
+            mean_psnr(&scene, &held, cfg.background)
+        );
+    }
+
+    if let Some(dir) = &args.preview {
+        write_previews(dir, &scene, if held.is_empty() { &views } else { &held }, cfg.background)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Renders four views spread over the dataset, writes each render and its
+/// ground truth, and `sheet.png` with one row per view (truth left, render right).
+fn write_previews(
+    dir: &std::path::Path,
+    scene: &gast_core::Gaussians,
+    views: &[(gast_core::Camera, Vec<f32>)],
+    background: [f32; 3],
+) -> anyhow::Result<()> {
+    let opts = RenderOptions { background };
+    let n = views.len().min(4);
+    let (w, h) = (views[0].0.width as usize, views[0].0.height as usize);
+    let mut sheet = vec![0.0f32; n * h * 2 * w * 3];
+    for k in 0..n {
+        let (cam, gt) = &views[k * views.len() / n];
+        let img = raster::render(scene, cam, &opts);
+        let stem = format!("view{k}");
+        write_png_rgb(&dir.join(format!("{stem}_render.png")), cam.width, cam.height, &img.rgb)?;
+        write_png_rgb(&dir.join(format!("{stem}_truth.png")), cam.width, cam.height, gt)?;
+        eprintln!("preview {stem} ({}): PSNR {:.2} dB", cam.name, psnr(&img.rgb, gt));
+        if (cam.width as usize, cam.height as usize) != (w, h) {
+            continue;
+        }
+        for y in 0..h {
+            let row = (k * h + y) * 2 * w * 3;
+            sheet[row..row + 3 * w].copy_from_slice(&gt[y * w * 3..(y + 1) * w * 3]);
+            sheet[row + 3 * w..row + 6 * w].copy_from_slice(&img.rgb[y * w * 3..(y + 1) * w * 3]);
+        }
+    }
+    write_png_rgb(&dir.join("sheet.png"), (2 * w) as u32, (n * h) as u32, &sheet)?;
+    eprintln!("previews in {} (sheet.png: ground truth left, render right)", dir.display());
+    Ok(())
+}

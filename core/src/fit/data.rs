@@ -1,0 +1,131 @@
+//! Posed photographs for the fitter: cameras from any camera file the project
+//! reads, the images they name, composited on the background and shrunk to
+//! the working resolution.
+
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+
+use crate::camera::{self, Camera, CameraError};
+use crate::vision::resize::resize_area;
+
+/// Why posed images could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum FitDataError {
+    /// The camera file could not be read.
+    #[error(transparent)]
+    Cameras(#[from] CameraError),
+    /// No image file was found for a camera.
+    #[error("{dataset}: expected an image for camera {camera:?}, found none of: {tried}")]
+    MissingImage {
+        /// The dataset path.
+        dataset: PathBuf,
+        /// The camera's name.
+        camera: String,
+        /// The paths tried, comma-separated.
+        tried: String,
+    },
+    /// An image could not be decoded.
+    #[error("{path}: expected an image (PNG, JPEG or WebP), found: {message}")]
+    Image {
+        /// The image file.
+        path: PathBuf,
+        /// The decoder's message.
+        message: String,
+    },
+}
+
+/// Posed images at a working resolution.
+#[derive(Clone, Debug, Default)]
+pub struct PosedImages {
+    /// One camera and its RGB image (`height × width × 3`, in `[0, 1]`) per view.
+    pub views: Vec<(Camera, Vec<f32>)>,
+    /// Things the camera reader had to approximate, one line each.
+    pub warnings: Vec<String>,
+}
+
+/// Extensions tried when a camera's name has none (NeRF-synthetic `./train/r_0`).
+const EXTENSIONS: [&str; 7] = ["png", "jpg", "jpeg", "PNG", "JPG", "JPEG", "webp"];
+
+/// Where the image of the camera named `name` can be: beside the camera file
+/// (transforms.json `file_path`), in `images/` (COLMAP, the INRIA layout), with
+/// or without an added extension. The first existing candidate wins.
+pub fn image_candidates(dataset: &Path, name: &str) -> Vec<PathBuf> {
+    let root =
+        if dataset.is_dir() { dataset.to_path_buf() } else { dataset.parent().unwrap_or(Path::new(".")).to_path_buf() };
+    let mut bases = vec![root.clone(), root.join("images")];
+    // A COLMAP folder given directly (`…/sparse/0`): its images are two levels up.
+    for up in root.ancestors().skip(1).take(2) {
+        bases.push(up.join("images"));
+    }
+    let name = name.strip_prefix("./").unwrap_or(name);
+    let mut out = Vec::new();
+    for b in &bases {
+        out.push(b.join(name));
+        for e in EXTENSIONS {
+            out.push(b.join(format!("{name}.{e}")));
+        }
+    }
+    out
+}
+
+/// Reads an image as RGB in `[0, 1]`, compositing any alpha channel on `background`.
+pub fn read_rgb(path: &Path, background: [f32; 3]) -> Result<(u32, u32, Vec<f32>), FitDataError> {
+    let img =
+        image::open(path).map_err(|e| FitDataError::Image { path: path.to_path_buf(), message: e.to_string() })?;
+    let rgba = img.to_rgba32f();
+    let (w, h) = rgba.dimensions();
+    let mut rgb = Vec::with_capacity(w as usize * h as usize * 3);
+    for px in rgba.pixels() {
+        let a = px.0[3].clamp(0.0, 1.0);
+        for (&v, &b) in px.0[..3].iter().zip(&background) {
+            rgb.push(v.clamp(0.0, 1.0) * a + b * (1.0 - a));
+        }
+    }
+    Ok((w, h, rgb))
+}
+
+/// Loads the cameras of `dataset` (any source [`camera::load`] reads) and
+/// their images, keeping `max_views` of them evenly spread (all when 0),
+/// composited on `background` and area-resized so the longer side is at most
+/// `resolution` pixels. A camera whose image has another size than the camera
+/// file says is rescaled to the image first.
+pub fn load_posed_images(
+    dataset: &Path,
+    resolution: u32,
+    max_views: usize,
+    background: [f32; 3],
+) -> Result<PosedImages, FitDataError> {
+    let set = camera::load(dataset)?;
+    let n = set.cameras.len();
+    let keep: Vec<usize> = if max_views == 0 || max_views >= n {
+        (0..n).collect()
+    } else {
+        (0..max_views).map(|i| i * n / max_views).collect()
+    };
+    let views = keep
+        .par_iter()
+        .map(|&i| {
+            let cam = &set.cameras[i];
+            let candidates = image_candidates(dataset, &cam.name);
+            let Some(path) = candidates.iter().find(|p| p.is_file()) else {
+                return Err(FitDataError::MissingImage {
+                    dataset: dataset.to_path_buf(),
+                    camera: cam.name.clone(),
+                    tried: candidates.iter().take(4).map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+                        + ", …",
+                });
+            };
+            let (w, h, rgb) = read_rgb(path, background)?;
+            let full = if (w, h) == (cam.width, cam.height) { cam.clone() } else { cam.scaled_to(w, h) };
+            let work = full.downscaled_to_max_side(resolution.max(1));
+            let img = if (work.width, work.height) == (w, h) {
+                rgb
+            } else {
+                resize_area(&rgb, h as usize, w as usize, 3, work.height as usize, work.width as usize)
+            };
+            Ok((work, img))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(PosedImages { views, warnings: set.warnings })
+}

@@ -1,0 +1,69 @@
+//! A fit of a small synthetic scene rendered by the rasterizer itself.
+
+use glam::Vec3;
+
+use super::*;
+use crate::scene::SH_C0;
+
+/// Twelve coloured blobs near the origin.
+fn target_scene() -> Gaussians {
+    let mut rng = Rng::new(7);
+    let mut g = Gaussians::with_capacity(12, 0);
+    for _ in 0..12 {
+        g.means.push([rng.uniform() - 0.5, rng.uniform() - 0.5, rng.uniform() - 0.5].map(|v| 1.2 * v));
+        g.log_scales.push([0.12f32.ln(), 0.2f32.ln(), 0.1f32.ln()]);
+        g.quats.push([1.0, rng.uniform() - 0.5, rng.uniform() - 0.5, rng.uniform() - 0.5]);
+        g.opacity_logits.push(2.0);
+        for _ in 0..3 {
+            g.sh.push((0.1 + 0.8 * rng.uniform() - 0.5) / SH_C0);
+        }
+    }
+    g
+}
+
+/// Twelve 32×32 views on two rings around the origin.
+fn cameras() -> Vec<Camera> {
+    (0..12)
+        .map(|i| {
+            let a = i as f32 * std::f32::consts::TAU / 6.0;
+            let y = if i % 2 == 0 { 1.2 } else { -0.8 };
+            Camera::look_at(
+                format!("v{i}"),
+                Vec3::new(3.0 * a.cos(), y, 3.0 * a.sin()),
+                Vec3::ZERO,
+                Vec3::Y,
+                32,
+                32,
+                45.0,
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn fits_a_synthetic_scene() {
+    let target = target_scene();
+    let opts = RenderOptions::default();
+    let views: Vec<(Camera, Vec<f32>)> =
+        cameras().into_iter().map(|c| (c.clone(), raster::render(&target, &c, &opts).rgb)).collect();
+    let cfg = FitConfig {
+        iterations: 400,
+        initial_gaussians: 1000,
+        densify: DensifyConfig { from: 100, interval: 50, ..DensifyConfig::default() },
+        ..FitConfig::default()
+    };
+    let cams: Vec<Camera> = views.iter().map(|v| v.0.clone()).collect();
+    let before = mean_psnr(&initial_scene(&cams, &cfg), &views, cfg.background);
+    let mut last = None;
+    let g = fit(&views, &cfg, &mut |p| last = Some(p));
+    let after = mean_psnr(&g, &views, cfg.background);
+    let last = last.expect("progress was reported");
+    println!("synthetic fit: PSNR {before:.2} dB → {after:.2} dB, {} Gaussians, {:.2} s", g.len(), last.elapsed_s);
+    assert_eq!(last.iteration, 400);
+    assert!(g.check_consistent().is_ok());
+    // Measured over seeds 0–5, with and without densification: 8.1–8.6 dB at
+    // the start, 30.0–33.3 dB after 400 iterations. 26 dB leaves room for
+    // rounding and scheduling changes, and still fails on a fit that only
+    // learns colours or stops early (23.4 dB at 100 iterations).
+    assert!(after > 26.0 && after > before + 15.0, "PSNR {before:.2} → {after:.2} dB");
+}
