@@ -157,7 +157,7 @@ mod tests {
     fn cam_at(degrees: f32) -> Camera {
         let t = degrees.to_radians();
         let eye = Vec3::new(3.0 * t.sin(), 0.0, -3.0 * t.cos());
-        Camera::look_at(format!("c{degrees}"), eye, Vec3::ZERO, Vec3::NEG_Y, 48, 40, 45.0)
+        Camera::look_at(format!("c{degrees}"), eye, Vec3::ZERO, Vec3::NEG_Y, 96, 80, 45.0)
     }
 
     #[test]
@@ -169,6 +169,8 @@ mod tests {
         let (ra, rb) = (render(&scene, &ca, &opts), render(&scene, &cb, &opts));
         let same = warp_consistency(&ra, &ca, &rb, &cb, DEFAULT_DEPTH_TOLERANCE);
         assert!(same.valid_fraction > 0.6, "{same:?}");
+        // What remains (≈ 0.02) is the plane's anti-aliased border and the
+        // nearest-pixel rounding of the forward warp.
         assert!(same.rmse < 0.03, "{same:?}");
 
         // The same geometry with other colours from view B: the colours no longer agree.
