@@ -1,0 +1,23 @@
+//! Measures of a stylization, each with its formula and units, for reports,
+//! benchmarks and the automatic detection of runs that went wrong.
+//!
+//! One file per concept, so each measure can be read and checked on its own:
+//! - [`style`]: how close the render's VGG features are to the style's (Gram,
+//!   mean–std, sliced Wasserstein, nearest-neighbour cosine);
+//! - [`content`]: how far the features moved from the colour-matched render;
+//! - [`consistency`]: whether views agree once warped into each other;
+//! - [`geometry`]: how much depth and surface orientation changed;
+//! - [`stability`]: detectors of degenerate optimisation (NaN, exploding
+//!   scales, vanishing opacity, Gaussians leaving the scene, inconsistency).
+
+pub mod consistency;
+pub mod content;
+pub mod geometry;
+pub mod stability;
+pub mod style;
+
+pub use consistency::{Consistency, ViewPairs, pick_view_pairs, warp_consistency};
+pub use content::{ContentDistance, content_distance};
+pub use geometry::{NormalChange, depth_normals, inverse_depth_change, normal_change};
+pub use stability::{Degeneration, DegenerationKind, StabilityReport, StabilityThresholds, assess_stability};
+pub use style::{gram_distance, gram_matrix, mean_std_distance, nn_cosine_distance, sliced_wasserstein_distance};
