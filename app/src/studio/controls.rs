@@ -3,7 +3,7 @@
 
 use egui::{Color32, Ui};
 use gast_core::session::StepReport;
-use gast_core::style::{Mode, StyleConfig};
+use gast_core::style::{Mode, Phase, StyleConfig};
 
 /// Label of a mode in menus.
 pub fn mode_label(m: Mode) -> &'static str {
@@ -82,9 +82,12 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
     changed
 }
 
-/// Draws the total loss (and GCFM) of the steps so far as lines.
+/// Draws every loss term of the steps so far as a line, each on its own
+/// scale (min to max of that term, printed beside its name), over a strip
+/// that marks each step's phase (colour steps amber, geometry steps blue,
+/// joint steps violet).
 pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
-    let (rect, _) = ui.allocate_exact_size(egui::vec2(ui.available_width(), 110.0), egui::Sense::hover());
+    let (rect, _) = ui.allocate_exact_size(egui::vec2(ui.available_width(), 130.0), egui::Sense::hover());
     let painter = ui.painter_at(rect);
     painter.rect_filled(rect, 4.0, ui.visuals().extreme_bg_color);
     if steps.len() < 2 {
@@ -97,47 +100,55 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
         );
         return;
     }
+    let n = steps.len() as f32 - 1.0;
+    let x = |i: usize| rect.left() + rect.width() * i as f32 / n;
+    // Phase strip along the bottom.
+    let strip = 5.0;
+    for (i, s) in steps.iter().enumerate() {
+        let color = match s.phase {
+            Phase::Color => Color32::from_rgb(230, 160, 40),
+            Phase::Geometry => Color32::from_rgb(60, 120, 230),
+            Phase::Joint => Color32::from_rgb(170, 90, 220),
+        };
+        let x0 = x(i.saturating_sub(1)).max(rect.left());
+        painter.rect_filled(
+            egui::Rect::from_min_max(egui::pos2(x0, rect.bottom() - strip), egui::pos2(x(i) + 1.0, rect.bottom())),
+            0.0,
+            color,
+        );
+    }
     type Series = (&'static str, Color32, fn(&StepReport) -> f32);
-    let series: [Series; 2] = [
+    let series: [Series; 5] = [
         ("total", Color32::from_rgb(250, 200, 60), |s| s.losses.total),
         ("GCFM", Color32::from_rgb(90, 170, 250), |s| s.losses.gcfm),
+        ("content", Color32::from_rgb(120, 220, 120), |s| s.losses.content),
+        ("TV", Color32::from_rgb(230, 110, 110), |s| s.losses.tv),
+        ("depth", Color32::from_rgb(200, 200, 200), |s| s.losses.depth),
     ];
-    let all = steps.iter().flat_map(|s| [s.losses.total, s.losses.gcfm]).filter(|v| v.is_finite());
-    let (lo, hi) = all.fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
-    let span = (hi - lo).max(1e-12);
-    let n = steps.len() as f32 - 1.0;
+    let (top, bottom) = (rect.top() + 4.0, rect.bottom() - strip - 3.0);
     for (k, (name, color, get)) in series.iter().enumerate() {
-        let pts: Vec<egui::Pos2> = steps
+        let values: Vec<f32> = steps.iter().map(get).collect();
+        let (lo, hi) = values
+            .iter()
+            .filter(|v| v.is_finite())
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        if lo > hi {
+            continue;
+        }
+        let span = (hi - lo).max(1e-12);
+        let pts: Vec<egui::Pos2> = values
             .iter()
             .enumerate()
-            .map(|(i, s)| {
-                egui::pos2(
-                    rect.left() + rect.width() * i as f32 / n,
-                    rect.bottom() - 4.0 - (rect.height() - 8.0) * (get(s) - lo) / span,
-                )
-            })
+            .filter(|(_, v)| v.is_finite())
+            .map(|(i, v)| egui::pos2(x(i), bottom - (bottom - top) * (v - lo) / span))
             .collect();
-        painter.add(egui::Shape::line(pts, egui::Stroke::new(1.5, *color)));
+        painter.add(egui::Shape::line(pts, egui::Stroke::new(1.3, *color)));
         painter.text(
-            rect.left_top() + egui::vec2(6.0, 4.0 + 14.0 * k as f32),
+            rect.left_top() + egui::vec2(6.0, 4.0 + 13.0 * k as f32),
             egui::Align2::LEFT_TOP,
-            *name,
-            egui::FontId::proportional(11.0),
+            format!("{name} {lo:.3}–{hi:.3}"),
+            egui::FontId::proportional(10.5),
             *color,
         );
     }
-    painter.text(
-        rect.right_top() + egui::vec2(-6.0, 4.0),
-        egui::Align2::RIGHT_TOP,
-        format!("{hi:.4}"),
-        egui::FontId::monospace(10.0),
-        ui.visuals().weak_text_color(),
-    );
-    painter.text(
-        rect.right_bottom() + egui::vec2(-6.0, -4.0),
-        egui::Align2::RIGHT_BOTTOM,
-        format!("{lo:.4}"),
-        egui::FontId::monospace(10.0),
-        ui.visuals().weak_text_color(),
-    );
 }
