@@ -33,13 +33,7 @@ struct Entry {
 /// `{id, img_name, width, height, position, rotation, fx, fy}`), in file order.
 pub fn load_inria(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
     let path = path.as_ref();
-    let text = std::fs::read_to_string(path).map_err(|e| CameraError::io(path, e))?;
-    let value = serde_json::from_str(&text).map_err(|source| CameraError::Json {
-        path: path.to_path_buf(),
-        record: "document".into(),
-        source,
-    })?;
-    from_value(path, value)
+    from_value(path, super::read_json(path)?)
 }
 
 /// Reads a parsed `cameras.json` document.

@@ -151,6 +151,16 @@ impl Camera {
     }
 }
 
+/// Reads and parses a JSON camera file; errors name the file.
+pub(crate) fn read_json(path: &Path) -> Result<serde_json::Value, CameraError> {
+    let text = std::fs::read_to_string(path).map_err(|e| CameraError::io(path, e))?;
+    serde_json::from_str(&text).map_err(|source| CameraError::Json {
+        path: path.to_path_buf(),
+        record: "document".into(),
+        source,
+    })
+}
+
 /// Cameras read from a file, with what the reader had to approximate.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct CameraSet {

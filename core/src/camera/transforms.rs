@@ -68,13 +68,7 @@ struct Frame {
 /// Reads a NeRF / nerfstudio `transforms*.json`, in frame order.
 pub fn load_transforms(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
     let path = path.as_ref();
-    let text = std::fs::read_to_string(path).map_err(|e| CameraError::io(path, e))?;
-    let value = serde_json::from_str(&text).map_err(|source| CameraError::Json {
-        path: path.to_path_buf(),
-        record: "document".into(),
-        source,
-    })?;
-    from_value(path, value)
+    from_value(path, super::read_json(path)?)
 }
 
 /// Reads a parsed `transforms.json` document.
