@@ -256,12 +256,7 @@ fn find_transforms(dir: &Path) -> Option<PathBuf> {
 }
 
 fn load_json(path: &Path) -> Result<CameraSet, CameraError> {
-    let text = std::fs::read_to_string(path).map_err(|e| CameraError::io(path, e))?;
-    let value: serde_json::Value = serde_json::from_str(&text).map_err(|source| CameraError::Json {
-        path: path.to_path_buf(),
-        record: "document".into(),
-        source,
-    })?;
+    let value = read_json(path)?;
     match &value {
         serde_json::Value::Array(_) => inria::from_value(path, value),
         serde_json::Value::Object(o) if o.contains_key("frames") => transforms::from_value(path, value),
