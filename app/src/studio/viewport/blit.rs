@@ -27,16 +27,7 @@ impl BlitPipeline {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("viewport_blit"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<BlitUniform>() as u64),
-                    },
-                    count: None,
-                },
+                super::uniform_entry::<BlitUniform>(0, wgpu::ShaderStages::FRAGMENT),
                 texture(1),
                 texture(2),
             ],

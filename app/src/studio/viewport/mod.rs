@@ -134,6 +134,20 @@ pub fn pack_geometry(g: &Gaussians) -> Vec<[f32; 4]> {
     out
 }
 
+/// A bind-group layout entry for a uniform buffer holding one `T`.
+fn uniform_entry<T>(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<T>() as u64),
+        },
+        count: None,
+    }
+}
+
 fn storage_init(device: &wgpu::Device, label: &str, bytes: &[u8]) -> wgpu::Buffer {
     // Bindings may not be empty: pad to at least one vec4.
     let mut padded;

@@ -30,16 +30,7 @@ impl DrawPipeline {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("splat_draw"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::VERTEX,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<ViewUniform>() as u64),
-                    },
-                    count: None,
-                },
+                super::uniform_entry::<ViewUniform>(0, wgpu::ShaderStages::VERTEX),
                 storage(1),
                 storage(2),
             ],

@@ -32,16 +32,7 @@ impl ProjectPipeline {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("splat_project"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<ViewUniform>() as u64),
-                    },
-                    count: None,
-                },
+                super::uniform_entry::<ViewUniform>(0, wgpu::ShaderStages::COMPUTE),
                 storage(1, true),
                 storage(2, true),
                 storage(3, true),
