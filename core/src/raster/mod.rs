@@ -46,7 +46,7 @@ use crate::scene::Gaussians;
 pub use backward::backward;
 pub use forward::{forward, render};
 pub use state::ForwardState;
-pub use visibility::contributing;
+pub use visibility::{contributing, render_and_contributing};
 
 /// Side of a square screen tile in pixels.
 pub const TILE: u32 = 16;

@@ -5,13 +5,19 @@
 
 use rayon::prelude::*;
 
-use super::{RenderOptions, TILE, forward};
+use super::{Render, RenderOptions, TILE, forward};
 use crate::camera::Camera;
 use crate::scene::Gaussians;
 
 /// For each Gaussian of `g`, whether `cam` composites it into some pixel.
 pub fn contributing(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> Vec<bool> {
-    let (_, st) = forward(g, cam, opts);
+    render_and_contributing(g, cam, opts).1
+}
+
+/// The render of `g` from `cam` and, for each Gaussian, whether it was
+/// composited into some pixel: one forward pass for both.
+pub fn render_and_contributing(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> (Render, Vec<bool>) {
+    let (img, st) = forward(g, cam, opts);
     let (w, h) = (st.width, st.height);
     let n_tiles = st.tile_starts.len().saturating_sub(1);
     let shown: Vec<Vec<u32>> = (0..n_tiles)
@@ -50,7 +56,7 @@ pub fn contributing(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> Vec<bo
     for id in shown.into_iter().flatten() {
         mask[id as usize] = true;
     }
-    mask
+    (img, mask)
 }
 
 #[cfg(test)]

@@ -13,7 +13,7 @@ mod worker;
 
 pub use events::{Command, Event, LossTerms, StepReport, StepTimings};
 pub use prepare::{
-    PreparedStyle, StyleDepthSource, StyleImage, fit_color_transfer, prepare_style, scatter, seen_by_any, subset,
+    PreparedStyle, StyleDepthSource, StyleImage, ViewSurvey, prepare_style, scatter, subset, survey_views,
 };
 pub use run::{Session, SessionError, SessionInputs};
 pub use slot::Slot;

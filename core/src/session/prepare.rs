@@ -8,7 +8,6 @@ use rayon::prelude::*;
 use crate::camera::Camera;
 use crate::raster::{self, RenderOptions};
 use crate::scene::Gaussians;
-use crate::style::color_transfer::ColorTransfer;
 use crate::style::stage1::{StyleMaps, style_maps};
 use crate::style::step::StyleTargets;
 use crate::vision::Vgg;
@@ -83,43 +82,41 @@ pub fn prepare_style(
     PreparedStyle { maps, targets }
 }
 
-/// Fits the linear colour transfer from the scene's renders to the style's pixels.
-///
-/// Content statistics use the pixels of the renders that the scene covers
-/// (alpha ≥ 0.5): the background is not scene content, and with a black
-/// background it would otherwise pull the content mean towards black.
-pub fn fit_color_transfer(
-    g: &Gaussians,
-    cameras: &[Camera],
-    opts: &RenderOptions,
-    style: &StyleImage,
-) -> ColorTransfer {
-    let per_view: Vec<Vec<f32>> = cameras
+/// What one pass over the optimisation cameras tells about the input scene.
+pub struct ViewSurvey {
+    /// RGB of every pixel the scene covers (alpha ≥ 0.5), flat triples: the
+    /// content statistics of the colour transfer. The background is not scene
+    /// content, and with a black background it would pull the mean towards black.
+    pub covered_rgb: Vec<f32>,
+    /// For each Gaussian, whether some camera composites it with α ≥ 1/255
+    /// before the pixel's transmittance runs out.
+    pub seen: Vec<bool>,
+}
+
+/// Renders `g` once from every camera for both the colour statistics and the
+/// visibility mask. (Visibility does not depend on colour, so it holds for the
+/// colour-matched scene too.)
+pub fn survey_views(g: &Gaussians, cameras: &[Camera], opts: &RenderOptions) -> ViewSurvey {
+    let per_view: Vec<(Vec<f32>, Vec<bool>)> = cameras
         .par_iter()
         .map(|cam| {
-            let r = raster::render(g, cam, opts);
+            let (r, seen) = raster::render_and_contributing(g, cam, opts);
             let mut px = Vec::new();
             for (i, &a) in r.alpha.iter().enumerate() {
                 if a >= 0.5 {
                     px.extend_from_slice(&r.rgb[3 * i..3 * i + 3]);
                 }
             }
-            px
+            (px, seen)
         })
         .collect();
-    ColorTransfer::fit(&per_view.concat(), &style.to_f32())
-}
-
-/// For each Gaussian, whether any camera composites it into some pixel with
-/// α ≥ 1/255 before the pixel's transmittance runs out.
-pub fn seen_by_any(g: &Gaussians, cameras: &[Camera], opts: &RenderOptions) -> Vec<bool> {
-    cameras.par_iter().map(|cam| raster::contributing(g, cam, opts)).reduce(
-        || vec![false; g.len()],
-        |mut a, b| {
-            a.iter_mut().zip(b).for_each(|(x, y)| *x |= y);
-            a
-        },
-    )
+    let mut seen = vec![false; g.len()];
+    let mut covered_rgb = Vec::new();
+    for (px, s) in per_view {
+        covered_rgb.extend(px);
+        seen.iter_mut().zip(s).for_each(|(x, y)| *x |= y);
+    }
+    ViewSurvey { covered_rgb, seen }
 }
 
 /// The Gaussians at `keep` (in order), a new set.

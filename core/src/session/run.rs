@@ -4,14 +4,13 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use super::events::{Event, LossTerms, StepReport, StepTimings};
-use super::prepare::{
-    PreparedStyle, StyleDepthSource, StyleImage, fit_color_transfer, prepare_style, scatter, seen_by_any, subset,
-};
+use super::prepare::{PreparedStyle, StyleDepthSource, StyleImage, prepare_style, scatter, subset, survey_views};
 use crate::camera::{Camera, scene_extent};
 use crate::raster::{self, RenderOptions};
 use crate::scene::Gaussians;
 use crate::style::StyleConfig;
 use crate::style::adam::Adam;
+use crate::style::color_transfer::ColorTransfer;
 use crate::style::regularizers::l2_distance;
 use crate::style::step::{FeatureMap, RenderedMaps, content_target, step_loss};
 use crate::vision::Vgg;
@@ -103,14 +102,14 @@ impl Session {
         let work_cams: Vec<Camera> = cameras.iter().map(|c| c.with_longer_side(config.resolution)).collect();
 
         let t = Instant::now();
-        let ct = fit_color_transfer(&scene, &work_cams, &opts, &style);
+        let survey = survey_views(&scene, &work_cams, &opts);
+        let ct = ColorTransfer::fit(&survey.covered_rgb, &style.to_f32());
         let mut full = scene;
         ct.apply_to_gaussians(&mut full);
         on_event(Event::Stage { name: "colour matching".into(), seconds: t.elapsed().as_secs_f64() });
 
         let t = Instant::now();
-        let seen = seen_by_any(&full, &work_cams, &opts);
-        let keep: Vec<u32> = seen.iter().enumerate().filter(|(_, s)| **s).map(|(i, _)| i as u32).collect();
+        let keep: Vec<u32> = survey.seen.iter().enumerate().filter(|(_, s)| **s).map(|(i, _)| i as u32).collect();
         if keep.is_empty() {
             return Err(SessionError::Input(format!(
                 "none of the {} Gaussians is visible from the {} optimisation cameras",

@@ -26,11 +26,7 @@ impl BlitPipeline {
         };
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("viewport_blit"),
-            entries: &[
-                super::uniform_entry::<BlitUniform>(0, wgpu::ShaderStages::FRAGMENT),
-                texture(1),
-                texture(2),
-            ],
+            entries: &[super::uniform_entry::<BlitUniform>(0, wgpu::ShaderStages::FRAGMENT), texture(1), texture(2)],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("viewport_blit"),

@@ -29,11 +29,7 @@ impl DrawPipeline {
         };
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("splat_draw"),
-            entries: &[
-                super::uniform_entry::<ViewUniform>(0, wgpu::ShaderStages::VERTEX),
-                storage(1),
-                storage(2),
-            ],
+            entries: &[super::uniform_entry::<ViewUniform>(0, wgpu::ShaderStages::VERTEX), storage(1), storage(2)],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("splat_draw"),
