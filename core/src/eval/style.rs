@@ -12,109 +12,226 @@
 
 use rayon::prelude::*;
 
+use crate::vision::matmul;
+
+/// The style side of every distance below, computed once: a study measures
+/// many renders against one style image, and the style's Gram matrix, its
+/// sorted projections and its normalised features are the expensive part.
+pub struct StyleReference {
+    channels: usize,
+    positions: usize,
+    /// Per channel `(mean, population std)`.
+    moments: Vec<(f64, f64)>,
+    /// `G = F Fᵀ / N`, `C × C`.
+    gram: Vec<f64>,
+    /// Unit-length features, `C × N` (zero columns stay zero).
+    unit: Vec<f32>,
+    /// Projection directions, `P × C`, and the sorted projections of the style, one row per direction.
+    directions: Vec<f32>,
+    sorted: Vec<Vec<f64>>,
+}
+
+impl StyleReference {
+    /// The statistics of the CHW style features `b` (`channels` channels) with
+    /// `projections` sliced-Wasserstein directions; `None` when `b` is empty or `channels` is 0.
+    pub fn new(b: &[f32], channels: usize, projections: usize) -> Option<Self> {
+        if channels == 0 || b.len() < channels {
+            return None;
+        }
+        let n = b.len() / channels;
+        let b = &b[..n * channels];
+        let mut rng = SplitMix(SLICED_WASSERSTEIN_SEED);
+        let directions: Vec<f32> = (0..projections)
+            .flat_map(|_| {
+                let v: Vec<f64> = (0..channels).map(|_| rng.gaussian()).collect();
+                let len = v.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-12);
+                v.into_iter().map(move |x| (x / len) as f32)
+            })
+            .collect();
+        let sorted = sorted_projections(&directions, projections, b, channels);
+        Some(Self {
+            channels,
+            positions: n,
+            moments: moments(b, channels),
+            gram: gram_matrix(b, channels),
+            unit: unit_columns(b, channels),
+            directions,
+            sorted,
+        })
+    }
+
+    fn positions_of(&self, a: &[f32]) -> Option<usize> {
+        (a.len() >= self.channels).then_some(a.len() / self.channels)
+    }
+
+    /// [`mean_std_distance`] of `a` to the style.
+    pub fn mean_std_distance(&self, a: &[f32]) -> f32 {
+        if self.positions_of(a).is_none() {
+            return 0.0;
+        }
+        let d: f64 = moments(a, self.channels)
+            .iter()
+            .zip(&self.moments)
+            .map(|((ma, sa), (mb, sb))| (ma - mb).abs() + (sa - sb).abs())
+            .sum();
+        (d / self.channels as f64) as f32
+    }
+
+    /// [`gram_distance`] of `a` to the style.
+    pub fn gram_distance(&self, a: &[f32]) -> f32 {
+        if self.positions_of(a).is_none() {
+            return 0.0;
+        }
+        let ga = gram_matrix(a, self.channels);
+        let sq: f64 = ga.iter().zip(&self.gram).map(|(x, y)| (x - y).powi(2)).sum();
+        (sq.sqrt() / self.channels as f64) as f32
+    }
+
+    /// [`sliced_wasserstein_distance`] of `a` to the style.
+    pub fn sliced_wasserstein(&self, a: &[f32]) -> f32 {
+        let Some(na) = self.positions_of(a) else { return 0.0 };
+        let projections = self.sorted.len();
+        if projections == 0 {
+            return 0.0;
+        }
+        let pa = sorted_projections(&self.directions, projections, &a[..na * self.channels], self.channels);
+        let m = na.max(self.positions);
+        let total: f64 = pa
+            .par_iter()
+            .zip(&self.sorted)
+            .map(|(pa, pb)| {
+                (0..m)
+                    .map(|k| {
+                        let q = (k as f64 + 0.5) / m as f64;
+                        (quantile(pa, q) - quantile(pb, q)).powi(2)
+                    })
+                    .sum::<f64>()
+                    / m as f64
+            })
+            .sum();
+        (total / projections as f64).sqrt() as f32
+    }
+
+    /// [`nn_cosine_distance`] of `a` to the style.
+    pub fn nn_cosine(&self, a: &[f32]) -> f32 {
+        let Some(na) = self.positions_of(a) else { return 0.0 };
+        let (c, nb) = (self.channels, self.positions);
+        // Cosines of every rendered position against every style position:
+        // (N_a × C) · (C × N_b) on unit columns, in bands of rows to bound memory.
+        let unit_a = unit_columns(&a[..na * c], c);
+        let mut at = vec![0.0f32; na * c];
+        for ch in 0..c {
+            for (p, &v) in unit_a[ch * na..(ch + 1) * na].iter().enumerate() {
+                at[p * c + ch] = v;
+            }
+        }
+        let band = (1 << 22) / nb.max(1);
+        let band = band.clamp(1, na);
+        let mut total = 0.0f64;
+        let mut scores = vec![0.0f32; band * nb];
+        for r0 in (0..na).step_by(band) {
+            let rows = band.min(na - r0);
+            matmul(&mut scores[..rows * nb], nb, (&at[r0 * c..], c, 1), (&self.unit, nb), (rows, nb, c), false);
+            total += scores[..rows * nb]
+                .par_chunks(nb)
+                .map(|row| f64::from(1.0 - row.iter().copied().fold(f32::NEG_INFINITY, f32::max)))
+                .sum::<f64>();
+        }
+        (total / na as f64) as f32
+    }
+}
+
+/// Per-channel mean and population standard deviation of a CHW map.
+fn moments(x: &[f32], channels: usize) -> Vec<(f64, f64)> {
+    let n = x.len() / channels;
+    (0..channels)
+        .map(|c| {
+            let s = &x[c * n..(c + 1) * n];
+            let mean = s.iter().map(|&v| f64::from(v)).sum::<f64>() / n as f64;
+            let var = s.iter().map(|&v| (f64::from(v) - mean).powi(2)).sum::<f64>() / n as f64;
+            (mean, var.sqrt())
+        })
+        .collect()
+}
+
+/// The CHW map with every position's feature vector scaled to unit length.
+fn unit_columns(x: &[f32], channels: usize) -> Vec<f32> {
+    let n = x.len() / channels;
+    let mut norm = vec![0.0f32; n];
+    for c in 0..channels {
+        for (acc, &v) in norm.iter_mut().zip(&x[c * n..(c + 1) * n]) {
+            *acc += v * v;
+        }
+    }
+    let inv: Vec<f32> = norm.iter().map(|v| if *v > 0.0 { 1.0 / v.sqrt() } else { 0.0 }).collect();
+    let mut out = x[..n * channels].to_vec();
+    for c in 0..channels {
+        for (v, s) in out[c * n..(c + 1) * n].iter_mut().zip(&inv) {
+            *v *= s;
+        }
+    }
+    out
+}
+
+/// Projections of every position of the CHW map `x` on each of the
+/// `projections` directions (`P × C`), one gemm, each row sorted.
+fn sorted_projections(directions: &[f32], projections: usize, x: &[f32], channels: usize) -> Vec<Vec<f64>> {
+    let n = x.len() / channels;
+    let mut p = vec![0.0f32; projections * n];
+    matmul(&mut p, n, (directions, channels, 1), (x, n), (projections, n, channels), false);
+    p.par_chunks(n.max(1))
+        .map(|row| {
+            let mut r: Vec<f64> = row.iter().map(|&v| f64::from(v)).collect();
+            r.sort_by(f64::total_cmp);
+            r
+        })
+        .collect()
+}
+
 /// Mean–std distance (as in AdaIN's style loss):
 /// `(1/C) Σ_c |μ_c(a) − μ_c(b)| + |σ_c(a) − σ_c(b)|` for CHW feature maps with
 /// `channels` channels (population standard deviation). Ignores spatial layout.
 /// 0 when either map is empty or `channels` is 0.
 pub fn mean_std_distance(a: &[f32], b: &[f32], channels: usize) -> f32 {
-    if channels == 0 || a.len() < channels || b.len() < channels {
-        return 0.0;
-    }
-    let (na, nb) = (a.len() / channels, b.len() / channels);
-    let stats = |x: &[f32]| {
-        let n = x.len() as f64;
-        let mean = x.iter().map(|&v| v as f64).sum::<f64>() / n;
-        let var = x.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / n;
-        (mean, var.sqrt())
-    };
-    let mut d = 0.0f64;
-    for c in 0..channels {
-        let (ma, sa) = stats(&a[c * na..(c + 1) * na]);
-        let (mb, sb) = stats(&b[c * nb..(c + 1) * nb]);
-        d += (ma - mb).abs() + (sa - sb).abs();
-    }
-    (d / channels as f64) as f32
+    StyleReference::new(b, channels, 0).map_or(0.0, |r| r.mean_std_distance(a))
 }
 
 /// Nearest-neighbour cosine distance `(1/N) Σ_x min_y (1 − cos(a(x), b(y)))`
 /// for CHW feature maps of `channels` channels: how well every rendered feature
-/// finds a close style feature (unitless, in `[0, 2]`). The nearest style
-/// feature is found by the same tiled matrix products as the GCFM matching
-/// (the other two modalities left empty, so the joint cosine is the cosine of
-/// `a` and `b`). 0 when either map is empty.
+/// finds a close style feature (unitless, in `[0, 2]`); all cosines by one
+/// matrix product of unit-length features. A zero feature vector has cosine 0
+/// with everything. 0 when either map is empty.
 pub fn nn_cosine_distance(a: &[f32], b: &[f32], channels: usize) -> f32 {
-    use crate::style::gcfm::{StyleFeatures, match_features};
-    if channels == 0 || a.len() < channels || b.len() < channels {
-        return 0.0;
-    }
-    let (na, nb) = (a.len() / channels, b.len() / channels);
-    let (a, b) = (&a[..na * channels], &b[..nb * channels]);
-    let style = StyleFeatures::new([b.to_vec(), vec![0.0; b.len()], vec![0.0; b.len()]], channels, 1, nb);
-    let zeros = vec![0.0; a.len()];
-    let best = match_features(&style, [a, &zeros, &zeros], na).best;
-    let norm = |x: &[f32], n: usize, i: usize| (0..channels).map(|c| x[c * n + i].powi(2)).sum::<f32>().sqrt() + 1e-8;
-    let total: f64 = best
-        .iter()
-        .enumerate()
-        .map(|(i, &j)| {
-            let j = j as usize;
-            let dot: f32 = (0..channels).map(|c| a[c * na + i] * b[c * nb + j]).sum();
-            f64::from(1.0 - dot / (norm(a, na, i) * norm(b, nb, j)))
-        })
-        .sum();
-    (total / na as f64) as f32
+    StyleReference::new(b, channels, 0).map_or(0.0, |r| r.nn_cosine(a))
 }
 
 /// The normalised Gram matrix `G = F Fᵀ / N` of a CHW feature map (`C × C`,
-/// row-major, `f64`), `N` the number of positions. Dividing by `N` makes maps
-/// of different sizes comparable (a render at 1/4 resolution against a style
-/// image of another size). Empty when `channels` is 0 or there are no positions.
+/// row-major, `f64`, the product itself in `f32` by gemm), `N` the number of
+/// positions. Dividing by `N` makes maps of different sizes comparable (a
+/// render at 1/4 resolution against a style image of another size). Empty when
+/// `channels` is 0 or there are no positions.
 pub fn gram_matrix(f: &[f32], channels: usize) -> Vec<f64> {
     if channels == 0 || f.len() < channels {
         return Vec::new();
     }
     let n = f.len() / channels;
-    // Upper triangle only (G is symmetric), four partial sums for throughput.
-    let rows: Vec<Vec<f64>> = (0..channels)
-        .into_par_iter()
-        .map(|i| {
-            let fi = &f[i * n..(i + 1) * n];
-            (i..channels).map(|j| dot(fi, &f[j * n..(j + 1) * n]) / n as f64).collect()
-        })
-        .collect();
-    let mut g = vec![0.0f64; channels * channels];
-    for (i, row) in rows.iter().enumerate() {
-        for (k, &v) in row.iter().enumerate() {
-            g[i * channels + i + k] = v;
-            g[(i + k) * channels + i] = v;
+    // One f32 matrix product F·Fᵀ (gemm); F transposed to N × C for the right operand.
+    let mut ft = vec![0.0f32; n * channels];
+    for c in 0..channels {
+        for (p, &v) in f[c * n..(c + 1) * n].iter().enumerate() {
+            ft[p * channels + c] = v;
         }
     }
-    g
-}
-
-/// `Σ x·y` in `f64`.
-fn dot(x: &[f32], y: &[f32]) -> f64 {
-    let mut acc = [0.0f64; 4];
-    let (xc, yc) = (x.chunks_exact(4), y.chunks_exact(4));
-    let tail: f64 = xc.remainder().iter().zip(yc.remainder()).map(|(&a, &b)| f64::from(a) * f64::from(b)).sum();
-    for (a, b) in xc.zip(yc) {
-        for k in 0..4 {
-            acc[k] += f64::from(a[k]) * f64::from(b[k]);
-        }
-    }
-    acc.iter().sum::<f64>() + tail
+    let mut g = vec![0.0f32; channels * channels];
+    matmul(&mut g, channels, (f, n, 1), (&ft, channels), (channels, channels, n), false);
+    g.into_iter().map(|v| f64::from(v) / n as f64).collect()
 }
 
 /// Gram-matrix distance `‖G(a) − G(b)‖_F / C` with `G = F Fᵀ / N` (see
 /// [`gram_matrix`]): the root-mean-square difference of the `C²` Gram entries,
 /// in squared feature units. 0 when either map is empty.
 pub fn gram_distance(a: &[f32], b: &[f32], channels: usize) -> f32 {
-    let (ga, gb) = (gram_matrix(a, channels), gram_matrix(b, channels));
-    if ga.is_empty() || gb.is_empty() {
-        return 0.0;
-    }
-    let sq: f64 = ga.iter().zip(&gb).map(|(x, y)| (x - y).powi(2)).sum();
-    (sq.sqrt() / channels as f64) as f32
+    StyleReference::new(b, channels, 0).map_or(0.0, |r| r.gram_distance(a))
 }
 
 /// The seed of the projection directions of [`sliced_wasserstein_distance`]:
@@ -132,42 +249,7 @@ pub const SLICED_WASSERSTEIN_SEED: u64 = 0x5eed_6a57_0001;
 /// variance of the estimate (64–256 are usual for 768 channels). 0 when either
 /// map is empty or `projections` is 0.
 pub fn sliced_wasserstein_distance(a: &[f32], b: &[f32], channels: usize, projections: usize) -> f32 {
-    if channels == 0 || projections == 0 || a.len() < channels || b.len() < channels {
-        return 0.0;
-    }
-    let (na, nb) = (a.len() / channels, b.len() / channels);
-    let m = na.max(nb);
-    let mut rng = SplitMix(SLICED_WASSERSTEIN_SEED);
-    let dirs: Vec<Vec<f64>> = (0..projections)
-        .map(|_| {
-            let v: Vec<f64> = (0..channels).map(|_| rng.gaussian()).collect();
-            let len = v.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-12);
-            v.into_iter().map(|x| x / len).collect()
-        })
-        .collect();
-    let project = |f: &[f32], n: usize, dir: &[f64]| {
-        let mut p = vec![0.0f64; n];
-        for (c, &w) in dir.iter().enumerate() {
-            for (acc, &x) in p.iter_mut().zip(&f[c * n..(c + 1) * n]) {
-                *acc += w * f64::from(x);
-            }
-        }
-        p.sort_by(f64::total_cmp);
-        p
-    };
-    let total: f64 = dirs
-        .par_iter()
-        .map(|dir| {
-            let (pa, pb) = (project(a, na, dir), project(b, nb, dir));
-            (0..m)
-                .map(|k| {
-                    (quantile(&pa, (k as f64 + 0.5) / m as f64) - quantile(&pb, (k as f64 + 0.5) / m as f64)).powi(2)
-                })
-                .sum::<f64>()
-                / m as f64
-        })
-        .sum();
-    (total / projections as f64).sqrt() as f32
+    StyleReference::new(b, channels, projections).map_or(0.0, |r| r.sliced_wasserstein(a))
 }
 
 /// The `q` quantile of sorted, non-empty `s`, linearly interpolated between
@@ -252,6 +334,32 @@ mod tests {
         let once = sliced_wasserstein_distance(&c, &d, 3, 32);
         assert_eq!(once, sliced_wasserstein_distance(&c, &d, 3, 32), "fixed seed: deterministic");
         assert!(once > 0.0);
+    }
+
+    #[test]
+    fn nn_cosine_matches_a_brute_force_search() {
+        let (c, na, nb) = (5, 37, 23);
+        let a = sample(c, na, 0.2);
+        let b = sample(c, nb, 2.9);
+        let col = |x: &[f32], n: usize, i: usize| (0..c).map(|k| x[k * n + i]).collect::<Vec<f32>>();
+        let cos = |u: &[f32], v: &[f32]| {
+            let d: f32 = u.iter().zip(v).map(|(x, y)| x * y).sum();
+            d / (u.iter().map(|x| x * x).sum::<f32>().sqrt() * v.iter().map(|x| x * x).sum::<f32>().sqrt())
+        };
+        let brute: f32 = (0..na)
+            .map(|i| {
+                let best = (0..nb).map(|j| cos(&col(&a, na, i), &col(&b, nb, j))).fold(f32::NEG_INFINITY, f32::max);
+                1.0 - best
+            })
+            .sum::<f32>()
+            / na as f32;
+        assert!((nn_cosine_distance(&a, &b, c) - brute).abs() < 1e-5, "{} vs {brute}", nn_cosine_distance(&a, &b, c));
+        // One reference answers every measure as the free functions do.
+        let r = StyleReference::new(&b, c, 16).expect("reference");
+        assert_eq!(r.nn_cosine(&a), nn_cosine_distance(&a, &b, c));
+        assert_eq!(r.gram_distance(&a), gram_distance(&a, &b, c));
+        assert_eq!(r.sliced_wasserstein(&a), sliced_wasserstein_distance(&a, &b, c, 16));
+        assert_eq!(r.mean_std_distance(&a), mean_std_distance(&a, &b, c));
     }
 
     #[test]

@@ -19,7 +19,7 @@ fn band_rows(k: usize, h: usize, w: usize, band_elems: usize) -> usize {
 /// `dst[i·dst_rs + j] (+)= Σ_p lhs[i·lhs_rs + p·lhs_cs] · rhs[p·rhs_rs + j]`
 /// for `i < m, j < n, p < k`, on gemm's rayon threads.
 #[allow(clippy::too_many_arguments)]
-fn matmul(
+pub(crate) fn matmul(
     dst: &mut [f32],
     dst_rs: usize,
     (lhs, lhs_rs, lhs_cs): (&[f32], usize, usize),

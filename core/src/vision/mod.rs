@@ -23,6 +23,7 @@ pub mod vgg;
 pub mod weights;
 
 pub use conv::gemm_gflops;
+pub(crate) use conv::matmul;
 pub use download::resolve_weights;
 pub use vgg::{Features, Vgg, VggState};
 pub use weights::{VggWeights, WeightsError};
