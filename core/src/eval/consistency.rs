@@ -24,7 +24,8 @@ pub const DEFAULT_DEPTH_TOLERANCE: f32 = 0.05;
 /// The result of warping one view into another.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Consistency {
-    /// `sqrt( Σ_valid Σ_c (A_warped − B)² / (3 · valid) )`, RGB in `[0, 1]` units;
+    /// `sqrt( Σ_valid Σ_c (A_warped − B)² / (3 · valid) )`, RGB clamped to `[0, 1]`
+    /// as displayed, so at most 1;
     /// 0 when no pixel is valid.
     pub rmse: f32,
     /// The number of valid pixels: pixels of B covered in B, hit by a warped
@@ -79,7 +80,7 @@ pub fn warp_consistency(a: &Render, cam_a: &Camera, b: &Render, cam_b: &Camera, 
         }
         valid += 1;
         for c in 0..3 {
-            sq += (f64::from(a.rgb[3 * i + c]) - f64::from(b.rgb[3 * j + c])).powi(2);
+            sq += (f64::from(a.rgb[3 * i + c].clamp(0.0, 1.0)) - f64::from(b.rgb[3 * j + c].clamp(0.0, 1.0))).powi(2);
         }
     }
     let rmse = if valid == 0 { 0.0 } else { (sq / (3 * valid) as f64).sqrt() as f32 };

@@ -73,7 +73,7 @@ pub fn depth_normals(render: &Render, cam: &Camera) -> Vec<Option<Vec3>> {
 /// How much the surface orientation changed between two renders from the same camera.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct NormalChange {
-    /// `mean_x acos(n_before(x) · n_after(x))` in degrees, over the pixels with
+    /// `mean_x ∠(n_before(x), n_after(x))` in degrees, over the pixels with
     /// a normal in both renders; 0 when there are none.
     pub mean_degrees: f32,
     /// The number of pixels that had a normal in both renders.
@@ -90,7 +90,8 @@ pub fn normal_change(before: &Render, after: &Render, cam: &Camera) -> NormalCha
     let (mut sum, mut pixels) = (0.0f64, 0usize);
     for (b, a) in nb.iter().zip(&na) {
         if let (Some(b), Some(a)) = (b, a) {
-            sum += f64::from(b.dot(*a).clamp(-1.0, 1.0).acos().to_degrees());
+            // atan2(|b × a|, b · a): exact 0 for equal vectors, where acos of a rounded dot is not.
+            sum += f64::from(b.cross(*a).length().atan2(b.dot(*a)).to_degrees());
             pixels += 1;
         }
     }
