@@ -87,6 +87,20 @@ pub struct Session {
 impl Session {
     /// Prepares a run: colour matching, culling, style features. Reports each stage.
     pub fn prepare(inputs: SessionInputs, on_event: &mut dyn FnMut(Event)) -> Result<Self, SessionError> {
+        Self::prepare_with_style(inputs, None, on_event)
+    }
+
+    /// As [`Session::prepare`], reusing the style's maps and features when
+    /// `style` is given (a study runs one style under many settings; Stage 1
+    /// is the slowest part of preparing). They must come from [`prepare_style`]
+    /// with the same style image, texture scale, depth source and polarity as
+    /// `inputs`.
+    pub fn prepare_with_style(
+        inputs: SessionInputs,
+        style: Option<PreparedStyle>,
+        on_event: &mut dyn FnMut(Event),
+    ) -> Result<Self, SessionError> {
+        let prepared = style;
         let SessionInputs { scene, cameras, style, style_depth, vgg, config } = inputs;
         let problems = config.problems();
         if !problems.is_empty() {
@@ -122,7 +136,10 @@ impl Session {
         on_event(Event::Stage { name: "visibility culling".into(), seconds: t.elapsed().as_secs_f64() });
 
         let t = Instant::now();
-        let style_maps_ = prepare_style(&vgg, &style, config.texture_scale, &style_depth, config.depth_polarity);
+        let style_maps_ = match prepared {
+            Some(p) => p,
+            None => prepare_style(&vgg, &style, config.texture_scale, &style_depth, config.depth_polarity),
+        };
         on_event(Event::Stage { name: "style features".into(), seconds: t.elapsed().as_secs_f64() });
 
         let n = keep.len();
