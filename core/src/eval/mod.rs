@@ -8,16 +8,24 @@
 //! - [`consistency`]: whether views agree once warped into each other;
 //! - [`geometry`]: how much depth and surface orientation changed;
 //! - [`stability`]: detectors of degenerate optimisation (NaN, exploding
-//!   scales, vanishing opacity, Gaussians leaving the scene, inconsistency).
+//!   scales, vanishing opacity, Gaussians leaving the scene, inconsistency);
+//! - [`measure`]: all of the above on one fixed ring of views, for comparing runs;
+//! - [`trial`]: one run stepped to its budget and measured along the way.
 
 pub mod consistency;
 pub mod content;
 pub mod geometry;
+pub mod measure;
 pub mod stability;
 pub mod style;
+pub mod trial;
 
 pub use consistency::{Consistency, ViewPairs, pick_view_pairs, warp_consistency};
 pub use content::{ContentDistance, content_distance};
 pub use geometry::{NormalChange, depth_normals, inverse_depth_change, normal_change};
+pub use measure::{EvalOptions, Evaluator, Measures};
 pub use stability::{Degeneration, DegenerationKind, StabilityReport, StabilityThresholds, assess_stability};
-pub use style::{gram_distance, gram_matrix, mean_std_distance, nn_cosine_distance, sliced_wasserstein_distance};
+pub use style::{
+    StyleReference, gram_distance, gram_matrix, mean_std_distance, nn_cosine_distance, sliced_wasserstein_distance,
+};
+pub use trial::{Checkpoint, TrialOutcome, run_trial};

@@ -1,0 +1,278 @@
+//! One fixed set of measures of a scene, so that runs with different settings
+//! (mode, budget, working resolution, weights) are compared on the same views.
+//!
+//! The views are a ring of [`RING_VIEWS`] cameras around the input scene, 2.5°
+//! apart, at [`EvalOptions::elevation_degrees`] and rendered at
+//! [`EvalOptions::resolution`] whatever the run's working resolution. Four of
+//! them, a quarter turn apart ([`STYLE_VIEWS`]), carry the style, content and
+//! geometry measures (each the mean over the four); two pairs per baseline
+//! carry consistency: a short baseline of 5° ([`SHORT_PAIRS`]) and a long one of
+//! 37.5° ([`LONG_PAIRS`]). The ring is not the optimisation's camera set, so
+//! the measures also see the scene between training views.
+
+use std::sync::Arc;
+
+use super::consistency::{DEFAULT_DEPTH_TOLERANCE, warp_consistency};
+use super::content::content_distance;
+use super::geometry::{inverse_depth_change, normal_change};
+use super::style::StyleReference;
+use crate::camera::{Camera, OrbitLayout, OrbitOptions, orbit_cameras};
+use crate::raster::{self, Render, RenderOptions};
+use crate::scene::Gaussians;
+use crate::style::StyleFeatures;
+use crate::style::step::{FeatureMap, content_target, replicate3};
+use crate::vision::Vgg;
+use crate::vision::canny::render_edges;
+
+/// Cameras on the evaluation ring (2.5° apart).
+pub const RING_VIEWS: usize = 144;
+/// Ring indices of the views that carry the style, content and geometry measures (0°, 90°, 180°, 270°).
+pub const STYLE_VIEWS: [usize; 4] = [0, 36, 72, 108];
+/// Short-baseline pairs (5° apart).
+pub const SHORT_PAIRS: [(usize, usize); 2] = [(0, 2), (72, 74)];
+/// Long-baseline pairs (37.5° apart).
+pub const LONG_PAIRS: [(usize, usize); 2] = [(0, 15), (72, 87)];
+/// Random projections of the sliced Wasserstein distance.
+pub const SW_PROJECTIONS: usize = 64;
+
+/// Where the evaluation views are.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EvalOptions {
+    /// Longer side of the evaluation renders in pixels (square views). Default 192.
+    pub resolution: u32,
+    /// Elevation of the ring above the horizontal plane, degrees. Default 15.
+    pub elevation_degrees: f32,
+    /// Vertical field of view, degrees. Default 50 (as the optimisation orbit).
+    pub fov_y_degrees: f32,
+    /// Background colour of the renders.
+    pub background: [f32; 3],
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        Self { resolution: 192, elevation_degrees: 15.0, fov_y_degrees: 50.0, background: [0.0; 3] }
+    }
+}
+
+/// The measures of one scene; lower is "more" of what the name says except
+/// where noted. Every value is a mean over the views or pairs named in the module doc.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Measures {
+    /// Gram distance to the style ([`super::gram_distance`]), squared feature units; lower is closer.
+    pub gram: f32,
+    /// Mean–std distance to the style ([`super::mean_std_distance`]), feature units.
+    pub mean_std: f32,
+    /// Sliced Wasserstein distance to the style ([`super::sliced_wasserstein_distance`], 64 projections), feature units.
+    pub sliced_wasserstein: f32,
+    /// Nearest-neighbour cosine distance to the style ([`super::nn_cosine_distance`]), in `[0, 2]`.
+    pub nn_cosine: f32,
+    /// The same between the rendered depth map (inverse depth min-max normalised
+    /// per view, as GCFM sees it) and the style's depth map: structure, not colour.
+    pub nn_cosine_depth: f32,
+    /// The same between the render's Canny edge map and the style's edge map.
+    pub nn_cosine_edge: f32,
+    /// Content distance to the colour-matched scene, relative ([`content_distance`]); unitless.
+    pub content: f32,
+    /// Multi-view RMSE at the 5° baseline, RGB in `[0, 1]`.
+    pub consistency_short: f32,
+    /// Multi-view RMSE at the 37.5° baseline, RGB in `[0, 1]`.
+    pub consistency_long: f32,
+    /// Inverse-depth change against the colour-matched scene ([`inverse_depth_change`]), relative.
+    pub depth_change: f32,
+    /// Mean angle between depth normals before and after ([`normal_change`]), degrees.
+    pub normal_change_degrees: f32,
+    /// Fraction of pixels covered (alpha ≥ 0.5) in the style views; shows holes and blow-ups.
+    pub coverage: f32,
+}
+
+/// The fixed views, the colour-matched renders and the style's features that
+/// every scene of a study is measured against.
+pub struct Evaluator {
+    net: Arc<Vgg>,
+    /// RGB, depth and edge statistics of the style (see [`StyleFeatures`]).
+    style: [Option<StyleReference>; 3],
+    cameras: Vec<(usize, Camera)>,
+    opts: RenderOptions,
+    /// Colour-matched renders, one per entry of `cameras`.
+    reference: Vec<Render>,
+    /// Features (RGB, depth, edge) of the colour-matched renders of the style views.
+    reference_features: Vec<[FeatureMap; 3]>,
+}
+
+impl Evaluator {
+    /// Builds the ring around `reference` (the colour-matched input `G^c`, whose
+    /// robust bounds place the ring) and renders it once. `style` holds the VGG
+    /// relu3 features of the style's RGB, depth and edge maps (as the
+    /// optimisation uses them).
+    pub fn new(net: Arc<Vgg>, style: &StyleFeatures, reference: &Gaussians, options: &EvalOptions) -> Self {
+        let ring = orbit_cameras(
+            &reference.means,
+            &OrbitOptions {
+                count: RING_VIEWS,
+                width: options.resolution.max(16),
+                height: options.resolution.max(16),
+                fov_y_degrees: options.fov_y_degrees,
+                layout: OrbitLayout::Ring { elevation_degrees: options.elevation_degrees },
+                ..OrbitOptions::default()
+            },
+        );
+        let mut used: Vec<usize> = STYLE_VIEWS.to_vec();
+        used.extend(SHORT_PAIRS.iter().chain(&LONG_PAIRS).flat_map(|&(a, b)| [a, b]));
+        used.sort_unstable();
+        used.dedup();
+        let cameras: Vec<(usize, Camera)> = used.into_iter().map(|i| (i, ring[i].clone())).collect();
+        let opts = RenderOptions { background: options.background };
+        let reference: Vec<Render> = cameras.iter().map(|(_, c)| raster::render(reference, c, &opts)).collect();
+        let c = style.channels;
+        let style = [
+            StyleReference::new(style.modality(0), c, SW_PROJECTIONS),
+            StyleReference::new(style.modality(1), c, 0),
+            StyleReference::new(style.modality(2), c, 0),
+        ];
+        let mut out = Self { net, style, cameras, opts, reference, reference_features: Vec::new() };
+        out.reference_features = STYLE_VIEWS.iter().map(|&v| out.features(&out.reference[out.slot(v)])).collect();
+        out
+    }
+
+    /// The evaluation cameras of the style views (for sample renders).
+    pub fn style_cameras(&self) -> Vec<Camera> {
+        STYLE_VIEWS.iter().map(|&v| self.cameras[self.slot(v)].1.clone()).collect()
+    }
+
+    /// The measures of the colour-matched scene itself (no second render).
+    pub fn measure_reference(&self) -> Measures {
+        self.measure_renders(&self.reference, &self.reference_features)
+    }
+
+    /// Renders `g` from the evaluation views and measures it.
+    pub fn measure(&self, g: &Gaussians) -> Measures {
+        let renders: Vec<Render> = self.cameras.iter().map(|(_, c)| raster::render(g, c, &self.opts)).collect();
+        let feats: Vec<[FeatureMap; 3]> = STYLE_VIEWS.iter().map(|&v| self.features(&renders[self.slot(v)])).collect();
+        self.measure_renders(&renders, &feats)
+    }
+
+    /// A sample sheet of style view `k` (0..4): the colour-matched input, `g`,
+    /// then the inverse depth of each (grey, near = bright, one range for both),
+    /// side by side. Returns `(width, height, rgb)`, RGB in `[0, 1]` row-major.
+    pub fn sample_sheet(&self, g: &Gaussians, k: usize) -> (u32, u32, Vec<f32>) {
+        let slot = self.slot(STYLE_VIEWS[k.min(STYLE_VIEWS.len() - 1)]);
+        let before = &self.reference[slot];
+        let after = raster::render(g, &self.cameras[slot].1, &self.opts);
+        let (w, h) = (before.width as usize, before.height as usize);
+        let covered = |r: &Render| -> Vec<f32> {
+            r.inv_depth.iter().zip(&r.alpha).filter(|(_, a)| **a >= 0.5).map(|(d, _)| *d).collect()
+        };
+        let all: Vec<f32> = covered(before).into_iter().chain(covered(&after)).filter(|v| v.is_finite()).collect();
+        let lo = all.iter().copied().fold(f32::INFINITY, f32::min);
+        let hi = all.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        let grey = |r: &Render, i: usize| {
+            if r.alpha[i] < 0.5 || hi <= lo { 0.0 } else { ((r.inv_depth[i] - lo) / (hi - lo)).clamp(0.0, 1.0) }
+        };
+        let mut out = vec![0.0f32; 4 * w * h * 3];
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let panels = [
+                    [before.rgb[3 * i], before.rgb[3 * i + 1], before.rgb[3 * i + 2]],
+                    [after.rgb[3 * i], after.rgb[3 * i + 1], after.rgb[3 * i + 2]],
+                    [grey(before, i); 3],
+                    [grey(&after, i); 3],
+                ];
+                for (p, rgb) in panels.iter().enumerate() {
+                    let o = 3 * (y * 4 * w + p * w + x);
+                    for c in 0..3 {
+                        out[o + c] = rgb[c].clamp(0.0, 1.0);
+                    }
+                }
+            }
+        }
+        (4 * w as u32, h as u32, out)
+    }
+
+    fn slot(&self, ring_index: usize) -> usize {
+        self.cameras.iter().position(|(i, _)| *i == ring_index).unwrap_or(0)
+    }
+
+    /// Features of the three maps GCFM compares: RGB (clamped), the inverse
+    /// depth min-max normalised per view, and the Canny edges of the RGB.
+    fn features(&self, r: &Render) -> [FeatureMap; 3] {
+        let (h, w) = (r.height as usize, r.width as usize);
+        let rgb: Vec<f32> = r.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+        let (lo, hi) = r.inv_depth.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+        let depth: Vec<f32> = r.inv_depth.iter().map(|&x| (x - lo) / (hi - lo + 1e-8)).collect();
+        let edge = render_edges(&rgb, h, w);
+        let net = &*self.net;
+        [
+            content_target(net, &rgb, h, w),
+            content_target(net, &replicate3(&depth), h, w),
+            content_target(net, &replicate3(&edge), h, w),
+        ]
+    }
+
+    fn measure_renders(&self, renders: &[Render], feats: &[[FeatureMap; 3]]) -> Measures {
+        let n = STYLE_VIEWS.len() as f32;
+        let mut m = Measures::default();
+        for (k, &v) in STYLE_VIEWS.iter().enumerate() {
+            let f = &feats[k][0].data;
+            if let Some(s) = &self.style[0] {
+                m.gram += s.gram_distance(f) / n;
+                m.mean_std += s.mean_std_distance(f) / n;
+                m.sliced_wasserstein += s.sliced_wasserstein(f) / n;
+                m.nn_cosine += s.nn_cosine(f) / n;
+            }
+            if let Some(s) = &self.style[1] {
+                m.nn_cosine_depth += s.nn_cosine(&feats[k][1].data) / n;
+            }
+            if let Some(s) = &self.style[2] {
+                m.nn_cosine_edge += s.nn_cosine(&feats[k][2].data) / n;
+            }
+            m.content += content_distance(f, &self.reference_features[k][0].data).map_or(0.0, |d| d.relative) / n;
+            let (before, after) = (&self.reference[self.slot(v)], &renders[self.slot(v)]);
+            let cam = &self.cameras[self.slot(v)].1;
+            m.depth_change +=
+                inverse_depth_change(&before.inv_depth, &after.inv_depth, &before.alpha, &after.alpha) / n;
+            m.normal_change_degrees += normal_change(before, after, cam).mean_degrees / n;
+            let covered = after.alpha.iter().filter(|&&a| a >= 0.5).count() as f32;
+            m.coverage += covered / after.alpha.len().max(1) as f32 / n;
+        }
+        let pair_rmse = |pairs: &[(usize, usize)]| {
+            pairs
+                .iter()
+                .map(|&(a, b)| {
+                    let (ia, ib) = (self.slot(a), self.slot(b));
+                    warp_consistency(
+                        &renders[ia],
+                        &self.cameras[ia].1,
+                        &renders[ib],
+                        &self.cameras[ib].1,
+                        DEFAULT_DEPTH_TOLERANCE,
+                    )
+                    .rmse
+                })
+                .sum::<f32>()
+                / pairs.len() as f32
+        };
+        m.consistency_short = pair_rmse(&SHORT_PAIRS);
+        m.consistency_long = pair_rmse(&LONG_PAIRS);
+        m
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_ring_indices_give_the_documented_baselines() {
+        let step = 360.0 / RING_VIEWS as f32;
+        for (a, b) in SHORT_PAIRS {
+            assert!(((b - a) as f32 * step - 5.0).abs() < 1e-4);
+        }
+        for (a, b) in LONG_PAIRS {
+            assert!(((b - a) as f32 * step - 37.5).abs() < 1e-4);
+        }
+        for (k, v) in STYLE_VIEWS.iter().enumerate() {
+            assert!((*v as f32 * step - 90.0 * k as f32).abs() < 1e-4);
+        }
+    }
+}
