@@ -6,8 +6,6 @@
 
 mod cli;
 mod progress;
-// Used by `gast bench quality` next; until then only its tests call it.
-#[allow(dead_code)]
 mod report;
 mod studio;
 

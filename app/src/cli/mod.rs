@@ -3,6 +3,7 @@
 mod bench;
 mod check;
 mod fit;
+pub mod quality;
 mod render;
 mod stylize;
 
@@ -78,6 +79,11 @@ pub enum BenchCommand {
     Raster(bench::RasterArgs),
     /// Per-step breakdown of the optimisation, the whole schedule's time, peak memory.
     Step(bench::StepArgs),
+    /// Speed against quality over a grid of modes, budgets, resolutions, N_g ratios and
+    /// λ_GC on the shared scenes and the nine styles; the stability study; the paper's
+    /// ablation tables. Writes a folder with an index.md, CSV/JSON tables, charts and renders
+    /// (about 30 minutes on two cores; `--quick` takes a few).
+    Quality(quality::QualityArgs),
     /// The studio viewport's frame time on the first GPU adapter (headless).
     Viewport {
         /// A scene; a synthetic scene of `--count` Gaussians when absent.
@@ -134,6 +140,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Check(CheckCommand::Golden(args)) => return check::run_golden(args),
         Command::Bench(BenchCommand::Raster(args)) => return bench::run_raster(args),
         Command::Bench(BenchCommand::Step(args)) => return bench::run_step(args),
+        Command::Bench(BenchCommand::Quality(args)) => return quality::run(args),
         Command::Bench(BenchCommand::Viewport { scene, count, frames, width, height }) => {
             println!("{}", studio::viewport::bench::run(scene.as_deref(), count, frames, width, height)?);
         }

@@ -1,6 +1,8 @@
 //! The report of a benchmark run: what `gast bench quality` writes next to its
-//! numbers so that a run can be judged at a glance. For now only the charts.
+//! numbers so that a run can be judged at a glance: charts (SVG and PNG) and
+//! the quality benchmark's folder of tables, renders and index.
 
 mod axis;
 pub mod chart;
 mod glyphs;
+pub mod quality;

@@ -1,0 +1,557 @@
+//! `gast bench quality`: speed against quality over a grid of settings, the
+//! stability study and the paper's ablations, on the shared scenes and styles.
+//!
+//! The grid is a list of *studies*, each a list of rows; every row names a
+//! trial (one [`run_trial`]) and the step at which to read it. Rows that differ
+//! only in their budget share one trial: with a constant learning rate and a
+//! schedule that repeats every cycle, the first `B` steps of a longer run are
+//! exactly a run of budget `B`, so one run measured at `B` answers both. The
+//! trials run grouped by scene and style, each scene loaded and each style's
+//! features computed once.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::{Args, ValueEnum};
+use gast_core::Gaussians;
+use gast_core::eval::{EvalOptions, StabilityThresholds, TrialOutcome, run_trial};
+use gast_core::session::{PreparedStyle, SessionInputs, StyleDepthSource, StyleImage, prepare_style};
+use gast_core::style::{Mode, StyleConfig};
+
+use super::{ViewArgs, load_scene, views_for};
+use crate::report::quality::{Record, write_report};
+
+/// Arguments of `gast bench quality`.
+#[derive(Args, Debug)]
+pub struct QualityArgs {
+    /// Output folder (default: `gast-quality-<UTC date and time>` in the current folder).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// A small subset (the guitar, two styles, short budgets, small images) that
+    /// runs in a few minutes; for checking the pipeline, not for conclusions.
+    #[arg(long)]
+    pub quick: bool,
+    /// Only these studies (default: all).
+    #[arg(long, value_delimiter = ',')]
+    pub studies: Vec<Study>,
+    /// VGG weights (default: the shared vgg19-conv3.safetensors, else the usual resolution).
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+}
+
+/// The studies of the grid.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Study {
+    /// The decoupled default on every scene × style pair.
+    Pairs,
+    /// The four optimisation modes over growing step budgets (the paper's first ablation).
+    Modes,
+    /// Working resolutions.
+    Resolution,
+    /// The geometry share N_g / (N_c + N_g) of each cycle (the paper's N_g ablation).
+    Ratio,
+    /// The GCFM weight λ_GC.
+    LambdaGc,
+    /// Settings pushed until they fail: high learning rates, geometry-only, long runs, extreme styles.
+    Stress,
+}
+
+impl Study {
+    /// All studies, in report order.
+    pub const ALL: [Study; 6] =
+        [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Pairs, Study::Stress];
+}
+
+/// A style: a file, or an extreme one made for the stress study.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum StyleSource {
+    /// An image file.
+    File(PathBuf),
+    /// Uniform random RGB noise (no structure at any scale).
+    Noise,
+    /// A black-and-white checkerboard of 16-pixel squares (extreme contrast and edges).
+    Checker,
+    /// One flat grey (no variance at all: colour matching collapses the scene's colours).
+    Flat,
+}
+
+impl StyleSource {
+    /// A short name for tables and file names.
+    pub fn name(&self) -> String {
+        match self {
+            StyleSource::File(p) => p.file_stem().map_or("style".into(), |s| s.to_string_lossy().into_owned()),
+            StyleSource::Noise => "noise".into(),
+            StyleSource::Checker => "checker".into(),
+            StyleSource::Flat => "flat".into(),
+        }
+    }
+
+    /// The image.
+    pub fn image(&self) -> anyhow::Result<StyleImage> {
+        let (w, h) = (256usize, 256usize);
+        let generated = |f: &dyn Fn(usize, usize, usize) -> u8| StyleImage {
+            width: w,
+            height: h,
+            rgb: (0..w * h * 3).map(|i| f(i / 3 % w, i / 3 / w, i % 3)).collect(),
+        };
+        Ok(match self {
+            StyleSource::File(p) => StyleImage::open(p).map_err(anyhow::Error::msg)?,
+            StyleSource::Noise => {
+                let mut state = 0x9e37_79b9_7f4a_7c15u64;
+                let bytes: Vec<u8> = (0..w * h * 3)
+                    .map(|_| {
+                        state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+                        (state >> 56) as u8
+                    })
+                    .collect();
+                StyleImage { width: w, height: h, rgb: bytes }
+            }
+            StyleSource::Checker => generated(&|x, y, _| if (x / 16 + y / 16) % 2 == 0 { 0 } else { 255 }),
+            StyleSource::Flat => generated(&|_, _, _| 128),
+        })
+    }
+}
+
+/// The sizes of a grid (full or `--quick`).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Sizes {
+    /// Working resolution of every study but `resolution` (longer side, px).
+    pub resolution: u32,
+    /// Evaluation resolution (longer side, px).
+    pub eval_resolution: u32,
+    /// Orbit views to optimise from.
+    pub views: usize,
+    /// Steps per cycle (N_c + N_g), the paper's 100 scaled down so short budgets still alternate.
+    pub steps_per_cycle: u32,
+    /// Budget of the scene × style pairs.
+    pub pair_budget: u32,
+    /// Budget of the mode curves (measured at every doubling from one cycle).
+    pub curve_budget: u32,
+    /// Budget of the ratio, λ_GC, resolution and stress rows.
+    pub ablation_budget: u32,
+    /// Budget of the long stress run.
+    pub long_budget: u32,
+    /// Working resolutions of the resolution study.
+    pub resolutions: Vec<u32>,
+    /// Scene files (relative to the shared folder).
+    pub scenes: Vec<String>,
+    /// Style files (relative to the shared folder).
+    pub styles: Vec<String>,
+    /// Styles of the mode curves and ablations.
+    pub curve_styles: Vec<String>,
+}
+
+const ALL_STYLES: [&str; 9] =
+    ["block2", "fire", "galaxy", "hydrangea", "mosaic", "particle", "starry", "stone", "wave"];
+
+impl Sizes {
+    /// The full grid: about half an hour on two cores.
+    pub fn full() -> Self {
+        Self {
+            resolution: 128,
+            eval_resolution: 192,
+            views: 36,
+            steps_per_cycle: 20,
+            pair_budget: 40,
+            curve_budget: 160,
+            ablation_budget: 80,
+            long_budget: 320,
+            resolutions: vec![64, 128, 192],
+            scenes: vec![
+                "data/scenes/guitar.compressed.ply".into(),
+                "data/scenes/biker.compressed.ply".into(),
+                "data/scenes/playbot-sog".into(),
+            ],
+            styles: ALL_STYLES.iter().map(|s| format!("data/styles/{s}.jpg")).collect(),
+            curve_styles: vec!["data/styles/wave.jpg".into(), "data/styles/block2.jpg".into()],
+        }
+    }
+
+    /// The `--quick` grid: the guitar, two styles, small images, a few minutes.
+    pub fn quick() -> Self {
+        Self {
+            resolution: 64,
+            eval_resolution: 96,
+            views: 12,
+            steps_per_cycle: 10,
+            pair_budget: 10,
+            curve_budget: 20,
+            ablation_budget: 10,
+            long_budget: 40,
+            resolutions: vec![48, 64],
+            scenes: vec!["data/scenes/guitar.compressed.ply".into()],
+            styles: vec!["data/styles/wave.jpg".into(), "data/styles/block2.jpg".into()],
+            curve_styles: vec!["data/styles/wave.jpg".into()],
+        }
+    }
+}
+
+/// One run of the grid.
+#[derive(Clone, Debug)]
+pub struct TrialSpec {
+    /// Unique, file-name-safe id.
+    pub id: String,
+    /// Index into the scenes.
+    pub scene: usize,
+    /// The style.
+    pub style: StyleSource,
+    /// The run's parameters (its budget is the largest any row asks).
+    pub config: StyleConfig,
+    /// Multiplier applied to every default learning rate (stress rows).
+    pub lr_scale: f32,
+    /// Steps to measure at (0 is the colour-matched input).
+    pub checkpoints: Vec<u32>,
+}
+
+/// One row of a study: a trial read at a step.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Row {
+    /// The study.
+    pub study: Study,
+    /// The row's label in the study's table.
+    pub label: String,
+    /// The trial's id.
+    pub trial: String,
+    /// The step it is read at (its budget).
+    pub step: u32,
+}
+
+/// The whole grid: trials and the rows that read them.
+#[derive(Default)]
+pub struct Grid {
+    /// Unique trials.
+    pub trials: Vec<TrialSpec>,
+    /// Rows of every study.
+    pub rows: Vec<Row>,
+}
+
+impl Grid {
+    /// Asks for `config` on (`scene`, `style`) read at its full budget (and at `extra` steps),
+    /// sharing a trial with an earlier row that differs only in budget.
+    fn want(
+        &mut self,
+        (study, label): (Study, &str),
+        scene: usize,
+        style: &StyleSource,
+        config: StyleConfig,
+        lr_scale: f32,
+        extra: &[u32],
+    ) {
+        let budget = config.schedule().total_steps();
+        let same = |t: &TrialSpec| {
+            t.scene == scene
+                && t.style == *style
+                && t.lr_scale == lr_scale
+                && StyleConfig { cycles: 1, ..t.config.clone() } == StyleConfig { cycles: 1, ..config.clone() }
+        };
+        let i = match self.trials.iter().position(same) {
+            Some(i) => {
+                let t = &mut self.trials[i];
+                t.config.cycles = t.config.cycles.max(config.cycles);
+                i
+            }
+            None => {
+                let id = format!("{:03}-{}", self.trials.len(), label_id(study, label, style));
+                self.trials.push(TrialSpec { id, scene, style: style.clone(), config, lr_scale, checkpoints: vec![0] });
+                self.trials.len() - 1
+            }
+        };
+        let t = &mut self.trials[i];
+        for &s in extra.iter().chain([&budget]) {
+            if !t.checkpoints.contains(&s) {
+                t.checkpoints.push(s);
+            }
+        }
+        t.checkpoints.sort_unstable();
+        self.rows.push(Row { study, label: label.into(), trial: t.id.clone(), step: budget });
+    }
+}
+
+fn label_id(study: Study, label: &str, style: &StyleSource) -> String {
+    let raw = format!("{study:?}-{label}-{}", style.name()).to_lowercase();
+    raw.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect()
+}
+
+/// The grid of `sizes` restricted to `studies`.
+pub fn build_grid(sizes: &Sizes, shared: &Path, studies: &[Study]) -> Grid {
+    let base =
+        StyleConfig { resolution: sizes.resolution, steps_per_cycle: sizes.steps_per_cycle, ..StyleConfig::default() };
+    let cycles = |budget: u32| budget.div_ceil(sizes.steps_per_cycle).max(1);
+    let file = |rel: &String| StyleSource::File(shared.join(rel));
+    let curve_styles: Vec<StyleSource> = sizes.curve_styles.iter().map(file).collect();
+    let main = curve_styles.first().cloned().unwrap_or(StyleSource::Checker);
+    let mut g = Grid::default();
+    let on = |s: Study| studies.contains(&s);
+    let ablation = StyleConfig { cycles: cycles(sizes.ablation_budget), ..base.clone() };
+
+    if on(Study::Modes) {
+        let doublings: Vec<u32> = std::iter::successors(Some(sizes.steps_per_cycle), |s| Some(s * 2))
+            .take_while(|s| *s < sizes.curve_budget)
+            .collect();
+        for style in &curve_styles {
+            for mode in Mode::ALL {
+                let config = StyleConfig { mode, cycles: cycles(sizes.curve_budget), ..base.clone() };
+                g.want((Study::Modes, mode_label(mode)), 0, style, config, 1.0, &doublings);
+            }
+            // The same run with another view order: the spread between the two is
+            // the noise floor against which the report reads every difference.
+            let config = StyleConfig { seed: 1, cycles: cycles(sizes.curve_budget), ..base.clone() };
+            g.want((Study::Modes, SEED_LABEL), 0, style, config, 1.0, &doublings);
+        }
+    }
+    if on(Study::Ratio) {
+        for style in &curve_styles {
+            for ratio in [0.0f32, 0.3, 0.6, 0.9, 1.0] {
+                let config = StyleConfig { ratio_geo: ratio, ..ablation.clone() };
+                g.want((Study::Ratio, &format!("{:.0}", ratio * 100.0)), 0, style, config, 1.0, &[]);
+            }
+        }
+    }
+    if on(Study::LambdaGc) {
+        for style in &curve_styles {
+            for l in [0.0f32, 0.5, 2.0, 4.0] {
+                let mut config = ablation.clone();
+                config.weights.gcfm = l;
+                g.want((Study::LambdaGc, &format!("{l}")), 0, style, config, 1.0, &[]);
+            }
+        }
+    }
+    if on(Study::Resolution) {
+        let quarter: Vec<u32> = [4u32, 2].iter().map(|d| sizes.ablation_budget / d).filter(|s| *s > 0).collect();
+        for &r in &sizes.resolutions {
+            let config = StyleConfig { resolution: r, ..ablation.clone() };
+            g.want((Study::Resolution, &format!("{r} px")), 0, &main, config, 1.0, &quarter);
+        }
+    }
+    if on(Study::Pairs) {
+        for scene in 0..sizes.scenes.len() {
+            for style in &sizes.styles {
+                let config = StyleConfig { cycles: cycles(sizes.pair_budget), ..base.clone() };
+                g.want((Study::Pairs, "decoupled"), scene, &file(style), config, 1.0, &[]);
+            }
+        }
+    }
+    if on(Study::Stress) {
+        for (mode, scale) in [
+            (Mode::Joint, 1.0),
+            (Mode::Joint, 10.0),
+            (Mode::Joint, 30.0),
+            (Mode::Joint, 100.0),
+            (Mode::Decoupled, 1.0),
+            (Mode::Decoupled, 10.0),
+            (Mode::Decoupled, 30.0),
+            (Mode::Decoupled, 100.0),
+            (Mode::GeometryOnly, 10.0),
+            (Mode::GeometryOnly, 100.0),
+        ] {
+            let config = StyleConfig { mode, lr: scaled_lr(scale), ..ablation.clone() };
+            g.want((Study::Stress, &format!("{} lr×{scale}", mode_label(mode))), 0, &main, config, scale, &[]);
+        }
+        let long = StyleConfig { cycles: cycles(sizes.long_budget), ..base.clone() };
+        let quarter: Vec<u32> = [4u32, 2].iter().map(|d| sizes.long_budget / d).collect();
+        g.want((Study::Stress, "decoupled long"), 0, &main, long, 1.0, &quarter);
+        for extreme in [StyleSource::Noise, StyleSource::Checker, StyleSource::Flat] {
+            for mode in [Mode::Decoupled, Mode::Joint] {
+                let config = StyleConfig { mode, ..ablation.clone() };
+                g.want(
+                    (Study::Stress, &format!("{} {}", mode_label(mode), extreme.name())),
+                    0,
+                    &extreme,
+                    config,
+                    1.0,
+                    &[],
+                );
+            }
+        }
+    }
+    g
+}
+
+fn scaled_lr(scale: f32) -> gast_core::style::config::LearningRates {
+    let d = gast_core::style::config::LearningRates::default();
+    gast_core::style::config::LearningRates {
+        color: d.color * scale,
+        means_per_extent: d.means_per_extent * scale,
+        scales: d.scales * scale,
+        quats: d.quats * scale,
+        opacity: d.opacity * scale,
+    }
+}
+
+/// The label of the decoupled run with another view order (seed 1).
+pub const SEED_LABEL: &str = "decoupled, seed 1";
+
+/// The paper's name of a mode.
+pub fn mode_label(mode: Mode) -> &'static str {
+    match mode {
+        Mode::Decoupled => "decoupled",
+        Mode::Joint => "joint",
+        Mode::ColorOnly => "colour-only",
+        Mode::GeometryOnly => "geometry-only",
+    }
+}
+
+fn shared_dir() -> PathBuf {
+    std::env::var_os("GAST_SHARED").map(PathBuf::from).unwrap_or_else(|| PathBuf::from("../shared"))
+}
+
+/// Runs the grid and writes the report.
+pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
+    let shared = shared_dir();
+    let sizes = if args.quick { Sizes::quick() } else { Sizes::full() };
+    let studies = if args.studies.is_empty() { Study::ALL.to_vec() } else { args.studies.clone() };
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("gast-quality-{}", utc_stamp())));
+    std::fs::create_dir_all(&out).with_context(|| format!("could not create the output folder {}", out.display()))?;
+    let weights = args.weights.clone().or_else(|| {
+        let p = shared.join("data/weights/vgg19-conv3.safetensors");
+        p.exists().then_some(p)
+    });
+    let vgg = Arc::new(super::stylize::load_vgg(weights.as_deref())?);
+    let grid = build_grid(&sizes, &shared, &studies);
+    let total_steps: u64 = grid.trials.iter().map(|t| u64::from(t.config.schedule().total_steps())).sum();
+    println!(
+        "quality benchmark: {} trials ({} rows, {total_steps} steps) over {} scenes, {} threads; writing {}",
+        grid.trials.len(),
+        grid.rows.len(),
+        sizes.scenes.len(),
+        rayon::current_num_threads(),
+        out.display()
+    );
+
+    let started = Instant::now();
+    let bar = crate::progress::bar(total_steps, "steps");
+    let mut order: Vec<usize> = (0..grid.trials.len()).collect();
+    order.sort_by(|&a, &b| {
+        let (ta, tb) = (&grid.trials[a], &grid.trials[b]);
+        (ta.scene, &ta.style).cmp(&(tb.scene, &tb.style))
+    });
+    let mut scenes: BTreeMap<usize, Gaussians> = BTreeMap::new();
+    let mut styles: BTreeMap<StyleSource, (StyleImage, PreparedStyle)> = BTreeMap::new();
+    let mut records = Vec::new();
+    let eval = EvalOptions { resolution: sizes.eval_resolution, ..EvalOptions::default() };
+    for &i in &order {
+        let spec = &grid.trials[i];
+        if !scenes.contains_key(&spec.scene) {
+            scenes.clear(); // trials are grouped by scene: keep one in memory
+            let path = shared.join(&sizes.scenes[spec.scene]);
+            scenes.insert(spec.scene, load_scene(&path)?);
+        }
+        let Some(scene) = scenes.get(&spec.scene) else { continue };
+        if !styles.contains_key(&spec.style) {
+            let image = spec.style.image().with_context(|| format!("style {}", spec.style.name()))?;
+            let c = &spec.config;
+            let prepared = prepare_style(&vgg, &image, c.texture_scale, &StyleDepthSource::Heuristic, c.depth_polarity);
+            styles.insert(spec.style.clone(), (image, prepared));
+        }
+        let Some((image, prepared)) = styles.get(&spec.style) else { continue };
+        let views =
+            views_for(scene, &ViewArgs { cameras: None, views: sizes.views, size: spec.config.resolution, fov: 50.0 })?;
+        let inputs = SessionInputs {
+            scene: scene.clone(),
+            cameras: views,
+            style: image.clone(),
+            style_depth: StyleDepthSource::Heuristic,
+            vgg: Arc::clone(&vgg),
+            config: spec.config.clone(),
+        };
+        bar.set_message(spec.id.clone());
+        let base = bar.position();
+        let outcome = run_trial(
+            inputs,
+            Some(prepared.clone()),
+            &spec.checkpoints,
+            &eval,
+            &StabilityThresholds::default(),
+            &mut |done, _| bar.set_position(base + u64::from(done)),
+        )
+        .with_context(|| format!("trial {}", spec.id))?;
+        bar.set_position(base + u64::from(spec.config.schedule().total_steps()));
+        bar.suspend(|| println!("{}", summary_line(spec, &outcome)));
+        records.push(Record::new(spec, &sizes.scenes[spec.scene], scene.len(), outcome));
+    }
+    bar.finish_and_clear();
+    let wall = started.elapsed().as_secs_f64();
+    let styles_used: Vec<(String, StyleImage)> = styles.into_iter().map(|(s, (image, _))| (s.name(), image)).collect();
+    let index = write_report(&out, &sizes, &grid.rows, &records, &styles_used, wall)?;
+    println!("{} trials in {:.1} min; report: {}", records.len(), wall / 60.0, index.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+fn summary_line(spec: &TrialSpec, o: &TrialOutcome) -> String {
+    let last = o.checkpoints.last().map(|c| c.measures).unwrap_or_default();
+    let health = if o.stability.is_healthy() {
+        "stable".to_string()
+    } else {
+        o.stability.issues.iter().map(|d| format!("{:?}", d.kind)).collect::<Vec<_>>().join("+")
+    };
+    format!(
+        "{:<44} {:>4} steps {:>6.1} s  SW {:>7.4}  NN {:.4}  long RMSE {:.4}  {health}",
+        spec.id,
+        o.steps,
+        o.checkpoints.last().map_or(0.0, |c| c.seconds),
+        last.sliced_wasserstein,
+        last.nn_cosine,
+        last.consistency_long
+    )
+}
+
+/// `YYYYmmdd-HHMMSS` in UTC, from the system clock.
+fn utc_stamp() -> String {
+    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
+    let (days, rem) = (secs / 86_400, secs % 86_400);
+    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
+    let z = days as i64 + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!("{y:04}{m:02}{d:02}-{:02}{:02}{:02}", rem / 3600, rem % 3600 / 60, rem % 60)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_that_differ_only_in_budget_share_a_trial() {
+        let g = build_grid(&Sizes::full(), Path::new("/shared"), &Study::ALL);
+        // The decoupled wave run of the mode curves also answers ratio 90, λ_GC 2,
+        // 128 px, the stress baseline and the guitar × wave pair.
+        let decoupled = g
+            .rows
+            .iter()
+            .find(|r| r.study == Study::Modes && r.label == "decoupled")
+            .map(|r| r.trial.clone())
+            .expect("a decoupled mode row");
+        let sharing: Vec<Study> = g.rows.iter().filter(|r| r.trial == decoupled).map(|r| r.study).collect();
+        for s in [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Pairs, Study::Stress] {
+            assert!(sharing.contains(&s), "{s:?} does not reuse the decoupled run: {sharing:?}");
+        }
+        let t = g.trials.iter().find(|t| t.id == decoupled).expect("trial");
+        assert_eq!(t.checkpoints, vec![0, 20, 40, 80, 160, 320]);
+        // Every row's step is one of its trial's checkpoints and within its budget.
+        for r in &g.rows {
+            let t = g.trials.iter().find(|t| t.id == r.trial).expect("trial of row");
+            assert!(t.checkpoints.contains(&r.step) && r.step <= t.config.schedule().total_steps(), "{r:?}");
+        }
+        let ids: std::collections::HashSet<&str> = g.trials.iter().map(|t| t.id.as_str()).collect();
+        assert_eq!(ids.len(), g.trials.len());
+    }
+
+    #[test]
+    fn utc_stamps_have_the_documented_shape() {
+        let s = utc_stamp();
+        assert_eq!(s.len(), 15);
+        assert_eq!(&s[8..9], "-");
+        assert!(s.starts_with("20"));
+    }
+}
