@@ -15,7 +15,7 @@ use std::sync::Arc;
 use super::consistency::{DEFAULT_DEPTH_TOLERANCE, warp_consistency};
 use super::content::content_distance;
 use super::geometry::{inverse_depth_change, normal_change};
-use super::style::StyleReference;
+use super::style::{NearestStyle, StyleReference};
 use crate::camera::{Camera, OrbitLayout, OrbitOptions, orbit_cameras};
 use crate::raster::{self, Render, RenderOptions};
 use crate::scene::Gaussians;
@@ -71,6 +71,10 @@ pub struct Measures {
     pub nn_cosine_depth: f32,
     /// The same between the render's Canny edge map and the style's edge map.
     pub nn_cosine_edge: f32,
+    /// GCFM's own matching criterion on these views: the cosine distance of each
+    /// joint vector `[F_rgb; F_depth; F_edge]` (2304 channels) to its nearest
+    /// style joint vector, in `[0, 2]`.
+    pub nn_cosine_joint: f32,
     /// Content distance to the colour-matched scene, relative ([`content_distance`]); unitless.
     pub content: f32,
     /// Multi-view RMSE at the 5° baseline, RGB in `[0, 1]`.
@@ -89,8 +93,10 @@ pub struct Measures {
 /// every scene of a study is measured against.
 pub struct Evaluator {
     net: Arc<Vgg>,
-    /// RGB, depth and edge statistics of the style (see [`StyleFeatures`]).
-    style: [Option<StyleReference>; 3],
+    /// Statistics of the style's RGB features (see [`StyleFeatures`]).
+    style: Option<StyleReference>,
+    /// The style's depth, edge and joint features, for nearest neighbours.
+    nearest: [Option<NearestStyle>; 3],
     cameras: Vec<(usize, Camera)>,
     opts: RenderOptions,
     /// Colour-matched renders, one per entry of `cameras`.
@@ -124,12 +130,14 @@ impl Evaluator {
         let opts = RenderOptions { background: options.background };
         let reference: Vec<Render> = cameras.iter().map(|(_, c)| raster::render(reference, c, &opts)).collect();
         let c = style.channels;
-        let style = [
-            StyleReference::new(style.modality(0), c, SW_PROJECTIONS),
-            StyleReference::new(style.modality(1), c, 0),
-            StyleReference::new(style.modality(2), c, 0),
+        let joint: Vec<f32> = (0..3).flat_map(|m| style.modality(m).iter().copied()).collect();
+        let nearest = [
+            NearestStyle::new(style.modality(1), c),
+            NearestStyle::new(style.modality(2), c),
+            NearestStyle::new(&joint, 3 * c),
         ];
-        let mut out = Self { net, style, cameras, opts, reference, reference_features: Vec::new() };
+        let style = StyleReference::new(style.modality(0), c, SW_PROJECTIONS);
+        let mut out = Self { net, style, nearest, cameras, opts, reference, reference_features: Vec::new() };
         out.reference_features = STYLE_VIEWS.iter().map(|&v| out.features(&out.reference[out.slot(v)])).collect();
         out
     }
@@ -214,17 +222,22 @@ impl Evaluator {
         let mut m = Measures::default();
         for (k, &v) in STYLE_VIEWS.iter().enumerate() {
             let f = &feats[k][0].data;
-            if let Some(s) = &self.style[0] {
+            if let Some(s) = &self.style {
                 m.gram += s.gram_distance(f) / n;
                 m.mean_std += s.mean_std_distance(f) / n;
                 m.sliced_wasserstein += s.sliced_wasserstein(f) / n;
                 m.nn_cosine += s.nn_cosine(f) / n;
             }
-            if let Some(s) = &self.style[1] {
+            let [depth, edge, joint] = &self.nearest;
+            if let Some(s) = depth {
                 m.nn_cosine_depth += s.nn_cosine(&feats[k][1].data) / n;
             }
-            if let Some(s) = &self.style[2] {
+            if let Some(s) = edge {
                 m.nn_cosine_edge += s.nn_cosine(&feats[k][2].data) / n;
+            }
+            if let Some(s) = joint {
+                let v: Vec<f32> = feats[k].iter().flat_map(|f| f.data.iter().copied()).collect();
+                m.nn_cosine_joint += s.nn_cosine(&v) / n;
             }
             m.content += content_distance(f, &self.reference_features[k][0].data).map_or(0.0, |d| d.relative) / n;
             let (before, after) = (&self.reference[self.slot(v)], &renders[self.slot(v)]);

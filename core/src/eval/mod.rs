@@ -26,6 +26,7 @@ pub use geometry::{NormalChange, depth_normals, inverse_depth_change, normal_cha
 pub use measure::{EvalOptions, Evaluator, Measures};
 pub use stability::{Degeneration, DegenerationKind, StabilityReport, StabilityThresholds, assess_stability};
 pub use style::{
-    StyleReference, gram_distance, gram_matrix, mean_std_distance, nn_cosine_distance, sliced_wasserstein_distance,
+    NearestStyle, StyleReference, gram_distance, gram_matrix, mean_std_distance, nn_cosine_distance,
+    sliced_wasserstein_distance,
 };
 pub use trial::{Checkpoint, TrialOutcome, run_trial};

@@ -24,8 +24,7 @@ pub struct StyleReference {
     moments: Vec<(f64, f64)>,
     /// `G = F Fᵀ / N`, `C × C`.
     gram: Vec<f64>,
-    /// Unit-length features, `C × N` (zero columns stay zero).
-    unit: Vec<f32>,
+    nearest: NearestStyle,
     /// Projection directions, `P × C`, and the sorted projections of the style, one row per direction.
     directions: Vec<f32>,
     sorted: Vec<Vec<f64>>,
@@ -54,7 +53,7 @@ impl StyleReference {
             positions: n,
             moments: moments(b, channels),
             gram: gram_matrix(b, channels),
-            unit: unit_columns(b, channels),
+            nearest: NearestStyle { channels, positions: n, unit: unit_columns(b, channels) },
             directions,
             sorted,
         })
@@ -114,7 +113,36 @@ impl StyleReference {
 
     /// [`nn_cosine_distance`] of `a` to the style.
     pub fn nn_cosine(&self, a: &[f32]) -> f32 {
-        let Some(na) = self.positions_of(a) else { return 0.0 };
+        self.nearest.nn_cosine(a)
+    }
+}
+
+/// Unit-length style features, for nearest-neighbour cosines only (cheap to
+/// build for wide joint features, where a Gram matrix would not be).
+pub struct NearestStyle {
+    channels: usize,
+    positions: usize,
+    /// Unit-length features, `C × N` (zero columns stay zero).
+    unit: Vec<f32>,
+}
+
+impl NearestStyle {
+    /// The CHW style features `b` of `channels` channels, each position scaled
+    /// to unit length; `None` when `b` is empty or `channels` is 0.
+    pub fn new(b: &[f32], channels: usize) -> Option<Self> {
+        if channels == 0 || b.len() < channels {
+            return None;
+        }
+        let n = b.len() / channels;
+        Some(Self { channels, positions: n, unit: unit_columns(&b[..n * channels], channels) })
+    }
+
+    /// [`nn_cosine_distance`] of `a` to the style.
+    pub fn nn_cosine(&self, a: &[f32]) -> f32 {
+        if a.len() < self.channels {
+            return 0.0;
+        }
+        let na = a.len() / self.channels;
         let (c, nb) = (self.channels, self.positions);
         // Cosines of every rendered position against every style position:
         // (N_a × C) · (C × N_b) on unit columns, in bands of rows to bound memory.
@@ -202,7 +230,7 @@ pub fn mean_std_distance(a: &[f32], b: &[f32], channels: usize) -> f32 {
 /// matrix product of unit-length features. A zero feature vector has cosine 0
 /// with everything. 0 when either map is empty.
 pub fn nn_cosine_distance(a: &[f32], b: &[f32], channels: usize) -> f32 {
-    StyleReference::new(b, channels, 0).map_or(0.0, |r| r.nn_cosine(a))
+    NearestStyle::new(b, channels).map_or(0.0, |r| r.nn_cosine(a))
 }
 
 /// The normalised Gram matrix `G = F Fᵀ / N` of a CHW feature map (`C × C`,
