@@ -98,7 +98,8 @@ fn linear_label(v: f64, step: f64) -> String {
         return "0".into();
     }
     let step_exp = step.log10().floor();
-    if v.abs() >= 1e6 || step < 1e-4 {
+    // Fixed decimals while they stay short ("0.19995"); exponents only for huge or tiny values.
+    if v.abs() >= 1e6 || (step < 1e-4 && v.abs() < 1e-2) {
         let digits = (v.abs().log10().floor() - step_exp).clamp(0.0, 6.0) as usize;
         format!("{v:.digits$e}")
     } else {
