@@ -91,7 +91,7 @@ fn quick_quality_benchmark_writes_a_complete_linked_report() {
         "sw_vs_iterations_wave",
         "nn_vs_time_wave",
         "nn_vs_iterations_wave",
-        "nn_depth_vs_iterations_wave",
+        "nn_joint_vs_iterations_wave",
         "resolution_tradeoff",
         "ratio_style",
         "ratio_geometry",
@@ -115,6 +115,16 @@ fn quick_quality_benchmark_writes_a_complete_linked_report() {
     for link in links(&index) {
         assert!(out.join(&link).exists(), "index.md links {link}, which is absent");
     }
+
+    // The report can be redrawn from results.json alone.
+    std::fs::remove_file(out.join("index.md")).expect("remove index");
+    let o = Command::new(env!("CARGO_BIN_EXE_gast"))
+        .args(["bench", "quality", "--report"])
+        .arg(&out)
+        .output()
+        .expect("run gast");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read_to_string(out.join("index.md")).expect("redrawn index"), index);
     let _ = std::fs::remove_dir_all(&out);
 }
 

@@ -23,7 +23,7 @@ use gast_core::session::{PreparedStyle, SessionInputs, StyleDepthSource, StyleIm
 use gast_core::style::{Mode, StyleConfig};
 
 use super::{ViewArgs, load_scene, views_for};
-use crate::report::quality::{Record, write_report};
+use crate::report::quality::{Record, RunSummary, read_summary, rewrite_report, write_report};
 
 /// Arguments of `gast bench quality`.
 #[derive(Args, Debug)]
@@ -41,10 +41,14 @@ pub struct QualityArgs {
     /// VGG weights (default: the shared vgg19-conv3.safetensors, else the usual resolution).
     #[arg(long)]
     pub weights: Option<PathBuf>,
+    /// Redraw the tables, charts and index of an earlier run's folder from its
+    /// results.json, without running anything.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["quick", "studies", "out"])]
+    pub report: Option<PathBuf>,
 }
 
 /// The studies of the grid.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, ValueEnum, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, ValueEnum, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Study {
     /// The decoupled default on every scene × style pair.
@@ -118,7 +122,7 @@ impl StyleSource {
 }
 
 /// The sizes of a grid (full or `--quick`).
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Sizes {
     /// Working resolution of every study but `resolution` (longer side, px).
     pub resolution: u32,
@@ -130,7 +134,7 @@ pub struct Sizes {
     pub steps_per_cycle: u32,
     /// Budget of the scene × style pairs.
     pub pair_budget: u32,
-    /// Budget of the mode curves (measured at every doubling from one cycle).
+    /// Budget of the mode curves of the first curve style (measured at every doubling from one cycle).
     pub curve_budget: u32,
     /// Budget of the ratio, λ_GC, resolution and stress rows.
     pub ablation_budget: u32,
@@ -160,7 +164,7 @@ impl Sizes {
             pair_budget: 40,
             curve_budget: 160,
             ablation_budget: 80,
-            long_budget: 320,
+            long_budget: 240,
             resolutions: vec![64, 128, 192],
             scenes: vec![
                 "data/scenes/guitar.compressed.ply".into(),
@@ -209,7 +213,7 @@ pub struct TrialSpec {
 }
 
 /// One row of a study: a trial read at a step.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Row {
     /// The study.
     pub study: Study,
@@ -290,17 +294,19 @@ pub fn build_grid(sizes: &Sizes, shared: &Path, studies: &[Study]) -> Grid {
     let ablation = StyleConfig { cycles: cycles(sizes.ablation_budget), ..base.clone() };
 
     if on(Study::Modes) {
-        let doublings: Vec<u32> = std::iter::successors(Some(sizes.steps_per_cycle), |s| Some(s * 2))
-            .take_while(|s| *s < sizes.curve_budget)
-            .collect();
-        for style in &curve_styles {
+        // The first curve style runs the long curves; the others check them at the ablation budget.
+        for (k, style) in curve_styles.iter().enumerate() {
+            let budget = if k == 0 { sizes.curve_budget } else { sizes.ablation_budget };
+            let doublings: Vec<u32> = std::iter::successors(Some(sizes.steps_per_cycle), |s| Some(s * 2))
+                .take_while(|s| *s < budget)
+                .collect();
             for mode in Mode::ALL {
-                let config = StyleConfig { mode, cycles: cycles(sizes.curve_budget), ..base.clone() };
+                let config = StyleConfig { mode, cycles: cycles(budget), ..base.clone() };
                 g.want((Study::Modes, mode_label(mode)), 0, style, config, 1.0, &doublings);
             }
             // The same run with another view order: the spread between the two is
             // the noise floor against which the report reads every difference.
-            let config = StyleConfig { seed: 1, cycles: cycles(sizes.curve_budget), ..base.clone() };
+            let config = StyleConfig { seed: 1, cycles: cycles(budget), ..base.clone() };
             g.want((Study::Modes, SEED_LABEL), 0, style, config, 1.0, &doublings);
         }
     }
@@ -314,7 +320,7 @@ pub fn build_grid(sizes: &Sizes, shared: &Path, studies: &[Study]) -> Grid {
     }
     if on(Study::LambdaGc) {
         for style in &curve_styles {
-            for l in [0.0f32, 0.5, 2.0, 4.0] {
+            for l in [0.0f32, 2.0, 4.0] {
                 let mut config = ablation.clone();
                 config.weights.gcfm = l;
                 g.want((Study::LambdaGc, &format!("{l}")), 0, style, config, 1.0, &[]);
@@ -346,7 +352,7 @@ pub fn build_grid(sizes: &Sizes, shared: &Path, studies: &[Study]) -> Grid {
             (Mode::Decoupled, 10.0),
             (Mode::Decoupled, 30.0),
             (Mode::Decoupled, 100.0),
-            (Mode::GeometryOnly, 10.0),
+            (Mode::GeometryOnly, 30.0),
             (Mode::GeometryOnly, 100.0),
         ] {
             let config = StyleConfig { mode, lr: scaled_lr(scale), ..ablation.clone() };
@@ -402,6 +408,11 @@ fn shared_dir() -> PathBuf {
 
 /// Runs the grid and writes the report.
 pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
+    if let Some(dir) = &args.report {
+        let index = rewrite_report(dir, &read_summary(dir)?)?;
+        println!("report: {}", index.display());
+        return Ok(ExitCode::SUCCESS);
+    }
     let shared = shared_dir();
     let sizes = if args.quick { Sizes::quick() } else { Sizes::full() };
     let studies = if args.studies.is_empty() { Study::ALL.to_vec() } else { args.studies.clone() };
@@ -477,8 +488,16 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
     bar.finish_and_clear();
     let wall = started.elapsed().as_secs_f64();
     let styles_used: Vec<(String, StyleImage)> = styles.into_iter().map(|(s, (image, _))| (s.name(), image)).collect();
-    let index = write_report(&out, &sizes, &grid.rows, &records, &styles_used, wall)?;
-    println!("{} trials in {:.1} min; report: {}", records.len(), wall / 60.0, index.display());
+    let run = RunSummary {
+        command: std::env::args().collect::<Vec<_>>().join(" "),
+        threads: rayon::current_num_threads(),
+        sizes,
+        wall_s: wall,
+        rows: grid.rows,
+        trials: records,
+    };
+    let index = write_report(&out, &run, &styles_used)?;
+    println!("{} trials in {:.1} min; report: {}", run.trials.len(), wall / 60.0, index.display());
     Ok(ExitCode::SUCCESS)
 }
 
@@ -537,7 +556,7 @@ mod tests {
             assert!(sharing.contains(&s), "{s:?} does not reuse the decoupled run: {sharing:?}");
         }
         let t = g.trials.iter().find(|t| t.id == decoupled).expect("trial");
-        assert_eq!(t.checkpoints, vec![0, 20, 40, 80, 160, 320]);
+        assert_eq!(t.checkpoints, vec![0, 20, 40, 60, 80, 120, 160, 240]);
         // Every row's step is one of its trial's checkpoints and within its budget.
         for r in &g.rows {
             let t = g.trials.iter().find(|t| t.id == r.trial).expect("trial of row");

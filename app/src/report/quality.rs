@@ -11,13 +11,13 @@ use gast_core::eval::{Checkpoint, Degeneration, Measures, TrialOutcome};
 use gast_core::io::{atomic_write, write_png_rgb};
 use gast_core::session::StyleImage;
 use gast_core::style::Mode;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::chart::{Chart, Series, palette};
 use crate::cli::quality::{Row, SEED_LABEL, Sizes, Study, TrialSpec, mode_label};
 
 /// One trial as reported.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Record {
     /// The trial's id.
     pub id: String,
@@ -110,23 +110,34 @@ impl Record {
     }
 }
 
-/// Writes everything under `out`; returns the index's path.
-pub fn write_report(
-    out: &Path,
-    sizes: &Sizes,
-    rows: &[Row],
-    records: &[Record],
-    styles: &[(String, StyleImage)],
-    wall_s: f64,
-) -> anyhow::Result<PathBuf> {
+/// What `results.json` holds: enough to rewrite every table, chart and the index.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct RunSummary {
+    /// The command line that ran the grid.
+    #[serde(default)]
+    pub command: String,
+    /// Worker threads.
+    #[serde(default)]
+    pub threads: usize,
+    /// The grid's sizes.
+    pub sizes: Sizes,
+    /// Wall-clock seconds of the whole run.
+    pub wall_s: f64,
+    /// Every study's rows.
+    pub rows: Vec<Row>,
+    /// Every trial.
+    pub trials: Vec<Record>,
+}
+
+/// Writes everything under `out` (`results.json`, sample renders, generated
+/// styles, then [`rewrite_report`]); returns the index's path.
+pub fn write_report(out: &Path, run: &RunSummary, styles: &[(String, StyleImage)]) -> anyhow::Result<PathBuf> {
     for dir in ["charts", "renders", "styles"] {
         std::fs::create_dir_all(out.join(dir))
             .with_context(|| format!("could not create {}", out.join(dir).display()))?;
     }
-    let json = serde_json::json!({ "sizes": sizes, "wall_s": wall_s, "rows": rows, "trials": records });
-    write_text(&out.join("results.json"), &serde_json::to_string_pretty(&json)?)?;
-    write_text(&out.join("results.csv"), &csv(records))?;
-    for r in records {
+    write_text(&out.join("results.json"), &serde_json::to_string_pretty(run)?)?;
+    for r in &run.trials {
         let (w, h, rgb) = &r.sample;
         write_png_rgb(&out.join(format!("renders/{}.png", r.id)), *w, *h, rgb)?;
     }
@@ -136,10 +147,31 @@ pub fn write_report(
             write_png_rgb(&out.join(format!("styles/{name}.png")), image.width as u32, image.height as u32, &rgb)?;
         }
     }
-    let charts = write_charts(out, rows, records)?;
+    rewrite_report(out, run)
+}
+
+/// Writes `results.csv`, the charts and `index.md` of `run` under `out`
+/// (also used to redraw an earlier run's report from its `results.json`).
+pub fn rewrite_report(out: &Path, run: &RunSummary) -> anyhow::Result<PathBuf> {
+    std::fs::create_dir_all(out.join("charts"))
+        .with_context(|| format!("could not create {}", out.join("charts").display()))?;
+    write_text(&out.join("results.csv"), &csv(&run.trials))?;
+    let charts = write_charts(out, &run.rows, &run.trials)?;
     let index = out.join("index.md");
-    write_text(&index, &index_markdown(sizes, rows, records, &charts, wall_s))?;
+    write_text(&index, &index_markdown(run, &charts))?;
     Ok(index)
+}
+
+/// Reads the `results.json` of an earlier run.
+pub fn read_summary(dir: &Path) -> anyhow::Result<RunSummary> {
+    let path = dir.join("results.json");
+    let text = std::fs::read_to_string(&path).with_context(|| format!("could not read {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| {
+        format!(
+            "{} is not the results.json of `gast bench quality` (expected command, sizes, rows, trials)",
+            path.display()
+        )
+    })
 }
 
 fn write_text(path: &Path, text: &str) -> anyhow::Result<()> {
@@ -147,13 +179,14 @@ fn write_text(path: &Path, text: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
-const MEASURE_COLUMNS: [&str; 12] = [
+const MEASURE_COLUMNS: [&str; 13] = [
     "gram",
     "mean_std",
     "sliced_wasserstein",
     "nn_cosine",
     "nn_cosine_depth",
     "nn_cosine_edge",
+    "nn_cosine_joint",
     "content",
     "consistency_short",
     "consistency_long",
@@ -162,7 +195,7 @@ const MEASURE_COLUMNS: [&str; 12] = [
     "coverage",
 ];
 
-fn measure_values(m: &Measures) -> [f32; 12] {
+fn measure_values(m: &Measures) -> [f32; 13] {
     [
         m.gram,
         m.mean_std,
@@ -170,6 +203,7 @@ fn measure_values(m: &Measures) -> [f32; 12] {
         m.nn_cosine,
         m.nn_cosine_depth,
         m.nn_cosine_edge,
+        m.nn_cosine_joint,
         m.content,
         m.consistency_short,
         m.consistency_long,
@@ -224,7 +258,7 @@ fn write_charts(out: &Path, rows: &[Row], records: &[Record]) -> anyhow::Result<
     let metrics: [(&str, &str, Measure); 3] = [
         ("sw", "sliced Wasserstein distance to the style (VGG relu3 units)", |m| m.sliced_wasserstein),
         ("nn", "nearest-neighbour cosine distance to the style (0–2)", |m| m.nn_cosine),
-        ("nn_depth", "depth-map nearest-neighbour cosine distance to the style's (0–2)", |m| m.nn_cosine_depth),
+        ("nn_joint", "GCFM joint (RGB+depth+edge) nearest-neighbour cosine distance (0–2)", |m| m.nn_cosine_joint),
     ];
     // One chart per style: the styles sit at different distances, and a shared
     // axis would flatten every curve.
@@ -365,7 +399,7 @@ fn dedup(items: impl Iterator<Item = String>) -> Vec<String> {
 
 fn table_header(first: &str) -> String {
     format!(
-        "| {first} | SW ↓ | Gram ↓ | NN-cos ↓ | NN depth ↓ | NN edge ↓ | content ↓ | RMSE 5° ↓ | RMSE 37.5° ↓ | depth Δ | normal Δ (°) | time (s) | stable |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n"
+        "| {first} | SW ↓ | Gram ↓ | NN-cos ↓ | NN depth ↓ | NN edge ↓ | NN joint ↓ | content ↓ | RMSE 5° ↓ | RMSE 37.5° ↓ | depth Δ | normal Δ (°) | time (s) | stable |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n"
     )
 }
 
@@ -373,12 +407,13 @@ fn table_row(label: &str, r: &Record, step: u32) -> String {
     let Some(c) = r.at(step) else { return format!("| {label} | (no measure) |\n") };
     let m = c.measures;
     format!(
-        "| {label} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.2} | {:.1} | {} |\n",
+        "| {label} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.2} | {:.1} | {} |\n",
         m.sliced_wasserstein,
         m.gram,
         m.nn_cosine,
         m.nn_cosine_depth,
         m.nn_cosine_edge,
+        m.nn_cosine_joint,
         m.content,
         m.consistency_short,
         m.consistency_long,
@@ -422,18 +457,19 @@ fn claim_less(name: &str, a: f32, b: f32, spread: Option<f32>) -> String {
 type Measure = fn(&Measures) -> f32;
 const SW: Measure = |m| m.sliced_wasserstein;
 const NN: Measure = |m| m.nn_cosine;
+const JOINT: Measure = |m| m.nn_cosine_joint;
 
-fn index_markdown(sizes: &Sizes, rows: &[Row], records: &[Record], charts: &[(String, String)], wall_s: f64) -> String {
+fn index_markdown(run: &RunSummary, charts: &[(String, String)]) -> String {
+    let (sizes, rows, records) = (&run.sizes, run.rows.as_slice(), run.trials.as_slice());
     let mut s = String::new();
-    let args: Vec<String> = std::env::args().collect();
     let _ = writeln!(s, "# Quality benchmark\n");
     let _ = writeln!(
         s,
         "`{}` — {} trials in {:.1} min on {} threads. Optimisation at {} px from {} orbit views, {} steps per cycle (the paper's 10:90 split of 100 scaled down; the geometry share is kept), measured on a fixed ring of {} px views (see `core/src/eval/measure.rs`). Times are preparation plus optimisation, measuring excluded.\n",
-        args.join(" "),
+        run.command,
         records.len(),
-        wall_s / 60.0,
-        rayon::current_num_threads(),
+        run.wall_s / 60.0,
+        run.threads,
         sizes.resolution,
         sizes.views,
         sizes.steps_per_cycle,
@@ -445,7 +481,7 @@ fn index_markdown(sizes: &Sizes, rows: &[Row], records: &[Record], charts: &[(St
     );
     let _ = writeln!(
         s,
-        "Columns: **SW** sliced Wasserstein and **Gram** distances between the VGG relu3 features of the renders and of the style; **NN-cos** mean cosine distance of each render feature to its nearest style feature, and **NN depth**, **NN edge** the same for the rendered depth and edge maps against the style's depth and edge maps (GCFM's three modalities, each on its own; depth and edges show structure rather than colour); **content** feature distance to the colour-matched render, relative; **RMSE** colour disagreement after warping one view into another by rendered depth, at a 5° and a 37.5° baseline; **depth Δ** relative inverse-depth change and **normal Δ** mean change of depth normals against the input (how much the geometry moved); **stable** whether any degeneration detector fired.\n"
+        "Columns: **SW** sliced Wasserstein and **Gram** distances between the VGG relu3 features of the renders and of the style; **NN-cos** mean cosine distance of each render feature to its nearest style feature, and **NN depth**, **NN edge** the same for the rendered depth and edge maps against the style's depth and edge maps (GCFM's three modalities, each on its own; depth and edges show structure rather than colour), and **NN joint** GCFM's own criterion on the concatenated features; **content** feature distance to the colour-matched render, relative; **RMSE** colour disagreement after warping one view into another by rendered depth, at a 5° and a 37.5° baseline; **depth Δ** relative inverse-depth change and **normal Δ** mean change of depth normals against the input (how much the geometry moved); **stable** whether any degeneration detector fired.\n"
     );
     let _ = writeln!(s, "## Charts\n");
     for (stem, caption) in charts {
@@ -482,7 +518,8 @@ fn index_markdown(sizes: &Sizes, rows: &[Row], records: &[Record], charts: &[(St
         {
             let _ = writeln!(
                 s,
-                "\n- Decoupled closer to the style than joint: {}; {}",
+                "\n- Decoupled closer to the style than joint: {}; {}; {}",
+                claim_less("NN joint", d.nn_cosine_joint, j.nn_cosine_joint, spread(JOINT)),
                 claim_less("NN-cos", d.nn_cosine, j.nn_cosine, spread(NN)),
                 claim_less("SW", d.sliced_wasserstein, j.sliced_wasserstein, spread(SW))
             );
@@ -506,7 +543,8 @@ fn index_markdown(sizes: &Sizes, rows: &[Row], records: &[Record], charts: &[(St
             );
             let _ = writeln!(
                 s,
-                "- Only geometry stays further from the style than decoupled: {}; {}\n",
+                "- Only geometry stays further from the style than decoupled: {}; {}; {}\n",
+                claim_less("NN joint", d.nn_cosine_joint, g.nn_cosine_joint, spread(JOINT)),
                 claim_less("NN-cos", d.nn_cosine, g.nn_cosine, spread(NN)),
                 claim_less("SW", d.sliced_wasserstein, g.sliced_wasserstein, spread(SW))
             );
@@ -535,7 +573,13 @@ fn index_markdown(sizes: &Sizes, rows: &[Row], records: &[Record], charts: &[(St
             for (label, m) in &others {
                 let _ = writeln!(
                     s,
-                    "- The paper's 90 % closer to the style than {label} %: {}; {}",
+                    "- The paper's 90 % closer to the style than {label} %: {}; {}; {}",
+                    claim_less(
+                        "NN joint",
+                        m90.nn_cosine_joint,
+                        m.nn_cosine_joint,
+                        seed_spread(&modes, &style, step, JOINT)
+                    ),
                     claim_less("NN-cos", m90.nn_cosine, m.nn_cosine, seed_spread(&modes, &style, step, NN)),
                     claim_less(
                         "SW",
@@ -564,7 +608,13 @@ fn index_markdown(sizes: &Sizes, rows: &[Row], records: &[Record], charts: &[(St
         if let (Some((l0, m0)), Some((l1, m1))) = (by_weight.first(), by_weight.last()) {
             let _ = writeln!(
                 s,
-                "\n- λ_GC = {l1} closer to the style than λ_GC = {l0}: {}; {}\n",
+                "\n- λ_GC = {l1} closer to the style than λ_GC = {l0}: {}; {}; {}\n",
+                claim_less(
+                    "NN joint",
+                    m1.nn_cosine_joint,
+                    m0.nn_cosine_joint,
+                    seed_spread(&modes, &style, step, JOINT)
+                ),
                 claim_less("NN-cos", m1.nn_cosine, m0.nn_cosine, seed_spread(&modes, &style, step, NN)),
                 claim_less("SW", m1.sliced_wasserstein, m0.sliced_wasserstein, seed_spread(&modes, &style, step, SW))
             );
@@ -603,7 +653,7 @@ fn index_markdown(sizes: &Sizes, rows: &[Row], records: &[Record], charts: &[(St
         let healthy = pairs.iter().filter(|(_, r)| r.stable).count();
         let _ = writeln!(
             s,
-            "Decoupled default on every scene × style pair: **{healthy} of {} stable**. Cells: SW at the end (SW of the colour-matched input), ✓ stable, ✗ a detector fired.\n",
+            "Decoupled default on every scene × style pair: **{healthy} of {} stable**. Cells: NN-cos at the end (of the colour-matched input), then NN depth at the end (of the input); ✓ stable, ✗ a detector fired.\n",
             pairs.len()
         );
         let scenes = dedup(pairs.iter().map(|(_, r)| r.scene_name()));
@@ -616,9 +666,16 @@ fn index_markdown(sizes: &Sizes, rows: &[Row], records: &[Record], charts: &[(St
                 let cell = pairs.iter().find(|(_, r)| &r.scene_name() == scene && &r.style == style).map_or(
                     "".into(),
                     |(row, r)| {
-                        let end = r.at(row.step).map_or(f32::NAN, |c| c.measures.sliced_wasserstein);
-                        let start = r.at(0).map_or(f32::NAN, |c| c.measures.sliced_wasserstein);
-                        format!("{end:.3} ({start:.3}) {}", if r.stable { "✓" } else { "✗" })
+                        let end = r.at(row.step).map(|c| c.measures).unwrap_or_default();
+                        let start = r.at(0).map(|c| c.measures).unwrap_or_default();
+                        format!(
+                            "{:.4} ({:.4}), {:.4} ({:.4}) {}",
+                            end.nn_cosine,
+                            start.nn_cosine,
+                            end.nn_cosine_depth,
+                            start.nn_cosine_depth,
+                            if r.stable { "✓" } else { "✗" }
+                        )
                     },
                 );
                 let _ = write!(s, " {cell} |");
