@@ -26,7 +26,8 @@ pub struct RasterArgs {
     pub views: usize,
 }
 
-fn shared_dir() -> PathBuf {
+/// The shared data folder: `$GAST_SHARED`, else `../shared`.
+pub(super) fn shared_dir() -> PathBuf {
     std::env::var_os("GAST_SHARED").map(PathBuf::from).unwrap_or_else(|| PathBuf::from("../shared"))
 }
 

@@ -22,6 +22,7 @@ use gast_core::eval::{EvalOptions, StabilityThresholds, TrialOutcome, run_trial}
 use gast_core::session::{PreparedStyle, SessionInputs, StyleDepthSource, StyleImage, prepare_style};
 use gast_core::style::{Mode, StyleConfig};
 
+use super::bench::shared_dir;
 use super::{ViewArgs, load_scene, views_for};
 use crate::report::quality::{Record, RunSummary, read_summary, rewrite_report, write_report};
 
@@ -400,10 +401,6 @@ pub fn mode_label(mode: Mode) -> &'static str {
         Mode::ColorOnly => "colour-only",
         Mode::GeometryOnly => "geometry-only",
     }
-}
-
-fn shared_dir() -> PathBuf {
-    std::env::var_os("GAST_SHARED").map(PathBuf::from).unwrap_or_else(|| PathBuf::from("../shared"))
 }
 
 /// Runs the grid and writes the report.

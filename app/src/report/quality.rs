@@ -179,43 +179,26 @@ fn write_text(path: &Path, text: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
-const MEASURE_COLUMNS: [&str; 13] = [
-    "gram",
-    "mean_std",
-    "sliced_wasserstein",
-    "nn_cosine",
-    "nn_cosine_depth",
-    "nn_cosine_edge",
-    "nn_cosine_joint",
-    "content",
-    "consistency_short",
-    "consistency_long",
-    "depth_change",
-    "normal_change_degrees",
-    "coverage",
+/// Every measure as reported: CSV name, table header, getter, decimals in tables.
+const COLUMNS: [(&str, &str, Measure, usize); 13] = [
+    ("sliced_wasserstein", "SW ↓", |m| m.sliced_wasserstein, 4),
+    ("gram", "Gram ↓", |m| m.gram, 4),
+    ("mean_std", "mean–std ↓", |m| m.mean_std, 4),
+    ("nn_cosine", "NN-cos ↓", |m| m.nn_cosine, 4),
+    ("nn_cosine_depth", "NN depth ↓", |m| m.nn_cosine_depth, 4),
+    ("nn_cosine_edge", "NN edge ↓", |m| m.nn_cosine_edge, 4),
+    ("nn_cosine_joint", "NN joint ↓", |m| m.nn_cosine_joint, 4),
+    ("content", "content ↓", |m| m.content, 4),
+    ("consistency_short", "RMSE 5° ↓", |m| m.consistency_short, 4),
+    ("consistency_long", "RMSE 37.5° ↓", |m| m.consistency_long, 4),
+    ("depth_change", "depth Δ", |m| m.depth_change, 4),
+    ("normal_change_degrees", "normal Δ (°)", |m| m.normal_change_degrees, 2),
+    ("coverage", "coverage", |m| m.coverage, 3),
 ];
-
-fn measure_values(m: &Measures) -> [f32; 13] {
-    [
-        m.gram,
-        m.mean_std,
-        m.sliced_wasserstein,
-        m.nn_cosine,
-        m.nn_cosine_depth,
-        m.nn_cosine_edge,
-        m.nn_cosine_joint,
-        m.content,
-        m.consistency_short,
-        m.consistency_long,
-        m.depth_change,
-        m.normal_change_degrees,
-        m.coverage,
-    ]
-}
 
 fn csv(records: &[Record]) -> String {
     let mut s = String::from("trial,scene,style,mode,ratio_geo,lambda_gc,lr_scale,resolution,budget,step,seconds,");
-    s.push_str(&MEASURE_COLUMNS.join(","));
+    s.push_str(&COLUMNS.map(|c| c.0).join(","));
     s.push_str(",stable,issues\n");
     for r in records {
         for c in &r.checkpoints {
@@ -234,8 +217,8 @@ fn csv(records: &[Record]) -> String {
                 c.step,
                 c.seconds
             );
-            for v in measure_values(&c.measures) {
-                let _ = write!(s, ",{v}");
+            for (_, _, f, _) in COLUMNS {
+                let _ = write!(s, ",{}", f(&c.measures));
             }
             let issues: Vec<String> = r.issues.iter().map(|d| format!("{:?}", d.kind)).collect();
             let _ = writeln!(s, ",{},{}", r.stable, issues.join("+"));
@@ -398,30 +381,19 @@ fn dedup(items: impl Iterator<Item = String>) -> Vec<String> {
 }
 
 fn table_header(first: &str) -> String {
+    let heads: Vec<&str> = COLUMNS.iter().map(|c| c.1).collect();
     format!(
-        "| {first} | SW ↓ | Gram ↓ | NN-cos ↓ | NN depth ↓ | NN edge ↓ | NN joint ↓ | content ↓ | RMSE 5° ↓ | RMSE 37.5° ↓ | depth Δ | normal Δ (°) | time (s) | stable |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n"
+        "| {first} | {} | time (s) | stable |\n|---|{}---:|---|\n",
+        heads.join(" | "),
+        "---:|".repeat(COLUMNS.len())
     )
 }
 
 fn table_row(label: &str, r: &Record, step: u32) -> String {
     let Some(c) = r.at(step) else { return format!("| {label} | (no measure) |\n") };
-    let m = c.measures;
-    format!(
-        "| {label} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.2} | {:.1} | {} |\n",
-        m.sliced_wasserstein,
-        m.gram,
-        m.nn_cosine,
-        m.nn_cosine_depth,
-        m.nn_cosine_edge,
-        m.nn_cosine_joint,
-        m.content,
-        m.consistency_short,
-        m.consistency_long,
-        m.depth_change,
-        m.normal_change_degrees,
-        c.seconds,
-        if r.stable { "yes".to_string() } else { format!("**no**: {}", r.health()) }
-    )
+    let cells: Vec<String> = COLUMNS.iter().map(|(_, _, f, d)| format!("{:.*}", *d, f(&c.measures))).collect();
+    let stable = if r.stable { "yes".to_string() } else { format!("**no**: {}", r.health()) };
+    format!("| {label} | {} | {:.1} | {stable} |\n", cells.join(" | "), c.seconds)
 }
 
 /// The spread of a measure between the decoupled run and its seed-1 twin

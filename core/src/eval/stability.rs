@@ -3,9 +3,10 @@
 //!
 //! A run that diverges rarely fails loudly: it leaves NaNs, a few Gaussians
 //! grown over the whole scene, a cloud of invisible Gaussians, points flung out
-//! of the scene, or views that no longer agree. Benchmarks and long batch runs
-//! need to flag those automatically instead of by eye, so every detector
-//! reports the value it measured beside the threshold it compared against.
+//! of the scene, splats smeared over the background, or views that no longer
+//! agree. Benchmarks and long batch runs need to flag those automatically
+//! instead of by eye, so every detector reports the value it measured beside
+//! the threshold it compared against.
 //! Thresholds live in one serde struct so a preset file or the CLI can tune them.
 
 use serde::{Deserialize, Serialize};
@@ -37,6 +38,11 @@ pub struct StabilityThresholds {
     /// Consistency collapse: the multi-view RMSE after may be at most this
     /// factor times the input's (the input's floored at 0.01). Default 2.0.
     pub max_consistency_growth: f32,
+    /// Coverage blow-up: the fraction of the evaluation views' pixels that the
+    /// scene covers may grow by at most this factor. Splats that swelled or
+    /// turned opaque smear over the background long before any single one is
+    /// larger than the scene. Default 1.5.
+    pub max_coverage_growth: f32,
 }
 
 impl Default for StabilityThresholds {
@@ -48,6 +54,7 @@ impl Default for StabilityThresholds {
             bounds_margin: 0.5,
             max_outside_rise: 0.05,
             max_consistency_growth: 2.0,
+            max_coverage_growth: 1.5,
         }
     }
 }
@@ -69,6 +76,8 @@ pub enum DegenerationKind {
     LeftBounds,
     /// Views no longer agree (value: RMSE after / RMSE before).
     ConsistencyCollapse,
+    /// The scene smears over the frame (value: coverage after / coverage before).
+    CoverageGrowth,
 }
 
 /// One detected degeneration.
@@ -102,12 +111,14 @@ impl StabilityReport {
 }
 
 /// Runs every detector: parameters of `after` against `before`, the `losses`
-/// of the run, and the multi-view RMSE `(before, after)` when measured.
+/// of the run, and the multi-view RMSE and the covered fraction of the views
+/// `(before, after)` when measured.
 pub fn assess_stability(
     before: &Gaussians,
     after: &Gaussians,
     losses: &[f32],
     consistency_rmse: Option<(f32, f32)>,
+    coverage: Option<(f32, f32)>,
     th: &StabilityThresholds,
 ) -> StabilityReport {
     let issues = [
@@ -118,6 +129,7 @@ pub fn assess_stability(
         opacity_collapse(before, after, th),
         left_bounds(before, after, th),
         consistency_rmse.and_then(|(b, a)| consistency_collapse(b, a, th)),
+        coverage.and_then(|(b, a)| coverage_growth(b, a, th)),
     ];
     StabilityReport { issues: issues.into_iter().flatten().collect() }
 }
@@ -219,6 +231,13 @@ pub fn consistency_collapse(before_rmse: f32, after_rmse: f32, th: &StabilityThr
     fired(DegenerationKind::ConsistencyCollapse, after_rmse / base, th.max_consistency_growth)
 }
 
+/// The covered fraction of the views after exceeding `max_coverage_growth`
+/// times the input's (floored at 1 %, so an almost empty view does not fire on noise).
+pub fn coverage_growth(before: f32, after: f32, th: &StabilityThresholds) -> Option<Degeneration> {
+    let base = if before.is_finite() { before.max(0.01) } else { 0.01 };
+    fired(DegenerationKind::CoverageGrowth, after / base, th.max_coverage_growth)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -245,7 +264,14 @@ mod tests {
     }
 
     fn assess(after: &Gaussians) -> StabilityReport {
-        assess_stability(&scene(), after, &[1.0, 0.5], Some((0.05, 0.06)), &StabilityThresholds::default())
+        assess_stability(
+            &scene(),
+            after,
+            &[1.0, 0.5],
+            Some((0.05, 0.06)),
+            Some((0.2, 0.21)),
+            &StabilityThresholds::default(),
+        )
     }
 
     #[test]
@@ -259,7 +285,7 @@ mod tests {
         assert!(assess(&scene()).is_healthy());
         let empty = Gaussians::default();
         let th = StabilityThresholds::default();
-        assert!(assess_stability(&empty, &empty, &[], None, &th).is_healthy());
+        assert!(assess_stability(&empty, &empty, &[], None, None, &th).is_healthy());
     }
 
     #[test]
@@ -271,7 +297,7 @@ mod tests {
         only(&r, NonFiniteParameter);
         assert_eq!(r.issues[0].value, 2.0);
         let th = StabilityThresholds::default();
-        let r = assess_stability(&scene(), &scene(), &[1.0, f32::NAN, 0.5], None, &th);
+        let r = assess_stability(&scene(), &scene(), &[1.0, f32::NAN, 0.5], None, None, &th);
         only(&r, NonFiniteLoss);
     }
 
@@ -312,12 +338,23 @@ mod tests {
     #[test]
     fn consistency_collapse_is_found() {
         let th = StabilityThresholds::default();
-        let r = assess_stability(&scene(), &scene(), &[], Some((0.05, 0.2)), &th);
+        let r = assess_stability(&scene(), &scene(), &[], Some((0.05, 0.2)), None, &th);
         only(&r, ConsistencyCollapse);
         assert!((r.issues[0].value - 4.0).abs() < 1e-5);
         // A perfect input is floored at 0.01: 0.015 is fine, NaN is not.
         assert!(consistency_collapse(0.0, 0.015, &th).is_none());
         assert!(consistency_collapse(0.05, f32::NAN, &th).is_some());
+    }
+
+    #[test]
+    fn coverage_growth_is_found() {
+        let th = StabilityThresholds::default();
+        // The geometry-only lr×100 run of the stress study: 8.9 % of the frame covered before, 33 % after.
+        let r = assess_stability(&scene(), &scene(), &[], None, Some((0.089, 0.330)), &th);
+        only(&r, CoverageGrowth);
+        assert!((r.issues[0].value - 0.330 / 0.089).abs() < 1e-4);
+        assert!(coverage_growth(0.089, 0.094, &th).is_none(), "a few per cent more is healthy");
+        assert!(coverage_growth(0.0, 0.012, &th).is_none(), "floored at 1 %");
     }
 
     #[test]

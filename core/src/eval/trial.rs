@@ -107,6 +107,7 @@ pub fn run_trial(
         &result,
         &losses,
         Some((reference.consistency_long, measures.consistency_long)),
+        Some((reference.coverage, measures.coverage)),
         thresholds,
     );
     measure_s += t.elapsed().as_secs_f64();
