@@ -426,7 +426,7 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
         "quality benchmark: {} trials ({} rows, {total_steps} steps) over {} scenes, {} threads; writing {}",
         grid.trials.len(),
         grid.rows.len(),
-        sizes.scenes.len(),
+        grid.trials.iter().map(|t| t.scene).collect::<std::collections::BTreeSet<_>>().len(),
         rayon::current_num_threads(),
         out.display()
     );
