@@ -73,10 +73,20 @@ where
     result.map_err(io_err)
 }
 
+/// Writes `bytes` as the whole file, atomically ([`atomic_write`]).
+pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
+    atomic_write(path, |w| w.write_all(bytes))
+}
+
 /// Writes an RGB image (`width·height·3` floats in [0, 1], row-major) as 8-bit PNG.
 pub fn write_png_rgb(path: &Path, width: u32, height: u32, rgb: &[f32]) -> Result<(), OutputError> {
     let bytes: Vec<u8> = rgb.iter().map(|&v| to_u8(v)).collect();
-    write_png(path, width, height, image::ColorType::Rgb8, &bytes)
+    write_png_rgb8(path, width, height, &bytes)
+}
+
+/// Writes an 8-bit RGB image (`width·height·3` bytes, row-major) as PNG.
+pub fn write_png_rgb8(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(), OutputError> {
+    write_png(path, width, height, image::ColorType::Rgb8, rgb)
 }
 
 /// Writes a single-channel map (`width·height` floats) as 8-bit grey PNG after
@@ -122,7 +132,7 @@ fn write_png(path: &Path, width: u32, height: u32, color: image::ColorType, byte
         color.into(),
     )
     .map_err(|e| OutputError::Encode { path: path.to_path_buf(), format: "PNG", message: e.to_string() })?;
-    atomic_write(path, |w| w.write_all(&encoded))
+    write_bytes(path, &encoded)
 }
 
 /// Writes a single-channel float map (`width·height`, row-major) as a 32-bit

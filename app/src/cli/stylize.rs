@@ -10,7 +10,7 @@ use anyhow::Context;
 use clap::Args;
 use gast_core::Camera;
 use gast_core::eval::{inverse_depth_change, mean_std_distance, nn_cosine_distance};
-use gast_core::io::{atomic_write, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb};
+use gast_core::io::{write_bytes, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
 use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::{Mode, StyleConfig};
@@ -225,7 +225,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let t_all = Instant::now();
     let config = args.config()?;
     if let Some(p) = &args.save_preset {
-        atomic_write(p, |w| std::io::Write::write_all(w, config.to_json().as_bytes()))?;
+        write_bytes(p, config.to_json().as_bytes())?;
     }
     let scene = load_scene(&args.scene)?;
     let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
@@ -334,7 +334,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         summary,
     };
     let json = serde_json::to_string_pretty(&report)?;
-    atomic_write(&args.out.join("report.json"), |w| std::io::Write::write_all(w, json.as_bytes()))?;
+    write_bytes(&args.out.join("report.json"), json.as_bytes())?;
     eprintln!("wrote {} in {:.1} s", args.out.display(), t_all.elapsed().as_secs_f64());
     Ok(ExitCode::SUCCESS)
 }

@@ -9,7 +9,6 @@
 
 use std::f64::consts::FRAC_PI_2;
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
@@ -122,14 +121,11 @@ impl Chart {
         };
         let svg_path = with_ext(".svg");
         let svg = self.to_svg();
-        gast_core::io::atomic_write(&svg_path, |w| w.write_all(svg.as_bytes()))
+        gast_core::io::write_bytes(&svg_path, svg.as_bytes())
             .with_context(|| format!("writing the chart {}", svg_path.display()))?;
         let png_path = with_ext(".png");
         let rgb = image::DynamicImage::ImageRgba8(self.to_rgba()).to_rgb8();
-        let mut png = Vec::new();
-        rgb.write_with_encoder(image::codecs::png::PngEncoder::new(&mut png))
-            .with_context(|| format!("encoding the chart {}", png_path.display()))?;
-        gast_core::io::atomic_write(&png_path, |w| w.write_all(&png))
+        gast_core::io::write_png_rgb8(&png_path, rgb.width(), rgb.height(), rgb.as_raw())
             .with_context(|| format!("writing the chart {}", png_path.display()))?;
         Ok(())
     }

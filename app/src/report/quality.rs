@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use gast_core::eval::{Checkpoint, Degeneration, Measures, TrialOutcome};
-use gast_core::io::{atomic_write, write_png_rgb};
+use gast_core::io::{write_bytes, write_png_rgb};
 use gast_core::session::StyleImage;
 use gast_core::style::Mode;
 use serde::{Deserialize, Serialize};
@@ -175,7 +175,7 @@ pub fn read_summary(dir: &Path) -> anyhow::Result<RunSummary> {
 }
 
 fn write_text(path: &Path, text: &str) -> anyhow::Result<()> {
-    atomic_write(path, |f| std::io::Write::write_all(f, text.as_bytes()))?;
+    write_bytes(path, text.as_bytes())?;
     Ok(())
 }
 

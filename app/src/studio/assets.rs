@@ -4,7 +4,6 @@
 //! into `assets/`; a test checks that regenerating reproduces the committed bytes,
 //! and the studio falls back to generating them in memory when the folder is absent.
 
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
@@ -265,8 +264,7 @@ pub fn generate(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     images.push((ICON.to_string(), png_bytes(&icon())?));
     for (name, bytes) in images {
         let path = dir.join(&name);
-        gast_core::io::atomic_write(&path, |w| w.write_all(&bytes))
-            .with_context(|| format!("writing {}", path.display()))?;
+        gast_core::io::write_bytes(&path, &bytes).with_context(|| format!("writing {}", path.display()))?;
         paths.push(path);
     }
     Ok(paths)

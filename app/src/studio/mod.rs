@@ -406,9 +406,8 @@ impl StudioApp {
 
     /// Saves the configuration as a preset (atomically).
     pub fn save_preset(&mut self, path: &Path) {
-        use std::io::Write as _;
         let json = self.config.to_json();
-        match gast_core::io::atomic_write(path, |w| w.write_all(json.as_bytes())) {
+        match gast_core::io::write_bytes(path, json.as_bytes()) {
             Ok(()) => self.notice = format!("preset saved to {}", path.display()),
             Err(e) => self.report(anyhow::Error::new(e).context("saving the preset")),
         }
