@@ -278,8 +278,7 @@ impl Grid {
 }
 
 fn label_id(study: Study, label: &str, style: &StyleSource) -> String {
-    let raw = format!("{study:?}-{label}-{}", style.name()).to_lowercase();
-    raw.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect()
+    super::render::file_safe(&format!("{study:?}-{label}-{}", style.name()).to_lowercase())
 }
 
 /// The grid of `sizes` restricted to `studies`.

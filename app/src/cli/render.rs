@@ -64,7 +64,11 @@ pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
 /// A file stem from a camera name (image names may hold folders and extensions).
 fn sanitize(name: &str) -> String {
     let base = std::path::Path::new(name).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    let s: String =
-        base.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
+    let s = file_safe(&base);
     if s.is_empty() { "view".into() } else { s }
+}
+
+/// `name` with every character but ASCII letters, digits, `-` and `_` replaced by `_`.
+pub(super) fn file_safe(name: &str) -> String {
+    name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect()
 }
