@@ -283,10 +283,10 @@ pub(crate) fn max_pool_backward(v_out: &[f32], argmax: &[u32], (c, h, w): (usize
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    /// Deterministic values in [-1, 1).
+    /// Deterministic values in [-1, 1) (also the VGG tests' inputs).
     pub(crate) fn noise(n: usize, seed: u64) -> Vec<f32> {
         let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         (0..n)

@@ -1,18 +1,8 @@
 //! Finite-difference check of [`Vgg::backward`] and a speed print.
 
 use super::*;
+use crate::vision::conv::tests::noise;
 use crate::vision::weights::{CONV_SHAPES, ConvWeights};
-
-/// Deterministic values in [-1, 1).
-fn noise(n: usize, seed: u64) -> Vec<f32> {
-    let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-    (0..n)
-        .map(|_| {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-        })
-        .collect()
-}
 
 /// He-initialised random weights, so activations keep their scale through the layers.
 fn random_vgg(seed: u64) -> Vgg {
