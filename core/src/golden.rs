@@ -247,46 +247,13 @@ const LOSS_TOL: Tolerance = Tolerance::RelToMax(1e-4);
 /// Gradients: within 1e-3 of the tensor's largest magnitude.
 const GRAD_TOL: Tolerance = Tolerance::RelToMax(1e-3);
 
-/// Inputs of `losses_*` files stored in width-major memory order.
-///
-/// The golden README declares every image `(H, W, C)` row-major, and most
-/// tensors of `losses_seed1` are. These three are not: their bytes are an
-/// `(W, H, …)` array reshaped to `(H, W, …)`. Read as declared, the reference's
-/// GCFM matches and content loss cannot be reproduced (35 of 80 best matches
-/// agree); read width-major, an independent float64 JAX implementation of
-/// ALGORITHM.md reproduces `gcfm_loss`, `content_loss`, all 160 matches and
-/// all gradients to 1e-13, and so does this project's code to the tolerances.
-/// The outputs (gradients included) are stored as declared.
-pub const LOSSES_WIDTH_MAJOR: [&str; 3] = ["content_rgb", "render_inv_depth", "style_depth"];
-
-/// A `(H, W, C…)` tensor whose bytes are a `(W, H, C…)` array, reordered to `(H, W, C…)`.
-pub fn from_width_major(t: &Tensor) -> Tensor {
-    if t.shape.len() < 2 {
-        return t.clone();
-    }
-    let (h, w) = (t.shape[0], t.shape[1]);
-    let c: usize = t.shape[2..].iter().product();
-    let mut data = vec![0.0; t.data.len()];
-    for i in 0..h {
-        for j in 0..w {
-            let src = (j * h + i) * c;
-            let dst = (i * w + j) * c;
-            data[dst..dst + c].copy_from_slice(&t.data[src..src + c]);
-        }
-    }
-    Tensor { shape: t.shape.clone(), data }
-}
-
 fn check_losses(file: &GoldenFile, ctx: &CheckContext) -> Result<Vec<OutputCheck>, GoldenError> {
     use crate::style::config::LossWeights;
     use crate::style::step::{RenderedMaps, StyleTargets, content_target, step_loss};
     use crate::vision::Vgg;
 
     let run_err = |message: String| GoldenError::Run { path: file.path.clone(), message };
-    let input = |name: &str| -> Result<Tensor, GoldenError> {
-        let t = file.get(name)?;
-        Ok(if LOSSES_WIDTH_MAJOR.contains(&name) { from_width_major(t) } else { t.clone() })
-    };
+    let input = |name: &str| file.get(name);
     let rgb_t = input("render_rgb")?;
     let [h, w, 3] = rgb_t.shape[..] else {
         return Err(GoldenError::Format {
