@@ -9,6 +9,7 @@ pub mod camera;
 pub mod eval;
 pub mod fit;
 pub mod golden;
+pub mod gpu;
 pub mod io;
 pub mod raster;
 pub mod scene;

@@ -1,0 +1,259 @@
+//! The device, its queue and what the kernels may use of it.
+
+use wgpu::util::DeviceExt as _;
+
+/// Why the GPU engine cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    /// No adapter matched the policy.
+    #[error("no GPU adapter found{0}")]
+    NoAdapter(String),
+    /// The adapter refused the device.
+    #[error("the GPU adapter {adapter} refused a device: {message}")]
+    Device {
+        /// The adapter's name.
+        adapter: String,
+        /// wgpu's reason.
+        message: String,
+    },
+    /// A buffer could not be read back.
+    #[error("reading a GPU buffer back failed: {0}")]
+    Readback(String),
+    /// The work does not fit the device.
+    #[error("{0}")]
+    TooLarge(String),
+}
+
+/// Which adapters [`GpuContext::headless`] accepts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AdapterPolicy {
+    /// Hardware adapters only (discrete, integrated, virtual): `--device auto`.
+    HardwareOnly,
+    /// Any adapter, software rasterizers (lavapipe, llvmpipe) included: `--device gpu`, tests.
+    AnyAdapter,
+}
+
+/// What the device offers beyond WebGPU's baseline, as the kernels use it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GpuCaps {
+    /// `atomic<f32>` add in storage buffers (else a compare-and-swap loop on `u32`).
+    pub float_atomics: bool,
+    /// Subgroup operations.
+    pub subgroups: bool,
+    /// Timestamp queries (per-pass timings in benchmarks).
+    pub timestamps: bool,
+}
+
+impl GpuCaps {
+    fn of(features: wgpu::Features) -> Self {
+        Self {
+            float_atomics: features.contains(wgpu::Features::SHADER_FLOAT32_ATOMIC),
+            subgroups: features.contains(wgpu::Features::SUBGROUP),
+            timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
+        }
+    }
+}
+
+/// The features the kernels use where the adapter has them; none is required.
+fn wanted_features(adapter: &wgpu::Adapter) -> wgpu::Features {
+    let wanted = wgpu::Features::SHADER_FLOAT32_ATOMIC | wgpu::Features::SUBGROUP | wgpu::Features::TIMESTAMP_QUERY;
+    adapter.features() & wanted
+}
+
+/// The device descriptor the engine needs: the adapter's own limits (storage
+/// bindings and workgroup sizes far above WebGPU's defaults) and the optional
+/// features it has. The studio hands this to eframe so both share one device.
+pub fn device_descriptor(adapter: &wgpu::Adapter) -> wgpu::DeviceDescriptor<'static> {
+    wgpu::DeviceDescriptor {
+        label: Some("gast"),
+        required_features: wanted_features(adapter),
+        required_limits: adapter.limits(),
+        ..Default::default()
+    }
+}
+
+/// One device and queue, shared by every kernel of a run (and by the studio's viewport).
+#[derive(Clone, Debug)]
+pub struct GpuContext {
+    /// The device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// The adapter's description (name, backend, type).
+    pub info: wgpu::AdapterInfo,
+    /// Optional features the device was created with.
+    pub caps: GpuCaps,
+}
+
+impl GpuContext {
+    /// A device of its own on the best adapter the policy allows: a discrete GPU
+    /// before an integrated one before anything else.
+    pub fn headless(policy: AdapterPolicy) -> Result<Self, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+        let rank = |a: &wgpu::Adapter| {
+            let info = a.get_info();
+            let kind = match info.device_type {
+                wgpu::DeviceType::DiscreteGpu => 0,
+                wgpu::DeviceType::IntegratedGpu => 1,
+                wgpu::DeviceType::VirtualGpu | wgpu::DeviceType::Other => 2,
+                wgpu::DeviceType::Cpu => 3,
+            };
+            // Vulkan/Metal/DX12 before GL: compute shaders and storage limits.
+            let backend = if info.backend == wgpu::Backend::Gl { 1 } else { 0 };
+            (kind, backend)
+        };
+        let seen: Vec<String> = adapters.iter().map(|a| describe(&a.get_info())).collect();
+        let adapter = adapters
+            .into_iter()
+            .filter(|a| policy == AdapterPolicy::AnyAdapter || a.get_info().device_type != wgpu::DeviceType::Cpu)
+            .filter(|a| a.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS))
+            .min_by_key(rank)
+            .ok_or_else(|| {
+                GpuError::NoAdapter(match (policy, seen.is_empty()) {
+                    (_, true) => String::new(),
+                    (AdapterPolicy::HardwareOnly, false) => {
+                        format!(" (hardware only; software adapters seen: {})", seen.join(", "))
+                    }
+                    (AdapterPolicy::AnyAdapter, false) => format!(" with compute shaders (seen: {})", seen.join(", ")),
+                })
+            })?;
+        Self::on_adapter(&adapter)
+    }
+
+    /// A device of its own on `adapter`.
+    pub fn on_adapter(adapter: &wgpu::Adapter) -> Result<Self, GpuError> {
+        let info = adapter.get_info();
+        let desc = device_descriptor(adapter);
+        let (device, queue) = pollster::block_on(adapter.request_device(&desc))
+            .map_err(|e| GpuError::Device { adapter: describe(&info), message: e.to_string() })?;
+        Ok(Self::from_device(device, queue, info))
+    }
+
+    /// Wraps a device someone else created (the studio's, from eframe).
+    pub fn from_device(device: wgpu::Device, queue: wgpu::Queue, info: wgpu::AdapterInfo) -> Self {
+        let caps = GpuCaps::of(device.features());
+        Self { device, queue, info, caps }
+    }
+
+    /// "NVIDIA H100 (Vulkan, discrete)", for reports.
+    pub fn describe(&self) -> String {
+        describe(&self.info)
+    }
+
+    /// Whether the adapter is a software rasterizer (lavapipe, llvmpipe).
+    pub fn is_software(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
+    }
+
+    /// The largest storage-buffer binding, in bytes.
+    pub fn max_binding_bytes(&self) -> u64 {
+        u64::from(self.device.limits().max_storage_buffer_binding_size)
+    }
+
+    /// A storage buffer holding `data` (read and written by kernels, copyable both ways).
+    pub fn upload<T: bytemuck::Pod>(&self, label: &str, data: &[T]) -> wgpu::Buffer {
+        if data.is_empty() {
+            return self.zeros(label, 1);
+        }
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: bytemuck::cast_slice(data),
+            usage: storage_usage(),
+        })
+    }
+
+    /// A zero-filled storage buffer of `words` 4-byte elements (at least one).
+    pub fn zeros(&self, label: &str, words: usize) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: (words.max(1) * 4) as u64,
+            usage: storage_usage(),
+            mapped_at_creation: false,
+        })
+    }
+
+    /// A uniform buffer holding `value`.
+    pub fn uniform<T: bytemuck::Pod>(&self, label: &str, value: &T) -> wgpu::Buffer {
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: bytemuck::bytes_of(value),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        })
+    }
+
+    /// Overwrites the start of `buffer` with `data`.
+    pub fn write<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer, data: &[T]) {
+        self.queue.write_buffer(buffer, 0, bytemuck::cast_slice(data));
+    }
+
+    /// A new command encoder.
+    pub fn encoder(&self, label: &str) -> wgpu::CommandEncoder {
+        self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) })
+    }
+
+    /// Submits `encoder`'s commands.
+    pub fn submit(&self, encoder: wgpu::CommandEncoder) {
+        self.queue.submit([encoder.finish()]);
+    }
+
+    /// Reads a whole buffer back as `T`s (blocks until the queue is done).
+    pub fn read<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer) -> Result<Vec<T>, GpuError> {
+        self.read_range(buffer, 0, buffer.size())
+    }
+
+    /// Reads `bytes` bytes of `buffer` from `offset` back as `T`s.
+    pub fn read_range<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer, offset: u64, bytes: u64) -> Result<Vec<T>, GpuError> {
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: bytes.max(4),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut enc = self.encoder("readback");
+        enc.copy_buffer_to_buffer(buffer, offset, &staging, 0, bytes);
+        self.submit(enc);
+        let slice = staging.slice(..bytes);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        match rx.recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(GpuError::Readback(e.to_string())),
+            Err(e) => return Err(GpuError::Readback(e.to_string())),
+        }
+        let view = slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
+        let out = bytemuck::pod_collect_to_vec(&view);
+        drop(view);
+        staging.unmap();
+        Ok(out)
+    }
+
+    /// Blocks until every submitted command has finished (benchmarks, timings).
+    pub fn wait(&self) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| GpuError::Readback(e.to_string()))
+    }
+}
+
+/// Storage buffers are read and written by kernels, filled from and read back to the host.
+fn storage_usage() -> wgpu::BufferUsages {
+    wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST
+}
+
+fn describe(info: &wgpu::AdapterInfo) -> String {
+    let kind = match info.device_type {
+        wgpu::DeviceType::DiscreteGpu => "discrete",
+        wgpu::DeviceType::IntegratedGpu => "integrated",
+        wgpu::DeviceType::VirtualGpu => "virtual",
+        wgpu::DeviceType::Cpu => "software",
+        wgpu::DeviceType::Other => "other",
+    };
+    format!("{} ({:?}, {kind})", info.name, info.backend)
+}

@@ -1,0 +1,97 @@
+//! The GPU engine: the optimisation step on wgpu, beside the CPU engine.
+//!
+//! Every kernel here has a CPU twin in the rest of `core` (the reference the
+//! tests compare against). Kernels are hand-written WGSL in the workspace's
+//! `shaders/` folder, one file per launching module, named after it
+//! (`gpu/adam.rs` launches `shaders/adam.wgsl`).
+//!
+//! The [`GpuContext`] wraps one `wgpu::Device` and its queue: a headless one
+//! (CLI, benchmarks, tests on lavapipe) or the studio's own, which eframe
+//! creates with [`device_descriptor`] so the kernels' features and limits are
+//! there. Buffers hold flat `f32`/`u32` arrays; a [`Kernel`] is one compute
+//! entry point with an explicit binding list.
+
+mod adam;
+mod context;
+mod kernel;
+
+pub use adam::GpuAdam;
+pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};
+pub use kernel::{Bind, Kernel};
+
+use serde::{Deserialize, Serialize};
+
+/// Where a run computes: the user's choice (`--device`, the studio's selector).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DeviceChoice {
+    /// A hardware GPU adapter when there is one (never a software one), else the CPU.
+    #[default]
+    Auto,
+    /// The CPU engine (the reference).
+    Cpu,
+    /// The GPU engine on any adapter, software rasterizers (lavapipe) included.
+    Gpu,
+}
+
+impl DeviceChoice {
+    /// Every choice, in the order a selector lists them.
+    pub const ALL: [DeviceChoice; 3] = [DeviceChoice::Auto, DeviceChoice::Cpu, DeviceChoice::Gpu];
+
+    /// The name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            DeviceChoice::Auto => "auto",
+            DeviceChoice::Cpu => "cpu",
+            DeviceChoice::Gpu => "gpu",
+        }
+    }
+}
+
+impl std::str::FromStr for DeviceChoice {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "auto" => Ok(DeviceChoice::Auto),
+            "cpu" => Ok(DeviceChoice::Cpu),
+            "gpu" => Ok(DeviceChoice::Gpu),
+            other => Err(format!("expected auto, cpu or gpu, found {other:?}")),
+        }
+    }
+}
+
+impl std::fmt::Display for DeviceChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod test_util {
+    //! A context for kernel tests: any adapter, lavapipe included (CI has no GPU).
+    use super::{AdapterPolicy, GpuContext};
+    use std::sync::OnceLock;
+
+    /// The shared test context; panics with the reason when no adapter exists
+    /// (CI installs Mesa's lavapipe, see `.ci/run`).
+    pub fn ctx() -> &'static GpuContext {
+        static CTX: OnceLock<GpuContext> = OnceLock::new();
+        CTX.get_or_init(|| match GpuContext::headless(AdapterPolicy::AnyAdapter) {
+            Ok(c) => c,
+            Err(e) => panic!("GPU tests need a wgpu adapter (lavapipe: apt-get install mesa-vulkan-drivers): {e}"),
+        })
+    }
+
+    /// Deterministic noise in [-1, 1) for inputs and for pre-filling scratch buffers.
+    pub fn noise(len: usize, seed: u64) -> Vec<f32> {
+        let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        (0..len)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                (s >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+            })
+            .collect()
+    }
+}

@@ -1,0 +1,35 @@
+// Adam on one flat parameter array (core/src/gpu/adam.rs; CPU twin: style/adam.rs).
+// p -= (lr / bc1) · m / (sqrt(v) / sqrt(bc2) + eps), PyTorch's bias correction.
+
+struct AdamParams {
+    len: u32,
+    beta1: f32,
+    beta2: f32,
+    eps: f32,
+    // lr / (1 - beta1^t)
+    step_size: f32,
+    // sqrt(1 - beta2^t)
+    bc2_sqrt: f32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+@group(0) @binding(0) var<uniform> u: AdamParams;
+@group(0) @binding(1) var<storage, read_write> params: array<f32>;
+@group(0) @binding(2) var<storage, read> grads: array<f32>;
+@group(0) @binding(3) var<storage, read_write> m: array<f32>;
+@group(0) @binding(4) var<storage, read_write> v: array<f32>;
+
+@compute @workgroup_size(256)
+fn step(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = gid.x + gid.y * nwg.x * 256u;
+    if i >= u.len {
+        return;
+    }
+    let g = grads[i];
+    let mi = u.beta1 * m[i] + (1.0 - u.beta1) * g;
+    let vi = u.beta2 * v[i] + (1.0 - u.beta2) * g * g;
+    m[i] = mi;
+    v[i] = vi;
+    params[i] = params[i] - u.step_size * mi / (sqrt(vi) / u.bc2_sqrt + u.eps);
+}
