@@ -129,6 +129,7 @@ pub fn run_with(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Re
             .with_inner_size([1280.0, 800.0])
             .with_drag_and_drop(true)
             .with_icon(egui::IconData { width: icon.width(), height: icon.height(), rgba: icon.into_raw() }),
+        wgpu_options: wgpu_options(),
         ..Default::default()
     };
     eframe::run_native(
@@ -148,6 +149,17 @@ pub fn run_with(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Re
         }),
     )
     .map_err(|e| anyhow::anyhow!("the studio window failed: {e}"))
+}
+
+/// eframe's device, created with the adapter's limits and the optional
+/// features the GPU engine's kernels use, so the optimiser and the viewport
+/// share one device (and the optimiser's buffers can be drawn without a copy).
+fn wgpu_options() -> egui_wgpu::WgpuConfiguration {
+    let setup = egui_wgpu::WgpuSetupCreateNew {
+        device_descriptor: Arc::new(gast_core::gpu::device_descriptor),
+        ..egui_wgpu::WgpuSetupCreateNew::without_display_handle()
+    };
+    egui_wgpu::WgpuConfiguration { wgpu_setup: egui_wgpu::WgpuSetup::CreateNew(setup), ..Default::default() }
 }
 
 impl eframe::App for StudioApp {

@@ -48,6 +48,31 @@ impl DeviceChoice {
     }
 }
 
+impl DeviceChoice {
+    /// The GPU context this choice runs on, for a front end without a device of
+    /// its own (the CLI): `None` for the CPU engine. `auto` takes a hardware
+    /// adapter when one answers and falls back to the CPU otherwise; `gpu`
+    /// takes any adapter (lavapipe included) and fails without one.
+    pub fn resolve(self) -> Result<Option<GpuContext>, GpuError> {
+        match self {
+            DeviceChoice::Cpu => Ok(None),
+            DeviceChoice::Auto => Ok(GpuContext::headless(AdapterPolicy::HardwareOnly).ok()),
+            DeviceChoice::Gpu => GpuContext::headless(AdapterPolicy::AnyAdapter).map(Some),
+        }
+    }
+
+    /// The same choice for a front end that already holds a device (the
+    /// studio's, shared with its viewport): `auto` uses it unless it is a
+    /// software rasterizer.
+    pub fn pick(self, shared: Option<&GpuContext>) -> Option<GpuContext> {
+        match self {
+            DeviceChoice::Cpu => None,
+            DeviceChoice::Auto => shared.filter(|c| !c.is_software()).cloned(),
+            DeviceChoice::Gpu => shared.cloned(),
+        }
+    }
+}
+
 impl std::str::FromStr for DeviceChoice {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
