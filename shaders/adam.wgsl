@@ -1,5 +1,9 @@
 // Adam on one flat parameter array (core/src/gpu/adam.rs; CPU twin: style/adam.rs).
 // p -= (lr / bc1) · m / (sqrt(v) / sqrt(bc2) + eps), PyTorch's bias correction.
+// Element i of the state updates params[(i / group) * stride + i % group] (and
+// the same gradient element), so one kernel serves whole arrays (group = stride
+// = 1) and the colour phase's DC coefficients inside the SH array (group 3,
+// stride = 3 × coefficients per Gaussian).
 
 struct AdamParams {
     len: u32,
@@ -10,8 +14,8 @@ struct AdamParams {
     step_size: f32,
     // sqrt(1 - beta2^t)
     bc2_sqrt: f32,
-    _pad0: u32,
-    _pad1: u32,
+    group: u32,
+    stride: u32,
 }
 
 @group(0) @binding(0) var<uniform> u: AdamParams;
@@ -26,10 +30,11 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if i >= u.len {
         return;
     }
-    let g = grads[i];
+    let j = (i / u.group) * u.stride + i % u.group;
+    let g = grads[j];
     let mi = u.beta1 * m[i] + (1.0 - u.beta1) * g;
     let vi = u.beta2 * v[i] + (1.0 - u.beta2) * g * g;
     m[i] = mi;
     v[i] = vi;
-    params[i] = params[i] - u.step_size * mi / (sqrt(vi) / u.bc2_sqrt + u.eps);
+    params[j] = params[j] - u.step_size * mi / (sqrt(vi) / u.bc2_sqrt + u.eps);
 }

@@ -17,7 +17,8 @@ struct AdamParams {
     eps: f32,
     step_size: f32,
     bc2_sqrt: f32,
-    _pad: [u32; 2],
+    group: u32,
+    stride: u32,
 }
 const _: () = assert!(std::mem::size_of::<AdamParams>() == 32);
 
@@ -27,6 +28,8 @@ pub struct GpuAdam {
     config: AdamConfig,
     len: usize,
     step: u32,
+    group: u32,
+    stride: u32,
     m: wgpu::Buffer,
     v: wgpu::Buffer,
     uniform: wgpu::Buffer,
@@ -50,13 +53,22 @@ impl AdamKernel {
 }
 
 impl GpuAdam {
-    /// Fresh state (zero moments) for `len` parameters.
+    /// Fresh state (zero moments) for `len` parameters, a whole flat array.
     pub fn new(ctx: &GpuContext, len: usize, config: AdamConfig) -> Self {
+        Self::strided(ctx, len, 1, 1, config)
+    }
+
+    /// Fresh state for `len` parameters taken `group` at a time every `stride`
+    /// elements of the parameter array (the DC colour inside the SH array:
+    /// group 3, stride 3 × coefficients per Gaussian).
+    pub fn strided(ctx: &GpuContext, len: usize, group: u32, stride: u32, config: AdamConfig) -> Self {
         let zeros = vec![0.0f32; len.max(1)];
         Self {
             config,
             len,
             step: 0,
+            group: group.max(1),
+            stride: stride.max(1),
             m: ctx.upload("adam.m", &zeros),
             v: ctx.upload("adam.v", &zeros),
             uniform: ctx.uniform("adam.params", &AdamParams::zeroed()),
@@ -88,7 +100,8 @@ impl GpuAdam {
             eps,
             step_size: lr / (1.0 - beta1.powi(t)),
             bc2_sqrt: (1.0 - beta2.powi(t)).sqrt(),
-            _pad: [0; 2],
+            group: self.group,
+            stride: self.stride,
         };
         // The uniform is written before the encoder is submitted; one buffer per
         // state is enough because each state steps at most once per submission.
@@ -126,6 +139,32 @@ mod tests {
         let worst = p_cpu.iter().zip(&p_gpu).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
         assert!(worst < 1e-6, "largest difference {worst}");
         assert_eq!(gpu.steps(), 5);
+    }
+
+    #[test]
+    fn strided_state_updates_only_its_elements() {
+        // Three Gaussians with 4 SH coefficients × 3 channels: the DC is the first 3 of every 12.
+        let ctx = ctx();
+        let kernel = AdamKernel::new(ctx);
+        let (n, stride) = (3usize, 12u32);
+        let sh = noise(n * 12, 3);
+        let grads_full = noise(n * 12, 4);
+        let params = ctx.upload("sh", &sh);
+        let grads = ctx.upload("v_sh", &grads_full);
+        let mut gpu = GpuAdam::strided(ctx, n * 3, 3, stride, AdamConfig::default());
+        let mut enc = ctx.encoder("adam strided");
+        gpu.step(ctx, &kernel, &mut enc, &params, &grads, 0.01);
+        ctx.submit(enc);
+        let out: Vec<f32> = ctx.read(&params).expect("read back");
+        let mut dc: Vec<f32> = (0..n).flat_map(|i| sh[i * 12..i * 12 + 3].to_vec()).collect();
+        let v_dc: Vec<f32> = (0..n).flat_map(|i| grads_full[i * 12..i * 12 + 3].to_vec()).collect();
+        Adam::new(n * 3, AdamConfig::default()).step(&mut dc, &v_dc, 0.01);
+        for i in 0..n {
+            for k in 0..12 {
+                let want = if k < 3 { dc[i * 3 + k] } else { sh[i * 12 + k] };
+                assert!((out[i * 12 + k] - want).abs() < 1e-6, "gaussian {i} coefficient {k}");
+            }
+        }
     }
 
     #[test]
