@@ -12,12 +12,24 @@
 //! entry point with an explicit binding list.
 
 mod adam;
+mod canny;
 mod context;
+mod depth_map;
 mod kernel;
+mod losses;
+mod ops_bench;
+mod reduce;
+mod resize;
 
 pub use adam::GpuAdam;
+pub use canny::{CannyKernels, EdgeMap};
 pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};
+pub use depth_map::{DepthMap, DepthMapKernels};
 pub use kernel::{Bind, Kernel};
+pub use losses::{DepthL1, LossKernels, ParamL2, TvLoss};
+pub use ops_bench::bench_image_ops;
+pub use reduce::{ReduceKernels, ReduceOp, ReduceSpec, Reduction};
+pub use resize::{Clamp01, Downscale, ResizeKernels};
 
 use serde::{Deserialize, Serialize};
 

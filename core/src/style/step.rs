@@ -146,7 +146,7 @@ pub struct StepLossTimings {
 
 /// Min-max normalisation `(d − min)/(max − min + 1e-8)` and its adjoint
 /// (ties at the min or max share the gradient equally, as autodiff does).
-fn min_max_backward(d: &[f32], v: &[f32]) -> Vec<f32> {
+pub(crate) fn min_max_backward(d: &[f32], v: &[f32]) -> Vec<f32> {
     let (lo, hi) = d.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
     let r = f64::from(hi - lo) + 1e-8;
     let (mut sum_v, mut sum_vd) = (0f64, 0f64);

@@ -1,0 +1,259 @@
+//! The step's image and parameter losses on the GPU (`shaders/losses.wgsl`):
+//! TV on the rendered colour, the depth L1 against the colour-matched scene's
+//! inverse depth, and the three parameter regularisers.
+//!
+//! Each term adds its λ-weighted gradient to a buffer the caller owns (`+=`,
+//! so the step sums several terms into one image gradient) and writes its
+//! **unweighted** value into the caller's scalars buffer at the offset given
+//! when it was planned, as the CPU step reports terms (`LossTerms`) and
+//! weights them in the total. Values are sums in a deterministic tree
+//! ([`Reduction`]); the CPU twins ([`crate::style::tv::tv_loss`],
+//! [`crate::style::regularizers::depth_l1`],
+//! [`crate::style::regularizers::l2_distance`]) sum in f64, so values agree to
+//! f32 rounding, not bit for bit.
+
+use std::sync::Arc;
+
+use super::{Bind, GpuContext, GpuError, Kernel, ReduceKernels, ReduceOp, ReduceSpec, Reduction};
+
+/// Threads per workgroup in `losses.wgsl`.
+const WORKGROUP: u32 = 256;
+
+/// The uniform block of `losses.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct LossParams {
+    h: u32,
+    w: u32,
+    c: u32,
+    n: u32,
+    weight: f32,
+    kh: f32,
+    kv: f32,
+    norm_index: u32,
+}
+const _: () = assert!(std::mem::size_of::<LossParams>() == 32);
+
+/// The compiled entry points of `losses.wgsl`.
+#[derive(Debug)]
+pub struct LossKernels {
+    tv: Kernel,
+    depth_l1: Kernel,
+    param_diff: Kernel,
+    param_grad: Kernel,
+}
+
+impl LossKernels {
+    /// Compiles `losses.wgsl`.
+    pub fn new(ctx: &GpuContext) -> Arc<Self> {
+        let src = include_str!("../../../shaders/losses.wgsl");
+        let binds = [Bind::Uniform, Bind::Read, Bind::Read, Bind::ReadWrite, Bind::ReadWrite, Bind::Read];
+        let k = |entry: &str| Kernel::new(ctx, &format!("losses.{entry}"), src, entry, &binds);
+        Arc::new(Self {
+            tv: k("tv"),
+            depth_l1: k("depth_l1"),
+            param_diff: k("param_diff"),
+            param_grad: k("param_grad"),
+        })
+    }
+}
+
+/// What every term keeps: its uniform, its per-element scratch and the reduction of it.
+#[derive(Debug)]
+struct LossPlan {
+    kernels: Arc<LossKernels>,
+    params: LossParams,
+    uniform: wgpu::Buffer,
+    scratch: wgpu::Buffer,
+    reduction: Reduction,
+}
+
+impl LossPlan {
+    fn new(
+        ctx: &GpuContext,
+        kernels: &Arc<LossKernels>,
+        reduce: &Arc<ReduceKernels>,
+        params: LossParams,
+        scratch_len: usize,
+        spec: ReduceSpec,
+    ) -> Result<Self, GpuError> {
+        Ok(Self {
+            kernels: Arc::clone(kernels),
+            params,
+            uniform: ctx.uniform("losses.params", &params),
+            scratch: ctx.zeros("losses.scratch", scratch_len),
+            reduction: Reduction::new(ctx, reduce, spec)?,
+        })
+    }
+
+    fn set_weight(&mut self, ctx: &GpuContext, weight: f32) {
+        self.params.weight = weight;
+        ctx.queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&self.params));
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn dispatch(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        kernel: &Kernel,
+        x: &wgpu::Buffer,
+        x_ref: &wgpu::Buffer,
+        grad: &wgpu::Buffer,
+        scalars: &wgpu::Buffer,
+    ) {
+        let groups = Kernel::groups_1d(self.params.n as usize, WORKGROUP);
+        kernel.dispatch(ctx, encoder, &[&self.uniform, x, x_ref, grad, &self.scratch, scalars], groups);
+    }
+}
+
+fn inverse(count: usize) -> f32 {
+    if count > 0 { (1.0 / count as f64) as f32 } else { 0.0 }
+}
+
+/// TV `(mean(Δ_h I)² + mean(Δ_v I)²)/2` of an `h × w × c` image (the paper's
+/// formula, as [`crate::style::tv::tv_loss`]).
+#[derive(Debug)]
+pub struct TvLoss(LossPlan);
+
+impl TvLoss {
+    /// Plans TV of `h × w × c` images with weight `weight`, its value going to `scalars[loss_offset]`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        ctx: &GpuContext,
+        kernels: &Arc<LossKernels>,
+        reduce: &Arc<ReduceKernels>,
+        h: usize,
+        w: usize,
+        c: usize,
+        weight: f32,
+        loss_offset: usize,
+    ) -> Result<Self, GpuError> {
+        let n = h * w * c;
+        let params = LossParams {
+            h: h as u32,
+            w: w as u32,
+            c: c as u32,
+            n: n as u32,
+            weight,
+            kh: inverse(h * w.saturating_sub(1) * c),
+            kv: inverse(h.saturating_sub(1) * w * c),
+            norm_index: 0,
+        };
+        let spec = ReduceSpec::new(ReduceOp::Sum, 2 * n).to(loss_offset);
+        Ok(Self(LossPlan::new(ctx, kernels, reduce, params, 2 * n, spec)?))
+    }
+
+    /// Changes λ (from the next submission on).
+    pub fn set_weight(&mut self, ctx: &GpuContext, weight: f32) {
+        self.0.set_weight(ctx, weight);
+    }
+
+    /// Records `v_img += λ ∂TV/∂img` and `scalars[loss_offset] = TV(img)`.
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        img: &wgpu::Buffer,
+        v_img: &wgpu::Buffer,
+        scalars: &wgpu::Buffer,
+    ) {
+        self.0.dispatch(ctx, encoder, &self.0.kernels.tv, img, img, v_img, scalars);
+        self.0.reduction.record(ctx, encoder, &self.0.scratch, scalars);
+    }
+}
+
+/// The depth regulariser `mean|D − D^c|` over `n` pixels ([`crate::style::regularizers::depth_l1`]).
+#[derive(Debug)]
+pub struct DepthL1(LossPlan);
+
+impl DepthL1 {
+    /// Plans the depth L1 of `n`-pixel maps with weight `weight`, its value going to `scalars[loss_offset]`.
+    pub fn new(
+        ctx: &GpuContext,
+        kernels: &Arc<LossKernels>,
+        reduce: &Arc<ReduceKernels>,
+        n: usize,
+        weight: f32,
+        loss_offset: usize,
+    ) -> Result<Self, GpuError> {
+        let k = inverse(n);
+        let params = LossParams { h: 1, w: n as u32, c: 1, n: n as u32, weight, kh: k, kv: 0.0, norm_index: 0 };
+        let spec = ReduceSpec::new(ReduceOp::Sum, n).to(loss_offset).scaled(k);
+        Ok(Self(LossPlan::new(ctx, kernels, reduce, params, n, spec)?))
+    }
+
+    /// Changes λ (from the next submission on).
+    pub fn set_weight(&mut self, ctx: &GpuContext, weight: f32) {
+        self.0.set_weight(ctx, weight);
+    }
+
+    /// Records `v_depth += λ sign(D − D^c)/n` and `scalars[loss_offset] = mean|D − D^c|`.
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        depth: &wgpu::Buffer,
+        depth_ref: &wgpu::Buffer,
+        v_depth: &wgpu::Buffer,
+        scalars: &wgpu::Buffer,
+    ) {
+        self.0.dispatch(ctx, encoder, &self.0.kernels.depth_l1, depth, depth_ref, v_depth, scalars);
+        self.0.reduction.record(ctx, encoder, &self.0.scratch, scalars);
+    }
+}
+
+/// A parameter regulariser `‖x − x^c‖₂` over a flat array (opacity logits,
+/// log-scales or quaternions; [`crate::style::regularizers::l2_distance`]).
+#[derive(Debug)]
+pub struct ParamL2(LossPlan);
+
+impl ParamL2 {
+    /// Plans the norm of `len`-float arrays with weight `weight`, its value going to `scalars[loss_offset]`.
+    pub fn new(
+        ctx: &GpuContext,
+        kernels: &Arc<LossKernels>,
+        reduce: &Arc<ReduceKernels>,
+        len: usize,
+        weight: f32,
+        loss_offset: usize,
+    ) -> Result<Self, GpuError> {
+        let params = LossParams {
+            h: 1,
+            w: len as u32,
+            c: 1,
+            n: len as u32,
+            weight,
+            kh: 0.0,
+            kv: 0.0,
+            norm_index: loss_offset as u32,
+        };
+        let spec = ReduceSpec::new(ReduceOp::SumSquares, len).to(loss_offset).sqrt();
+        Ok(Self(LossPlan::new(ctx, kernels, reduce, params, len, spec)?))
+    }
+
+    /// Changes λ (from the next submission on).
+    pub fn set_weight(&mut self, ctx: &GpuContext, weight: f32) {
+        self.0.set_weight(ctx, weight);
+    }
+
+    /// Records `scalars[loss_offset] = ‖x − x^c‖` and `v_x += λ (x − x^c)/‖x − x^c‖`
+    /// (nothing where the norm is 0).
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        x: &wgpu::Buffer,
+        x_ref: &wgpu::Buffer,
+        v_x: &wgpu::Buffer,
+        scalars: &wgpu::Buffer,
+    ) {
+        self.0.dispatch(ctx, encoder, &self.0.kernels.param_diff, x, x_ref, v_x, scalars);
+        self.0.reduction.record(ctx, encoder, &self.0.scratch, scalars);
+        self.0.dispatch(ctx, encoder, &self.0.kernels.param_grad, x, x_ref, v_x, scalars);
+    }
+}
+
+#[cfg(test)]
+#[path = "losses_tests.rs"]
+mod tests;

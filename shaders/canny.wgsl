@@ -1,0 +1,205 @@
+// The render's edge map (core/src/gpu/canny.rs; CPU twin: vision/canny.rs
+// render_edges): the clamped render min-max normalised to 8-bit per channel,
+// OpenCV's Canny(25, 200) with the L1 gradient on each channel, the three
+// maps averaged and replicated to 3 channels. Integer arithmetic throughout,
+// so the map is the CPU's exactly.
+// state (3 planes of n): 1 nothing, 0 candidate (a local maximum above low),
+// 2 edge (above high, or connected to such a pixel through candidates).
+
+struct CannyParams {
+    h: u32,
+    w: u32,
+    n: u32,
+    // floor(low), floor(high).
+    low: i32,
+    high: i32,
+    // The hysteresis pass this uniform drives (0, 1, …).
+    iteration: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+@group(0) @binding(0) var<uniform> u: CannyParams;
+// The clamped render, h × w × 3.
+@group(0) @binding(1) var<storage, read> rgb: array<f32>;
+// [min, max] of rgb.
+@group(0) @binding(2) var<storage, read> stats: array<f32>;
+@group(0) @binding(3) var<storage, read_write> state: array<atomic<u32>>;
+// flags[k] = 1 when hysteresis pass k changed a pixel on a tile's border.
+@group(0) @binding(4) var<storage, read_write> flags: array<atomic<u32>>;
+// The edge map, h × w × 3.
+@group(0) @binding(5) var<storage, read_write> edge: array<f32>;
+
+const NONE: u32 = 1u;
+const CANDIDATE: u32 = 0u;
+const EDGE: u32 = 2u;
+// tan(22.5°) in Q15, as OpenCV rounds it.
+const TG22: i32 = 13573;
+const TILE: u32 = 16u;
+const HALO: u32 = 18u;
+
+// The 8-bit value of channel ch at (i, j), borders replicated:
+// (v − min)/(max − min)·255 truncated (0 for a flat image).
+fn q(i: i32, j: i32, ch: u32) -> i32 {
+    let ii = u32(clamp(i, 0, i32(u.h) - 1));
+    let jj = u32(clamp(j, 0, i32(u.w) - 1));
+    let v = rgb[(ii * u.w + jj) * 3u + ch];
+    let lo = stats[0];
+    let range = stats[1] - lo;
+    if range > 0.0 {
+        return i32(clamp((v - lo) / range * 255.0, 0.0, 255.0));
+    }
+    return 0;
+}
+
+// 3×3 Sobel: (gx, gy, |gx| + |gy|).
+fn sobel(i: i32, j: i32, ch: u32) -> vec3<i32> {
+    let gx = (q(i - 1, j + 1, ch) - q(i - 1, j - 1, ch)) + 2 * (q(i, j + 1, ch) - q(i, j - 1, ch))
+        + (q(i + 1, j + 1, ch) - q(i + 1, j - 1, ch));
+    let gy = (q(i + 1, j - 1, ch) - q(i - 1, j - 1, ch)) + 2 * (q(i + 1, j, ch) - q(i - 1, j, ch))
+        + (q(i + 1, j + 1, ch) - q(i - 1, j + 1, ch));
+    return vec3<i32>(gx, gy, abs(gx) + abs(gy));
+}
+
+// Magnitude for non-maximum suppression: 0 outside the image.
+fn mag_at(i: i32, j: i32, ch: u32) -> i32 {
+    if i < 0 || j < 0 || i >= i32(u.h) || j >= i32(u.w) {
+        return 0;
+    }
+    return sobel(i, j, ch).z;
+}
+
+// Non-maximum suppression and the two thresholds, one (pixel, channel) each.
+@compute @workgroup_size(256)
+fn nms(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let t = gid.x + gid.y * nwg.x * 256u;
+    if t >= 3u * u.n {
+        return;
+    }
+    let ch = t / u.n;
+    let p = t % u.n;
+    let i = i32(p / u.w);
+    let j = i32(p % u.w);
+    let s = sobel(i, j, ch);
+    let m = s.z;
+    var out = NONE;
+    if m > u.low {
+        let x = abs(s.x);
+        let y = abs(s.y) << 15u;
+        let tg22x = x * TG22;
+        var is_max = false;
+        if y < tg22x {
+            is_max = m > mag_at(i, j - 1, ch) && m >= mag_at(i, j + 1, ch);
+        } else {
+            let tg67x = tg22x + (x << 16u);
+            if y > tg67x {
+                is_max = m > mag_at(i - 1, j, ch) && m >= mag_at(i + 1, j, ch);
+            } else {
+                let sg = select(1, -1, (s.x ^ s.y) < 0);
+                is_max = m > mag_at(i - 1, j - sg, ch) && m > mag_at(i + 1, j + sg, ch);
+            }
+        }
+        if is_max {
+            out = select(CANDIDATE, EDGE, m > u.high);
+        }
+    }
+    atomicStore(&state[t], out);
+}
+
+var<workgroup> tile: array<atomic<u32>, 324>;
+var<workgroup> wg_changed: atomic<u32>;
+var<workgroup> wg_flag: u32;
+
+// One hysteresis pass: each workgroup loads a 16×16 tile of one channel with
+// a one-pixel halo and grows edges through 8-connected candidates until the
+// tile is stable, then writes its new edges back. Edges cross tile borders
+// from one pass to the next; a pass after one that changed no tile border
+// returns at once, so a fixed number of passes costs little once stable.
+@compute @workgroup_size(16, 16)
+fn hysteresis(
+    @builtin(local_invocation_id) lid: vec3<u32>,
+    @builtin(local_invocation_index) lidx: u32,
+    @builtin(workgroup_id) wid: vec3<u32>,
+) {
+    let k = u.iteration;
+    if lidx == 0u {
+        var go = 1u;
+        if k > 0u {
+            go = atomicLoad(&flags[k - 1u]);
+        }
+        wg_flag = go;
+        atomicStore(&wg_changed, 0u);
+    }
+    if workgroupUniformLoad(&wg_flag) == 0u {
+        return;
+    }
+    let base = wid.z * u.n;
+    let i0 = i32(wid.y * TILE) - 1;
+    let j0 = i32(wid.x * TILE) - 1;
+    for (var t = lidx; t < HALO * HALO; t = t + 256u) {
+        let gi = i0 + i32(t / HALO);
+        let gj = j0 + i32(t % HALO);
+        var s = NONE;
+        if gi >= 0 && gj >= 0 && gi < i32(u.h) && gj < i32(u.w) {
+            s = atomicLoad(&state[base + u32(gi) * u.w + u32(gj)]);
+        }
+        atomicStore(&tile[t], s);
+    }
+    workgroupBarrier();
+    let li = lid.y + 1u;
+    let lj = lid.x + 1u;
+    let me = li * HALO + lj;
+    let start = atomicLoad(&tile[me]);
+    loop {
+        if atomicLoad(&tile[me]) == CANDIDATE {
+            var strong = false;
+            for (var di = 0u; di < 3u; di = di + 1u) {
+                for (var dj = 0u; dj < 3u; dj = dj + 1u) {
+                    if atomicLoad(&tile[(li + di - 1u) * HALO + lj + dj - 1u]) == EDGE {
+                        strong = true;
+                    }
+                }
+            }
+            if strong {
+                atomicStore(&tile[me], EDGE);
+                atomicStore(&wg_changed, 1u);
+            }
+        }
+        workgroupBarrier();
+        if lidx == 0u {
+            wg_flag = atomicExchange(&wg_changed, 0u);
+        }
+        if workgroupUniformLoad(&wg_flag) == 0u {
+            break;
+        }
+    }
+    if start == CANDIDATE && atomicLoad(&tile[me]) == EDGE {
+        let gi = u32(i0) + li;
+        let gj = u32(j0) + lj;
+        atomicStore(&state[base + gi * u.w + gj], EDGE);
+        if lid.x == 0u || lid.y == 0u || lid.x == TILE - 1u || lid.y == TILE - 1u {
+            atomicStore(&flags[k], 1u);
+        }
+    }
+}
+
+// The average of the three channels' edges, replicated to 3 channels.
+@compute @workgroup_size(256)
+fn finish(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let p = gid.x + gid.y * nwg.x * 256u;
+    if p >= u.n {
+        return;
+    }
+    var count = 0u;
+    for (var ch = 0u; ch < 3u; ch = ch + 1u) {
+        if atomicLoad(&state[ch * u.n + p]) == EDGE {
+            count = count + 1u;
+        }
+    }
+    // The CPU's f32 count / 3, exactly.
+    var values = array<f32, 4>(0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0);
+    let v = values[count];
+    edge[3u * p] = v;
+    edge[3u * p + 1u] = v;
+    edge[3u * p + 2u] = v;
+}
