@@ -13,9 +13,11 @@
 
 mod adam;
 mod context;
+mod gemm;
 mod kernel;
 
 pub use adam::GpuAdam;
+pub use gemm::{Gemm, GemmPlan, GemmSpec, Strided, bench_gemm};
 pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};
 pub use kernel::{Bind, Kernel};
 
