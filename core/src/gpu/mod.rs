@@ -13,13 +13,19 @@
 
 mod adam;
 mod context;
+mod feature_net;
+mod gcfm;
 mod gemm;
 mod kernel;
+mod vgg;
 
 pub use adam::GpuAdam;
+pub use feature_net::{GpuFeatureNet, GpuFeatureState};
+pub use gcfm::{GcfmWorkspace, GpuGcfm, GpuStyle, bench_gcfm};
 pub use gemm::{Gemm, GemmPlan, GemmSpec, Strided, bench_gemm};
 pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};
 pub use kernel::{Bind, Kernel};
+pub use vgg::{GpuVgg, GpuVggState, GpuVggWorkspace, bench_vgg};
 
 use serde::{Deserialize, Serialize};
 
