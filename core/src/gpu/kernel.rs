@@ -111,3 +111,20 @@ impl Kernel {
         [groups.div_ceil(y), y, 1]
     }
 }
+
+/// A 1-D launch planned once: its uniform (made when a workspace is, never
+/// rewritten between dispatches of one encoder) and its workgroup counts.
+#[derive(Debug)]
+pub(crate) struct Launch {
+    /// The uniform block.
+    pub uniform: wgpu::Buffer,
+    /// Workgroups covering the launch's items.
+    pub groups: [u32; 3],
+}
+
+impl Launch {
+    /// A uniform holding `params` and the workgroups for `items` threads of `workgroup`.
+    pub fn new<T: bytemuck::Pod>(ctx: &GpuContext, label: &str, params: &T, items: usize, workgroup: u32) -> Self {
+        Self { uniform: ctx.uniform(label, params), groups: Kernel::groups_1d(items, workgroup) }
+    }
+}

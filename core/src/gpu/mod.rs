@@ -15,21 +15,29 @@ mod adam;
 mod canny;
 mod context;
 mod depth_map;
+mod feature_net;
+mod gcfm;
+mod gemm;
 mod kernel;
 mod losses;
 mod ops_bench;
 mod reduce;
 mod resize;
+mod vgg;
 
 pub use adam::GpuAdam;
 pub use canny::{CannyKernels, EdgeMap};
 pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};
 pub use depth_map::{DepthMap, DepthMapKernels};
+pub use feature_net::{GpuFeatureNet, GpuFeatureState};
+pub use gcfm::{GcfmWorkspace, GpuGcfm, GpuStyle, bench_gcfm};
+pub use gemm::{Gemm, GemmPlan, GemmSpec, Strided, bench_gemm};
 pub use kernel::{Bind, Kernel};
 pub use losses::{DepthL1, LossKernels, ParamL2, TvLoss};
 pub use ops_bench::bench_image_ops;
 pub use reduce::{ReduceKernels, ReduceOp, ReduceSpec, Reduction};
 pub use resize::{Clamp01, Downscale, ResizeKernels};
+pub use vgg::{GpuVgg, GpuVggState, GpuVggWorkspace, bench_vgg};
 
 use serde::{Deserialize, Serialize};
 

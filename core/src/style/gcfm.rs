@@ -71,6 +71,16 @@ impl StyleFeatures {
     pub fn modality(&self, m: usize) -> &[f32] {
         &self.feats[m]
     }
+
+    /// The matching's style-side scale `1 / (sqrt(‖joint‖² + 1e-8) + 1e-8)`, per position.
+    pub(crate) fn joint_inv_norm(&self) -> &[f32] {
+        &self.joint_inv_norm
+    }
+
+    /// The loss's `1 / (‖F_m‖ + 1e-8)` of modality `m`, per position.
+    pub(crate) fn modal_inv_norm(&self, m: usize) -> &[f64] {
+        &self.modal_inv_norm[m]
+    }
 }
 
 /// Squared norm of every column of a `c × n` row-major matrix, in f64.

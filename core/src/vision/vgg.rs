@@ -56,7 +56,7 @@ pub struct Vgg {
 }
 
 /// Index of each convolution's stage (0: full resolution, 1: ½, 2: ¼).
-const STAGE: [usize; 7] = [0, 0, 1, 1, 2, 2, 2];
+pub(crate) const STAGE: [usize; 7] = [0, 0, 1, 1, 2, 2, 2];
 
 impl Vgg {
     /// Wraps loaded weights (see [`VggWeights::load`]).
@@ -293,4 +293,4 @@ pub fn bench(vgg: &Vgg, h: usize, w: usize, reps: usize) -> VggTiming {
 
 #[cfg(test)]
 #[path = "vgg_tests.rs"]
-mod tests;
+pub(crate) mod tests;

@@ -5,7 +5,7 @@ use crate::vision::conv::tests::noise;
 use crate::vision::weights::{CONV_SHAPES, ConvWeights};
 
 /// He-initialised random weights, so activations keep their scale through the layers.
-fn random_vgg(seed: u64) -> Vgg {
+pub(crate) fn random_vgg(seed: u64) -> Vgg {
     let convs = CONV_SHAPES
         .iter()
         .enumerate()

@@ -1,0 +1,275 @@
+//! The GCFM loss on the GPU (`shaders/gcfm.wgsl` and the GEMM), repeating
+//! [`crate::style::gcfm`]: the joint nearest (`y+`) and farthest (`y−`) style
+//! position of every rendered feature position, the per-modality loss terms
+//! and the gradients w.r.t. the rendered RGB and depth features (the edge
+//! features are a constant: their term is reported, their gradient is not).
+//!
+//! The search is one GEMM per modality accumulating the joint scores
+//! `⟨r(x), s(y)⟩` of a chunk of rendered positions against every style
+//! position, then one workgroup per row taking the arg-extrema of the scores
+//! scaled by the style's joint `1/‖s(y)‖` (the rendered norm does not change
+//! them). Chunks keep the score matrix under the storage-binding limit. The
+//! CPU re-decides near-ties in `f64`; the GPU keeps the `f32` winner (the
+//! first index on exact ties), so the two may differ where two style positions
+//! score within rounding of each other: the tests count those.
+//!
+//! The style side ([`GpuStyle`]) is uploaded once per style image with the
+//! norms [`StyleFeatures`] computed; a [`GcfmWorkspace`] holds the scratch and
+//! every launch's uniform for one rendered size, made once.
+
+use super::gemm::{Gemm, GemmPlan, GemmSpec, Strided};
+use super::kernel::Launch;
+use super::{Bind, GpuContext, Kernel};
+use crate::style::gcfm::StyleFeatures;
+
+/// Threads per workgroup of the `gcfm.wgsl` kernels.
+const WORKGROUP: u32 = 256;
+/// Largest score chunk, in f32 elements (64 MiB).
+const SCORE_ELEMS: usize = 1 << 24;
+/// Most rows per chunk (one workgroup per row, one dispatch dimension).
+const MAX_ROWS: usize = 65_535;
+
+/// The uniform block of `gcfm.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+struct GcfmParams {
+    n: u32,
+    m: u32,
+    c: u32,
+    x0: u32,
+    len: u32,
+    modality: u32,
+    out_off: u32,
+    _pad0: u32,
+    scale: f32,
+    _pad: [u32; 3],
+}
+const _: () = assert!(std::mem::size_of::<GcfmParams>() == 48);
+
+/// The style's features and norms on the device, uploaded once per style image.
+#[derive(Debug)]
+pub struct GpuStyle {
+    channels: usize,
+    positions: usize,
+    feats: Vec<wgpu::Buffer>,
+    joint_inv_norm: wgpu::Buffer,
+    modal_inv_norm: Vec<wgpu::Buffer>,
+}
+
+impl GpuStyle {
+    /// Uploads the three modalities' features and their norms.
+    pub fn new(ctx: &GpuContext, style: &StyleFeatures) -> Self {
+        Self {
+            channels: style.channels,
+            positions: style.positions(),
+            feats: (0..3).map(|k| ctx.upload("gcfm.style", style.modality(k))).collect(),
+            joint_inv_norm: ctx.upload("gcfm.joint_inv_norm", style.joint_inv_norm()),
+            modal_inv_norm: (0..3)
+                .map(|k| {
+                    let v: Vec<f32> = style.modal_inv_norm(k).iter().map(|&x| x as f32).collect();
+                    ctx.upload("gcfm.modal_inv_norm", &v)
+                })
+                .collect(),
+        }
+    }
+
+    /// Number of style positions.
+    pub fn positions(&self) -> usize {
+        self.positions
+    }
+}
+
+/// One chunk of rendered rows: three accumulating GEMMs and the arg-extrema.
+#[derive(Debug)]
+struct Chunk {
+    gemms: Vec<GemmPlan>,
+    argext: Launch,
+}
+
+/// Scratch and launch uniforms for one rendered size against one style.
+#[derive(Debug)]
+pub struct GcfmWorkspace {
+    n: usize,
+    m: usize,
+    scores: wgpu::Buffer,
+    matches: wgpu::Buffer,
+    stats: wgpu::Buffer,
+    chunks: Vec<Chunk>,
+    stats_launch: Vec<Launch>,
+    grad_launch: Vec<Launch>,
+    reduce: Launch,
+}
+
+impl GcfmWorkspace {
+    /// The matches of the last run: `y+` of every rendered position, then `y−`
+    /// (`2n` `u32`s, flat row-major indices into the style feature map, as
+    /// [`crate::style::gcfm::Matches`]).
+    pub fn matches(&self) -> &wgpu::Buffer {
+        &self.matches
+    }
+
+    /// Rendered positions.
+    pub fn positions(&self) -> usize {
+        self.n
+    }
+}
+
+/// The compiled kernels.
+#[derive(Debug)]
+pub struct GpuGcfm {
+    gemm: Gemm,
+    argext: Kernel,
+    stats: Kernel,
+    grad: Kernel,
+    reduce: Kernel,
+    dummy: wgpu::Buffer,
+}
+
+fn u32_of(v: usize) -> u32 {
+    u32::try_from(v).unwrap_or(u32::MAX)
+}
+
+impl GpuGcfm {
+    /// Compiles `gcfm.wgsl` and the GEMM.
+    pub fn new(ctx: &GpuContext) -> Self {
+        let src = include_str!("../../../shaders/gcfm.wgsl");
+        use Bind::{Read, ReadWrite, Uniform};
+        let all = [Uniform, Read, Read, ReadWrite, Read, ReadWrite];
+        Self {
+            gemm: Gemm::new(ctx),
+            argext: Kernel::new(ctx, "gcfm.argext", src, "argext", &all[..4]),
+            stats: Kernel::new(ctx, "gcfm.stats", src, "stats", &all),
+            grad: Kernel::new(ctx, "gcfm.grad", src, "grad", &all),
+            reduce: Kernel::new(ctx, "gcfm.reduce", src, "reduce", &all),
+            dummy: ctx.zeros("gcfm.dummy", 1),
+        }
+    }
+
+    /// Scratch and uniforms for `n` rendered positions against `style`. The
+    /// run writes the loss of each modality (RGB, depth, edge) and their sum,
+    /// four `f32`s, at `scalars_offset` (in `f32`s) of the scalars buffer, and
+    /// the gradients multiplied by `scale` (the loss weight).
+    pub fn workspace(&self, ctx: &GpuContext, style: &GpuStyle, n: usize, scalars_offset: usize, scale: f32) -> GcfmWorkspace {
+        let limit = SCORE_ELEMS.min((ctx.max_binding_bytes() / 4) as usize);
+        self.workspace_chunked(ctx, style, n, scalars_offset, scale, limit)
+    }
+
+    /// [`GpuGcfm::workspace`] with score chunks of at most `limit` elements.
+    fn workspace_chunked(
+        &self,
+        ctx: &GpuContext,
+        style: &GpuStyle,
+        n: usize,
+        scalars_offset: usize,
+        scale: f32,
+        limit: usize,
+    ) -> GcfmWorkspace {
+        let (c, m) = (style.channels, style.positions);
+        let rows = (limit / m.max(1)).clamp(1, MAX_ROWS).min(n.max(1));
+        let base =
+            GcfmParams { n: u32_of(n), m: u32_of(m), c: u32_of(c), out_off: u32_of(scalars_offset), scale, ..Default::default() };
+        let mut chunks = Vec::new();
+        let mut x0 = 0;
+        while x0 < n {
+            let t = rows.min(n - x0);
+            let gemms = (0..3)
+                .map(|k| {
+                    let spec = GemmSpec {
+                        a: Strided { offset: x0, row_stride: 1, col_stride: n, batch_stride: 0 },
+                        b: Strided::rows(0, m),
+                        c: Strided::rows(0, m),
+                        accumulate: k > 0,
+                        ..GemmSpec::plain(t, m, c)
+                    };
+                    self.gemm.plan(ctx, &spec)
+                })
+                .collect();
+            let p = GcfmParams { x0: u32_of(x0), len: u32_of(t), ..base };
+            chunks.push(Chunk { gemms, argext: Launch { uniform: ctx.uniform("gcfm.argext", &p), groups: [u32_of(t), 1, 1] } });
+            x0 += t;
+        }
+        let per = |k: usize, len: usize| GcfmParams { modality: u32_of(k), len: u32_of(len), ..base };
+        GcfmWorkspace {
+            n,
+            m,
+            scores: ctx.zeros("gcfm.scores", rows * m),
+            matches: ctx.zeros("gcfm.matches", 2 * n),
+            stats: ctx.zeros("gcfm.stats", 3 * 4 * n),
+            chunks,
+            stats_launch: (0..3).map(|k| Launch::new(ctx, "gcfm.stats", &per(k, n), n, WORKGROUP)).collect(),
+            grad_launch: (0..2).map(|k| Launch::new(ctx, "gcfm.grad", &per(k, c * n), c * n, WORKGROUP)).collect(),
+            reduce: Launch { uniform: ctx.uniform("gcfm.reduce", &base), groups: [1, 1, 1] },
+        }
+    }
+
+    /// Records the matching, the loss terms (into `scalars`) and the
+    /// gradients w.r.t. the rendered RGB and depth features (`v_rgb`,
+    /// `v_depth`, each `c × n` CHW like `rendered`, overwritten). `rendered`
+    /// are the RGB, depth and edge features (`c × n` CHW each).
+    ///
+    /// # Panics
+    /// When the workspace was made for another style (a caller bug).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        enc: &mut wgpu::CommandEncoder,
+        ws: &GcfmWorkspace,
+        style: &GpuStyle,
+        rendered: [&wgpu::Buffer; 3],
+        v_rgb: &wgpu::Buffer,
+        v_depth: &wgpu::Buffer,
+        scalars: &wgpu::Buffer,
+    ) {
+        assert_eq!(ws.m, style.positions, "GpuGcfm::record: workspace made for another style");
+        if ws.n == 0 || ws.m == 0 {
+            return;
+        }
+        for chunk in &ws.chunks {
+            for (k, plan) in chunk.gemms.iter().enumerate() {
+                self.gemm.record(ctx, enc, plan, rendered[k], &style.feats[k], None, &ws.scores);
+            }
+            let l = &chunk.argext;
+            self.argext.dispatch(ctx, enc, &[&l.uniform, &ws.scores, &style.joint_inv_norm, &ws.matches], l.groups);
+        }
+        for (k, l) in ws.stats_launch.iter().enumerate() {
+            let b = [&l.uniform, rendered[k], &style.feats[k], &ws.matches, &style.modal_inv_norm[k], &ws.stats];
+            self.stats.dispatch(ctx, enc, &b, l.groups);
+        }
+        for (k, (l, out)) in ws.grad_launch.iter().zip([v_rgb, v_depth]).enumerate() {
+            let b = [&l.uniform, rendered[k], &style.feats[k], &ws.matches, &ws.stats, out];
+            self.grad.dispatch(ctx, enc, &b, l.groups);
+        }
+        let l = &ws.reduce;
+        self.reduce.dispatch(ctx, enc, &[&l.uniform, &ws.stats, &self.dummy, &ws.matches, &self.dummy, scalars], l.groups);
+    }
+}
+
+/// Milliseconds of one GCFM run (search, loss, gradients) for `n` rendered
+/// positions against `m` style positions of `c` channels per modality (best of
+/// `reps` after a warm-up), for `gast bench`.
+pub fn bench_gcfm(ctx: &GpuContext, c: usize, n: usize, m: usize, reps: usize) -> Vec<(String, f64)> {
+    let wave = |len: usize, f: f32| -> Vec<f32> { (0..len).map(|i| ((i as f32) * f).sin().max(0.0)).collect() };
+    let style = StyleFeatures::new([wave(c * m, 0.37), wave(c * m, 0.11), wave(c * m, 0.23)], c, 1, m);
+    let style = GpuStyle::new(ctx, &style);
+    let gcfm = GpuGcfm::new(ctx);
+    let ws = gcfm.workspace(ctx, &style, n, 0, 1.0);
+    let r: Vec<wgpu::Buffer> = [0.31f32, 0.17, 0.05].iter().map(|&f| ctx.upload("bench.r", &wave(c * n, f))).collect();
+    let (v_rgb, v_depth, scalars) = (ctx.zeros("bench.v", c * n), ctx.zeros("bench.v", c * n), ctx.zeros("bench.s", 4));
+    let mut best = f64::INFINITY;
+    for _ in 0..reps.max(1) + 1 {
+        let t = std::time::Instant::now();
+        let mut enc = ctx.encoder("bench gcfm");
+        gcfm.record(ctx, &mut enc, &ws, &style, [&r[0], &r[1], &r[2]], &v_rgb, &v_depth, &scalars);
+        ctx.submit(enc);
+        if ctx.wait().is_err() {
+            return Vec::new();
+        }
+        best = best.min(t.elapsed().as_secs_f64() * 1e3);
+    }
+    vec![(format!("gcfm {n}×{m}×{} ms", 3 * c), best)]
+}
+
+#[cfg(test)]
+#[path = "gcfm_tests.rs"]
+mod tests;

@@ -1,0 +1,103 @@
+//! The GPU GCFM against the CPU one: matches (near-ties counted), loss terms
+//! and gradients, with the score matrix in one chunk or several.
+
+use super::*;
+use crate::gpu::test_util::{ctx, noise};
+use crate::style::gcfm::{gcfm_loss, gcfm_loss_with_matches};
+
+/// ReLU-like features: non-negative, some zeros.
+fn feats(c: usize, n: usize, seed: u64) -> Vec<f32> {
+    noise(c * n, seed).iter().map(|v| (v + 0.4).max(0.0)).collect()
+}
+
+/// The joint score `⟨r(x), s(y)⟩ / ‖s(y)‖` in f64, as the CPU decides near-ties.
+fn joint_score(st: &StyleFeatures, r: &[Vec<f32>; 3], n: usize, x: usize, y: usize) -> f64 {
+    let (c, m) = (st.channels, st.positions());
+    let (mut dot, mut sq) = (0f64, 0f64);
+    for k in 0..3 {
+        for ch in 0..c {
+            let s = f64::from(st.modality(k)[ch * m + y]);
+            dot += f64::from(r[k][ch * n + x]) * s;
+            sq += s * s;
+        }
+    }
+    dot / sq.sqrt().max(1e-30)
+}
+
+#[test]
+fn search_loss_and_gradients_match_the_cpu_gcfm() {
+    let ctx = ctx();
+    let gcfm = GpuGcfm::new(ctx);
+    let (c, hs, ws_) = (96, 9, 13);
+    let m = hs * ws_;
+    let st = StyleFeatures::new([feats(c, m, 1), feats(c, m, 2), feats(c, m, 3)], c, hs, ws_);
+    let style = GpuStyle::new(ctx, &st);
+    let mut failures = Vec::new();
+    let mut report = Vec::new();
+    for (n, limit) in [(300usize, SCORE_ELEMS), (211, 37 * m)] {
+        let r: [Vec<f32>; 3] = std::array::from_fn(|k| feats(c, n, 10 + k as u64 + n as u64));
+        let ws = gcfm.workspace_chunked(ctx, &style, n, 2, 2.0, limit);
+        for (i, b) in [&ws.scores, &ws.matches, &ws.stats].into_iter().enumerate() {
+            ctx.write(b, &noise((b.size() / 4) as usize, 50 + i as u64).iter().map(|v| v.to_bits()).collect::<Vec<u32>>());
+        }
+        let rb: Vec<wgpu::Buffer> = r.iter().map(|v| ctx.upload("r", v)).collect();
+        let v_rgb = ctx.upload("v_rgb", &noise(c * n, 60));
+        let v_depth = ctx.upload("v_depth", &noise(c * n, 61));
+        let scalars = ctx.upload("scalars", &noise(8, 62));
+        let mut enc = ctx.encoder("gcfm test");
+        gcfm.record(ctx, &mut enc, &ws, &style, [&rb[0], &rb[1], &rb[2]], &v_rgb, &v_depth, &scalars);
+        ctx.submit(enc);
+        let mt: Vec<u32> = ctx.read(&ws.matches).expect("matches");
+        let s: Vec<f32> = ctx.read(&scalars).expect("scalars");
+        let g = [ctx.read::<f32>(&v_rgb).expect("v_rgb"), ctx.read::<f32>(&v_depth).expect("v_depth")];
+
+        // Matches: identical to the CPU's except near-ties of the joint score.
+        let cpu = gcfm_loss(&st, [&r[0], &r[1], &r[2]], n);
+        let gpu_matches =
+            crate::style::gcfm::Matches { best: mt[..n].to_vec(), worst: mt[n..].to_vec() };
+        let mut ties = 0;
+        for x in 0..n {
+            for (a, b) in [(cpu.matches.best[x], gpu_matches.best[x]), (cpu.matches.worst[x], gpu_matches.worst[x])] {
+                if a != b {
+                    let (sa, sb) = (joint_score(&st, &r, n, x, a as usize), joint_score(&st, &r, n, x, b as usize));
+                    if (sa - sb).abs() > 1e-5 * sa.abs().max(1.0) {
+                        failures.push(format!("n {n} x {x}: CPU picks {a} ({sa}), GPU {b} ({sb})"));
+                    }
+                    ties += 1;
+                }
+            }
+        }
+        if ties * 50 > n {
+            failures.push(format!("n {n}: {ties} near-tie differences of {} matches", 2 * n));
+        }
+
+        // Loss and gradients: against the CPU with the GPU's matches.
+        let want = gcfm_loss_with_matches(&st, [&r[0], &r[1], &r[2]], n, gpu_matches);
+        for k in 0..3 {
+            let rel = (s[2 + k] - want.terms[k]).abs() / want.terms[k].abs().max(1e-6);
+            if rel > 1e-4 {
+                failures.push(format!("n {n} modality {k}: loss {} vs CPU {}", s[2 + k], want.terms[k]));
+            }
+        }
+        if (s[5] - want.loss).abs() > 1e-4 * want.loss.abs() {
+            failures.push(format!("n {n}: total {} vs CPU {}", s[5], want.loss));
+        }
+        let mut worst_rel = 0f32;
+        for k in 0..2 {
+            let largest = want.v_rendered[k].iter().fold(0f32, |a, v| a.max(2.0 * v.abs()));
+            let err = g[k].iter().zip(&want.v_rendered[k]).map(|(a, b)| (a - 2.0 * b).abs()).fold(0f32, f32::max);
+            worst_rel = worst_rel.max(err / largest);
+            if err > 1e-3 * largest {
+                failures.push(format!("n {n} modality {k}: gradient differs by {err} (largest {largest})"));
+            }
+        }
+        report.push(format!(
+            "n {n}, m {m}, {} chunks: {ties} near-tie differences; loss {} vs CPU {}; gradient error {worst_rel:.1e} of the largest",
+            ws.chunks.len(),
+            s[5],
+            want.loss
+        ));
+    }
+    println!("{}", report.join("\n"));
+    assert!(failures.is_empty(), "{}\n{}", failures.join("\n"), report.join("\n"));
+}
