@@ -17,7 +17,7 @@ fn inputs(config: StyleConfig) -> Option<SessionInputs> {
     let vgg = Arc::new(Vgg::load(&shared_file("data/weights/vgg19-conv3.safetensors")?).expect("weights"));
     let opts = gast_core::camera::OrbitOptions { count: 6, width: 48, height: 48, ..Default::default() };
     let cameras = gast_core::camera::orbit_cameras(&scene.means, &opts);
-    Some(SessionInputs { scene, cameras, style, style_depth: StyleDepthSource::Heuristic, vgg, config })
+    Some(SessionInputs { scene, cameras, style, style_depth: StyleDepthSource::Heuristic, vgg, config, gpu: None })
 }
 
 fn next(events: &crossbeam_channel::Receiver<Event>) -> Event {

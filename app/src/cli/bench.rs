@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
+use anyhow::Context as _;
 use clap::Args;
 use gast_core::camera::Camera;
 use gast_core::raster::{self, RenderOptions};
@@ -175,11 +176,32 @@ pub struct StepArgs {
     /// Run the whole default schedule (3,000 steps) instead of extrapolating from the timed steps.
     #[arg(long)]
     pub full: bool,
+    /// Run exactly this many steps of the default schedule and report their measured time
+    /// (overrides --geometry-steps and --full).
+    #[arg(long)]
+    pub steps: Option<u32>,
+    /// Where the steps run: auto (a hardware GPU when there is one, else the CPU), cpu, or gpu
+    /// (any adapter, lavapipe included).
+    #[arg(long, default_value_t = gast_core::gpu::DeviceChoice::Auto)]
+    pub device: gast_core::gpu::DeviceChoice,
+    /// Run the same steps on the CPU and on the GPU (any adapter) in this process and print the ratio.
+    #[arg(long)]
+    pub compare: bool,
+}
+
+/// What one device's run of the step benchmark measured.
+struct StepRun {
+    device: String,
+    steps: usize,
+    wall_s: f64,
+    per_phase: Vec<(gast_core::style::Phase, f64)>,
+    first_losses: Option<gast_core::session::LossTerms>,
 }
 
 /// Per-step breakdown of the optimisation, the whole schedule's time, and memory.
 pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
-    use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource, StyleImage};
+    use gast_core::gpu::DeviceChoice;
+    use gast_core::session::StyleImage;
     use gast_core::style::{Phase, StyleConfig};
 
     let shared = shared_dir();
@@ -204,32 +226,157 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         args.resolution,
         rayon::current_num_threads()
     );
+    let schedule = config.schedule();
+    let budget = match args.steps {
+        Some(n) => n,
+        None if args.full => schedule.total_steps(),
+        None => schedule.color_steps + args.geometry_steps,
+    };
+    let devices: Vec<DeviceChoice> =
+        if args.compare { vec![DeviceChoice::Cpu, DeviceChoice::Gpu] } else { vec![args.device] };
+    let mut runs = Vec::new();
+    for device in devices {
+        let gpu = device.resolve().with_context(|| format!("--device {device}"))?;
+        let run = time_steps(&scene, &views, &style, &vgg, &config, gpu, budget)?;
+        runs.push(run);
+    }
+    if let [cpu, gpu] = &runs[..] {
+        println!("\nCPU against GPU, the same {} steps in one process:", cpu.steps.min(gpu.steps));
+        for (phase, cpu_ms) in &cpu.per_phase {
+            if let Some((_, gpu_ms)) = gpu.per_phase.iter().find(|p| p.0 == *phase) {
+                println!(
+                    "  {:<9} step median: CPU {:>9.1} ms, GPU {:>8.2} ms, ratio {:>7.1}x",
+                    format!("{phase:?}").to_lowercase(),
+                    cpu_ms,
+                    gpu_ms,
+                    cpu_ms / gpu_ms.max(1e-9)
+                );
+            }
+        }
+        println!(
+            "  whole run: CPU {:.1} s, GPU {:.2} s, ratio {:.1}x",
+            cpu.wall_s,
+            gpu.wall_s,
+            cpu.wall_s / gpu.wall_s.max(1e-9)
+        );
+        if let (Some(a), Some(b)) = (cpu.first_losses, gpu.first_losses) {
+            let rel = |x: f32, y: f32| f64::from((x - y).abs()) / f64::from(x.abs().max(1e-12));
+            println!(
+                "  first step's losses, relative difference: total {:.1e}, GCFM {:.1e}, content {:.1e}, TV {:.1e} ({} on the GPU)",
+                rel(a.total, b.total),
+                rel(a.gcfm, b.gcfm),
+                rel(a.content, b.content),
+                rel(a.tv, b.tv),
+                gpu.device
+            );
+        }
+    }
+    let side = (args.resolution / 2) as usize;
+    if runs.iter().any(|r| r.device.starts_with("CPU")) {
+        // One modality at the VGG input size (the render downscaled 0.5×), and the gemm floor.
+        let vt = gast_core::vision::vgg::bench(&vgg, side, side, 3);
+        let gemm = gast_core::vision::gemm_gflops(256, 64 * 64, 2304, 3);
+        let flops = vgg.forward_flops(side, side);
+        println!("\none modality on the CPU: {vt}");
+        println!(
+            "gemm floor: {gemm:.0} GFLOP/s measured (256×4096×2304); one VGG forward at {side}² is {:.2} GFLOP = {:.0} ms at that rate, measured {:.0} ms ({:.0}% of the floor's speed)",
+            flops * 1e-9,
+            flops / gemm / 1e6,
+            vt.forward_s * 1e3,
+            100.0 * (flops / gemm / 1e9) / vt.forward_s
+        );
+    }
+    if !runs.iter().all(|r| r.device.starts_with("CPU")) {
+        let ctx = gast_core::gpu::DeviceChoice::Gpu.resolve()?.context("no GPU adapter for the per-part figures")?;
+        gpu_parts(&ctx, &vgg, &scene, &views[0], args.resolution as usize)?;
+    }
+    for run in &runs {
+        let total = f64::from(schedule.total_steps());
+        if run.steps as u32 >= schedule.total_steps() {
+            println!(
+                "\nwhole schedule on {}: {} steps in {:.1} s ({:.1} min), measured",
+                run.device,
+                run.steps,
+                run.wall_s,
+                run.wall_s / 60.0
+            );
+        } else if args.steps.is_some() {
+            println!(
+                "\n{} steps on {} in {:.2} s measured ({:.2} ms a step; the default schedule has {total} steps)",
+                run.steps,
+                run.device,
+                run.wall_s,
+                run.wall_s * 1e3 / run.steps.max(1) as f64
+            );
+        } else {
+            let colour = run.per_phase.iter().find(|p| p.0 == Phase::Color).map_or(0.0, |p| p.1);
+            let geometry = run.per_phase.iter().find(|p| p.0 == Phase::Geometry).map_or(0.0, |p| p.1);
+            let est = (f64::from(schedule.cycles * schedule.color_steps) * colour
+                + f64::from(schedule.cycles * schedule.geometry_steps) * geometry)
+                / 1e3;
+            println!(
+                "\nwhole default schedule on {} ({} colour + {} geometry steps), extrapolated from the medians: {:.0} s ({:.1} min); `--steps 3000` measures it",
+                run.device,
+                schedule.cycles * schedule.color_steps,
+                schedule.cycles * schedule.geometry_steps,
+                est,
+                est / 60.0
+            );
+        }
+    }
+    let (peak, rss) = memory_mib();
+    println!("memory: peak resident {peak:.0} MiB, now {rss:.0} MiB");
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Runs `budget` steps of a fresh session on `gpu` (the CPU when `None`) and
+/// prints the per-phase table.
+fn time_steps(
+    scene: &gast_core::Gaussians,
+    views: &[Camera],
+    style: &gast_core::session::StyleImage,
+    vgg: &std::sync::Arc<gast_core::vision::Vgg>,
+    config: &gast_core::style::StyleConfig,
+    gpu: Option<gast_core::gpu::GpuContext>,
+    budget: u32,
+) -> anyhow::Result<StepRun> {
+    use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource};
+    use gast_core::style::Phase;
+
     let inputs = SessionInputs {
-        scene,
-        cameras: views,
-        style,
+        scene: scene.clone(),
+        cameras: views.to_vec(),
+        style: style.clone(),
         style_depth: StyleDepthSource::Heuristic,
         vgg: vgg.clone(),
         config: config.clone(),
+        gpu,
     };
     let mut session = Session::prepare(inputs, &mut |e| match e {
         Event::Stage { name, seconds } => println!("  prepare: {name:<20} {:>8.0} ms", seconds * 1e3),
         Event::Culled { total, kept } => println!("  culling: optimising {kept} of {total} Gaussians"),
         _ => {}
     })?;
-
-    let schedule = config.schedule();
-    let budget = if args.full { schedule.total_steps() } else { schedule.color_steps + args.geometry_steps };
+    let device = session.device();
+    println!("\n{device}");
+    if let Some(bytes) = session.gpu_memory_bytes() {
+        println!("  GPU memory allocated by the engine: {:.1} MiB", bytes as f64 / f64::from(1u32 << 20));
+    }
+    let pb = crate::progress::bar(u64::from(budget), "steps");
     let mut reports: Vec<(StepReport, f64)> = Vec::new();
     let t_all = Instant::now();
     for _ in 0..budget {
         let t = Instant::now();
         let Some(r) = session.step() else { break };
         reports.push((r, t.elapsed().as_secs_f64() * 1e3));
+        pb.inc(1);
     }
-    let wall_all = t_all.elapsed().as_secs_f64();
-
-    println!("\nper-step medians (ms); the first visit of a view also renders G^c and its content features once");
+    let wall_s = t_all.elapsed().as_secs_f64();
+    pb.finish_and_clear();
+    if let Some(why) = session.failure() {
+        anyhow::bail!("{device}: the run stopped at {why}");
+    }
+    println!("per-step medians (ms); the first visit of a view also renders G^c and its content features once");
     println!(
         "{:<10} {:>6} {:>8} {:>10} {:>9} {:>10} {:>10} {:>8} {:>9}",
         "phase", "steps", "render", "vgg fwd×3", "matching", "vgg bwd", "raster bwd", "adam", "step"
@@ -244,7 +391,7 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         let wall = median(rows.iter().map(|(_, w)| *w).collect());
         per_phase.push((phase, wall));
         println!(
-            "{:<10} {:>6} {:>8.1} {:>10.1} {:>9.1} {:>10.1} {:>10.1} {:>8.1} {:>9.1}",
+            "{:<10} {:>6} {:>8.1} {:>10.1} {:>9.1} {:>10.1} {:>10.1} {:>8.1} {:>9.2}",
             format!("{phase:?}").to_lowercase(),
             rows.len(),
             m(&|r| r.timings.render_ms),
@@ -256,38 +403,30 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
             wall
         );
     }
-
-    // One modality at the VGG input size (the render downscaled 0.5×), and the gemm floor.
-    let side = (args.resolution / 2) as usize;
-    let vt = gast_core::vision::vgg::bench(&vgg, side, side, 3);
-    let gemm = gast_core::vision::gemm_gflops(256, 64 * 64, 2304, 3);
-    let flops = vgg.forward_flops(side, side);
-    println!("\none modality: {vt}");
-    println!(
-        "gemm floor: {gemm:.0} GFLOP/s measured (256×4096×2304); one VGG forward at {side}² is {:.2} GFLOP = {:.0} ms at that rate, measured {:.0} ms ({:.0}% of the floor's speed)",
-        flops * 1e-9,
-        flops / gemm / 1e6,
-        vt.forward_s * 1e3,
-        100.0 * (flops / gemm / 1e9) / vt.forward_s
-    );
-
-    let (peak, rss) = memory_mib();
-    if args.full {
-        println!("\nwhole schedule: {} steps in {:.1} s ({:.1} min)", reports.len(), wall_all, wall_all / 60.0);
-    } else {
-        let colour = per_phase.iter().find(|p| p.0 == Phase::Color).map_or(0.0, |p| p.1);
-        let geometry = per_phase.iter().find(|p| p.0 == Phase::Geometry).map_or(0.0, |p| p.1);
-        let est = (f64::from(schedule.cycles * schedule.color_steps) * colour
-            + f64::from(schedule.cycles * schedule.geometry_steps) * geometry)
-            / 1e3;
-        println!(
-            "\nwhole default schedule ({} colour + {} geometry steps), extrapolated from the medians: {:.0} s ({:.1} min); `--full` runs it",
-            schedule.cycles * schedule.color_steps,
-            schedule.cycles * schedule.geometry_steps,
-            est,
-            est / 60.0
-        );
+    if session.gpu_memory_bytes().is_some() {
+        println!("(on the GPU the parts run back to back in one submission; their times are below)");
     }
-    println!("memory: peak resident {peak:.0} MiB, now {rss:.0} MiB");
-    Ok(ExitCode::SUCCESS)
+    Ok(StepRun { device, steps: reports.len(), wall_s, per_phase, first_losses: reports.first().map(|r| r.0.losses) })
+}
+
+/// Each GPU part of a step timed on its own at the benchmark's size.
+fn gpu_parts(
+    ctx: &gast_core::gpu::GpuContext,
+    vgg: &gast_core::vision::Vgg,
+    scene: &gast_core::Gaussians,
+    cam: &Camera,
+    resolution: usize,
+) -> anyhow::Result<()> {
+    use gast_core::gpu;
+    println!("\nGPU parts on {} (median ms)", ctx.describe());
+    let mut rows = gpu::bench_raster(ctx, scene, cam)?;
+    let side = resolution / 2;
+    rows.extend(gpu::bench_vgg(ctx, vgg, side, side, 5));
+    let n = (side / 4) * (side / 4);
+    rows.extend(gpu::bench_gcfm(ctx, 768, n, 4096, 5));
+    rows.extend(gpu::bench_image_ops(ctx, &[resolution], scene.len(), 5)?);
+    for (name, ms) in rows {
+        println!("  {name:<36} {ms:>9.3}");
+    }
+    Ok(())
 }

@@ -465,6 +465,7 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
             style_depth: StyleDepthSource::Heuristic,
             vgg: Arc::clone(&vgg),
             config: spec.config.clone(),
+            gpu: None,
         };
         bar.set_message(spec.id.clone());
         let base = bar.position();

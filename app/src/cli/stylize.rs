@@ -12,6 +12,7 @@ use gast_core::Camera;
 use gast_core::eval::{inverse_depth_change, mean_std_distance, nn_cosine_distance};
 use gast_core::io::{write_bytes, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
+use gast_core::gpu::DeviceChoice;
 use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::{Mode, StyleConfig};
 use gast_core::vision::Vgg;
@@ -117,6 +118,10 @@ pub struct StylizeArgs {
     /// Views rendered before/after into the output folder.
     #[arg(long, default_value_t = 4)]
     pub preview_views: usize,
+    /// Where the optimisation runs: auto (a hardware GPU when there is one,
+    /// else the CPU), cpu, or gpu (any adapter, software ones included).
+    #[arg(long, default_value_t = DeviceChoice::Auto)]
+    pub device: DeviceChoice,
 }
 
 impl StylizeArgs {
@@ -258,6 +263,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         style_depth,
         vgg: vgg.clone(),
         config: config.clone(),
+        gpu: args.device.resolve().with_context(|| format!("--device {}", args.device))?,
     };
     let mut session = Session::prepare(inputs, &mut |e| match e {
         Event::Stage { name, seconds } => {
@@ -284,9 +290,13 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         steps.push(r);
     }
     pb.finish_and_clear();
+    if let Some(why) = session.failure() {
+        anyhow::bail!("the optimisation stopped at {why}");
+    }
     let optimisation_s = session.elapsed_s();
     eprintln!(
-        "  optimisation: {total} steps in {optimisation_s:.1} s ({:.2} s/step)",
+        "  optimisation on {}: {total} steps in {optimisation_s:.1} s ({:.3} s/step)",
+        session.device(),
         optimisation_s / total.max(1) as f64
     );
 

@@ -91,6 +91,10 @@ pub struct StudioApp {
     notice: String,
     run: RunMonitor,
     starter: Option<SessionStarter>,
+    /// eframe's device as the GPU engine's context (none in headless tests).
+    gpu: Option<gast_core::gpu::GpuContext>,
+    /// Where runs compute (the device selector).
+    device: gast_core::gpu::DeviceChoice,
     stats: Arc<Mutex<FrameStats>>,
     viewport_notes: Arc<Mutex<ViewportNotes>>,
     jobs: inspect::Jobs,
@@ -142,6 +146,11 @@ pub fn run_with(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Re
             let resources = ViewportResources::new(&rs.device, rs.target_format);
             rs.renderer.write().callback_resources.insert(resources);
             let mut app = StudioApp::new(cc.egui_ctx.clone(), args);
+            app.set_gpu(gast_core::gpu::GpuContext::from_device(
+                rs.device.clone(),
+                rs.queue.clone(),
+                rs.adapter.get_info(),
+            ));
             if let Some(starter) = starter {
                 app.set_session_starter(starter);
             }
@@ -193,6 +202,8 @@ impl StudioApp {
             notice: String::new(),
             run: RunMonitor::default(),
             starter: None,
+            gpu: None,
+            device: gast_core::gpu::DeviceChoice::Auto,
             stats: Arc::default(),
             viewport_notes: Arc::default(),
             jobs: inspect::Jobs::new(waker),
@@ -233,6 +244,11 @@ impl StudioApp {
         }
         app.load_in_background = true;
         app
+    }
+
+    /// The device runs may use: eframe's own, so the optimiser and the viewport share it.
+    pub fn set_gpu(&mut self, gpu: gast_core::gpu::GpuContext) {
+        self.gpu = Some(gpu);
     }
 
     /// Connects the code that spawns session workers; until then Start is disabled.

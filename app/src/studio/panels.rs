@@ -192,6 +192,7 @@ impl StudioApp {
                 self.run.send(Command::Stop);
             }
         });
+        self.device_selector(ui, live);
         let status = match &self.run.status {
             RunStatus::Idle => "idle".to_string(),
             RunStatus::Running => "running".into(),
@@ -201,6 +202,26 @@ impl StudioApp {
             RunStatus::Failed(m) => format!("failed: {m}"),
         };
         ui.weak(format!("status: {status}"));
+    }
+
+    /// Where the next run computes: auto, CPU or GPU, and what that means on this machine.
+    fn device_selector(&mut self, ui: &mut Ui, live: bool) {
+        use gast_core::gpu::DeviceChoice;
+        ui.horizontal(|ui| {
+            ui.add_enabled_ui(!live, |ui| {
+                egui::ComboBox::new("device", "device").selected_text(self.device.name()).show_ui(ui, |ui| {
+                    for choice in DeviceChoice::ALL {
+                        ui.selectable_value(&mut self.device, choice, choice.name());
+                    }
+                });
+            });
+            let runs_on = match self.device.pick(self.gpu.as_ref()) {
+                Some(g) => format!("GPU: {}", g.describe()),
+                None if self.device == DeviceChoice::Gpu => "no GPU device: the run will use the CPU".into(),
+                None => "CPU".into(),
+            };
+            ui.weak(runs_on);
+        });
     }
 
     pub(super) fn start_run(&mut self) {
@@ -221,6 +242,7 @@ impl StudioApp {
             config: self.config.clone(),
             cameras: self.cameras.clone(),
             waker: Arc::new(move || ctx.request_repaint()),
+            gpu: self.device.pick(self.gpu.as_ref()),
         };
         match starter(request) {
             Ok(link) => self.run.attach(link),

@@ -43,6 +43,9 @@ pub struct StartRequest {
     pub cameras: Vec<gast_core::Camera>,
     /// Wakes the UI; call after sending an event or putting a snapshot.
     pub waker: Arc<dyn Fn() + Send + Sync>,
+    /// The GPU the steps run on (the studio's own device, shared with the
+    /// viewport); `None` runs them on the CPU.
+    pub gpu: Option<gast_core::gpu::GpuContext>,
 }
 
 /// Starts a session worker (provided by whoever links the session runner in).

@@ -17,7 +17,7 @@ const ORBIT_VIEWS: usize = 36;
 /// The studio's session starter.
 pub fn starter() -> SessionStarter {
     Box::new(|req: StartRequest| {
-        let StartRequest { scene, style, config, cameras, waker } = req;
+        let StartRequest { scene, style, config, cameras, waker, gpu } = req;
         let handle = spawn_with(
             move |emit: &mut dyn FnMut(Event)| {
                 let t = std::time::Instant::now();
@@ -46,7 +46,7 @@ pub fn starter() -> SessionStarter {
                     cameras
                 };
                 emit(Event::Stage { name: "weights and cameras".into(), seconds: t.elapsed().as_secs_f64() });
-                Ok(SessionInputs { scene, cameras, style, style_depth: StyleDepthSource::Heuristic, vgg, config })
+                Ok(SessionInputs { scene, cameras, style, style_depth: StyleDepthSource::Heuristic, vgg, config, gpu })
             },
             waker,
         );

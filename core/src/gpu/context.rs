@@ -1,5 +1,8 @@
 //! The device, its queue and what the kernels may use of it.
 
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use wgpu::util::DeviceExt as _;
 
 /// Why the GPU engine cannot run.
@@ -83,6 +86,9 @@ pub struct GpuContext {
     pub info: wgpu::AdapterInfo,
     /// Optional features the device was created with.
     pub caps: GpuCaps,
+    /// Bytes of buffers made through this context (and its clones) so far:
+    /// what the engine reports as its GPU memory.
+    allocated: Arc<AtomicU64>,
 }
 
 impl GpuContext {
@@ -133,12 +139,23 @@ impl GpuContext {
     /// Wraps a device someone else created (the studio's, from eframe).
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue, info: wgpu::AdapterInfo) -> Self {
         let caps = GpuCaps::of(device.features());
-        Self { device, queue, info, caps }
+        Self { device, queue, info, caps, allocated: Arc::default() }
     }
 
     /// "NVIDIA H100 (Vulkan, discrete)", for reports.
     pub fn describe(&self) -> String {
         describe(&self.info)
+    }
+
+    /// Bytes of buffers made through [`GpuContext::upload`], [`GpuContext::zeros`]
+    /// and [`GpuContext::uniform`] so far (freed ones included: a high-water mark
+    /// for a run that allocates once).
+    pub fn allocated_bytes(&self) -> u64 {
+        self.allocated.load(Ordering::Relaxed)
+    }
+
+    fn count(&self, bytes: u64) {
+        self.allocated.fetch_add(bytes, Ordering::Relaxed);
     }
 
     /// Whether the adapter is a software rasterizer (lavapipe, llvmpipe).
@@ -156,6 +173,7 @@ impl GpuContext {
         if data.is_empty() {
             return self.zeros(label, 1);
         }
+        self.count(std::mem::size_of_val(data) as u64);
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some(label),
             contents: bytemuck::cast_slice(data),
@@ -165,6 +183,7 @@ impl GpuContext {
 
     /// A zero-filled storage buffer of `words` 4-byte elements (at least one).
     pub fn zeros(&self, label: &str, words: usize) -> wgpu::Buffer {
+        self.count((words.max(1) * 4) as u64);
         self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
             size: (words.max(1) * 4) as u64,
@@ -175,6 +194,7 @@ impl GpuContext {
 
     /// A uniform buffer holding `value`.
     pub fn uniform<T: bytemuck::Pod>(&self, label: &str, value: &T) -> wgpu::Buffer {
+        self.count(std::mem::size_of::<T>() as u64);
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some(label),
             contents: bytemuck::bytes_of(value),

@@ -13,8 +13,10 @@
 
 mod adam;
 mod canny;
+mod content;
 mod context;
 mod depth_map;
+mod engine;
 mod feature_net;
 mod gcfm;
 mod gemm;
@@ -23,12 +25,15 @@ mod losses;
 mod ops_bench;
 mod reduce;
 mod resize;
+mod step_loss;
 mod vgg;
 
 pub use adam::GpuAdam;
 pub use canny::{CannyKernels, EdgeMap};
 pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};
+pub use content::ContentLoss;
 pub use depth_map::{DepthMap, DepthMapKernels};
+pub use engine::GpuEngine;
 pub use feature_net::{GpuFeatureNet, GpuFeatureState};
 pub use gcfm::{GcfmWorkspace, GpuGcfm, GpuStyle, bench_gcfm};
 pub use gemm::{Gemm, GemmPlan, GemmSpec, Strided, bench_gemm};
@@ -37,6 +42,7 @@ pub use losses::{DepthL1, LossKernels, ParamL2, TvLoss};
 pub use ops_bench::bench_image_ops;
 pub use reduce::{ReduceKernels, ReduceOp, ReduceSpec, Reduction};
 pub use resize::{Clamp01, Downscale, ResizeKernels};
+pub use step_loss::{StepLossKernels, StepLossPlan, step_loss_gpu};
 pub use vgg::{GpuVgg, GpuVggState, GpuVggWorkspace, bench_vgg};
 
 use serde::{Deserialize, Serialize};

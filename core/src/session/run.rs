@@ -6,6 +6,7 @@ use std::time::Instant;
 use super::events::{Event, LossTerms, StepReport, StepTimings};
 use super::prepare::{PreparedStyle, StyleDepthSource, StyleImage, prepare_style, scatter, subset, survey_views};
 use crate::camera::{Camera, scene_extent};
+use crate::gpu::{GpuContext, GpuEngine, GpuError};
 use crate::raster::{self, RenderOptions};
 use crate::scene::Gaussians;
 use crate::style::StyleConfig;
@@ -25,6 +26,9 @@ pub enum SessionError {
     /// There is nothing to optimise from.
     #[error("{0}")]
     Input(String),
+    /// The GPU engine could not start or failed.
+    #[error("the GPU engine failed: {0}")]
+    Gpu(#[from] GpuError),
 }
 
 /// Everything a run starts from.
@@ -42,6 +46,9 @@ pub struct SessionInputs {
     pub vgg: Arc<Vgg>,
     /// The run's parameters.
     pub config: StyleConfig,
+    /// The GPU that runs the steps ([`crate::gpu::DeviceChoice::resolve`]);
+    /// `None` runs them on the CPU engine.
+    pub gpu: Option<GpuContext>,
 }
 
 /// Per-view targets computed once from the colour-matched scene `G^c`.
@@ -82,6 +89,11 @@ pub struct Session {
     sampler: ViewSampler,
     step: u32,
     elapsed_s: f64,
+    /// The GPU engine when the steps run there (it then holds the optimised
+    /// Gaussians; `g` keeps the colour-matched start).
+    engine: Option<Box<GpuEngine>>,
+    /// Why stepping stopped early, if it did.
+    failure: Option<String>,
 }
 
 impl Session {
@@ -101,7 +113,7 @@ impl Session {
         on_event: &mut dyn FnMut(Event),
     ) -> Result<Self, SessionError> {
         let prepared = style;
-        let SessionInputs { scene, cameras, style, style_depth, vgg, config } = inputs;
+        let SessionInputs { scene, cameras, style, style_depth, vgg, config, gpu } = inputs;
         let problems = config.problems();
         if !problems.is_empty() {
             return Err(SessionError::Config(problems));
@@ -152,6 +164,22 @@ impl Session {
         };
         let extent = scene_extent(&work_cams);
         let sampler = ViewSampler::new(work_cams.len(), config.seed);
+        let engine = match gpu {
+            Some(ctx) => {
+                let t = Instant::now();
+                let e = GpuEngine::new(&ctx, &vgg, &g_ref, &style_maps_.targets.features, &work_cams, &config)?;
+                on_event(Event::Stage {
+                    name: format!(
+                        "GPU upload on {} ({:.0} MiB)",
+                        ctx.describe(),
+                        e.memory_bytes() as f64 / (1u64 << 20) as f64
+                    ),
+                    seconds: t.elapsed().as_secs_f64(),
+                });
+                Some(Box::new(e))
+            }
+            None => None,
+        };
         Ok(Self {
             targets: (0..work_cams.len()).map(|_| None).collect(),
             base_cameras: cameras,
@@ -169,6 +197,8 @@ impl Session {
             sampler,
             step: 0,
             elapsed_s: 0.0,
+            engine,
+            failure: None,
             config,
         })
     }
@@ -218,11 +248,38 @@ impl Session {
         self.keep.len()
     }
 
-    /// The whole scene with the current optimised Gaussians in place.
+    /// The whole scene with the current optimised Gaussians in place (read
+    /// back from the GPU when the steps run there).
     pub fn result(&self) -> Gaussians {
         let mut out = self.full.clone();
-        scatter(&mut out, &self.keep, &self.g);
+        match self.engine.as_ref().map(|e| e.download()) {
+            Some(Ok(g)) => scatter(&mut out, &self.keep, &g),
+            _ => scatter(&mut out, &self.keep, &self.g),
+        }
         out
+    }
+
+    /// Where the steps run: the GPU adapter's description, or the CPU.
+    pub fn device(&self) -> String {
+        match &self.engine {
+            Some(e) => e.context().describe(),
+            None => format!("CPU ({} threads)", rayon::current_num_threads()),
+        }
+    }
+
+    /// GPU memory the engine allocated, in bytes (`None` on the CPU).
+    pub fn gpu_memory_bytes(&self) -> Option<u64> {
+        self.engine.as_ref().map(|e| e.memory_bytes())
+    }
+
+    /// Why stepping stopped before the schedule ended (a GPU failure), if it did.
+    pub fn failure(&self) -> Option<&str> {
+        self.failure.as_deref()
+    }
+
+    /// Warnings the GPU engine raised since the last call.
+    pub fn take_warnings(&mut self) -> Vec<String> {
+        self.engine.as_mut().map(|e| e.take_warnings()).unwrap_or_default()
     }
 
     /// Takes new parameters from the next step on. A new texture scale or depth
@@ -241,21 +298,54 @@ impl Session {
                 &self.style_depth,
                 config.depth_polarity,
             );
+            if let Some(e) = &mut self.engine {
+                e.set_style(&self.style.targets.features);
+            }
         }
         if config.resolution != self.config.resolution || config.background != self.config.background {
             self.cameras = self.base_cameras.iter().map(|c| c.with_longer_side(config.resolution)).collect();
             self.targets.iter_mut().for_each(|t| *t = None);
+            if let Some(e) = &mut self.engine {
+                e.reset_views(self.cameras.len(), config.background);
+            }
         }
         self.config = config;
         Ok(())
     }
 
-    /// Runs the next scheduled step; `None` when the schedule is complete.
+    /// Runs the next scheduled step; `None` when the schedule is complete or
+    /// the GPU engine failed ([`Session::failure`] then says why).
     pub fn step(&mut self) -> Option<StepReport> {
+        if self.failure.is_some() {
+            return None;
+        }
         let schedule = self.config.schedule();
         let (cycle, phase) = schedule.at(self.step)?;
         let started = Instant::now();
         let view = self.sampler.next();
+        if let Some(engine) = &mut self.engine {
+            let cam = &self.cameras[view];
+            let (losses, timings) = match engine.step(view, cam, phase, &self.config, self.extent) {
+                Ok(r) => r,
+                Err(e) => {
+                    self.failure = Some(format!("step {}: {e}", self.step));
+                    return None;
+                }
+            };
+            self.elapsed_s += started.elapsed().as_secs_f64();
+            let report = StepReport {
+                iter: self.step,
+                total: schedule.total_steps(),
+                cycle,
+                phase,
+                view: view as u32,
+                losses,
+                timings,
+                elapsed_s: self.elapsed_s,
+            };
+            self.step += 1;
+            return Some(report);
+        }
         let opts = RenderOptions { background: self.config.background };
         let cam = self.cameras[view].clone();
         let (h, w) = (cam.height as usize, cam.width as usize);

@@ -173,7 +173,15 @@ pub fn run_loop(
                     waker();
                 }
             }
-            None => return,
+            None => {
+                if let Some(why) = session.failure() {
+                    emit(Event::Failed(why.to_owned()));
+                }
+                return;
+            }
+        }
+        for w in session.take_warnings() {
+            emit(Event::Warning(w));
         }
     }
 }

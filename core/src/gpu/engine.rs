@@ -1,0 +1,354 @@
+//! One whole optimisation step on the GPU: the GPU twin of
+//! [`crate::session::Session::step`]'s CPU path, with nothing read back but
+//! a few loss scalars.
+//!
+//! The session keeps what is the same on both devices (the schedule, the view
+//! sampler, colour matching, culling, Stage 1 of the style) and hands the step
+//! to a [`GpuEngine`] when it runs on the GPU. The engine holds the optimised
+//! Gaussians and the frozen colour-matched ones (`G^c`) in device buffers, the
+//! Adam states, the style's features, per-view targets (the content features
+//! and the inverse depth of `G^c`), and one [`ViewPlan`] of scratch buffers
+//! per image size. A step records, in one command encoder: render → clamp →
+//! 0.5× downscale; the depth map and the edge map; three VGG forwards; GCFM;
+//! content; the two VGG backwards and the image-space adjoints; TV and the
+//! depth regulariser; the rasterizer's backward; the parameter regularisers
+//! and Adam. It then reads back the scalars buffer: the loss terms and the
+//! number of (tile, splat) pairs the render needed.
+
+use std::collections::HashMap;
+
+use super::adam::AdamKernel;
+use super::step_loss::{StepLossKernels, StepLossPlan, slot};
+use super::{GpuAdam, GpuContext, GpuError, GpuGaussians, GpuGrads, GpuRaster, GpuStyle, ParamL2, RasterKernels};
+use crate::camera::Camera;
+use crate::raster::RenderOptions;
+use crate::scene::Gaussians;
+use crate::session::{LossTerms, StepTimings};
+use crate::style::StyleConfig;
+use crate::style::config::LossWeights;
+use crate::style::gcfm::StyleFeatures;
+use crate::style::schedule::Phase;
+use crate::vision::Vgg;
+
+/// Headroom over the pairs the colour-matched scene needs in its busiest view.
+const PAIR_HEADROOM: f64 = 1.5;
+
+/// Kernels compiled once per engine.
+struct Kernels {
+    raster: RasterKernels,
+    loss: StepLossKernels,
+    adam: AdamKernel,
+}
+
+/// The rasterizer's workspace and the loss's plan for one image size.
+struct ViewPlan {
+    raster: GpuRaster,
+    loss: StepLossPlan,
+}
+
+/// What a view's steps compare against, computed once from `G^c`.
+struct ViewTarget {
+    content: wgpu::Buffer,
+    inv_depth: wgpu::Buffer,
+}
+
+/// One Adam state per parameter group, colour and geometry phases.
+struct Optimisers {
+    color: GpuAdam,
+    means: GpuAdam,
+    scales: GpuAdam,
+    quats: GpuAdam,
+    opacity: GpuAdam,
+}
+
+/// The optimisation state on the device and the step that advances it.
+pub struct GpuEngine {
+    ctx: GpuContext,
+    k: Kernels,
+    style: GpuStyle,
+    g: GpuGaussians,
+    g_ref: GpuGaussians,
+    grads: GpuGrads,
+    regs: [ParamL2; 3],
+    opt: Optimisers,
+    plans: HashMap<(u32, u32), ViewPlan>,
+    targets: Vec<Option<ViewTarget>>,
+    scalars: wgpu::Buffer,
+    weights: LossWeights,
+    background: [f32; 3],
+    /// (tile, splat) pairs each new plan's rasterizer holds.
+    pair_capacity: usize,
+    /// Bytes of device memory the engine allocated.
+    bytes: u64,
+    /// Warnings for the session to pass on (a render that ran out of pair room).
+    warnings: Vec<String>,
+}
+
+impl GpuEngine {
+    /// Uploads the optimised Gaussians (`G^c` restricted to what the cameras
+    /// see), the network and the style's features, and sizes the rasterizer
+    /// on the busiest of `cameras`.
+    pub fn new(
+        ctx: &GpuContext,
+        vgg: &Vgg,
+        g_ref: &Gaussians,
+        style: &StyleFeatures,
+        cameras: &[Camera],
+        config: &StyleConfig,
+    ) -> Result<Self, GpuError> {
+        let before = ctx.allocated_bytes();
+        let k = Kernels { raster: RasterKernels::new(ctx), loss: StepLossKernels::new(ctx, vgg), adam: AdamKernel::new(ctx) };
+        let g = GpuGaussians::upload(ctx, g_ref);
+        let g_ref_gpu = GpuGaussians::upload(ctx, g_ref);
+        let grads = GpuGrads::new(ctx, &g);
+        let n = g_ref.len();
+        let w = &config.weights;
+        let regs = [
+            ParamL2::new(ctx, &k.loss.losses, &k.loss.reduce, n, w.opacity, slot::REG_OPACITY)?,
+            ParamL2::new(ctx, &k.loss.losses, &k.loss.reduce, 3 * n, w.scale, slot::REG_SCALE)?,
+            ParamL2::new(ctx, &k.loss.losses, &k.loss.reduce, 4 * n, w.rotation, slot::REG_ROTATION)?,
+        ];
+        let sh_stride = (g_ref.sh_coeffs() * 3) as u32;
+        let opt = Optimisers {
+            color: GpuAdam::strided(ctx, 3 * n, 3, sh_stride, config.adam),
+            means: GpuAdam::new(ctx, 3 * n, config.adam),
+            scales: GpuAdam::new(ctx, 3 * n, config.adam),
+            quats: GpuAdam::new(ctx, 4 * n, config.adam),
+            opacity: GpuAdam::new(ctx, n, config.adam),
+        };
+        let pair_capacity = busiest_view(ctx, &k.raster, &g_ref_gpu, cameras, config)?;
+        let style = GpuStyle::new(ctx, style);
+        let mut engine = Self {
+            ctx: ctx.clone(),
+            k,
+            style,
+            g,
+            g_ref: g_ref_gpu,
+            grads,
+            regs,
+            opt,
+            plans: HashMap::new(),
+            targets: (0..cameras.len()).map(|_| None).collect(),
+            scalars: ctx.zeros("engine.scalars", slot::LEN),
+            weights: config.weights,
+            background: config.background,
+            pair_capacity: ((pair_capacity as f64 * PAIR_HEADROOM) as usize).max(4096),
+            bytes: 0,
+            warnings: Vec::new(),
+        };
+        engine.bytes = ctx.allocated_bytes().saturating_sub(before);
+        Ok(engine)
+    }
+
+    /// The context the engine runs on.
+    pub fn context(&self) -> &GpuContext {
+        &self.ctx
+    }
+
+    /// Device memory the engine has allocated (parameters, optimiser state,
+    /// targets, scratch), in bytes.
+    pub fn memory_bytes(&self) -> u64 {
+        self.bytes
+    }
+
+    /// The optimised Gaussians on the device (for a viewer sharing the device).
+    pub fn gaussians(&self) -> &GpuGaussians {
+        &self.g
+    }
+
+    /// Reads the optimised Gaussians back (snapshots, export).
+    pub fn download(&self) -> Result<Gaussians, GpuError> {
+        self.g.download(&self.ctx)
+    }
+
+    /// Warnings raised since the last call.
+    pub fn take_warnings(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.warnings)
+    }
+
+    /// New style features (a new texture scale or depth polarity).
+    pub fn set_style(&mut self, style: &StyleFeatures) {
+        let before = self.ctx.allocated_bytes();
+        self.style = GpuStyle::new(&self.ctx, style);
+        // GCFM workspaces depend on the style's size: rebuild the plans.
+        self.plans.clear();
+        self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
+    }
+
+    /// New cameras (a new working resolution or background): per-view targets are recomputed.
+    pub fn reset_views(&mut self, views: usize, background: [f32; 3]) {
+        self.targets = (0..views).map(|_| None).collect();
+        self.background = background;
+    }
+
+    /// One optimisation step from view `view` seen by `cam` in `phase`.
+    pub fn step(
+        &mut self,
+        view: usize,
+        cam: &Camera,
+        phase: Phase,
+        config: &StyleConfig,
+        extent: f32,
+    ) -> Result<(LossTerms, StepTimings), GpuError> {
+        let size = (cam.width, cam.height);
+        if self.plans.get(&size).is_some_and(|p| p.loss.gcfm_weight() != config.weights.gcfm) {
+            // λ_GC is baked into the GCFM workspace's uniforms.
+            self.plans.clear();
+        }
+        if !self.plans.contains_key(&size) {
+            let before = self.ctx.allocated_bytes();
+            let plan = self.plan(cam, &config.weights)?;
+            self.plans.insert(size, plan);
+            self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
+        }
+        if config.weights != self.weights {
+            self.set_weights(&config.weights);
+        }
+        if self.targets.get(view).is_none_or(Option::is_none) {
+            let before = self.ctx.allocated_bytes();
+            self.make_target(view, cam)?;
+            self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
+        }
+        let Some(Some(target)) = self.targets.get(view) else {
+            return Err(GpuError::TooLarge(format!("no target for view {view}")));
+        };
+        let Some(plan) = self.plans.get(&size) else {
+            return Err(GpuError::TooLarge(format!("no plan for {}×{}", size.0, size.1)));
+        };
+        let (ctx, k) = (&self.ctx, &self.k);
+        let opts = RenderOptions { background: self.background };
+        let geometry = phase.updates_geometry();
+        let mut enc = ctx.encoder("engine.step");
+        enc.clear_buffer(&self.scalars, 0, None);
+        plan.raster.forward(ctx, &k.raster, &mut enc, &self.g, cam, &opts);
+        let (rgb, inv_depth) = (&plan.raster.rgb, &plan.raster.inv_depth);
+        let depth_ref = geometry.then_some(&target.inv_depth);
+        let content = Some(&target.content);
+        plan.loss.record(ctx, &k.loss, &mut enc, &self.style, rgb, inv_depth, None, content, depth_ref, geometry, &self.scalars);
+        let (v_rgb, v_inv_depth) = (plan.loss.v_rgb(), plan.loss.v_inv_depth());
+        plan.raster.backward(ctx, &k.raster, &mut enc, &self.g, v_rgb, v_inv_depth, &self.grads);
+
+        // The phase's parameters: regularisers on the raw geometry, then Adam.
+        let lr = &config.lr;
+        if phase.updates_color() {
+            self.opt.color.step(ctx, &k.adam, &mut enc, &self.g.sh, &self.grads.v_sh, lr.color);
+        }
+        if geometry {
+            let (g, r, v) = (&self.g, &self.g_ref, &self.grads);
+            self.regs[0].record(ctx, &mut enc, &g.opacity_logits, &r.opacity_logits, &v.v_opacity_logits, &self.scalars);
+            self.regs[1].record(ctx, &mut enc, &g.log_scales, &r.log_scales, &v.v_log_scales, &self.scalars);
+            self.regs[2].record(ctx, &mut enc, &g.quats, &r.quats, &v.v_quats, &self.scalars);
+            self.opt.means.step(ctx, &k.adam, &mut enc, &g.means, &v.v_means, lr.means_per_extent * extent);
+            self.opt.scales.step(ctx, &k.adam, &mut enc, &g.log_scales, &v.v_log_scales, lr.scales);
+            self.opt.quats.step(ctx, &k.adam, &mut enc, &g.quats, &v.v_quats, lr.quats);
+            self.opt.opacity.step(ctx, &k.adam, &mut enc, &g.opacity_logits, &v.v_opacity_logits, lr.opacity);
+        }
+        enc.copy_buffer_to_buffer(plan.raster.pair_count(), 0, &self.scalars, (slot::PAIRS * 4) as u64, 4);
+        ctx.submit(enc);
+
+        let s: Vec<f32> = ctx.read(&self.scalars)?;
+        let pairs = s[slot::PAIRS].to_bits() as usize;
+        if pairs > plan.raster.capacity() {
+            self.grow_pairs(size, pairs);
+        }
+        let w = &config.weights;
+        let mut terms = LossTerms {
+            gcfm: s[slot::GCFM + 3],
+            content: s[slot::CONTENT],
+            tv: s[slot::TV],
+            depth: if geometry { s[slot::DEPTH] } else { 0.0 },
+            ..LossTerms::default()
+        };
+        terms.total = w.gcfm * terms.gcfm + w.content * terms.content + w.tv * terms.tv + w.depth * terms.depth;
+        if geometry {
+            terms.reg_opacity = s[slot::REG_OPACITY];
+            terms.reg_scale = s[slot::REG_SCALE];
+            terms.reg_rotation = s[slot::REG_ROTATION];
+            terms.total += w.opacity * terms.reg_opacity + w.scale * terms.reg_scale + w.rotation * terms.reg_rotation;
+        }
+        // The parts run back to back on the device: `gast bench step --device gpu`
+        // times them separately; the session measures the whole step.
+        Ok((terms, StepTimings::default()))
+    }
+
+    /// A render needed more (tile, splat) pairs than its workspace holds: the
+    /// step dropped the farthest splats of the fullest tiles. Later steps get room.
+    fn grow_pairs(&mut self, size: (u32, u32), pairs: usize) {
+        self.warnings.push(format!(
+            "a {}×{} render needed {pairs} tile-splat pairs, more than the {} reserved; that step dropped some, later steps get room",
+            size.0,
+            size.1,
+            self.plans.get(&size).map_or(0, |p| p.raster.capacity())
+        ));
+        self.pair_capacity = (pairs as f64 * PAIR_HEADROOM) as usize;
+        self.plans.remove(&size);
+    }
+
+    fn set_weights(&mut self, w: &LossWeights) {
+        let ctx = &self.ctx;
+        for plan in self.plans.values() {
+            plan.loss.set_weights(ctx, w);
+        }
+        self.regs[0].set_weight(ctx, w.opacity);
+        self.regs[1].set_weight(ctx, w.scale);
+        self.regs[2].set_weight(ctx, w.rotation);
+        self.weights = *w;
+    }
+
+    fn plan(&self, cam: &Camera, w: &LossWeights) -> Result<ViewPlan, GpuError> {
+        let ctx = &self.ctx;
+        Ok(ViewPlan {
+            raster: GpuRaster::new(ctx, self.g.len, cam.width, cam.height, self.pair_capacity)?,
+            loss: StepLossPlan::new(ctx, &self.k.loss, &self.style, cam.height as usize, cam.width as usize, w)?,
+        })
+    }
+
+    /// The content features and inverse depth of `G^c` from view `view`, once.
+    fn make_target(&mut self, view: usize, cam: &Camera) -> Result<(), GpuError> {
+        let size = (cam.width, cam.height);
+        let Some(plan) = self.plans.get(&size) else {
+            return Err(GpuError::TooLarge(format!("no plan for {}×{}", size.0, size.1)));
+        };
+        let (ctx, k) = (&self.ctx, &self.k);
+        let opts = RenderOptions { background: self.background };
+        let content = ctx.zeros("engine.target.content", plan.loss.feature_len());
+        let inv_depth = ctx.zeros("engine.target.inv_depth", (cam.width * cam.height) as usize);
+        let mut enc = ctx.encoder("engine.target");
+        plan.raster.forward(ctx, &k.raster, &mut enc, &self.g_ref, cam, &opts);
+        plan.loss.record_content_target(ctx, &k.loss, &mut enc, &plan.raster.rgb, &content);
+        enc.copy_buffer_to_buffer(&plan.raster.inv_depth, 0, &inv_depth, 0, u64::from(cam.width * cam.height) * 4);
+        ctx.submit(enc);
+        if view >= self.targets.len() {
+            self.targets.resize_with(view + 1, || None);
+        }
+        self.targets[view] = Some(ViewTarget { content, inv_depth });
+        Ok(())
+    }
+}
+
+/// The most (tile, splat) pairs `g` needs in any of `cameras` (one render each, read back once).
+fn busiest_view(
+    ctx: &GpuContext,
+    k: &RasterKernels,
+    g: &GpuGaussians,
+    cameras: &[Camera],
+    config: &StyleConfig,
+) -> Result<usize, GpuError> {
+    let opts = RenderOptions { background: config.background };
+    let mut most = 0;
+    let mut raster: Option<GpuRaster> = None;
+    for cam in cameras {
+        let r = match raster.take() {
+            Some(r) if (r.width, r.height) == (cam.width, cam.height) => {
+                let mut enc = ctx.encoder("engine.size");
+                r.forward(ctx, k, &mut enc, g, cam, &opts);
+                ctx.submit(enc);
+                if r.pairs(ctx)? <= r.capacity() { r } else { GpuRaster::fitted(ctx, k, g, cam, &opts)? }
+            }
+            _ => GpuRaster::fitted(ctx, k, g, cam, &opts)?,
+        };
+        most = most.max(r.pairs(ctx)?);
+        raster = Some(r);
+    }
+    Ok(most)
+}

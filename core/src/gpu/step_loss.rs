@@ -1,0 +1,309 @@
+//! The per-step loss on the GPU: the twin of [`crate::style::step::step_loss`]
+//! from a rendered image to the gradients w.r.t. that image, recorded into
+//! one command encoder.
+//!
+//! [`StepLossPlan`] holds the scratch buffers and planned launches for one
+//! image size: the clamp, the 0.5× downscale, the depth map, the edge map,
+//! three VGG forwards, GCFM, content, the two VGG backwards and the image-space
+//! adjoints, TV and the depth regulariser. The engine ([`super::GpuEngine`])
+//! records it between the rasterizer's forward and backward passes;
+//! [`step_loss_gpu`] runs it on uploaded maps (the golden checks).
+
+use std::sync::Arc;
+
+use super::content::ContentLoss;
+use super::{
+    CannyKernels, Clamp01, DepthL1, DepthMap, DepthMapKernels, Downscale, EdgeMap, GcfmWorkspace, GpuContext, GpuError,
+    GpuGcfm, GpuStyle, GpuVgg, GpuVggState, GpuVggWorkspace, LossKernels, ReduceKernels, ResizeKernels, TvLoss,
+};
+use crate::style::config::LossWeights;
+use crate::style::gcfm::Matches;
+use crate::style::step::{RenderedMaps, StepLoss, StepLossTimings, StyleTargets, replicate3};
+use crate::vision::Vgg;
+
+/// Where each loss value lives in a scalars buffer (in 4-byte words).
+pub mod slot {
+    /// GCFM: RGB, depth, edge, sum (four words, unweighted).
+    pub const GCFM: usize = 0;
+    /// Content (unweighted).
+    pub const CONTENT: usize = 4;
+    /// TV (unweighted).
+    pub const TV: usize = 5;
+    /// Depth L1 (unweighted).
+    pub const DEPTH: usize = 6;
+    /// ‖o − o^c‖.
+    pub const REG_OPACITY: usize = 7;
+    /// ‖s − s^c‖.
+    pub const REG_SCALE: usize = 8;
+    /// ‖q − q^c‖.
+    pub const REG_ROTATION: usize = 9;
+    /// (tile, splat) pairs the render needed (a `u32`).
+    pub const PAIRS: usize = 10;
+    /// Words in all.
+    pub const LEN: usize = 12;
+}
+
+/// The kernels of the loss, compiled once per context (with the network's weights).
+#[derive(Debug)]
+pub struct StepLossKernels {
+    pub(crate) resize: Arc<ResizeKernels>,
+    pub(crate) depth: Arc<DepthMapKernels>,
+    pub(crate) canny: Arc<CannyKernels>,
+    pub(crate) losses: Arc<LossKernels>,
+    pub(crate) reduce: Arc<ReduceKernels>,
+    pub(crate) vgg: GpuVgg,
+    pub(crate) gcfm: GpuGcfm,
+}
+
+impl StepLossKernels {
+    /// Compiles every kernel and uploads `vgg`'s convolutions.
+    pub fn new(ctx: &GpuContext, vgg: &Vgg) -> Self {
+        Self {
+            resize: ResizeKernels::new(ctx),
+            depth: DepthMapKernels::new(ctx),
+            canny: CannyKernels::new(ctx),
+            losses: LossKernels::new(ctx),
+            reduce: ReduceKernels::new(ctx),
+            vgg: GpuVgg::new(ctx, vgg),
+            gcfm: GpuGcfm::new(ctx),
+        }
+    }
+}
+
+/// Scratch buffers and planned launches of the loss for `h × w` renders.
+#[derive(Debug)]
+pub struct StepLossPlan {
+    h: usize,
+    w: usize,
+    clamp: Clamp01,
+    down: Downscale,
+    depth_map: DepthMap,
+    edges: EdgeMap,
+    tv: TvLoss,
+    depth_l1: DepthL1,
+    vgg_ws: GpuVggWorkspace,
+    /// VGG states of the RGB, depth and edge maps (the edge state doubles as
+    /// the scratch of [`StepLossPlan::record_content_target`]).
+    states: [GpuVggState; 3],
+    gcfm_ws: GcfmWorkspace,
+    content: ContentLoss,
+    /// λ_GC baked into the GCFM workspace.
+    gcfm_weight: f32,
+    rgb: wgpu::Buffer,
+    depth3: wgpu::Buffer,
+    edge3: wgpu::Buffer,
+    small: [wgpu::Buffer; 3],
+    v_feat: [wgpu::Buffer; 2],
+    v_small: [wgpu::Buffer; 2],
+    v_rgb: wgpu::Buffer,
+    v_depth3: wgpu::Buffer,
+    v_inv_depth: wgpu::Buffer,
+    feature_len: usize,
+}
+
+impl StepLossPlan {
+    /// Plans the loss of `h × w` renders against `style` with `weights`.
+    pub fn new(
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        style: &GpuStyle,
+        h: usize,
+        w: usize,
+        weights: &LossWeights,
+    ) -> Result<Self, GpuError> {
+        let (sh, sw) = (h / 2, w / 2);
+        let states = [GpuVggState::new(ctx, sh, sw), GpuVggState::new(ctx, sh, sw), GpuVggState::new(ctx, sh, sw)];
+        let (fh, fw) = states[0].feature_size();
+        let positions = fh * fw;
+        let feature_len = positions * crate::vision::vgg::FEATURE_CHANNELS;
+        Ok(Self {
+            h,
+            w,
+            clamp: Clamp01::new(ctx, &k.resize, h * w * 3),
+            down: Downscale::new(ctx, &k.resize, h, w, 3),
+            depth_map: DepthMap::new(ctx, &k.depth, &k.reduce, h, w)?,
+            edges: EdgeMap::new(ctx, &k.canny, &k.reduce, h, w)?,
+            tv: TvLoss::new(ctx, &k.losses, &k.reduce, h, w, 3, weights.tv, slot::TV)?,
+            depth_l1: DepthL1::new(ctx, &k.losses, &k.reduce, h * w, weights.depth, slot::DEPTH)?,
+            vgg_ws: k.vgg.workspace(ctx, sh, sw),
+            gcfm_ws: k.gcfm.workspace(ctx, style, positions, slot::GCFM, weights.gcfm),
+            content: ContentLoss::new(ctx, &k.reduce, feature_len, weights.content, slot::CONTENT)?,
+            gcfm_weight: weights.gcfm,
+            states,
+            rgb: ctx.zeros("loss.rgb", h * w * 3),
+            depth3: ctx.zeros("loss.depth3", h * w * 3),
+            edge3: ctx.zeros("loss.edge3", h * w * 3),
+            small: std::array::from_fn(|_| ctx.zeros("loss.small", sh * sw * 3)),
+            v_feat: std::array::from_fn(|_| ctx.zeros("loss.v_feat", feature_len)),
+            v_small: std::array::from_fn(|_| ctx.zeros("loss.v_small", sh * sw * 3)),
+            v_rgb: ctx.zeros("loss.v_rgb", h * w * 3),
+            v_depth3: ctx.zeros("loss.v_depth3", h * w * 3),
+            v_inv_depth: ctx.zeros("loss.v_inv_depth", h * w),
+            feature_len,
+        })
+    }
+
+    /// Floats of one feature map (768 × h/8 × w/8), the size of a content target.
+    pub fn feature_len(&self) -> usize {
+        self.feature_len
+    }
+
+    /// The λ_GC this plan was made with (a new one needs a new plan).
+    pub fn gcfm_weight(&self) -> f32 {
+        self.gcfm_weight
+    }
+
+    /// Changes λ_TV, λ_d and λ_cont (from the next submission on).
+    pub fn set_weights(&self, ctx: &GpuContext, w: &LossWeights) {
+        self.tv.set_weight(ctx, w.tv);
+        self.depth_l1.set_weight(ctx, w.depth);
+        self.content.set_weight(ctx, w.content);
+    }
+
+    /// After [`StepLossPlan::record`]: the gradient w.r.t. the raw render's
+    /// colour (the clamp's mask applied), `h × w × 3`.
+    pub fn v_rgb(&self) -> &wgpu::Buffer {
+        &self.v_rgb
+    }
+
+    /// After [`StepLossPlan::record`]: the gradient w.r.t. the inverse depth, `h × w`.
+    pub fn v_inv_depth(&self) -> &wgpu::Buffer {
+        &self.v_inv_depth
+    }
+
+    /// After [`StepLossPlan::record`]: the GCFM matches (`y+` of every
+    /// rendered feature position, then `y−`).
+    pub fn matches(&self) -> &wgpu::Buffer {
+        self.gcfm_ws.matches()
+    }
+
+    /// Records into `out` (`feature_len` floats) the content target of a raw
+    /// render: the features of the clamped, downscaled image.
+    pub fn record_content_target(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        enc: &mut wgpu::CommandEncoder,
+        rgb_raw: &wgpu::Buffer,
+        out: &wgpu::Buffer,
+    ) {
+        self.clamp.forward(ctx, enc, rgb_raw, &self.rgb);
+        self.down.forward(ctx, enc, &self.rgb, &self.small[0]);
+        k.vgg.forward(ctx, enc, &self.vgg_ws, &self.small[0], &self.states[2]);
+        enc.copy_buffer_to_buffer(self.states[2].features(), 0, out, 0, (self.feature_len * 4) as u64);
+    }
+
+    /// Records the whole loss of one render: `rgb_raw` (`h × w × 3`, before
+    /// the clamp) and `inv_depth` (`h × w`); `edge` the render's edge map
+    /// (`h × w`) when given, else computed from the clamped render; `content`
+    /// a content target and `depth_ref` the inverse depth of `G^c`, when the
+    /// step uses them; the depth map's gradient only when `depth_grad`. The
+    /// unweighted terms go to `scalars` ([`slot`]), the gradients of the
+    /// weighted total to [`StepLossPlan::v_rgb`] and [`StepLossPlan::v_inv_depth`].
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        enc: &mut wgpu::CommandEncoder,
+        style: &GpuStyle,
+        rgb_raw: &wgpu::Buffer,
+        inv_depth: &wgpu::Buffer,
+        edge: Option<&wgpu::Buffer>,
+        content: Option<&wgpu::Buffer>,
+        depth_ref: Option<&wgpu::Buffer>,
+        depth_grad: bool,
+        scalars: &wgpu::Buffer,
+    ) {
+        // The three maps VGG sees.
+        self.clamp.forward(ctx, enc, rgb_raw, &self.rgb);
+        self.down.forward(ctx, enc, &self.rgb, &self.small[0]);
+        self.depth_map.forward(ctx, enc, inv_depth, &self.depth3);
+        self.down.forward(ctx, enc, &self.depth3, &self.small[1]);
+        match edge {
+            Some(e) => self.down.forward(ctx, enc, e, &self.small[2]),
+            None => {
+                self.edges.record(ctx, enc, &self.rgb, &self.edge3);
+                self.down.forward(ctx, enc, &self.edge3, &self.small[2]);
+            }
+        }
+        for (small, state) in self.small.iter().zip(&self.states) {
+            k.vgg.forward(ctx, enc, &self.vgg_ws, small, state);
+        }
+
+        // Feature space: GCFM (gradients scaled by λ_GC), then content on the RGB features.
+        let feats = [self.states[0].features(), self.states[1].features(), self.states[2].features()];
+        k.gcfm.record(ctx, enc, &self.gcfm_ws, style, feats, &self.v_feat[0], &self.v_feat[1], scalars);
+        if let Some(target) = content {
+            self.content.record(ctx, enc, feats[0], target, &self.v_feat[0], scalars);
+        }
+
+        // Image space: RGB through VGG and the downscale, plus TV, then the clamp's mask.
+        k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[0], &self.v_feat[0], &self.v_small[0]);
+        self.down.backward(ctx, enc, &self.v_small[0], &self.v_rgb, false);
+        self.tv.record(ctx, enc, &self.rgb, &self.v_rgb, scalars);
+        self.clamp.backward(ctx, enc, rgb_raw, &self.v_rgb);
+        if depth_grad {
+            k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[1], &self.v_feat[1], &self.v_small[1]);
+            self.down.backward(ctx, enc, &self.v_small[1], &self.v_depth3, false);
+            self.depth_map.backward(ctx, enc, inv_depth, &self.v_depth3, &self.v_inv_depth, false);
+        } else {
+            enc.clear_buffer(&self.v_inv_depth, 0, None);
+        }
+        if let Some(d) = depth_ref {
+            self.depth_l1.record(ctx, enc, inv_depth, d, &self.v_inv_depth, scalars);
+        }
+    }
+}
+
+/// The whole per-step loss of uploaded maps on the GPU, read back: the twin
+/// of [`crate::style::step::step_loss`] (same arguments, but the content
+/// target is the colour-matched *image*, whose features are computed here).
+/// For checks against the CPU and the golden files, not for the loop.
+#[allow(clippy::too_many_arguments)]
+pub fn step_loss_gpu(
+    ctx: &GpuContext,
+    k: &StepLossKernels,
+    style: &StyleTargets,
+    maps: RenderedMaps<'_>,
+    content_rgb: Option<&[f32]>,
+    depth_ref: Option<&[f32]>,
+    weights: &LossWeights,
+    depth_grad: bool,
+) -> Result<StepLoss, GpuError> {
+    let (h, w) = (maps.height, maps.width);
+    let gstyle = GpuStyle::new(ctx, &style.features);
+    let plan = StepLossPlan::new(ctx, k, &gstyle, h, w, weights)?;
+    let rgb = ctx.upload("loss.in.rgb", maps.rgb);
+    let inv_depth = ctx.upload("loss.in.inv_depth", maps.inv_depth);
+    let edge = ctx.upload("loss.in.edge", &replicate3(maps.edge));
+    let scalars = ctx.zeros("loss.scalars", slot::LEN);
+    let mut enc = ctx.encoder("step_loss_gpu");
+    let content = content_rgb.map(|c| {
+        let image = ctx.upload("loss.in.content", c);
+        let target = ctx.zeros("loss.content_target", plan.feature_len());
+        plan.record_content_target(ctx, k, &mut enc, &image, &target);
+        target
+    });
+    let dref = depth_ref.map(|d| ctx.upload("loss.in.depth_ref", d));
+    plan.record(ctx, k, &mut enc, &gstyle, &rgb, &inv_depth, Some(&edge), content.as_ref(), dref.as_ref(), depth_grad, &scalars);
+    ctx.submit(enc);
+    let s: Vec<f32> = ctx.read(&scalars)?;
+    let m: Vec<u32> = ctx.read(plan.matches())?;
+    let n = m.len() / 2;
+    let gcfm = s[slot::GCFM + 3];
+    let content_value = if content.is_some() { s[slot::CONTENT] } else { 0.0 };
+    let depth_value = if dref.is_some() { s[slot::DEPTH] } else { 0.0 };
+    let tv = s[slot::TV];
+    Ok(StepLoss {
+        timings: StepLossTimings::default(),
+        gcfm,
+        content: content_value,
+        tv,
+        depth: depth_value,
+        total: weights.gcfm * gcfm + weights.content * content_value + weights.tv * tv + weights.depth * depth_value,
+        v_rgb: ctx.read(plan.v_rgb())?,
+        v_inv_depth: ctx.read(plan.v_inv_depth())?,
+        matches: Matches { best: m[..n].to_vec(), worst: m[n..2 * n].to_vec() },
+    })
+}
