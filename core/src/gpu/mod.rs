@@ -14,10 +14,14 @@
 mod adam;
 mod context;
 mod kernel;
+mod scan;
+mod sort;
 
 pub use adam::GpuAdam;
 pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};
 pub use kernel::{Bind, Kernel};
+pub use scan::{GpuScan, ScanKernels};
+pub use sort::{GpuSort, SortKernels, bits_for};
 
 use serde::{Deserialize, Serialize};
 
