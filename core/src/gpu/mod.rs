@@ -13,13 +13,23 @@
 
 mod adam;
 mod context;
+mod gaussians;
 mod kernel;
+mod raster_backward;
+mod raster_forward;
+mod raster_project;
+mod raster_run;
+#[cfg(test)]
+mod raster_tests;
 mod scan;
 mod sort;
 
 pub use adam::GpuAdam;
 pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};
+pub use gaussians::{GpuGaussians, GpuGrads};
 pub use kernel::{Bind, Kernel};
+pub use raster_forward::{GpuRaster, RasterKernels};
+pub use raster_run::{bench_raster, render_and_backward_gpu, render_gpu};
 pub use scan::{GpuScan, ScanKernels};
 pub use sort::{GpuSort, SortKernels, bits_for};
 

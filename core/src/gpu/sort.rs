@@ -45,7 +45,8 @@ impl SortKernels {
     /// Compiles `sort.wgsl` (and `scan.wgsl`, which it uses).
     pub fn new(ctx: &GpuContext) -> Self {
         let src = include_str!("../../../shaders/sort.wgsl");
-        let binds = [Bind::Uniform, Bind::Read, Bind::Read, Bind::Read, Bind::ReadWrite, Bind::ReadWrite, Bind::ReadWrite];
+        let binds =
+            [Bind::Uniform, Bind::Read, Bind::Read, Bind::Read, Bind::ReadWrite, Bind::ReadWrite, Bind::ReadWrite];
         Self {
             histogram: Kernel::new(ctx, "sort.histogram", src, "histogram", &binds),
             scatter: Kernel::new(ctx, "sort.scatter", src, "scatter", &binds),
@@ -70,6 +71,7 @@ pub struct GpuSort {
     hist_scan: GpuScan,
     keys_alt: wgpu::Buffer,
     values_alt: wgpu::Buffer,
+    everything: wgpu::Buffer,
 }
 
 impl GpuSort {
@@ -78,8 +80,12 @@ impl GpuSort {
         let groups = capacity.div_ceil(BLOCK).clamp(1, MAX_GROUPS);
         let uniforms = (0..MAX_PASSES)
             .map(|p| {
-                let params =
-                    SortParams { shift: p as u32 * RADIX_BITS, groups: groups as u32, capacity: capacity as u32, _pad: 0 };
+                let params = SortParams {
+                    shift: p as u32 * RADIX_BITS,
+                    groups: groups as u32,
+                    capacity: capacity as u32,
+                    _pad: 0,
+                };
                 ctx.uniform("sort.params", &params)
             })
             .collect();
@@ -91,12 +97,18 @@ impl GpuSort {
             hist_scan: GpuScan::new(ctx, 16 * groups),
             keys_alt: ctx.zeros("sort.keys_alt", capacity),
             values_alt: ctx.zeros("sort.values_alt", capacity),
+            everything: ctx.upload("sort.everything", &[capacity as u32]),
         }
     }
 
     /// The most elements one sort handles.
     pub fn capacity(&self) -> usize {
         self.capacity
+    }
+
+    /// A count buffer holding the capacity, for sorting every element.
+    pub fn everything(&self) -> &wgpu::Buffer {
+        &self.everything
     }
 
     /// Records a stable sort of the first `n` elements of `keys` and `values`
