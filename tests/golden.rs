@@ -7,9 +7,23 @@ use gast_core::golden::{CheckContext, check_file};
 use gast_tests::shared_file;
 
 fn check(rel: &str) {
+    check_on(rel, None);
+}
+
+/// The same check with the rasterizer and the losses on the GPU engine
+/// (lavapipe in CI), to the same tolerances (`gast check golden --device gpu`).
+fn check_on_gpu(rel: &str) {
+    let gpu = match gast_core::gpu::DeviceChoice::Gpu.resolve() {
+        Ok(Some(g)) => g,
+        other => panic!("the GPU golden checks need a wgpu adapter (lavapipe: mesa-vulkan-drivers): {other:?}"),
+    };
+    check_on(rel, Some(gpu));
+}
+
+fn check_on(rel: &str, gpu: Option<gast_core::gpu::GpuContext>) {
     let Some(path) = shared_file(rel) else { return };
     let weights = shared_file("data/weights/vgg19-conv3.safetensors");
-    let checks = check_file(&path, &CheckContext { weights }).unwrap_or_else(|e| panic!("{e}"));
+    let checks = check_file(&path, &CheckContext { weights, gpu }).unwrap_or_else(|e| panic!("{e}"));
     assert!(!checks.is_empty(), "{rel}: no output was compared");
     let mut failed = Vec::new();
     for c in &checks {
@@ -47,4 +61,19 @@ fn rasterizer_matches_golden_degree_0() {
 #[test]
 fn rasterizer_matches_golden_degree_3() {
     check("golden/raster_deg3_seed1.safetensors");
+}
+
+#[test]
+fn losses_match_golden_on_the_gpu() {
+    check_on_gpu("golden/losses_seed1.safetensors");
+}
+
+#[test]
+fn rasterizer_matches_golden_degree_0_on_the_gpu() {
+    check_on_gpu("golden/raster_deg0_seed1.safetensors");
+}
+
+#[test]
+fn rasterizer_matches_golden_degree_3_on_the_gpu() {
+    check_on_gpu("golden/raster_deg3_seed1.safetensors");
 }

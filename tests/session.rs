@@ -132,3 +132,56 @@ fn a_bad_configuration_fails_with_a_message() {
     }
     assert!(handle.stop_and_join().is_none());
 }
+
+/// The GPU engine (on lavapipe in CI) against the CPU engine: the same
+/// session, the same views, step by step. The first step starts from the same
+/// Gaussians, so its losses agree to float rounding; the second follows one
+/// Adam update, which the first step's gradients decide on both devices.
+#[test]
+fn gpu_steps_give_the_cpu_losses() {
+    use gast_core::gpu::DeviceChoice;
+    use gast_core::session::{LossTerms, Session};
+    let ctx = match DeviceChoice::Gpu.resolve() {
+        Ok(Some(c)) => c,
+        other => panic!("the GPU tests need a wgpu adapter (lavapipe: mesa-vulkan-drivers): {other:?}"),
+    };
+    let terms = |l: &LossTerms| {
+        [
+            ("total", l.total),
+            ("gcfm", l.gcfm),
+            ("content", l.content),
+            ("tv", l.tv),
+            ("depth", l.depth),
+            ("reg_opacity", l.reg_opacity),
+            ("reg_scale", l.reg_scale),
+            ("reg_rotation", l.reg_rotation),
+        ]
+    };
+    for mode in [Mode::Decoupled, Mode::GeometryOnly] {
+        let config = StyleConfig {
+            cycles: 1,
+            steps_per_cycle: 4,
+            resolution: 64,
+            texture_scale: 64,
+            mode,
+            ..Default::default()
+        };
+        let Some(cpu_inputs) = inputs(config) else { return };
+        let gpu_inputs = SessionInputs { gpu: Some(ctx.clone()), ..cpu_inputs.clone() };
+        let mut cpu = Session::prepare(cpu_inputs, &mut |_| {}).expect("CPU session");
+        let mut gpu = Session::prepare(gpu_inputs, &mut |_| {}).expect("GPU session");
+        for (step, tol) in [(0, 1e-4f32), (1, 1e-3)] {
+            let a = cpu.step().expect("CPU step");
+            let b = gpu.step().unwrap_or_else(|| panic!("GPU step failed: {:?}", gpu.failure()));
+            assert_eq!((a.phase, a.view), (b.phase, b.view), "{mode:?} step {step}: same schedule and view");
+            let mut off = Vec::new();
+            for ((name, x), (_, y)) in terms(&a.losses).into_iter().zip(terms(&b.losses)) {
+                let err = (x - y).abs() / x.abs().max(1e-6);
+                if err > tol {
+                    off.push(format!("{name}: CPU {x} GPU {y} (relative {err:.1e})"));
+                }
+            }
+            assert!(off.is_empty(), "{mode:?} step {step} ({:?}): {}", a.phase, off.join("; "));
+        }
+    }
+}

@@ -222,13 +222,16 @@ pub struct CheckContext {
     /// VGG weights for the `losses_*` files (else the usual resolution: `$GAST_WEIGHTS`,
     /// the caches, a download).
     pub weights: Option<PathBuf>,
+    /// Run the rasterizer and the losses on this GPU (`--device gpu`) instead
+    /// of the CPU; the colour transfer runs on the CPU either way.
+    pub gpu: Option<crate::gpu::GpuContext>,
 }
 
 /// Reads a golden file, runs the project's code on its inputs and compares every output.
 pub fn check_file(path: &Path, ctx: &CheckContext) -> Result<Vec<OutputCheck>, GoldenError> {
     let file = GoldenFile::read(path)?;
     match file.kind() {
-        Some(GoldenKind::Raster) => check_raster(&file),
+        Some(GoldenKind::Raster) => check_raster(&file, ctx.gpu.as_ref()),
         Some(GoldenKind::Losses) => check_losses(&file, ctx),
         Some(GoldenKind::Color) => check_color(&file),
         None => Err(GoldenError::Format {
@@ -278,9 +281,16 @@ fn check_losses(file: &GoldenFile, ctx: &CheckContext) -> Result<Vec<OutputCheck
 
     let rgb = rgb_t.to_f32();
     let mut checks = Vec::new();
+    let gpu = ctx.gpu.as_ref().map(|c| (c, crate::gpu::StepLossKernels::new(c, &vgg)));
     if let Ok(want) = file.get("vgg_relu3_of_render_rgb") {
-        let f = vgg.features(&rgb, h, w);
-        checks.push(compare("vgg_relu3_of_render_rgb", &widen(&f.data), want, Tolerance::RelToMax(1e-4)));
+        let f = match ctx.gpu.as_ref() {
+            Some(c) => {
+                use crate::style::step::FeatureNet as _;
+                crate::gpu::GpuFeatureNet::new(c.clone(), &vgg).features(&rgb, h, w).data
+            }
+            None => vgg.features(&rgb, h, w).data,
+        };
+        checks.push(compare("vgg_relu3_of_render_rgb", &widen(&f), want, Tolerance::RelToMax(1e-4)));
     }
     let style = StyleTargets::new(
         &vgg,
@@ -294,8 +304,19 @@ fn check_losses(file: &GoldenFile, ctx: &CheckContext) -> Result<Vec<OutputCheck
     let edge = input("render_edge")?.to_f32();
     let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
     let none = LossWeights { gcfm: 0.0, content: 0.0, tv: 0.0, depth: 0.0, ..LossWeights::default() };
+    let content_rgb = input("content_rgb")?.to_f32();
+    let content = content_target(&vgg, &content_rgb, h, w);
+    // The whole per-step loss on the chosen device, with or without the content target.
+    let run = |with_content: bool, weights: LossWeights, depth_grad: bool| match &gpu {
+        Some((c, k)) => {
+            let content = with_content.then_some(content_rgb.as_slice());
+            crate::gpu::step_loss_gpu(c, k, &style, maps, content, None, &weights, depth_grad)
+                .map_err(|e| run_err(format!("GPU: {e}")))
+        }
+        None => Ok(step_loss(&vgg, &style, maps, with_content.then_some(&content), None, &weights, depth_grad)),
+    };
 
-    let g = step_loss(&vgg, &style, maps, None, None, &LossWeights { gcfm: 1.0, ..none }, true);
+    let g = run(false, LossWeights { gcfm: 1.0, ..none }, true)?;
     checks.push(compare("gcfm_loss", &[f64::from(g.gcfm)], file.get("gcfm_loss")?, LOSS_TOL));
     checks.push(compare("grad_gcfm_rgb", &widen(&g.v_rgb), file.get("grad_gcfm_rgb")?, GRAD_TOL));
     checks.push(compare("grad_gcfm_inv_depth", &widen(&g.v_inv_depth), file.get("grad_gcfm_inv_depth")?, GRAD_TOL));
@@ -303,12 +324,11 @@ fn check_losses(file: &GoldenFile, ctx: &CheckContext) -> Result<Vec<OutputCheck
     checks.push(compare("match_best", &as_f64(&g.matches.best), file.get("match_best")?, Tolerance::Exact));
     checks.push(compare("match_worst", &as_f64(&g.matches.worst), file.get("match_worst")?, Tolerance::Exact));
 
-    let content = content_target(&vgg, &input("content_rgb")?.to_f32(), h, w);
-    let c = step_loss(&vgg, &style, maps, Some(&content), None, &LossWeights { content: 1.0, ..none }, false);
+    let c = run(true, LossWeights { content: 1.0, ..none }, false)?;
     checks.push(compare("content_loss", &[f64::from(c.content)], file.get("content_loss")?, LOSS_TOL));
     checks.push(compare("grad_content_rgb", &widen(&c.v_rgb), file.get("grad_content_rgb")?, GRAD_TOL));
 
-    let t = step_loss(&vgg, &style, maps, None, None, &LossWeights { tv: 1.0, ..none }, false);
+    let t = run(false, LossWeights { tv: 1.0, ..none }, false)?;
     checks.push(compare("tv_loss", &[f64::from(t.tv)], file.get("tv_loss")?, LOSS_TOL));
     // With every other weight zero, `v_rgb` is exactly ∂TV/∂rgb.
     checks.push(compare("grad_tv_rgb", &widen(&t.v_rgb), file.get("grad_tv_rgb")?, GRAD_TOL));
@@ -328,12 +348,23 @@ fn check_color(file: &GoldenFile) -> Result<Vec<OutputCheck>, GoldenError> {
     ])
 }
 
-fn check_raster(file: &GoldenFile) -> Result<Vec<OutputCheck>, GoldenError> {
+fn check_raster(file: &GoldenFile, gpu: Option<&crate::gpu::GpuContext>) -> Result<Vec<OutputCheck>, GoldenError> {
     use crate::raster::{backward, dense, forward};
     let case = crate::raster::golden::case_from(file)?;
     let (g, cam, opts) = (&case.gaussians, &case.camera, &case.options);
-    let (img, state) = forward(g, cam, opts);
-    let grads = backward(g, cam, opts, &state, &case.cotangent_rgb, &case.cotangent_inv_depth);
+    let (v_rgb, v_inv_depth) = (&case.cotangent_rgb, &case.cotangent_inv_depth);
+    let (img, grads) = match gpu {
+        Some(c) => {
+            let k = crate::gpu::RasterKernels::new(c);
+            crate::gpu::render_and_backward_gpu(c, &k, g, cam, opts, v_rgb, v_inv_depth)
+                .map_err(|e| GoldenError::Run { path: file.path.clone(), message: format!("GPU: {e}") })?
+        }
+        None => {
+            let (img, state) = forward(g, cam, opts);
+            let grads = backward(g, cam, opts, &state, v_rgb, v_inv_depth);
+            (img, grads)
+        }
+    };
     let reference = dense::render(g, cam, opts);
     // Images to an absolute error, gradients relative to their largest magnitude.
     const IMAGE_TOL: Tolerance = Tolerance::Abs(1e-5);

@@ -15,11 +15,18 @@ pub struct GoldenArgs {
     /// VGG weights for losses_* files (else $GAST_WEIGHTS, the caches, or a download).
     #[arg(long)]
     pub weights: Option<PathBuf>,
+    /// Where the rasterizer and the losses run: cpu, gpu (any adapter, lavapipe
+    /// included), or auto (a hardware GPU when there is one, else the CPU).
+    /// The colour transfer runs on the CPU either way.
+    #[arg(long, default_value_t = gast_core::gpu::DeviceChoice::Cpu)]
+    pub device: gast_core::gpu::DeviceChoice,
 }
 
 /// Checks every file and prints one line per output; fails when any output is out of tolerance.
 pub fn run_golden(args: GoldenArgs) -> anyhow::Result<ExitCode> {
-    let ctx = CheckContext { weights: args.weights.clone() };
+    let gpu = args.device.resolve().map_err(|e| anyhow::anyhow!("--device {}: {e}", args.device))?;
+    println!("device: {}", gpu.as_ref().map_or_else(|| "CPU".to_owned(), |g| g.describe()));
+    let ctx = CheckContext { weights: args.weights.clone(), gpu };
     let mut failed = 0usize;
     let mut total = 0usize;
     for file in &args.files {

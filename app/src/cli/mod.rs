@@ -38,6 +38,10 @@ pub enum Command {
         scene: Option<PathBuf>,
         /// A style image; the first demo style when absent.
         style: Option<PathBuf>,
+        /// Where runs compute: auto (a hardware GPU when there is one, else the
+        /// CPU), cpu, or gpu (the window's adapter even when it is a software one).
+        #[arg(long, default_value_t = gast_core::gpu::DeviceChoice::Auto)]
+        device: gast_core::gpu::DeviceChoice,
     },
     /// Regenerate the demo assets (scene, styles, icon) into a folder.
     Assets {
@@ -128,8 +132,8 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     };
     match command {
-        Command::Studio { scene, style } => {
-            studio::run_with(studio::StudioArgs { scene, style }, Some(studio::worker::starter()))?;
+        Command::Studio { scene, style, device } => {
+            studio::run_with(studio::StudioArgs { scene, style, device }, Some(studio::worker::starter()))?;
         }
         Command::Assets { out } => {
             for p in studio::assets::generate(&out)? {

@@ -43,6 +43,8 @@ pub struct StudioArgs {
     pub scene: Option<PathBuf>,
     /// A style image; the first demo style when absent.
     pub style: Option<PathBuf>,
+    /// Where runs compute at first (the device selector changes it).
+    pub device: gast_core::gpu::DeviceChoice,
 }
 
 /// A loaded scene.
@@ -143,14 +145,12 @@ pub fn run_with(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Re
             let Some(rs) = cc.wgpu_render_state.as_ref() else {
                 return Err("the studio needs the wgpu renderer, which did not start".into());
             };
-            let resources = ViewportResources::new(&rs.device, rs.target_format);
+            let gpu = gast_core::gpu::GpuContext::from_device(rs.device.clone(), rs.queue.clone(), rs.adapter.get_info());
+            let mut resources = ViewportResources::new(&rs.device, rs.target_format);
+            resources.use_gpu_sort(gpu.clone());
             rs.renderer.write().callback_resources.insert(resources);
             let mut app = StudioApp::new(cc.egui_ctx.clone(), args);
-            app.set_gpu(gast_core::gpu::GpuContext::from_device(
-                rs.device.clone(),
-                rs.queue.clone(),
-                rs.adapter.get_info(),
-            ));
+            app.set_gpu(gpu);
             if let Some(starter) = starter {
                 app.set_session_starter(starter);
             }
@@ -203,7 +203,7 @@ impl StudioApp {
             run: RunMonitor::default(),
             starter: None,
             gpu: None,
-            device: gast_core::gpu::DeviceChoice::Auto,
+            device: args.device,
             stats: Arc::default(),
             viewport_notes: Arc::default(),
             jobs: inspect::Jobs::new(waker),

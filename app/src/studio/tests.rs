@@ -111,6 +111,50 @@ fn gpu_viewport_matches_the_cpu_reference() {
     println!("wrote {}", out.display());
 }
 
+/// The GPU depth sort (keys from the projection pass, the engine's radix sort)
+/// draws what the CPU sort draws: the same order of every visible splat.
+#[test]
+fn gpu_depth_sort_draws_what_the_cpu_sort_draws() {
+    use gast_core::gpu::{AdapterPolicy, GpuContext};
+    let ctx = GpuContext::headless(AdapterPolicy::AnyAdapter).expect("a wgpu adapter (lavapipe)");
+    let (device, queue) = (&ctx.device, &ctx.queue);
+    let g: SharedGaussians = Arc::new(assets::demo_scene()).into();
+    let (w, h) = (160, 120);
+    let cam = demo_camera(&g, w, h);
+    let mut images = Vec::new();
+    for gpu_sort in [false, true] {
+        let mut r = SplatRenderer::new(device);
+        if gpu_sort {
+            r.use_gpu_sort(ctx.clone());
+        }
+        r.set_scene(device, Side::Before, 1, &g).expect("upload");
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+        assert!(r.render(device, queue, &mut encoder, Side::Before, &cam));
+        queue.submit([encoder.finish()]);
+        let (texture, _) = r.target(Side::Before).expect("target");
+        images.push(read_target(device, queue, texture));
+        if gpu_sort {
+            // Every Gaussian once, the visible ones farthest first.
+            let order: Vec<u32> = ctx.read(r.order_buffer(Side::Before).expect("order")).expect("read back");
+            let order = &order[..g.len()];
+            let mut seen = vec![false; g.len()];
+            order.iter().for_each(|&i| seen[i as usize] = true);
+            assert!(seen.iter().all(|&s| s), "the GPU order is not a permutation");
+            let row = cam.rotation.row(2);
+            let z = |i: u32| row.dot(glam::Vec3::from_array(g.means[i as usize])) + cam.translation.z;
+            let cpu = super::viewport::sort::back_to_front(&g.means, row, cam.translation.z);
+            let visible: Vec<u32> = order.iter().copied().filter(|&i| cpu.contains(&i)).collect();
+            assert!(visible.windows(2).all(|p| z(p[0]) >= z(p[1])), "the GPU order is not back to front");
+        }
+    }
+    let worst = images[0]
+        .iter()
+        .zip(&images[1])
+        .flat_map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y).abs()))
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-3, "GPU-sorted frame differs from the CPU-sorted one by {worst}");
+}
+
 #[test]
 fn viewport_frame_time_500k() {
     if std::env::var_os("GAST_BENCH").is_none() {

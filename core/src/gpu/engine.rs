@@ -286,7 +286,7 @@ impl GpuEngine {
 
     fn set_weights(&mut self, w: &LossWeights) {
         let ctx = &self.ctx;
-        for plan in self.plans.values() {
+        for plan in self.plans.values_mut() {
             plan.loss.set_weights(ctx, w);
         }
         self.regs[0].set_weight(ctx, w.opacity);

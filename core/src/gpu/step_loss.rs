@@ -73,8 +73,6 @@ impl StepLossKernels {
 /// Scratch buffers and planned launches of the loss for `h × w` renders.
 #[derive(Debug)]
 pub struct StepLossPlan {
-    h: usize,
-    w: usize,
     clamp: Clamp01,
     down: Downscale,
     depth_map: DepthMap,
@@ -117,8 +115,6 @@ impl StepLossPlan {
         let positions = fh * fw;
         let feature_len = positions * crate::vision::vgg::FEATURE_CHANNELS;
         Ok(Self {
-            h,
-            w,
             clamp: Clamp01::new(ctx, &k.resize, h * w * 3),
             down: Downscale::new(ctx, &k.resize, h, w, 3),
             depth_map: DepthMap::new(ctx, &k.depth, &k.reduce, h, w)?,
@@ -154,7 +150,7 @@ impl StepLossPlan {
     }
 
     /// Changes λ_TV, λ_d and λ_cont (from the next submission on).
-    pub fn set_weights(&self, ctx: &GpuContext, w: &LossWeights) {
+    pub fn set_weights(&mut self, ctx: &GpuContext, w: &LossWeights) {
         self.tv.set_weight(ctx, w.tv);
         self.depth_l1.set_weight(ctx, w.depth);
         self.content.set_weight(ctx, w.content);

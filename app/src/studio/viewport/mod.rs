@@ -11,10 +11,12 @@ pub mod gpu_types;
 pub mod sort;
 pub mod splat_draw;
 pub mod splat_project;
+pub mod splat_sort;
 
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
+use gast_core::gpu::GpuContext;
 use gast_core::{Camera, Gaussians};
 use glam::Vec3;
 use wgpu::util::DeviceExt as _;
@@ -71,8 +73,12 @@ struct GpuScene {
     sh_degree: u32,
     /// The depth axis (row z of R, t.z) the order buffer was sorted for, and how many are in front.
     sorted_for: Option<([f32; 4], u32)>,
+    /// The GPU sort's workspace, when the renderer sorts on the GPU.
+    gpu_sort: Option<splat_sort::SceneSort>,
     /// Kept alive for the bind groups.
     _buffers: Vec<wgpu::Buffer>,
+    /// The projection pass's output (the GPU sort reads the depths there).
+    projected: wgpu::Buffer,
 }
 
 /// An offscreen render target.
@@ -175,6 +181,8 @@ pub struct SplatRenderer {
     pub stats: FrameStats,
     /// Bytes one SH binding may hold; the device's limit unless a test lowers it.
     pub sh_binding_limit: Option<usize>,
+    /// Sorts on the GPU when set ([`SplatRenderer::use_gpu_sort`]); on the CPU otherwise.
+    gpu_sort: Option<splat_sort::DepthSortKernels>,
 }
 
 /// Which scene slot: the original Gaussians or the current (optimised) ones.
@@ -196,7 +204,19 @@ impl SplatRenderer {
             targets: [None, None],
             stats: FrameStats::default(),
             sh_binding_limit: None,
+            gpu_sort: None,
         }
+    }
+
+    /// Sorts by depth on the GPU from now on (scenes set afterwards), on
+    /// `ctx`, which must wrap the device the renderer draws with.
+    pub fn use_gpu_sort(&mut self, ctx: GpuContext) {
+        self.gpu_sort = Some(splat_sort::DepthSortKernels::new(ctx));
+    }
+
+    /// The back-to-front order buffer of `side` (after a render), for tests.
+    pub fn order_buffer(&self, side: Side) -> Option<&wgpu::Buffer> {
+        self.scenes[side as usize].as_ref().map(|s| &s.order)
     }
 
     /// Uploads `g` into `side` unless that version is already there. A scene whose
@@ -245,7 +265,7 @@ impl SplatRenderer {
         let order = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("splat order"),
             size: (n.max(4) * 4) as u64,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
         let view = device.create_buffer(&wgpu::BufferDescriptor {
@@ -267,7 +287,9 @@ impl SplatRenderer {
             sh_split: split as u32,
             sh_degree: degree,
             sorted_for: None,
-            _buffers: vec![geom, sh_a, sh_b, projected],
+            gpu_sort: self.gpu_sort.as_ref().map(|k| k.scene(n)),
+            _buffers: vec![geom, sh_a, sh_b],
+            projected,
         });
         Ok(note)
     }
@@ -317,6 +339,19 @@ impl SplatRenderer {
         let (w, h) = (cam.width.max(1), cam.height.max(1));
         self.ensure_target(device, side, w, h);
         let Some(scene) = &mut self.scenes[side as usize] else { return false };
+        if let (Some(kernels), Some(sort)) = (&self.gpu_sort, &scene.gpu_sort) {
+            // Project, then sort every splat on the device (culled ones last, drawn degenerate).
+            let n = scene.gaussians.len() as u32;
+            let uniform = ViewUniform::new(cam, n, scene.sh_degree, scene.sh_words, scene.sh_split, [0.0; 3]);
+            queue.write_buffer(&scene.view, 0, bytemuck::bytes_of(&uniform));
+            self.project.dispatch(encoder, &scene.project_bind, n);
+            kernels.record(encoder, sort, &scene.projected, &scene.order);
+            let Some(target) = &self.targets[side as usize] else { return false };
+            self.draw.draw(encoder, &target.view, &scene.draw_bind, n);
+            self.stats.drawn += n as usize;
+            self.stats.prepare_ms += started.elapsed().as_secs_f32() * 1e3;
+            return true;
+        }
         let g = &scene.gaussians;
         let row_z = cam.rotation.row(2);
         let axis = [row_z.x, row_z.y, row_z.z, cam.translation.z];
@@ -367,6 +402,11 @@ impl ViewportResources {
             blit: blit::BlitPipeline::new(device, target_format),
             blit_bind: None,
         }
+    }
+
+    /// Sorts by depth on the GPU (`ctx` wraps the same device).
+    pub fn use_gpu_sort(&mut self, ctx: GpuContext) {
+        self.renderer.use_gpu_sort(ctx);
     }
 }
 

@@ -1,0 +1,100 @@
+//! The GPU rasterizer's backward pass (`shaders/raster_backward.wgsl`, then
+//! `raster_project.wgsl`'s `project_backward`): reverse compositing per tile
+//! to each Gaussian's screen-space gradient, accumulated with atomic adds,
+//! then the per-Gaussian chain to the parameter gradients. The CPU twin is
+//! `raster/backward.rs`; float atomics make the sum order vary, so the two
+//! agree to rounding, not bit for bit.
+
+use super::raster_forward::{GpuRaster, RasterKernels};
+use super::raster_project::WORKGROUP;
+use super::{Bind, GpuContext, GpuGaussians, GpuGrads, Kernel};
+use crate::raster::TILE;
+
+/// The fallback accumulator in `raster_backward.wgsl`, between these markers.
+const CAS_BEGIN: &str = "// BEGIN add_grad";
+const CAS_END: &str = "// END add_grad";
+/// What replaces it where the device has `SHADER_FLOAT32_ATOMIC`.
+const NATIVE_ADD: &str = "@group(0) @binding(8) var<storage, read_write> v_splat: array<atomic<f32>>;
+
+fn add_grad(i: u32, v: f32) {
+    atomicAdd(&v_splat[i], v);
+}
+";
+
+/// The `raster_backward.wgsl` source with native float atomics or the compare-and-swap fallback.
+pub(crate) fn tile_backward_source(native: bool) -> String {
+    let src = include_str!("../../../shaders/raster_backward.wgsl");
+    if !native {
+        return src.to_owned();
+    }
+    let (head, rest) = src.split_once(CAS_BEGIN).expect("raster_backward.wgsl has its add_grad markers");
+    let (_, tail) = rest.split_once(CAS_END).expect("raster_backward.wgsl has its add_grad markers");
+    format!("{head}{NATIVE_ADD}{tail}")
+}
+
+/// Compiles `tile_backward` with the chosen atomic add.
+pub(crate) fn tile_backward_kernel(ctx: &GpuContext, native: bool) -> Kernel {
+    use Bind::{Read, ReadWrite, Uniform};
+    Kernel::new(
+        ctx,
+        if native { "raster_backward.tile_backward (f32 atomics)" } else { "raster_backward.tile_backward (CAS)" },
+        &tile_backward_source(native),
+        "tile_backward",
+        &[Uniform, Read, Read, Read, Read, Read, Read, Read, ReadWrite],
+    )
+}
+
+impl GpuRaster {
+    /// Records the backward pass of the last recorded [`GpuRaster::forward`]
+    /// (same Gaussians, camera and options) given `v_rgb = ∂L/∂rgb` (H·W·3)
+    /// and `v_inv_depth = ∂L/∂inv_depth` (H·W). Every entry of `grads` is
+    /// written: zero for Gaussians that no pixel composited.
+    #[allow(clippy::too_many_arguments)]
+    pub fn backward(
+        &self,
+        ctx: &GpuContext,
+        k: &RasterKernels,
+        encoder: &mut wgpu::CommandEncoder,
+        g: &GpuGaussians,
+        v_rgb: &wgpu::Buffer,
+        v_inv_depth: &wgpu::Buffer,
+        grads: &GpuGrads,
+    ) {
+        encoder.clear_buffer(&self.v_splat, 0, None);
+        k.tile_backward.dispatch(
+            ctx,
+            encoder,
+            &[
+                &self.uniform,
+                &self.pair_values,
+                &self.order,
+                &self.splats,
+                &self.ranges,
+                &self.px_state,
+                v_rgb,
+                v_inv_depth,
+                &self.v_splat,
+            ],
+            [self.width.div_ceil(TILE), self.height.div_ceil(TILE), 1],
+        );
+        k.project.backward.dispatch(
+            ctx,
+            encoder,
+            &[
+                &self.uniform,
+                &g.means,
+                &g.log_scales,
+                &g.quats,
+                &g.opacity_logits,
+                &g.sh,
+                &self.v_splat,
+                &grads.v_means,
+                &grads.v_log_scales,
+                &grads.v_quats,
+                &grads.v_opacity_logits,
+                &grads.v_sh,
+            ],
+            Kernel::groups_1d(self.n, WORKGROUP),
+        );
+    }
+}

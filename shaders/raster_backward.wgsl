@@ -1,0 +1,155 @@
+// Reverse compositing per tile (core/src/gpu/raster_backward.rs; CPU twin:
+// core/src/raster/backward.rs): one workgroup per tile, one thread per pixel,
+// splats staged 256 at a time in workgroup memory from the back of the list.
+// Each pixel walks from its last composited splat to the front, recovering
+// T_i = T_{i+1} / (1 − α_i) and the colour and depth behind each splat, and
+// adds its share of ∂L/∂(x, y, A, B, C, opacity, r, g, b, 1/z) to the
+// splat's Gaussian with atomic adds.
+//
+// The lines between the add_grad markers are the fallback, a compare-and-swap
+// loop on u32 bits; raster_backward.rs swaps them for a native atomic<f32>
+// add where the device has SHADER_FLOAT32_ATOMIC.
+
+struct Cam {
+    r0: vec4<f32>,
+    r1: vec4<f32>,
+    r2: vec4<f32>,
+    trans: vec4<f32>,
+    center: vec4<f32>,
+    bg: vec4<f32>,
+    fx: f32,
+    fy: f32,
+    cx: f32,
+    cy: f32,
+    lim_x: f32,
+    lim_y: f32,
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    n: u32,
+    sh_coeffs: u32,
+    capacity: u32,
+    sh_degree: u32,
+    _p0: u32,
+    _p1: u32,
+}
+
+@group(0) @binding(0) var<uniform> cam: Cam;
+@group(0) @binding(1) var<storage, read> tile_splats: array<u32>;
+@group(0) @binding(2) var<storage, read> order: array<u32>;
+@group(0) @binding(3) var<storage, read> splats: array<f32>;
+@group(0) @binding(4) var<storage, read> tile_ranges: array<u32>;
+@group(0) @binding(5) var<storage, read> px_state: array<u32>;
+@group(0) @binding(6) var<storage, read> v_rgb: array<f32>;
+@group(0) @binding(7) var<storage, read> v_inv_depth: array<f32>;
+
+// BEGIN add_grad
+@group(0) @binding(8) var<storage, read_write> v_splat: array<atomic<u32>>;
+
+fn add_grad(i: u32, v: f32) {
+    var old = atomicLoad(&v_splat[i]);
+    loop {
+        let r = atomicCompareExchangeWeak(&v_splat[i], old, bitcast<u32>(bitcast<f32>(old) + v));
+        if r.exchanged {
+            break;
+        }
+        old = r.old_value;
+    }
+}
+// END add_grad
+
+const TILE: u32 = 16u;
+const SPLAT: u32 = 16u;
+const ALPHA_MIN: f32 = 0.003921569;
+const ALPHA_MAX: f32 = 0.99;
+
+fn sp(g: u32, f: u32) -> f32 {
+    return splats[g * SPLAT + f];
+}
+
+var<workgroup> s_id: array<u32, 256>;
+var<workgroup> s_xy: array<vec2<f32>, 256>;
+var<workgroup> s_conic: array<vec4<f32>, 256>;
+var<workgroup> s_feat: array<vec4<f32>, 256>;
+var<workgroup> max_nc: atomic<u32>;
+
+@compute @workgroup_size(16, 16)
+fn tile_backward(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {
+    let t = lid.y * TILE + lid.x;
+    let tile = wid.y * cam.tiles_x + wid.x;
+    let px = wid.x * TILE + lid.x;
+    let py = wid.y * TILE + lid.y;
+    let inside = px < cam.width && py < cam.height;
+    let first = tile_ranges[2u * tile];
+    if t == 0u {
+        atomicStore(&max_nc, 0u);
+    }
+    workgroupBarrier();
+    var trans = 0.0;
+    var n_contrib = 0u;
+    var cot = vec4<f32>(0.0);
+    var behind = vec4<f32>(cam.bg.xyz, 0.0);
+    if inside {
+        let q = py * cam.width + px;
+        trans = bitcast<f32>(px_state[2u * q]);
+        n_contrib = px_state[2u * q + 1u];
+        cot = vec4<f32>(v_rgb[3u * q], v_rgb[3u * q + 1u], v_rgb[3u * q + 2u], v_inv_depth[q]);
+        atomicMax(&max_nc, n_contrib);
+    }
+    let count = workgroupUniformLoad(&max_nc);
+    let pos = vec2<f32>(f32(px) + 0.5, f32(py) + 0.5);
+    var end = count;
+    while end > 0u {
+        let start = select(0u, end - 256u, end > 256u);
+        workgroupBarrier();
+        if start + t < end {
+            let g = order[tile_splats[first + start + t]];
+            s_id[t] = g;
+            s_xy[t] = vec2<f32>(sp(g, 0u), sp(g, 1u));
+            s_conic[t] = vec4<f32>(sp(g, 2u), sp(g, 3u), sp(g, 4u), sp(g, 5u));
+            s_feat[t] = vec4<f32>(sp(g, 6u), sp(g, 7u), sp(g, 8u), sp(g, 9u));
+        }
+        workgroupBarrier();
+        for (var j = end - start; j > 0u; j = j - 1u) {
+            let k = start + j - 1u;
+            if k >= n_contrib {
+                continue;
+            }
+            let b = j - 1u;
+            let d = pos - s_xy[b];
+            let co = s_conic[b];
+            let power = -0.5 * (co.x * d.x * d.x + co.z * d.y * d.y) - co.y * d.x * d.y;
+            if power > 0.0 {
+                continue;
+            }
+            let gauss = exp(power);
+            var alpha = co.w * gauss;
+            if !(alpha >= ALPHA_MIN) {
+                continue;
+            }
+            alpha = min(alpha, ALPHA_MAX);
+            let feat = s_feat[b];
+            let t_i = trans / (1.0 - alpha);
+            let v_feat = (alpha * t_i) * cot;
+            let v_alpha = dot(feat - behind, cot) * t_i;
+            behind = alpha * feat + (1.0 - alpha) * behind;
+            trans = t_i;
+            let base = 10u * s_id[b];
+            if co.w * gauss <= ALPHA_MAX {
+                let v_power = v_alpha * alpha;
+                add_grad(base, v_power * (co.x * d.x + co.y * d.y));
+                add_grad(base + 1u, v_power * (co.y * d.x + co.z * d.y));
+                add_grad(base + 2u, -0.5 * v_power * d.x * d.x);
+                add_grad(base + 3u, -v_power * d.x * d.y);
+                add_grad(base + 4u, -0.5 * v_power * d.y * d.y);
+                add_grad(base + 5u, v_alpha * gauss);
+            }
+            add_grad(base + 6u, v_feat.x);
+            add_grad(base + 7u, v_feat.y);
+            add_grad(base + 8u, v_feat.z);
+            add_grad(base + 9u, v_feat.w);
+        }
+        end = start;
+    }
+}
