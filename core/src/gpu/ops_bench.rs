@@ -12,6 +12,9 @@ use super::{
     ParamL2, ReduceKernels, ResizeKernels, TvLoss,
 };
 
+/// Records one call of an operation.
+type Record<'a> = &'a dyn Fn(&mut wgpu::CommandEncoder);
+
 /// Milliseconds per call of each image operation and loss at `side × side`
 /// renders (one row per operation and size, labelled `"tv 256²"`), plus the
 /// three parameter regularisers at `gaussians` Gaussians (500k is playbot's size).
@@ -27,7 +30,7 @@ pub fn bench_image_ops(
     let depth_k = DepthMapKernels::new(ctx);
     let canny_k = CannyKernels::new(ctx);
     let loss_k = LossKernels::new(ctx);
-    let time = |record: &dyn Fn(&mut wgpu::CommandEncoder)| -> Result<f64, GpuError> {
+    let time = |record: Record<'_>| -> Result<f64, GpuError> {
         let mut enc = ctx.encoder("bench warm-up");
         record(&mut enc);
         ctx.submit(enc);
@@ -62,7 +65,7 @@ pub fn bench_image_ops(
         let edges = EdgeMap::new(ctx, &canny_k, &reduce, h, w)?;
         let tv = TvLoss::new(ctx, &loss_k, &reduce, h, w, 3, 0.02, 0)?;
         let l1 = DepthL1::new(ctx, &loss_k, &reduce, n, 10.0, 1)?;
-        let ops: [(&str, &dyn Fn(&mut wgpu::CommandEncoder)); 8] = [
+        let ops: [(&str, Record<'_>); 8] = [
             ("clamp fwd+bwd", &|e| {
                 clamp.forward(ctx, e, &v_full3, &full3);
                 clamp.backward(ctx, e, &rgb, &full3);
