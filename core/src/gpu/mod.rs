@@ -18,6 +18,8 @@ mod depth_map;
 mod kernel;
 mod losses;
 mod ops_bench;
+#[cfg(test)]
+mod ops_chain_tests;
 mod reduce;
 mod resize;
 
