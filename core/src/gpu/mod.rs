@@ -28,7 +28,7 @@ pub use canny::{CannyKernels, EdgeMap};
 pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};
 pub use depth_map::{DepthMap, DepthMapKernels};
 pub use kernel::{Bind, Kernel};
-pub use losses::{DepthL1, LossKernels, ParamL2, TvLoss};
+pub use losses::{LossKernels, RefLoss, TvLoss};
 pub use ops_bench::bench_image_ops;
 pub use reduce::{ReduceKernels, ReduceOp, ReduceSpec, Reduction};
 pub use resize::{Clamp01, Downscale, ResizeKernels};

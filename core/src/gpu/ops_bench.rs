@@ -8,8 +8,8 @@
 use std::time::Instant;
 
 use super::{
-    CannyKernels, Clamp01, DepthL1, DepthMap, DepthMapKernels, Downscale, EdgeMap, GpuContext, GpuError, LossKernels,
-    ParamL2, ReduceKernels, ResizeKernels, TvLoss,
+    CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, GpuContext, GpuError, LossKernels,
+    ReduceKernels, RefLoss, ResizeKernels, TvLoss,
 };
 
 /// Records one call of an operation.
@@ -64,7 +64,7 @@ pub fn bench_image_ops(
         let map = DepthMap::new(ctx, &depth_k, &reduce, h, w)?;
         let edges = EdgeMap::new(ctx, &canny_k, &reduce, h, w)?;
         let tv = TvLoss::new(ctx, &loss_k, &reduce, h, w, 3, 0.02, 0)?;
-        let l1 = DepthL1::new(ctx, &loss_k, &reduce, n, 10.0, 1)?;
+        let l1 = RefLoss::depth_l1(ctx, &loss_k, &reduce, n, 10.0, 1)?;
         let ops: [(&str, Record<'_>); 8] = [
             ("clamp fwd+bwd", &|e| {
                 clamp.forward(ctx, e, &v_full3, &full3);
@@ -90,7 +90,7 @@ pub fn bench_image_ops(
     let regs = [1, 3, 4]
         .iter()
         .enumerate()
-        .map(|(k, &per)| ParamL2::new(ctx, &loss_k, &reduce, per * len, 1.0, k))
+        .map(|(k, &per)| RefLoss::param_l2(ctx, &loss_k, &reduce, per * len, 1.0, k))
         .collect::<Result<Vec<_>, _>>()?;
     let ms = time(&|e| regs.iter().for_each(|r| r.record(ctx, e, &x, &x_ref, &v_x, &scalars)))?;
     rows.push((format!("param l2 ×3 {len} gaussians"), ms));

@@ -5,7 +5,7 @@
 //! until the end.
 
 use super::{
-    CannyKernels, Clamp01, DepthL1, DepthMap, DepthMapKernels, Downscale, EdgeMap, LossKernels, ReduceKernels,
+    CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, LossKernels, ReduceKernels, RefLoss,
     ResizeKernels, TvLoss,
 };
 use crate::gpu::test_util::{ctx, noise};
@@ -60,7 +60,7 @@ fn the_maps_and_image_gradients_of_a_step_match_the_cpu() {
     let depth_map = DepthMap::new(ctx, &DepthMapKernels::new(ctx), &reduce, h, w).expect("plan");
     let edges = EdgeMap::new(ctx, &CannyKernels::new(ctx), &reduce, h, w).expect("plan");
     let tv_term = TvLoss::new(ctx, &losses, &reduce, h, w, 3, lambda_tv, 0).expect("plan");
-    let depth_term = DepthL1::new(ctx, &losses, &reduce, n, lambda_depth, 1).expect("plan");
+    let depth_term = RefLoss::depth_l1(ctx, &losses, &reduce, n, lambda_depth, 1).expect("plan");
     let buf = |label: &str, len: usize, seed: u64| ctx.upload(label, &noise(len, seed));
     let (raw_b, inv_b, ref_b) =
         (ctx.upload("raw", &raw), ctx.upload("inv_depth", &inv_depth), ctx.upload("depth_ref", &depth_ref));
