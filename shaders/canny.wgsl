@@ -25,8 +25,10 @@ struct CannyParams {
 // [min, max] of rgb.
 @group(0) @binding(2) var<storage, read> stats: array<f32>;
 @group(0) @binding(3) var<storage, read_write> state: array<atomic<u32>>;
-// flags[k] = 1 when hysteresis pass k changed a pixel on a tile's border.
-@group(0) @binding(4) var<storage, read_write> flags: array<atomic<u32>>;
+// The indirect dispatch arguments of every hysteresis pass, three words
+// each, zeroed before the first: pass k writes pass k + 1's (its own
+// workgroup counts) when it changed a pixel on a tile's border.
+@group(0) @binding(4) var<storage, read_write> next: array<atomic<u32>>;
 // The edge map, h × w × 3.
 @group(0) @binding(5) var<storage, read_write> edge: array<f32>;
 
@@ -108,30 +110,22 @@ fn nms(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) n
 
 var<workgroup> tile: array<atomic<u32>, 324>;
 var<workgroup> wg_changed: atomic<u32>;
-var<workgroup> wg_flag: u32;
+var<workgroup> wg_again: u32;
 
 // One hysteresis pass: each workgroup loads a 16×16 tile of one channel with
 // a one-pixel halo and grows edges through 8-connected candidates until the
 // tile is stable, then writes its new edges back. Edges cross tile borders
-// from one pass to the next; a pass after one that changed no tile border
-// returns at once, so a fixed number of passes costs little once stable.
+// from one pass to the next; only a pass that changed a tile border launches
+// the next one (an indirect dispatch), so a generous bound on passes is free.
 @compute @workgroup_size(16, 16)
 fn hysteresis(
     @builtin(local_invocation_id) lid: vec3<u32>,
     @builtin(local_invocation_index) lidx: u32,
     @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) nwg: vec3<u32>,
 ) {
-    let k = u.iteration;
     if lidx == 0u {
-        var go = 1u;
-        if k > 0u {
-            go = atomicLoad(&flags[k - 1u]);
-        }
-        wg_flag = go;
         atomicStore(&wg_changed, 0u);
-    }
-    if workgroupUniformLoad(&wg_flag) == 0u {
-        return;
     }
     let base = wid.z * u.n;
     let i0 = i32(wid.y * TILE) - 1;
@@ -167,9 +161,9 @@ fn hysteresis(
         }
         workgroupBarrier();
         if lidx == 0u {
-            wg_flag = atomicExchange(&wg_changed, 0u);
+            wg_again = atomicExchange(&wg_changed, 0u);
         }
-        if workgroupUniformLoad(&wg_flag) == 0u {
+        if workgroupUniformLoad(&wg_again) == 0u {
             break;
         }
     }
@@ -178,7 +172,10 @@ fn hysteresis(
         let gj = u32(j0) + lj;
         atomicStore(&state[base + gi * u.w + gj], EDGE);
         if lid.x == 0u || lid.y == 0u || lid.x == TILE - 1u || lid.y == TILE - 1u {
-            atomicStore(&flags[k], 1u);
+            let a = 3u * (u.iteration + 1u);
+            atomicStore(&next[a], nwg.x);
+            atomicStore(&next[a + 1u], nwg.y);
+            atomicStore(&next[a + 2u], nwg.z);
         }
     }
 }

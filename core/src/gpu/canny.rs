@@ -4,11 +4,13 @@
 //!
 //! Everything after the min-max is integer arithmetic, so the GPU map equals
 //! the CPU's exactly. Hysteresis is a connected-component growth, sequential
-//! on the CPU (a stack); here it is a fixed number of passes of a tiled kernel
-//! that grows edges inside each 16×16 tile until stable and hands them across
-//! tile borders from pass to pass. A pass after one that changed no tile
-//! border returns at once, so the bound costs little; [`EdgeMap::converged`]
-//! tells (by a read-back, for tests and diagnostics) whether it was enough.
+//! on the CPU (a stack); here it is a bounded number of passes of a tiled
+//! kernel that grows edges inside each 16×16 tile until stable and hands them
+//! across tile borders from pass to pass. Each pass writes the next one's
+//! indirect dispatch arguments, zero workgroups unless it changed a tile
+//! border, so the passes after the map settles cost nothing but their
+//! recording; [`EdgeMap::converged`] tells (by a read-back, for tests and
+//! diagnostics) whether the bound was enough.
 
 use std::sync::Arc;
 
@@ -63,7 +65,9 @@ pub struct EdgeMap {
     max: Reduction,
     stats: wgpu::Buffer,
     state: wgpu::Buffer,
-    flags: wgpu::Buffer,
+    /// Indirect arguments of the passes, in two buffers (pass k reads its
+    /// own from `next[k % 2]` and writes pass k + 1's into the other).
+    next: [wgpu::Buffer; 2],
     passes: Vec<wgpu::Buffer>,
 }
 
@@ -116,7 +120,17 @@ impl EdgeMap {
             max: Reduction::new(ctx, reduce, ReduceSpec::new(ReduceOp::Max, 3 * n).to(1))?,
             stats: ctx.zeros("canny.stats", 2),
             state: ctx.zeros("canny.state", 3 * n),
-            flags: ctx.zeros("canny.flags", passes.max(1)),
+            next: std::array::from_fn(|_| {
+                ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("canny.next"),
+                    size: (3 * 4 * (passes.max(1) + 1)) as u64,
+                    usage: wgpu::BufferUsages::STORAGE
+                        | wgpu::BufferUsages::INDIRECT
+                        | wgpu::BufferUsages::COPY_SRC
+                        | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                })
+            }),
             passes: uniforms,
         })
     }
@@ -135,12 +149,17 @@ impl EdgeMap {
         }
         self.min.record(ctx, encoder, rgb, &self.stats);
         self.max.record(ctx, encoder, rgb, &self.stats);
-        encoder.clear_buffer(&self.flags, 0, None);
-        let first = self.buffers(&self.passes[0], rgb, edge);
+        self.next.iter().for_each(|b| encoder.clear_buffer(b, 0, None));
+        let first = self.buffers(&self.passes[0], rgb, edge, &self.next[1]);
         self.kernels.nms.dispatch(ctx, encoder, &first, Kernel::groups_1d(3 * n, WORKGROUP));
         let tiles = [self.w.div_ceil(TILE) as u32, self.h.div_ceil(TILE) as u32, 3];
-        for u in &self.passes {
-            self.kernels.hysteresis.dispatch(ctx, encoder, &self.buffers(u, rgb, edge), tiles);
+        for (k, u) in self.passes.iter().enumerate() {
+            let buffers = self.buffers(u, rgb, edge, &self.next[(k + 1) % 2]);
+            if k == 0 {
+                self.kernels.hysteresis.dispatch(ctx, encoder, &buffers, tiles);
+            } else {
+                self.kernels.hysteresis.dispatch_indirect(ctx, encoder, &buffers, &self.next[k % 2], 12 * k as u64);
+            }
         }
         self.kernels.finish.dispatch(ctx, encoder, &first, Kernel::groups_1d(n, WORKGROUP));
     }
@@ -151,17 +170,19 @@ impl EdgeMap {
         u: &'a wgpu::Buffer,
         rgb: &'a wgpu::Buffer,
         edge: &'a wgpu::Buffer,
+        next: &'a wgpu::Buffer,
     ) -> [&'a wgpu::Buffer; 6] {
-        [u, rgb, &self.stats, &self.state, &self.flags, edge]
+        [u, rgb, &self.stats, &self.state, next, edge]
     }
 
     /// Hysteresis passes that changed a tile border in the last recorded map,
     /// and whether the last pass changed none (the map is then final). A
     /// read-back: for tests and diagnostics, never inside the step.
     pub fn converged(&self, ctx: &GpuContext) -> Result<(usize, bool), GpuError> {
-        let flags: Vec<u32> = ctx.read(&self.flags)?;
-        let busy = flags.iter().take_while(|&&f| f != 0).count();
-        Ok((busy, flags.last().is_none_or(|&f| f == 0)))
+        let next = [ctx.read::<u32>(&self.next[0])?, ctx.read::<u32>(&self.next[1])?];
+        let launched: Vec<bool> = (1..=self.passes.len()).map(|k| next[k % 2][3 * k] != 0).collect();
+        let busy = launched.iter().filter(|&&l| l).count();
+        Ok((busy, launched.last().is_none_or(|&l| !l)))
     }
 }
 

@@ -99,24 +99,11 @@ fn a_long_weak_chain_needs_its_passes_and_gets_them() {
     assert!(diff.is_empty(), "{} pixels differ:\n{}", diff.len(), diff.join("\n"));
 }
 
-fn shared(rel: &str) -> Option<std::path::PathBuf> {
-    let base = std::env::var_os("GAST_SHARED")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
-    let p = base.join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!("\n!!!!!!!! SKIPPED: shared data file {} is absent !!!!!!!!\n", p.display());
-        None
-    }
-}
-
 #[test]
 fn guitar_renders_give_the_cpu_map_exactly() {
     use crate::camera::{OrbitOptions, orbit_cameras};
     use crate::raster::{RenderOptions, render};
-    let Some(path) = shared("data/scenes/guitar.compressed.ply") else { return };
+    let Some(path) = crate::vision::weights::tests::shared("data/scenes/guitar.compressed.ply") else { return };
     let g = crate::scene::load(&path).expect("guitar");
     let (h, w) = (97usize, 128usize);
     let cams = orbit_cameras(

@@ -19,7 +19,7 @@ use std::collections::HashMap;
 
 use super::adam::AdamKernel;
 use super::step_loss::{StepLossKernels, StepLossPlan, slot};
-use super::{GpuAdam, GpuContext, GpuError, GpuGaussians, GpuGrads, GpuRaster, GpuStyle, ParamL2, RasterKernels};
+use super::{GpuAdam, GpuContext, GpuError, GpuGaussians, GpuGrads, GpuRaster, GpuStyle, RasterKernels, RefLoss};
 use crate::camera::Camera;
 use crate::raster::RenderOptions;
 use crate::scene::Gaussians;
@@ -69,7 +69,7 @@ pub struct GpuEngine {
     g: GpuGaussians,
     g_ref: GpuGaussians,
     grads: GpuGrads,
-    regs: [ParamL2; 3],
+    regs: [RefLoss; 3],
     opt: Optimisers,
     plans: HashMap<(u32, u32), ViewPlan>,
     targets: Vec<Option<ViewTarget>>,
@@ -104,9 +104,9 @@ impl GpuEngine {
         let n = g_ref.len();
         let w = &config.weights;
         let regs = [
-            ParamL2::new(ctx, &k.loss.losses, &k.loss.reduce, n, w.opacity, slot::REG_OPACITY)?,
-            ParamL2::new(ctx, &k.loss.losses, &k.loss.reduce, 3 * n, w.scale, slot::REG_SCALE)?,
-            ParamL2::new(ctx, &k.loss.losses, &k.loss.reduce, 4 * n, w.rotation, slot::REG_ROTATION)?,
+            RefLoss::param_l2(ctx, &k.loss.losses, &k.loss.reduce, n, w.opacity, slot::REG_OPACITY)?,
+            RefLoss::param_l2(ctx, &k.loss.losses, &k.loss.reduce, 3 * n, w.scale, slot::REG_SCALE)?,
+            RefLoss::param_l2(ctx, &k.loss.losses, &k.loss.reduce, 4 * n, w.rotation, slot::REG_ROTATION)?,
         ];
         let sh_stride = (g_ref.sh_coeffs() * 3) as u32;
         let opt = Optimisers {

@@ -99,6 +99,24 @@ impl Kernel {
         pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
     }
 
+    /// Records a dispatch whose workgroup counts a kernel wrote earlier into
+    /// `indirect` at byte `offset` (three `u32`s; zero workgroups skip it).
+    pub fn dispatch_indirect(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        buffers: &[&wgpu::Buffer],
+        indirect: &wgpu::Buffer,
+        offset: u64,
+    ) {
+        let bind = self.bind(ctx, buffers);
+        let mut pass =
+            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(&self.label), timestamp_writes: None });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups_indirect(indirect, offset);
+    }
+
     /// Workgroup counts covering `items` invocations of a 1-D kernel with
     /// `workgroup` threads: x up to 65,535, the rest in y. The shader computes
     /// its flat index as `gid.x + gid.y * nwg.x * workgroup` and checks bounds.

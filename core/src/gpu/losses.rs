@@ -163,13 +163,27 @@ impl TvLoss {
     }
 }
 
-/// The depth regulariser `mean|D − D^c|` over `n` pixels ([`crate::style::regularizers::depth_l1`]).
-#[derive(Debug)]
-pub struct DepthL1(LossPlan);
+/// Which term a [`RefLoss`] is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum RefKind {
+    DepthL1,
+    ParamL2,
+}
 
-impl DepthL1 {
+/// A term comparing a buffer with its reference from the colour-matched scene
+/// `G^c`: the depth regulariser `mean|D − D^c|` over the inverse-depth map
+/// ([`crate::style::regularizers::depth_l1`]), or a parameter regulariser
+/// `‖x − x^c‖₂` over a flat array of opacity logits, log-scales or
+/// quaternions ([`crate::style::regularizers::l2_distance`]).
+#[derive(Debug)]
+pub struct RefLoss {
+    kind: RefKind,
+    plan: LossPlan,
+}
+
+impl RefLoss {
     /// Plans the depth L1 of `n`-pixel maps with weight `weight`, its value going to `scalars[loss_offset]`.
-    pub fn new(
+    pub fn depth_l1(
         ctx: &GpuContext,
         kernels: &Arc<LossKernels>,
         reduce: &Arc<ReduceKernels>,
@@ -180,37 +194,11 @@ impl DepthL1 {
         let k = inverse(n);
         let params = LossParams { h: 1, w: n as u32, c: 1, n: n as u32, weight, kh: k, kv: 0.0, norm_index: 0 };
         let spec = ReduceSpec::new(ReduceOp::Sum, n).to(loss_offset).scaled(k);
-        Ok(Self(LossPlan::new(ctx, kernels, reduce, params, n, spec)?))
+        Ok(Self { kind: RefKind::DepthL1, plan: LossPlan::new(ctx, kernels, reduce, params, n, spec)? })
     }
 
-    /// Changes λ (from the next submission on).
-    pub fn set_weight(&mut self, ctx: &GpuContext, weight: f32) {
-        self.0.set_weight(ctx, weight);
-    }
-
-    /// Records `v_depth += λ sign(D − D^c)/n` and `scalars[loss_offset] = mean|D − D^c|`.
-    pub fn record(
-        &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        depth: &wgpu::Buffer,
-        depth_ref: &wgpu::Buffer,
-        v_depth: &wgpu::Buffer,
-        scalars: &wgpu::Buffer,
-    ) {
-        self.0.dispatch(ctx, encoder, &self.0.kernels.depth_l1, depth, depth_ref, v_depth, scalars);
-        self.0.reduction.record(ctx, encoder, &self.0.scratch, scalars);
-    }
-}
-
-/// A parameter regulariser `‖x − x^c‖₂` over a flat array (opacity logits,
-/// log-scales or quaternions; [`crate::style::regularizers::l2_distance`]).
-#[derive(Debug)]
-pub struct ParamL2(LossPlan);
-
-impl ParamL2 {
-    /// Plans the norm of `len`-float arrays with weight `weight`, its value going to `scalars[loss_offset]`.
-    pub fn new(
+    /// Plans the L2 norm of `len`-float arrays with weight `weight`, its value going to `scalars[loss_offset]`.
+    pub fn param_l2(
         ctx: &GpuContext,
         kernels: &Arc<LossKernels>,
         reduce: &Arc<ReduceKernels>,
@@ -218,26 +206,20 @@ impl ParamL2 {
         weight: f32,
         loss_offset: usize,
     ) -> Result<Self, GpuError> {
-        let params = LossParams {
-            h: 1,
-            w: len as u32,
-            c: 1,
-            n: len as u32,
-            weight,
-            kh: 0.0,
-            kv: 0.0,
-            norm_index: loss_offset as u32,
-        };
+        let n = len as u32;
+        let params = LossParams { h: 1, w: n, c: 1, n, weight, kh: 0.0, kv: 0.0, norm_index: loss_offset as u32 };
         let spec = ReduceSpec::new(ReduceOp::SumSquares, len).to(loss_offset).sqrt();
-        Ok(Self(LossPlan::new(ctx, kernels, reduce, params, len, spec)?))
+        Ok(Self { kind: RefKind::ParamL2, plan: LossPlan::new(ctx, kernels, reduce, params, len, spec)? })
     }
 
     /// Changes λ (from the next submission on).
     pub fn set_weight(&mut self, ctx: &GpuContext, weight: f32) {
-        self.0.set_weight(ctx, weight);
+        self.plan.set_weight(ctx, weight);
     }
 
-    /// Records `scalars[loss_offset] = ‖x − x^c‖` and `v_x += λ (x − x^c)/‖x − x^c‖`
+    /// Records the term of `x` against `x_ref` into `scalars[loss_offset]` and
+    /// its weighted gradient into `v_x`: for the depth L1 `v_x += λ sign(x −
+    /// x_ref)/n`; for a parameter norm `v_x += λ (x − x_ref)/‖x − x_ref‖`
     /// (nothing where the norm is 0).
     pub fn record(
         &self,
@@ -248,9 +230,18 @@ impl ParamL2 {
         v_x: &wgpu::Buffer,
         scalars: &wgpu::Buffer,
     ) {
-        self.0.dispatch(ctx, encoder, &self.0.kernels.param_diff, x, x_ref, v_x, scalars);
-        self.0.reduction.record(ctx, encoder, &self.0.scratch, scalars);
-        self.0.dispatch(ctx, encoder, &self.0.kernels.param_grad, x, x_ref, v_x, scalars);
+        let (p, k) = (&self.plan, &self.plan.kernels);
+        match self.kind {
+            RefKind::DepthL1 => {
+                p.dispatch(ctx, encoder, &k.depth_l1, x, x_ref, v_x, scalars);
+                p.reduction.record(ctx, encoder, &p.scratch, scalars);
+            }
+            RefKind::ParamL2 => {
+                p.dispatch(ctx, encoder, &k.param_diff, x, x_ref, v_x, scalars);
+                p.reduction.record(ctx, encoder, &p.scratch, scalars);
+                p.dispatch(ctx, encoder, &k.param_grad, x, x_ref, v_x, scalars);
+            }
+        }
     }
 }
 

@@ -67,8 +67,8 @@ fn depth_l1_matches_the_cpu_with_ties() {
             d_ref[i] = d[i];
         }
         let weight = 10.0;
-        let l1 = DepthL1::new(ctx, &kernels, &reduce, n, weight, 0).expect("plan");
-        scratch_noise(ctx, &l1.0, n);
+        let l1 = RefLoss::depth_l1(ctx, &kernels, &reduce, n, weight, 0).expect("plan");
+        scratch_noise(ctx, &l1.plan, n);
         let before = noise(n, seed + 2);
         let grad = ctx.upload("grad", &before);
         let scalars = ctx.upload("scalars", &noise(2, seed + 3));
@@ -106,8 +106,8 @@ fn parameter_regularisers_match_the_cpu_and_vanish_at_zero() {
             x_ref.clone()
         };
         let weight = 1.0 + k as f32;
-        let plan = ParamL2::new(ctx, &kernels, &reduce, len, weight, offset).expect("plan");
-        scratch_noise(ctx, &plan.0, len);
+        let plan = RefLoss::param_l2(ctx, &kernels, &reduce, len, weight, offset).expect("plan");
+        scratch_noise(ctx, &plan.plan, len);
         let before = noise(len, 600 + k as u64);
         let grad = ctx.upload("grad", &before);
         let (xb, rb) = (ctx.upload("x", &x), ctx.upload("x_ref", &x_ref));

@@ -30,6 +30,8 @@ mod raster_project;
 mod raster_run;
 #[cfg(test)]
 mod raster_tests;
+#[cfg(test)]
+mod ops_chain_tests;
 mod reduce;
 mod resize;
 mod scan;
@@ -48,7 +50,7 @@ pub use gaussians::{GpuGaussians, GpuGrads};
 pub use gcfm::{GcfmWorkspace, GpuGcfm, GpuStyle, bench_gcfm};
 pub use gemm::{Gemm, GemmPlan, GemmSpec, Strided, bench_gemm};
 pub use kernel::{Bind, Kernel};
-pub use losses::{DepthL1, LossKernels, ParamL2, TvLoss};
+pub use losses::{LossKernels, RefLoss, TvLoss};
 pub use ops_bench::bench_image_ops;
 pub use raster_forward::{GpuRaster, RasterKernels};
 pub use raster_run::{bench_raster, render_and_backward_gpu, render_gpu};

@@ -8,9 +8,12 @@
 use std::time::Instant;
 
 use super::{
-    CannyKernels, Clamp01, DepthL1, DepthMap, DepthMapKernels, Downscale, EdgeMap, GpuContext, GpuError, LossKernels,
-    ParamL2, ReduceKernels, ResizeKernels, TvLoss,
+    CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, GpuContext, GpuError, LossKernels,
+    ReduceKernels, RefLoss, ResizeKernels, TvLoss,
 };
+
+/// Records one call of an operation.
+type Record<'a> = &'a dyn Fn(&mut wgpu::CommandEncoder);
 
 /// Milliseconds per call of each image operation and loss at `side × side`
 /// renders (one row per operation and size, labelled `"tv 256²"`), plus the
@@ -27,7 +30,7 @@ pub fn bench_image_ops(
     let depth_k = DepthMapKernels::new(ctx);
     let canny_k = CannyKernels::new(ctx);
     let loss_k = LossKernels::new(ctx);
-    let time = |record: &dyn Fn(&mut wgpu::CommandEncoder)| -> Result<f64, GpuError> {
+    let time = |record: Record<'_>| -> Result<f64, GpuError> {
         let mut enc = ctx.encoder("bench warm-up");
         record(&mut enc);
         ctx.submit(enc);
@@ -61,8 +64,8 @@ pub fn bench_image_ops(
         let map = DepthMap::new(ctx, &depth_k, &reduce, h, w)?;
         let edges = EdgeMap::new(ctx, &canny_k, &reduce, h, w)?;
         let tv = TvLoss::new(ctx, &loss_k, &reduce, h, w, 3, 0.02, 0)?;
-        let l1 = DepthL1::new(ctx, &loss_k, &reduce, n, 10.0, 1)?;
-        let ops: [(&str, &dyn Fn(&mut wgpu::CommandEncoder)); 8] = [
+        let l1 = RefLoss::depth_l1(ctx, &loss_k, &reduce, n, 10.0, 1)?;
+        let ops: [(&str, Record<'_>); 8] = [
             ("clamp fwd+bwd", &|e| {
                 clamp.forward(ctx, e, &v_full3, &full3);
                 clamp.backward(ctx, e, &rgb, &full3);
@@ -87,7 +90,7 @@ pub fn bench_image_ops(
     let regs = [1, 3, 4]
         .iter()
         .enumerate()
-        .map(|(k, &per)| ParamL2::new(ctx, &loss_k, &reduce, per * len, 1.0, k))
+        .map(|(k, &per)| RefLoss::param_l2(ctx, &loss_k, &reduce, per * len, 1.0, k))
         .collect::<Result<Vec<_>, _>>()?;
     let ms = time(&|e| regs.iter().for_each(|r| r.record(ctx, e, &x, &x_ref, &v_x, &scalars)))?;
     rows.push((format!("param l2 ×3 {len} gaussians"), ms));

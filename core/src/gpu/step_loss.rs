@@ -13,8 +13,8 @@ use std::sync::Arc;
 
 use super::content::ContentLoss;
 use super::{
-    CannyKernels, Clamp01, DepthL1, DepthMap, DepthMapKernels, Downscale, EdgeMap, GcfmWorkspace, GpuContext, GpuError,
-    GpuGcfm, GpuStyle, GpuVgg, GpuVggState, GpuVggWorkspace, LossKernels, ReduceKernels, ResizeKernels, TvLoss,
+    CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, GcfmWorkspace, GpuContext, GpuError,
+    GpuGcfm, GpuStyle, GpuVgg, GpuVggState, GpuVggWorkspace, LossKernels, ReduceKernels, RefLoss, ResizeKernels, TvLoss,
 };
 use crate::style::config::LossWeights;
 use crate::style::gcfm::Matches;
@@ -78,7 +78,7 @@ pub struct StepLossPlan {
     depth_map: DepthMap,
     edges: EdgeMap,
     tv: TvLoss,
-    depth_l1: DepthL1,
+    depth_l1: RefLoss,
     vgg_ws: GpuVggWorkspace,
     /// VGG states of the RGB, depth and edge maps (the edge state doubles as
     /// the scratch of [`StepLossPlan::record_content_target`]).
@@ -120,7 +120,7 @@ impl StepLossPlan {
             depth_map: DepthMap::new(ctx, &k.depth, &k.reduce, h, w)?,
             edges: EdgeMap::new(ctx, &k.canny, &k.reduce, h, w)?,
             tv: TvLoss::new(ctx, &k.losses, &k.reduce, h, w, 3, weights.tv, slot::TV)?,
-            depth_l1: DepthL1::new(ctx, &k.losses, &k.reduce, h * w, weights.depth, slot::DEPTH)?,
+            depth_l1: RefLoss::depth_l1(ctx, &k.losses, &k.reduce, h * w, weights.depth, slot::DEPTH)?,
             vgg_ws: k.vgg.workspace(ctx, sh, sw),
             gcfm_ws: k.gcfm.workspace(ctx, style, positions, slot::GCFM, weights.gcfm),
             content: ContentLoss::new(ctx, &k.reduce, feature_len, weights.content, slot::CONTENT)?,
