@@ -60,6 +60,19 @@ impl GpuRaster {
         v_inv_depth: &wgpu::Buffer,
         grads: &GpuGrads,
     ) {
+        self.backward_tiles(ctx, k, encoder, v_rgb, v_inv_depth);
+        self.backward_gaussians(ctx, k, encoder, g, grads);
+    }
+
+    /// The first half of [`GpuRaster::backward`]: reverse compositing to the splats' gradients.
+    pub(crate) fn backward_tiles(
+        &self,
+        ctx: &GpuContext,
+        k: &RasterKernels,
+        encoder: &mut wgpu::CommandEncoder,
+        v_rgb: &wgpu::Buffer,
+        v_inv_depth: &wgpu::Buffer,
+    ) {
         encoder.clear_buffer(&self.v_splat, 0, None);
         k.tile_backward.dispatch(
             ctx,
@@ -77,6 +90,17 @@ impl GpuRaster {
             ],
             [self.width.div_ceil(TILE), self.height.div_ceil(TILE), 1],
         );
+    }
+
+    /// The second half of [`GpuRaster::backward`]: splat gradients to parameter gradients.
+    pub(crate) fn backward_gaussians(
+        &self,
+        ctx: &GpuContext,
+        k: &RasterKernels,
+        encoder: &mut wgpu::CommandEncoder,
+        g: &GpuGaussians,
+        grads: &GpuGrads,
+    ) {
         k.project.backward.dispatch(
             ctx,
             encoder,

@@ -69,6 +69,37 @@ impl RasterKernels {
     }
 }
 
+/// The stages of the forward pass, in order (benchmarks time them one by one).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Stage {
+    /// Per-Gaussian projection to splats and depth keys.
+    Project,
+    /// Splats sorted by depth.
+    DepthSort,
+    /// Tile counts, their prefix sums, the (tile, splat) pairs.
+    Bin,
+    /// Pairs sorted by tile; each tile's range.
+    TileSort,
+    /// Per-tile compositing.
+    Composite,
+}
+
+impl Stage {
+    /// Every stage in order.
+    pub const ALL: [Stage; 5] = [Stage::Project, Stage::DepthSort, Stage::Bin, Stage::TileSort, Stage::Composite];
+
+    /// A name for reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Project => "raster project",
+            Stage::DepthSort => "raster depth sort",
+            Stage::Bin => "raster tile binning",
+            Stage::TileSort => "raster tile sort",
+            Stage::Composite => "raster composite",
+        }
+    }
+}
+
 /// The rasterizer's workspace for `n` Gaussians and one image size.
 #[derive(Debug)]
 pub struct GpuRaster {
@@ -176,13 +207,21 @@ impl GpuRaster {
         );
         let u = RasterUniform::new(cam, opts, self.n, g.sh_degree, self.capacity);
         ctx.queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
+        for stage in Stage::ALL {
+            self.record_stage(ctx, k, encoder, g, stage);
+        }
+    }
+
+    /// Records one stage of the forward pass (the uniform already written).
+    pub(crate) fn record_stage(
+        &self,
+        ctx: &GpuContext,
+        k: &RasterKernels,
+        encoder: &mut wgpu::CommandEncoder,
+        g: &GpuGaussians,
+        stage: Stage,
+    ) {
         let per_gaussian = Kernel::groups_1d(self.n, WORKGROUP);
-        let params = [&self.uniform, &g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.sh];
-        let mut bufs = params.to_vec();
-        bufs.extend([&self.splats, &self.depth_keys, &self.order]);
-        k.project.project.dispatch(ctx, encoder, &bufs, per_gaussian);
-        // Depth keys are positive float bits below 2³¹, or u32::MAX for culled Gaussians.
-        self.depth_sort.record(ctx, &k.sort, encoder, self.depth_sort.everything(), &self.depth_keys, &self.order, 32);
         let bin = [
             &self.uniform,
             &self.depth_keys,
@@ -192,35 +231,58 @@ impl GpuRaster {
             &self.pair_keys,
             &self.pair_values,
         ];
-        k.count_tiles.dispatch(ctx, encoder, &bin, per_gaussian);
-        self.count_scan.record(ctx, k.sort.scan(), encoder, &self.counts);
-        k.emit.dispatch(ctx, encoder, &bin, per_gaussian);
-        let tiles = self.width.div_ceil(TILE) * self.height.div_ceil(TILE);
         let total = self.count_scan.total();
-        self.tile_sort.record(ctx, &k.sort, encoder, total, &self.pair_keys, &self.pair_values, bits_for(tiles));
-        encoder.clear_buffer(&self.ranges, 0, None);
-        k.ranges.dispatch(
-            ctx,
-            encoder,
-            &[&self.uniform, total, &self.pair_keys, &self.ranges],
-            Kernel::groups_1d(self.capacity, WORKGROUP),
-        );
-        k.composite.dispatch(
-            ctx,
-            encoder,
-            &[
-                &self.uniform,
-                &self.pair_values,
+        let (tiles_x, tiles_y) = (self.width.div_ceil(TILE), self.height.div_ceil(TILE));
+        match stage {
+            Stage::Project => {
+                let params = [&self.uniform, &g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.sh];
+                let mut bufs = params.to_vec();
+                bufs.extend([&self.splats, &self.depth_keys, &self.order]);
+                k.project.project.dispatch(ctx, encoder, &bufs, per_gaussian);
+            }
+            // Depth keys are positive float bits, or u32::MAX for culled Gaussians.
+            Stage::DepthSort => self.depth_sort.record(
+                ctx,
+                &k.sort,
+                encoder,
+                self.depth_sort.everything(),
+                &self.depth_keys,
                 &self.order,
-                &self.splats,
-                &self.ranges,
-                &self.rgb,
-                &self.inv_depth,
-                &self.alpha,
-                &self.px_state,
-            ],
-            [self.width.div_ceil(TILE), self.height.div_ceil(TILE), 1],
-        );
+                32,
+            ),
+            Stage::Bin => {
+                k.count_tiles.dispatch(ctx, encoder, &bin, per_gaussian);
+                self.count_scan.record(ctx, k.sort.scan(), encoder, &self.counts);
+                k.emit.dispatch(ctx, encoder, &bin, per_gaussian);
+            }
+            Stage::TileSort => {
+                let bits = bits_for(tiles_x * tiles_y);
+                self.tile_sort.record(ctx, &k.sort, encoder, total, &self.pair_keys, &self.pair_values, bits);
+                encoder.clear_buffer(&self.ranges, 0, None);
+                k.ranges.dispatch(
+                    ctx,
+                    encoder,
+                    &[&self.uniform, total, &self.pair_keys, &self.ranges],
+                    Kernel::groups_1d(self.capacity, WORKGROUP),
+                );
+            }
+            Stage::Composite => k.composite.dispatch(
+                ctx,
+                encoder,
+                &[
+                    &self.uniform,
+                    &self.pair_values,
+                    &self.order,
+                    &self.splats,
+                    &self.ranges,
+                    &self.rgb,
+                    &self.inv_depth,
+                    &self.alpha,
+                    &self.px_state,
+                ],
+                [tiles_x, tiles_y, 1],
+            ),
+        }
     }
 
     /// The (tile, splat) pairs the last forward pass needed (a read-back:
