@@ -28,6 +28,7 @@ pub use adam::GpuAdam;
 pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};
 pub use gaussians::{GpuGaussians, GpuGrads};
 pub use kernel::{Bind, Kernel};
+pub use raster_backward::Accumulation;
 pub use raster_forward::{GpuRaster, RasterKernels};
 pub use raster_run::{bench_raster, render_and_backward_gpu, render_gpu};
 pub use scan::{GpuScan, ScanKernels};

@@ -10,6 +10,7 @@
 //! capacity; [`GpuRaster::pairs`] reads the number a pass needed (with the
 //! step's scalars, say) so that the caller can grow the workspace.
 
+use super::raster_backward::Accumulation;
 use super::raster_project::{ProjectKernels, RasterUniform, WORKGROUP};
 use super::scan::GpuScan;
 use super::sort::{GpuSort, SortKernels, bits_for};
@@ -33,15 +34,18 @@ pub struct RasterKernels {
 }
 
 impl RasterKernels {
-    /// Compiles the raster shaders, with native float atomics in the backward
-    /// pass where the device has them.
+    /// Compiles the raster shaders, the backward pass using native float
+    /// atomics and subgroups where the device has them.
     pub fn new(ctx: &GpuContext) -> Self {
-        Self::with_float_atomics(ctx, ctx.caps.float_atomics)
+        Self::with_accumulation(
+            ctx,
+            Accumulation { float_atomics: ctx.caps.float_atomics, subgroups: ctx.caps.subgroups },
+        )
     }
 
-    /// As [`RasterKernels::new`], choosing the atomic add: `native` needs
-    /// `SHADER_FLOAT32_ATOMIC`; otherwise a compare-and-swap loop.
-    pub fn with_float_atomics(ctx: &GpuContext, native: bool) -> Self {
+    /// As [`RasterKernels::new`] with a chosen accumulation (each feature it
+    /// asks for must be on the device; tests force the fallbacks with it).
+    pub fn with_accumulation(ctx: &GpuContext, acc: Accumulation) -> Self {
         let src = include_str!("../../../shaders/raster_forward.wgsl");
         use super::Bind::{Read, ReadWrite, Uniform};
         let bin = [Uniform, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite];
@@ -63,7 +67,7 @@ impl RasterKernels {
                 "composite",
                 &[Uniform, Read, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite],
             ),
-            tile_backward: super::raster_backward::tile_backward_kernel(ctx, native),
+            tile_backward: super::raster_backward::tile_backward_kernel(ctx, acc),
             sort: SortKernels::new(ctx),
         }
     }
