@@ -8,7 +8,10 @@
 //
 // The lines between the add_grad markers are the fallback, a compare-and-swap
 // loop on u32 bits; raster_backward.rs swaps them for a native atomic<f32>
-// add where the device has SHADER_FLOAT32_ATOMIC.
+// add where the device has SHADER_FLOAT32_ATOMIC. Between the flush markers,
+// each thread adds its own share; where the device has subgroups,
+// raster_backward.rs swaps in a subgroup sum first, so one atomic add per
+// subgroup (not per pixel) reaches memory.
 
 struct Cam {
     r0: vec4<f32>,
@@ -68,6 +71,17 @@ fn sp(g: u32, f: u32) -> f32 {
     return splats[g * SPLAT + f];
 }
 
+// BEGIN flush
+// Adds one pixel's gradient of one splat (every thread calls it for every splat, zeros included).
+fn flush(base: u32, gv: array<f32, 10>) {
+    for (var c = 0u; c < 10u; c = c + 1u) {
+        if gv[c] != 0.0 {
+            add_grad(base + c, gv[c]);
+        }
+    }
+}
+// END flush
+
 var<workgroup> s_id: array<u32, 256>;
 var<workgroup> s_xy: array<vec2<f32>, 256>;
 var<workgroup> s_conic: array<vec4<f32>, 256>;
@@ -111,44 +125,40 @@ fn tile_backward(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgrou
             s_feat[t] = vec4<f32>(sp(g, 6u), sp(g, 7u), sp(g, 8u), sp(g, 9u));
         }
         workgroupBarrier();
+        // Every thread visits every splat of the batch (flush may need the
+        // whole subgroup); those that do not composite it add zeros.
         for (var j = end - start; j > 0u; j = j - 1u) {
             let k = start + j - 1u;
-            if k >= n_contrib {
-                continue;
-            }
             let b = j - 1u;
             let d = pos - s_xy[b];
             let co = s_conic[b];
             let power = -0.5 * (co.x * d.x * d.x + co.z * d.y * d.y) - co.y * d.x * d.y;
-            if power > 0.0 {
-                continue;
-            }
             let gauss = exp(power);
-            var alpha = co.w * gauss;
-            if !(alpha >= ALPHA_MIN) {
-                continue;
+            let raw_alpha = co.w * gauss;
+            var gv: array<f32, 10>;
+            if k < n_contrib && power <= 0.0 && raw_alpha >= ALPHA_MIN {
+                let alpha = min(raw_alpha, ALPHA_MAX);
+                let feat = s_feat[b];
+                let t_i = trans / (1.0 - alpha);
+                let v_feat = (alpha * t_i) * cot;
+                let v_alpha = dot(feat - behind, cot) * t_i;
+                behind = alpha * feat + (1.0 - alpha) * behind;
+                trans = t_i;
+                if raw_alpha <= ALPHA_MAX {
+                    let v_power = v_alpha * alpha;
+                    gv[0] = v_power * (co.x * d.x + co.y * d.y);
+                    gv[1] = v_power * (co.y * d.x + co.z * d.y);
+                    gv[2] = -0.5 * v_power * d.x * d.x;
+                    gv[3] = -v_power * d.x * d.y;
+                    gv[4] = -0.5 * v_power * d.y * d.y;
+                    gv[5] = v_alpha * gauss;
+                }
+                gv[6] = v_feat.x;
+                gv[7] = v_feat.y;
+                gv[8] = v_feat.z;
+                gv[9] = v_feat.w;
             }
-            alpha = min(alpha, ALPHA_MAX);
-            let feat = s_feat[b];
-            let t_i = trans / (1.0 - alpha);
-            let v_feat = (alpha * t_i) * cot;
-            let v_alpha = dot(feat - behind, cot) * t_i;
-            behind = alpha * feat + (1.0 - alpha) * behind;
-            trans = t_i;
-            let base = 10u * s_id[b];
-            if co.w * gauss <= ALPHA_MAX {
-                let v_power = v_alpha * alpha;
-                add_grad(base, v_power * (co.x * d.x + co.y * d.y));
-                add_grad(base + 1u, v_power * (co.y * d.x + co.z * d.y));
-                add_grad(base + 2u, -0.5 * v_power * d.x * d.x);
-                add_grad(base + 3u, -v_power * d.x * d.y);
-                add_grad(base + 4u, -0.5 * v_power * d.y * d.y);
-                add_grad(base + 5u, v_alpha * gauss);
-            }
-            add_grad(base + 6u, v_feat.x);
-            add_grad(base + 7u, v_feat.y);
-            add_grad(base + 8u, v_feat.z);
-            add_grad(base + 9u, v_feat.w);
+            flush(10u * s_id[b], gv);
         }
         end = start;
     }

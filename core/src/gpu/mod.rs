@@ -52,6 +52,7 @@ pub use gemm::{Gemm, GemmPlan, GemmSpec, Strided, bench_gemm};
 pub use kernel::{Bind, Kernel};
 pub use losses::{LossKernels, RefLoss, TvLoss};
 pub use ops_bench::bench_image_ops;
+pub use raster_backward::Accumulation;
 pub use raster_forward::{GpuRaster, RasterKernels};
 pub use raster_run::{bench_raster, render_and_backward_gpu, render_gpu};
 pub use reduce::{ReduceKernels, ReduceOp, ReduceSpec, Reduction};

@@ -21,24 +21,57 @@ fn add_grad(i: u32, v: f32) {
 }
 ";
 
-/// The `raster_backward.wgsl` source with native float atomics or the compare-and-swap fallback.
-pub(crate) fn tile_backward_source(native: bool) -> String {
-    let src = include_str!("../../../shaders/raster_backward.wgsl");
-    if !native {
-        return src.to_owned();
+/// The per-thread flush in `raster_backward.wgsl`, between these markers.
+const FLUSH_BEGIN: &str = "// BEGIN flush";
+const FLUSH_END: &str = "// END flush";
+/// What replaces it where the device has subgroups: one add per subgroup.
+/// (naga 30 has no `subgroupElect`: the first invocation is the one with nothing before it.)
+const SUBGROUP_FLUSH: &str = "fn flush(base: u32, gv: array<f32, 10>) {
+    let first = subgroupExclusiveAdd(1u) == 0u;
+    for (var c = 0u; c < 10u; c = c + 1u) {
+        let s = subgroupAdd(gv[c]);
+        if first && s != 0.0 {
+            add_grad(base + c, s);
+        }
     }
-    let (head, rest) = src.split_once(CAS_BEGIN).expect("raster_backward.wgsl has its add_grad markers");
-    let (_, tail) = rest.split_once(CAS_END).expect("raster_backward.wgsl has its add_grad markers");
-    format!("{head}{NATIVE_ADD}{tail}")
+}
+";
+
+/// How the backward pass accumulates gradients: the device features it uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Accumulation {
+    /// Native `atomic<f32>` adds (`SHADER_FLOAT32_ATOMIC`), else a compare-and-swap loop.
+    pub float_atomics: bool,
+    /// A subgroup sum before each add (`SUBGROUP`), else one add per pixel.
+    pub subgroups: bool,
 }
 
-/// Compiles `tile_backward` with the chosen atomic add.
-pub(crate) fn tile_backward_kernel(ctx: &GpuContext, native: bool) -> Kernel {
+/// `src` with the text between `begin` and `end` replaced by `with`.
+fn splice(src: &str, begin: &str, end: &str, with: &str) -> String {
+    let (head, rest) = src.split_once(begin).expect("raster_backward.wgsl has its markers");
+    let (_, tail) = rest.split_once(end).expect("raster_backward.wgsl has its markers");
+    format!("{head}{with}{tail}")
+}
+
+/// The `raster_backward.wgsl` source for an accumulation mode.
+pub(crate) fn tile_backward_source(acc: Accumulation) -> String {
+    let mut src = include_str!("../../../shaders/raster_backward.wgsl").to_owned();
+    if acc.float_atomics {
+        src = splice(&src, CAS_BEGIN, CAS_END, NATIVE_ADD);
+    }
+    if acc.subgroups {
+        src = splice(&src, FLUSH_BEGIN, FLUSH_END, SUBGROUP_FLUSH);
+    }
+    src
+}
+
+/// Compiles `tile_backward` for an accumulation mode.
+pub(crate) fn tile_backward_kernel(ctx: &GpuContext, acc: Accumulation) -> Kernel {
     use Bind::{Read, ReadWrite, Uniform};
     Kernel::new(
         ctx,
-        if native { "raster_backward.tile_backward (f32 atomics)" } else { "raster_backward.tile_backward (CAS)" },
-        &tile_backward_source(native),
+        &format!("raster_backward.tile_backward ({acc:?})"),
+        &tile_backward_source(acc),
         "tile_backward",
         &[Uniform, Read, Read, Read, Read, Read, Read, Read, ReadWrite],
     )
@@ -60,6 +93,19 @@ impl GpuRaster {
         v_inv_depth: &wgpu::Buffer,
         grads: &GpuGrads,
     ) {
+        self.backward_tiles(ctx, k, encoder, v_rgb, v_inv_depth);
+        self.backward_gaussians(ctx, k, encoder, g, grads);
+    }
+
+    /// The first half of [`GpuRaster::backward`]: reverse compositing to the splats' gradients.
+    pub(crate) fn backward_tiles(
+        &self,
+        ctx: &GpuContext,
+        k: &RasterKernels,
+        encoder: &mut wgpu::CommandEncoder,
+        v_rgb: &wgpu::Buffer,
+        v_inv_depth: &wgpu::Buffer,
+    ) {
         encoder.clear_buffer(&self.v_splat, 0, None);
         k.tile_backward.dispatch(
             ctx,
@@ -77,6 +123,17 @@ impl GpuRaster {
             ],
             [self.width.div_ceil(TILE), self.height.div_ceil(TILE), 1],
         );
+    }
+
+    /// The second half of [`GpuRaster::backward`]: splat gradients to parameter gradients.
+    pub(crate) fn backward_gaussians(
+        &self,
+        ctx: &GpuContext,
+        k: &RasterKernels,
+        encoder: &mut wgpu::CommandEncoder,
+        g: &GpuGaussians,
+        grads: &GpuGrads,
+    ) {
         k.project.backward.dispatch(
             ctx,
             encoder,

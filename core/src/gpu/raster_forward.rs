@@ -10,6 +10,7 @@
 //! capacity; [`GpuRaster::pairs`] reads the number a pass needed (with the
 //! step's scalars, say) so that the caller can grow the workspace.
 
+use super::raster_backward::Accumulation;
 use super::raster_project::{ProjectKernels, RasterUniform, WORKGROUP};
 use super::scan::GpuScan;
 use super::sort::{GpuSort, SortKernels, bits_for};
@@ -33,15 +34,18 @@ pub struct RasterKernels {
 }
 
 impl RasterKernels {
-    /// Compiles the raster shaders, with native float atomics in the backward
-    /// pass where the device has them.
+    /// Compiles the raster shaders, the backward pass using native float
+    /// atomics and subgroups where the device has them.
     pub fn new(ctx: &GpuContext) -> Self {
-        Self::with_float_atomics(ctx, ctx.caps.float_atomics)
+        Self::with_accumulation(
+            ctx,
+            Accumulation { float_atomics: ctx.caps.float_atomics, subgroups: ctx.caps.subgroups },
+        )
     }
 
-    /// As [`RasterKernels::new`], choosing the atomic add: `native` needs
-    /// `SHADER_FLOAT32_ATOMIC`; otherwise a compare-and-swap loop.
-    pub fn with_float_atomics(ctx: &GpuContext, native: bool) -> Self {
+    /// As [`RasterKernels::new`] with a chosen accumulation (each feature it
+    /// asks for must be on the device; tests force the fallbacks with it).
+    pub fn with_accumulation(ctx: &GpuContext, acc: Accumulation) -> Self {
         let src = include_str!("../../../shaders/raster_forward.wgsl");
         use super::Bind::{Read, ReadWrite, Uniform};
         let bin = [Uniform, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite];
@@ -63,8 +67,39 @@ impl RasterKernels {
                 "composite",
                 &[Uniform, Read, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite],
             ),
-            tile_backward: super::raster_backward::tile_backward_kernel(ctx, native),
+            tile_backward: super::raster_backward::tile_backward_kernel(ctx, acc),
             sort: SortKernels::new(ctx),
+        }
+    }
+}
+
+/// The stages of the forward pass, in order (benchmarks time them one by one).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Stage {
+    /// Per-Gaussian projection to splats and depth keys.
+    Project,
+    /// Splats sorted by depth.
+    DepthSort,
+    /// Tile counts, their prefix sums, the (tile, splat) pairs.
+    Bin,
+    /// Pairs sorted by tile; each tile's range.
+    TileSort,
+    /// Per-tile compositing.
+    Composite,
+}
+
+impl Stage {
+    /// Every stage in order.
+    pub const ALL: [Stage; 5] = [Stage::Project, Stage::DepthSort, Stage::Bin, Stage::TileSort, Stage::Composite];
+
+    /// A name for reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Project => "raster project",
+            Stage::DepthSort => "raster depth sort",
+            Stage::Bin => "raster tile binning",
+            Stage::TileSort => "raster tile sort",
+            Stage::Composite => "raster composite",
         }
     }
 }
@@ -176,13 +211,21 @@ impl GpuRaster {
         );
         let u = RasterUniform::new(cam, opts, self.n, g.sh_degree, self.capacity);
         ctx.queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
+        for stage in Stage::ALL {
+            self.record_stage(ctx, k, encoder, g, stage);
+        }
+    }
+
+    /// Records one stage of the forward pass (the uniform already written).
+    pub(crate) fn record_stage(
+        &self,
+        ctx: &GpuContext,
+        k: &RasterKernels,
+        encoder: &mut wgpu::CommandEncoder,
+        g: &GpuGaussians,
+        stage: Stage,
+    ) {
         let per_gaussian = Kernel::groups_1d(self.n, WORKGROUP);
-        let params = [&self.uniform, &g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.sh];
-        let mut bufs = params.to_vec();
-        bufs.extend([&self.splats, &self.depth_keys, &self.order]);
-        k.project.project.dispatch(ctx, encoder, &bufs, per_gaussian);
-        // Depth keys are positive float bits below 2³¹, or u32::MAX for culled Gaussians.
-        self.depth_sort.record(ctx, &k.sort, encoder, self.depth_sort.everything(), &self.depth_keys, &self.order, 32);
         let bin = [
             &self.uniform,
             &self.depth_keys,
@@ -192,35 +235,58 @@ impl GpuRaster {
             &self.pair_keys,
             &self.pair_values,
         ];
-        k.count_tiles.dispatch(ctx, encoder, &bin, per_gaussian);
-        self.count_scan.record(ctx, k.sort.scan(), encoder, &self.counts);
-        k.emit.dispatch(ctx, encoder, &bin, per_gaussian);
-        let tiles = self.width.div_ceil(TILE) * self.height.div_ceil(TILE);
         let total = self.count_scan.total();
-        self.tile_sort.record(ctx, &k.sort, encoder, total, &self.pair_keys, &self.pair_values, bits_for(tiles));
-        encoder.clear_buffer(&self.ranges, 0, None);
-        k.ranges.dispatch(
-            ctx,
-            encoder,
-            &[&self.uniform, total, &self.pair_keys, &self.ranges],
-            Kernel::groups_1d(self.capacity, WORKGROUP),
-        );
-        k.composite.dispatch(
-            ctx,
-            encoder,
-            &[
-                &self.uniform,
-                &self.pair_values,
+        let (tiles_x, tiles_y) = (self.width.div_ceil(TILE), self.height.div_ceil(TILE));
+        match stage {
+            Stage::Project => {
+                let params = [&self.uniform, &g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.sh];
+                let mut bufs = params.to_vec();
+                bufs.extend([&self.splats, &self.depth_keys, &self.order]);
+                k.project.project.dispatch(ctx, encoder, &bufs, per_gaussian);
+            }
+            // Depth keys are positive float bits, or u32::MAX for culled Gaussians.
+            Stage::DepthSort => self.depth_sort.record(
+                ctx,
+                &k.sort,
+                encoder,
+                self.depth_sort.everything(),
+                &self.depth_keys,
                 &self.order,
-                &self.splats,
-                &self.ranges,
-                &self.rgb,
-                &self.inv_depth,
-                &self.alpha,
-                &self.px_state,
-            ],
-            [self.width.div_ceil(TILE), self.height.div_ceil(TILE), 1],
-        );
+                32,
+            ),
+            Stage::Bin => {
+                k.count_tiles.dispatch(ctx, encoder, &bin, per_gaussian);
+                self.count_scan.record(ctx, k.sort.scan(), encoder, &self.counts);
+                k.emit.dispatch(ctx, encoder, &bin, per_gaussian);
+            }
+            Stage::TileSort => {
+                let bits = bits_for(tiles_x * tiles_y);
+                self.tile_sort.record(ctx, &k.sort, encoder, total, &self.pair_keys, &self.pair_values, bits);
+                encoder.clear_buffer(&self.ranges, 0, None);
+                k.ranges.dispatch(
+                    ctx,
+                    encoder,
+                    &[&self.uniform, total, &self.pair_keys, &self.ranges],
+                    Kernel::groups_1d(self.capacity, WORKGROUP),
+                );
+            }
+            Stage::Composite => k.composite.dispatch(
+                ctx,
+                encoder,
+                &[
+                    &self.uniform,
+                    &self.pair_values,
+                    &self.order,
+                    &self.splats,
+                    &self.ranges,
+                    &self.rgb,
+                    &self.inv_depth,
+                    &self.alpha,
+                    &self.px_state,
+                ],
+                [tiles_x, tiles_y, 1],
+            ),
+        }
     }
 
     /// The (tile, splat) pairs the last forward pass needed (a read-back:

@@ -5,6 +5,7 @@
 
 use std::time::Instant;
 
+use super::raster_forward::Stage;
 use super::{GpuContext, GpuError, GpuGaussians, GpuGrads, GpuRaster, RasterKernels};
 use crate::camera::Camera;
 use crate::raster::{Grads, Render, RenderOptions};
@@ -66,12 +67,12 @@ pub fn render_and_backward_gpu(
     Ok((raster.download(ctx)?, grads.download(ctx)?))
 }
 
-/// Milliseconds of the forward and the backward pass of `g` seen by `cam`,
-/// each the median of several runs after a warm-up, measured by waiting for
-/// the queue (so they include submission). Returns
-/// `[("raster forward", ms), ("raster backward", ms)]`.
+/// Milliseconds of the rasterizer on `g` seen by `cam`: each forward stage,
+/// the two halves of the backward pass, and the whole forward and backward,
+/// each the median of several runs after a warm-up, timed by waiting for the
+/// queue (so each includes one submission). Names start with "raster".
 pub fn bench_raster(ctx: &GpuContext, g: &Gaussians, cam: &Camera) -> Result<Vec<(String, f64)>, GpuError> {
-    const RUNS: usize = 7;
+    const RUNS: usize = 5;
     let opts = RenderOptions::default();
     let k = RasterKernels::new(ctx);
     let gg = GpuGaussians::upload(ctx, g);
@@ -80,16 +81,12 @@ pub fn bench_raster(ctx: &GpuContext, g: &Gaussians, cam: &Camera) -> Result<Vec
     let npx = cam.width as usize * cam.height as usize;
     let vr = ctx.upload("v_rgb", &vec![1.0f32; 3 * npx]);
     let vd = ctx.upload("v_inv_depth", &vec![0.1f32; npx]);
-    let time = |backward: bool| -> Result<f64, GpuError> {
+    let time = |record: &dyn Fn(&mut wgpu::CommandEncoder)| -> Result<f64, GpuError> {
         let mut ms = Vec::with_capacity(RUNS);
         for run in 0..=RUNS {
             let mut enc = ctx.encoder("bench.raster");
             let t0 = Instant::now();
-            if backward {
-                raster.backward(ctx, &k, &mut enc, &gg, &vr, &vd, &grads);
-            } else {
-                raster.forward(ctx, &k, &mut enc, &gg, cam, &opts);
-            }
+            record(&mut enc);
             ctx.submit(enc);
             ctx.wait()?;
             if run > 0 {
@@ -99,7 +96,14 @@ pub fn bench_raster(ctx: &GpuContext, g: &Gaussians, cam: &Camera) -> Result<Vec
         ms.sort_by(f64::total_cmp);
         Ok(ms[RUNS / 2])
     };
-    let fwd = time(false)?;
-    let bwd = time(true)?;
-    Ok(vec![("raster forward".into(), fwd), ("raster backward".into(), bwd)])
+    let mut out = Vec::new();
+    // `fitted` left this view's uniform written; each stage reads what the previous left.
+    for stage in Stage::ALL {
+        out.push((stage.name().to_owned(), time(&|enc| raster.record_stage(ctx, &k, enc, &gg, stage))?));
+    }
+    out.push(("raster backward tiles".into(), time(&|enc| raster.backward_tiles(ctx, &k, enc, &vr, &vd))?));
+    out.push(("raster backward gaussians".into(), time(&|enc| raster.backward_gaussians(ctx, &k, enc, &gg, &grads))?));
+    out.push(("raster forward".into(), time(&|enc| raster.forward(ctx, &k, enc, &gg, cam, &opts))?));
+    out.push(("raster backward".into(), time(&|enc| raster.backward(ctx, &k, enc, &gg, &vr, &vd, &grads))?));
+    Ok(out)
 }

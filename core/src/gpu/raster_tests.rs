@@ -7,6 +7,7 @@ use std::path::PathBuf;
 
 use glam::Vec3;
 
+use super::raster_backward::Accumulation;
 use super::test_util::{ctx, noise};
 use super::{GpuGaussians, GpuGrads, GpuRaster, RasterKernels};
 use crate::camera::{Camera, OrbitOptions, orbit_cameras};
@@ -135,9 +136,9 @@ fn compare_with_cpu(
     (failures, differing)
 }
 
-fn check_random_scenes(native: bool) {
+fn check_random_scenes(float_atomics: bool, subgroups: bool) {
     let ctx = ctx();
-    let k = RasterKernels::with_float_atomics(ctx, native);
+    let k = RasterKernels::with_accumulation(ctx, Accumulation { float_atomics, subgroups });
     let mut failures = Vec::new();
     let mut differing = 0;
     // The last case is dense: many layers per pixel, transmittance running out.
@@ -158,17 +159,25 @@ fn check_random_scenes(native: bool) {
 }
 
 #[test]
-fn matches_the_cpu_on_random_scenes_with_float_atomics() {
-    if !ctx().caps.float_atomics {
-        eprintln!("the adapter has no float atomics: the native path is not tested here");
-        return;
+fn matches_the_cpu_on_random_scenes_with_float_atomics_and_subgroups() {
+    let caps = ctx().caps;
+    // Lavapipe has both; an adapter without them tests what it has.
+    println!("adapter {}: {caps:?}", ctx().describe());
+    check_random_scenes(caps.float_atomics, caps.subgroups);
+    if caps.subgroups {
+        check_random_scenes(caps.float_atomics, false);
     }
-    check_random_scenes(true);
 }
 
 #[test]
-fn matches_the_cpu_on_random_scenes_with_the_cas_fallback() {
-    check_random_scenes(false);
+fn matches_the_cpu_on_random_scenes_with_the_cas_fallback_and_no_subgroups() {
+    check_random_scenes(false, false);
+}
+
+#[test]
+fn matches_the_cpu_on_random_scenes_with_subgroups_and_the_cas_fallback() {
+    let subgroups = ctx().caps.subgroups;
+    check_random_scenes(false, subgroups);
 }
 
 /// A file of the shared data (`$GAST_SHARED`, else `../shared` beside the
