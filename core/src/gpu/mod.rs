@@ -12,6 +12,7 @@
 //! entry point with an explicit binding list.
 
 mod adam;
+mod content;
 mod context;
 mod feature_net;
 mod gcfm;
@@ -20,6 +21,7 @@ mod kernel;
 mod vgg;
 
 pub use adam::GpuAdam;
+pub use content::{ContentWorkspace, GpuContent};
 pub use feature_net::{GpuFeatureNet, GpuFeatureState};
 pub use gcfm::{GcfmWorkspace, GpuGcfm, GpuStyle, bench_gcfm};
 pub use gemm::{Gemm, GemmPlan, GemmSpec, Strided, bench_gemm};
