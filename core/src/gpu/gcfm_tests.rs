@@ -38,7 +38,10 @@ fn search_loss_and_gradients_match_the_cpu_gcfm() {
         let r: [Vec<f32>; 3] = std::array::from_fn(|k| feats(c, n, 10 + k as u64 + n as u64));
         let ws = gcfm.workspace_chunked(ctx, &style, n, 2, 2.0, limit);
         for (i, b) in [&ws.scores, &ws.matches, &ws.stats].into_iter().enumerate() {
-            ctx.write(b, &noise((b.size() / 4) as usize, 50 + i as u64).iter().map(|v| v.to_bits()).collect::<Vec<u32>>());
+            ctx.write(
+                b,
+                &noise((b.size() / 4) as usize, 50 + i as u64).iter().map(|v| v.to_bits()).collect::<Vec<u32>>(),
+            );
         }
         let rb: Vec<wgpu::Buffer> = r.iter().map(|v| ctx.upload("r", v)).collect();
         let v_rgb = ctx.upload("v_rgb", &noise(c * n, 60));
@@ -53,8 +56,7 @@ fn search_loss_and_gradients_match_the_cpu_gcfm() {
 
         // Matches: identical to the CPU's except near-ties of the joint score.
         let cpu = gcfm_loss(&st, [&r[0], &r[1], &r[2]], n);
-        let gpu_matches =
-            crate::style::gcfm::Matches { best: mt[..n].to_vec(), worst: mt[n..].to_vec() };
+        let gpu_matches = crate::style::gcfm::Matches { best: mt[..n].to_vec(), worst: mt[n..].to_vec() };
         let mut ties = 0;
         for x in 0..n {
             for (a, b) in [(cpu.matches.best[x], gpu_matches.best[x]), (cpu.matches.worst[x], gpu_matches.worst[x])] {
