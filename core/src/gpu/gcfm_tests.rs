@@ -14,10 +14,10 @@ fn feats(c: usize, n: usize, seed: u64) -> Vec<f32> {
 fn joint_score(st: &StyleFeatures, r: &[Vec<f32>; 3], n: usize, x: usize, y: usize) -> f64 {
     let (c, m) = (st.channels, st.positions());
     let (mut dot, mut sq) = (0f64, 0f64);
-    for k in 0..3 {
+    for (k, rk) in r.iter().enumerate() {
         for ch in 0..c {
             let s = f64::from(st.modality(k)[ch * m + y]);
-            dot += f64::from(r[k][ch * n + x]) * s;
+            dot += f64::from(rk[ch * n + x]) * s;
             sq += s * s;
         }
     }
@@ -85,9 +85,9 @@ fn search_loss_and_gradients_match_the_cpu_gcfm() {
             failures.push(format!("n {n}: total {} vs CPU {}", s[5], want.loss));
         }
         let mut worst_rel = 0f32;
-        for k in 0..2 {
+        for (k, gk) in g.iter().enumerate() {
             let largest = want.v_rendered[k].iter().fold(0f32, |a, v| a.max(2.0 * v.abs()));
-            let err = g[k].iter().zip(&want.v_rendered[k]).map(|(a, b)| (a - 2.0 * b).abs()).fold(0f32, f32::max);
+            let err = gk.iter().zip(&want.v_rendered[k]).map(|(a, b)| (a - 2.0 * b).abs()).fold(0f32, f32::max);
             worst_rel = worst_rel.max(err / largest);
             if err > 1e-3 * largest {
                 failures.push(format!("n {n} modality {k}: gradient differs by {err} (largest {largest})"));

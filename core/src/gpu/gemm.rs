@@ -195,6 +195,7 @@ impl Gemm {
 
     /// Records the planned product into `encoder`. `c` must be a different
     /// buffer from `a` and `b`; `bias` is needed when the plan has one.
+    #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
         ctx: &GpuContext,
