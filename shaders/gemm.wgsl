@@ -61,10 +61,13 @@ fn gemm(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid
     let a_along_i = u.a_rs == 1u;
     let b_along_j = u.b_cs == 1u;
 
-    var acc: array<f32, 16>;
-    for (var q = 0u; q < 16u; q++) {
-        acc[q] = 0.0;
-    }
+    // Row qi of this thread's 4×4 block in acc{qi}, columns tx + 16·qj in
+    // its components: registers, no indexed private arrays (which software
+    // rasterizers spill to memory).
+    var acc0 = vec4<f32>(0.0);
+    var acc1 = vec4<f32>(0.0);
+    var acc2 = vec4<f32>(0.0);
+    var acc3 = vec4<f32>(0.0);
     let tiles = (u.k + TK - 1u) / TK;
     for (var kt = 0u; kt < tiles; kt++) {
         let p0 = kt * TK;
@@ -107,42 +110,47 @@ fn gemm(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid
         }
         workgroupBarrier();
         for (var p = 0u; p < TK; p++) {
-            var ra: array<f32, 4>;
-            var rb: array<f32, 4>;
-            for (var q = 0u; q < 4u; q++) {
-                ra[q] = As[p * TM + ty + 16u * q];
-                rb[q] = Bs[p * TN + tx + 16u * q];
-            }
-            for (var qi = 0u; qi < 4u; qi++) {
-                for (var qj = 0u; qj < 4u; qj++) {
-                    acc[qi * 4u + qj] = fma(ra[qi], rb[qj], acc[qi * 4u + qj]);
-                }
-            }
+            let ao = p * TM + ty;
+            let bo = p * TN + tx;
+            let bv = vec4<f32>(Bs[bo], Bs[bo + 16u], Bs[bo + 32u], Bs[bo + 48u]);
+            acc0 = fma(vec4<f32>(As[ao]), bv, acc0);
+            acc1 = fma(vec4<f32>(As[ao + 16u]), bv, acc1);
+            acc2 = fma(vec4<f32>(As[ao + 32u]), bv, acc2);
+            acc3 = fma(vec4<f32>(As[ao + 48u]), bv, acc3);
         }
         workgroupBarrier();
     }
-    for (var qi = 0u; qi < 4u; qi++) {
-        let gi = i0 + ty + 16u * qi;
-        if gi >= u.m {
-            continue;
-        }
-        for (var qj = 0u; qj < 4u; qj++) {
-            let gj = j0 + tx + 16u * qj;
-            if gj >= u.n {
-                continue;
-            }
-            let at = c_base + gi * u.c_rs + gj;
-            var v = u.alpha * acc[qi * 4u + qj];
-            if (u.flags & 1u) != 0u {
-                v += c[at];
-            }
-            if (u.flags & 2u) != 0u {
-                v += bias[u.bias_off + gi];
-            }
-            if (u.flags & 4u) != 0u {
-                v = max(v, 0.0);
-            }
-            c[at] = v;
-        }
+    store_row(i0 + ty, j0 + tx, c_base, acc0);
+    store_row(i0 + ty + 16u, j0 + tx, c_base, acc1);
+    store_row(i0 + ty + 32u, j0 + tx, c_base, acc2);
+    store_row(i0 + ty + 48u, j0 + tx, c_base, acc3);
+}
+
+// The epilogue of one row of a thread's block: columns gj0 + 16·q.
+fn store_row(gi: u32, gj0: u32, c_base: u32, v: vec4<f32>) {
+    if gi >= u.m {
+        return;
     }
+    store(gi, gj0, c_base, v.x);
+    store(gi, gj0 + 16u, c_base, v.y);
+    store(gi, gj0 + 32u, c_base, v.z);
+    store(gi, gj0 + 48u, c_base, v.w);
+}
+
+fn store(gi: u32, gj: u32, c_base: u32, acc: f32) {
+    if gj >= u.n {
+        return;
+    }
+    let at = c_base + gi * u.c_rs + gj;
+    var v = u.alpha * acc;
+    if (u.flags & 1u) != 0u {
+        v += c[at];
+    }
+    if (u.flags & 2u) != 0u {
+        v += bias[u.bias_off + gi];
+    }
+    if (u.flags & 4u) != 0u {
+        v = max(v, 0.0);
+    }
+    c[at] = v;
 }

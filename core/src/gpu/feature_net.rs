@@ -7,8 +7,8 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
-use super::vgg::{GpuVgg, GpuVggState, GpuVggWorkspace};
 use super::GpuContext;
+use super::vgg::{GpuVgg, GpuVggState, GpuVggWorkspace};
 use crate::style::step::{FeatureMap, FeatureNet};
 use crate::vision::Vgg;
 use crate::vision::vgg::FEATURE_CHANNELS;

@@ -149,7 +149,14 @@ impl GpuGcfm {
     /// run writes the loss of each modality (RGB, depth, edge) and their sum,
     /// four `f32`s, at `scalars_offset` (in `f32`s) of the scalars buffer, and
     /// the gradients multiplied by `scale` (the loss weight).
-    pub fn workspace(&self, ctx: &GpuContext, style: &GpuStyle, n: usize, scalars_offset: usize, scale: f32) -> GcfmWorkspace {
+    pub fn workspace(
+        &self,
+        ctx: &GpuContext,
+        style: &GpuStyle,
+        n: usize,
+        scalars_offset: usize,
+        scale: f32,
+    ) -> GcfmWorkspace {
         let limit = SCORE_ELEMS.min((ctx.max_binding_bytes() / 4) as usize);
         self.workspace_chunked(ctx, style, n, scalars_offset, scale, limit)
     }
@@ -166,8 +173,14 @@ impl GpuGcfm {
     ) -> GcfmWorkspace {
         let (c, m) = (style.channels, style.positions);
         let rows = (limit / m.max(1)).clamp(1, MAX_ROWS).min(n.max(1));
-        let base =
-            GcfmParams { n: u32_of(n), m: u32_of(m), c: u32_of(c), out_off: u32_of(scalars_offset), scale, ..Default::default() };
+        let base = GcfmParams {
+            n: u32_of(n),
+            m: u32_of(m),
+            c: u32_of(c),
+            out_off: u32_of(scalars_offset),
+            scale,
+            ..Default::default()
+        };
         let mut chunks = Vec::new();
         let mut x0 = 0;
         while x0 < n {
@@ -185,7 +198,10 @@ impl GpuGcfm {
                 })
                 .collect();
             let p = GcfmParams { x0: u32_of(x0), len: u32_of(t), ..base };
-            chunks.push(Chunk { gemms, argext: Launch { uniform: ctx.uniform("gcfm.argext", &p), groups: [u32_of(t), 1, 1] } });
+            chunks.push(Chunk {
+                gemms,
+                argext: Launch { uniform: ctx.uniform("gcfm.argext", &p), groups: [u32_of(t), 1, 1] },
+            });
             x0 += t;
         }
         let per = |k: usize, len: usize| GcfmParams { modality: u32_of(k), len: u32_of(len), ..base };
@@ -241,7 +257,12 @@ impl GpuGcfm {
             self.grad.dispatch(ctx, enc, &b, l.groups);
         }
         let l = &ws.reduce;
-        self.reduce.dispatch(ctx, enc, &[&l.uniform, &ws.stats, &self.dummy, &ws.matches, &self.dummy, scalars], l.groups);
+        self.reduce.dispatch(
+            ctx,
+            enc,
+            &[&l.uniform, &ws.stats, &self.dummy, &ws.matches, &self.dummy, scalars],
+            l.groups,
+        );
     }
 }
 

@@ -14,10 +14,10 @@ fn feats(c: usize, n: usize, seed: u64) -> Vec<f32> {
 fn joint_score(st: &StyleFeatures, r: &[Vec<f32>; 3], n: usize, x: usize, y: usize) -> f64 {
     let (c, m) = (st.channels, st.positions());
     let (mut dot, mut sq) = (0f64, 0f64);
-    for k in 0..3 {
+    for (k, rk) in r.iter().enumerate() {
         for ch in 0..c {
             let s = f64::from(st.modality(k)[ch * m + y]);
-            dot += f64::from(r[k][ch * n + x]) * s;
+            dot += f64::from(rk[ch * n + x]) * s;
             sq += s * s;
         }
     }
@@ -38,7 +38,10 @@ fn search_loss_and_gradients_match_the_cpu_gcfm() {
         let r: [Vec<f32>; 3] = std::array::from_fn(|k| feats(c, n, 10 + k as u64 + n as u64));
         let ws = gcfm.workspace_chunked(ctx, &style, n, 2, 2.0, limit);
         for (i, b) in [&ws.scores, &ws.matches, &ws.stats].into_iter().enumerate() {
-            ctx.write(b, &noise((b.size() / 4) as usize, 50 + i as u64).iter().map(|v| v.to_bits()).collect::<Vec<u32>>());
+            ctx.write(
+                b,
+                &noise((b.size() / 4) as usize, 50 + i as u64).iter().map(|v| v.to_bits()).collect::<Vec<u32>>(),
+            );
         }
         let rb: Vec<wgpu::Buffer> = r.iter().map(|v| ctx.upload("r", v)).collect();
         let v_rgb = ctx.upload("v_rgb", &noise(c * n, 60));
@@ -53,8 +56,7 @@ fn search_loss_and_gradients_match_the_cpu_gcfm() {
 
         // Matches: identical to the CPU's except near-ties of the joint score.
         let cpu = gcfm_loss(&st, [&r[0], &r[1], &r[2]], n);
-        let gpu_matches =
-            crate::style::gcfm::Matches { best: mt[..n].to_vec(), worst: mt[n..].to_vec() };
+        let gpu_matches = crate::style::gcfm::Matches { best: mt[..n].to_vec(), worst: mt[n..].to_vec() };
         let mut ties = 0;
         for x in 0..n {
             for (a, b) in [(cpu.matches.best[x], gpu_matches.best[x]), (cpu.matches.worst[x], gpu_matches.worst[x])] {
@@ -83,9 +85,9 @@ fn search_loss_and_gradients_match_the_cpu_gcfm() {
             failures.push(format!("n {n}: total {} vs CPU {}", s[5], want.loss));
         }
         let mut worst_rel = 0f32;
-        for k in 0..2 {
+        for (k, gk) in g.iter().enumerate() {
             let largest = want.v_rendered[k].iter().fold(0f32, |a, v| a.max(2.0 * v.abs()));
-            let err = g[k].iter().zip(&want.v_rendered[k]).map(|(a, b)| (a - 2.0 * b).abs()).fold(0f32, f32::max);
+            let err = gk.iter().zip(&want.v_rendered[k]).map(|(a, b)| (a - 2.0 * b).abs()).fold(0f32, f32::max);
             worst_rel = worst_rel.max(err / largest);
             if err > 1e-3 * largest {
                 failures.push(format!("n {n} modality {k}: gradient differs by {err} (largest {largest})"));

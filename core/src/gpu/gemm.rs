@@ -195,6 +195,7 @@ impl Gemm {
 
     /// Records the planned product into `encoder`. `c` must be a different
     /// buffer from `a` and `b`; `bias` is needed when the plan has one.
+    #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
         ctx: &GpuContext,
@@ -253,8 +254,10 @@ mod tests {
                 for j in 0..spec.n {
                     let mut acc = 0f64;
                     for p in 0..spec.k {
-                        let ai = spec.a.offset + z * spec.a.batch_stride + i * spec.a.row_stride + p * spec.a.col_stride;
-                        let bi = spec.b.offset + z * spec.b.batch_stride + p * spec.b.row_stride + j * spec.b.col_stride;
+                        let ai =
+                            spec.a.offset + z * spec.a.batch_stride + i * spec.a.row_stride + p * spec.a.col_stride;
+                        let bi =
+                            spec.b.offset + z * spec.b.batch_stride + p * spec.b.row_stride + j * spec.b.col_stride;
                         acc += f64::from(a[ai]) * f64::from(b[bi]);
                     }
                     let at = spec.c.offset + z * spec.c.batch_stride + i * spec.c.row_stride + j;

@@ -120,10 +120,8 @@ impl GpuVggState {
     pub fn new(ctx: &GpuContext, h: usize, w: usize) -> Self {
         let dims = stage_dims(h, w);
         let n = |s: usize| dims[s].0 * dims[s].1;
-        let acts = [(64, 0), (64, 0), (128, 1), (128, 1)]
-            .iter()
-            .map(|&(c, s)| ctx.zeros("vgg.act", c * n(s)))
-            .collect();
+        let acts =
+            [(64, 0), (64, 0), (128, 1), (128, 1)].iter().map(|&(c, s)| ctx.zeros("vgg.act", c * n(s))).collect();
         Self { size: (h, w), acts, features: ctx.zeros("vgg.features", FEATURE_CHANNELS * n(2)) }
     }
 
@@ -325,7 +323,15 @@ impl GpuVgg {
             let out = if layer < 4 { &state.acts[layer] } else { &state.features };
             for band in &plan.bands {
                 self.launch(ctx, enc, &k.im2col, &band.im2col, src, None, &ws.cols, None);
-                self.gemm.record(ctx, enc, &band.forward, &self.weights[layer], &ws.cols, Some(&self.biases[layer]), out);
+                self.gemm.record(
+                    ctx,
+                    enc,
+                    &band.forward,
+                    &self.weights[layer],
+                    &ws.cols,
+                    Some(&self.biases[layer]),
+                    out,
+                );
             }
             if layer == 1 || layer == 3 {
                 self.launch(ctx, enc, &k.pool, &ws.pools[layer / 2], out, None, &ws.ping, None);
