@@ -289,8 +289,9 @@ pub(crate) fn write_compressed_ply(out: &mut impl std::io::Write, g: &Gaussians)
     let mut table: Vec<[f32; 18]> = Vec::with_capacity(n.div_ceil(CHUNK_SIZE));
     let mut buf = Vec::with_capacity(n.div_ceil(CHUNK_SIZE) * 72);
     for c in 0..n.div_ceil(CHUNK_SIZE) {
-        let mut row = [f32::INFINITY, f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY]
-            .repeat(3);
+        let mut row =
+            [f32::INFINITY, f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY]
+                .repeat(3);
         for i in c * CHUNK_SIZE..((c + 1) * CHUNK_SIZE).min(n) {
             for (group, v) in [g.means[i], g.log_scales[i], colour(i)].iter().enumerate() {
                 for a in 0..3 {

@@ -199,8 +199,7 @@ pub(crate) fn palette(data: &[f32], dim: usize, k: usize, progress: &mut dyn FnM
     let sample: Vec<usize> = (0..n).step_by(stride).collect();
     let coarse = lloyd(data, dim, &sample, groups.min(sample.len()), VECTOR_ITERS);
     progress(0.1);
-    let coarse_label: Vec<usize> =
-        data.par_chunks_exact(dim).map(|row| nearest_vector(&coarse, dim, row)).collect();
+    let coarse_label: Vec<usize> = data.par_chunks_exact(dim).map(|row| nearest_vector(&coarse, dim, row)).collect();
     let mut members: Vec<Vec<usize>> = vec![Vec::new(); coarse.len() / dim];
     for (i, &c) in coarse_label.iter().enumerate() {
         members[c].push(i);

@@ -65,8 +65,7 @@ fn clamp_infinities(g: &mut Gaussians) -> (usize, usize) {
         }
     };
     let opacity = g.opacity_logits.iter_mut().map(|o| fix(o, OPACITY_LOGIT_INF, OPACITY_LOGIT_NEG_INF)).sum();
-    let scales =
-        g.log_scales.iter_mut().flatten().map(|s| fix(s, LOG_SCALE_INF, LOG_SCALE_NEG_INF)).sum();
+    let scales = g.log_scales.iter_mut().flatten().map(|s| fix(s, LOG_SCALE_INF, LOG_SCALE_NEG_INF)).sum();
     (opacity, scales)
 }
 

@@ -132,8 +132,7 @@ pub(crate) fn encode(
         let coeffs = g.sh_coeffs() - 1;
         let dim = coeffs * 3;
         let rest: Vec<f32> = (0..n).flat_map(|i| g.sh_of(i)[3..].to_vec()).collect();
-        let (centres, labels) =
-            palette(&rest, dim, palette_size, &mut |f| progress("SH palette", 0.1 + 0.8 * f));
+        let (centres, labels) = palette(&rest, dim, palette_size, &mut |f| progress("SH palette", 0.1 + 0.8 * f));
         let count = (centres.len() / dim).max(1);
         let book = codebook(&centres, CODEBOOK);
         let (cw, ch) = (64 * coeffs, count.div_ceil(64));
