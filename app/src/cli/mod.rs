@@ -2,6 +2,7 @@
 
 mod bench;
 mod check;
+pub mod convert;
 mod fit;
 pub mod quality;
 mod render;
@@ -56,6 +57,9 @@ pub enum Command {
     /// colour/geometry optimisation; writes the stylized .ply, before/after
     /// renders with depth, and report.json.
     Stylize(Box<stylize::StylizeArgs>),
+    /// Convert a scene between INRIA .ply, PlayCanvas .compressed.ply, Niantic .spz
+    /// and SOG (folder or .sog); the output's name picks the format.
+    Convert(convert::ConvertArgs),
     /// Fit a 3DGS scene to posed images (transforms.json, COLMAP, cameras.json)
     /// with the CPU rasterizer; writes the .ply and optional preview renders.
     Fit(fit::FitArgs),
@@ -150,13 +154,19 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Command::Stylize(args) => return stylize::run(*args),
         Command::Fit(args) => return fit::run(args),
+        Command::Convert(args) => return convert::run(args),
     }
     Ok(ExitCode::SUCCESS)
 }
 
-/// Loads a scene with its path in the error.
+/// Loads a scene with its path in the error, printing the readers' warnings.
 pub fn load_scene(path: &Path) -> anyhow::Result<Gaussians> {
-    gast_core::scene::load(path).with_context(|| format!("could not load the scene {}", path.display()))
+    let (scene, warnings) = gast_core::scene::load_with_warnings(path)
+        .with_context(|| format!("could not load the scene {}", path.display()))?;
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(scene)
 }
 
 /// The views of `args` for `scene`: the camera file rescaled to `--size`, or an orbit.

@@ -32,6 +32,12 @@ pub struct StylizeArgs {
     /// Output folder.
     #[arg(long, default_value = "out/stylize")]
     pub out: PathBuf,
+    /// Name of the stylized scene in the output folder; its ending picks the
+    /// format: .ply, .compressed.ply, .spz, .sog, or a SOG folder (ending in /).
+    #[arg(long, default_value = "stylized.ply")]
+    pub scene_name: PathBuf,
+    #[command(flatten)]
+    pub save: super::convert::SaveArgs,
     /// Optimisation cameras (COLMAP sparse/0, cameras.json, transforms.json);
     /// without it, `--views` orbit views are generated around the scene.
     #[arg(long)]
@@ -229,6 +235,7 @@ struct Summary {
 pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let t_all = Instant::now();
     let config = args.config()?;
+    super::convert::check_output_name(&args.scene_name)?;
     if let Some(p) = &args.save_preset {
         write_bytes(p, config.to_json().as_bytes())?;
     }
@@ -302,7 +309,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
 
     let result = session.result();
     std::fs::create_dir_all(&args.out).with_context(|| format!("could not create {}", args.out.display()))?;
-    gast_core::scene::save_ply(args.out.join("stylized.ply"), &result)?;
+    super::convert::save_scene(&args.out.join(&args.scene_name), &result, &args.save)?;
     let preview = write_previews(
         &args.out,
         &scene,

@@ -31,15 +31,17 @@ pub struct SceneFile {
     pub gaussians: Gaussians,
     /// Cameras from the scene's folder (COLMAP, `cameras.json`, `transforms.json`) and that folder.
     pub cameras: Option<(gast_core::camera::CameraSet, PathBuf)>,
+    /// What the reader had to repair (e.g. infinite opacities), one line per kind.
+    pub warnings: Vec<String>,
 }
 
 /// Reads a scene and looks for training cameras beside it.
 pub fn read_scene_file(path: &std::path::Path) -> anyhow::Result<SceneFile> {
-    let gaussians = gast_core::scene::load(path)?;
+    let (gaussians, warnings) = gast_core::scene::load_with_warnings(path)?;
     let cameras = path.parent().filter(|d| !d.as_os_str().is_empty()).and_then(|dir| {
         gast_core::camera::load(dir).ok().filter(|set| !set.cameras.is_empty()).map(|set| (set, dir.to_path_buf()))
     });
-    Ok(SceneFile { gaussians, cameras })
+    Ok(SceneFile { gaussians, cameras, warnings })
 }
 
 /// What a finished job reports.
@@ -189,9 +191,10 @@ impl Jobs {
         });
     }
 
-    /// Writes Gaussians as `.ply`.
-    pub fn export_ply(&mut self, g: SharedGaussians, path: PathBuf) {
-        self.spawn(move || match gast_core::scene::save_ply(&path, &g) {
+    /// Writes Gaussians in the format the file's name asks for (`.ply`,
+    /// `.compressed.ply`, `.spz`, `.sog`; see `gast_core::scene::save`).
+    pub fn export_scene(&mut self, g: SharedGaussians, path: PathBuf) {
+        self.spawn(move || match gast_core::scene::save(&path, &g, &Default::default()) {
             Ok(()) => JobDone::Exported(path),
             Err(e) => JobDone::Failed(format!("exporting the scene: {e}")),
         });

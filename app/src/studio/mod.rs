@@ -304,6 +304,7 @@ impl StudioApp {
                 let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
                 self.notice = format!("opened {} ({} Gaussians, SH degree {})", path.display(), g.len(), g.sh_degree);
                 self.set_scene(name, g);
+                self.run.log.extend(f.warnings.iter().map(|w| format!("scene: {w}")));
                 if let Some((set, dir)) = f.cameras {
                     self.set_cameras(set, &dir);
                 }
@@ -552,7 +553,7 @@ impl StudioApp {
             self.run.send(Command::Pause);
             eprintln!("studio: scripted run paused after {} steps ({:?})", self.run.steps.len(), self.run.status);
             if let (Some(path), Some(g)) = (export, self.current()) {
-                match gast_core::scene::save_ply(&path, &g) {
+                match gast_core::scene::save(&path, &g, &Default::default()) {
                     Ok(()) => eprintln!("studio: exported {} Gaussians to {}", g.len(), path.display()),
                     Err(e) => self.report(anyhow::Error::new(e).context("exporting the scripted run")),
                 }

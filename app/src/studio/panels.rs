@@ -39,11 +39,16 @@ impl StudioApp {
         let cam = self.viewport_camera();
         ui.add_enabled_ui(current.is_some(), |ui| {
             let Some(g) = current else { return };
-            if ui.button("Current Gaussians as .ply…").clicked()
-                && let Some(p) =
-                    rfd::FileDialog::new().add_filter("PLY", &["ply"]).set_file_name("stylized.ply").save_file()
+            // The name's ending picks the format (NAME.compressed.ply for PlayCanvas's).
+            if ui.button("Current Gaussians as .ply, .compressed.ply, .spz or .sog…").clicked()
+                && let Some(p) = rfd::FileDialog::new()
+                    .add_filter("INRIA PLY or PlayCanvas NAME.compressed.ply", &["ply"])
+                    .add_filter("Niantic SPZ", &["spz"])
+                    .add_filter("PlayCanvas SOG bundle", &["sog"])
+                    .set_file_name("stylized.ply")
+                    .save_file()
             {
-                self.jobs.export_ply(g.clone(), p);
+                self.jobs.export_scene(g.clone(), p);
             }
             if ui.button("Current view as PNG…").clicked()
                 && let Some(p) =

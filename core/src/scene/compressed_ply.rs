@@ -19,6 +19,10 @@
 //! Quantisation steps per chunk: position `(max−min)/2047` (x, z) and
 //! `/1023` (y), log-scale likewise, colour `(max−min)/255`, alpha `1/255`,
 //! quaternion components `√2/1023`, SH `8/256`.
+//!
+//! The writer computes those bounds per chunk (colour bounds included) and
+//! rounds to the nearest step, except SH, which takes the bucket holding the
+//! value as PlayCanvas's writer does.
 
 use std::path::Path;
 
@@ -221,6 +225,123 @@ pub(crate) fn read_compressed_ply(path: &Path, bytes: &[u8], header: &Header) ->
     Ok(g)
 }
 
+/// Quantises `v` between `lo` and `hi` to a `bits`-bit unorm (0 when the range is empty).
+fn quantise(v: f32, lo: f32, hi: f32, bits: u32) -> u32 {
+    let max = ((1u32 << bits) - 1) as f32;
+    let t = if hi > lo { (v - lo) / (hi - lo) } else { 0.0 };
+    (t.clamp(0.0, 1.0) * max).round() as u32
+}
+
+/// Packs three values as 11/10/11 bits (x high) between per-axis bounds.
+fn pack_111011(v: [f32; 3], lo: &[f32], hi: &[f32]) -> u32 {
+    quantise(v[0], lo[0], hi[0], 11) << 21 | quantise(v[1], lo[1], hi[1], 10) << 11 | quantise(v[2], lo[2], hi[2], 11)
+}
+
+/// Smallest-three packing of a (w, x, y, z) quaternion, the inverse of [`unpack_rotation`].
+pub(crate) fn pack_rotation(q: [f32; 4]) -> u32 {
+    let q = super::normalised_largest_positive(q);
+    let largest = super::largest_abs(&q);
+    let mut word = largest as u32;
+    for (c, v) in q.iter().enumerate() {
+        if c != largest {
+            let u = ((v / std::f32::consts::SQRT_2 + 0.5) * 1023.0).round().clamp(0.0, 1023.0) as u32;
+            word = word << 10 | u;
+        }
+    }
+    word
+}
+
+/// The SH byte whose bucket holds `v` (values beyond ±4 clamp), the inverse of [`sh_byte`].
+fn to_sh_byte(v: f32) -> u8 {
+    ((v / 8.0 + 0.5) * 256.0).floor().clamp(0.0, 255.0) as u8
+}
+
+/// The compressed PLY header for `n` Gaussians with `rest` higher SH bytes each.
+fn header_text(n: usize, rest: usize) -> String {
+    let mut h = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment written by gast\nelement chunk {}\n",
+        n.div_ceil(CHUNK_SIZE)
+    );
+    for name in CHUNK_BOUNDS.iter().chain(&CHUNK_COLOUR) {
+        h += &format!("property float {name}\n");
+    }
+    h += &format!("element vertex {n}\n");
+    for name in PACKED {
+        h += &format!("property uint {name}\n");
+    }
+    if rest > 0 {
+        h += &format!("element sh {n}\n");
+        for j in 0..rest {
+            h += &format!("property uchar f_rest_{j}\n");
+        }
+    }
+    h + "end_header\n"
+}
+
+/// Writes `g` as a PlayCanvas compressed PLY: per chunk of 256 the bounds of
+/// positions, log-scales and DC colours, then the packed words, then the SH
+/// bytes (channel-major, as in INRIA files). Order is kept.
+pub(crate) fn write_compressed_ply(out: &mut impl std::io::Write, g: &Gaussians) -> std::io::Result<()> {
+    let n = g.len();
+    let k = g.sh_coeffs();
+    out.write_all(header_text(n, (k - 1) * 3).as_bytes())?;
+    let colour = |i: usize| -> [f32; 3] { [0, 1, 2].map(|ch| g.sh_of(i)[ch] * SH_C0 + 0.5) };
+    let mut table: Vec<[f32; 18]> = Vec::with_capacity(n.div_ceil(CHUNK_SIZE));
+    let mut buf = Vec::with_capacity(n.div_ceil(CHUNK_SIZE) * 72);
+    for c in 0..n.div_ceil(CHUNK_SIZE) {
+        let mut row =
+            [f32::INFINITY, f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY]
+                .repeat(3);
+        for i in c * CHUNK_SIZE..((c + 1) * CHUNK_SIZE).min(n) {
+            for (group, v) in [g.means[i], g.log_scales[i], colour(i)].iter().enumerate() {
+                for a in 0..3 {
+                    row[group * 6 + a] = row[group * 6 + a].min(v[a]);
+                    row[group * 6 + 3 + a] = row[group * 6 + 3 + a].max(v[a]);
+                }
+            }
+        }
+        let mut bounds = [0.0f32; 18];
+        bounds.copy_from_slice(&row);
+        for v in bounds {
+            buf.extend_from_slice(&v.to_le_bytes());
+        }
+        table.push(bounds);
+    }
+    out.write_all(&buf)?;
+    buf.clear();
+    for i in 0..n {
+        let t = &table[i / CHUNK_SIZE];
+        let col = colour(i);
+        let alpha = 1.0 / (1.0 + (-g.opacity_logits[i]).exp());
+        let rgba = [
+            quantise(col[0], t[12], t[15], 8),
+            quantise(col[1], t[13], t[16], 8),
+            quantise(col[2], t[14], t[17], 8),
+            quantise(alpha, 0.0, 1.0, 8),
+        ];
+        let words = [
+            pack_111011(g.means[i], &t[0..3], &t[3..6]),
+            pack_rotation(g.quats[i]),
+            pack_111011(g.log_scales[i], &t[6..9], &t[9..12]),
+            rgba[0] << 24 | rgba[1] << 16 | rgba[2] << 8 | rgba[3],
+        ];
+        for w in words {
+            buf.extend_from_slice(&w.to_le_bytes());
+        }
+    }
+    out.write_all(&buf)?;
+    buf.clear();
+    for i in 0..n {
+        let sh = g.sh_of(i);
+        for ch in 0..3 {
+            for kk in 1..k {
+                buf.push(to_sh_byte(sh[kk * 3 + ch]));
+            }
+        }
+    }
+    out.write_all(&buf)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -235,6 +356,25 @@ mod tests {
             let n: f32 = q.iter().map(|v| v * v).sum();
             assert!((n - 1.0).abs() < 1e-5);
         }
+    }
+
+    #[test]
+    fn rotation_packs_back_to_itself() {
+        for q in [[1.0, 0.0, 0.0, 0.0], [0.1, -0.7, 0.2, 0.3], [-0.5, 0.5, -0.5, 0.5], [0.0, 0.0, 0.0, -2.0]] {
+            let n = q.iter().map(|v: &f32| v * v).sum::<f32>().sqrt();
+            let back = unpack_rotation(pack_rotation(q));
+            let dot: f32 = (0..4).map(|c| back[c] * q[c] / n).sum();
+            assert!(dot.abs() > 1.0 - 1e-5, "{q:?} came back as {back:?}");
+        }
+    }
+
+    #[test]
+    fn sh_bytes_invert_within_half_a_bucket() {
+        for b in 1..=254u8 {
+            assert_eq!(to_sh_byte(sh_byte(b)), b);
+        }
+        assert_eq!(to_sh_byte(-9.0), 0);
+        assert_eq!(to_sh_byte(9.0), 255);
     }
 
     #[test]

@@ -13,23 +13,31 @@
 //! counts against the bytes that are really there before allocating, and
 //! every decoded scene is validated (finite values, non-zero quaternions)
 //! before it is returned; [`save_ply`] applies the same check, so whatever it
-//! writes [`load`] reads back.
+//! writes [`load`] reads back. [`save`] writes any of these formats, chosen
+//! by the output's name (`save.rs`).
 
 mod compressed_ply;
 mod error;
+mod kmeans;
 mod ply;
 mod ply_header;
+mod save;
 mod sog;
+mod sog_write;
 mod spz;
 #[cfg(test)]
 mod test_util;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_write;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 pub use error::SceneError;
+pub use ply::{LOG_SCALE_INF, LOG_SCALE_NEG_INF, OPACITY_LOGIT_INF, OPACITY_LOGIT_NEG_INF};
+pub use save::{OUTPUT_NAMES, SaveOptions, SceneFormat, save, save_with_progress};
 
 /// SH basis constant of band 0: rendered colour is `0.5 + C0 · c_0 + …`.
 pub const SH_C0: f32 = 0.282_094_8;
@@ -120,20 +128,42 @@ impl Gaussians {
 /// (ASCII or binary), PlayCanvas compressed `.ply`, Niantic `.spz` (gzip v2/v3
 /// or zstd v4), or a PlayCanvas SOG directory, its `meta.json`, or a `.sog`
 /// zip bundle.
+/// Warnings (values the reader had to repair) are dropped; use
+/// [`load_with_warnings`] to show them.
 pub fn load(path: impl AsRef<Path>) -> Result<Gaussians, SceneError> {
+    load_with_warnings(path).map(|(g, _)| g)
+}
+
+/// [`load`], also returning the readers' warnings: one message per kind of
+/// repair, with counts (today: infinite opacity logits or log-scales in an
+/// INRIA `.ply`, replaced by finite values that render the same).
+pub fn load_with_warnings(path: impl AsRef<Path>) -> Result<(Gaussians, Vec<String>), SceneError> {
     let path = path.as_ref();
     if path.is_dir() {
-        return sog::read_sog(&path.join("meta.json"));
+        return sog::read_sog(&path.join("meta.json")).map(|g| (g, Vec::new()));
     }
     let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
-    load_from_bytes(path, &bytes)
+    load_from_bytes_with_warnings(path, &bytes)
 }
 
 /// Decodes a scene file already held in memory, recognising the format as
 /// [`load`] does. `path` names the file in errors; for a SOG `meta.json` the
 /// textures are read from beside it.
 pub fn load_from_bytes(path: impl AsRef<Path>, bytes: &[u8]) -> Result<Gaussians, SceneError> {
-    let path = path.as_ref();
+    load_from_bytes_with_warnings(path, bytes).map(|(g, _)| g)
+}
+
+/// [`load_from_bytes`], also returning the readers' warnings.
+pub fn load_from_bytes_with_warnings(
+    path: impl AsRef<Path>,
+    bytes: &[u8],
+) -> Result<(Gaussians, Vec<String>), SceneError> {
+    let mut warnings = Vec::new();
+    let g = decode(path.as_ref(), bytes, &mut warnings)?;
+    Ok((g, warnings))
+}
+
+fn decode(path: &Path, bytes: &[u8], warnings: &mut Vec<String>) -> Result<Gaussians, SceneError> {
     if bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r\n") {
         let header = ply_header::parse_header(path, bytes)?;
         let compressed =
@@ -141,7 +171,7 @@ pub fn load_from_bytes(path: impl AsRef<Path>, bytes: &[u8]) -> Result<Gaussians
         return if compressed {
             compressed_ply::read_compressed_ply(path, bytes, &header)
         } else {
-            ply::read_ply_bytes(path, bytes, &header)
+            ply::read_ply_bytes(path, bytes, &header, warnings)
         };
     }
     if bytes.starts_with(&[0x1f, 0x8b]) || bytes.starts_with(b"NGSP") {
@@ -250,6 +280,20 @@ pub(crate) fn atomic_write(
         return Err(SceneError::io(path, e));
     }
     Ok(())
+}
+
+/// Index of the component of `q` with the largest magnitude (the first on ties).
+pub(crate) fn largest_abs(q: &[f32; 4]) -> usize {
+    (1..4).fold(0, |best, c| if q[c].abs() > q[best].abs() { c } else { best })
+}
+
+/// `q` scaled to unit length and negated if needed so that its largest
+/// component is positive (q and −q are the same rotation), as the
+/// smallest-three packings need.
+pub(crate) fn normalised_largest_positive(q: [f32; 4]) -> [f32; 4] {
+    let norm = q.iter().map(|v| v * v).sum::<f32>().sqrt();
+    let s = if q[largest_abs(&q)] < 0.0 { -1.0 / norm } else { 1.0 / norm };
+    q.map(|v| v * s)
 }
 
 /// Inverse sigmoid of a quantised opacity, clamped to [1e-6, 1 − 1e-6] so

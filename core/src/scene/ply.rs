@@ -31,8 +31,53 @@ fn degree_for_rest(count: usize) -> Option<u32> {
     }
 }
 
+/// Finite stand-in for an opacity logit of +inf: the smallest round value
+/// whose sigmoid is exactly 1 in f32 both as `1/(1 + e^−x)` (needs
+/// `e^−x ≤ 2^−24`, x ≥ 16.7) and as `e^x/(1 + e^x)` (needs `e^x ≥ 2^25`,
+/// x ≥ 17.4), while `e^x` stays far from overflow.
+pub const OPACITY_LOGIT_INF: f32 = 20.0;
+/// Finite stand-in for an opacity logit of −inf: `1/(1 + e^110)` is 0 in f32
+/// because `e^110` overflows to inf, and `e^−110` underflows to 0, so the
+/// sigmoid is exactly 0 whichever way it is computed.
+pub const OPACITY_LOGIT_NEG_INF: f32 = -110.0;
+/// Finite stand-in for a log-scale of +inf: a standard deviation of e^10 ≈
+/// 22,000 units, far beyond any captured scene, so the Gaussian covers the
+/// whole view at near-constant alpha as an infinite one would, while its
+/// projected 2D covariance and that covariance's determinant stay finite in
+/// f32 (about f²·e^20/z² ≤ 10^17 px² for f = 2000 px and depth 0.1).
+pub const LOG_SCALE_INF: f32 = 10.0;
+/// Finite stand-in for a log-scale of −inf: a standard deviation of e^−30
+/// (variance ~10^−26), whose projected footprint is some 10^−20 px², far under
+/// the 0.3 px² screen-space dilation, so it renders as a zero-size Gaussian.
+pub const LOG_SCALE_NEG_INF: f32 = -30.0;
+
+/// Replaces infinite opacity logits and log-scales (which some tools write,
+/// e.g. splat-transform for an opacity of exactly 1) by the finite values
+/// above; returns how many of each were replaced. NaN is left for
+/// [`validate`] to refuse.
+fn clamp_infinities(g: &mut Gaussians) -> (usize, usize) {
+    let fix = |v: &mut f32, hi: f32, lo: f32| {
+        if v.is_infinite() {
+            *v = if *v > 0.0 { hi } else { lo };
+            1
+        } else {
+            0
+        }
+    };
+    let opacity = g.opacity_logits.iter_mut().map(|o| fix(o, OPACITY_LOGIT_INF, OPACITY_LOGIT_NEG_INF)).sum();
+    let scales = g.log_scales.iter_mut().flatten().map(|s| fix(s, LOG_SCALE_INF, LOG_SCALE_NEG_INF)).sum();
+    (opacity, scales)
+}
+
 /// Reads an INRIA `.ply` held in `bytes` (already known to start with `ply`).
-pub(crate) fn read_ply_bytes(path: &Path, bytes: &[u8], header: &Header) -> Result<Gaussians, SceneError> {
+/// Infinite opacity logits and log-scales are clamped (see [`OPACITY_LOGIT_INF`]
+/// and the others) and counted in one message pushed to `warnings`.
+pub(crate) fn read_ply_bytes(
+    path: &Path,
+    bytes: &[u8],
+    header: &Header,
+    warnings: &mut Vec<String>,
+) -> Result<Gaussians, SceneError> {
     let (vi, vertex) = header.element("vertex").ok_or_else(|| {
         let names: Vec<&str> = header.elements.iter().map(|e| e.name.as_str()).collect();
         SceneError::format(path, "element vertex", "a `vertex` element", format!("elements [{}]", names.join(", ")))
@@ -94,6 +139,15 @@ pub(crate) fn read_ply_bytes(path: &Path, bytes: &[u8], header: &Header) -> Resu
                 sh[kk * 3 + ch] = f(&r[ch * (k - 1) + (kk - 1)], i);
             }
         }
+    }
+    let (opacity, scales) = clamp_infinities(&mut g);
+    if opacity + scales > 0 {
+        warnings.push(format!(
+            "{}: {opacity} infinite opacity logits replaced by {OPACITY_LOGIT_INF} or {OPACITY_LOGIT_NEG_INF} \
+             (sigmoid exactly 1 or 0, as infinity gives) and {scales} infinite log-scales by {LOG_SCALE_INF} \
+             or {LOG_SCALE_NEG_INF}, among {n} Gaussians",
+            path.display()
+        ));
     }
     validate(path, &g)?;
     Ok(g)

@@ -25,6 +25,7 @@
 //! negated (`S R S` with `S = diag(1, −1, −1)`), and each SH coefficient whose
 //! basis function is odd under (y, z) → (−y, −z) negated. The shared
 //! `biker.spz` then matches `biker.compressed.ply` Gaussian for Gaussian.
+//! The writer applies the same flip and rounds every field to its nearest step.
 
 use std::io::Read;
 use std::path::Path;
@@ -286,40 +287,114 @@ fn decode(path: &Path, lay: &Layout, parts: &[Vec<u8>]) -> Result<Gaussians, Sce
 }
 
 /// Builds `.spz` bytes for tests: `version` 3 (gzip) or 4 (zstd), from raw
-/// attribute arrays (positions, alphas, colours, scales, rotations, SH).
+/// attribute arrays (positions, alphas, colours, scales, rotations, SH), with
+/// Niantic's 12 fractional bits.
 #[cfg(test)]
 pub(crate) fn encode_for_test(version: u32, n: u32, degree: u8, parts: &[Vec<u8>; 6]) -> Vec<u8> {
+    container(version, n, degree, 12, parts).expect("encode to memory")
+}
+
+/// Wraps the attribute arrays in a version 3 (one gzip stream) or version 4
+/// (plain header, table of sizes, one zstd frame per non-empty array) file.
+fn container(version: u32, n: u32, degree: u8, fractional_bits: u8, parts: &[Vec<u8>; 6]) -> std::io::Result<Vec<u8>> {
     use std::io::Write;
     let mut head = Vec::new();
     head.extend_from_slice(MAGIC);
     head.extend_from_slice(&version.to_le_bytes());
     head.extend_from_slice(&n.to_le_bytes());
     if version == 4 {
-        let streams: Vec<&Vec<u8>> = parts.iter().filter(|p| !p.is_empty()).collect();
-        head.extend_from_slice(&[degree, 12, 0, streams.len() as u8]);
+        let count = if parts[5].is_empty() { 5 } else { 6 };
+        head.extend_from_slice(&[degree, fractional_bits, 0, count]);
         head.extend_from_slice(&32u32.to_le_bytes());
         head.extend_from_slice(&[0; 12]);
-        let frames: Vec<Vec<u8>> = streams
+        let frames: Vec<Vec<u8>> = parts[..count as usize]
             .iter()
             .map(|s| ruzstd::encoding::compress_to_vec(s.as_slice(), ruzstd::encoding::CompressionLevel::Fastest))
             .collect();
-        for (f, s) in frames.iter().zip(&streams) {
+        for (f, s) in frames.iter().zip(&parts[..count as usize]) {
             head.extend_from_slice(&(f.len() as u64).to_le_bytes());
             head.extend_from_slice(&(s.len() as u64).to_le_bytes());
         }
         for f in frames {
             head.extend_from_slice(&f);
         }
-        head
+        Ok(head)
     } else {
-        head.extend_from_slice(&[degree, 12, 0, 0]);
+        head.extend_from_slice(&[degree, fractional_bits, 0, 0]);
+        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+        enc.write_all(&head)?;
         for p in parts {
-            head.extend_from_slice(p);
+            enc.write_all(p)?;
         }
-        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
-        enc.write_all(&head).expect("gzip to memory");
-        enc.finish().expect("gzip to memory")
+        enc.finish()
     }
+}
+
+/// The most fraction bits (at most 23, of a signed 24-bit fixed point) that
+/// still hold the largest coordinate of `g`; `None` when even 0 does not.
+fn fraction_bits_for(g: &Gaussians) -> Option<u8> {
+    let largest = g.means.iter().flatten().fold(0.0f64, |m, &v| m.max((v as f64).abs()));
+    (0..=23u8).rev().find(|&b| (largest * (1u64 << b) as f64).round() <= ((1 << 23) - 1) as f64)
+}
+
+/// A byte from a value already scaled to 0..255 (rounded, clamped).
+fn byte_of(v: f32) -> u8 {
+    v.round().clamp(0.0, 255.0) as u8
+}
+
+/// Smallest-three packing (v3+) of an (x, y, z, w) quaternion, the inverse of
+/// [`unpack_rotation_v3`].
+fn pack_rotation_v3(q: [f32; 4]) -> [u8; 4] {
+    let q = super::normalised_largest_positive(q);
+    let largest = super::largest_abs(&q);
+    let mask = (1u32 << 9) - 1;
+    let mut comp = largest as u32;
+    for (i, v) in q.iter().enumerate() {
+        if i != largest {
+            let mag = (v.abs() / std::f32::consts::FRAC_1_SQRT_2 * mask as f32).round().min(mask as f32) as u32;
+            comp = comp << 10 | u32::from(*v < 0.0) << 9 | mag;
+        }
+    }
+    comp.to_le_bytes()
+}
+
+/// Encodes `g` as a `.spz` of `version` 3 or 4, converting to the format's
+/// right-up-back frame (the inverse of the reader's flip). Positions use the
+/// most fraction bits the scene's extent allows (Niantic's writer always uses
+/// 12, which overflows beyond ±2048 units); a scene beyond ±2^23 is refused.
+pub(crate) fn encode(path: &Path, g: &Gaussians, version: u32) -> Result<Vec<u8>, SceneError> {
+    let n = g.len();
+    let count = u32::try_from(n).map_err(|_| fmt(path, "count", "at most 2^32 − 1 Gaussians", n.to_string()))?;
+    let bits = fraction_bits_for(g).ok_or_else(|| {
+        fmt(path, "positions", "coordinates within ±8388607 (24-bit fixed point)", "a larger coordinate")
+    })?;
+    let k = g.sh_coeffs();
+    let scale = (1u64 << bits) as f64;
+    let mut parts: [Vec<u8>; 6] = Default::default();
+    for i in 0..n {
+        let [x, y, z] = g.means[i];
+        for v in [x, -y, -z] {
+            let fixed = ((v as f64) * scale).round() as i32;
+            parts[0].extend_from_slice(&fixed.to_le_bytes()[..3]);
+        }
+        let alpha = 1.0 / (1.0 + (-g.opacity_logits[i]).exp());
+        parts[1].push(byte_of(alpha * 255.0));
+        let sh = g.sh_of(i);
+        for &c in &sh[..3] {
+            parts[2].push(byte_of((c * COLOR_SCALE + 0.5) * 255.0));
+        }
+        for s in g.log_scales[i] {
+            parts[3].push(byte_of((s + 10.0) * 16.0));
+        }
+        let [w, qx, qy, qz] = g.quats[i];
+        parts[4].extend_from_slice(&pack_rotation_v3([qx, -qy, -qz, w]));
+        for j in 0..k - 1 {
+            for ch in 0..3 {
+                parts[5].push(byte_of(SH_FLIP[j] * sh[(j + 1) * 3 + ch] * 128.0 + 128.0));
+            }
+        }
+    }
+    container(version, count, g.sh_degree as u8, bits, &parts).map_err(|e| SceneError::io(path, e))
 }
 
 #[cfg(test)]
@@ -331,5 +406,27 @@ mod tests {
         // largest = w (index 3), others zero → identity.
         let q = unpack_rotation_v3(&(3u32 << 30).to_le_bytes());
         assert_eq!(q, [1.0, 0.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn rotation_packs_back_to_itself() {
+        for q in [[0.0, 0.0, 0.0, 1.0], [0.1, -0.7, 0.2, 0.3], [-0.5, 0.5, -0.5, 0.5], [0.0, -2.0, 0.0, 0.0]] {
+            let n = q.iter().map(|v: &f32| v * v).sum::<f32>().sqrt();
+            let b = unpack_rotation_v3(&pack_rotation_v3(q)); // (w, x, y, z)
+            let back = [b[1], b[2], b[3], b[0]];
+            let dot: f32 = (0..4).map(|c| back[c] * q[c] / n).sum();
+            assert!(dot.abs() > 1.0 - 1e-5, "{q:?} came back as {back:?}");
+        }
+    }
+
+    #[test]
+    fn fraction_bits_fit_the_extent() {
+        let mut g = crate::scene::test_util::sample(3, 0);
+        g.means = vec![[0.0; 3], [2047.9, 0.0, 0.0], [0.0, -1.0, 0.0]];
+        assert_eq!(fraction_bits_for(&g), Some(12));
+        g.means[1][0] = 0.5;
+        assert_eq!(fraction_bits_for(&g), Some(22));
+        g.means[1][0] = 1e7;
+        assert_eq!(fraction_bits_for(&g), None);
     }
 }

@@ -1,0 +1,117 @@
+//! `gast convert` end to end: every output format from a real scene, names it
+//! cannot write, bad output folders, and an INRIA file with infinite opacity
+//! logits as splat-transform writes them.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use gast_tests::shared_file;
+
+fn gast(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_gast")).args(args).output().expect("run gast")
+}
+
+fn temp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("gast-convert-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn listing(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .expect("list")
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn converts_guitar_to_every_format_and_refuses_bad_outputs() {
+    let Some(scene) = shared_file("data/scenes/guitar.compressed.ply") else { return };
+    let out = temp("all");
+    let input = gast_core::scene::load(&scene).expect("input");
+    for name in ["g.ply", "g.compressed.ply", "g.spz", "g3.spz", "g.sog", "g-sog/"] {
+        let path = out.join(name);
+        let version = if name == "g3.spz" { "3" } else { "4" };
+        let o = gast(&["convert", s(&scene), s(&path), "--spz-version", version]);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        assert!(stderr(&o).contains("converted") && stderr(&o).contains("90854 Gaussians"), "{}", stderr(&o));
+        let back = gast_core::scene::load(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(back.len(), input.len(), "{name}");
+    }
+    let before = listing(&out);
+
+    let o = gast(&["convert", s(&scene), s(&out.join("g.splat"))]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("g.splat") && e.contains(".splat") && e.contains(".compressed.ply") && e.contains(".sog"),
+        "{e}"
+    );
+
+    // A missing folder, and a folder that is really a file (even root cannot write under it).
+    for bad in [out.join("missing/g.spz"), out.join("g.ply/g.spz"), out.join("g.ply/sog/")] {
+        let o = gast(&["convert", s(&scene), s(&bad)]);
+        assert!(!o.status.success(), "{}", bad.display());
+        let e = stderr(&o);
+        assert!(e.contains(s(&bad)) && e.contains("output folder"), "{e}");
+    }
+    assert_eq!(listing(&out), before, "a failed conversion left files behind");
+
+    // stylize refuses a scene name it cannot write before any work.
+    let o = gast(&["stylize", s(&scene), s(&scene), "--out", s(&out), "--scene-name", "x.splat"]);
+    assert!(!o.status.success() && stderr(&o).contains("x.splat"), "{}", stderr(&o));
+    std::fs::remove_dir_all(&out).ok();
+}
+
+/// An INRIA `.ply` written by `gast`, with some opacities patched to +inf and
+/// −inf as splat-transform writes them: it converts with one warning that
+/// counts them, and the Gaussians come out fully opaque and fully transparent.
+#[test]
+fn infinite_opacity_logits_read_with_one_warning() {
+    let Some(scene) = shared_file("data/scenes/guitar.compressed.ply") else { return };
+    let out = temp("inf");
+    let ply = out.join("g.ply");
+    let o = gast(&["convert", s(&scene), s(&ply)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut bytes = std::fs::read(&ply).expect("read");
+    let body = bytes.windows(11).position(|w| w == b"end_header\n").expect("header") + 11;
+    // 17 floats a row (x y z nx ny nz f_dc×3 opacity scale×3 rot×4); opacity is the 10th.
+    let patched = [(3usize, f32::INFINITY), (130, f32::INFINITY), (500, f32::NEG_INFINITY)];
+    for (row, v) in patched {
+        let at = body + (row * 17 + 9) * 4;
+        bytes[at..at + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    let inf = out.join("inf.ply");
+    std::fs::write(&inf, &bytes).expect("write");
+    let o = gast(&["convert", s(&inf), s(&out.join("back.spz"))]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert_eq!(e.matches("warning").count(), 1, "{e}");
+    assert!(e.contains("inf.ply") && e.contains("3 infinite opacity logits"), "{e}");
+    let back = gast_core::scene::load(out.join("back.spz")).expect("spz");
+    let alpha = |o: f32| 1.0 / (1.0 + (-o).exp());
+    assert!((alpha(back.opacity_logits[3]) - 1.0).abs() < 1e-5);
+    assert!((alpha(back.opacity_logits[130]) - 1.0).abs() < 1e-5);
+    assert!(alpha(back.opacity_logits[500]) < 1e-5);
+    // NaN stays an error.
+    let at = body + (7 * 17 + 9) * 4;
+    bytes[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    std::fs::write(&inf, &bytes).expect("write");
+    let o = gast(&["convert", s(&inf), s(&out.join("nan.spz"))]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("vertex 7: opacity") && stderr(&o).contains("NaN"), "{}", stderr(&o));
+    assert!(!out.join("nan.spz").exists());
+    std::fs::remove_dir_all(&out).ok();
+}
