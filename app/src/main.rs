@@ -8,6 +8,7 @@ mod cli;
 mod progress;
 mod report;
 mod studio;
+mod study;
 
 use clap::Parser;
 
