@@ -9,6 +9,7 @@ mod progress;
 mod report;
 mod studio;
 mod study;
+mod turntable;
 
 use clap::Parser;
 

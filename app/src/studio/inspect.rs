@@ -189,6 +189,20 @@ impl Jobs {
         });
     }
 
+    /// Writes a turntable of `g` (beside `after` when given) into `dir`; reports the GIF.
+    pub fn export_turntable(
+        &mut self,
+        g: SharedGaussians,
+        after: Option<SharedGaussians>,
+        opts: crate::turntable::TurntableOptions,
+        dir: PathBuf,
+    ) {
+        self.spawn(move || match crate::turntable::write(&dir, &g, after.as_deref(), &opts, &mut |_, _| {}) {
+            Ok(made) => JobDone::Exported(made.gif),
+            Err(e) => JobDone::Failed(format!("exporting the turntable: {}", crate::error_text(&e))),
+        });
+    }
+
     /// Writes Gaussians as `.ply`.
     pub fn export_ply(&mut self, g: SharedGaussians, path: PathBuf) {
         self.spawn(move || match gast_core::scene::save_ply(&path, &g) {
