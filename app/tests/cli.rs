@@ -202,3 +202,51 @@ fn turntables_write_frames_and_a_gif_and_compare_side_by_side() {
     std::fs::remove_dir_all(&out).ok();
     std::fs::remove_dir_all(&cmp).ok();
 }
+
+/// `gast` with the display variables removed, run in `dir`.
+fn gast_without_display(args: &[&str], dir: &Path, weights: &Path) -> Output {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_gast"));
+    for var in ["DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"] {
+        cmd.env_remove(var);
+    }
+    cmd.args(args).current_dir(dir).env("GAST_WEIGHTS", weights).output().expect("run gast")
+}
+
+const NO_DESKTOP: &str = "the studio needs a desktop session, and none was found \
+                          (DISPLAY, WAYLAND_DISPLAY and WAYLAND_SOCKET are unset)";
+
+#[test]
+fn without_a_display_gast_runs_the_headless_demo_and_studio_fails() {
+    let Some(weights) = shared_file("data/weights/vgg19-conv3.safetensors") else { return };
+    let dir = temp("first-run");
+    std::fs::create_dir_all(&dir).expect("temp folder");
+
+    let o = gast_without_display(&[], &dir, &weights);
+    let (out, err) = (String::from_utf8_lossy(&o.stdout), stderr(&o));
+    assert!(o.status.success(), "the demo failed:\n{out}\n{err}");
+    assert!(err.lines().next().is_some_and(|l| l == format!("{NO_DESKTOP}.")), "no sentence first:\n{err}");
+    let folder = out
+        .lines()
+        .find_map(|l| l.strip_prefix("the demo's outputs are in "))
+        .map(PathBuf::from)
+        .unwrap_or_else(|| panic!("the demo did not print its folder:\n{out}"));
+    assert!(folder.starts_with(&dir) && folder.is_dir(), "{} is not a folder in the current one", folder.display());
+    let stylized = gast_core::scene::load(folder.join("stylized.ply")).expect("the stylized demo scene");
+    assert!(stylized.len() > 3000, "{} Gaussians", stylized.len());
+    for v in 0..4 {
+        for tag in ["before", "after"] {
+            let png = image::open(folder.join(format!("view{v}_{tag}.png"))).expect("a demo render").to_rgb8();
+            let lit = png.pixels().filter(|p| p.0.iter().any(|&c| c > 20)).count();
+            assert!(lit > 1000, "view {v} {tag}: only {lit} lit pixels");
+        }
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(folder.join("report.json")).expect("report")).expect("json");
+    assert_eq!(report["steps"].as_array().map(Vec::len), Some(24), "the demo's schedule");
+    assert!(err.contains("optimisation: 24 steps"), "the stylization's summary is missing:\n{err}");
+
+    let o = gast_without_display(&["studio"], &dir, &weights);
+    assert!(!o.status.success(), "`gast studio` without a display must fail");
+    assert_eq!(stderr(&o).trim(), format!("error: {NO_DESKTOP}"));
+    std::fs::remove_dir_all(&dir).ok();
+}

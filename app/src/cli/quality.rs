@@ -326,7 +326,7 @@ fn summary_line(spec: &TrialSpec, o: &TrialOutcome) -> String {
 }
 
 /// `YYYYmmdd-HHMMSS` in UTC, from the system clock.
-fn utc_stamp() -> String {
+pub(super) fn utc_stamp() -> String {
     let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
     let (days, rem) = (secs / 86_400, secs % 86_400);
     // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
