@@ -8,6 +8,8 @@ mod cli;
 mod progress;
 mod report;
 mod studio;
+mod study;
+mod turntable;
 
 use clap::Parser;
 

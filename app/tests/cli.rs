@@ -155,3 +155,98 @@ fn bad_inputs_fail_with_the_file_named_and_keep_existing_outputs() {
     assert_eq!(std::fs::read(&bogus).expect("kept"), b"not a jpeg");
     std::fs::remove_dir_all(&out).ok();
 }
+
+/// Decodes an animated GIF: its frames' sizes.
+fn gif_frames(path: &Path) -> Vec<(u32, u32)> {
+    let file = std::io::BufReader::new(std::fs::File::open(path).expect("the GIF"));
+    let decoder = image::codecs::gif::GifDecoder::new(file).expect("a GIF");
+    let frames = image::AnimationDecoder::into_frames(decoder).collect_frames().expect("GIF frames");
+    frames.iter().map(|f| f.buffer().dimensions()).collect()
+}
+
+#[test]
+fn turntables_write_frames_and_a_gif_and_compare_side_by_side() {
+    let Some(scene) = shared_file("data/scenes/guitar.compressed.ply") else { return };
+    let out = temp("turntable");
+    let o = gast(&["render", s(&scene), "--out", s(&out), "--turntable", "6", "--size", "64"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let frames: Vec<PathBuf> = (0..6).map(|i| out.join(format!("turntable_{i:03}.png"))).collect();
+    let images: Vec<image::RgbImage> =
+        frames.iter().map(|f| image::open(f).expect("a turntable frame").to_rgb8()).collect();
+    assert!(!out.join("turntable_006.png").exists(), "more frames than asked");
+    for (i, img) in images.iter().enumerate() {
+        assert_eq!(img.dimensions(), (64, 64));
+        let lit = img.pixels().filter(|p| p.0.iter().any(|&c| c > 20)).count();
+        assert!(lit > 300, "frame {i}: only {lit} lit pixels");
+    }
+    assert!(images[0] != images[3], "the turntable does not turn");
+    assert_eq!(gif_frames(&out.join("turntable.gif")), vec![(64, 64); 6]);
+
+    // Before | after from the same cameras: the scene beside itself gives two
+    // halves equal to the turntable's own frames.
+    let cmp = temp("turntable-compare");
+    let o = gast(&["render", s(&scene), "--compare", s(&scene), "--out", s(&cmp), "--turntable", "6", "--size", "64"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(gif_frames(&cmp.join("turntable.gif")), vec![(128, 64); 6]);
+    for (i, alone) in images.iter().enumerate() {
+        let frame = image::open(cmp.join(format!("turntable_{i:03}.png"))).expect("a compare frame").to_rgb8();
+        assert_eq!(frame.dimensions(), (128, 64));
+        for x0 in [0, 64] {
+            let half = image::imageops::crop_imm(&frame, x0, 0, 64, 64).to_image();
+            assert!(half == *alone, "frame {i}: the half at x = {x0} is not the turntable's frame");
+        }
+    }
+
+    let o = gast(&["render", s(&scene), "--compare", s(&scene), "--out", s(&cmp)]);
+    assert!(!o.status.success(), "--compare without --turntable must be refused");
+    std::fs::remove_dir_all(&out).ok();
+    std::fs::remove_dir_all(&cmp).ok();
+}
+
+/// `gast` with the display variables removed, run in `dir`.
+fn gast_without_display(args: &[&str], dir: &Path, weights: &Path) -> Output {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_gast"));
+    for var in ["DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"] {
+        cmd.env_remove(var);
+    }
+    cmd.args(args).current_dir(dir).env("GAST_WEIGHTS", weights).output().expect("run gast")
+}
+
+const NO_DESKTOP: &str = "the studio needs a desktop session, and none was found \
+                          (DISPLAY, WAYLAND_DISPLAY and WAYLAND_SOCKET are unset)";
+
+#[test]
+fn without_a_display_gast_runs_the_headless_demo_and_studio_fails() {
+    let Some(weights) = shared_file("data/weights/vgg19-conv3.safetensors") else { return };
+    let dir = temp("first-run");
+    std::fs::create_dir_all(&dir).expect("temp folder");
+
+    let o = gast_without_display(&[], &dir, &weights);
+    let (out, err) = (String::from_utf8_lossy(&o.stdout), stderr(&o));
+    assert!(o.status.success(), "the demo failed:\n{out}\n{err}");
+    assert!(err.lines().next().is_some_and(|l| l == format!("{NO_DESKTOP}.")), "no sentence first:\n{err}");
+    let folder = out
+        .lines()
+        .find_map(|l| l.strip_prefix("the demo's outputs are in "))
+        .map(PathBuf::from)
+        .unwrap_or_else(|| panic!("the demo did not print its folder:\n{out}"));
+    assert!(folder.starts_with(&dir) && folder.is_dir(), "{} is not a folder in the current one", folder.display());
+    let stylized = gast_core::scene::load(folder.join("stylized.ply")).expect("the stylized demo scene");
+    assert!(stylized.len() > 3000, "{} Gaussians", stylized.len());
+    for v in 0..4 {
+        for tag in ["before", "after"] {
+            let png = image::open(folder.join(format!("view{v}_{tag}.png"))).expect("a demo render").to_rgb8();
+            let lit = png.pixels().filter(|p| p.0.iter().any(|&c| c > 20)).count();
+            assert!(lit > 1000, "view {v} {tag}: only {lit} lit pixels");
+        }
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(folder.join("report.json")).expect("report")).expect("json");
+    assert_eq!(report["steps"].as_array().map(Vec::len), Some(24), "the demo's schedule");
+    assert!(err.contains("optimisation: 24 steps"), "the stylization's summary is missing:\n{err}");
+
+    let o = gast_without_display(&["studio"], &dir, &weights);
+    assert!(!o.status.success(), "`gast studio` without a display must fail");
+    assert_eq!(stderr(&o).trim(), format!("error: {NO_DESKTOP}"));
+    std::fs::remove_dir_all(&dir).ok();
+}

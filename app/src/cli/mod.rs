@@ -3,6 +3,7 @@
 mod bench;
 mod check;
 pub mod convert;
+mod demo;
 mod fit;
 pub mod quality;
 mod render;
@@ -20,7 +21,8 @@ use crate::studio;
 
 /// GAST Studio: geometry-aware style transfer for 3D Gaussian Splatting scenes.
 ///
-/// Without a command, opens the studio on the demo scene and style.
+/// Without a command, opens the studio on the demo scene and style; without a
+/// desktop session, runs a short headless demo instead.
 #[derive(Parser, Debug)]
 #[command(name = "gast", version, about, long_about = None)]
 pub struct Cli {
@@ -132,11 +134,15 @@ pub struct ViewArgs {
 /// Runs the parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     let Some(command) = cli.command else {
+        if !demo::desktop_session() {
+            return demo::run();
+        }
         studio::run_with(studio::StudioArgs::default(), Some(studio::worker::starter()))?;
         return Ok(ExitCode::SUCCESS);
     };
     match command {
         Command::Studio { scene, style, device } => {
+            anyhow::ensure!(demo::desktop_session(), "{}", demo::NO_DESKTOP);
             studio::run_with(studio::StudioArgs { scene, style, device }, Some(studio::worker::starter()))?;
         }
         Command::Assets { out } => {

@@ -16,7 +16,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::Context;
-use clap::{Args, ValueEnum};
+use clap::Args;
 use gast_core::Gaussians;
 use gast_core::eval::{EvalOptions, StabilityThresholds, TrialOutcome, run_trial};
 use gast_core::session::{PreparedStyle, SessionInputs, StyleDepthSource, StyleImage, prepare_style};
@@ -24,7 +24,8 @@ use gast_core::style::{Mode, StyleConfig};
 
 use super::bench::shared_dir;
 use super::{ViewArgs, load_scene, views_for};
-use crate::report::quality::{Record, RunSummary, read_summary, rewrite_report, write_report};
+use crate::report::quality::{read_summary, rewrite_report, write_report};
+use crate::study::{Record, Row, RunSummary, SEED_LABEL, Sizes, Study, StyleSource, TrialSpec, mode_label};
 
 /// Arguments of `gast bench quality`.
 #[derive(Args, Debug)]
@@ -46,184 +47,6 @@ pub struct QualityArgs {
     /// results.json, without running anything.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["quick", "studies", "out"])]
     pub report: Option<PathBuf>,
-}
-
-/// The studies of the grid.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, ValueEnum, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Study {
-    /// The decoupled default on every scene × style pair.
-    Pairs,
-    /// The four optimisation modes over growing step budgets (the paper's first ablation).
-    Modes,
-    /// Working resolutions.
-    Resolution,
-    /// The geometry share N_g / (N_c + N_g) of each cycle (the paper's N_g ablation).
-    Ratio,
-    /// The GCFM weight λ_GC.
-    LambdaGc,
-    /// Settings pushed until they fail: high learning rates, geometry-only, long runs, extreme styles.
-    Stress,
-}
-
-impl Study {
-    /// All studies, in report order.
-    pub const ALL: [Study; 6] =
-        [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Pairs, Study::Stress];
-}
-
-/// A style: a file, or an extreme one made for the stress study.
-#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub enum StyleSource {
-    /// An image file.
-    File(PathBuf),
-    /// Uniform random RGB noise (no structure at any scale).
-    Noise,
-    /// A black-and-white checkerboard of 16-pixel squares (extreme contrast and edges).
-    Checker,
-    /// One flat grey (no variance at all: colour matching collapses the scene's colours).
-    Flat,
-}
-
-impl StyleSource {
-    /// A short name for tables and file names.
-    pub fn name(&self) -> String {
-        match self {
-            StyleSource::File(p) => p.file_stem().map_or("style".into(), |s| s.to_string_lossy().into_owned()),
-            StyleSource::Noise => "noise".into(),
-            StyleSource::Checker => "checker".into(),
-            StyleSource::Flat => "flat".into(),
-        }
-    }
-
-    /// The image.
-    pub fn image(&self) -> anyhow::Result<StyleImage> {
-        let (w, h) = (256usize, 256usize);
-        let generated = |f: &dyn Fn(usize, usize, usize) -> u8| StyleImage {
-            width: w,
-            height: h,
-            rgb: (0..w * h * 3).map(|i| f(i / 3 % w, i / 3 / w, i % 3)).collect(),
-        };
-        Ok(match self {
-            StyleSource::File(p) => StyleImage::open(p).map_err(anyhow::Error::msg)?,
-            StyleSource::Noise => {
-                let mut state = 0x9e37_79b9_7f4a_7c15u64;
-                let bytes: Vec<u8> = (0..w * h * 3)
-                    .map(|_| {
-                        state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
-                        (state >> 56) as u8
-                    })
-                    .collect();
-                StyleImage { width: w, height: h, rgb: bytes }
-            }
-            StyleSource::Checker => generated(&|x, y, _| if (x / 16 + y / 16) % 2 == 0 { 0 } else { 255 }),
-            StyleSource::Flat => generated(&|_, _, _| 128),
-        })
-    }
-}
-
-/// The sizes of a grid (full or `--quick`).
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-pub struct Sizes {
-    /// Working resolution of every study but `resolution` (longer side, px).
-    pub resolution: u32,
-    /// Evaluation resolution (longer side, px).
-    pub eval_resolution: u32,
-    /// Orbit views to optimise from.
-    pub views: usize,
-    /// Steps per cycle (N_c + N_g), the paper's 100 scaled down so short budgets still alternate.
-    pub steps_per_cycle: u32,
-    /// Budget of the scene × style pairs.
-    pub pair_budget: u32,
-    /// Budget of the mode curves of the first curve style (measured at every doubling from one cycle).
-    pub curve_budget: u32,
-    /// Budget of the ratio, λ_GC, resolution and stress rows.
-    pub ablation_budget: u32,
-    /// Budget of the long stress run.
-    pub long_budget: u32,
-    /// Working resolutions of the resolution study.
-    pub resolutions: Vec<u32>,
-    /// Scene files (relative to the shared folder).
-    pub scenes: Vec<String>,
-    /// Style files (relative to the shared folder).
-    pub styles: Vec<String>,
-    /// Styles of the mode curves and ablations.
-    pub curve_styles: Vec<String>,
-}
-
-const ALL_STYLES: [&str; 9] =
-    ["block2", "fire", "galaxy", "hydrangea", "mosaic", "particle", "starry", "stone", "wave"];
-
-impl Sizes {
-    /// The full grid: about half an hour on two cores.
-    pub fn full() -> Self {
-        Self {
-            resolution: 128,
-            eval_resolution: 192,
-            views: 36,
-            steps_per_cycle: 20,
-            pair_budget: 40,
-            curve_budget: 160,
-            ablation_budget: 80,
-            long_budget: 240,
-            resolutions: vec![64, 128, 192],
-            scenes: vec![
-                "data/scenes/guitar.compressed.ply".into(),
-                "data/scenes/biker.compressed.ply".into(),
-                "data/scenes/playbot-sog".into(),
-            ],
-            styles: ALL_STYLES.iter().map(|s| format!("data/styles/{s}.jpg")).collect(),
-            curve_styles: vec!["data/styles/wave.jpg".into(), "data/styles/block2.jpg".into()],
-        }
-    }
-
-    /// The `--quick` grid: the guitar, two styles, small images, a few minutes.
-    pub fn quick() -> Self {
-        Self {
-            resolution: 64,
-            eval_resolution: 96,
-            views: 12,
-            steps_per_cycle: 10,
-            pair_budget: 10,
-            curve_budget: 20,
-            ablation_budget: 10,
-            long_budget: 40,
-            resolutions: vec![48, 64],
-            scenes: vec!["data/scenes/guitar.compressed.ply".into()],
-            styles: vec!["data/styles/wave.jpg".into(), "data/styles/block2.jpg".into()],
-            curve_styles: vec!["data/styles/wave.jpg".into()],
-        }
-    }
-}
-
-/// One run of the grid.
-#[derive(Clone, Debug)]
-pub struct TrialSpec {
-    /// Unique, file-name-safe id.
-    pub id: String,
-    /// Index into the scenes.
-    pub scene: usize,
-    /// The style.
-    pub style: StyleSource,
-    /// The run's parameters (its budget is the largest any row asks).
-    pub config: StyleConfig,
-    /// Multiplier applied to every default learning rate (stress rows).
-    pub lr_scale: f32,
-    /// Steps to measure at (0 is the colour-matched input).
-    pub checkpoints: Vec<u32>,
-}
-
-/// One row of a study: a trial read at a step.
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-pub struct Row {
-    /// The study.
-    pub study: Study,
-    /// The row's label in the study's table.
-    pub label: String,
-    /// The trial's id.
-    pub trial: String,
-    /// The step it is read at (its budget).
-    pub step: u32,
 }
 
 /// The whole grid: trials and the rows that read them.
@@ -389,19 +212,6 @@ fn scaled_lr(scale: f32) -> gast_core::style::config::LearningRates {
     }
 }
 
-/// The label of the decoupled run with another view order (seed 1).
-pub const SEED_LABEL: &str = "decoupled, seed 1";
-
-/// The paper's name of a mode.
-pub fn mode_label(mode: Mode) -> &'static str {
-    match mode {
-        Mode::Decoupled => "decoupled",
-        Mode::Joint => "joint",
-        Mode::ColorOnly => "colour-only",
-        Mode::GeometryOnly => "geometry-only",
-    }
-}
-
 /// Runs the grid and writes the report.
 pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
     if let Some(dir) = &args.report {
@@ -517,7 +327,7 @@ fn summary_line(spec: &TrialSpec, o: &TrialOutcome) -> String {
 }
 
 /// `YYYYmmdd-HHMMSS` in UTC, from the system clock.
-fn utc_stamp() -> String {
+pub(super) fn utc_stamp() -> String {
     let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
     let (days, rem) = (secs / 86_400, secs % 86_400);
     // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).

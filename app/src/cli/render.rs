@@ -1,4 +1,6 @@
-//! `gast render`: PNG colour, PNG + EXR inverse depth of chosen or generated views.
+//! `gast render`: PNG colour, PNG + EXR inverse depth of chosen or generated views;
+//! or, with `--turntable N`, a turntable (frames and an animated GIF, see
+//! [`crate::turntable`]), optionally before | after side by side with `--compare`.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -6,10 +8,12 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::Args;
 use gast_core::io::{write_depth_png, write_exr_depth, write_png_rgb};
+use gast_core::Gaussians;
 use gast_core::raster::{self, RenderOptions};
 
 use super::{ViewArgs, load_scene, views_for};
 use crate::progress;
+use crate::turntable::{self, TurntableOptions};
 
 /// Arguments of `gast render`.
 #[derive(Args, Debug)]
@@ -24,13 +28,25 @@ pub struct RenderArgs {
     /// Background colour as r,g,b in [0, 1].
     #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [0.0, 0.0, 0.0])]
     pub background: Vec<f32>,
+    /// Instead of the views, N frames on a ring around the scene (`turntable_NNN.png`)
+    /// and a looping animated `turntable.gif`, `--size` pixels square.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=3600))]
+    pub turntable: Option<u32>,
+    /// A second scene (e.g. the stylized one) shown beside SCENE in every
+    /// turntable frame, from the same cameras: before | after.
+    #[arg(long, value_name = "OTHER", requires = "turntable")]
+    pub compare: Option<PathBuf>,
 }
 
 /// Renders every view and writes `NAME.png`, `NAME_depth.png` and `NAME_depth.exr`.
 pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
     let scene = load_scene(&args.scene)?;
+    let background = [args.background[0], args.background[1], args.background[2]];
+    if let Some(frames) = args.turntable {
+        return run_turntable(&args, &scene, frames as usize, background);
+    }
     let cameras = views_for(&scene, &args.views)?;
-    let opts = RenderOptions { background: [args.background[0], args.background[1], args.background[2]] };
+    let opts = RenderOptions { background };
     let pb = progress::bar(cameras.len() as u64, "render");
     let start = std::time::Instant::now();
     for cam in &cameras {
@@ -58,6 +74,33 @@ pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
         args.out.display(),
         start.elapsed().as_secs_f64()
     );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Writes the turntable of `scene` (beside `--compare`'s scene when given).
+fn run_turntable(args: &RenderArgs, scene: &Gaussians, frames: usize, background: [f32; 3]) -> anyhow::Result<ExitCode> {
+    let after = args.compare.as_deref().map(load_scene).transpose()?;
+    let opts = TurntableOptions {
+        frames,
+        size: args.views.size,
+        fov_y_degrees: args.views.fov,
+        background,
+        ..TurntableOptions::default()
+    };
+    let pb = progress::bar(frames as u64, "turntable");
+    let start = std::time::Instant::now();
+    let made = turntable::write(&args.out, scene, after.as_ref(), &opts, &mut |done, _| pb.set_position(done as u64))?;
+    pb.finish_and_clear();
+    eprintln!(
+        "rendered a {}-frame turntable of {}{} ({}x{} px) in {:.2} s",
+        made.frames.len(),
+        args.scene.display(),
+        args.compare.as_ref().map_or(String::new(), |p| format!(" beside {}", p.display())),
+        made.width,
+        made.height,
+        start.elapsed().as_secs_f64()
+    );
+    println!("{}", made.gif.display());
     Ok(ExitCode::SUCCESS)
 }
 

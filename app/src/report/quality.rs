@@ -7,91 +7,15 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use gast_core::eval::{Checkpoint, Degeneration, Measures, TrialOutcome};
+use gast_core::eval::Measures;
 use gast_core::io::{write_bytes, write_png_rgb};
 use gast_core::session::StyleImage;
 use gast_core::style::Mode;
-use serde::{Deserialize, Serialize};
 
 use super::chart::{Chart, Series, palette};
-use crate::cli::quality::{Row, SEED_LABEL, Sizes, Study, TrialSpec, mode_label};
-
-/// One trial as reported.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct Record {
-    /// The trial's id.
-    pub id: String,
-    /// Scene file, relative to the shared folder.
-    pub scene: String,
-    /// Gaussians in the scene.
-    pub gaussians: usize,
-    /// Gaussians optimised (seen by an optimisation camera).
-    pub optimised: usize,
-    /// Style name.
-    pub style: String,
-    /// Mode.
-    pub mode: String,
-    /// Geometry share of a cycle.
-    pub ratio_geo: f32,
-    /// λ_GC.
-    pub lambda_gc: f32,
-    /// Learning-rate multiplier.
-    pub lr_scale: f32,
-    /// Working resolution, px.
-    pub resolution: u32,
-    /// Steps per cycle.
-    pub steps_per_cycle: u32,
-    /// Scheduled steps.
-    pub budget: u32,
-    /// Steps run.
-    pub steps: u32,
-    /// Preparation seconds.
-    pub prepare_s: f64,
-    /// Measuring seconds (not in any checkpoint's time).
-    pub measure_s: f64,
-    /// No detector fired.
-    pub stable: bool,
-    /// What the detectors found.
-    pub issues: Vec<Degeneration>,
-    /// Measures along the way.
-    pub checkpoints: Vec<Checkpoint>,
-    /// Sample sheet of the final scene (input, result, their depths).
-    #[serde(skip)]
-    pub sample: (u32, u32, Vec<f32>),
-}
+use crate::study::{Record, Row, RunSummary, SEED_LABEL, Study, mode_label};
 
 impl Record {
-    /// The record of `spec`'s run.
-    pub fn new(spec: &TrialSpec, scene: &str, gaussians: usize, o: TrialOutcome) -> Self {
-        let sample = o.evaluator.sample_sheet(&o.result, 0);
-        Self {
-            id: spec.id.clone(),
-            scene: scene.to_string(),
-            gaussians,
-            optimised: o.optimised,
-            style: spec.style.name(),
-            mode: mode_label(spec.config.mode).into(),
-            ratio_geo: spec.config.ratio_geo,
-            lambda_gc: spec.config.weights.gcfm,
-            lr_scale: spec.lr_scale,
-            resolution: spec.config.resolution,
-            steps_per_cycle: spec.config.steps_per_cycle,
-            budget: spec.config.schedule().total_steps(),
-            steps: o.steps,
-            prepare_s: o.prepare_s,
-            measure_s: o.measure_s,
-            stable: o.stability.is_healthy(),
-            issues: o.stability.issues,
-            checkpoints: o.checkpoints,
-            sample,
-        }
-    }
-
-    /// The checkpoint at `step`, or the last one when the run stopped earlier.
-    pub fn at(&self, step: u32) -> Option<&Checkpoint> {
-        self.checkpoints.iter().find(|c| c.step == step).or_else(|| self.checkpoints.last().filter(|c| c.step < step))
-    }
-
     fn scene_name(&self) -> String {
         let name = Path::new(&self.scene).file_name().map_or(self.scene.clone(), |s| s.to_string_lossy().into_owned());
         name.split('.').next().unwrap_or(&name).trim_end_matches("-sog").to_string()
@@ -108,25 +32,6 @@ impl Record {
                 .join("; ")
         }
     }
-}
-
-/// What `results.json` holds: enough to rewrite every table, chart and the index.
-#[derive(Debug, Serialize, Deserialize)]
-pub struct RunSummary {
-    /// The command line that ran the grid.
-    #[serde(default)]
-    pub command: String,
-    /// Worker threads.
-    #[serde(default)]
-    pub threads: usize,
-    /// The grid's sizes.
-    pub sizes: Sizes,
-    /// Wall-clock seconds of the whole run.
-    pub wall_s: f64,
-    /// Every study's rows.
-    pub rows: Vec<Row>,
-    /// Every trial.
-    pub trials: Vec<Record>,
 }
 
 /// Writes everything under `out` (`results.json`, sample renders, generated

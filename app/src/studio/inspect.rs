@@ -191,6 +191,20 @@ impl Jobs {
         });
     }
 
+    /// Writes a turntable of `g` (beside `after` when given) into `dir`; reports the GIF.
+    pub fn export_turntable(
+        &mut self,
+        g: SharedGaussians,
+        after: Option<SharedGaussians>,
+        opts: crate::turntable::TurntableOptions,
+        dir: PathBuf,
+    ) {
+        self.spawn(move || match crate::turntable::write(&dir, &g, after.as_deref(), &opts, &mut |_, _| {}) {
+            Ok(made) => JobDone::Exported(made.gif),
+            Err(e) => JobDone::Failed(format!("exporting the turntable: {}", crate::error_text(&e))),
+        });
+    }
+
     /// Writes Gaussians in the format the file's name asks for (`.ply`,
     /// `.compressed.ply`, `.spz`, `.sog`; see `gast_core::scene::save`).
     pub fn export_scene(&mut self, g: SharedGaussians, path: PathBuf) {

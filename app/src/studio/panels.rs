@@ -11,6 +11,7 @@ use gast_core::style::StyleConfig;
 use super::session_link::{RunStatus, StartRequest};
 use super::view::{UpAxis, ViewState};
 use super::{StudioApp, controls};
+use crate::turntable::TurntableOptions;
 
 impl StudioApp {
     pub(super) fn menu_bar(&mut self, ui: &mut Ui) {
@@ -62,7 +63,30 @@ impl StudioApp {
             {
                 self.jobs.export_depth(g.clone(), cam.clone(), p);
             }
+            ui.separator();
+            let compare = self.snapshot.is_some();
+            let label = if compare { "Turntable, before | after…" } else { "Turntable…" };
+            if ui
+                .button(label)
+                .on_hover_text("36 frames around the scene as PNG and an animated GIF, into a folder")
+                .clicked()
+                && let Some(dir) = rfd::FileDialog::new().set_title("Folder for the turntable").pick_folder()
+            {
+                self.export_turntable(dir, TurntableOptions::default());
+            }
         });
+    }
+
+    /// Starts writing a turntable into `dir` in the background: the loaded
+    /// scene, beside the newest snapshot of a run when there is one (the GIF's
+    /// path appears in the status line when it is done).
+    pub(super) fn export_turntable(&mut self, dir: std::path::PathBuf, opts: TurntableOptions) {
+        let Some(scene) = &self.scene else { return };
+        let before = scene.scene.gaussians.clone();
+        let after = self.snapshot.as_ref().map(|s| s.gaussians.clone());
+        let opts = TurntableOptions { up: self.view.up.vector().to_array(), background: self.background, ..opts };
+        self.notice = format!("writing a turntable into {}…", dir.display());
+        self.jobs.export_turntable(before, after, opts, dir);
     }
 
     pub(super) fn status_panel(&mut self, ui: &mut Ui) {

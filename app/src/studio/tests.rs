@@ -538,3 +538,30 @@ fn sh_split_across_two_bindings_renders_the_same() {
     let note = r.set_scene(&device, Side::Before, 1, &g).expect("upload").expect("a note");
     assert!(note.contains("SH degree 2 of 3"), "{note}");
 }
+
+#[test]
+fn turntable_export_runs_in_the_background_and_shows_its_gif() {
+    let mut app = test_app();
+    let dir = std::env::temp_dir().join(format!("gast-studio-turntable-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let opts = crate::turntable::TurntableOptions { frames: 5, size: 40, ..Default::default() };
+    app.export_turntable(dir.clone(), opts);
+    // The call only starts a job; the UI thread keeps going.
+    assert_eq!(app.jobs.running, 1);
+    for _ in 0..500 {
+        app.poll_workers();
+        if app.jobs.running == 0 {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    assert!(app.errors.is_empty(), "{:?}", app.errors);
+    let gif = dir.join(crate::turntable::GIF_NAME);
+    assert!(app.notice.contains(&gif.display().to_string()), "the notice does not show the GIF: {}", app.notice);
+    let file = std::io::BufReader::new(std::fs::File::open(&gif).expect("the GIF"));
+    let decoder = image::codecs::gif::GifDecoder::new(file).expect("a GIF");
+    let frames = image::AnimationDecoder::into_frames(decoder).collect_frames().expect("frames");
+    assert_eq!(frames.len(), 5);
+    assert_eq!(frames[0].buffer().dimensions(), (40, 40), "no snapshot: one panel per frame");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -1,0 +1,302 @@
+//! The quality study's definitions, shared by the command that runs it
+//! (`cli::quality`, which builds the grid and runs the trials) and the report
+//! that presents it (`report::quality`, which writes tables, charts and the
+//! index): the studies, the grid's sizes, one trial's specification, the rows
+//! that read trials, and what a run records. Both sides import them from here
+//! so neither reaches into the other.
+
+use std::path::PathBuf;
+
+use clap::ValueEnum;
+use gast_core::eval::{Checkpoint, Degeneration, TrialOutcome};
+use gast_core::session::StyleImage;
+use gast_core::style::{Mode, StyleConfig};
+use serde::{Deserialize, Serialize};
+
+/// The studies of the grid.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Study {
+    /// The decoupled default on every scene × style pair.
+    Pairs,
+    /// The four optimisation modes over growing step budgets (the paper's first ablation).
+    Modes,
+    /// Working resolutions.
+    Resolution,
+    /// The geometry share N_g / (N_c + N_g) of each cycle (the paper's N_g ablation).
+    Ratio,
+    /// The GCFM weight λ_GC.
+    LambdaGc,
+    /// Settings pushed until they fail: high learning rates, geometry-only, long runs, extreme styles.
+    Stress,
+}
+
+impl Study {
+    /// All studies, in report order.
+    pub const ALL: [Study; 6] =
+        [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Pairs, Study::Stress];
+}
+
+/// A style: a file, or an extreme one made for the stress study.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum StyleSource {
+    /// An image file.
+    File(PathBuf),
+    /// Uniform random RGB noise (no structure at any scale).
+    Noise,
+    /// A black-and-white checkerboard of 16-pixel squares (extreme contrast and edges).
+    Checker,
+    /// One flat grey (no variance at all: colour matching collapses the scene's colours).
+    Flat,
+}
+
+impl StyleSource {
+    /// A short name for tables and file names.
+    pub fn name(&self) -> String {
+        match self {
+            StyleSource::File(p) => p.file_stem().map_or("style".into(), |s| s.to_string_lossy().into_owned()),
+            StyleSource::Noise => "noise".into(),
+            StyleSource::Checker => "checker".into(),
+            StyleSource::Flat => "flat".into(),
+        }
+    }
+
+    /// The image.
+    pub fn image(&self) -> anyhow::Result<StyleImage> {
+        let (w, h) = (256usize, 256usize);
+        let generated = |f: &dyn Fn(usize, usize, usize) -> u8| StyleImage {
+            width: w,
+            height: h,
+            rgb: (0..w * h * 3).map(|i| f(i / 3 % w, i / 3 / w, i % 3)).collect(),
+        };
+        Ok(match self {
+            StyleSource::File(p) => StyleImage::open(p).map_err(anyhow::Error::msg)?,
+            StyleSource::Noise => {
+                let mut state = 0x9e37_79b9_7f4a_7c15u64;
+                let bytes: Vec<u8> = (0..w * h * 3)
+                    .map(|_| {
+                        state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+                        (state >> 56) as u8
+                    })
+                    .collect();
+                StyleImage { width: w, height: h, rgb: bytes }
+            }
+            StyleSource::Checker => generated(&|x, y, _| if (x / 16 + y / 16) % 2 == 0 { 0 } else { 255 }),
+            StyleSource::Flat => generated(&|_, _, _| 128),
+        })
+    }
+}
+
+/// The sizes of a grid (full or `--quick`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Sizes {
+    /// Working resolution of every study but `resolution` (longer side, px).
+    pub resolution: u32,
+    /// Evaluation resolution (longer side, px).
+    pub eval_resolution: u32,
+    /// Orbit views to optimise from.
+    pub views: usize,
+    /// Steps per cycle (N_c + N_g), the paper's 100 scaled down so short budgets still alternate.
+    pub steps_per_cycle: u32,
+    /// Budget of the scene × style pairs.
+    pub pair_budget: u32,
+    /// Budget of the mode curves of the first curve style (measured at every doubling from one cycle).
+    pub curve_budget: u32,
+    /// Budget of the ratio, λ_GC, resolution and stress rows.
+    pub ablation_budget: u32,
+    /// Budget of the long stress run.
+    pub long_budget: u32,
+    /// Working resolutions of the resolution study.
+    pub resolutions: Vec<u32>,
+    /// Scene files (relative to the shared folder).
+    pub scenes: Vec<String>,
+    /// Style files (relative to the shared folder).
+    pub styles: Vec<String>,
+    /// Styles of the mode curves and ablations.
+    pub curve_styles: Vec<String>,
+}
+
+const ALL_STYLES: [&str; 9] =
+    ["block2", "fire", "galaxy", "hydrangea", "mosaic", "particle", "starry", "stone", "wave"];
+
+impl Sizes {
+    /// The full grid: about half an hour on two cores.
+    pub fn full() -> Self {
+        Self {
+            resolution: 128,
+            eval_resolution: 192,
+            views: 36,
+            steps_per_cycle: 20,
+            pair_budget: 40,
+            curve_budget: 160,
+            ablation_budget: 80,
+            long_budget: 240,
+            resolutions: vec![64, 128, 192],
+            scenes: vec![
+                "data/scenes/guitar.compressed.ply".into(),
+                "data/scenes/biker.compressed.ply".into(),
+                "data/scenes/playbot-sog".into(),
+            ],
+            styles: ALL_STYLES.iter().map(|s| format!("data/styles/{s}.jpg")).collect(),
+            curve_styles: vec!["data/styles/wave.jpg".into(), "data/styles/block2.jpg".into()],
+        }
+    }
+
+    /// The `--quick` grid: the guitar, two styles, small images, a few minutes.
+    pub fn quick() -> Self {
+        Self {
+            resolution: 64,
+            eval_resolution: 96,
+            views: 12,
+            steps_per_cycle: 10,
+            pair_budget: 10,
+            curve_budget: 20,
+            ablation_budget: 10,
+            long_budget: 40,
+            resolutions: vec![48, 64],
+            scenes: vec!["data/scenes/guitar.compressed.ply".into()],
+            styles: vec!["data/styles/wave.jpg".into(), "data/styles/block2.jpg".into()],
+            curve_styles: vec!["data/styles/wave.jpg".into()],
+        }
+    }
+}
+
+/// One run of the grid.
+#[derive(Clone, Debug)]
+pub struct TrialSpec {
+    /// Unique, file-name-safe id.
+    pub id: String,
+    /// Index into the scenes.
+    pub scene: usize,
+    /// The style.
+    pub style: StyleSource,
+    /// The run's parameters (its budget is the largest any row asks).
+    pub config: StyleConfig,
+    /// Multiplier applied to every default learning rate (stress rows).
+    pub lr_scale: f32,
+    /// Steps to measure at (0 is the colour-matched input).
+    pub checkpoints: Vec<u32>,
+}
+
+/// One row of a study: a trial read at a step.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Row {
+    /// The study.
+    pub study: Study,
+    /// The row's label in the study's table.
+    pub label: String,
+    /// The trial's id.
+    pub trial: String,
+    /// The step it is read at (its budget).
+    pub step: u32,
+}
+
+/// The label of the decoupled run with another view order (seed 1).
+pub const SEED_LABEL: &str = "decoupled, seed 1";
+
+/// The paper's name of a mode.
+pub fn mode_label(mode: Mode) -> &'static str {
+    match mode {
+        Mode::Decoupled => "decoupled",
+        Mode::Joint => "joint",
+        Mode::ColorOnly => "colour-only",
+        Mode::GeometryOnly => "geometry-only",
+    }
+}
+
+/// One trial as reported.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Record {
+    /// The trial's id.
+    pub id: String,
+    /// Scene file, relative to the shared folder.
+    pub scene: String,
+    /// Gaussians in the scene.
+    pub gaussians: usize,
+    /// Gaussians optimised (seen by an optimisation camera).
+    pub optimised: usize,
+    /// Style name.
+    pub style: String,
+    /// Mode.
+    pub mode: String,
+    /// Geometry share of a cycle.
+    pub ratio_geo: f32,
+    /// λ_GC.
+    pub lambda_gc: f32,
+    /// Learning-rate multiplier.
+    pub lr_scale: f32,
+    /// Working resolution, px.
+    pub resolution: u32,
+    /// Steps per cycle.
+    pub steps_per_cycle: u32,
+    /// Scheduled steps.
+    pub budget: u32,
+    /// Steps run.
+    pub steps: u32,
+    /// Preparation seconds.
+    pub prepare_s: f64,
+    /// Measuring seconds (not in any checkpoint's time).
+    pub measure_s: f64,
+    /// No detector fired.
+    pub stable: bool,
+    /// What the detectors found.
+    pub issues: Vec<Degeneration>,
+    /// Measures along the way.
+    pub checkpoints: Vec<Checkpoint>,
+    /// Sample sheet of the final scene (input, result, their depths).
+    #[serde(skip)]
+    pub sample: (u32, u32, Vec<f32>),
+}
+
+impl Record {
+    /// The record of `spec`'s run.
+    pub fn new(spec: &TrialSpec, scene: &str, gaussians: usize, o: TrialOutcome) -> Self {
+        let sample = o.evaluator.sample_sheet(&o.result, 0);
+        Self {
+            id: spec.id.clone(),
+            scene: scene.to_string(),
+            gaussians,
+            optimised: o.optimised,
+            style: spec.style.name(),
+            mode: mode_label(spec.config.mode).into(),
+            ratio_geo: spec.config.ratio_geo,
+            lambda_gc: spec.config.weights.gcfm,
+            lr_scale: spec.lr_scale,
+            resolution: spec.config.resolution,
+            steps_per_cycle: spec.config.steps_per_cycle,
+            budget: spec.config.schedule().total_steps(),
+            steps: o.steps,
+            prepare_s: o.prepare_s,
+            measure_s: o.measure_s,
+            stable: o.stability.is_healthy(),
+            issues: o.stability.issues,
+            checkpoints: o.checkpoints,
+            sample,
+        }
+    }
+
+    /// The checkpoint at `step`, or the last one when the run stopped earlier.
+    pub fn at(&self, step: u32) -> Option<&Checkpoint> {
+        self.checkpoints.iter().find(|c| c.step == step).or_else(|| self.checkpoints.last().filter(|c| c.step < step))
+    }
+}
+
+/// What `results.json` holds: enough to rewrite every table, chart and the index.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct RunSummary {
+    /// The command line that ran the grid.
+    #[serde(default)]
+    pub command: String,
+    /// Worker threads.
+    #[serde(default)]
+    pub threads: usize,
+    /// The grid's sizes.
+    pub sizes: Sizes,
+    /// Wall-clock seconds of the whole run.
+    pub wall_s: f64,
+    /// Every study's rows.
+    pub rows: Vec<Row>,
+    /// Every trial.
+    pub trials: Vec<Record>,
+}
+
