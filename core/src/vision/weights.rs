@@ -215,10 +215,12 @@ fn read_safetensors(path: &Path) -> Result<std::collections::HashMap<String, Raw
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn shared(rel: &str) -> Option<PathBuf> {
+    /// A file under `$GAST_SHARED` (else `../shared` beside the workspace), or
+    /// `None` after a loud message when it is absent.
+    pub(crate) fn shared(rel: &str) -> Option<PathBuf> {
         let base = std::env::var_os("GAST_SHARED")
             .map(PathBuf::from)
             .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
