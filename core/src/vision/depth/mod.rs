@@ -166,6 +166,12 @@ impl DepthAnything {
         Self::from_checkpoint(&ck, config)
     }
 
+    /// A network of `config`'s sizes with pseudo-random weights: for timing
+    /// the real architecture where the checkpoint is not at hand.
+    pub fn random(config: DepthConfig, seed: u64) -> Result<Self, DepthModelError> {
+        Self::from_checkpoint(&Checkpoint::random(seed), config)
+    }
+
     fn from_checkpoint(ck: &Checkpoint, config: DepthConfig) -> Result<Self, DepthModelError> {
         let vit = vit::Vit::load(ck, &config)?;
         let dpt = dpt::Dpt::load(ck, &config)?;

@@ -29,6 +29,8 @@ pub(crate) struct Checkpoint {
     entries: HashMap<String, Entry>,
     /// The header's `__metadata__` strings (the golden file keeps its config there).
     pub metadata: HashMap<String, String>,
+    /// When set, every tensor asked for is made up from this seed instead (for benchmarks).
+    random: Option<u64>,
 }
 
 impl Checkpoint {
@@ -63,7 +65,15 @@ impl Checkpoint {
                 .map_err(|e| format(format!("an unreadable header entry for tensor `{name}` ({e})")))?;
             entries.insert(name, e);
         }
-        Ok(Self { path: path.to_path_buf(), bytes, data_start: 8 + n, entries, metadata })
+        Ok(Self { path: path.to_path_buf(), bytes, data_start: 8 + n, entries, metadata, random: None })
+    }
+
+    /// A checkpoint that has every tensor with the shape asked for, filled
+    /// with small pseudo-random values (±0.05), like a freshly initialised
+    /// network: the real sizes' cost without the real weights.
+    pub(crate) fn random(seed: u64) -> Self {
+        let path = PathBuf::from(format!("<random weights, seed {seed}>"));
+        Self { path, bytes: Vec::new(), data_start: 0, entries: HashMap::new(), metadata: HashMap::new(), random: Some(seed) }
     }
 
     /// The path the checkpoint was read from.
@@ -73,6 +83,16 @@ impl Checkpoint {
 
     /// The tensor `name` as f32, checked to have `shape`.
     pub(crate) fn take(&self, name: &str, shape: &[usize]) -> Result<Vec<f32>, DepthModelError> {
+        if let Some(seed) = self.random {
+            let mut state = name.bytes().fold(seed ^ 0x9e37_79b9_7f4a_7c15, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3));
+            let count: usize = shape.iter().product();
+            return Ok((0..count)
+                .map(|_| {
+                    state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+                    ((state >> 40) as f32 / (1u64 << 24) as f32 - 0.5) * 0.1
+                })
+                .collect());
+        }
         let Some(e) = self.entries.get(name) else {
             return Err(DepthModelError::MissingTensor {
                 path: self.path.clone(),
