@@ -196,23 +196,32 @@ impl DepthAnything {
     /// own size, through the reference's pre- and post-processing.
     pub fn estimate_rgb(&self, rgb: &[f32], h: usize, w: usize) -> Vec<f32> {
         let (ih, iw) = input_size(h, w, INPUT_SIZE, self.config.patch_size);
-        let resized = resize_bicubic_antialias(rgb, h, w, 3, ih, iw);
+        let depth = self.forward(&self.preprocess(rgb, h, w, ih, iw), ih, iw);
+        resize_bicubic(&depth, ih, iw, 1, h, w)
+    }
+
+    /// The image resized to `ih × iw` (bicubic with antialiasing) and
+    /// ImageNet-normalised, as CHW.
+    fn preprocess(&self, rgb: &[f32], h: usize, w: usize, ih: usize, iw: usize) -> Vec<f32> {
         const MEAN: [f32; 3] = [0.485, 0.456, 0.406];
         const STD: [f32; 3] = [0.229, 0.224, 0.225];
+        let resized = resize_bicubic_antialias(rgb, h, w, 3, ih, iw);
         let mut chw = vec![0f32; 3 * ih * iw];
         for (i, px) in resized.chunks_exact(3).enumerate() {
             for c in 0..3 {
                 chw[c * ih * iw + i] = (px[c] - MEAN[c]) / STD[c];
             }
         }
-        let depth = self.forward(&chw, ih, iw);
-        resize_bicubic(&depth, ih, iw, 1, h, w)
+        chw
     }
 
-    /// The estimate as a depth image at the image's size (near = larger), to
-    /// compute once per style and reuse at every texture scale and polarity.
+    /// The estimate as a depth image (near = larger) at the network's input
+    /// size, to compute once per style: [`DepthImage`] resizes it to every
+    /// texture scale the style is used at, and polarity applies afterwards.
     pub fn depth_image(&self, rgb: &[f32], h: usize, w: usize) -> DepthImage {
-        DepthImage { values: self.estimate_rgb(rgb, h, w), height: h, width: w, near_is_larger: true }
+        let (ih, iw) = input_size(h, w, INPUT_SIZE, self.config.patch_size);
+        let values = self.forward(&self.preprocess(rgb, h, w, ih, iw), ih, iw);
+        DepthImage { values, height: ih, width: iw, near_is_larger: true }
     }
 }
 
