@@ -54,7 +54,7 @@ pub enum DepthPolarity {
 }
 
 /// Where the style's depth comes from (the config's `depth_provider`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum DepthProvider {
     /// Depth Anything V2 ([`super::depth`]), found or downloaded once; the
