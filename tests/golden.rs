@@ -1,7 +1,8 @@
 //! Every golden file against the project's code, through the same
 //! `gast_core::golden::check_file` that `gast check golden` runs: rasterizer
 //! forward and gradients, VGG features, GCFM (loss, gradients, matches),
-//! content, TV and the colour transfer, each with the tolerance of the issue.
+//! content, TV, the colour transfer and the Depth Anything V2 forward pass,
+//! each with the tolerance of the issue.
 
 use gast_core::golden::{CheckContext, check_file};
 use gast_tests::shared_file;
@@ -46,6 +47,11 @@ fn check_on(rel: &str, gpu: Option<gast_core::gpu::GpuContext>) {
 #[test]
 fn losses_match_golden() {
     check("golden/losses_seed1.safetensors");
+}
+
+#[test]
+fn depth_anything_matches_golden() {
+    check("golden/depth/depth_seed1.safetensors");
 }
 
 #[test]

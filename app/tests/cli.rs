@@ -113,6 +113,8 @@ fn stylize_writes_a_scene_renders_and_a_report() {
         "4",
         "--preview-views",
         "1",
+        "--depth-provider",
+        "heuristic",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let input = gast_core::scene::load(&scene).expect("input scene");

@@ -114,6 +114,8 @@ fn studio_runs_steps_and_exports_in_a_real_window() {
         .arg(&guitar)
         .arg(&style)
         .env("GAST_WEIGHTS", &weights)
+        // The learned style depth, end to end, from the golden file's small random network.
+        .envs(gast_tests::shared_file("golden/depth/depth_seed1.safetensors").map(|p| ("GAST_DEPTH_MODEL", p)))
         .env("GAST_STUDIO_PRESET", &preset)
         .env("GAST_STUDIO_RUN_STEPS", "12")
         .env("GAST_STUDIO_EXPORT", &export)

@@ -132,6 +132,8 @@ impl GoldenFile {
             Some(GoldenKind::Losses)
         } else if has("content_pixels") && has("A") {
             Some(GoldenKind::Color)
+        } else if has("out_predicted_depth") && has("input_pixel_values") {
+            Some(GoldenKind::Depth)
         } else {
             None
         }
@@ -147,6 +149,8 @@ pub enum GoldenKind {
     Losses,
     /// Linear colour transfer (`color_*`).
     Color,
+    /// A Depth Anything V2 forward pass (`depth/depth_*`).
+    Depth,
 }
 
 /// How an output is judged.
@@ -234,11 +238,12 @@ pub fn check_file(path: &Path, ctx: &CheckContext) -> Result<Vec<OutputCheck>, G
         Some(GoldenKind::Raster) => check_raster(&file, ctx.gpu.as_ref()),
         Some(GoldenKind::Losses) => check_losses(&file, ctx),
         Some(GoldenKind::Color) => check_color(&file),
+        Some(GoldenKind::Depth) => check_depth(&file),
         None => Err(GoldenError::Format {
             path: path.to_path_buf(),
             what: "tensor names".into(),
             expected:
-                "a raster (out_rgb, means, …), losses (gcfm_loss, …) or colour (content_pixels, A, …) golden file"
+                "a raster (out_rgb, means, …), losses (gcfm_loss, …), colour (content_pixels, A, …) or depth (input_pixel_values, out_predicted_depth) golden file"
                     .into(),
             found: file.tensors.keys().cloned().collect::<Vec<_>>().join(", "),
         }),
@@ -249,6 +254,40 @@ pub fn check_file(path: &Path, ctx: &CheckContext) -> Result<Vec<OutputCheck>, G
 const LOSS_TOL: Tolerance = Tolerance::RelToMax(1e-4);
 /// Gradients: within 1e-3 of the tensor's largest magnitude.
 const GRAD_TOL: Tolerance = Tolerance::RelToMax(1e-3);
+
+/// The depth network's output: within 1e-4 of its largest magnitude.
+const DEPTH_TOL: Tolerance = Tolerance::RelToMax(1e-4);
+
+/// Builds the network from the file's own weights and config metadata and
+/// runs it on `input_pixel_values`.
+fn check_depth(file: &GoldenFile) -> Result<Vec<OutputCheck>, GoldenError> {
+    let model = crate::vision::depth::DepthAnything::load_with_metadata_config(&file.path)
+        .map_err(|e| GoldenError::Run { path: file.path.clone(), message: e.to_string() })?;
+    let x = file.get("input_pixel_values")?;
+    let (h, w) = match x.shape[..] {
+        [1, 3, h, w] => (h, w),
+        _ => {
+            return Err(GoldenError::Format {
+                path: file.path.clone(),
+                what: "tensor input_pixel_values".into(),
+                expected: "shape [1, 3, H, W]".into(),
+                found: format!("shape {:?}", x.shape),
+            });
+        }
+    };
+    let p = model.config().patch_size;
+    if h % p != 0 || w % p != 0 {
+        return Err(GoldenError::Format {
+            path: file.path.clone(),
+            what: "tensor input_pixel_values".into(),
+            expected: format!("sides that are multiples of the patch size {p}"),
+            found: format!("{h}×{w}"),
+        });
+    }
+    let expected = file.get_shaped("out_predicted_depth", &[1, h, w])?;
+    let out = model.forward(&x.to_f32(), h, w);
+    Ok(vec![compare("out_predicted_depth", &widen(&out), expected, DEPTH_TOL)])
+}
 
 fn check_losses(file: &GoldenFile, ctx: &CheckContext) -> Result<Vec<OutputCheck>, GoldenError> {
     use crate::style::config::LossWeights;

@@ -9,7 +9,7 @@ use gast_core::golden::{CheckContext, check_file};
 /// Arguments of `gast check golden`.
 #[derive(Args, Debug)]
 pub struct GoldenArgs {
-    /// Golden files (safetensors, float64): raster_*, losses_*, color_*.
+    /// Golden files (safetensors, float64): raster_*, losses_*, color_*, depth/depth_*.
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
     /// VGG weights for losses_* files (else $GAST_WEIGHTS, the caches, or a download).

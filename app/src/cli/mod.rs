@@ -89,6 +89,9 @@ pub enum BenchCommand {
     Raster(bench::RasterArgs),
     /// Per-step breakdown of the optimisation, the whole schedule's time, peak memory.
     Step(bench::StepArgs),
+    /// The style depth network's time per style (Depth Anything V2: the checkpoint found
+    /// here, else random weights at the Small model's sizes).
+    Depth(bench::DepthArgs),
     /// Speed against quality over a grid of modes, budgets, resolutions, N_g ratios and
     /// λ_GC on the shared scenes and the nine styles; the stability study; the paper's
     /// ablation tables. Writes a folder with an index.md, CSV/JSON tables, charts and renders
@@ -154,6 +157,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Check(CheckCommand::Golden(args)) => return check::run_golden(args),
         Command::Bench(BenchCommand::Raster(args)) => return bench::run_raster(args),
         Command::Bench(BenchCommand::Step(args)) => return bench::run_step(args),
+        Command::Bench(BenchCommand::Depth(args)) => return bench::run_depth(args),
         Command::Bench(BenchCommand::Quality(args)) => return quality::run(args),
         Command::Bench(BenchCommand::Viewport { scene, count, frames, width, height }) => {
             println!("{}", studio::viewport::bench::run(scene.as_deref(), count, frames, width, height)?);

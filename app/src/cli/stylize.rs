@@ -16,7 +16,7 @@ use gast_core::gpu::DeviceChoice;
 use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::{Mode, StyleConfig};
 use gast_core::vision::Vgg;
-use gast_core::vision::style_depth::{DepthImage, DepthPolarity};
+use gast_core::vision::style_depth::{DepthImage, DepthPolarity, DepthProvider};
 use serde::Serialize;
 
 use super::{ViewArgs, load_scene, views_for};
@@ -57,9 +57,17 @@ pub struct StylizeArgs {
     /// VGG weights (.safetensors or .pth); else $GAST_WEIGHTS, the caches, or a download.
     #[arg(long)]
     pub weights: Option<PathBuf>,
-    /// A depth image for the style (PNG 8/16-bit or EXR); else a built-in estimate.
+    /// A depth image for the style (PNG 8/16-bit or EXR); implies `--depth-provider image`.
     #[arg(long)]
     pub style_depth: Option<PathBuf>,
+    /// Where the style's depth comes from: learned (Depth Anything V2), image (`--style-depth`)
+    /// or heuristic [default: learned, or image with `--style-depth`].
+    #[arg(long, value_parser = DepthProvider::parse)]
+    pub depth_provider: Option<DepthProvider>,
+    /// Depth Anything V2 checkpoint: a folder with model.safetensors and config.json, or the
+    /// file; else $GAST_DEPTH_MODEL, the caches, or a one-time download of the Small model.
+    #[arg(long)]
+    pub depth_model: Option<PathBuf>,
     /// Cycles K [default: 30].
     #[arg(long)]
     pub cycles: Option<u32>,
@@ -168,6 +176,10 @@ impl StylizeArgs {
         set!(self.lr_quats, c.lr.quats);
         set!(self.lr_opacity, c.lr.opacity);
         set!(self.depth_polarity, c.depth_polarity);
+        if self.style_depth.is_some() {
+            c.depth_provider = DepthProvider::Image;
+        }
+        set!(self.depth_provider, c.depth_provider);
         set!(self.seed, c.seed);
         let problems = c.problems();
         anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
@@ -181,6 +193,36 @@ fn parse_polarity(s: &str) -> Result<DepthPolarity, String> {
         "near-dark" | "reference" => Ok(DepthPolarity::NearDark),
         _ => Err(format!("expected near-bright or near-dark, found {s:?}")),
     }
+}
+
+/// The style's depth as the config's provider asks, with a progress bar for a
+/// download of the depth network and a visible warning when it falls back to
+/// the heuristic.
+pub fn resolve_style_depth(
+    config: &StyleConfig,
+    style: &StyleImage,
+    image: Option<&Path>,
+    model: Option<&Path>,
+) -> anyhow::Result<StyleDepthSource> {
+    let image = match image {
+        Some(p) => Some(DepthImage::from_file(p)?),
+        None => None,
+    };
+    let t = Instant::now();
+    let pb = progress::bytes_bar("depth model");
+    let (source, warning) = StyleDepthSource::resolve(config.depth_provider, image, model, style, &mut |done, total| {
+        if let Some(t) = total {
+            pb.set_length(t);
+        }
+        pb.set_position(done);
+    });
+    pb.finish_and_clear();
+    if let Some(w) = warning {
+        eprintln!("warning: {w}");
+    } else if config.depth_provider == DepthProvider::Learned {
+        eprintln!("  style depth (Depth Anything V2): {:.2} s", t.elapsed().as_secs_f64());
+    }
+    Ok(source)
 }
 
 /// Loads the VGG weights the usual way, with a progress bar for a download.
@@ -241,10 +283,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     }
     let scene = load_scene(&args.scene)?;
     let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
-    let style_depth = match &args.style_depth {
-        Some(p) => StyleDepthSource::Image(DepthImage::from_file(p)?),
-        None => StyleDepthSource::Heuristic,
-    };
+    let style_depth = resolve_style_depth(&config, &style, args.style_depth.as_deref(), args.depth_model.as_deref())?;
     let cameras = views_for(
         &scene,
         &ViewArgs { cameras: args.cameras.clone(), views: args.views, size: config.resolution, fov: args.fov },

@@ -7,7 +7,9 @@ use std::sync::Arc;
 
 use crossbeam_channel::{Receiver, Sender};
 use gast_core::session::StyleImage;
-use gast_core::vision::style_depth::{DepthPolarity, HeuristicDepth};
+use gast_core::session::StyleDepthSource;
+use gast_core::style::stage1;
+use gast_core::vision::style_depth::{DepthPolarity, DepthProvider, HeuristicDepth};
 use gast_core::{Camera, Gaussians};
 
 use super::viewport::SharedGaussians;
@@ -50,8 +52,8 @@ pub enum JobDone {
     Scene(PathBuf, anyhow::Result<SceneFile>),
     /// Inspection maps are ready.
     Maps(Box<Maps>),
-    /// The style's maps for a (style, texture scale, polarity) are ready.
-    StyleMaps(StyleMapsKey, Box<Maps>),
+    /// The style's maps for a [`StyleMapsKey`] are ready, with the depth's fallback warning.
+    StyleMaps(StyleMapsKey, Box<Maps>, Option<String>),
     /// A file was written.
     Exported(PathBuf),
     /// A job failed; the message names the file and the reason.
@@ -109,26 +111,30 @@ pub fn maps(g: &Gaussians, cam: &Camera, background: [f32; 3]) -> Maps {
     }
 }
 
-/// What the style maps were computed for: the style file, texture scale, depth polarity.
-pub type StyleMapsKey = (PathBuf, u32, DepthPolarity);
+/// What the style maps were computed for: the style file, texture scale, depth
+/// polarity, depth provider and the style's depth image (if one was given).
+pub type StyleMapsKey = (PathBuf, u32, DepthPolarity, DepthProvider, Option<PathBuf>);
 
 /// The style's RGB, depth and edge maps at texture scale, as the optimisation
-/// sees them (built-in depth estimate; the run uses the same).
-pub fn style_maps(style: &StyleImage, scale: u32, polarity: DepthPolarity) -> Maps {
-    let m = gast_core::style::stage1::style_maps(
-        &style.rgb,
-        style.height,
-        style.width,
-        scale as usize,
-        &HeuristicDepth::default(),
-        polarity,
-    );
+/// sees them (the run resolves its depth through the same cache), and the
+/// warning when the chosen depth fell back to the heuristic.
+pub fn style_maps(style: &StyleImage, key: &StyleMapsKey) -> (Maps, Option<String>) {
+    let (path, scale, polarity, provider, image) = key;
+    let (source, warning) = super::style_depth::source_for(path, style, *provider, image.as_deref());
+    let m = match &source {
+        StyleDepthSource::Image(img) => stage1::style_maps(&style.rgb, style.height, style.width, *scale as usize, img, *polarity),
+        StyleDepthSource::Heuristic => {
+            let heuristic = HeuristicDepth::default();
+            stage1::style_maps(&style.rgb, style.height, style.width, *scale as usize, &heuristic, *polarity)
+        }
+    };
     let (w, h) = (m.width as u32, m.height as u32);
-    Maps {
+    let maps = Maps {
         rgb: rgb_image(w, h, &m.rgb),
         depth: gray_image(w, h, &m.depth, |_| true),
         edges: gray_image(w, h, &m.edge, |_| true),
-    }
+    };
+    (maps, warning)
 }
 
 impl Jobs {
@@ -151,8 +157,8 @@ impl Jobs {
     /// Computes the style's maps.
     pub fn style_maps(&mut self, key: StyleMapsKey, style: Arc<StyleImage>) {
         self.spawn(move || {
-            let maps = style_maps(&style, key.1, key.2);
-            JobDone::StyleMaps(key, Box::new(maps))
+            let (maps, warning) = style_maps(&style, &key);
+            JobDone::StyleMaps(key, Box::new(maps), warning)
         });
     }
 

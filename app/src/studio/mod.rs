@@ -18,6 +18,7 @@ pub mod controls;
 pub mod inspect;
 mod panels;
 pub mod session_link;
+pub mod style_depth;
 pub mod view;
 pub mod viewport;
 pub mod worker;
@@ -104,6 +105,10 @@ pub struct StudioApp {
     /// The selected style's maps at texture scale, and what they were made for.
     style_maps: Option<(inspect::StyleMapsKey, [egui::TextureHandle; 3])>,
     style_maps_requested: Option<inspect::StyleMapsKey>,
+    /// A depth image per style (by style path), for the `image` depth provider.
+    style_depth_images: std::collections::HashMap<PathBuf, PathBuf>,
+    /// Why the selected style's depth fell back to the heuristic, if it did.
+    style_depth_warning: Option<String>,
     auto_inspect: bool,
     inspected_view: Option<InspectKey>,
     inspect_pending: Option<(InspectKey, std::time::Instant)>,
@@ -210,6 +215,8 @@ impl StudioApp {
             maps: None,
             style_maps: None,
             style_maps_requested: None,
+            style_depth_images: std::collections::HashMap::new(),
+            style_depth_warning: None,
             auto_inspect: true,
             inspected_view: None,
             inspect_pending: None,
@@ -471,7 +478,8 @@ impl StudioApp {
                         self.ctx.load_texture("inspect edges", m.edges, opts),
                     ]);
                 }
-                inspect::JobDone::StyleMaps(key, m) => {
+                inspect::JobDone::StyleMaps(key, m, warning) => {
+                    self.style_depth_warning = warning;
                     let opts = egui::TextureOptions::LINEAR;
                     self.style_maps = Some((
                         key,
@@ -570,7 +578,14 @@ impl StudioApp {
     /// polarity changed since they were last made or asked for.
     fn request_style_maps(&mut self) {
         let Some(style) = self.style.and_then(|k| self.styles.get(k)) else { return };
-        let key = (style.path.clone(), self.config.texture_scale, self.config.depth_polarity);
+        let depth_image = self.style_depth_images.get(&style.path).cloned();
+        let key = (
+            style.path.clone(),
+            self.config.texture_scale,
+            self.config.depth_polarity,
+            self.config.depth_provider,
+            depth_image,
+        );
         let have = self.style_maps.as_ref().is_some_and(|(k, _)| *k == key);
         if have || self.style_maps_requested.as_ref() == Some(&key) {
             return;

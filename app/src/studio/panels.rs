@@ -152,6 +152,8 @@ impl StudioApp {
         });
         if let Some(s) = self.style.and_then(|k| self.styles.get(k)) {
             ui.weak(format!("{} ({}×{})", s.path.display(), s.size[0], s.size[1]));
+            let path = s.path.clone();
+            self.style_depth_row(ui, &path);
         }
 
         ui.separator();
@@ -253,6 +255,36 @@ impl StudioApp {
         });
     }
 
+    /// The depth provider next to the style, the style's depth-image slot, and
+    /// the warning when the chosen depth fell back to the heuristic.
+    fn style_depth_row(&mut self, ui: &mut Ui, style: &std::path::Path) {
+        use gast_core::vision::style_depth::DepthProvider;
+        ui.horizontal(|ui| {
+            ui.label("depth");
+            egui::ComboBox::from_id_salt("depth provider")
+                .selected_text(self.config.depth_provider.name())
+                .show_ui(ui, |ui| {
+                    for p in DepthProvider::ALL {
+                        ui.selectable_value(&mut self.config.depth_provider, p, p.name());
+                    }
+                })
+                .response
+                .on_hover_text("learned: Depth Anything V2 (fetched once) · image: a depth image for this style · heuristic: built in");
+            if ui.button("Depth image…").on_hover_text("a depth image for this style (PNG or EXR)").clicked()
+                && let Some(p) = rfd::FileDialog::new().add_filter("Depth images", &["png", "exr"]).pick_file()
+            {
+                self.style_depth_images.insert(style.to_path_buf(), p);
+                self.config.depth_provider = DepthProvider::Image;
+            }
+        });
+        if let Some(p) = self.style_depth_images.get(style) {
+            ui.weak(format!("depth image: {}", p.display()));
+        }
+        if let Some(w) = &self.style_depth_warning {
+            ui.colored_label(ui.visuals().warn_fg_color, format!("⚠ {w}"));
+        }
+    }
+
     pub(super) fn start_run(&mut self) {
         let (Some(starter), Some(scene), Some(style)) =
             (&self.starter, &self.scene, self.style.and_then(|k| self.styles.get(k)))
@@ -268,6 +300,8 @@ impl StudioApp {
         let request = StartRequest {
             scene: scene.scene.gaussians.to_arc(),
             style: style.image.clone(),
+            style_path: style.path.clone(),
+            style_depth_image: self.style_depth_images.get(&style.path).cloned(),
             config: self.config.clone(),
             cameras: self.cameras.clone(),
             waker: Arc::new(move || ctx.request_repaint()),

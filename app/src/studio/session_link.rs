@@ -36,6 +36,10 @@ pub struct StartRequest {
     pub scene: Arc<Gaussians>,
     /// The style image.
     pub style: Arc<gast_core::session::StyleImage>,
+    /// Where the style image came from (the key of its cached depth).
+    pub style_path: std::path::PathBuf,
+    /// The user's depth image for this style, for the `image` depth provider.
+    pub style_depth_image: Option<std::path::PathBuf>,
     /// The run's parameters.
     pub config: StyleConfig,
     /// Optimisation cameras (the scene's training cameras); orbit views around

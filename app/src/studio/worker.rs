@@ -1,12 +1,13 @@
 //! Links the core session runner into the studio: a [`SessionStarter`] that
 //! spawns a worker thread which resolves the VGG
 //! weights (a download on first use, reported as a stage), builds the
-//! optimisation cameras and runs the session. Nothing here runs on the UI thread.
+//! optimisation cameras, resolves the style's depth (cached per style, see
+//! [`super::style_depth`]) and runs the session. Nothing here runs on the UI thread.
 
 use std::sync::Arc;
 
 use gast_core::camera::{OrbitOptions, orbit_cameras};
-use gast_core::session::{Event, SessionInputs, StyleDepthSource, spawn_with};
+use gast_core::session::{Event, SessionInputs, spawn_with};
 use gast_core::vision::Vgg;
 
 use super::session_link::{SessionLink, SessionStarter, StartRequest};
@@ -17,7 +18,7 @@ const ORBIT_VIEWS: usize = 36;
 /// The studio's session starter.
 pub fn starter() -> SessionStarter {
     Box::new(|req: StartRequest| {
-        let StartRequest { scene, style, config, cameras, waker, gpu } = req;
+        let StartRequest { scene, style, style_path, style_depth_image, config, cameras, waker, gpu } = req;
         let handle = spawn_with(
             move |emit: &mut dyn FnMut(Event)| {
                 let t = std::time::Instant::now();
@@ -46,7 +47,18 @@ pub fn starter() -> SessionStarter {
                     cameras
                 };
                 emit(Event::Stage { name: "weights and cameras".into(), seconds: t.elapsed().as_secs_f64() });
-                Ok(SessionInputs { scene, cameras, style, style_depth: StyleDepthSource::Heuristic, vgg, config, gpu })
+                let t = std::time::Instant::now();
+                let (style_depth, warning) = super::style_depth::source_for(
+                    &style_path,
+                    &style,
+                    config.depth_provider,
+                    style_depth_image.as_deref(),
+                );
+                if let Some(w) = warning {
+                    emit(Event::Warning(w));
+                }
+                emit(Event::Stage { name: "style depth".into(), seconds: t.elapsed().as_secs_f64() });
+                Ok(SessionInputs { scene, cameras, style, style_depth, vgg, config, gpu })
             },
             waker,
         );

@@ -11,7 +11,8 @@ use crate::scene::Gaussians;
 use crate::style::stage1::{StyleMaps, style_maps};
 use crate::style::step::StyleTargets;
 use crate::vision::Vgg;
-use crate::vision::style_depth::{DepthImage, DepthPolarity, HeuristicDepth};
+use crate::vision::depth::{DepthAnything, DepthModelError, resolve_depth_model};
+use crate::vision::style_depth::{DepthImage, DepthPolarity, DepthProvider, HeuristicDepth};
 
 /// An 8-bit RGB image (the style), row-major HWC.
 #[derive(Clone, Debug, PartialEq)]
@@ -51,6 +52,46 @@ pub enum StyleDepthSource {
     Heuristic,
     /// A depth image the user supplied for this style.
     Image(DepthImage),
+}
+
+impl StyleDepthSource {
+    /// The source `provider` asks for: the learned network's estimate of
+    /// `style` (its checkpoint resolved from `model`, `$GAST_DEPTH_MODEL`, the
+    /// caches, or a download reported through `progress`), the user's `image`,
+    /// or the heuristic. When the choice cannot be honoured the heuristic is
+    /// used and the second value says why, for the CLI and the studio to show.
+    /// Compute this once per style: the result serves every texture scale and polarity.
+    pub fn resolve(
+        provider: DepthProvider,
+        image: Option<DepthImage>,
+        model: Option<&Path>,
+        style: &StyleImage,
+        progress: &mut dyn FnMut(u64, Option<u64>),
+    ) -> (Self, Option<String>) {
+        match provider {
+            DepthProvider::Heuristic => (Self::Heuristic, None),
+            DepthProvider::Image => match image {
+                Some(img) => (Self::Image(img), None),
+                None => (Self::Heuristic, Some("no depth image was given for this style; using the built-in heuristic depth".into())),
+            },
+            DepthProvider::Learned => match learned_style_depth(style, model, progress) {
+                Ok(img) => (Self::Image(img), None),
+                Err(e) => (Self::Heuristic, Some(format!("learned style depth unavailable ({e}); using the built-in heuristic depth"))),
+            },
+        }
+    }
+}
+
+/// Depth Anything V2's relative inverse depth of `style`, at the network's
+/// input size (near = larger); [`DepthImage`] resizes it to each texture scale.
+pub fn learned_style_depth(
+    style: &StyleImage,
+    model: Option<&Path>,
+    progress: &mut dyn FnMut(u64, Option<u64>),
+) -> Result<DepthImage, DepthModelError> {
+    let path = resolve_depth_model(model, progress)?;
+    let net = DepthAnything::load_path(&path)?;
+    Ok(net.depth_image(&style.to_f32(), style.height, style.width))
 }
 
 /// The style's maps at texture scale and their features.
@@ -150,6 +191,29 @@ pub fn scatter(full: &mut Gaussians, keep: &[u32], part: &Gaussians) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn depth_choice_falls_back_with_a_warning() {
+        let style = StyleImage { width: 40, height: 28, rgb: (0..40 * 28 * 3).map(|i| (i * 7 % 251) as u8).collect() };
+        let none = &mut |_: u64, _: Option<u64>| {};
+        let (s, w) = StyleDepthSource::resolve(DepthProvider::Heuristic, None, None, &style, none);
+        assert!(matches!(s, StyleDepthSource::Heuristic) && w.is_none());
+        let (s, w) = StyleDepthSource::resolve(DepthProvider::Image, None, None, &style, none);
+        assert!(matches!(s, StyleDepthSource::Heuristic) && w.is_some_and(|w| w.contains("no depth image")));
+        let absent = std::env::temp_dir().join("gast-no-such-depth-model");
+        let (s, w) = StyleDepthSource::resolve(DepthProvider::Learned, None, Some(&absent), &style, none);
+        let w = w.unwrap_or_default();
+        assert!(matches!(s, StyleDepthSource::Heuristic) && w.contains("gast-no-such-depth-model"), "{w}");
+        // The golden file is a complete (small, random) checkpoint with its config inside.
+        let Some(p) = crate::vision::weights::tests::shared("golden/depth/depth_seed1.safetensors") else { return };
+        let (s, w) = StyleDepthSource::resolve(DepthProvider::Learned, None, Some(&p), &style, none);
+        assert!(w.is_none(), "{w:?}");
+        let StyleDepthSource::Image(img) = s else { panic!("expected the learned depth") };
+        // 28 × 40 is enlarged: the scale closer to 1 brings the longer side to
+        // 518 (as transformers does), the height follows, snapped to 14.
+        assert_eq!((img.height, img.width), (364, 518));
+        assert!(img.values.iter().all(|v| v.is_finite()) && img.near_is_larger);
+    }
 
     #[test]
     fn subset_then_scatter_restores_the_scene() {

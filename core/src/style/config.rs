@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::adam::AdamConfig;
 use super::schedule::{Mode, Schedule};
-pub use crate::vision::style_depth::DepthPolarity;
+pub use crate::vision::style_depth::{DepthPolarity, DepthProvider};
 
 /// Loss weights (λ of ALGORITHM.md).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -84,6 +84,8 @@ pub struct StyleConfig {
     pub background: [f32; 3],
     /// Style depth polarity.
     pub depth_polarity: DepthPolarity,
+    /// Where the style's depth comes from: `learned`, `image` or `heuristic`.
+    pub depth_provider: DepthProvider,
     /// Seed of the view shuffling.
     pub seed: u64,
 }
@@ -102,6 +104,7 @@ impl Default for StyleConfig {
             resolution: 256,
             background: [0.0; 3],
             depth_polarity: DepthPolarity::NearBright,
+            depth_provider: DepthProvider::Learned,
             seed: 0,
         }
     }

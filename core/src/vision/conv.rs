@@ -148,8 +148,8 @@ pub(crate) fn conv_relu(
     conv_relu_banded(input, dims, weight, bias, out, scratch, BAND_ELEMS, true);
 }
 
-/// `out = conv3x3(input) + bias`, without the ReLU (for tests of the linearised network).
-#[cfg(test)]
+/// `out = conv3x3(input) + bias`, without the ReLU (the depth network's
+/// convolutions, and tests of the linearised network).
 pub(crate) fn conv_affine(
     input: &[f32],
     dims: (usize, usize, usize),

@@ -117,6 +117,18 @@ pub fn hash_prefix(name: &str) -> Option<&str> {
 /// `<name>.part` if an earlier attempt left one, and checks the name's sha256
 /// prefix before the atomic rename. Returns the final path.
 pub fn download(url: &str, dir: &Path, progress: &mut dyn FnMut(u64, Option<u64>)) -> Result<PathBuf, WeightsError> {
+    download_verified(url, dir, None, progress)
+}
+
+/// [`download`] with the sha256 (or a prefix of it) to check: `expected` when
+/// given, else the prefix in the file name, else the `X-Linked-Etag` header
+/// by which the Hugging Face hub announces the sha256 of the files it serves.
+pub fn download_verified(
+    url: &str,
+    dir: &Path,
+    expected: Option<&str>,
+    progress: &mut dyn FnMut(u64, Option<u64>),
+) -> Result<PathBuf, WeightsError> {
     let name = file_name(url);
     if name.is_empty() {
         return Err(WeightsError::Download { url: url.into(), detail: "the address names no file".into() });
@@ -160,6 +172,12 @@ pub fn download(url: &str, dir: &Path, progress: &mut dyn FnMut(u64, Option<u64>
         .and_then(|v| v.strip_prefix("bytes "))
         .and_then(|v| v.split('-').next())
         .and_then(|v| v.trim().parse::<u64>().ok());
+    let announced = response
+        .headers()
+        .get("x-linked-etag")
+        .and_then(|v| v.to_str().ok())
+        .map(|v| v.trim().trim_start_matches("W/").trim_matches('"').to_ascii_lowercase())
+        .filter(|v| v.len() == 64 && v.bytes().all(|b| b.is_ascii_hexdigit()));
     let (append, total) = match status {
         206 if range_start.is_some_and(|s| s != have) => {
             return Err(fail(format!("asked for bytes from {have}, the server sent from {range_start:?}")));
@@ -208,11 +226,12 @@ pub fn download(url: &str, dir: &Path, progress: &mut dyn FnMut(u64, Option<u64>
         return Err(fail(format!("expected {t} bytes, received {have}; the next attempt resumes {}", part.display())));
     }
     let digest: String = hasher.finalize().iter().map(|b| format!("{b:02x}")).collect();
-    if let Some(expected) = hash_prefix(name)
-        && !digest.starts_with(expected)
+    let expected = expected.map(str::to_ascii_lowercase).or_else(|| hash_prefix(name).map(String::from)).or(announced);
+    if let Some(expected) = expected
+        && !digest.starts_with(&expected)
     {
         let _ = std::fs::remove_file(&part);
-        return Err(WeightsError::Checksum { url: url.into(), expected: expected.into(), found: digest });
+        return Err(WeightsError::Checksum { url: url.into(), expected, found: digest });
     }
     std::fs::rename(&part, &dest).map_err(|e| WeightsError::io(&dest, e))?;
     Ok(dest)
@@ -232,4 +251,4 @@ fn describe(e: &ureq::Error) -> String {
 
 #[cfg(test)]
 #[path = "download_tests.rs"]
-mod tests;
+pub(crate) mod tests;

@@ -12,12 +12,25 @@ use super::*;
 /// Serves `body` for every path except `/missing` (404); honours `Range:
 /// bytes=N-`; the first `cut_first` responses stop after half the bytes.
 /// Records each request's Range header.
-struct Server {
-    port: u16,
+pub(crate) struct Server {
+    pub port: u16,
     ranges: Arc<Mutex<Vec<Option<u64>>>>,
 }
 
 fn serve(body: Vec<u8>, cut_first: usize) -> Server {
+    serve_routes(vec![Route { path: String::new(), body, headers: String::new() }], cut_first)
+}
+
+/// One file the test server knows: the first route whose `path` the request
+/// line contains is served, with `headers` (`Name: value\r\n` lines) added.
+pub(crate) struct Route {
+    pub path: String,
+    pub body: Vec<u8>,
+    pub headers: String,
+}
+
+/// [`serve`] with several files.
+pub(crate) fn serve_routes(routes: Vec<Route>, cut_first: usize) -> Server {
     let listener = TcpListener::bind("127.0.0.1:0").expect("bind a local port");
     let port = listener.local_addr().map(|a| a.port()).unwrap_or(0);
     let ranges = Arc::new(Mutex::new(Vec::new()));
@@ -40,10 +53,12 @@ fn serve(body: Vec<u8>, cut_first: usize) -> Server {
                 }
             }
             log.lock().map(|mut l| l.push(start)).ok();
-            if first.contains("/missing") {
+            let Some(route) = routes.iter().find(|r| first.contains(&r.path)).filter(|_| !first.contains("/missing"))
+            else {
                 let _ = stream.write_all(b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\nConnection: close\r\n\r\n");
                 continue;
-            }
+            };
+            let (body, extra) = (&route.body, &route.headers);
             let s = start.unwrap_or(0) as usize;
             let head = match start {
                 Some(_) if s >= body.len() => {
@@ -55,12 +70,12 @@ fn serve(body: Vec<u8>, cut_first: usize) -> Server {
                     continue;
                 }
                 Some(_) => format!(
-                    "HTTP/1.1 206 Partial Content\r\nContent-Range: bytes {s}-{}/{}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+                    "HTTP/1.1 206 Partial Content\r\nContent-Range: bytes {s}-{}/{}\r\nContent-Length: {}\r\n{extra}Connection: close\r\n\r\n",
                     body.len() - 1,
                     body.len(),
                     body.len() - s
                 ),
-                None => format!("HTTP/1.1 200 OK\r\nContent-Length: {}\r\nConnection: close\r\n\r\n", body.len()),
+                None => format!("HTTP/1.1 200 OK\r\nContent-Length: {}\r\n{extra}Connection: close\r\n\r\n", body.len()),
             };
             let _ = stream.write_all(head.as_bytes());
             let end = if i < cut_first { s + (body.len() - s) / 2 } else { body.len() };
@@ -85,7 +100,7 @@ fn body() -> Option<Vec<u8>> {
     }
 }
 
-fn temp_dir(tag: &str) -> PathBuf {
+pub(crate) fn temp_dir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("gast-dl-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     d

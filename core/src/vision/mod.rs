@@ -15,6 +15,7 @@
 pub mod canny;
 pub mod colormap;
 mod conv;
+pub mod depth;
 pub mod download;
 mod pth;
 pub mod resize;

@@ -202,6 +202,117 @@ pub fn downscale_half_backward(v_out: &[f32], h: usize, w: usize, c: usize) -> V
     resize_bilinear_scaled_backward(v_out, h, w, c, h / 2, w / 2, 2.0, 2.0)
 }
 
+/// Source taps of one output sample along one axis: `(source index, weight)`.
+type Taps = Vec<Vec<(usize, f32)>>;
+
+/// Applies per-axis taps to an HWC image: columns first, then rows.
+fn resample_separable(src: &[f32], (h, w, c): (usize, usize, usize), ty: &Taps, tx: &Taps) -> Vec<f32> {
+    assert_eq!(src.len(), h * w * c, "resample: image size mismatch");
+    let ow = tx.len();
+    let mut mid = vec![0f32; h * ow * c];
+    for i in 0..h {
+        for (j, taps) in tx.iter().enumerate() {
+            for &(x, wt) in taps {
+                for k in 0..c {
+                    mid[(i * ow + j) * c + k] += wt * src[(i * w + x) * c + k];
+                }
+            }
+        }
+    }
+    let mut out = vec![0f32; ty.len() * ow * c];
+    for (i, taps) in ty.iter().enumerate() {
+        let row = &mut out[i * ow * c..(i + 1) * ow * c];
+        for &(y, wt) in taps {
+            row.iter_mut().zip(&mid[y * ow * c..(y + 1) * ow * c]).for_each(|(o, &m)| *o += wt * m);
+        }
+    }
+    out
+}
+
+/// PyTorch's cubic convolution taps (`A = −0.75`, half-pixel centres, no
+/// antialiasing, borders clamped) with `scale` source pixels per output pixel.
+fn torch_cubic_taps(src: usize, dst: usize) -> Taps {
+    const A: f64 = -0.75;
+    let near = |x: f64| ((A + 2.0) * x - (A + 3.0)) * x * x + 1.0;
+    let far = |x: f64| ((A * x - 5.0 * A) * x + 8.0 * A) * x - 4.0 * A;
+    let scale = src as f64 / dst as f64;
+    (0..dst)
+        .map(|d| {
+            let real = scale * (d as f64 + 0.5) - 0.5;
+            let i = real.floor();
+            let t = real - i;
+            let wts = [far(t + 1.0), near(t), near(1.0 - t), far(2.0 - t)];
+            (0..4)
+                .map(|k| ((i as isize + k as isize - 1).clamp(0, src as isize - 1) as usize, wts[k] as f32))
+                .collect()
+        })
+        .collect()
+}
+
+/// Bicubic resize as `F.interpolate(size=(oh, ow), mode='bicubic',
+/// align_corners=False)`: DINOv2's position-embedding interpolation and the
+/// `transformers` depth post-processing.
+pub fn resize_bicubic(src: &[f32], h: usize, w: usize, c: usize, oh: usize, ow: usize) -> Vec<f32> {
+    resample_separable(src, (h, w, c), &torch_cubic_taps(h, oh), &torch_cubic_taps(w, ow))
+}
+
+/// Pillow's bicubic taps (`a = −0.5`), widened by the scale when shrinking
+/// (antialiasing) and normalised to sum to one.
+fn pil_cubic_taps(src: usize, dst: usize) -> Taps {
+    let cubic = |x: f64| {
+        let (a, x) = (-0.5, x.abs());
+        if x < 1.0 {
+            ((a + 2.0) * x - (a + 3.0)) * x * x + 1.0
+        } else if x < 2.0 {
+            (((x - 5.0) * x + 8.0) * x - 4.0) * a
+        } else {
+            0.0
+        }
+    };
+    let scale = src as f64 / dst as f64;
+    let fscale = scale.max(1.0);
+    let support = 2.0 * fscale;
+    (0..dst)
+        .map(|d| {
+            let center = (d as f64 + 0.5) * scale;
+            let lo = ((center - support + 0.5).floor().max(0.0)) as usize;
+            let hi = ((center + support + 0.5).floor() as usize).min(src);
+            let raw: Vec<(usize, f64)> =
+                (lo..hi).map(|x| (x, cubic((x as f64 - center + 0.5) / fscale))).collect();
+            let sum: f64 = raw.iter().map(|t| t.1).sum();
+            let sum = if sum == 0.0 { 1.0 } else { sum };
+            raw.into_iter().map(|(x, v)| (x, (v / sum) as f32)).collect()
+        })
+        .collect()
+}
+
+/// Bicubic resize with antialiasing as Pillow's `Image.resize(BICUBIC)` (and
+/// torchvision's `antialias=True`) computes it, in floating point: what the
+/// `transformers` image processors use to bring an image to the network's size.
+pub fn resize_bicubic_antialias(src: &[f32], h: usize, w: usize, c: usize, oh: usize, ow: usize) -> Vec<f32> {
+    resample_separable(src, (h, w, c), &pil_cubic_taps(h, oh), &pil_cubic_taps(w, ow))
+}
+
+/// Bilinear taps with the corners aligned: output `d` samples source `d·(src−1)/(dst−1)`.
+fn aligned_linear_taps(src: usize, dst: usize) -> Taps {
+    let scale = if dst > 1 { (src as f64 - 1.0) / (dst as f64 - 1.0) } else { 0.0 };
+    (0..dst)
+        .map(|d| {
+            let x = d as f64 * scale;
+            let i0 = (x.floor() as usize).min(src - 1);
+            let i1 = (i0 + 1).min(src - 1);
+            let l = (x - i0 as f64) as f32;
+            vec![(i0, 1.0 - l), (i1, l)]
+        })
+        .collect()
+}
+
+/// Bilinear resize as `F.interpolate(size=(oh, ow), mode='bilinear',
+/// align_corners=True)` (the DPT fusion and head upsampling).
+pub fn resize_bilinear_align_corners(src: &[f32], h: usize, w: usize, c: usize, oh: usize, ow: usize) -> Vec<f32> {
+    resample_separable(src, (h, w, c), &aligned_linear_taps(h, oh), &aligned_linear_taps(w, ow))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -264,5 +375,30 @@ mod tests {
     fn style_size_follows_the_reference() {
         assert_eq!(size_for_height(1000, 1500, 256), (256, 384));
         assert_eq!(size_for_height(300, 401, 256), (256, 342));
+    }
+
+    #[test]
+    fn cubic_resizers_keep_constants_and_identity() {
+        let cst = vec![0.3f32; 9 * 7 * 2];
+        for f in [resize_bicubic, resize_bicubic_antialias, resize_bilinear_align_corners] {
+            assert!(f(&cst, 9, 7, 2, 4, 13).iter().all(|v| (v - 0.3).abs() < 1e-5));
+            let img = ramp(6, 5, 3);
+            let same = f(&img, 6, 5, 3, 6, 5);
+            assert!(img.iter().zip(&same).all(|(a, b)| (a - b).abs() < 1e-6));
+        }
+    }
+
+    #[test]
+    fn torch_bicubic_known_values() {
+        // F.interpolate(torch.tensor([[[[0., 1., 4., 9.]]]]), size=(1, 2), mode='bicubic', align_corners=False)
+        // samples x = 0.5 and 2.5: 0.3125·0 … computed by hand from the A = −0.75 kernel.
+        let out = resize_bicubic(&[0.0, 1.0, 4.0, 9.0], 1, 4, 1, 1, 2);
+        // Taps at t = 0.5: (−0.09375, 0.59375, 0.59375, −0.09375), indices clamped at the border.
+        let e0 = -0.09375 * 0.0 + 0.59375 * 0.0 + 0.59375 * 1.0 - 0.09375 * 4.0;
+        let e1 = -0.09375 * 1.0 + 0.59375 * 4.0 + 0.59375 * 9.0 - 0.09375 * 9.0;
+        assert!((out[0] - e0).abs() < 1e-6 && (out[1] - e1).abs() < 1e-6, "{out:?}");
+        // Aligned corners keep both ends.
+        let al = resize_bilinear_align_corners(&[0.0, 3.0], 1, 2, 1, 1, 4);
+        assert_eq!(al, vec![0.0, 1.0, 2.0, 3.0]);
     }
 }

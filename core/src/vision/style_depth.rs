@@ -1,10 +1,11 @@
 //! Depth of the style image, the geometry cue GCFM matches rendered depth against.
 //!
 //! The reference runs Depth Anything V2-L (a 335 M-parameter network) on the
-//! style image. The studio does not ship that network, so depth comes from a
-//! [`StyleDepthProvider`]: either a depth image the user supplies (made with any
-//! estimator they like: PNG 8/16-bit grey or EXR), or a built-in heuristic that
-//! needs no weights. Either way the result is resized to the style image,
+//! style image. The studio runs the same network family ([`super::depth`],
+//! the Small model by default, fetched once), and depth comes from a
+//! [`StyleDepthProvider`] chosen by [`DepthProvider`]: that network, a depth
+//! image the user supplies (made with any estimator they like: PNG 8/16-bit
+//! grey or EXR), or a built-in heuristic that needs no weights. Either way the result is resized to the style image,
 //! min-max normalised to [0, 1] and oriented by [`DepthPolarity`].
 
 use std::path::Path;
@@ -50,6 +51,43 @@ pub enum DepthPolarity {
     /// Near is dark (0): the reference's `1 − d` on the style side, kept to
     /// compare with it (ALGORITHM.md, "Depth polarity").
     NearDark,
+}
+
+/// Where the style's depth comes from (the config's `depth_provider`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DepthProvider {
+    /// Depth Anything V2 ([`super::depth`]), found or downloaded once; the
+    /// heuristic, with a warning, when it cannot be had.
+    #[default]
+    Learned,
+    /// A depth image the user supplies for the style; the heuristic, with a
+    /// warning, when none is given.
+    Image,
+    /// The built-in [`HeuristicDepth`], which needs no weights.
+    Heuristic,
+}
+
+impl DepthProvider {
+    /// All choices, in the order the studio lists them.
+    pub const ALL: [DepthProvider; 3] = [DepthProvider::Learned, DepthProvider::Image, DepthProvider::Heuristic];
+
+    /// The name used in presets and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            DepthProvider::Learned => "learned",
+            DepthProvider::Image => "image",
+            DepthProvider::Heuristic => "heuristic",
+        }
+    }
+
+    /// Parses [`DepthProvider::name`].
+    pub fn parse(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|p| p.name() == s)
+            .ok_or_else(|| format!("expected learned, image or heuristic, found {s:?}"))
+    }
 }
 
 /// Something that estimates a depth map for an RGB image.

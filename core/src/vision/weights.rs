@@ -218,8 +218,8 @@ fn read_safetensors(path: &Path) -> Result<std::collections::HashMap<String, Raw
 pub(crate) mod tests {
     use super::*;
 
-    /// A file under the shared data folder (`$GAST_SHARED`, else `../shared`
-    /// beside the workspace), or `None` after a loud message when it is absent.
+    /// A file under `$GAST_SHARED` (else `../shared` beside the workspace), or
+    /// `None` after a loud message when it is absent.
     pub(crate) fn shared(rel: &str) -> Option<PathBuf> {
         let base = std::env::var_os("GAST_SHARED")
             .map(PathBuf::from)
