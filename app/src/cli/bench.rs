@@ -200,6 +200,7 @@ struct StepRun {
     wall_s: f64,
     per_phase: Vec<(gast_core::style::Phase, f64)>,
     first_losses: Option<gast_core::session::LossTerms>,
+}
 
 /// Arguments of `gast bench depth`.
 #[derive(Args, Debug)]

@@ -215,6 +215,7 @@ impl SplatRenderer {
     }
 
     /// The back-to-front order buffer of `side` (after a render), for tests.
+    #[cfg(test)]
     pub fn order_buffer(&self, side: Side) -> Option<&wgpu::Buffer> {
         self.scenes[side as usize].as_ref().map(|s| &s.order)
     }
