@@ -21,8 +21,9 @@ pub mod resize;
 pub mod style_depth;
 pub mod vgg;
 pub mod weights;
+pub mod winograd;
 
-pub use conv::gemm_gflops;
+pub use conv::{ConvAlgo, gemm_gflops};
 pub(crate) use conv::matmul;
 pub use download::resolve_weights;
 pub use vgg::{Features, Vgg, VggState};
