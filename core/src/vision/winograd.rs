@@ -149,50 +149,55 @@ pub(crate) fn winograd_conv_banded(
     let (tiles_y, tiles_x) = (h.div_ceil(TILE), w.div_ceil(TILE));
     let per_row = XI * (c_in + c_out) * tiles_x;
     let band_rows = (band_elems / per_row.max(1)).clamp(1, tiles_y);
-    let max_tiles = band_rows * tiles_x;
-    scratch.resize(scratch.len().max(XI * (c_in + c_out) * max_tiles), 0.0);
-    let (v_buf, m_buf) = scratch.split_at_mut(XI * c_in * max_tiles);
+    // Each ξ's row of tiles starts `stride` floats after the previous one: a
+    // multiple of 16 plus 16, so the 36 rows never sit 4 KiB apart (which
+    // would map them onto the same cache sets).
+    let stride = (band_rows * tiles_x).next_multiple_of(16) + 16;
+    scratch.resize(scratch.len().max(XI * (c_in + c_out) * stride), 0.0);
+    let (v_buf, m_buf) = scratch.split_at_mut(XI * c_in * stride);
     let mut ty0 = 0;
     while ty0 < tiles_y {
         let ty1 = (ty0 + band_rows).min(tiles_y);
         let nt = (ty1 - ty0) * tiles_x;
-        // V: [ci][ξ][tile].
-        let v = &mut v_buf[..XI * c_in * nt];
-        v.par_chunks_mut(XI * nt).enumerate().for_each(|(ci, vc)| {
+        // V: [ci][ξ][tile], one row of tiles transformed into `row` then copied out.
+        v_buf.par_chunks_mut(XI * stride).take(c_in).enumerate().for_each(|(ci, vc)| {
             let plane = &input[ci * h * w..(ci + 1) * h * w];
+            let mut row = vec![0f32; XI * tiles_x];
             for ty in ty0..ty1 {
                 for tx in 0..tiles_x {
                     let d = gather(plane, h, w, ty * TILE, tx * TILE);
-                    let t = (ty - ty0) * tiles_x + tx;
                     for (xi, val) in input_transform(&d).into_iter().enumerate() {
-                        vc[xi * nt + t] = val;
+                        row[xi * tiles_x + tx] = val;
                     }
+                }
+                let t = (ty - ty0) * tiles_x;
+                for (xi, src) in row.chunks_exact(tiles_x).enumerate() {
+                    vc[xi * stride + t..xi * stride + t + tiles_x].copy_from_slice(src);
                 }
             }
         });
         // M_ξ = U_ξ · V_ξ, M: [co][ξ][tile].
-        let m = &mut m_buf[..XI * c_out * nt];
         for xi in 0..XI {
             let u = &kernel.u[xi * c_out * c_in..(xi + 1) * c_out * c_in];
-            matmul(&mut m[xi * nt..], XI * nt, (u, c_in, 1), (&v[xi * nt..], XI * nt), (c_out, nt, c_in), false);
+            let (dst, rhs) = (&mut m_buf[xi * stride..], &v_buf[xi * stride..]);
+            matmul(dst, XI * stride, (u, c_in, 1), (rhs, XI * stride), (c_out, nt, c_in), false);
         }
         // Y = Aᵀ M A per output channel and tile.
-        let (m, y_hi) = (&*m, (ty1 * TILE).min(h));
+        let (m, y_hi) = (&*m_buf, (ty1 * TILE).min(h));
         out[..c_out * h * w].par_chunks_mut(h * w).enumerate().for_each(|(co, plane)| {
-            let mc = &m[co * XI * nt..(co + 1) * XI * nt];
+            let mc = &m[co * XI * stride..(co + 1) * XI * stride];
             let mut tile = [0f32; XI];
             for ty in ty0..ty1 {
+                let t0 = (ty - ty0) * tiles_x;
                 for tx in 0..tiles_x {
-                    let t = (ty - ty0) * tiles_x + tx;
                     for (xi, v) in tile.iter_mut().enumerate() {
-                        *v = mc[xi * nt + t];
+                        *v = mc[xi * stride + t0 + tx];
                     }
                     let y = output_transform(&tile);
                     let (oy, ox) = (ty * TILE, tx * TILE);
+                    let n = TILE.min(w - ox);
                     for (r, row) in y.iter().enumerate().take(y_hi.min(oy + TILE) - oy) {
-                        let dst = &mut plane[(oy + r) * w + ox..];
-                        let n = TILE.min(w - ox);
-                        dst[..n].copy_from_slice(&row[..n]);
+                        plane[(oy + r) * w + ox..(oy + r) * w + ox + n].copy_from_slice(&row[..n]);
                     }
                 }
             }
