@@ -4,17 +4,22 @@
 //! content, TV and the colour transfer, each with the tolerance of the issue.
 
 use gast_core::golden::{CheckContext, check_file};
+use gast_core::vision::ConvAlgo;
 use gast_tests::shared_file;
 
 fn check(rel: &str) {
+    check_with(rel, ConvAlgo::Im2col);
+}
+
+fn check_with(rel: &str, conv: ConvAlgo) {
     let Some(path) = shared_file(rel) else { return };
     let weights = shared_file("data/weights/vgg19-conv3.safetensors");
-    let checks = check_file(&path, &CheckContext { weights }).unwrap_or_else(|e| panic!("{e}"));
+    let checks = check_file(&path, &CheckContext { weights, conv }).unwrap_or_else(|e| panic!("{e}"));
     assert!(!checks.is_empty(), "{rel}: no output was compared");
     let mut failed = Vec::new();
     for c in &checks {
         println!(
-            "{rel} {:<26} max abs {:>10.3e} max |ref| {:>10.3e} rel {:>10.3e} ({}) {}",
+            "{rel} {conv} {:<26} max abs {:>10.3e} max |ref| {:>10.3e} rel {:>10.3e} ({}) {}",
             c.name,
             c.max_abs,
             c.max_ref,
@@ -32,6 +37,12 @@ fn check(rel: &str) {
 #[test]
 fn losses_match_golden() {
     check("golden/losses_seed1.safetensors");
+}
+
+/// The fast convolution is exact too: the same tolerances hold with it.
+#[test]
+fn losses_match_golden_with_winograd() {
+    check_with("golden/losses_seed1.safetensors", ConvAlgo::Winograd);
 }
 
 #[test]

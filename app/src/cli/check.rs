@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use clap::Args;
 use gast_core::golden::{CheckContext, check_file};
+use gast_core::vision::ConvAlgo;
 
 /// Arguments of `gast check golden`.
 #[derive(Args, Debug)]
@@ -15,11 +16,14 @@ pub struct GoldenArgs {
     /// VGG weights for losses_* files (else $GAST_WEIGHTS, the caches, or a download).
     #[arg(long)]
     pub weights: Option<PathBuf>,
+    /// VGG convolutions for losses_* files: im2col or winograd.
+    #[arg(long, default_value_t = ConvAlgo::Im2col)]
+    pub conv: ConvAlgo,
 }
 
 /// Checks every file and prints one line per output; fails when any output is out of tolerance.
 pub fn run_golden(args: GoldenArgs) -> anyhow::Result<ExitCode> {
-    let ctx = CheckContext { weights: args.weights.clone() };
+    let ctx = CheckContext { weights: args.weights.clone(), conv: args.conv };
     let mut failed = 0usize;
     let mut total = 0usize;
     for file in &args.files {

@@ -14,6 +14,7 @@ use gast_core::io::{write_bytes, write_depth_png, write_exr_depth, write_png_gra
 use gast_core::raster::{self, RenderOptions};
 use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::{Mode, StyleConfig};
+use gast_core::vision::ConvAlgo;
 use gast_core::vision::Vgg;
 use gast_core::vision::style_depth::{DepthImage, DepthPolarity};
 use serde::Serialize;
@@ -114,6 +115,9 @@ pub struct StylizeArgs {
     /// Seed of the view order [default: 0].
     #[arg(long)]
     pub seed: Option<u64>,
+    /// VGG convolutions: im2col (the reference) or winograd (4× fewer multiplies) [default: im2col].
+    #[arg(long)]
+    pub conv: Option<ConvAlgo>,
     /// Views rendered before/after into the output folder.
     #[arg(long, default_value_t = 4)]
     pub preview_views: usize,
@@ -158,6 +162,7 @@ impl StylizeArgs {
         set!(self.lr_opacity, c.lr.opacity);
         set!(self.depth_polarity, c.depth_polarity);
         set!(self.seed, c.seed);
+        set!(self.conv, c.conv);
         let problems = c.problems();
         anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
         Ok(c)

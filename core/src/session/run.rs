@@ -102,6 +102,7 @@ impl Session {
     ) -> Result<Self, SessionError> {
         let prepared = style;
         let SessionInputs { scene, cameras, style, style_depth, vgg, config } = inputs;
+        let vgg = with_conv(vgg, config.conv);
         let problems = config.problems();
         if !problems.is_empty() {
             return Err(SessionError::Config(problems));
@@ -242,6 +243,7 @@ impl Session {
                 config.depth_polarity,
             );
         }
+        self.vgg = with_conv(self.vgg.clone(), config.conv);
         if config.resolution != self.config.resolution || config.background != self.config.background {
             self.cameras = self.base_cameras.iter().map(|c| c.with_longer_side(config.resolution)).collect();
             self.targets.iter_mut().for_each(|t| *t = None);
@@ -355,6 +357,11 @@ impl Session {
         self.step += 1;
         Some(report)
     }
+}
+
+/// The network computing its convolutions with `conv` (the same one when it already does).
+fn with_conv(vgg: Arc<Vgg>, conv: crate::vision::ConvAlgo) -> Arc<Vgg> {
+    if vgg.conv() == conv { vgg } else { Arc::new((*vgg).clone().with_conv(conv)) }
 }
 
 /// `(x − x^c)/‖x − x^c‖` scaled by λ, plus the loss gradient: `reg ← λ·reg + loss`.

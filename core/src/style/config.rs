@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::adam::AdamConfig;
 use super::schedule::{Mode, Schedule};
+pub use crate::vision::ConvAlgo;
 pub use crate::vision::style_depth::DepthPolarity;
 
 /// Loss weights (λ of ALGORITHM.md).
@@ -86,6 +87,8 @@ pub struct StyleConfig {
     pub depth_polarity: DepthPolarity,
     /// Seed of the view shuffling.
     pub seed: u64,
+    /// How VGG's convolutions are computed (both exact; Winograd does 4× fewer multiplies).
+    pub conv: ConvAlgo,
 }
 
 impl Default for StyleConfig {
@@ -103,6 +106,7 @@ impl Default for StyleConfig {
             background: [0.0; 3],
             depth_polarity: DepthPolarity::NearBright,
             seed: 0,
+            conv: ConvAlgo::Im2col,
         }
     }
 }
