@@ -7,6 +7,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::adam::AdamConfig;
+pub use super::matching::{MatchMethod, MatchingConfig};
 use super::schedule::{Mode, Schedule};
 pub use crate::vision::ConvAlgo;
 pub use crate::vision::style_depth::DepthPolarity;
@@ -89,6 +90,8 @@ pub struct StyleConfig {
     pub seed: u64,
     /// How VGG's convolutions are computed (both exact; Winograd does 4× fewer multiplies).
     pub conv: ConvAlgo,
+    /// How the GCFM matches are searched (exact by default) and how long they are kept.
+    pub matching: MatchingConfig,
 }
 
 impl Default for StyleConfig {
@@ -107,6 +110,7 @@ impl Default for StyleConfig {
             depth_polarity: DepthPolarity::NearBright,
             seed: 0,
             conv: ConvAlgo::Im2col,
+            matching: MatchingConfig::default(),
         }
     }
 }
@@ -144,6 +148,13 @@ impl StyleConfig {
         }
         if !(16..=4096).contains(&self.resolution) {
             out.push(format!("resolution must lie in 16..=4096 pixels, found {}", self.resolution));
+        }
+        let mc = self.matching;
+        if mc.dims == 0 || mc.candidates == 0 || mc.reuse == 0 {
+            out.push(format!(
+                "matching dims, candidates and reuse must be positive (found {}, {} and {})",
+                mc.dims, mc.candidates, mc.reuse
+            ));
         }
         let w = self.weights;
         let lr = self.lr;
