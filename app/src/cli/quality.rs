@@ -64,12 +64,15 @@ pub enum Study {
     LambdaGc,
     /// Settings pushed until they fail: high learning rates, geometry-only, long runs, extreme styles.
     Stress,
+    /// Winograd convolutions, the matching index and re-used matches against the exact
+    /// default, at a fixed step budget and at twice it (to compare at equal wall time).
+    Fast,
 }
 
 impl Study {
     /// All studies, in report order.
-    pub const ALL: [Study; 6] =
-        [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Pairs, Study::Stress];
+    pub const ALL: [Study; 7] =
+        [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Fast, Study::Pairs, Study::Stress];
 }
 
 /// A style: a file, or an extreme one made for the stress study.
@@ -334,6 +337,16 @@ pub fn build_grid(sizes: &Sizes, shared: &Path, studies: &[Study]) -> Grid {
             g.want((Study::Resolution, &format!("{r} px")), 0, &main, config, 1.0, &quarter);
         }
     }
+    if on(Study::Fast) {
+        for style in &curve_styles {
+            for (label, config) in fast_options(&ablation) {
+                let budget = config.schedule().total_steps();
+                let doubled = StyleConfig { cycles: config.cycles * 2, ..config.clone() };
+                g.want((Study::Fast, &format!("{label} @ {budget}")), 0, style, config, 1.0, &[]);
+                g.want((Study::Fast, &format!("{label} @ {}", 2 * budget)), 0, style, doubled, 1.0, &[]);
+            }
+        }
+    }
     if on(Study::Pairs) {
         for scene in 0..sizes.scenes.len() {
             for style in &sizes.styles {
@@ -387,6 +400,24 @@ fn scaled_lr(scale: f32) -> gast_core::style::config::LearningRates {
         quats: d.quats * scale,
         opacity: d.opacity * scale,
     }
+}
+
+/// The settings of the `fast` study: the exact default, its seed-1 twin (the
+/// noise floor), and each option of issue 10 alone and together.
+fn fast_options(base: &StyleConfig) -> Vec<(&'static str, StyleConfig)> {
+    use gast_core::style::{MatchMethod, MatchingConfig};
+    use gast_core::vision::ConvAlgo;
+    let pca = MatchingConfig { method: MatchMethod::Pca, ..MatchingConfig::default() };
+    let reuse = MatchingConfig { reuse: 3, ..MatchingConfig::default() };
+    let all = MatchingConfig { reuse: 3, ..pca };
+    vec![
+        ("exact", base.clone()),
+        ("exact, seed 1", StyleConfig { seed: 1, ..base.clone() }),
+        ("winograd", StyleConfig { conv: ConvAlgo::Winograd, ..base.clone() }),
+        ("pca 128/32", StyleConfig { matching: pca, ..base.clone() }),
+        ("reuse 3", StyleConfig { matching: reuse, ..base.clone() }),
+        ("winograd + pca + reuse 3", StyleConfig { conv: ConvAlgo::Winograd, matching: all, ..base.clone() }),
+    ]
 }
 
 /// The label of the decoupled run with another view order (seed 1).
@@ -548,7 +579,7 @@ mod tests {
             .map(|r| r.trial.clone())
             .expect("a decoupled mode row");
         let sharing: Vec<Study> = g.rows.iter().filter(|r| r.trial == decoupled).map(|r| r.study).collect();
-        for s in [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Pairs, Study::Stress] {
+        for s in [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Fast, Study::Pairs, Study::Stress] {
             assert!(sharing.contains(&s), "{s:?} does not reuse the decoupled run: {sharing:?}");
         }
         let t = g.trials.iter().find(|t| t.id == decoupled).expect("trial");
