@@ -142,7 +142,8 @@ fn fast_options_keep_the_exact_results() {
     use gast_core::style::{MatchMethod, MatchingConfig};
     use gast_core::vision::ConvAlgo;
     let base = StyleConfig { cycles: 1, steps_per_cycle: 4, resolution: 48, texture_scale: 48, ..Default::default() };
-    let run = |config: StyleConfig, audit: u32| -> Option<(Vec<f32>, Option<(f64, f64, u32)>)> {
+    type Agreement = Option<(f64, f64, u32)>;
+    let run = |config: StyleConfig, audit: u32| -> Option<(Vec<f32>, Agreement)> {
         let mut s = Session::prepare(inputs(config)?, &mut |_| {}).expect("prepare");
         s.audit_matches(audit);
         let losses = std::iter::from_fn(|| s.step()).map(|r| r.losses.gcfm).collect();

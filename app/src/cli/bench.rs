@@ -372,7 +372,12 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     let (peak, rss) = memory_mib();
     for (k, label) in ["old", "new"].iter().enumerate() {
         if args.full {
-            println!("{label} whole schedule: {} steps in {:.1} s ({:.1} min)", reports[k].len(), wall_all[k], wall_all[k] / 60.0);
+            println!(
+                "{label} whole schedule: {} steps in {:.1} s ({:.1} min)",
+                reports[k].len(),
+                wall_all[k],
+                wall_all[k] / 60.0
+            );
         } else {
             let per = |p: Phase| rows[k].iter().find(|r| r.0 == p).map_or(0.0, |r| r.2[6]);
             let est = (f64::from(schedule.cycles * schedule.color_steps) * per(Phase::Color)

@@ -579,7 +579,9 @@ mod tests {
             .map(|r| r.trial.clone())
             .expect("a decoupled mode row");
         let sharing: Vec<Study> = g.rows.iter().filter(|r| r.trial == decoupled).map(|r| r.study).collect();
-        for s in [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Fast, Study::Pairs, Study::Stress] {
+        for s in
+            [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Fast, Study::Pairs, Study::Stress]
+        {
             assert!(sharing.contains(&s), "{s:?} does not reuse the decoupled run: {sharing:?}");
         }
         let t = g.trials.iter().find(|t| t.id == decoupled).expect("trial");

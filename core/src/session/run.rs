@@ -11,9 +11,9 @@ use crate::scene::Gaussians;
 use crate::style::StyleConfig;
 use crate::style::adam::Adam;
 use crate::style::color_transfer::ColorTransfer;
-use crate::style::regularizers::l2_distance;
 use crate::style::gcfm::{Matches, match_features};
 use crate::style::matching::{MatchIndex, MatchMethod, agreement, find_matches};
+use crate::style::regularizers::l2_distance;
 use crate::style::step::{FeatureMap, RenderedMaps, content_target, step_loss_with};
 use crate::vision::Vgg;
 use crate::vision::canny::render_edges;
@@ -264,9 +264,12 @@ impl Session {
             );
         }
         self.vgg = with_conv(self.vgg.clone(), config.conv);
-        let restyled = config.texture_scale != self.config.texture_scale
-            || config.depth_polarity != self.config.depth_polarity;
-        if restyled || config.matching.method != self.config.matching.method || config.matching.dims != self.config.matching.dims {
+        let restyled =
+            config.texture_scale != self.config.texture_scale || config.depth_polarity != self.config.depth_polarity;
+        if restyled
+            || config.matching.method != self.config.matching.method
+            || config.matching.dims != self.config.matching.dims
+        {
             self.index = build_index(&self.style, &config);
         }
         if restyled || config.matching != self.config.matching {
@@ -325,7 +328,8 @@ impl Session {
         let mc = self.config.matching;
         let kept = self.view_matches[view].take().filter(|(_, uses)| *uses < mc.reuse);
         let uses = kept.as_ref().map_or(0, |k| k.1);
-        let audit_now = self.audit_every > 0 && self.step % self.audit_every == 0 && mc.method != MatchMethod::Exact;
+        let audit_now =
+            self.audit_every > 0 && self.step.is_multiple_of(self.audit_every) && mc.method != MatchMethod::Exact;
         let (features, index) = (&self.style.targets.features, self.index.as_ref());
         let (mut audited, mut audit_s) = (None, 0.0);
         let mut matcher = |r: [&[f32]; 3], n: usize| match &kept {

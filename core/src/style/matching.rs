@@ -246,7 +246,8 @@ impl MatchIndex {
     /// smallest exact joint score, the first on ties.
     fn rerank(&self, joint: &[f32], cands: &[u32], want_max: bool) -> u32 {
         let d = joint.len();
-        let score = |y: u32| dot_f64(&self.rows[y as usize * d..(y as usize + 1) * d], joint) * self.inv_norm[y as usize];
+        let score =
+            |y: u32| dot_f64(&self.rows[y as usize * d..(y as usize + 1) * d], joint) * self.inv_norm[y as usize];
         let mut arg = cands[0];
         let mut top = score(arg);
         for &y in &cands[1..] {
@@ -294,7 +295,8 @@ fn orthonormalise_rows(q: &mut [f32], l: usize, d: usize) {
         for _ in 0..2 {
             let (done, rest) = rows.split_at_mut(i);
             let ri = &mut rest[0];
-            let coeffs: Vec<f64> = done.par_iter().map(|rj| rj.iter().zip(ri.iter()).map(|(a, b)| a * b).sum()).collect();
+            let coeffs: Vec<f64> =
+                done.par_iter().map(|rj| rj.iter().zip(ri.iter()).map(|(a, b)| a * b).sum()).collect();
             for (rj, cf) in done.iter().zip(coeffs) {
                 ri.iter_mut().zip(rj).for_each(|(a, b)| *a -= cf * b);
             }

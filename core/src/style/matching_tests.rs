@@ -54,6 +54,11 @@ fn full_subspace_with_few_candidates_is_exact_and_a_small_one_mostly_agrees() {
     let full = MatchIndex::build(&st, 3 * c).search(rr, n, 16);
     assert_eq!(agreement(&full, &exact), (1.0, 1.0));
     let (b, w) = agreement(&MatchIndex::build(&st, 8).search(rr, n, 16), &exact);
-    println!("8 of {} dimensions, 16 candidates: {:.1}% nearest, {:.1}% farthest identical", 3 * c, b * 100.0, w * 100.0);
+    println!(
+        "8 of {} dimensions, 16 candidates: {:.1}% nearest, {:.1}% farthest identical",
+        3 * c,
+        b * 100.0,
+        w * 100.0
+    );
     assert!(b > 0.5 && w > 0.5, "the index should find most matches of rank-4 features: {b} {w}");
 }

@@ -24,8 +24,8 @@ pub mod vgg;
 pub mod weights;
 pub mod winograd;
 
-pub use conv::{ConvAlgo, gemm_gflops};
 pub(crate) use conv::matmul;
+pub use conv::{ConvAlgo, gemm_gflops};
 pub use download::resolve_weights;
 pub use vgg::{Features, Vgg, VggState};
 pub use weights::{VggWeights, WeightsError};

@@ -109,7 +109,14 @@ impl Vgg {
     }
 
     /// Input gradient of convolution `layer` at `h × w` (overwrites `v_input`).
-    fn conv_backward(&self, layer: usize, v_out: &[f32], (h, w): (usize, usize), v_input: &mut [f32], scratch: &mut Vec<f32>) {
+    fn conv_backward(
+        &self,
+        layer: usize,
+        v_out: &[f32],
+        (h, w): (usize, usize),
+        v_input: &mut [f32],
+        scratch: &mut Vec<f32>,
+    ) {
         let c = &self.weights.convs[layer];
         match self.winograd.get(layer) {
             Some([_, k]) => winograd_conv(v_out, (c.c_out, h, w), k, v_input, scratch),

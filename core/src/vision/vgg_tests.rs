@@ -115,7 +115,9 @@ fn frozen_features(vgg: &Vgg, state: &VggState, rgb: &[f32], h: usize, w: usize)
 fn backward_is_the_exact_gradient_of_the_linearised_network() {
     let mut failures = Vec::new();
     let mut checked = 0;
-    for (h, w, seed, conv) in [(16, 16, 1u64, ConvAlgo::Im2col), (17, 22, 7, ConvAlgo::Im2col), (17, 22, 7, ConvAlgo::Winograd)] {
+    for (h, w, seed, conv) in
+        [(16, 16, 1u64, ConvAlgo::Im2col), (17, 22, 7, ConvAlgo::Im2col), (17, 22, 7, ConvAlgo::Winograd)]
+    {
         let vgg = random_vgg(seed).with_conv(conv);
         let rgb: Vec<f32> = noise(h * w * 3, seed + 100).iter().map(|v| 0.5 + 0.4 * v).collect();
         let (f, state) = vgg.forward(&rgb, h, w);

@@ -54,4 +54,3 @@ fn winograd_matches_im2col_forward_and_backward() {
     }
     assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
 }
-
