@@ -5,10 +5,15 @@
 //! each with the tolerance of the issue.
 
 use gast_core::golden::{CheckContext, check_file};
+use gast_core::vision::ConvAlgo;
 use gast_tests::shared_file;
 
 fn check(rel: &str) {
-    check_on(rel, None);
+    check_on(rel, ConvAlgo::Im2col, None);
+}
+
+fn check_with(rel: &str, conv: ConvAlgo) {
+    check_on(rel, conv, None);
 }
 
 /// The same check with the rasterizer and the losses on the GPU engine
@@ -18,18 +23,18 @@ fn check_on_gpu(rel: &str) {
         Ok(Some(g)) => g,
         other => panic!("the GPU golden checks need a wgpu adapter (lavapipe: mesa-vulkan-drivers): {other:?}"),
     };
-    check_on(rel, Some(gpu));
+    check_on(rel, ConvAlgo::Im2col, Some(gpu));
 }
 
-fn check_on(rel: &str, gpu: Option<gast_core::gpu::GpuContext>) {
+fn check_on(rel: &str, conv: ConvAlgo, gpu: Option<gast_core::gpu::GpuContext>) {
     let Some(path) = shared_file(rel) else { return };
     let weights = shared_file("data/weights/vgg19-conv3.safetensors");
-    let checks = check_file(&path, &CheckContext { weights, gpu }).unwrap_or_else(|e| panic!("{e}"));
+    let checks = check_file(&path, &CheckContext { weights, gpu, conv }).unwrap_or_else(|e| panic!("{e}"));
     assert!(!checks.is_empty(), "{rel}: no output was compared");
     let mut failed = Vec::new();
     for c in &checks {
         println!(
-            "{rel} {:<26} max abs {:>10.3e} max |ref| {:>10.3e} rel {:>10.3e} ({}) {}",
+            "{rel} {conv} {:<26} max abs {:>10.3e} max |ref| {:>10.3e} rel {:>10.3e} ({}) {}",
             c.name,
             c.max_abs,
             c.max_ref,
@@ -47,6 +52,12 @@ fn check_on(rel: &str, gpu: Option<gast_core::gpu::GpuContext>) {
 #[test]
 fn losses_match_golden() {
     check("golden/losses_seed1.safetensors");
+}
+
+/// The fast convolution is exact too: the same tolerances hold with it.
+#[test]
+fn losses_match_golden_with_winograd() {
+    check_with("golden/losses_seed1.safetensors", ConvAlgo::Winograd);
 }
 
 #[test]

@@ -185,3 +185,36 @@ fn gpu_steps_give_the_cpu_losses() {
         }
     }
 }
+
+/// Issue 10's options on a real scene and style: Winograd gives the reference
+/// losses; the index asked for exhaustive re-ranking finds exactly the exact
+/// search's matches (audited at every step); re-used matches still step.
+#[test]
+fn fast_options_keep_the_exact_results() {
+    use gast_core::session::Session;
+    use gast_core::style::{MatchMethod, MatchingConfig};
+    use gast_core::vision::ConvAlgo;
+    let base = StyleConfig { cycles: 1, steps_per_cycle: 4, resolution: 48, texture_scale: 48, ..Default::default() };
+    type Agreement = Option<(f64, f64, u32)>;
+    let run = |config: StyleConfig, audit: u32| -> Option<(Vec<f32>, Agreement)> {
+        let mut s = Session::prepare(inputs(config)?, &mut |_| {}).expect("prepare");
+        s.audit_matches(audit);
+        let losses = std::iter::from_fn(|| s.step()).map(|r| r.losses.gcfm).collect();
+        Some((losses, s.match_agreement()))
+    };
+    let Some((reference, none)) = run(base.clone(), 1) else { return };
+    assert_eq!(none, None, "an exact run has nothing to audit");
+    let (wino, _) = run(StyleConfig { conv: ConvAlgo::Winograd, ..base.clone() }, 0).expect("inputs");
+    for (a, b) in reference.iter().zip(&wino) {
+        assert!((a - b).abs() <= 1e-4 * a.abs(), "GCFM with Winograd {b} vs im2col {a}");
+    }
+    let exhaustive = MatchingConfig { method: MatchMethod::Pca, dims: 16, candidates: u32::MAX, reuse: 1 };
+    let (pca, agreement) = run(StyleConfig { matching: exhaustive, ..base.clone() }, 1).expect("inputs");
+    assert_eq!(agreement, Some((1.0, 1.0, 4)), "exhaustive re-ranking is the exact search");
+    assert_eq!(pca, reference);
+    let reused = MatchingConfig { reuse: 3, ..MatchingConfig::default() };
+    // Two cycles over six views: the revisited views step on their kept matches.
+    let (kept, _) = run(StyleConfig { matching: reused, cycles: 2, ..base }, 0).expect("inputs");
+    assert_eq!(kept.len(), 8);
+    assert!(kept.iter().all(|l| l.is_finite()));
+}

@@ -29,12 +29,15 @@ pub enum Study {
     LambdaGc,
     /// Settings pushed until they fail: high learning rates, geometry-only, long runs, extreme styles.
     Stress,
+    /// Winograd convolutions, the matching index and re-used matches against the exact
+    /// default, at a fixed step budget and at twice it (to compare at equal wall time).
+    Fast,
 }
 
 impl Study {
     /// All studies, in report order.
-    pub const ALL: [Study; 6] =
-        [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Pairs, Study::Stress];
+    pub const ALL: [Study; 7] =
+        [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Fast, Study::Pairs, Study::Stress];
 }
 
 /// A style: a file, or an extreme one made for the stress study.

@@ -229,6 +229,8 @@ pub struct CheckContext {
     /// Run the rasterizer and the losses on this GPU (`--device gpu`) instead
     /// of the CPU; the colour transfer runs on the CPU either way.
     pub gpu: Option<crate::gpu::GpuContext>,
+    /// How VGG computes its convolutions for the `losses_*` files.
+    pub conv: crate::vision::ConvAlgo,
 }
 
 /// Reads a golden file, runs the project's code on its inputs and compares every output.
@@ -316,7 +318,7 @@ fn check_losses(file: &GoldenFile, ctx: &CheckContext) -> Result<Vec<OutputCheck
     };
     let weights_path = crate::vision::download::resolve_weights(ctx.weights.as_deref(), &mut |_, _| {})
         .map_err(|e| run_err(format!("VGG weights: {e}")))?;
-    let vgg = Vgg::load(&weights_path).map_err(|e| run_err(format!("VGG weights: {e}")))?;
+    let vgg = Vgg::load(&weights_path).map_err(|e| run_err(format!("VGG weights: {e}")))?.with_conv(ctx.conv);
 
     let rgb = rgb_t.to_f32();
     let mut checks = Vec::new();

@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use clap::Args;
 use gast_core::golden::{CheckContext, check_file};
+use gast_core::vision::ConvAlgo;
 
 /// Arguments of `gast check golden`.
 #[derive(Args, Debug)]
@@ -20,13 +21,16 @@ pub struct GoldenArgs {
     /// The colour transfer runs on the CPU either way.
     #[arg(long, default_value_t = gast_core::gpu::DeviceChoice::Cpu)]
     pub device: gast_core::gpu::DeviceChoice,
+    /// VGG convolutions for losses_* files: im2col or winograd.
+    #[arg(long, default_value_t = ConvAlgo::Im2col)]
+    pub conv: ConvAlgo,
 }
 
 /// Checks every file and prints one line per output; fails when any output is out of tolerance.
 pub fn run_golden(args: GoldenArgs) -> anyhow::Result<ExitCode> {
     let gpu = args.device.resolve().map_err(|e| anyhow::anyhow!("--device {}: {e}", args.device))?;
     println!("device: {}", gpu.as_ref().map_or_else(|| "CPU".to_owned(), |g| g.describe()));
-    let ctx = CheckContext { weights: args.weights.clone(), gpu };
+    let ctx = CheckContext { weights: args.weights.clone(), gpu, conv: args.conv };
     let mut failed = 0usize;
     let mut total = 0usize;
     for file in &args.files {

@@ -157,6 +157,16 @@ pub fn build_grid(sizes: &Sizes, shared: &Path, studies: &[Study]) -> Grid {
             g.want((Study::Resolution, &format!("{r} px")), 0, &main, config, 1.0, &quarter);
         }
     }
+    if on(Study::Fast) {
+        for style in &curve_styles {
+            for (label, config) in fast_options(&ablation) {
+                let budget = config.schedule().total_steps();
+                let doubled = StyleConfig { cycles: config.cycles * 2, ..config.clone() };
+                g.want((Study::Fast, &format!("{label} @ {budget}")), 0, style, config, 1.0, &[]);
+                g.want((Study::Fast, &format!("{label} @ {}", 2 * budget)), 0, style, doubled, 1.0, &[]);
+            }
+        }
+    }
     if on(Study::Pairs) {
         for scene in 0..sizes.scenes.len() {
             for style in &sizes.styles {
@@ -359,7 +369,9 @@ mod tests {
             .map(|r| r.trial.clone())
             .expect("a decoupled mode row");
         let sharing: Vec<Study> = g.rows.iter().filter(|r| r.trial == decoupled).map(|r| r.study).collect();
-        for s in [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Pairs, Study::Stress] {
+        for s in
+            [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Fast, Study::Pairs, Study::Stress]
+        {
             assert!(sharing.contains(&s), "{s:?} does not reuse the decoupled run: {sharing:?}");
         }
         let t = g.trials.iter().find(|t| t.id == decoupled).expect("trial");

@@ -14,7 +14,8 @@ use gast_core::io::{write_bytes, write_depth_png, write_exr_depth, write_png_gra
 use gast_core::raster::{self, RenderOptions};
 use gast_core::gpu::DeviceChoice;
 use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource, StyleImage};
-use gast_core::style::{Mode, StyleConfig};
+use gast_core::style::{MatchMethod, Mode, StyleConfig};
+use gast_core::vision::ConvAlgo;
 use gast_core::vision::Vgg;
 use gast_core::vision::style_depth::{DepthImage, DepthPolarity, DepthProvider};
 use serde::Serialize;
@@ -129,6 +130,9 @@ pub struct StylizeArgs {
     /// Seed of the view order [default: 0].
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Convolution and matching choices.
+    #[command(flatten)]
+    pub fast: FastArgs,
     /// Views rendered before/after into the output folder.
     #[arg(long, default_value_t = 4)]
     pub preview_views: usize,
@@ -181,9 +185,48 @@ impl StylizeArgs {
         }
         set!(self.depth_provider, c.depth_provider);
         set!(self.seed, c.seed);
+        self.fast.apply(&mut c);
         let problems = c.problems();
         anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
         Ok(c)
+    }
+}
+
+/// The choices of issue 10 (fewer operations per step), shared by `stylize` and `bench step`.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct FastArgs {
+    /// VGG convolutions: im2col (the reference) or winograd (4× fewer multiplies, exact) [default: im2col].
+    #[arg(long)]
+    pub conv: Option<ConvAlgo>,
+    /// GCFM matching: exact, or pca (a principal-subspace index with exact re-ranking) [default: exact].
+    #[arg(long)]
+    pub matching: Option<MatchMethod>,
+    /// Dimensions the pca index keeps, of 2304 [default: 128].
+    #[arg(long)]
+    pub matching_dims: Option<u32>,
+    /// Candidates the pca index re-ranks exactly per position, nearest and farthest each [default: 32].
+    #[arg(long)]
+    pub matching_candidates: Option<u32>,
+    /// Visits of a view that share one search of its matches (1: search every step) [default: 1].
+    #[arg(long)]
+    pub matching_reuse: Option<u32>,
+}
+
+impl FastArgs {
+    /// Writes the given flags into `c`.
+    pub fn apply(&self, c: &mut StyleConfig) {
+        let pairs = [
+            (self.matching_dims, &mut c.matching.dims),
+            (self.matching_candidates, &mut c.matching.candidates),
+            (self.matching_reuse, &mut c.matching.reuse),
+        ];
+        for (flag, field) in pairs {
+            if let Some(v) = flag {
+                *field = v;
+            }
+        }
+        c.conv = self.conv.unwrap_or(c.conv);
+        c.matching.method = self.matching.unwrap_or(c.matching.method);
     }
 }
 

@@ -507,6 +507,19 @@ fn index_markdown(run: &RunSummary, charts: &[(String, String)]) -> String {
         s.push('\n');
     }
 
+    let fast = study_rows(rows, records, Study::Fast);
+    if !fast.is_empty() {
+        let _ = writeln!(
+            s,
+            "## Fewer operations per step\n\nEach option at the ablation budget and at twice it: read the style distances at equal steps, and at equal time through the time column (preparation included). `exact, seed 1` is the noise floor.\n"
+        );
+        s.push_str(&table_header("setting @ steps"));
+        for (row, r) in &fast {
+            s.push_str(&table_row(&row.label, r, row.step));
+        }
+        s.push('\n');
+    }
+
     let _ = writeln!(s, "## Stability\n");
     let stress = study_rows(rows, records, Study::Stress);
     if !stress.is_empty() {

@@ -12,8 +12,10 @@ use crate::scene::Gaussians;
 use crate::style::StyleConfig;
 use crate::style::adam::Adam;
 use crate::style::color_transfer::ColorTransfer;
+use crate::style::gcfm::{Matches, match_features};
+use crate::style::matching::{MatchIndex, MatchMethod, agreement, find_matches};
 use crate::style::regularizers::l2_distance;
-use crate::style::step::{FeatureMap, RenderedMaps, content_target, step_loss};
+use crate::style::step::{FeatureMap, RenderedMaps, content_target, step_loss_with};
 use crate::vision::Vgg;
 use crate::vision::canny::render_edges;
 
@@ -94,6 +96,14 @@ pub struct Session {
     engine: Option<Box<GpuEngine>>,
     /// Why stepping stopped early, if it did.
     failure: Option<String>,
+    /// The style's matching index (when the config asks for one).
+    index: Option<MatchIndex>,
+    /// Per view, its last matches and the visits they have served.
+    view_matches: Vec<Option<(Matches, u32)>>,
+    /// Every how many steps an approximate search is compared with the exact one (0: never).
+    audit_every: u32,
+    /// Sums of the audited agreement fractions (nearest, farthest) and their count.
+    audit: (f64, f64, u32),
 }
 
 impl Session {
@@ -114,6 +124,7 @@ impl Session {
     ) -> Result<Self, SessionError> {
         let prepared = style;
         let SessionInputs { scene, cameras, style, style_depth, vgg, config, gpu } = inputs;
+        let vgg = with_conv(vgg, config.conv);
         let problems = config.problems();
         if !problems.is_empty() {
             return Err(SessionError::Config(problems));
@@ -153,6 +164,11 @@ impl Session {
             None => prepare_style(&vgg, &style, config.texture_scale, &style_depth, config.depth_polarity),
         };
         on_event(Event::Stage { name: "style features".into(), seconds: t.elapsed().as_secs_f64() });
+        let t = Instant::now();
+        let index = build_index(&style_maps_, &config);
+        if index.is_some() {
+            on_event(Event::Stage { name: "matching index".into(), seconds: t.elapsed().as_secs_f64() });
+        }
 
         let n = keep.len();
         let opt = Optimisers {
@@ -176,12 +192,21 @@ impl Session {
                     ),
                     seconds: t.elapsed().as_secs_f64(),
                 });
+                if config.matching.method != crate::style::MatchMethod::Exact {
+                    on_event(Event::Warning(
+                        "the GPU engine searches matches exactly; the matching index and re-use are CPU options".into(),
+                    ));
+                }
                 Some(Box::new(e))
             }
             None => None,
         };
         Ok(Self {
             targets: (0..work_cams.len()).map(|_| None).collect(),
+            view_matches: (0..work_cams.len()).map(|_| None).collect(),
+            index,
+            audit_every: 0,
+            audit: (0.0, 0.0, 0),
             base_cameras: cameras,
             cameras: work_cams,
             g: g_ref.clone(),
@@ -283,8 +308,9 @@ impl Session {
     }
 
     /// Takes new parameters from the next step on. A new texture scale or depth
-    /// polarity recomputes the style features; a new resolution the cameras and
-    /// per-view targets. Adam state is kept.
+    /// polarity recomputes the style features (and the matching index); a new
+    /// resolution the cameras and per-view targets; any of these, or new
+    /// matching settings, forgets the kept matches. Adam state is kept.
     pub fn set_config(&mut self, config: StyleConfig) -> Result<(), SessionError> {
         let problems = config.problems();
         if !problems.is_empty() {
@@ -302,15 +328,42 @@ impl Session {
                 e.set_style(&self.style.targets.features);
             }
         }
+        self.vgg = with_conv(self.vgg.clone(), config.conv);
+        let restyled =
+            config.texture_scale != self.config.texture_scale || config.depth_polarity != self.config.depth_polarity;
+        if restyled
+            || config.matching.method != self.config.matching.method
+            || config.matching.dims != self.config.matching.dims
+        {
+            self.index = build_index(&self.style, &config);
+        }
+        if restyled || config.matching != self.config.matching {
+            self.view_matches.iter_mut().for_each(|m| *m = None);
+        }
         if config.resolution != self.config.resolution || config.background != self.config.background {
             self.cameras = self.base_cameras.iter().map(|c| c.with_longer_side(config.resolution)).collect();
             self.targets.iter_mut().for_each(|t| *t = None);
             if let Some(e) = &mut self.engine {
                 e.reset_views(self.cameras.len(), config.background);
             }
+            self.view_matches.iter_mut().for_each(|m| *m = None);
         }
         self.config = config;
         Ok(())
+    }
+
+    /// Compares every `every`-th step's approximate matches with the exact
+    /// search (0: never; exact runs have nothing to compare). The comparison's
+    /// time is left out of the step's timings.
+    pub fn audit_matches(&mut self, every: u32) {
+        self.audit_every = every;
+    }
+
+    /// Mean fractions of matches identical to the exact search (nearest,
+    /// farthest) over the audited steps, and their number.
+    pub fn match_agreement(&self) -> Option<(f64, f64, u32)> {
+        let (b, w, k) = self.audit;
+        (k > 0).then(|| (b / f64::from(k), w / f64::from(k), k))
     }
 
     /// Runs the next scheduled step; `None` when the schedule is complete or
@@ -365,7 +418,28 @@ impl Session {
         let edge = render_edges(&rgb, h, w);
         let target = self.targets[view].as_ref()?;
         let geometry = phase.updates_geometry();
-        let loss = step_loss(
+        // Matches: kept from this view's last visits, or searched (and, when
+        // auditing, compared with the exact search off the clock).
+        let mc = self.config.matching;
+        let kept = self.view_matches[view].take().filter(|(_, uses)| *uses < mc.reuse);
+        let uses = kept.as_ref().map_or(0, |k| k.1);
+        let audit_now =
+            self.audit_every > 0 && self.step.is_multiple_of(self.audit_every) && mc.method != MatchMethod::Exact;
+        let (features, index) = (&self.style.targets.features, self.index.as_ref());
+        let (mut audited, mut audit_s) = (None, 0.0);
+        let mut matcher = |r: [&[f32]; 3], n: usize| match &kept {
+            Some((m, _)) => m.clone(),
+            None => {
+                let m = find_matches(features, index, &mc, r, n);
+                if audit_now {
+                    let t = Instant::now();
+                    audited = Some(agreement(&m, &match_features(features, r, n)));
+                    audit_s = t.elapsed().as_secs_f64();
+                }
+                m
+            }
+        };
+        let loss = step_loss_with(
             &*self.vgg,
             &self.style.targets,
             RenderedMaps { rgb: &rgb, inv_depth: &img.inv_depth, edge: &edge, height: h, width: w },
@@ -373,9 +447,14 @@ impl Session {
             geometry.then_some(target.inv_depth.as_slice()),
             &self.config.weights,
             geometry,
+            &mut matcher,
         );
+        if let Some((b, w)) = audited {
+            self.audit = (self.audit.0 + b, self.audit.1 + w, self.audit.2 + 1);
+        }
+        self.view_matches[view] = Some((loss.matches.clone(), uses + 1));
         timings.features_ms = loss.timings.features_ms;
-        timings.matching_ms = loss.timings.matching_ms;
+        timings.matching_ms = loss.timings.matching_ms - (audit_s * 1e3) as f32;
         timings.vgg_backward_ms = loss.timings.backward_ms;
 
         // The clamp to [0, 1] passes no gradient outside the range.
@@ -431,7 +510,7 @@ impl Session {
         }
         timings.update_ms = ms(t);
 
-        self.elapsed_s += started.elapsed().as_secs_f64();
+        self.elapsed_s += started.elapsed().as_secs_f64() - audit_s;
         let report = StepReport {
             iter: self.step,
             total: schedule.total_steps(),
@@ -445,6 +524,17 @@ impl Session {
         self.step += 1;
         Some(report)
     }
+}
+
+/// The matching index the configuration asks for, over the style's features.
+fn build_index(style: &PreparedStyle, config: &StyleConfig) -> Option<MatchIndex> {
+    (config.matching.method == MatchMethod::Pca)
+        .then(|| MatchIndex::build(&style.targets.features, config.matching.dims as usize))
+}
+
+/// The network computing its convolutions with `conv` (the same one when it already does).
+fn with_conv(vgg: Arc<Vgg>, conv: crate::vision::ConvAlgo) -> Arc<Vgg> {
+    if vgg.conv() == conv { vgg } else { Arc::new((*vgg).clone().with_conv(conv)) }
 }
 
 /// `(x − x^c)/‖x − x^c‖` scaled by λ, plus the loss gradient: `reg ← λ·reg + loss`.

@@ -7,7 +7,9 @@
 use serde::{Deserialize, Serialize};
 
 use super::adam::AdamConfig;
+pub use super::matching::{MatchMethod, MatchingConfig};
 use super::schedule::{Mode, Schedule};
+pub use crate::vision::ConvAlgo;
 pub use crate::vision::style_depth::{DepthPolarity, DepthProvider};
 
 /// Loss weights (λ of ALGORITHM.md).
@@ -88,6 +90,10 @@ pub struct StyleConfig {
     pub depth_provider: DepthProvider,
     /// Seed of the view shuffling.
     pub seed: u64,
+    /// How VGG's convolutions are computed (both exact; Winograd does 4× fewer multiplies).
+    pub conv: ConvAlgo,
+    /// How the GCFM matches are searched (exact by default) and how long they are kept.
+    pub matching: MatchingConfig,
 }
 
 impl Default for StyleConfig {
@@ -106,6 +112,8 @@ impl Default for StyleConfig {
             depth_polarity: DepthPolarity::NearBright,
             depth_provider: DepthProvider::Learned,
             seed: 0,
+            conv: ConvAlgo::Im2col,
+            matching: MatchingConfig::default(),
         }
     }
 }
@@ -143,6 +151,13 @@ impl StyleConfig {
         }
         if !(16..=4096).contains(&self.resolution) {
             out.push(format!("resolution must lie in 16..=4096 pixels, found {}", self.resolution));
+        }
+        let mc = self.matching;
+        if mc.dims == 0 || mc.candidates == 0 || mc.reuse == 0 {
+            out.push(format!(
+                "matching dims, candidates and reuse must be positive (found {}, {} and {})",
+                mc.dims, mc.candidates, mc.reuse
+            ));
         }
         let w = self.weights;
         let lr = self.lr;

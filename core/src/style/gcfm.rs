@@ -19,7 +19,7 @@
 use rayon::prelude::*;
 
 /// The epsilon of the reference's normalisations.
-const EPS: f64 = 1e-8;
+pub(super) const EPS: f64 = 1e-8;
 /// Score-matrix elements per tile (4 MiB of `f32`).
 const TILE_ELEMS: usize = 1 << 20;
 /// Scores within this fraction of the rendered vector's norm of the best (or
@@ -121,7 +121,7 @@ pub struct GcfmOutput {
 /// accumulating into `dst` when `accumulate`.
 #[allow(unsafe_code)]
 #[allow(clippy::too_many_arguments)]
-fn gemm_tile(
+pub(super) fn gemm_tile(
     dst: &mut [f32],
     t: usize,
     m: usize,

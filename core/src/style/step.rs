@@ -12,7 +12,7 @@
 
 use super::config::LossWeights;
 use super::content::content_loss;
-use super::gcfm::{Matches, StyleFeatures, gcfm_loss};
+use super::gcfm::{Matches, StyleFeatures, gcfm_loss_with_matches, match_features};
 use super::regularizers::depth_l1;
 use super::tv::tv_loss;
 use crate::vision::resize::{downscale_half, downscale_half_backward};
@@ -191,6 +191,24 @@ pub fn step_loss<N: FeatureNet>(
     weights: &LossWeights,
     depth_grad: bool,
 ) -> StepLoss {
+    let exact = &mut |rendered: [&[f32]; 3], n: usize| match_features(&style.features, rendered, n);
+    step_loss_with(net, style, maps, content, depth_ref, weights, depth_grad, exact)
+}
+
+/// [`step_loss`] with the GCFM matches found by `matcher` (given the rendered
+/// RGB, depth and edge features and their number of positions): an index,
+/// or matches kept from an earlier visit of the view.
+#[allow(clippy::too_many_arguments)]
+pub fn step_loss_with<N: FeatureNet>(
+    net: &N,
+    style: &StyleTargets,
+    maps: RenderedMaps<'_>,
+    content: Option<&FeatureMap>,
+    depth_ref: Option<&[f32]>,
+    weights: &LossWeights,
+    depth_grad: bool,
+    matcher: &mut dyn FnMut([&[f32]; 3], usize) -> Matches,
+) -> StepLoss {
     use rayon::prelude::*;
     let (h, w) = (maps.height, maps.width);
     assert_eq!(maps.rgb.len(), h * w * 3, "step_loss: rgb size");
@@ -224,7 +242,8 @@ pub fn step_loss<N: FeatureNet>(
     timings.features_ms = t.elapsed().as_secs_f32() * 1e3;
     let t = std::time::Instant::now();
     let n = fwd[0].0.height * fwd[0].0.width;
-    let out = gcfm_loss(&style.features, [&fwd[0].0.data, &fwd[1].0.data, &fwd[2].0.data], n);
+    let rendered = [&fwd[0].0.data[..], &fwd[1].0.data[..], &fwd[2].0.data[..]];
+    let out = gcfm_loss_with_matches(&style.features, rendered, n, matcher(rendered, n));
 
     // RGB features' gradient: GCFM plus content.
     let mut v_feat_rgb: Vec<f32> = out.v_rendered[0].iter().map(|v| v * weights.gcfm).collect();

@@ -4,7 +4,8 @@
 //! GAST measures style and content in the relu3 feature space of an
 //! ImageNet-trained VGG (ALGORITHM.md, Stage 1 and the GCFM loss). This module
 //! finds and loads those weights ([`weights`], [`download`]), and runs the
-//! network forward and backward on the CPU ([`vgg`]). Around it: Canny edges as
+//! network forward and backward on the CPU ([`vgg`]), its convolutions by
+//! im2col or by Winograd's minimal filtering ([`winograd`]). Around it: Canny edges as
 //! OpenCV computes them ([`canny`]), the JET colour map ([`colormap`]), area and
 //! bilinear resizing with the adjoint of the bilinear one ([`resize`]), and
 //! style-image depth ([`style_depth`]).
@@ -22,9 +23,10 @@ pub mod resize;
 pub mod style_depth;
 pub mod vgg;
 pub mod weights;
+pub mod winograd;
 
-pub use conv::gemm_gflops;
 pub(crate) use conv::matmul;
+pub use conv::{ConvAlgo, gemm_gflops};
 pub use download::resolve_weights;
 pub use vgg::{Features, Vgg, VggState};
 pub use weights::{VggWeights, WeightsError};

@@ -9,13 +9,15 @@
 //! saved state is small: a ReLU mask per convolution and the winners of the
 //! two max-pools.
 //!
-//! Convolutions are im2col + `gemm` (see `conv.rs`); the ImageNet
-//! normalisation torchvision's weights expect happens inside.
+//! Convolutions are im2col + `gemm` (see `conv.rs`) or Winograd F(4×4, 3×3)
+//! (`winograd.rs`), chosen by [`Vgg::with_conv`]; the ImageNet normalisation
+//! torchvision's weights expect happens inside.
 
 use rayon::prelude::*;
 
-use super::conv::{conv_backward, conv_relu, max_pool, max_pool_backward};
+use super::conv::{ConvAlgo, add_bias, conv_backward, conv_relu, max_pool, max_pool_backward};
 use super::weights::VggWeights;
+use super::winograd::{WinogradKernel, winograd_conv, winograd_flops};
 
 /// torchvision's ImageNet normalisation, per RGB channel.
 pub const IMAGENET_MEAN: [f32; 3] = [0.485, 0.456, 0.406];
@@ -53,6 +55,10 @@ pub struct VggState {
 #[derive(Clone, Debug)]
 pub struct Vgg {
     weights: VggWeights,
+    conv: ConvAlgo,
+    /// Per convolution, the forward and input-gradient kernels in the Winograd
+    /// domain (empty unless `conv` is Winograd).
+    winograd: Vec<[WinogradKernel; 2]>,
 }
 
 /// Index of each convolution's stage (0: full resolution, 1: ½, 2: ¼).
@@ -61,7 +67,61 @@ pub(crate) const STAGE: [usize; 7] = [0, 0, 1, 1, 2, 2, 2];
 impl Vgg {
     /// Wraps loaded weights (see [`VggWeights::load`]).
     pub fn from_weights(weights: VggWeights) -> Self {
-        Self { weights }
+        Self { weights, conv: ConvAlgo::default(), winograd: Vec::new() }
+    }
+
+    /// The same network computing its convolutions with `conv` (transforms
+    /// the kernels once for Winograd).
+    pub fn with_conv(mut self, conv: ConvAlgo) -> Self {
+        self.winograd = match conv {
+            ConvAlgo::Im2col => Vec::new(),
+            ConvAlgo::Winograd => self
+                .weights
+                .convs
+                .iter()
+                .map(|c| {
+                    [
+                        WinogradKernel::forward(&c.weight, c.c_out, c.c_in),
+                        WinogradKernel::input_gradient(&c.weight, c.c_out, c.c_in),
+                    ]
+                })
+                .collect(),
+        };
+        self.conv = conv;
+        self
+    }
+
+    /// How the convolutions are computed.
+    pub fn conv(&self) -> ConvAlgo {
+        self.conv
+    }
+
+    /// `out = relu(conv_layer(input) + bias)` at `h × w`, by the chosen algorithm.
+    fn conv_relu(&self, layer: usize, input: &[f32], (h, w): (usize, usize), out: &mut [f32], scratch: &mut Vec<f32>) {
+        let c = &self.weights.convs[layer];
+        match self.winograd.get(layer) {
+            Some([k, _]) => {
+                winograd_conv(input, (c.c_in, h, w), k, out, scratch);
+                add_bias(out, h * w, &c.bias, true);
+            }
+            None => conv_relu(input, (c.c_in, h, w), &c.weight, &c.bias, out, scratch),
+        }
+    }
+
+    /// Input gradient of convolution `layer` at `h × w` (overwrites `v_input`).
+    fn conv_backward(
+        &self,
+        layer: usize,
+        v_out: &[f32],
+        (h, w): (usize, usize),
+        v_input: &mut [f32],
+        scratch: &mut Vec<f32>,
+    ) {
+        let c = &self.weights.convs[layer];
+        match self.winograd.get(layer) {
+            Some([_, k]) => winograd_conv(v_out, (c.c_out, h, w), k, v_input, scratch),
+            None => conv_backward(v_out, (c.c_in, h, w), &c.weight, c.c_out, v_input, scratch),
+        }
     }
 
     /// Loads the weights from a `.safetensors` or `.pth` file (see
@@ -126,7 +186,7 @@ impl Vgg {
                 }
             });
             v_in.resize(c.c_in * lh * lw, 0.0);
-            conv_backward(&v, (c.c_in, lh, lw), &c.weight, c.c_out, &mut v_in, &mut scratch);
+            self.conv_backward(layer, &v, (lh, lw), &mut v_in, &mut scratch);
             std::mem::swap(&mut v, &mut v_in);
             if layer == 4 || layer == 2 {
                 // Through the pool in front of this stage.
@@ -175,7 +235,7 @@ impl Vgg {
             let c = &convs[layer];
             let (lh, lw) = dims[STAGE[layer]];
             y.resize(c.c_out * lh * lw, 0.0);
-            conv_relu(&x, (c.c_in, lh, lw), &c.weight, &c.bias, &mut y, &mut scratch);
+            self.conv_relu(layer, &x, (lh, lw), &mut y, &mut scratch);
             if let Some(s) = save.as_deref_mut() {
                 s.relu_open.push(y.par_iter().map(|&v| v > 0.0).collect());
             }
@@ -192,12 +252,9 @@ impl Vgg {
         let (h3, w3) = dims[2];
         let (f1, rest) = feats.split_at_mut(256 * n3);
         let (f2, f3) = rest.split_at_mut(256 * n3);
-        let c = &convs[4];
-        conv_relu(&x, (c.c_in, h3, w3), &c.weight, &c.bias, f1, &mut scratch);
-        let c = &convs[5];
-        conv_relu(f1, (c.c_in, h3, w3), &c.weight, &c.bias, f2, &mut scratch);
-        let c = &convs[6];
-        conv_relu(f2, (c.c_in, h3, w3), &c.weight, &c.bias, f3, &mut scratch);
+        self.conv_relu(4, &x, (h3, w3), f1, &mut scratch);
+        self.conv_relu(5, f1, (h3, w3), f2, &mut scratch);
+        self.conv_relu(6, f2, (h3, w3), f3, &mut scratch);
         if let Some(s) = save {
             for f in [&*f1, &*f2, &*f3] {
                 s.relu_open.push(f.par_iter().map(|&v| v > 0.0).collect());
@@ -214,6 +271,22 @@ impl Vgg {
             .iter()
             .zip(STAGE)
             .map(|(c, s)| 2.0 * (c.c_out * c.c_in * 9) as f64 * (dims[s].0 * dims[s].1) as f64)
+            .sum()
+    }
+
+    /// Floating-point operations one forward pass at `h × w` executes with the
+    /// chosen convolution (for Winograd: its products plus both transforms;
+    /// the backward does about as many).
+    pub fn executed_forward_flops(&self, h: usize, w: usize) -> f64 {
+        if self.conv == ConvAlgo::Im2col {
+            return self.forward_flops(h, w);
+        }
+        let dims = [(h, w), (h / 2, w / 2), (h / 4, w / 4)];
+        self.weights
+            .convs
+            .iter()
+            .zip(STAGE)
+            .map(|(c, s)| winograd_flops(c.c_in, c.c_out, dims[s].0, dims[s].1).iter().sum::<f64>())
             .sum()
     }
 }

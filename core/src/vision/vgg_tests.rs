@@ -1,6 +1,7 @@
 //! Finite-difference check of [`Vgg::backward`] and a speed print.
 
 use super::*;
+use crate::vision::ConvAlgo;
 use crate::vision::conv::tests::noise;
 use crate::vision::weights::{CONV_SHAPES, ConvWeights};
 
@@ -114,8 +115,10 @@ fn frozen_features(vgg: &Vgg, state: &VggState, rgb: &[f32], h: usize, w: usize)
 fn backward_is_the_exact_gradient_of_the_linearised_network() {
     let mut failures = Vec::new();
     let mut checked = 0;
-    for (h, w, seed) in [(16, 16, 1u64), (17, 22, 7)] {
-        let vgg = random_vgg(seed);
+    for (h, w, seed, conv) in
+        [(16, 16, 1u64, ConvAlgo::Im2col), (17, 22, 7, ConvAlgo::Im2col), (17, 22, 7, ConvAlgo::Winograd)]
+    {
+        let vgg = random_vgg(seed).with_conv(conv);
         let rgb: Vec<f32> = noise(h * w * 3, seed + 100).iter().map(|v| 0.5 + 0.4 * v).collect();
         let (f, state) = vgg.forward(&rgb, h, w);
         let frozen = frozen_features(&vgg, &state, &rgb, h, w);
@@ -136,17 +139,40 @@ fn backward_is_the_exact_gradient_of_the_linearised_network() {
             let fd = (up - value(&x)) / (2.0 * eps as f64);
             let g = grad[i] as f64;
             if (fd - g).abs() > 1e-3 + 1e-3 * fd.abs() {
-                failures.push(format!("{h}×{w} input {i}: backward {g:.6}, differences {fd:.6}"));
+                failures.push(format!("{conv} {h}×{w} input {i}: backward {g:.6}, differences {fd:.6}"));
             }
         }
     }
     assert!(failures.is_empty(), "{} of {checked} gradient checks failed:\n{}", failures.len(), failures.join("\n"));
 }
 
+/// Winograd against im2col through the whole network: features within the
+/// golden files' 1e-4 of the largest value, and the input gradient through
+/// the same ReLU masks and pool winners.
+#[test]
+fn winograd_network_matches_im2col() {
+    for (h, w, seed) in [(32, 32, 11u64), (23, 30, 12)] {
+        let reference = random_vgg(seed);
+        let fast = reference.clone().with_conv(ConvAlgo::Winograd);
+        let rgb: Vec<f32> = noise(h * w * 3, seed + 100).iter().map(|v| 0.5 + 0.4 * v).collect();
+        let (f_ref, state) = reference.forward(&rgb, h, w);
+        let f_fast = fast.features(&rgb, h, w);
+        let max_ref = f_ref.data.iter().fold(0f32, |m, v| m.max(v.abs()));
+        let diff = f_ref.data.iter().zip(&f_fast.data).fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+        assert!(diff <= 1e-4 * max_ref, "{h}×{w} features: max diff {diff:.3e} of max {max_ref:.3e}");
+        let r = noise(f_ref.data.len(), seed + 200);
+        let (g_ref, g_fast) = (reference.backward(&state, &r), fast.backward(&state, &r));
+        let max_ref = g_ref.iter().fold(0f32, |m, v| m.max(v.abs()));
+        let diff = g_ref.iter().zip(&g_fast).fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+        assert!(diff <= 1e-4 * max_ref, "{h}×{w} input gradient: max diff {diff:.3e} of max {max_ref:.3e}");
+    }
+}
+
 #[test]
 fn speed_at_128() {
     let vgg = random_vgg(3);
     println!("{}", bench(&vgg, 128, 128, 5));
+    println!("winograd: {}", bench(&vgg.with_conv(ConvAlgo::Winograd), 128, 128, 5));
 }
 
 #[test]
