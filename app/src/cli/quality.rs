@@ -222,6 +222,24 @@ fn scaled_lr(scale: f32) -> gast_core::style::config::LearningRates {
     }
 }
 
+/// The settings of the `fast` study: the exact default, its seed-1 twin (the
+/// noise floor), and each option of issue 10 alone and together.
+fn fast_options(base: &StyleConfig) -> Vec<(&'static str, StyleConfig)> {
+    use gast_core::style::{MatchMethod, MatchingConfig};
+    use gast_core::vision::ConvAlgo;
+    let pca = MatchingConfig { method: MatchMethod::Pca, ..MatchingConfig::default() };
+    let reuse = MatchingConfig { reuse: 3, ..MatchingConfig::default() };
+    let all = MatchingConfig { reuse: 3, ..pca };
+    vec![
+        ("exact", base.clone()),
+        ("exact, seed 1", StyleConfig { seed: 1, ..base.clone() }),
+        ("winograd", StyleConfig { conv: ConvAlgo::Winograd, ..base.clone() }),
+        ("pca 128/32", StyleConfig { matching: pca, ..base.clone() }),
+        ("reuse 3", StyleConfig { matching: reuse, ..base.clone() }),
+        ("winograd + pca + reuse 3", StyleConfig { conv: ConvAlgo::Winograd, matching: all, ..base.clone() }),
+    ]
+}
+
 /// Runs the grid and writes the report.
 pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
     if let Some(dir) = &args.report {
