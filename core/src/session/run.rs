@@ -12,7 +12,8 @@ use crate::style::StyleConfig;
 use crate::style::adam::Adam;
 use crate::style::color_transfer::ColorTransfer;
 use crate::style::regularizers::l2_distance;
-use crate::style::step::{FeatureMap, RenderedMaps, content_target, step_loss};
+use crate::style::focus::coverage_mask;
+use crate::style::step::{FeatureMap, RenderedMaps, content_target, step_loss_masked};
 use crate::vision::Vgg;
 use crate::vision::canny::render_edges;
 
@@ -48,6 +49,8 @@ pub struct SessionInputs {
 struct ViewTarget {
     content: FeatureMap,
     inv_depth: Vec<f32>,
+    /// Pixels `G^c` covers ([`coverage_mask`]): the focus of the losses with `Focus::Object`.
+    coverage: Vec<bool>,
 }
 
 /// Optimiser state, one Adam per parameter group, per phase (kept across cycles).
@@ -82,6 +85,8 @@ pub struct Session {
     sampler: ViewSampler,
     step: u32,
     elapsed_s: f64,
+    /// Mean share of the optimisation views' pixels the scene covers (alpha ≥ 0.5).
+    coverage: f32,
 }
 
 impl Session {
@@ -117,6 +122,8 @@ impl Session {
 
         let t = Instant::now();
         let survey = survey_views(&scene, &work_cams, &opts);
+        let pixels: usize = work_cams.iter().map(|c| c.width as usize * c.height as usize).sum();
+        let coverage = survey.covered_rgb.len() as f32 / 3.0 / pixels.max(1) as f32;
         let ct = ColorTransfer::fit(&survey.covered_rgb, &style.to_f32());
         let mut full = scene;
         ct.apply_to_gaussians(&mut full);
@@ -169,6 +176,7 @@ impl Session {
             sampler,
             step: 0,
             elapsed_s: 0.0,
+            coverage,
             config,
         })
     }
@@ -211,6 +219,17 @@ impl Session {
     /// The colour-matched scene before optimisation (`G^c`, whole).
     pub fn colour_matched(&self) -> &Gaussians {
         &self.full
+    }
+
+    /// Mean share of the optimisation views' pixels the input scene covers.
+    pub fn coverage(&self) -> f32 {
+        self.coverage
+    }
+
+    /// Whether the losses focus on the object (the configured focus, with
+    /// `auto` resolved by [`Session::coverage`]).
+    pub fn focus_on_object(&self) -> bool {
+        self.config.focus.is_object(self.coverage)
     }
 
     /// Number of Gaussians being optimised.
@@ -264,8 +283,11 @@ impl Session {
         if self.targets[view].is_none() {
             let r = raster::render(&self.g_ref, &cam, &opts);
             let rgb: Vec<f32> = r.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
-            self.targets[view] =
-                Some(ViewTarget { content: content_target(&*self.vgg, &rgb, h, w), inv_depth: r.inv_depth });
+            self.targets[view] = Some(ViewTarget {
+                content: content_target(&*self.vgg, &rgb, h, w),
+                coverage: coverage_mask(&r.alpha, h, w),
+                inv_depth: r.inv_depth,
+            });
         }
 
         let t = Instant::now();
@@ -275,7 +297,7 @@ impl Session {
         let edge = render_edges(&rgb, h, w);
         let target = self.targets[view].as_ref()?;
         let geometry = phase.updates_geometry();
-        let loss = step_loss(
+        let loss = step_loss_masked(
             &*self.vgg,
             &self.style.targets,
             RenderedMaps { rgb: &rgb, inv_depth: &img.inv_depth, edge: &edge, height: h, width: w },
@@ -283,6 +305,7 @@ impl Session {
             geometry.then_some(target.inv_depth.as_slice()),
             &self.config.weights,
             geometry,
+            self.focus_on_object().then_some(target.coverage.as_slice()),
         );
         timings.features_ms = loss.timings.features_ms;
         timings.matching_ms = loss.timings.matching_ms;
@@ -319,6 +342,9 @@ impl Session {
                 .flat_map(|i| [grads.v_sh[i * k], grads.v_sh[i * k + 1], grads.v_sh[i * k + 2]])
                 .collect();
             self.opt.color.step(&mut dc, &v_dc, lr.color);
+            if self.config.color_floor {
+                floor_dc(&mut dc);
+            }
             for i in 0..self.g.len() {
                 self.g.sh[i * k..i * k + 3].copy_from_slice(&dc[3 * i..3 * i + 3]);
             }
@@ -355,6 +381,13 @@ impl Session {
         self.step += 1;
         Some(report)
     }
+}
+
+/// Projects DC colour coefficients out of the clamp's dead zone: every
+/// channel's base colour `0.5 + C0·f_dc` is raised to at least 0.
+fn floor_dc(dc: &mut [f32]) {
+    let lowest = -0.5 / crate::scene::SH_C0;
+    dc.iter_mut().for_each(|v| *v = v.max(lowest));
 }
 
 /// `(x − x^c)/‖x − x^c‖` scaled by λ, plus the loss gradient: `reg ← λ·reg + loss`.

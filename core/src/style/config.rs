@@ -7,6 +7,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::adam::AdamConfig;
+use super::focus::Focus;
 use super::schedule::{Mode, Schedule};
 pub use crate::vision::style_depth::DepthPolarity;
 
@@ -86,6 +87,13 @@ pub struct StyleConfig {
     pub depth_polarity: DepthPolarity,
     /// Seed of the view shuffling.
     pub seed: u64,
+    /// Which pixels GCFM, content and TV average over (the whole frame, the
+    /// object, or the object when it covers less than half of the views).
+    pub focus: Focus,
+    /// After each colour step, raise every Gaussian's DC colour so that no
+    /// channel renders below 0 (`0.5 + C0·f_dc ≥ 0`), out of the clamp's dead
+    /// zone where no gradient reaches it again. Off in the reference.
+    pub color_floor: bool,
 }
 
 impl Default for StyleConfig {
@@ -103,6 +111,8 @@ impl Default for StyleConfig {
             background: [0.0; 3],
             depth_polarity: DepthPolarity::NearBright,
             seed: 0,
+            focus: Focus::default(),
+            color_floor: false,
         }
     }
 }
