@@ -13,13 +13,14 @@ use gast_core::eval::{inverse_depth_change, mean_std_distance, nn_cosine_distanc
 use gast_core::io::{write_bytes, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
 use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource, StyleImage};
-use gast_core::style::{Mode, StyleConfig};
+use gast_core::style::{Focus, Mode, StyleConfig};
 use gast_core::vision::Vgg;
 use gast_core::vision::style_depth::{DepthImage, DepthPolarity};
 use serde::Serialize;
 
-use super::{ViewArgs, load_scene, views_for};
+use super::{Framing, ViewArgs, load_scene, views_for};
 use crate::progress;
+use crate::report::sheet;
 
 /// Arguments of `gast stylize`.
 #[derive(Args, Debug)]
@@ -41,6 +42,13 @@ pub struct StylizeArgs {
     /// Vertical field of view of generated views, degrees.
     #[arg(long, default_value_t = 50.0)]
     pub fov: f32,
+    /// Generated views: `object` fits each view to the object (it spans 90% of
+    /// the longer side), `full` is the plain orbit around its bounding sphere.
+    #[arg(long, value_enum, default_value_t = Framing::Object)]
+    pub framing: Framing,
+    /// With --cameras: crop each view to the region the object covers.
+    #[arg(long)]
+    pub crop: bool,
     /// A preset file (JSON StyleConfig); flags below override it.
     #[arg(long)]
     pub preset: Option<PathBuf>,
@@ -114,6 +122,15 @@ pub struct StylizeArgs {
     /// Seed of the view order [default: 0].
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Where GCFM, content and TV look: frame (every pixel, the paper), object
+    /// (the pixels the scene covers), auto (object when the scene covers less
+    /// than half of the views) [default: auto].
+    #[arg(long)]
+    pub focus: Option<Focus>,
+    /// Keep colours out of the clamp's dead zone: after each colour step no
+    /// channel of a Gaussian's base colour goes below 0 [default: off].
+    #[arg(long)]
+    pub color_floor: Option<bool>,
     /// Views rendered before/after into the output folder.
     #[arg(long, default_value_t = 4)]
     pub preview_views: usize,
@@ -158,6 +175,8 @@ impl StylizeArgs {
         set!(self.lr_opacity, c.lr.opacity);
         set!(self.depth_polarity, c.depth_polarity);
         set!(self.seed, c.seed);
+        set!(self.focus, c.focus);
+        set!(self.color_floor, c.color_floor);
         let problems = c.problems();
         anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
         Ok(c)
@@ -235,7 +254,14 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     };
     let cameras = views_for(
         &scene,
-        &ViewArgs { cameras: args.cameras.clone(), views: args.views, size: config.resolution, fov: args.fov },
+        &ViewArgs {
+            cameras: args.cameras.clone(),
+            views: args.views,
+            size: config.resolution,
+            fov: args.fov,
+            framing: args.framing,
+            crop: args.crop,
+        },
     )?;
     let vgg = Arc::new(load_vgg(args.weights.as_deref())?);
     eprintln!(
@@ -303,6 +329,38 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         &vgg,
         args.preview_views,
     )?;
+    let sheet_path = args.out.join("sheet.png");
+    let focus = if session.focus_on_object() { "object" } else { "frame" };
+    let settings = format!(
+        "{} {} steps ({} cycles x {}), {} px, texture {} px, focus {focus} (asked {:?}, coverage {:.0}%), lr colour {}, colour floor {}; {:.0} s ({:.2} s/step)",
+        config.mode.name(),
+        total,
+        config.cycles,
+        config.steps_per_cycle,
+        config.resolution,
+        config.texture_scale,
+        config.focus,
+        100.0 * session.coverage(),
+        config.lr.color,
+        if config.color_floor { "on" } else { "off" },
+        optimisation_s,
+        optimisation_s / f64::from(total.max(1)),
+    );
+    let title = format!(
+        "{} x {}",
+        args.scene.file_name().unwrap_or_default().to_string_lossy(),
+        args.style.file_name().unwrap_or_default().to_string_lossy()
+    );
+    sheet::write_sheet(
+        &sheet_path,
+        &sheet::SheetContent {
+            title,
+            settings,
+            style: sheet::style_tiles(&session),
+            views: sheet::session_views(&session, &scene, args.preview_views),
+        },
+    )?;
+    eprintln!("  contact sheet: {}", sheet_path.display());
     let mut summary = Summary::default();
     let n = preview.len().max(1) as f32;
     for p in &preview {
@@ -354,12 +412,11 @@ fn write_previews(
     let opts = RenderOptions { background: session.config().background };
     let style = &session.style().maps;
     let style_feats = vgg.features(&style.rgb, style.height, style.width);
-    let step = (cameras.len() / count.max(1)).max(1);
     let mut metrics = Vec::new();
     write_png_rgb(&out.join("style.png"), style.width as u32, style.height as u32, &style.rgb)?;
     write_png_gray_normalized(&out.join("style_depth.png"), style.width as u32, style.height as u32, &style.depth)?;
     write_png_gray_normalized(&out.join("style_edge.png"), style.width as u32, style.height as u32, &style.edge)?;
-    for (k, cam) in cameras.iter().step_by(step).take(count).enumerate() {
+    for (k, cam) in sheet::spread(cameras, count).enumerate() {
         let (w, h) = (cam.width, cam.height);
         let before = raster::render(input, cam, &opts);
         let matched = raster::render(colour_matched, cam, &opts);
