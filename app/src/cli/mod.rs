@@ -7,6 +7,8 @@ pub mod quality;
 mod render;
 mod stylize;
 
+pub use stylize::step_time_hint;
+
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 

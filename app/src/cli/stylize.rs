@@ -9,6 +9,7 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Args;
 use gast_core::Camera;
+use gast_core::camera::{framing_subject, subject_span};
 use gast_core::eval::{inverse_depth_change, mean_std_distance, nn_cosine_distance};
 use gast_core::io::{write_bytes, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
@@ -76,7 +77,12 @@ pub struct StylizeArgs {
     /// Texture scale: the style's height in pixels (128, 256, 512 = 0.5x, 1x, 2x) [default: 256].
     #[arg(long)]
     pub texture_scale: Option<u32>,
-    /// Working resolution: longer side of the optimisation renders [default: 256].
+    /// Working resolution: longer side of the optimisation renders [default:
+    /// follows the object: the smallest size (a multiple of 32) at which it
+    /// spans 64 relu3 positions across its longer side, at most the size where a
+    /// CPU step takes about 1 s; on a 2-core CPU a step takes about 0.6 s at
+    /// 256 px, 1.4 s at 384 px and 2.4 s at 512 px (the time grows with the
+    /// pixel count)].
     #[arg(long)]
     pub resolution: Option<u32>,
     /// λ_GC, contrastive feature matching [default: 2].
@@ -191,6 +197,34 @@ fn parse_polarity(s: &str) -> Result<DepthPolarity, String> {
     }
 }
 
+/// Render pixels per VGG relu3 feature position: the 0.5× downscale, then VGG's two poolings.
+const PIXELS_PER_FEATURE: f32 = 8.0;
+/// relu3 positions the object should span across its longer side.
+const OBJECT_FEATURES: f32 = 64.0;
+/// Seconds of one optimisation step at 256 × 256 px on a 2-core CPU (the
+/// step benchmark's figure; a step's time grows with the pixel count).
+pub const CPU_STEP_S_AT_256: f64 = 0.6;
+/// The longest step the automatic working resolution accepts, seconds.
+const AUTO_STEP_BUDGET_S: f64 = 1.0;
+
+/// The estimated time of one CPU step at `resolution` (square views; views
+/// fitted to an elongated object have fewer pixels and are faster).
+pub fn step_time_hint(resolution: u32) -> String {
+    let s = CPU_STEP_S_AT_256 * (f64::from(resolution) / 256.0).powi(2);
+    format!("about {s:.1} s per step at {resolution} px on a 2-core CPU")
+}
+
+/// The working resolution for an object that spans `span` of the longer
+/// image side: the smallest multiple of 32 at which it spans
+/// [`OBJECT_FEATURES`] relu3 positions, bounded by [`AUTO_STEP_BUDGET_S`] per
+/// step (and 128 px below). Returns `(chosen, wanted)`.
+fn auto_resolution(span: f32) -> (u32, u32) {
+    let wanted = if span > 1e-3 { OBJECT_FEATURES * PIXELS_PER_FEATURE / span } else { 4096.0 };
+    let wanted = ((wanted / 32.0).ceil() * 32.0).min(4096.0) as u32;
+    let cap = (256.0 * (AUTO_STEP_BUDGET_S / CPU_STEP_S_AT_256).sqrt() / 32.0).floor() as u32 * 32;
+    (wanted.clamp(128, cap.max(128)), wanted)
+}
+
 /// Loads the VGG weights the usual way, with a progress bar for a download.
 pub fn load_vgg(explicit: Option<&Path>) -> anyhow::Result<Vgg> {
     let pb = progress::bytes_bar("weights");
@@ -243,9 +277,6 @@ struct Summary {
 pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let t_all = Instant::now();
     let config = args.config()?;
-    if let Some(p) = &args.save_preset {
-        write_bytes(p, config.to_json().as_bytes())?;
-    }
     let scene = load_scene(&args.scene)?;
     let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
     let style_depth = match &args.style_depth {
@@ -263,6 +294,22 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             crop: args.crop,
         },
     )?;
+    let mut config = config;
+    if args.resolution.is_none() && args.preset.is_none() {
+        let subject = framing_subject(&scene);
+        let span = cameras.iter().map(|c| subject_span(c, &subject)).sum::<f32>() / cameras.len().max(1) as f32;
+        let (chosen, wanted) = auto_resolution(span);
+        eprintln!(
+            "working resolution {chosen} px: the object spans {:.0} relu3 positions across its longer side \
+             (64 would need {wanted} px); {}",
+            span * chosen as f32 / PIXELS_PER_FEATURE,
+            step_time_hint(chosen)
+        );
+        config.resolution = chosen;
+    }
+    if let Some(p) = &args.save_preset {
+        write_bytes(p, config.to_json().as_bytes())?;
+    }
     let vgg = Arc::new(load_vgg(args.weights.as_deref())?);
     eprintln!(
         "{}: {} Gaussians (SH degree {}), {} views; style {} ({}x{})",
@@ -446,4 +493,21 @@ fn write_previews(
         });
     }
     Ok(metrics)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_automatic_resolution_follows_the_object_within_the_step_budget() {
+        // A fitted view (the object spans 90 %) wants 576 px for 64 relu3
+        // positions; a 1 s step allows 320 px at 0.6 s per 256 px step.
+        assert_eq!(auto_resolution(0.9), (320, 576));
+        // A small object wants more, gets the same cap; nothing goes below 128 px.
+        assert_eq!(auto_resolution(0.3).0, 320);
+        assert!(auto_resolution(0.3).1 > 1600);
+        assert_eq!(auto_resolution(0.0).1, 4096);
+        assert!(step_time_hint(512).contains("2.4 s"), "{}", step_time_hint(512));
+    }
 }

@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 
-use gast_core::camera::{OrbitOptions, orbit_cameras};
+use gast_core::camera::{OrbitOptions, framed_orbit};
 use gast_core::session::{Event, SessionInputs, StyleDepthSource, spawn_with};
 use gast_core::vision::Vgg;
 
@@ -41,7 +41,7 @@ pub fn starter() -> SessionStarter {
                         height: config.resolution,
                         ..OrbitOptions::default()
                     };
-                    orbit_cameras(&scene.means, &opts)
+                    framed_orbit(&scene, &opts)
                 } else {
                     cameras
                 };

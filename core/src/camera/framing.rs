@@ -83,6 +83,13 @@ pub fn fit_view(cam: &Camera, points: &[Vec3], longer_side: u32) -> Camera {
     Camera { width: w as u32, height: h as u32, fx: f, fy: f, cx: 0.5 * w - f * mid.x, cy: 0.5 * h - f * mid.y, ..cam.clone() }
 }
 
+/// How much of `cam`'s frame the points take: the longer side of their
+/// projected box over the longer image side (0 when none is in front).
+pub fn subject_span(cam: &Camera, points: &[Vec3]) -> f32 {
+    let Some((lo, hi)) = normalised_box(cam, points) else { return 0.0 };
+    ((hi.x - lo.x) * cam.fx).max((hi.y - lo.y) * cam.fy) / cam.width.max(cam.height).max(1) as f32
+}
+
 /// Orbit views (positions and directions of [`orbit_cameras`]) each fitted to
 /// the subject of `g` ([`framing_subject`], [`fit_view`]); the longer side of
 /// every image is `max(opts.width, opts.height)`.
@@ -177,6 +184,7 @@ mod tests {
             }
             let span = (hi.x - lo.x).max(hi.y - lo.y);
             assert!(span >= 0.8 * 256.0, "{}: the subject spans {span} of 256 px", cam.name);
+            assert!((subject_span(cam, &subject) - span / 256.0).abs() < 1e-3);
             // The plain orbit never frames it larger.
             let old_span = plain_span(old, &subject) * 256.0 / old.width.max(old.height) as f32;
             assert!(span >= old_span - 1.0, "{}: {span} px fitted, {old_span} px on the plain orbit", cam.name);
