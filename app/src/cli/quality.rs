@@ -214,7 +214,7 @@ impl Sizes {
             styles: vec!["data/styles/wave.jpg".into(), "data/styles/block2.jpg".into()],
             curve_styles: vec!["data/styles/wave.jpg".into()],
             focus_budget: 10,
-            collapse_budget: 20,
+            collapse_budget: 100,
             collapse_resolution: 64,
         }
     }
@@ -469,7 +469,8 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
             cycles: sizes.collapse_budget.div_ceil(steps).max(1),
             ..base.clone()
         };
-        let quarters: Vec<u32> = [4u32, 2].iter().map(|d| sizes.collapse_budget / d).filter(|s| *s > 0).collect();
+        let total = default.schedule().total_steps();
+        let quarters: Vec<u32> = [4u32, 2].iter().map(|d| total / d).filter(|s| *s > 0).collect();
         for scene in 0..sizes.scenes.len() {
             for style in &sizes.styles {
                 g.want_framed((Study::Collapse, "decoupled"), scene, &file(style), default.clone(), 1.0, &quarters, plain_on_object);
