@@ -32,10 +32,19 @@ pub enum Study {
     /// Winograd convolutions, the matching index and re-used matches against the exact
     /// default, at a fixed step budget and at twice it (to compare at equal wall time).
     Fast,
+    /// Frame against object focus (plain orbit and whole-frame losses against
+    /// fitted views and masked losses) on every scene × style pair, measured on
+    /// the object's pixels of the fitted evaluation ring. Runs only when named.
+    Focus,
+    /// The decoupled default at 1,000 steps on every pair, watched by the
+    /// colour-collapse detector; on the first scene × block2 also object focus,
+    /// colour learning rates 1e-3 and 1e-4, and the colour floor. Runs only when named.
+    Collapse,
 }
 
 impl Study {
-    /// All studies, in report order.
+    /// The studies of a run without `--studies`, in report order (the long
+    /// focus and collapse studies run only when named).
     pub const ALL: [Study; 7] =
         [Study::Modes, Study::Ratio, Study::LambdaGc, Study::Resolution, Study::Fast, Study::Pairs, Study::Stress];
 }
@@ -117,6 +126,15 @@ pub struct Sizes {
     pub styles: Vec<String>,
     /// Styles of the mode curves and ablations.
     pub curve_styles: Vec<String>,
+    /// Budget of each arm of the focus study.
+    #[serde(default)]
+    pub focus_budget: u32,
+    /// Budget of the collapse study's runs (steps per cycle: the default 100).
+    #[serde(default)]
+    pub collapse_budget: u32,
+    /// Working resolution of the collapse study (the issue saw the collapse at 256 px).
+    #[serde(default)]
+    pub collapse_resolution: u32,
 }
 
 const ALL_STYLES: [&str; 9] =
@@ -142,6 +160,9 @@ impl Sizes {
             ],
             styles: ALL_STYLES.iter().map(|s| format!("data/styles/{s}.jpg")).collect(),
             curve_styles: vec!["data/styles/wave.jpg".into(), "data/styles/block2.jpg".into()],
+            focus_budget: 200,
+            collapse_budget: 1000,
+            collapse_resolution: 256,
         }
     }
 
@@ -160,6 +181,9 @@ impl Sizes {
             scenes: vec!["data/scenes/guitar.compressed.ply".into()],
             styles: vec!["data/styles/wave.jpg".into(), "data/styles/block2.jpg".into()],
             curve_styles: vec!["data/styles/wave.jpg".into()],
+            focus_budget: 10,
+            collapse_budget: 100,
+            collapse_resolution: 64,
         }
     }
 }
@@ -179,6 +203,10 @@ pub struct TrialSpec {
     pub lr_scale: f32,
     /// Steps to measure at (0 is the colour-matched input).
     pub checkpoints: Vec<u32>,
+    /// How the optimisation views frame the scene.
+    pub framing: crate::cli::Framing,
+    /// Whether the evaluation ring is fitted to the object ([`gast_core::eval::EvalOptions::fit_to_object`]).
+    pub eval_on_object: bool,
 }
 
 /// One row of a study: a trial read at a step.

@@ -107,15 +107,20 @@ pub fn write_depth_png(
     inv_depth: &[f32],
     alpha: &[f32],
 ) -> Result<(), OutputError> {
+    write_png(path, width, height, image::ColorType::L8, &depth_to_gray(inv_depth, alpha))
+}
+
+/// An inverse-depth map as 8-bit grey, as [`write_depth_png`] draws it:
+/// min-max over the covered pixels (`alpha ≥ 0.5`), near bright, uncovered black.
+pub fn depth_to_gray(inv_depth: &[f32], alpha: &[f32]) -> Vec<u8> {
     let covered: Vec<f32> = inv_depth.iter().zip(alpha).filter(|(_, a)| **a >= 0.5).map(|(d, _)| *d).collect();
     let (lo, hi) = finite_range(&covered);
     let scale = if hi > lo { 1.0 / (hi - lo) } else { 0.0 };
-    let bytes: Vec<u8> = inv_depth
+    inv_depth
         .iter()
         .zip(alpha)
         .map(|(&d, &a)| if a >= 0.5 && d.is_finite() { to_u8(0.1 + 0.9 * (d - lo) * scale) } else { 0 })
-        .collect();
-    write_png(path, width, height, image::ColorType::L8, &bytes)
+        .collect()
 }
 
 fn write_png(path: &Path, width: u32, height: u32, color: image::ColorType, bytes: &[u8]) -> Result<(), OutputError> {

@@ -11,7 +11,7 @@ use clap::Args;
 use gast_core::camera::Camera;
 use gast_core::raster::{self, RenderOptions};
 
-use super::{ViewArgs, load_scene, views_for};
+use super::{Framing, ViewArgs, load_scene, views_for};
 
 /// Arguments of `gast bench raster`.
 #[derive(Args, Debug)]
@@ -87,7 +87,7 @@ pub fn run_raster(args: RasterArgs) -> anyhow::Result<ExitCode> {
             small = Some((name.clone(), gast_core::session::subset(&scene, &keep)));
         }
         for &size in &args.sizes {
-            let views = views_for(&scene, &ViewArgs { cameras: None, views: args.views, size, fov: 50.0 })?;
+            let views = views_for(&scene, &ViewArgs { cameras: None, views: args.views, size, fov: 50.0, framing: Framing::Full, crop: false })?;
             let (fwd, bwd) = time_views(&scene, &views, &opts);
             let (peak, _) = memory_mib();
             println!(
@@ -134,7 +134,7 @@ fn time_views(scene: &gast_core::Gaussians, views: &[Camera], opts: &RenderOptio
 /// The dense reference against the tiled path on a small scene (every n-th
 /// Gaussian of a real one), from an orbit view at 96².
 fn dense_ratio(name: &str, scene: &gast_core::Gaussians) -> anyhow::Result<()> {
-    let views = views_for(scene, &ViewArgs { cameras: None, views: 1, size: 96, fov: 50.0 })?;
+    let views = views_for(scene, &ViewArgs { cameras: None, views: 1, size: 96, fov: 50.0, framing: Framing::Full, crop: false })?;
     let cam = &views[0];
     let opts = RenderOptions::default();
     let t = Instant::now();
@@ -307,7 +307,7 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     let style = StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
     let vgg = std::sync::Arc::new(super::stylize::load_vgg(weights.as_deref())?);
     let config = StyleConfig { resolution: args.resolution, ..StyleConfig::default() };
-    let views = views_for(&scene, &ViewArgs { cameras: None, views: args.views, size: args.resolution, fov: 50.0 })?;
+    let views = views_for(&scene, &ViewArgs { cameras: None, views: args.views, size: args.resolution, fov: 50.0, framing: Framing::Full, crop: false })?;
     println!(
         "step benchmark: {} ({} Gaussians), style {}, {} views at {} px, {} threads",
         scene_path.display(),

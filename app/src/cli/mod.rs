@@ -9,12 +9,14 @@ pub mod quality;
 mod render;
 mod stylize;
 
+pub use stylize::step_time_hint;
+
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
-use gast_core::camera::{OrbitOptions, orbit_cameras};
+use gast_core::camera::{OrbitOptions, crop_view, framed_orbit, framing_subject, orbit_cameras};
 use gast_core::{Camera, Gaussians};
 
 use crate::studio;
@@ -132,6 +134,24 @@ pub struct ViewArgs {
     /// Vertical field of view of generated views, in degrees.
     #[arg(long, default_value_t = 50.0)]
     pub fov: f32,
+    /// How generated views frame the scene: `object` fits each view's
+    /// intrinsics and aspect ratio to the object so it spans 90% of the longer
+    /// side; `full` is the plain orbit that fits the object's bounding sphere.
+    #[arg(long, value_enum, default_value_t = Framing::Object)]
+    pub framing: Framing,
+    /// With --cameras: crop each view to the region the scene's object covers.
+    #[arg(long)]
+    pub crop: bool,
+}
+
+/// How generated views frame the scene (see [`ViewArgs::framing`]).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Framing {
+    /// Each view fitted to the object ([`gast_core::camera::framed_orbit`]).
+    #[default]
+    Object,
+    /// The plain orbit ([`gast_core::camera::orbit_cameras`]).
+    Full,
 }
 
 /// Runs the parsed command line.
@@ -179,7 +199,8 @@ pub fn load_scene(path: &Path) -> anyhow::Result<Gaussians> {
     Ok(scene)
 }
 
-/// The views of `args` for `scene`: the camera file rescaled to `--size`, or an orbit.
+/// The views of `args` for `scene`: the camera file (cropped to the object with
+/// `--crop`) rescaled to `--size`, or an orbit framed as `--framing` says.
 pub fn views_for(scene: &Gaussians, args: &ViewArgs) -> anyhow::Result<Vec<Camera>> {
     let size = args.size.max(1);
     if let Some(path) = &args.cameras {
@@ -188,7 +209,12 @@ pub fn views_for(scene: &Gaussians, args: &ViewArgs) -> anyhow::Result<Vec<Camer
         for w in &set.warnings {
             eprintln!("warning: {w}");
         }
-        Ok(set.cameras.iter().map(|c| c.with_longer_side(size)).collect())
+        let subject = if args.crop { framing_subject(scene) } else { Vec::new() };
+        Ok(set
+            .cameras
+            .iter()
+            .map(|c| if args.crop { crop_view(c, &subject) } else { c.clone() }.with_longer_side(size))
+            .collect())
     } else {
         let opts = OrbitOptions {
             count: args.views.max(1),
@@ -197,6 +223,9 @@ pub fn views_for(scene: &Gaussians, args: &ViewArgs) -> anyhow::Result<Vec<Camer
             fov_y_degrees: args.fov,
             ..OrbitOptions::default()
         };
-        Ok(orbit_cameras(&scene.means, &opts))
+        Ok(match args.framing {
+            Framing::Object => framed_orbit(scene, &opts),
+            Framing::Full => orbit_cameras(&scene.means, &opts),
+        })
     }
 }

@@ -20,10 +20,10 @@ use clap::Args;
 use gast_core::Gaussians;
 use gast_core::eval::{EvalOptions, StabilityThresholds, TrialOutcome, run_trial};
 use gast_core::session::{PreparedStyle, SessionInputs, StyleDepthSource, StyleImage, prepare_style};
-use gast_core::style::{Mode, StyleConfig};
+use gast_core::style::{Focus, Mode, StyleConfig};
 
 use super::bench::shared_dir;
-use super::{ViewArgs, load_scene, views_for};
+use super::{Framing, ViewArgs, load_scene, views_for};
 use crate::report::quality::{read_summary, rewrite_report, write_report};
 use crate::study::{Record, Row, RunSummary, SEED_LABEL, Sizes, Study, StyleSource, TrialSpec, mode_label};
 
@@ -63,16 +63,34 @@ impl Grid {
     /// sharing a trial with an earlier row that differs only in budget.
     fn want(
         &mut self,
-        (study, label): (Study, &str),
+        row: (Study, &str),
         scene: usize,
         style: &StyleSource,
         config: StyleConfig,
         lr_scale: f32,
         extra: &[u32],
     ) {
+        self.want_framed(row, scene, style, config, lr_scale, extra, (Framing::Full, false));
+    }
+
+    /// [`Grid::want`] with the optimisation views' framing and whether the
+    /// evaluation ring is fitted to the object.
+    #[allow(clippy::too_many_arguments)]
+    fn want_framed(
+        &mut self,
+        (study, label): (Study, &str),
+        scene: usize,
+        style: &StyleSource,
+        config: StyleConfig,
+        lr_scale: f32,
+        extra: &[u32],
+        (framing, eval_on_object): (Framing, bool),
+    ) {
         let budget = config.schedule().total_steps();
         let same = |t: &TrialSpec| {
             t.scene == scene
+                && t.framing == framing
+                && t.eval_on_object == eval_on_object
                 && t.style == *style
                 && t.lr_scale == lr_scale
                 && StyleConfig { cycles: 1, ..t.config.clone() } == StyleConfig { cycles: 1, ..config.clone() }
@@ -85,7 +103,9 @@ impl Grid {
             }
             None => {
                 let id = format!("{:03}-{}", self.trials.len(), label_id(study, label, style));
-                self.trials.push(TrialSpec { id, scene, style: style.clone(), config, lr_scale, checkpoints: vec![0] });
+                let checkpoints = vec![0];
+                let (style, views) = (style.clone(), framing);
+                self.trials.push(TrialSpec { id, scene, style, config, lr_scale, checkpoints, framing: views, eval_on_object });
                 self.trials.len() - 1
             }
         };
@@ -106,8 +126,14 @@ fn label_id(study: Study, label: &str, style: &StyleSource) -> String {
 
 /// The grid of `sizes` restricted to `studies`.
 pub fn build_grid(sizes: &Sizes, shared: &Path, studies: &[Study]) -> Grid {
-    let base =
-        StyleConfig { resolution: sizes.resolution, steps_per_cycle: sizes.steps_per_cycle, ..StyleConfig::default() };
+    // Every study but focus keeps the paper's whole-frame losses, so its
+    // figures stay comparable with earlier runs.
+    let base = StyleConfig {
+        resolution: sizes.resolution,
+        steps_per_cycle: sizes.steps_per_cycle,
+        focus: Focus::Frame,
+        ..StyleConfig::default()
+    };
     let cycles = |budget: u32| budget.div_ceil(sizes.steps_per_cycle).max(1);
     let file = |rel: &String| StyleSource::File(shared.join(rel));
     let curve_styles: Vec<StyleSource> = sizes.curve_styles.iter().map(file).collect();
@@ -208,7 +234,69 @@ pub fn build_grid(sizes: &Sizes, shared: &Path, studies: &[Study]) -> Grid {
             }
         }
     }
+    focus_studies(&mut g, sizes, shared, studies, &base);
     g
+}
+
+/// Labels of the focus study's arms and of its noise-floor run.
+pub const FOCUS_FRAME: &str = "frame";
+/// See [`FOCUS_FRAME`].
+pub const FOCUS_OBJECT: &str = "object";
+/// See [`FOCUS_FRAME`]: the frame arm with another view order.
+pub const FOCUS_SEED: &str = "frame, seed 1";
+
+/// The rows of the focus and collapse studies (see [`Study::Focus`], [`Study::Collapse`]).
+fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], base: &StyleConfig) {
+    let file = |rel: &String| StyleSource::File(shared.join(rel));
+    let fitted = (Framing::Object, true);
+    let plain_on_object = (Framing::Full, true);
+    if studies.contains(&Study::Focus) {
+        let cycles = sizes.focus_budget.div_ceil(sizes.steps_per_cycle).max(1);
+        let frame = StyleConfig { cycles, ..base.clone() };
+        let object = StyleConfig { focus: Focus::Object, ..frame.clone() };
+        for scene in 0..sizes.scenes.len() {
+            for (k, style) in sizes.styles.iter().enumerate() {
+                let style = file(style);
+                g.want_framed((Study::Focus, FOCUS_FRAME), scene, &style, frame.clone(), 1.0, &[], plain_on_object);
+                g.want_framed((Study::Focus, FOCUS_OBJECT), scene, &style, object.clone(), 1.0, &[], fitted);
+                if k == 0 {
+                    let seed = StyleConfig { seed: 1, ..frame.clone() };
+                    g.want_framed((Study::Focus, FOCUS_SEED), scene, &style, seed, 1.0, &[], plain_on_object);
+                }
+            }
+        }
+    }
+    if studies.contains(&Study::Collapse) {
+        let steps = 100;
+        let default = StyleConfig {
+            resolution: sizes.collapse_resolution,
+            steps_per_cycle: steps,
+            cycles: sizes.collapse_budget.div_ceil(steps).max(1),
+            ..base.clone()
+        };
+        let total = default.schedule().total_steps();
+        let quarters: Vec<u32> = [4u32, 2].iter().map(|d| total / d).filter(|s| *s > 0).collect();
+        for scene in 0..sizes.scenes.len() {
+            for style in &sizes.styles {
+                g.want_framed((Study::Collapse, "decoupled"), scene, &file(style), default.clone(), 1.0, &quarters, plain_on_object);
+            }
+        }
+        let block2 = sizes.styles.iter().find(|s| s.contains("block2")).or(sizes.styles.first());
+        if let Some(style) = block2.map(file) {
+            let mut arms = vec![
+                ("object focus".to_string(), StyleConfig { focus: Focus::Object, ..default.clone() }, fitted),
+                ("colour floor".to_string(), StyleConfig { color_floor: true, ..default.clone() }, plain_on_object),
+            ];
+            for lr in [1e-3f32, 1e-4] {
+                let mut c = default.clone();
+                c.lr.color = lr;
+                arms.push((format!("lr colour {lr:e}"), c, plain_on_object));
+            }
+            for (label, config, framing) in arms {
+                g.want_framed((Study::Collapse, &label), 0, &style, config, 1.0, &quarters, framing);
+            }
+        }
+    }
 }
 
 fn scaled_lr(scale: f32) -> gast_core::style::config::LearningRates {
@@ -243,7 +331,11 @@ fn fast_options(base: &StyleConfig) -> Vec<(&'static str, StyleConfig)> {
 /// Runs the grid and writes the report.
 pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
     if let Some(dir) = &args.report {
-        let index = rewrite_report(dir, &read_summary(dir)?)?;
+        let run = read_summary(dir)?;
+        let index = rewrite_report(dir, &run)?;
+        for line in crate::report::focus::write_focus_report(dir, &run)? {
+            println!("{line}");
+        }
         println!("report: {}", index.display());
         return Ok(ExitCode::SUCCESS);
     }
@@ -295,7 +387,17 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
         }
         let Some((image, prepared)) = styles.get(&spec.style) else { continue };
         let views =
-            views_for(scene, &ViewArgs { cameras: None, views: sizes.views, size: spec.config.resolution, fov: 50.0 })?;
+            views_for(
+                scene,
+                &ViewArgs {
+                    cameras: None,
+                    views: sizes.views,
+                    size: spec.config.resolution,
+                    fov: 50.0,
+                    framing: spec.framing,
+                    crop: false,
+                },
+            )?;
         let inputs = SessionInputs {
             scene: scene.clone(),
             cameras: views,
@@ -311,7 +413,7 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
             inputs,
             Some(prepared.clone()),
             &spec.checkpoints,
-            &eval,
+            &EvalOptions { fit_to_object: spec.eval_on_object, ..eval },
             &StabilityThresholds::default(),
             &mut |done, _| bar.set_position(base + u64::from(done)),
         )
@@ -332,6 +434,9 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
         trials: records,
     };
     let index = write_report(&out, &run, &styles_used)?;
+    for line in crate::report::focus::write_focus_report(&out, &run)? {
+        println!("{line}");
+    }
     println!("{} trials in {:.1} min; report: {}", run.trials.len(), wall / 60.0, index.display());
     Ok(ExitCode::SUCCESS)
 }

@@ -9,19 +9,21 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Args;
 use gast_core::Camera;
+use gast_core::camera::{framing_subject, subject_span};
 use gast_core::eval::{inverse_depth_change, mean_std_distance, nn_cosine_distance};
 use gast_core::io::{write_bytes, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
 use gast_core::gpu::DeviceChoice;
 use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource, StyleImage};
-use gast_core::style::{MatchMethod, Mode, StyleConfig};
+use gast_core::style::{Focus, MatchMethod, Mode, StyleConfig};
 use gast_core::vision::ConvAlgo;
 use gast_core::vision::Vgg;
 use gast_core::vision::style_depth::{DepthImage, DepthPolarity, DepthProvider};
 use serde::Serialize;
 
-use super::{ViewArgs, load_scene, views_for};
+use super::{Framing, ViewArgs, load_scene, views_for};
 use crate::progress;
+use crate::report::sheet;
 
 /// Arguments of `gast stylize`.
 #[derive(Args, Debug)]
@@ -49,6 +51,13 @@ pub struct StylizeArgs {
     /// Vertical field of view of generated views, degrees.
     #[arg(long, default_value_t = 50.0)]
     pub fov: f32,
+    /// Generated views: `object` fits each view to the object (it spans 90% of
+    /// the longer side), `full` is the plain orbit around its bounding sphere.
+    #[arg(long, value_enum, default_value_t = Framing::Object)]
+    pub framing: Framing,
+    /// With --cameras: crop each view to the region the object covers.
+    #[arg(long)]
+    pub crop: bool,
     /// A preset file (JSON StyleConfig); flags below override it.
     #[arg(long)]
     pub preset: Option<PathBuf>,
@@ -84,7 +93,12 @@ pub struct StylizeArgs {
     /// Texture scale: the style's height in pixels (128, 256, 512 = 0.5x, 1x, 2x) [default: 256].
     #[arg(long)]
     pub texture_scale: Option<u32>,
-    /// Working resolution: longer side of the optimisation renders [default: 256].
+    /// Working resolution: longer side of the optimisation renders [default:
+    /// follows the object: the smallest size (a multiple of 32) at which it
+    /// spans 64 relu3 positions across its longer side, at most the size where a
+    /// CPU step takes about 1 s; on a 2-core CPU a step takes about 0.6 s at
+    /// 256 px, 1.4 s at 384 px and 2.4 s at 512 px (the time grows with the
+    /// pixel count)].
     #[arg(long)]
     pub resolution: Option<u32>,
     /// λ_GC, contrastive feature matching [default: 2].
@@ -133,6 +147,15 @@ pub struct StylizeArgs {
     /// Convolution and matching choices.
     #[command(flatten)]
     pub fast: FastArgs,
+    /// Where GCFM, content and TV look: frame (every pixel, the paper), object
+    /// (the pixels the scene covers), auto (object when the scene covers less
+    /// than half of the views) [default: auto].
+    #[arg(long)]
+    pub focus: Option<Focus>,
+    /// Keep colours out of the clamp's dead zone: after each colour step no
+    /// channel of a Gaussian's base colour goes below 0 [default: off].
+    #[arg(long)]
+    pub color_floor: Option<bool>,
     /// Views rendered before/after into the output folder.
     #[arg(long, default_value_t = 4)]
     pub preview_views: usize,
@@ -186,6 +209,8 @@ impl StylizeArgs {
         set!(self.depth_provider, c.depth_provider);
         set!(self.seed, c.seed);
         self.fast.apply(&mut c);
+        set!(self.focus, c.focus);
+        set!(self.color_floor, c.color_floor);
         let problems = c.problems();
         anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
         Ok(c)
@@ -268,6 +293,49 @@ pub fn resolve_style_depth(
     Ok(source)
 }
 
+/// Render pixels per VGG relu3 feature position: the 0.5× downscale, then VGG's two poolings.
+const PIXELS_PER_FEATURE: f32 = 8.0;
+/// relu3 positions the object should span across its longer side.
+const OBJECT_FEATURES: f32 = 64.0;
+/// Seconds of one optimisation step at 256 × 256 px on a 2-core CPU (the
+/// step benchmark's figure; a step's time grows with the pixel count).
+pub const CPU_STEP_S_AT_256: f64 = 0.6;
+/// The longest step the automatic working resolution accepts, seconds.
+const AUTO_STEP_BUDGET_S: f64 = 1.0;
+
+/// The estimated time of one CPU step at `resolution` (square views; views
+/// fitted to an elongated object have fewer pixels and are faster).
+pub fn step_time_hint(resolution: u32) -> String {
+    let s = CPU_STEP_S_AT_256 * (f64::from(resolution) / 256.0).powi(2);
+    format!("about {s:.1} s per step at {resolution} px on a 2-core CPU")
+}
+
+/// The working resolution for an object that spans `span` of the longer
+/// image side: the smallest multiple of 32 at which it spans
+/// [`OBJECT_FEATURES`] relu3 positions, bounded by [`AUTO_STEP_BUDGET_S`] per
+/// step (and 128 px below). Returns `(chosen, wanted)`.
+fn auto_resolution(span: f32) -> (u32, u32) {
+    let cap = (256.0 * (AUTO_STEP_BUDGET_S / CPU_STEP_S_AT_256).sqrt() / 32.0).floor() as u32 * 32;
+    resolution_for(span, cap)
+}
+
+/// [`auto_resolution`] when a GPU runs the steps: bounded by the reference's
+/// scale (its photos' ~1,000 px) instead of the CPU's step time.
+fn auto_resolution_gpu(span: f32) -> (u32, u32) {
+    resolution_for(span, GPU_MAX_RESOLUTION)
+}
+
+/// The longest side the automatic working resolution takes on a GPU.
+const GPU_MAX_RESOLUTION: u32 = 1024;
+
+/// The smallest multiple of 32 at which an object spanning `span` of the
+/// longer side covers [`OBJECT_FEATURES`] relu3 positions, within [128, cap].
+fn resolution_for(span: f32, cap: u32) -> (u32, u32) {
+    let wanted = if span > 1e-3 { OBJECT_FEATURES * PIXELS_PER_FEATURE / span } else { 4096.0 };
+    let wanted = ((wanted / 32.0).ceil() * 32.0).min(4096.0) as u32;
+    (wanted.clamp(128, cap.max(128)), wanted)
+}
+
 /// Loads the VGG weights the usual way, with a progress bar for a download.
 pub fn load_vgg(explicit: Option<&Path>) -> anyhow::Result<Vgg> {
     let pb = progress::bytes_bar("weights");
@@ -321,16 +389,40 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let t_all = Instant::now();
     let config = args.config()?;
     super::convert::check_output_name(&args.scene_name)?;
-    if let Some(p) = &args.save_preset {
-        write_bytes(p, config.to_json().as_bytes())?;
-    }
     let scene = load_scene(&args.scene)?;
     let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
     let style_depth = resolve_style_depth(&config, &style, args.style_depth.as_deref(), args.depth_model.as_deref())?;
     let cameras = views_for(
         &scene,
-        &ViewArgs { cameras: args.cameras.clone(), views: args.views, size: config.resolution, fov: args.fov },
+        &ViewArgs {
+            cameras: args.cameras.clone(),
+            views: args.views,
+            size: config.resolution,
+            fov: args.fov,
+            framing: args.framing,
+            crop: args.crop,
+        },
     )?;
+    let mut config = config;
+    let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
+    if args.resolution.is_none() && args.preset.is_none() {
+        let subject = framing_subject(&scene);
+        let span = cameras.iter().map(|c| subject_span(c, &subject)).sum::<f32>() / cameras.len().max(1) as f32;
+        let (chosen, wanted) = if gpu.is_some() { auto_resolution_gpu(span) } else { auto_resolution(span) };
+        let hint = match &gpu {
+            Some(g) => format!("steps run on {}", g.describe()),
+            None => step_time_hint(chosen),
+        };
+        eprintln!(
+            "working resolution {chosen} px: the object spans {:.0} relu3 positions across its longer side \
+             (64 would need {wanted} px); {hint}",
+            span * chosen as f32 / PIXELS_PER_FEATURE,
+        );
+        config.resolution = chosen;
+    }
+    if let Some(p) = &args.save_preset {
+        write_bytes(p, config.to_json().as_bytes())?;
+    }
     let vgg = Arc::new(load_vgg(args.weights.as_deref())?);
     eprintln!(
         "{}: {} Gaussians (SH degree {}), {} views; style {} ({}x{})",
@@ -352,7 +444,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         style_depth,
         vgg: vgg.clone(),
         config: config.clone(),
-        gpu: args.device.resolve().with_context(|| format!("--device {}", args.device))?,
+        gpu,
     };
     let mut session = Session::prepare(inputs, &mut |e| match e {
         Event::Stage { name, seconds } => {
@@ -402,6 +494,38 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         &vgg,
         args.preview_views,
     )?;
+    let sheet_path = args.out.join("sheet.png");
+    let focus = if session.focus_on_object() { "object" } else { "frame" };
+    let settings = format!(
+        "{} {} steps ({} cycles x {}), {} px, texture {} px, focus {focus} (asked {:?}, coverage {:.0}%), lr colour {}, colour floor {}; {:.0} s ({:.2} s/step)",
+        config.mode.name(),
+        total,
+        config.cycles,
+        config.steps_per_cycle,
+        config.resolution,
+        config.texture_scale,
+        config.focus,
+        100.0 * session.coverage(),
+        config.lr.color,
+        if config.color_floor { "on" } else { "off" },
+        optimisation_s,
+        optimisation_s / f64::from(total.max(1)),
+    );
+    let title = format!(
+        "{} x {}",
+        args.scene.file_name().unwrap_or_default().to_string_lossy(),
+        args.style.file_name().unwrap_or_default().to_string_lossy()
+    );
+    sheet::write_sheet(
+        &sheet_path,
+        &sheet::SheetContent {
+            title,
+            settings,
+            style: sheet::style_tiles(&session),
+            views: sheet::session_views(&session, &scene, args.preview_views),
+        },
+    )?;
+    eprintln!("  contact sheet: {}", sheet_path.display());
     let mut summary = Summary::default();
     let n = preview.len().max(1) as f32;
     for p in &preview {
@@ -453,12 +577,11 @@ fn write_previews(
     let opts = RenderOptions { background: session.config().background };
     let style = &session.style().maps;
     let style_feats = vgg.features(&style.rgb, style.height, style.width);
-    let step = (cameras.len() / count.max(1)).max(1);
     let mut metrics = Vec::new();
     write_png_rgb(&out.join("style.png"), style.width as u32, style.height as u32, &style.rgb)?;
     write_png_gray_normalized(&out.join("style_depth.png"), style.width as u32, style.height as u32, &style.depth)?;
     write_png_gray_normalized(&out.join("style_edge.png"), style.width as u32, style.height as u32, &style.edge)?;
-    for (k, cam) in cameras.iter().step_by(step).take(count).enumerate() {
+    for (k, cam) in sheet::spread(cameras, count).enumerate() {
         let (w, h) = (cam.width, cam.height);
         let before = raster::render(input, cam, &opts);
         let matched = raster::render(colour_matched, cam, &opts);
@@ -488,4 +611,21 @@ fn write_previews(
         });
     }
     Ok(metrics)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_automatic_resolution_follows_the_object_within_the_step_budget() {
+        // A fitted view (the object spans 90 %) wants 576 px for 64 relu3
+        // positions; a 1 s step allows 320 px at 0.6 s per 256 px step.
+        assert_eq!(auto_resolution(0.9), (320, 576));
+        // A small object wants more, gets the same cap; nothing goes below 128 px.
+        assert_eq!(auto_resolution(0.3).0, 320);
+        assert!(auto_resolution(0.3).1 > 1600);
+        assert_eq!(auto_resolution(0.0).1, 4096);
+        assert!(step_time_hint(512).contains("2.4 s"), "{}", step_time_hint(512));
+    }
 }

@@ -6,3 +6,5 @@ mod axis;
 pub mod chart;
 mod glyphs;
 pub mod quality;
+pub mod focus;
+pub mod sheet;

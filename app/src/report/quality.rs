@@ -16,12 +16,12 @@ use super::chart::{Chart, Series, palette};
 use crate::study::{Record, Row, RunSummary, SEED_LABEL, Study, mode_label};
 
 impl Record {
-    fn scene_name(&self) -> String {
+    pub(crate) fn scene_name(&self) -> String {
         let name = Path::new(&self.scene).file_name().map_or(self.scene.clone(), |s| s.to_string_lossy().into_owned());
         name.split('.').next().unwrap_or(&name).trim_end_matches("-sog").to_string()
     }
 
-    fn health(&self) -> String {
+    pub(crate) fn health(&self) -> String {
         if self.stable {
             "stable".into()
         } else {

@@ -3,7 +3,16 @@
 
 use egui::{Color32, Ui};
 use gast_core::session::StepReport;
-use gast_core::style::{Mode, Phase, StyleConfig};
+use gast_core::style::{Focus, Mode, Phase, StyleConfig};
+
+/// Label of a focus in menus.
+pub fn focus_label(f: Focus) -> &'static str {
+    match f {
+        Focus::Frame => "frame (every pixel)",
+        Focus::Object => "object (covered pixels)",
+        Focus::Auto => "auto (object below half coverage)",
+    }
+}
 
 /// Label of a mode in menus.
 pub fn mode_label(m: Mode) -> &'static str {
@@ -68,6 +77,16 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
     });
     changed |= ui.add(egui::Slider::new(&mut c.texture_scale, 16..=1024).text("style height (px)")).changed();
     changed |= ui.add(egui::Slider::new(&mut c.resolution, 64..=1024).text("working resolution")).changed();
+    ui.weak(crate::cli::step_time_hint(c.resolution));
+    egui::ComboBox::from_label("focus").selected_text(focus_label(c.focus)).show_ui(ui, |ui| {
+        for f in Focus::ALL {
+            changed |= ui.selectable_value(&mut c.focus, f, focus_label(f)).changed();
+        }
+    });
+    changed |= ui
+        .checkbox(&mut c.color_floor, "colour floor")
+        .on_hover_text("keep every Gaussian's base colour out of the clamp at 0, where no gradient reaches it")
+        .changed();
 
     ui.separator();
     egui::CollapsingHeader::new("Learning rates").default_open(false).show(ui, |ui| {

@@ -6,7 +6,7 @@
 
 use std::sync::Arc;
 
-use gast_core::camera::{OrbitOptions, orbit_cameras};
+use gast_core::camera::{OrbitOptions, framed_orbit};
 use gast_core::session::{Event, SessionInputs, spawn_with};
 use gast_core::vision::Vgg;
 
@@ -42,7 +42,7 @@ pub fn starter() -> SessionStarter {
                         height: config.resolution,
                         ..OrbitOptions::default()
                     };
-                    orbit_cameras(&scene.means, &opts)
+                    framed_orbit(&scene, &opts)
                 } else {
                     cameras
                 };

@@ -13,6 +13,7 @@ mod colmap;
 mod colmap_bin;
 mod colmap_write;
 mod error;
+mod framing;
 mod inria;
 mod orbit;
 #[cfg(test)]
@@ -26,6 +27,7 @@ use glam::{Mat3, Vec2, Vec3};
 pub use colmap::load_colmap;
 pub use colmap_write::{write_colmap_binary, write_colmap_text};
 pub use error::CameraError;
+pub use framing::{crop_view, fit_view, framed_orbit, framing_subject, subject_span};
 pub use inria::load_inria;
 pub use orbit::{OrbitLayout, OrbitOptions, RobustBounds, orbit_cameras, robust_bounds};
 pub use transforms::load_transforms;

@@ -16,10 +16,12 @@ use super::consistency::{DEFAULT_DEPTH_TOLERANCE, warp_consistency};
 use super::content::content_distance;
 use super::geometry::{inverse_depth_change, normal_change};
 use super::style::{NearestStyle, StyleReference};
-use crate::camera::{Camera, OrbitLayout, OrbitOptions, orbit_cameras};
+use super::stability::CoveredColour;
+use crate::camera::{Camera, OrbitLayout, OrbitOptions, fit_view, framing_subject, orbit_cameras};
 use crate::raster::{self, Render, RenderOptions};
 use crate::scene::Gaussians;
 use crate::style::StyleFeatures;
+use crate::style::focus::{coverage_mask, feature_mask, gather_positions};
 use crate::style::step::{FeatureMap, content_target, replicate3};
 use crate::vision::Vgg;
 use crate::vision::canny::render_edges;
@@ -46,11 +48,14 @@ pub struct EvalOptions {
     pub fov_y_degrees: f32,
     /// Background colour of the renders.
     pub background: [f32; 3],
+    /// Fit every ring view to the object ([`crate::camera::fit_view`]) so the
+    /// measures rest on its pixels; the plain ring otherwise. Default false.
+    pub fit_to_object: bool,
 }
 
 impl Default for EvalOptions {
     fn default() -> Self {
-        Self { resolution: 192, elevation_degrees: 15.0, fov_y_degrees: 50.0, background: [0.0; 3] }
+        Self { resolution: 192, elevation_degrees: 15.0, fov_y_degrees: 50.0, background: [0.0; 3], fit_to_object: false }
     }
 }
 
@@ -87,6 +92,18 @@ pub struct Measures {
     pub normal_change_degrees: f32,
     /// Fraction of pixels covered (alpha ≥ 0.5) in the style views; shows holes and blow-ups.
     pub coverage: f32,
+    /// Mean luminance and chroma of the covered pixels of the style views (the
+    /// colour-collapse detector's input).
+    #[serde(default)]
+    pub colour: CoveredColour,
+    /// [`Measures::sliced_wasserstein`] over the feature positions the
+    /// colour-matched scene covers ([`crate::style::focus::coverage_mask`]):
+    /// the style distance on the object, not the background.
+    #[serde(default)]
+    pub sliced_wasserstein_object: f32,
+    /// [`Measures::nn_cosine`] over the covered feature positions.
+    #[serde(default)]
+    pub nn_cosine_object: f32,
 }
 
 /// The fixed views, the colour-matched renders and the style's features that
@@ -103,6 +120,8 @@ pub struct Evaluator {
     reference: Vec<Render>,
     /// Features (RGB, depth, edge) of the colour-matched renders of the style views.
     reference_features: Vec<[FeatureMap; 3]>,
+    /// Per style view, the feature positions the colour-matched scene covers.
+    covered_positions: Vec<Vec<usize>>,
 }
 
 impl Evaluator {
@@ -126,7 +145,12 @@ impl Evaluator {
         used.extend(SHORT_PAIRS.iter().chain(&LONG_PAIRS).flat_map(|&(a, b)| [a, b]));
         used.sort_unstable();
         used.dedup();
-        let cameras: Vec<(usize, Camera)> = used.into_iter().map(|i| (i, ring[i].clone())).collect();
+        let subject = if options.fit_to_object { framing_subject(reference) } else { Vec::new() };
+        let long = options.resolution.max(16);
+        let cameras: Vec<(usize, Camera)> = used
+            .into_iter()
+            .map(|i| (i, if options.fit_to_object { fit_view(&ring[i], &subject, long) } else { ring[i].clone() }))
+            .collect();
         let opts = RenderOptions { background: options.background };
         let reference: Vec<Render> = cameras.iter().map(|(_, c)| raster::render(reference, c, &opts)).collect();
         let c = style.channels;
@@ -137,8 +161,27 @@ impl Evaluator {
             NearestStyle::new(&joint, 3 * c),
         ];
         let style = StyleReference::new(style.modality(0), c, SW_PROJECTIONS);
-        let mut out = Self { net, style, nearest, cameras, opts, reference, reference_features: Vec::new() };
+        let mut out = Self {
+            net,
+            style,
+            nearest,
+            cameras,
+            opts,
+            reference,
+            reference_features: Vec::new(),
+            covered_positions: Vec::new(),
+        };
         out.reference_features = STYLE_VIEWS.iter().map(|&v| out.features(&out.reference[out.slot(v)])).collect();
+        out.covered_positions = STYLE_VIEWS
+            .iter()
+            .zip(&out.reference_features)
+            .map(|(&v, f)| {
+                let r = &out.reference[out.slot(v)];
+                let (h, w) = (r.height as usize, r.width as usize);
+                let cells = feature_mask(&coverage_mask(&r.alpha, h, w), h, w, f[0].height, f[0].width);
+                (0..cells.len()).filter(|&x| cells[x]).collect()
+            })
+            .collect();
         out
     }
 
@@ -227,6 +270,13 @@ impl Evaluator {
                 m.mean_std += s.mean_std_distance(f) / n;
                 m.sliced_wasserstein += s.sliced_wasserstein(f) / n;
                 m.nn_cosine += s.nn_cosine(f) / n;
+                let fm = &feats[k][0];
+                let idx = &self.covered_positions[k];
+                if !idx.is_empty() {
+                    let on = gather_positions(f, fm.channels, fm.height * fm.width, idx);
+                    m.sliced_wasserstein_object += s.sliced_wasserstein(&on) / n;
+                    m.nn_cosine_object += s.nn_cosine(&on) / n;
+                }
             }
             let [depth, edge, joint] = &self.nearest;
             if let Some(s) = depth {
@@ -247,6 +297,9 @@ impl Evaluator {
             m.normal_change_degrees += normal_change(before, after, cam).mean_degrees / n;
             let covered = after.alpha.iter().filter(|&&a| a >= 0.5).count() as f32;
             m.coverage += covered / after.alpha.len().max(1) as f32 / n;
+            let colour = CoveredColour::of(&after.rgb, &after.alpha);
+            m.colour.luminance += colour.luminance / n;
+            m.colour.chroma += colour.chroma / n;
         }
         let pair_rmse = |pairs: &[(usize, usize)]| {
             pairs

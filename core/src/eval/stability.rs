@@ -43,6 +43,12 @@ pub struct StabilityThresholds {
     /// turned opaque smear over the background long before any single one is
     /// larger than the scene. Default 1.5.
     pub max_coverage_growth: f32,
+    /// Colour collapse: the mean luminance, or the mean chroma, of the pixels
+    /// the scene covers in the evaluation views may fall by at most this
+    /// fraction of the colour-matched state's. A colour DC driven below the
+    /// clamp at 0 gets no gradient again, so such a run renders ever darker
+    /// while its depth keeps the shape. Default 0.5.
+    pub max_colour_loss: f32,
 }
 
 impl Default for StabilityThresholds {
@@ -55,6 +61,7 @@ impl Default for StabilityThresholds {
             max_outside_rise: 0.05,
             max_consistency_growth: 2.0,
             max_coverage_growth: 1.5,
+            max_colour_loss: 0.5,
         }
     }
 }
@@ -78,6 +85,9 @@ pub enum DegenerationKind {
     ConsistencyCollapse,
     /// The scene smears over the frame (value: coverage after / coverage before).
     CoverageGrowth,
+    /// The covered pixels went dark or grey (value: the larger fractional loss
+    /// of mean luminance or mean chroma against the colour-matched state).
+    ColourCollapse,
 }
 
 /// One detected degeneration.
@@ -111,14 +121,15 @@ impl StabilityReport {
 }
 
 /// Runs every detector: parameters of `after` against `before`, the `losses`
-/// of the run, and the multi-view RMSE and the covered fraction of the views
-/// `(before, after)` when measured.
+/// of the run, and the multi-view RMSE, the covered fraction of the views and
+/// the colour of the covered pixels `(before, after)` when measured.
 pub fn assess_stability(
     before: &Gaussians,
     after: &Gaussians,
     losses: &[f32],
     consistency_rmse: Option<(f32, f32)>,
     coverage: Option<(f32, f32)>,
+    colour: Option<(CoveredColour, CoveredColour)>,
     th: &StabilityThresholds,
 ) -> StabilityReport {
     let issues = [
@@ -130,6 +141,7 @@ pub fn assess_stability(
         left_bounds(before, after, th),
         consistency_rmse.and_then(|(b, a)| consistency_collapse(b, a, th)),
         coverage.and_then(|(b, a)| coverage_growth(b, a, th)),
+        colour.and_then(|(b, a)| colour_collapse(b, a, th)),
     ];
     StabilityReport { issues: issues.into_iter().flatten().collect() }
 }
@@ -238,6 +250,47 @@ pub fn coverage_growth(before: f32, after: f32, th: &StabilityThresholds) -> Opt
     fired(DegenerationKind::CoverageGrowth, after / base, th.max_coverage_growth)
 }
 
+/// Mean colour of the pixels a scene covers in some views.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CoveredColour {
+    /// Mean Rec. 709 luminance `0.2126 R + 0.7152 G + 0.0722 B`, in [0, 1].
+    pub luminance: f32,
+    /// Mean chroma `max(R, G, B) − min(R, G, B)`, in [0, 1].
+    pub chroma: f32,
+}
+
+impl CoveredColour {
+    /// The mean over the pixels of `rgb` (HWC, clamped to [0, 1]) whose
+    /// `alpha ≥ 0.5`; zeros when none is covered.
+    pub fn of(rgb: &[f32], alpha: &[f32]) -> Self {
+        let (mut l, mut c, mut n) = (0f64, 0f64, 0usize);
+        for (p, &a) in rgb.chunks_exact(3).zip(alpha) {
+            if a >= 0.5 {
+                let [r, g, b] = [p[0], p[1], p[2]].map(|v| f64::from(v.clamp(0.0, 1.0)));
+                l += 0.2126 * r + 0.7152 * g + 0.0722 * b;
+                c += r.max(g).max(b) - r.min(g).min(b);
+                n += 1;
+            }
+        }
+        let n = n.max(1) as f64;
+        Self { luminance: (l / n) as f32, chroma: (c / n) as f32 }
+    }
+}
+
+/// Chroma below which the colour-matched state counts as grey, so that a
+/// grey style's noise cannot fire the chroma half of [`colour_collapse`].
+const GREY_CHROMA: f32 = 0.05;
+
+/// The covered pixels' mean luminance, or their mean chroma (when the
+/// colour-matched state has some), falling by more than `max_colour_loss` of
+/// the colour-matched state's.
+pub fn colour_collapse(before: CoveredColour, after: CoveredColour, th: &StabilityThresholds) -> Option<Degeneration> {
+    let loss = |b: f32, a: f32| if b > 1e-6 { 1.0 - a / b } else { 0.0 };
+    let lum = loss(before.luminance, after.luminance);
+    let chroma = if before.chroma >= GREY_CHROMA { loss(before.chroma, after.chroma) } else { 0.0 };
+    fired(DegenerationKind::ColourCollapse, lum.max(chroma), th.max_colour_loss)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -270,6 +323,7 @@ mod tests {
             &[1.0, 0.5],
             Some((0.05, 0.06)),
             Some((0.2, 0.21)),
+            Some((CoveredColour { luminance: 0.4, chroma: 0.2 }, CoveredColour { luminance: 0.37, chroma: 0.22 })),
             &StabilityThresholds::default(),
         )
     }
@@ -285,7 +339,7 @@ mod tests {
         assert!(assess(&scene()).is_healthy());
         let empty = Gaussians::default();
         let th = StabilityThresholds::default();
-        assert!(assess_stability(&empty, &empty, &[], None, None, &th).is_healthy());
+        assert!(assess_stability(&empty, &empty, &[], None, None, None, &th).is_healthy());
     }
 
     #[test]
@@ -297,7 +351,7 @@ mod tests {
         only(&r, NonFiniteParameter);
         assert_eq!(r.issues[0].value, 2.0);
         let th = StabilityThresholds::default();
-        let r = assess_stability(&scene(), &scene(), &[1.0, f32::NAN, 0.5], None, None, &th);
+        let r = assess_stability(&scene(), &scene(), &[1.0, f32::NAN, 0.5], None, None, None, &th);
         only(&r, NonFiniteLoss);
     }
 
@@ -338,7 +392,7 @@ mod tests {
     #[test]
     fn consistency_collapse_is_found() {
         let th = StabilityThresholds::default();
-        let r = assess_stability(&scene(), &scene(), &[], Some((0.05, 0.2)), None, &th);
+        let r = assess_stability(&scene(), &scene(), &[], Some((0.05, 0.2)), None, None, &th);
         only(&r, ConsistencyCollapse);
         assert!((r.issues[0].value - 4.0).abs() < 1e-5);
         // A perfect input is floored at 0.01: 0.015 is fine, NaN is not.
@@ -350,11 +404,45 @@ mod tests {
     fn coverage_growth_is_found() {
         let th = StabilityThresholds::default();
         // The geometry-only lr×100 run of the stress study: 8.9 % of the frame covered before, 33 % after.
-        let r = assess_stability(&scene(), &scene(), &[], None, Some((0.089, 0.330)), &th);
+        let r = assess_stability(&scene(), &scene(), &[], None, Some((0.089, 0.330)), None, &th);
         only(&r, CoverageGrowth);
         assert!((r.issues[0].value - 0.330 / 0.089).abs() < 1e-4);
         assert!(coverage_growth(0.089, 0.094, &th).is_none(), "a few per cent more is healthy");
         assert!(coverage_growth(0.0, 0.012, &th).is_none(), "floored at 1 %");
+    }
+
+    #[test]
+    fn colour_collapse_is_found() {
+        // The guitar after 3,000 frame-focus steps: the covered pixels' colour DC
+        // driven below the clamp for most Gaussians. Constructed here: render a
+        // small scene, clamp 60 % of its Gaussians' DC to the dead zone, render again.
+        use crate::camera::{OrbitOptions, orbit_cameras};
+        use crate::raster::{RenderOptions, render};
+        let mut before = scene();
+        before.sh.chunks_exact_mut(3).for_each(|c| c.copy_from_slice(&[0.8, 0.0, -0.8]));
+        let mut after = before.clone();
+        let k = after.sh_coeffs() * 3;
+        for i in (0..after.len()).filter(|i| i % 5 < 3) {
+            after.sh[i * k..i * k + 3].copy_from_slice(&[-2.0; 3]);
+        }
+        let cams = orbit_cameras(&before.means, &OrbitOptions { count: 2, width: 48, height: 48, ..Default::default() });
+        let measure = |g: &Gaussians| {
+            let r = render(g, &cams[0], &RenderOptions::default());
+            CoveredColour::of(&r.rgb, &r.alpha)
+        };
+        let (b, a) = (measure(&before), measure(&after));
+        assert!(b.luminance > 0.3 && b.chroma > 0.2, "{b:?}");
+        let th = StabilityThresholds::default();
+        let r = assess_stability(&before, &after, &[], None, None, Some((b, a)), &th);
+        only(&r, ColourCollapse);
+        assert!(r.issues[0].value > 0.5, "{:?}", r.issues[0]);
+        // A healthy recolouring (10 % darker) and a grey input whose chroma wobbles do not fire.
+        let darker = CoveredColour { luminance: 0.9 * b.luminance, chroma: 0.95 * b.chroma };
+        assert!(colour_collapse(b, darker, &th).is_none());
+        let grey = CoveredColour { luminance: 0.5, chroma: 0.01 };
+        assert!(colour_collapse(grey, CoveredColour { luminance: 0.5, chroma: 0.001 }, &th).is_none());
+        // Chroma alone collapsing fires.
+        assert!(colour_collapse(b, CoveredColour { luminance: b.luminance, chroma: 0.2 * b.chroma }, &th).is_some());
     }
 
     #[test]

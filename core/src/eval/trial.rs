@@ -108,6 +108,7 @@ pub fn run_trial(
         &losses,
         Some((reference.consistency_long, measures.consistency_long)),
         Some((reference.coverage, measures.coverage)),
+        Some((reference.colour, measures.colour)),
         thresholds,
     );
     measure_s += t.elapsed().as_secs_f64();

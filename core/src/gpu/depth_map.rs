@@ -181,7 +181,7 @@ mod tests {
             assert!(err < 1e-4, "{h}×{w}: forward max abs error {err}");
 
             let v_n: Vec<f32> = v_map.chunks_exact(3).map(|p| p[0] + p[1] + p[2]).collect();
-            let v_want = min_max_backward(&d, &v_n);
+            let v_want = min_max_backward(&d, &v_n, None);
             let largest = v_want.iter().fold(0.0f32, |m, v| m.max(v.abs()));
             let over = ctx.read::<f32>(&v_over).expect("read");
             let acc = ctx.read::<f32>(&v_acc).expect("read");

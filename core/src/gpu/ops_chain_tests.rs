@@ -47,7 +47,7 @@ fn the_maps_and_image_gradients_of_a_step_match_the_cpu() {
     v_rgb.iter_mut().zip(&raw).filter(|(_, r)| !(0.0..=1.0).contains(*r)).for_each(|(g, _)| *g = 0.0);
     let v_depth3 = downscale_half_backward(&v_small_depth, h, w, 3);
     let v_n: Vec<f32> = v_depth3.chunks_exact(3).map(|p| p[0] + p[1] + p[2]).collect();
-    let mut v_inv = min_max_backward(&inv_depth, &v_n);
+    let mut v_inv = min_max_backward(&inv_depth, &v_n, None);
     let (dl1, v_dl1) = depth_l1(&inv_depth, &depth_ref);
     v_inv.iter_mut().zip(&v_dl1).for_each(|(a, b)| *a += lambda_depth * b);
 

@@ -15,6 +15,7 @@ use crate::style::color_transfer::ColorTransfer;
 use crate::style::gcfm::{Matches, match_features};
 use crate::style::matching::{MatchIndex, MatchMethod, agreement, find_matches};
 use crate::style::regularizers::l2_distance;
+use crate::style::focus::coverage_mask;
 use crate::style::step::{FeatureMap, RenderedMaps, content_target, step_loss_with};
 use crate::vision::Vgg;
 use crate::vision::canny::render_edges;
@@ -57,6 +58,8 @@ pub struct SessionInputs {
 struct ViewTarget {
     content: FeatureMap,
     inv_depth: Vec<f32>,
+    /// Pixels `G^c` covers ([`coverage_mask`]): the focus of the losses with `Focus::Object`.
+    coverage: Vec<bool>,
 }
 
 /// Optimiser state, one Adam per parameter group, per phase (kept across cycles).
@@ -104,6 +107,8 @@ pub struct Session {
     audit_every: u32,
     /// Sums of the audited agreement fractions (nearest, farthest) and their count.
     audit: (f64, f64, u32),
+    /// Mean share of the optimisation views' pixels the scene covers (alpha ≥ 0.5).
+    coverage: f32,
 }
 
 impl Session {
@@ -140,6 +145,8 @@ impl Session {
 
         let t = Instant::now();
         let survey = survey_views(&scene, &work_cams, &opts);
+        let pixels: usize = work_cams.iter().map(|c| c.width as usize * c.height as usize).sum();
+        let coverage = survey.covered_rgb.len() as f32 / 3.0 / pixels.max(1) as f32;
         let ct = ColorTransfer::fit(&survey.covered_rgb, &style.to_f32());
         let mut full = scene;
         ct.apply_to_gaussians(&mut full);
@@ -192,6 +199,16 @@ impl Session {
                     ),
                     seconds: t.elapsed().as_secs_f64(),
                 });
+                if config.focus.is_object(coverage) {
+                    on_event(Event::Warning(
+                        "the GPU engine averages the losses over the whole frame: focus on the object (masked losses) \
+                         runs on the CPU engine; the views stay framed on the object"
+                            .into(),
+                    ));
+                }
+                if config.color_floor {
+                    on_event(Event::Warning("the colour floor is a CPU engine option; the GPU engine runs without it".into()));
+                }
                 if config.matching.method != crate::style::MatchMethod::Exact {
                     on_event(Event::Warning(
                         "the GPU engine searches matches exactly; the matching index and re-use are CPU options".into(),
@@ -224,6 +241,7 @@ impl Session {
             elapsed_s: 0.0,
             engine,
             failure: None,
+            coverage,
             config,
         })
     }
@@ -266,6 +284,17 @@ impl Session {
     /// The colour-matched scene before optimisation (`G^c`, whole).
     pub fn colour_matched(&self) -> &Gaussians {
         &self.full
+    }
+
+    /// Mean share of the optimisation views' pixels the input scene covers.
+    pub fn coverage(&self) -> f32 {
+        self.coverage
+    }
+
+    /// Whether the losses focus on the object (the configured focus, with
+    /// `auto` resolved by [`Session::coverage`]).
+    pub fn focus_on_object(&self) -> bool {
+        self.config.focus.is_object(self.coverage)
     }
 
     /// Number of Gaussians being optimised.
@@ -407,8 +436,11 @@ impl Session {
         if self.targets[view].is_none() {
             let r = raster::render(&self.g_ref, &cam, &opts);
             let rgb: Vec<f32> = r.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
-            self.targets[view] =
-                Some(ViewTarget { content: content_target(&*self.vgg, &rgb, h, w), inv_depth: r.inv_depth });
+            self.targets[view] = Some(ViewTarget {
+                content: content_target(&*self.vgg, &rgb, h, w),
+                coverage: coverage_mask(&r.alpha, h, w),
+                inv_depth: r.inv_depth,
+            });
         }
 
         let t = Instant::now();
@@ -447,6 +479,7 @@ impl Session {
             geometry.then_some(target.inv_depth.as_slice()),
             &self.config.weights,
             geometry,
+            self.focus_on_object().then_some(target.coverage.as_slice()),
             &mut matcher,
         );
         if let Some((b, w)) = audited {
@@ -488,6 +521,9 @@ impl Session {
                 .flat_map(|i| [grads.v_sh[i * k], grads.v_sh[i * k + 1], grads.v_sh[i * k + 2]])
                 .collect();
             self.opt.color.step(&mut dc, &v_dc, lr.color);
+            if self.config.color_floor {
+                floor_dc(&mut dc);
+            }
             for i in 0..self.g.len() {
                 self.g.sh[i * k..i * k + 3].copy_from_slice(&dc[3 * i..3 * i + 3]);
             }
@@ -535,6 +571,13 @@ fn build_index(style: &PreparedStyle, config: &StyleConfig) -> Option<MatchIndex
 /// The network computing its convolutions with `conv` (the same one when it already does).
 fn with_conv(vgg: Arc<Vgg>, conv: crate::vision::ConvAlgo) -> Arc<Vgg> {
     if vgg.conv() == conv { vgg } else { Arc::new((*vgg).clone().with_conv(conv)) }
+}
+
+/// Projects DC colour coefficients out of the clamp's dead zone: every
+/// channel's base colour `0.5 + C0·f_dc` is raised to at least 0.
+fn floor_dc(dc: &mut [f32]) {
+    let lowest = -0.5 / crate::scene::SH_C0;
+    dc.iter_mut().for_each(|v| *v = v.max(lowest));
 }
 
 /// `(x − x^c)/‖x − x^c‖` scaled by λ, plus the loss gradient: `reg ← λ·reg + loss`.

@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::adam::AdamConfig;
 pub use super::matching::{MatchMethod, MatchingConfig};
+use super::focus::Focus;
 use super::schedule::{Mode, Schedule};
 pub use crate::vision::ConvAlgo;
 pub use crate::vision::style_depth::{DepthPolarity, DepthProvider};
@@ -94,6 +95,13 @@ pub struct StyleConfig {
     pub conv: ConvAlgo,
     /// How the GCFM matches are searched (exact by default) and how long they are kept.
     pub matching: MatchingConfig,
+    /// Which pixels GCFM, content and TV average over (the whole frame, the
+    /// object, or the object when it covers less than half of the views).
+    pub focus: Focus,
+    /// After each colour step, raise every Gaussian's DC colour so that no
+    /// channel renders below 0 (`0.5 + C0·f_dc ≥ 0`), out of the clamp's dead
+    /// zone where no gradient reaches it again. Off in the reference.
+    pub color_floor: bool,
 }
 
 impl Default for StyleConfig {
@@ -114,6 +122,8 @@ impl Default for StyleConfig {
             seed: 0,
             conv: ConvAlgo::Im2col,
             matching: MatchingConfig::default(),
+            focus: Focus::default(),
+            color_floor: false,
         }
     }
 }

@@ -6,14 +6,31 @@
 /// Mean squared difference of two feature maps (any layout, same length) and
 /// its gradient with respect to `features`.
 pub fn content_loss(features: &[f32], content_features: &[f32]) -> (f32, Vec<f32>) {
+    content_loss_masked(features, content_features, None)
+}
+
+/// [`content_loss`] averaged over the positions in `mask` only: the maps are
+/// channel-major (`c × mask.len()`), the mean runs over every channel of the
+/// covered positions, and uncovered positions get a zero gradient.
+pub fn content_loss_masked(features: &[f32], content_features: &[f32], mask: Option<&[bool]>) -> (f32, Vec<f32>) {
     assert_eq!(features.len(), content_features.len(), "content_loss: feature sizes differ");
-    let n = features.len().max(1) as f64;
+    let positions = mask.map_or(1, <[bool]>::len).max(1);
+    let inside = |k: usize| mask.is_none_or(|m| m[k % positions]);
+    let count = match mask {
+        None => features.len(),
+        Some(m) => m.iter().filter(|&&v| v).count() * (features.len() / positions),
+    };
+    let n = count.max(1) as f64;
     let mut sum = 0f64;
     let scale = (2.0 / n) as f32;
     let grad = features
         .iter()
         .zip(content_features)
-        .map(|(&f, &c)| {
+        .enumerate()
+        .map(|(k, (&f, &c))| {
+            if !inside(k) {
+                return 0.0;
+            }
             let d = f - c;
             sum += f64::from(d) * f64::from(d);
             scale * d

@@ -11,6 +11,7 @@ pub mod adam;
 pub mod color_transfer;
 pub mod config;
 pub mod content;
+pub mod focus;
 pub mod gcfm;
 pub mod matching;
 pub mod regularizers;
@@ -21,8 +22,9 @@ pub mod tv;
 
 pub use color_transfer::ColorTransfer;
 pub use config::StyleConfig;
+pub use focus::Focus;
 pub use gcfm::{GcfmOutput, Matches, StyleFeatures};
 pub use matching::{MatchIndex, MatchMethod, MatchingConfig};
 pub use schedule::{Mode, Phase, Schedule};
 pub use stage1::{StyleMaps, style_maps};
-pub use step::{FeatureNet, RenderedMaps, StepLoss, StyleTargets, step_loss};
+pub use step::{FeatureNet, RenderedMaps, StepLoss, StyleTargets, step_loss, step_loss_masked};

@@ -11,10 +11,11 @@
 //! (and tests can use a small stand-in).
 
 use super::config::LossWeights;
-use super::content::content_loss;
-use super::gcfm::{Matches, StyleFeatures, gcfm_loss_with_matches, match_features};
+use super::content::content_loss_masked;
+use super::focus::{feature_mask, gather_positions, scatter_positions};
+use super::gcfm::{GcfmOutput, Matches, StyleFeatures, gcfm_loss_with_matches, match_features};
 use super::regularizers::depth_l1;
-use super::tv::tv_loss;
+use super::tv::tv_loss_masked;
 use crate::vision::resize::{downscale_half, downscale_half_backward};
 
 /// A CHW feature map.
@@ -144,25 +145,43 @@ pub struct StepLossTimings {
     pub backward_ms: f32,
 }
 
-/// Min-max normalisation `(d − min)/(max − min + 1e-8)` and its adjoint
+/// The min and max of `d` over the positions in `mask` (all without one).
+fn masked_range(d: &[f32], mask: Option<&[bool]>) -> (f32, f32) {
+    let inside = |k: usize| mask.is_none_or(|m| m[k]);
+    d.iter()
+        .enumerate()
+        .filter(|(k, _)| inside(*k))
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), (_, &x)| (a.min(x), b.max(x)))
+}
+
+/// Min-max normalisation `(d − min)/(max − min + 1e-8)` over the positions in
+/// `mask` (all without one; those outside are a constant 0) and its adjoint
 /// (ties at the min or max share the gradient equally, as autodiff does).
-pub(crate) fn min_max_backward(d: &[f32], v: &[f32]) -> Vec<f32> {
-    let (lo, hi) = d.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+pub(crate) fn min_max_backward(d: &[f32], v: &[f32], mask: Option<&[bool]>) -> Vec<f32> {
+    let inside = |k: usize| mask.is_none_or(|m| m[k]);
+    let (lo, hi) = masked_range(d, mask);
     let r = f64::from(hi - lo) + 1e-8;
     let (mut sum_v, mut sum_vd) = (0f64, 0f64);
-    for (&x, &g) in d.iter().zip(v) {
+    for (k, (&x, &g)) in d.iter().zip(v).enumerate() {
+        if !inside(k) {
+            continue;
+        }
         let dn = f64::from(x - lo) / r;
         sum_v += f64::from(g);
         sum_vd += f64::from(g) * dn;
     }
-    let n_lo = d.iter().filter(|&&x| x == lo).count().max(1) as f64;
-    let n_hi = d.iter().filter(|&&x| x == hi).count().max(1) as f64;
+    let ties = |t: f32| d.iter().enumerate().filter(|&(k, &x)| inside(k) && x == t).count().max(1) as f64;
+    let (n_lo, n_hi) = (ties(lo), ties(hi));
     // ∂/∂max = −Σ g·d̃ / r ; ∂/∂min = (Σ g·d̃ − Σ g) / r.
     let g_hi = -sum_vd / r / n_hi;
     let g_lo = (sum_vd - sum_v) / r / n_lo;
     d.iter()
         .zip(v)
-        .map(|(&x, &g)| {
+        .enumerate()
+        .map(|(k, (&x, &g))| {
+            if !inside(k) {
+                return 0.0;
+            }
             let mut o = f64::from(g) / r;
             if x == hi {
                 o += g_hi;
@@ -191,13 +210,36 @@ pub fn step_loss<N: FeatureNet>(
     weights: &LossWeights,
     depth_grad: bool,
 ) -> StepLoss {
-    let exact = &mut |rendered: [&[f32]; 3], n: usize| match_features(&style.features, rendered, n);
-    step_loss_with(net, style, maps, content, depth_ref, weights, depth_grad, exact)
+    step_loss_masked(net, style, maps, content, depth_ref, weights, depth_grad, None)
 }
 
-/// [`step_loss`] with the GCFM matches found by `matcher` (given the rendered
-/// RGB, depth and edge features and their number of positions): an index,
-/// or matches kept from an earlier visit of the view.
+/// [`step_loss_masked`] with the exact GCFM matches.
+#[allow(clippy::too_many_arguments)]
+pub fn step_loss_masked<N: FeatureNet>(
+    net: &N,
+    style: &StyleTargets,
+    maps: RenderedMaps<'_>,
+    content: Option<&FeatureMap>,
+    depth_ref: Option<&[f32]>,
+    weights: &LossWeights,
+    depth_grad: bool,
+    mask: Option<&[bool]>,
+) -> StepLoss {
+    let exact = &mut |rendered: [&[f32]; 3], n: usize| match_features(&style.features, rendered, n);
+    step_loss_with(net, style, maps, content, depth_ref, weights, depth_grad, mask, exact)
+}
+
+/// [`step_loss`] with the focus on the pixels in `mask` (`h × w`, see
+/// [`super::focus`]): GCFM and content average over the feature positions
+/// whose cell the mask covers ([`feature_mask`]), TV over the differences
+/// inside it, and the depth map is min-max normalised over the covered pixels
+/// (a constant 0 elsewhere). Uncovered positions get exactly zero gradient
+/// from these terms. The style side and the depth regulariser, which anchors
+/// the geometry everywhere, are unchanged. A mask that covers no feature
+/// position falls back to the whole frame. The GCFM matches of the covered
+/// positions come from `matcher` (given their RGB, depth and edge features and
+/// their number): the exact search, an index, or matches kept from an earlier
+/// visit of the view.
 #[allow(clippy::too_many_arguments)]
 pub fn step_loss_with<N: FeatureNet>(
     net: &N,
@@ -207,6 +249,7 @@ pub fn step_loss_with<N: FeatureNet>(
     depth_ref: Option<&[f32]>,
     weights: &LossWeights,
     depth_grad: bool,
+    mask: Option<&[bool]>,
     matcher: &mut dyn FnMut([&[f32]; 3], usize) -> Matches,
 ) -> StepLoss {
     use rayon::prelude::*;
@@ -214,13 +257,21 @@ pub fn step_loss_with<N: FeatureNet>(
     assert_eq!(maps.rgb.len(), h * w * 3, "step_loss: rgb size");
     assert_eq!(maps.inv_depth.len(), h * w, "step_loss: inverse depth size");
     assert_eq!(maps.edge.len(), h * w, "step_loss: edge size");
+    if let Some(m) = mask {
+        assert_eq!(m.len(), h * w, "step_loss: mask size");
+    }
     let mut timings = StepLossTimings::default();
     let t = std::time::Instant::now();
 
     // Depth map: min-max normalised, replicated to 3 channels.
-    let (lo, hi) = maps.inv_depth.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+    let (lo, hi) = masked_range(maps.inv_depth, mask);
     let r = hi - lo + 1e-8;
-    let depth_n: Vec<f32> = maps.inv_depth.iter().map(|&x| (x - lo) / r).collect();
+    let depth_n: Vec<f32> = maps
+        .inv_depth
+        .iter()
+        .enumerate()
+        .map(|(k, &x)| if mask.is_none_or(|m| m[k]) { (x - lo) / r } else { 0.0 })
+        .collect();
     let images = [maps.rgb.to_vec(), replicate3(&depth_n), replicate3(maps.edge)];
     let downs: Vec<(Vec<f32>, usize, usize)> = images.iter().map(|im| downscale_half(im, h, w, 3)).collect();
     let (sh, sw) = (downs[0].1, downs[0].2);
@@ -241,15 +292,23 @@ pub fn step_loss_with<N: FeatureNet>(
         .collect();
     timings.features_ms = t.elapsed().as_secs_f32() * 1e3;
     let t = std::time::Instant::now();
-    let n = fwd[0].0.height * fwd[0].0.width;
-    let rendered = [&fwd[0].0.data[..], &fwd[1].0.data[..], &fwd[2].0.data[..]];
-    let out = gcfm_loss_with_matches(&style.features, rendered, n, matcher(rendered, n));
+    let (fh, fw) = (fwd[0].0.height, fwd[0].0.width);
+    let n = fh * fw;
+    let fmask = mask.map(|m| feature_mask(m, h, w, fh, fw)).filter(|f| f.contains(&true));
+    let feats = [&fwd[0].0.data, &fwd[1].0.data, &fwd[2].0.data];
+    let out = match &fmask {
+        None => {
+            let rendered = feats.map(Vec::as_slice);
+            gcfm_loss_with_matches(&style.features, rendered, n, matcher(rendered, n))
+        }
+        Some(f) => masked_gcfm(&style.features, feats.map(Vec::as_slice), fwd[0].0.channels, f, matcher),
+    };
 
     // RGB features' gradient: GCFM plus content.
     let mut v_feat_rgb: Vec<f32> = out.v_rendered[0].iter().map(|v| v * weights.gcfm).collect();
     let mut content_value = 0.0;
     if let Some(ct) = content {
-        let (l, g) = content_loss(&fwd[0].0.data, &ct.data);
+        let (l, g) = content_loss_masked(&fwd[0].0.data, &ct.data, fmask.as_deref());
         content_value = l;
         for (a, b) in v_feat_rgb.iter_mut().zip(g) {
             *a += weights.content * b;
@@ -267,13 +326,13 @@ pub fn step_loss_with<N: FeatureNet>(
         Some(v) => {
             let v_depth3 = downscale_half_backward(&v, h, w, 3);
             let v_depth_n: Vec<f32> = v_depth3.chunks_exact(3).map(|p| p[0] + p[1] + p[2]).collect();
-            min_max_backward(maps.inv_depth, &v_depth_n)
+            min_max_backward(maps.inv_depth, &v_depth_n, fmask.is_some().then_some(mask).flatten())
         }
         None => vec![0.0; h * w],
     };
     timings.backward_ms = t.elapsed().as_secs_f32() * 1e3;
 
-    let (tv, v_tv) = tv_loss(maps.rgb, h, w, 3);
+    let (tv, v_tv) = tv_loss_masked(maps.rgb, h, w, 3, fmask.is_some().then_some(mask).flatten());
     for (a, b) in v_rgb.iter_mut().zip(v_tv) {
         *a += weights.tv * b;
     }
@@ -297,6 +356,43 @@ pub fn step_loss_with<N: FeatureNet>(
         v_rgb,
         v_inv_depth,
         matches: out.matches,
+    }
+}
+
+/// GCFM over the feature positions in `fmask` only: the rendered features of
+/// those positions are gathered, matched and averaged, and the gradients
+/// scattered back (zero elsewhere). Matches of uncovered positions are `u32::MAX`.
+fn masked_gcfm(
+    style: &StyleFeatures,
+    rendered: [&[f32]; 3],
+    channels: usize,
+    fmask: &[bool],
+    matcher: &mut dyn FnMut([&[f32]; 3], usize) -> Matches,
+) -> GcfmOutput {
+    let n = fmask.len();
+    let idx: Vec<usize> = (0..n).filter(|&x| fmask[x]).collect();
+    let parts = rendered.map(|f| gather_positions(f, channels, n, &idx));
+    let covered = [&parts[0][..], &parts[1][..], &parts[2][..]];
+    // Matches kept from an earlier visit of the view span every position
+    // (u32::MAX where uncovered); the view's mask, and so `idx`, is the same.
+    let mut found = matcher(covered, idx.len());
+    if found.best.len() == n && idx.len() != n {
+        found = Matches {
+            best: idx.iter().map(|&x| found.best[x]).collect(),
+            worst: idx.iter().map(|&x| found.worst[x]).collect(),
+        };
+    }
+    let out = gcfm_loss_with_matches(style, covered, idx.len(), found);
+    let spread = |m: &[u32]| {
+        let mut all = vec![u32::MAX; n];
+        idx.iter().zip(m).for_each(|(&x, &v)| all[x] = v);
+        all
+    };
+    GcfmOutput {
+        loss: out.loss,
+        terms: out.terms,
+        v_rendered: out.v_rendered.map(|v| scatter_positions(&v, channels, n, &idx)),
+        matches: Matches { best: spread(&out.matches.best), worst: spread(&out.matches.worst) },
     }
 }
 

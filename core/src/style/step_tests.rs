@@ -90,7 +90,7 @@ fn min_max_adjoint_matches_finite_differences() {
         let hi = d.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
         d.iter().zip(&v).map(|(&x, &g)| f64::from((x - lo) / (hi - lo + 1e-8) * g)).sum()
     };
-    let an = min_max_backward(&d, &v);
+    let an = min_max_backward(&d, &v, None);
     for i in 0..d.len() {
         let mut p = d.clone();
         p[i] += 1e-3;
@@ -156,4 +156,93 @@ fn step_loss_gradients_match_finite_differences() {
         }
     }
     assert!(bad.is_empty(), "{} failures:\n{}", bad.len(), bad.join("\n"));
+}
+
+/// A small scene for the focus tests: 16 × 24 pixels, a 2 × 3 feature grid
+/// (each cell 8 × 8 pixels after the 0.5× downscale and the net's 1/4).
+fn focus_inputs() -> (ToyNet, StyleTargets, Vec<f32>, Vec<f32>, FeatureMap, Vec<f32>) {
+    let (h, w) = (16, 24);
+    let net = ToyNet::new(5);
+    let (hs, ws) = (12, 16);
+    let st = StyleTargets::new(
+        &net,
+        &noise(hs * ws * 3, 11, 0.0, 1.0),
+        &noise(hs * ws, 12, 0.0, 1.0),
+        &noise(hs * ws, 13, 0.0, 1.0).iter().map(|v| v.round()).collect::<Vec<_>>(),
+        hs,
+        ws,
+    );
+    let content = content_target(&net, &noise(h * w * 3, 17, 0.0, 1.0), h, w);
+    (net, st, noise(h * w * 3, 15, 0.1, 0.9), noise(h * w, 16, 0.3, 1.0), content, noise(h * w, 18, 0.3, 1.0))
+}
+
+#[test]
+fn an_all_ones_mask_equals_the_unmasked_loss() {
+    let (h, w) = (16, 24);
+    let (net, st, rgb, inv_depth, content, dref) = focus_inputs();
+    let edge = vec![0.0f32; h * w];
+    let weights = LossWeights { gcfm: 2.0, content: 0.5, tv: 0.02, depth: 0.1, ..LossWeights::default() };
+    let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
+    let ones = vec![true; h * w];
+    let a = step_loss(&net, &st, maps, Some(&content), Some(&dref), &weights, true);
+    let b = step_loss_masked(&net, &st, maps, Some(&content), Some(&dref), &weights, true, Some(&ones));
+    let close = |x: f32, y: f32| (x - y).abs() <= 1e-6 * (1.0 + x.abs());
+    for (name, x, y) in
+        [("gcfm", a.gcfm, b.gcfm), ("content", a.content, b.content), ("tv", a.tv, b.tv), ("total", a.total, b.total)]
+    {
+        assert!(close(x, y), "{name}: unmasked {x}, all-ones mask {y}");
+    }
+    assert!(a.content > 0.0 && a.tv > 0.0);
+    assert_eq!(a.matches, b.matches);
+    for (name, u, v) in [("v_rgb", &a.v_rgb, &b.v_rgb), ("v_inv_depth", &a.v_inv_depth, &b.v_inv_depth)] {
+        let worst = u.iter().zip(v.iter()).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+        assert!(worst <= 1e-7, "{name}: worst difference {worst}");
+    }
+}
+
+#[test]
+fn a_mask_ignores_uncovered_positions_with_exactly_zero_gradient() {
+    let (h, w) = (16, 24);
+    let (net, st, rgb, inv_depth, content, _) = focus_inputs();
+    let edge = vec![0.0f32; h * w];
+    let weights = LossWeights { gcfm: 2.0, content: 0.5, tv: 0.02, ..LossWeights::default() };
+    // The left two feature cells (pixel columns 0..16) are covered.
+    let mask: Vec<bool> = (0..h * w).map(|k| k % w < 16).collect();
+    let eval = |rgb: &[f32], d: &[f32]| {
+        let maps = RenderedMaps { rgb, inv_depth: d, edge: &edge, height: h, width: w };
+        step_loss_masked(&net, &st, maps, Some(&content), None, &weights, true, Some(&mask))
+    };
+    let base = eval(&rgb, &inv_depth);
+    let full = step_loss(
+        &net,
+        &st,
+        RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w },
+        Some(&content),
+        None,
+        &weights,
+        true,
+    );
+    assert!((base.total - full.total).abs() > 1e-4, "the mask changed nothing: {}", base.total);
+    let mut bad = Vec::new();
+    for k in (0..h * w).filter(|&k| !mask[k]) {
+        if base.v_inv_depth[k] != 0.0 {
+            bad.push(format!("v_inv_depth at pixel {k}: {}", base.v_inv_depth[k]));
+        }
+        for c in 0..3 {
+            if base.v_rgb[3 * k + c] != 0.0 {
+                bad.push(format!("v_rgb at pixel {k}.{c}: {}", base.v_rgb[3 * k + c]));
+            }
+        }
+    }
+    assert!(bad.is_empty(), "{} non-zero gradients outside the mask:\n{}", bad.len(), bad.join("\n"));
+    assert!(mask.iter().zip(base.v_rgb.chunks(3)).any(|(&m, g)| m && g.iter().any(|&v| v != 0.0)));
+    // Changing what lies outside the mask changes nothing.
+    let (mut rgb2, mut d2) = (rgb.clone(), inv_depth.clone());
+    for k in (0..h * w).filter(|&k| !mask[k]) {
+        rgb2[3 * k] = 1.0 - rgb2[3 * k];
+        d2[k] *= 3.0;
+    }
+    let moved = eval(&rgb2, &d2);
+    assert_eq!((moved.gcfm, moved.content, moved.tv, moved.total), (base.gcfm, base.content, base.tv, base.total));
+    assert!(base.matches.best[2] == u32::MAX && base.matches.best[0] != u32::MAX);
 }

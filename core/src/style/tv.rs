@@ -10,10 +10,26 @@
 
 /// TV loss of an HWC image and its gradient.
 pub fn tv_loss(img: &[f32], h: usize, w: usize, c: usize) -> (f32, Vec<f32>) {
+    tv_loss_masked(img, h, w, c, None)
+}
+
+/// [`tv_loss`] over the differences whose two pixels are both in `mask`
+/// (`h × w`; all of them without a mask): the means are over those
+/// differences, and pixels outside the mask get no gradient.
+pub fn tv_loss_masked(img: &[f32], h: usize, w: usize, c: usize, mask: Option<&[bool]>) -> (f32, Vec<f32>) {
     assert_eq!(img.len(), h * w * c, "tv_loss: image size mismatch");
+    let inside = |p: usize| mask.is_none_or(|m| m[p]);
     let mut grad = vec![0f32; img.len()];
-    let nh = (h * w.saturating_sub(1) * c) as f64;
-    let nv = (h.saturating_sub(1) * w * c) as f64;
+    let (mut count_h, mut count_v) = (0usize, 0usize);
+    for i in 0..h {
+        for j in 0..w {
+            let p = i * w + j;
+            count_h += usize::from(j + 1 < w && inside(p) && inside(p + 1));
+            count_v += usize::from(i + 1 < h && inside(p) && inside(p + w));
+        }
+    }
+    let nh = (count_h * c) as f64;
+    let nv = (count_v * c) as f64;
     let (mut sh, mut sv) = (0f64, 0f64);
     // d/dx of mean(d²)/2 = d/n per difference, with sign ±.
     let kh = if nh > 0.0 { (1.0 / nh) as f32 } else { 0.0 };
@@ -22,14 +38,15 @@ pub fn tv_loss(img: &[f32], h: usize, w: usize, c: usize) -> (f32, Vec<f32>) {
         for j in 0..w {
             for k in 0..c {
                 let p = (i * w + j) * c + k;
-                if j + 1 < w {
+                let here = inside(i * w + j);
+                if j + 1 < w && here && inside(i * w + j + 1) {
                     let q = p + c;
                     let d = img[q] - img[p];
                     sh += f64::from(d) * f64::from(d);
                     grad[q] += kh * d;
                     grad[p] -= kh * d;
                 }
-                if i + 1 < h {
+                if i + 1 < h && here && inside((i + 1) * w + j) {
                     let q = p + w * c;
                     let d = img[q] - img[p];
                     sv += f64::from(d) * f64::from(d);

@@ -1,0 +1,167 @@
+//! The tables of the focus and collapse studies of `gast bench quality`
+//! (`focus.md`, also printed): whether object focus moves the object's style
+//! measures further from the colour-matched state than the paper's
+//! whole-frame losses do, and whether a long run's colours collapse.
+//!
+//! A separate page because both studies run only when named, and because the
+//! focus study's verdict is a per-pair comparison, not a chart.
+
+use std::path::Path;
+
+use gast_core::eval::{DegenerationKind, Measures};
+
+use crate::cli::quality::{FOCUS_FRAME, FOCUS_OBJECT, FOCUS_SEED};
+use crate::study::{Record, Row, RunSummary, Study};
+
+/// Object's RMSE may be at most this factor of frame's for a pair to pass.
+const RMSE_FACTOR: f32 = 1.2;
+
+/// The decrease of a measure from the colour-matched state (step 0) to `step`.
+fn decrease(r: &Record, step: u32, f: fn(&Measures) -> f32) -> Option<f32> {
+    let first = r.checkpoints.first().filter(|c| c.step == 0)?;
+    Some(f(&first.measures) - f(&r.at(step)?.measures))
+}
+
+fn sw(m: &Measures) -> f32 {
+    m.sliced_wasserstein_object
+}
+
+fn nn(m: &Measures) -> f32 {
+    m.nn_cosine_object
+}
+
+/// The rows of `study` with their records.
+fn rows_of<'a>(run: &'a RunSummary, study: Study) -> Vec<(&'a Row, &'a Record)> {
+    run.rows
+        .iter()
+        .filter(|r| r.study == study)
+        .filter_map(|r| run.trials.iter().find(|t| t.id == r.trial).map(|t| (r, t)))
+        .collect()
+}
+
+fn median(mut v: Vec<f32>) -> Option<f32> {
+    v.retain(|x| x.is_finite());
+    v.sort_by(f32::total_cmp);
+    (!v.is_empty()).then(|| if v.len() % 2 == 1 { v[v.len() / 2] } else { 0.5 * (v[v.len() / 2 - 1] + v[v.len() / 2]) })
+}
+
+/// The focus study's table: per pair, each arm's decrease of SW and NN-cos on
+/// the object from the colour-matched state, their ratio (object / frame),
+/// the long-baseline RMSE of both, and the verdict against the seed floor.
+fn focus_lines(run: &RunSummary) -> Vec<String> {
+    let rows = rows_of(run, Study::Focus);
+    if rows.is_empty() {
+        return Vec::new();
+    }
+    let find = |label: &str, scene: &str, style: &str| {
+        rows.iter().find(|(r, t)| r.label == label && t.scene_name() == scene && t.style == style).copied()
+    };
+    let mut out = vec![
+        "## Focus: frame against object (SW and NN-cos on relu3, object pixels of the fitted ring)".to_string(),
+        String::new(),
+        "| scene | style | steps | ΔSW frame | ΔSW object | ratio | ΔNN frame | ΔNN object | ratio | RMSE frame | RMSE object | passes |"
+            .into(),
+        "|---|---|---|---|---|---|---|---|---|---|---|---|".into(),
+    ];
+    let mut ratios = Vec::new();
+    let mut per_scene: Vec<(String, usize, usize)> = Vec::new();
+    for &(row, frame) in rows.iter().filter(|(r, _)| r.label == FOCUS_FRAME) {
+        let (scene, style) = (frame.scene_name(), frame.style.clone());
+        let Some((_, object)) = find(FOCUS_OBJECT, &scene, &style) else { continue };
+        // The seed floor: the spread of the two frame runs' final measures on this scene.
+        let seed = rows.iter().find(|(r, t)| r.label == FOCUS_SEED && t.scene_name() == scene);
+        let floor = |f: fn(&Measures) -> f32| -> f32 {
+            let twin = seed.and_then(|(r, t)| {
+                let base = rows.iter().find(|(r2, t2)| r2.label == FOCUS_FRAME && t2.scene_name() == scene && t2.style == t.style)?;
+                Some((f(&t.at(r.step)?.measures) - f(&base.1.at(base.0.step)?.measures)).abs())
+            });
+            twin.unwrap_or(0.0)
+        };
+        let step = row.step;
+        let (Some(sw_f), Some(sw_o), Some(nn_f), Some(nn_o)) =
+            (decrease(frame, step, sw), decrease(object, step, sw), decrease(frame, step, nn), decrease(object, step, nn))
+        else {
+            continue;
+        };
+        let rmse = |r: &Record| r.at(step).map_or(f32::NAN, |c| c.measures.consistency_long);
+        let (rmse_f, rmse_o) = (rmse(frame), rmse(object));
+        let pass = sw_o - sw_f > floor(sw) && nn_o - nn_f > floor(nn) && rmse_o <= RMSE_FACTOR * rmse_f;
+        let ratio_sw = sw_o / sw_f;
+        ratios.push(ratio_sw);
+        match per_scene.iter_mut().find(|(s, _, _)| *s == scene) {
+            Some(e) => {
+                e.1 += usize::from(pass);
+                e.2 += 1;
+            }
+            None => per_scene.push((scene.clone(), usize::from(pass), 1)),
+        }
+        out.push(format!(
+            "| {scene} | {style} | {step} | {sw_f:.4} | {sw_o:.4} | {ratio_sw:.2} | {nn_f:.4} | {nn_o:.4} | {:.2} | {rmse_f:.4} | {rmse_o:.4} | {} |",
+            nn_o / nn_f,
+            if pass { "yes" } else { "no" }
+        ));
+    }
+    out.push(String::new());
+    if let Some(m) = median(ratios) {
+        out.push(format!("Median ratio of the SW decreases (object / frame): {m:.2}."));
+    }
+    for (scene, pass, n) in per_scene {
+        out.push(format!(
+            "{scene}: object beats frame beyond the seed floor, with RMSE within {RMSE_FACTOR}x, on {pass} of {n} styles."
+        ));
+    }
+    out.push(String::new());
+    out
+}
+
+/// The collapse study's table: per run, the covered pixels' luminance and
+/// chroma relative to the colour-matched state at each checkpoint, and the
+/// detectors that fired.
+fn collapse_lines(run: &RunSummary) -> Vec<String> {
+    let rows = rows_of(run, Study::Collapse);
+    if rows.is_empty() {
+        return Vec::new();
+    }
+    let mut out = vec![
+        "## Colour collapse (luminance / chroma of the covered pixels, relative to the colour-matched state)".to_string(),
+        String::new(),
+        "| run | scene | style | luminance at checkpoints | chroma at checkpoints | SW object end | collapse | detectors |".into(),
+        "|---|---|---|---|---|---|---|---|".into(),
+    ];
+    for (row, r) in rows.iter().copied() {
+        let Some(first) = r.checkpoints.first() else { continue };
+        let rel = |f: fn(&Measures) -> f32| {
+            r.checkpoints
+                .iter()
+                .filter(|c| c.step <= row.step)
+                .map(|c| format!("{}: {:.2}", c.step, f(&c.measures) / f(&first.measures).max(1e-6)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let collapsed = r.issues.iter().any(|d| d.kind == DegenerationKind::ColourCollapse);
+        out.push(format!(
+            "| {} | {} | {} | {} | {} | {:.4} | {} | {} |",
+            row.label,
+            r.scene_name(),
+            r.style,
+            rel(|m| m.colour.luminance),
+            rel(|m| m.colour.chroma),
+            r.at(row.step).map_or(f32::NAN, |c| c.measures.sliced_wasserstein_object),
+            if collapsed { "yes" } else { "no" },
+            r.health()
+        ));
+    }
+    out.push(String::new());
+    out
+}
+
+/// Writes `focus.md` into `out` when the run has focus or collapse rows and
+/// returns its lines (empty when it has none).
+pub fn write_focus_report(out: &Path, run: &RunSummary) -> anyhow::Result<Vec<String>> {
+    let mut lines = focus_lines(run);
+    lines.extend(collapse_lines(run));
+    if !lines.is_empty() {
+        gast_core::io::write_bytes(&out.join("focus.md"), (lines.join("\n") + "\n").as_bytes())?;
+    }
+    Ok(lines)
+}

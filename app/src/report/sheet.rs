@@ -1,0 +1,242 @@
+//! The contact sheet of a stylization run: one image a person reads at a
+//! glance. The style with its depth and edge maps, then four views, each
+//! before / colour-matched / after in RGB and in inverse depth, labelled, with
+//! the run's settings and time. `gast stylize` writes it as `sheet.png`; the
+//! studio exports the same sheet for its current run.
+//!
+//! Tiles are letterboxed into squares so that views of any aspect ratio (the
+//! fitted framing gives each view its own) line up in a grid.
+
+use std::path::Path;
+
+use anyhow::Context;
+use gast_core::io::depth_to_gray;
+use gast_core::raster::{self, Render, RenderOptions};
+use gast_core::session::Session;
+use gast_core::{Camera, Gaussians};
+use image::{Rgb, RgbImage};
+use vello_cpu::color::AlphaColor;
+use vello_cpu::kurbo::{Affine, BezPath};
+
+use super::glyphs::shape_text;
+
+/// Side of one square tile, pixels.
+const TILE: u32 = 200;
+/// Gap between tiles, pixels.
+const GAP: u32 = 6;
+/// Height of a label line above a row of tiles.
+const LABEL: u32 = 22;
+/// Columns of the grid: RGB and depth of before / colour-matched / after.
+const COLUMNS: u32 = 6;
+const BACKGROUND: Rgb<u8> = Rgb([28, 28, 32]);
+const LETTERBOX: Rgb<u8> = Rgb([48, 48, 54]);
+
+/// One picture of the sheet: an 8-bit RGB image of any size.
+pub struct Tile {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// `width · height · 3` bytes.
+    pub rgb: Vec<u8>,
+}
+
+impl Tile {
+    /// Colour of a float RGB image (clamped to [0, 1]).
+    pub fn from_rgb(width: u32, height: u32, rgb: &[f32]) -> Self {
+        Self { width, height, rgb: rgb.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect() }
+    }
+
+    /// A single-channel map in grey, min-max normalised.
+    pub fn from_gray(width: u32, height: u32, values: &[f32]) -> Self {
+        let (lo, hi) = gast_core::io::finite_range(values);
+        let s = if hi > lo { 255.0 / (hi - lo) } else { 0.0 };
+        Self { width, height, rgb: values.iter().flat_map(|&v| [((v - lo) * s).round().clamp(0.0, 255.0) as u8; 3]).collect() }
+    }
+
+    /// The colour of a render.
+    pub fn render_rgb(r: &Render) -> Self {
+        Self::from_rgb(r.width, r.height, &r.rgb)
+    }
+
+    /// The inverse depth of a render, as `write_depth_png` draws it (near bright, background black).
+    pub fn render_depth(r: &Render) -> Self {
+        let g = depth_to_gray(&r.inv_depth, &r.alpha);
+        Self { width: r.width, height: r.height, rgb: g.iter().flat_map(|&v| [v; 3]).collect() }
+    }
+}
+
+/// Everything the sheet shows.
+pub struct SheetContent {
+    /// The first line: what ran (scene, style).
+    pub title: String,
+    /// The second line: the settings and the time.
+    pub settings: String,
+    /// The style, its depth and its edges.
+    pub style: [Tile; 3],
+    /// Per view: before, colour-matched and after renders.
+    pub views: Vec<[Render; 3]>,
+}
+
+/// Renders the sheet's views of a session: `input` (the scene as loaded)
+/// before, the colour-matched scene, and the current result, from `count`
+/// optimisation cameras spread over the set.
+pub fn session_views(session: &Session, input: &Gaussians, count: usize) -> Vec<[Render; 3]> {
+    let opts = RenderOptions { background: session.config().background };
+    let result = session.result();
+    spread(session.cameras(), count)
+        .map(|cam| {
+            [raster::render(input, cam, &opts), raster::render(session.colour_matched(), cam, &opts), raster::render(&result, cam, &opts)]
+        })
+        .collect()
+}
+
+/// `count` cameras evenly spread over `cameras` (all of them when fewer).
+pub fn spread(cameras: &[Camera], count: usize) -> impl Iterator<Item = &Camera> {
+    let step = (cameras.len() / count.max(1)).max(1);
+    cameras.iter().step_by(step).take(count)
+}
+
+/// The style's three maps of a session as tiles.
+pub fn style_tiles(session: &Session) -> [Tile; 3] {
+    let m = &session.style().maps;
+    let (w, h) = (m.width as u32, m.height as u32);
+    [Tile::from_rgb(w, h, &m.rgb), Tile::from_gray(w, h, &m.depth), Tile::from_gray(w, h, &m.edge)]
+}
+
+/// The sheet as an RGB image.
+pub fn contact_sheet(content: &SheetContent) -> RgbImage {
+    let width = COLUMNS * TILE + (COLUMNS + 1) * GAP;
+    let header = 2 * LABEL + GAP;
+    let row = LABEL + TILE + GAP;
+    let height = header + row * (1 + content.views.len() as u32) + GAP;
+    let mut img = RgbImage::from_pixel(width, height, BACKGROUND);
+    let mut labels: Vec<(f64, f64, f64, String)> = vec![
+        (f64::from(GAP), 17.0, 16.0, content.title.clone()),
+        (f64::from(GAP), f64::from(LABEL) + 15.0, 13.0, content.settings.clone()),
+    ];
+    let col_x = |c: u32| GAP + c * (TILE + GAP);
+    let mut y = header;
+    for (c, (tile, name)) in content.style.iter().zip(["style", "style depth", "style edges"]).enumerate() {
+        labels.push((f64::from(col_x(c as u32)), f64::from(y + 16), 13.0, name.into()));
+        blit(&mut img, tile, col_x(c as u32), y + LABEL);
+    }
+    y += row;
+    let names = ["before", "colour-matched", "after"];
+    for (v, renders) in content.views.iter().enumerate() {
+        for (k, r) in renders.iter().enumerate() {
+            let (rgb_col, depth_col) = (k as u32, 3 + k as u32);
+            labels.push((f64::from(col_x(rgb_col)), f64::from(y + 16), 13.0, format!("view {} {}", v + 1, names[k])));
+            labels.push((f64::from(col_x(depth_col)), f64::from(y + 16), 13.0, format!("{} depth", names[k])));
+            blit(&mut img, &Tile::render_rgb(r), col_x(rgb_col), y + LABEL);
+            blit(&mut img, &Tile::render_depth(r), col_x(depth_col), y + LABEL);
+        }
+        y += row;
+    }
+    draw_text(&mut img, &labels);
+    img
+}
+
+/// Writes the sheet as a PNG (atomically).
+pub fn write_sheet(path: &Path, content: &SheetContent) -> anyhow::Result<()> {
+    let img = contact_sheet(content);
+    gast_core::io::write_png_rgb8(path, img.width(), img.height(), img.as_raw())
+        .with_context(|| format!("writing the contact sheet {}", path.display()))
+}
+
+/// Draws `tile` scaled (nearest neighbour) into the `TILE × TILE` square at
+/// `(x0, y0)`, centred, keeping its aspect ratio; the rest is letterbox grey.
+fn blit(img: &mut RgbImage, tile: &Tile, x0: u32, y0: u32) {
+    let (tw, th) = (tile.width.max(1), tile.height.max(1));
+    let s = f64::from(TILE) / f64::from(tw.max(th));
+    let (dw, dh) = (((f64::from(tw) * s).round() as u32).max(1), ((f64::from(th) * s).round() as u32).max(1));
+    let (ox, oy) = ((TILE - dw.min(TILE)) / 2, (TILE - dh.min(TILE)) / 2);
+    for y in 0..TILE {
+        for x in 0..TILE {
+            let inside = x >= ox && x < ox + dw && y >= oy && y < oy + dh;
+            let px = if inside && tile.rgb.len() == (tw * th * 3) as usize {
+                let sx = ((f64::from(x - ox) + 0.5) / s) as u32;
+                let sy = ((f64::from(y - oy) + 0.5) / s) as u32;
+                let k = 3 * (sy.min(th - 1) * tw + sx.min(tw - 1)) as usize;
+                Rgb([tile.rgb[k], tile.rgb[k + 1], tile.rgb[k + 2]])
+            } else {
+                LETTERBOX
+            };
+            if x0 + x < img.width() && y0 + y < img.height() {
+                img.put_pixel(x0 + x, y0 + y, px);
+            }
+        }
+    }
+}
+
+/// Draws white text (x, baseline y, size, text) over the image.
+fn draw_text(img: &mut RgbImage, labels: &[(f64, f64, f64, String)]) {
+    let (w, h) = (img.width().min(u16::MAX.into()) as u16, img.height().min(u16::MAX.into()) as u16);
+    let mut ctx = vello_cpu::RenderContext::new(w, h);
+    ctx.set_paint(AlphaColor::from_rgb8(235, 235, 235));
+    for (x, y, size, text) in labels {
+        let mut path = BezPath::new();
+        shape_text(text, *size, Some(&mut path));
+        ctx.set_transform(Affine::translate((*x, *y)));
+        ctx.fill_path(&path);
+    }
+    ctx.flush();
+    let mut pixmap = vello_cpu::Pixmap::new(w, h);
+    ctx.render(&mut pixmap, &mut vello_cpu::Resources::new());
+    for (i, p) in pixmap.take_unpremultiplied().into_iter().enumerate() {
+        if p.a == 0 {
+            continue;
+        }
+        let (x, y) = (i as u32 % u32::from(w), i as u32 / u32::from(w));
+        let a = f32::from(p.a) / 255.0;
+        let dst = img.get_pixel_mut(x, y);
+        for (d, s) in dst.0.iter_mut().zip([p.r, p.g, p.b]) {
+            *d = (f32::from(s) * a + f32::from(*d) * (1.0 - a)).round() as u8;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_sheet_has_every_tile_and_its_labels() {
+        let view = |v: f32| {
+            let (w, h) = (40u32, 24u32);
+            let mut r = Render::zeros(w, h);
+            for (k, a) in r.alpha.iter_mut().enumerate() {
+                let x = k as u32 % w;
+                *a = if (8..32).contains(&x) { 1.0 } else { 0.0 };
+                r.inv_depth[k] = *a * (0.5 + x as f32 / 80.0);
+                r.rgb[3 * k..3 * k + 3].copy_from_slice(&[v * *a, 0.5 * *a, 1.0 - v]);
+            }
+            r
+        };
+        let style = Tile::from_rgb(8, 8, &[0.6; 8 * 8 * 3]);
+        let gray = Tile::from_gray(8, 8, &(0..64).map(|v| v as f32).collect::<Vec<_>>());
+        let content = SheetContent {
+            title: "guitar × block2".into(),
+            settings: "300 steps, 256 px".into(),
+            style: [style, Tile::from_gray(8, 8, &[0.0; 64]), gray],
+            views: (0..4).map(|i| [view(0.1 * i as f32), view(0.5), view(0.8)]).collect(),
+        };
+        let img = contact_sheet(&content);
+        assert_eq!(img.width(), COLUMNS * TILE + (COLUMNS + 1) * GAP);
+        assert_eq!(img.height(), 2 * LABEL + GAP + 5 * (LABEL + TILE + GAP) + GAP);
+        // The style tile is its colour, the after tile of the last view its render.
+        let header = 2 * LABEL + GAP;
+        assert_eq!(img.get_pixel(GAP + TILE / 2, header + LABEL + TILE / 2).0, [153, 153, 153]);
+        let last = header + 4 * (LABEL + TILE + GAP) + LABEL;
+        let after = img.get_pixel(GAP + 2 * (TILE + GAP) + TILE / 2, last + TILE / 2).0;
+        assert_eq!(after, [204, 128, 51]);
+        // Labels are drawn: light pixels in the title line.
+        let bright = (0..img.width()).flat_map(|x| (0..LABEL).map(move |y| (x, y))).filter(|&(x, y)| img.get_pixel(x, y).0[0] > 150);
+        assert!(bright.count() > 100, "no title text");
+        // Not blank: many distinct colours.
+        let mut colours: Vec<[u8; 3]> = img.pixels().map(|p| p.0).collect();
+        colours.sort_unstable();
+        colours.dedup();
+        assert!(colours.len() > 20, "{} colours", colours.len());
+    }
+}
