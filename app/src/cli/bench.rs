@@ -576,7 +576,7 @@ fn run_fast_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     args.fast.apply(&mut new_config);
     let problems = new_config.problems();
     anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
-    let views = views_for(&scene, &ViewArgs { cameras: None, views: args.views, size: args.resolution, fov: 50.0 })?;
+    let views = views_for(&scene, &ViewArgs { cameras: None, views: args.views, size: args.resolution, fov: 50.0, framing: super::Framing::Full, crop: false })?;
     let (cam_h, cam_w) = (views[0].height as usize, views[0].width as usize);
     let mc = new_config.matching;
     println!(
