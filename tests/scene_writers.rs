@@ -52,7 +52,8 @@ impl Check {
             Some((_, w)) => *w = w.max(ratio),
             None => self.worst.push((field, ratio)),
         }
-        if !(err <= tol) && self.failures.iter().filter(|f| f.starts_with(field)).count() < 3 {
+        let within = err <= tol;
+        if !within && self.failures.iter().filter(|f| f.starts_with(field)).count() < 3 {
             self.failures.push(format!("{field}: Gaussian {i}: error {err} > tolerance {tol}"));
         }
     }
