@@ -134,10 +134,11 @@ pub struct ViewArgs {
     /// Vertical field of view of generated views, in degrees.
     #[arg(long, default_value_t = 50.0)]
     pub fov: f32,
-    /// How generated views frame the scene: `object` fits each view's
-    /// intrinsics and aspect ratio to the object so it spans 90% of the longer
-    /// side; `full` is the plain orbit that fits the object's bounding sphere.
-    #[arg(long, value_enum, default_value_t = Framing::Object)]
+    /// How generated views frame the scene: `full` is the plain orbit that
+    /// fits the object's bounding sphere (square images); `object` fits each
+    /// view's intrinsics and aspect ratio to the object so it spans 90% of the
+    /// longer side (`gast stylize` defaults to `object`).
+    #[arg(long, value_enum, default_value_t = Framing::Full)]
     pub framing: Framing,
     /// With --cameras: crop each view to the region the scene's object covers.
     #[arg(long)]
