@@ -184,7 +184,7 @@ mod tests {
         let (want_k, want_v): (Vec<u32>, Vec<u32>) = want.into_iter().unzip();
         assert_eq!(got_k[..n], want_k[..], "keys, n {n}, bits {key_bits}");
         assert_eq!(got_v[..n], want_v[..], "values (stability), n {n}, bits {key_bits}");
-        if key_bits.div_ceil(4) % 2 == 0 {
+        if key_bits.div_ceil(4).is_multiple_of(2) {
             assert_eq!(got_k[n..], tail[..], "elements past n moved");
         }
     }
