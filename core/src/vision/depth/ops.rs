@@ -67,8 +67,8 @@ impl Norm {
         let mut y = vec![0f32; d * n];
         y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(c, (out, row))| {
             let (g, b) = (self.w[c], self.b[c]);
-            for j in 0..n {
-                out[j] = (row[j] - mean[j]) * inv[j] * g + b;
+            for (((o, &v), &m), &s) in out.iter_mut().zip(row).zip(&mean).zip(&inv) {
+                *o = (v - m) * s * g + b;
             }
         });
         y
@@ -244,13 +244,16 @@ impl ConvUp {
     }
 }
 
+/// An HWC resizer: `(src, h, w, c, oh, ow) → dst`, as in [`crate::vision::resize`].
+pub(crate) type Resizer = fn(&[f32], usize, usize, usize, usize, usize) -> Vec<f32>;
+
 /// Each channel of a `c × h × w` array resampled to `oh × ow` by `resize`
 /// (an HWC resizer called with one channel).
 pub(crate) fn resize_planes(
     x: &[f32],
     (c, h, w): (usize, usize, usize),
     (oh, ow): (usize, usize),
-    resize: fn(&[f32], usize, usize, usize, usize, usize) -> Vec<f32>,
+    resize: Resizer,
 ) -> Vec<f32> {
     let mut y = vec![0f32; c * oh * ow];
     y.par_chunks_mut(oh * ow).zip(x.par_chunks(h * w)).for_each(|(out, plane)| {
@@ -296,10 +299,10 @@ mod tests {
         let (oh, ow) = conv.out_size(h, w);
         assert_eq!((oh, ow), (3, 2));
         let y = conv.forward(&x, h, w);
-        for o in 0..3 {
+        for (o, &bias) in conv.b.iter().enumerate() {
             for oy in 0..oh {
                 for ox in 0..ow {
-                    let mut s = conv.b[o];
+                    let mut s = bias;
                     for c in 0..c_in {
                         for ky in 0..3 {
                             for kx in 0..3 {
