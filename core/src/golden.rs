@@ -278,7 +278,7 @@ fn check_depth(file: &GoldenFile) -> Result<Vec<OutputCheck>, GoldenError> {
         }
     };
     let p = model.config().patch_size;
-    if h % p != 0 || w % p != 0 {
+    if !h.is_multiple_of(p) || !w.is_multiple_of(p) {
         return Err(GoldenError::Format {
             path: file.path.clone(),
             what: "tensor input_pixel_values".into(),

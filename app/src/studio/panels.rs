@@ -281,7 +281,7 @@ impl StudioApp {
             ui.weak(format!("depth image: {}", p.display()));
         }
         if let Some(w) = &self.style_depth_warning {
-            ui.colored_label(ui.visuals().warn_fg_color, format!("⚠ {w}"));
+            ui.colored_label(ui.visuals().warn_fg_color, format!("warning: {w}"));
         }
     }
 

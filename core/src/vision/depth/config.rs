@@ -156,7 +156,7 @@ impl DepthConfig {
         if b.hidden_act != "gelu" {
             return Err(format!("backbone_config.hidden_act: expected \"gelu\", found {:?}", b.hidden_act));
         }
-        if b.num_attention_heads == 0 || b.hidden_size % b.num_attention_heads != 0 {
+        if b.num_attention_heads == 0 || !b.hidden_size.is_multiple_of(b.num_attention_heads) {
             return Err(format!(
                 "hidden_size {} must be a multiple of num_attention_heads {}",
                 b.hidden_size, b.num_attention_heads

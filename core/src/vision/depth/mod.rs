@@ -187,7 +187,7 @@ impl DepthAnything {
     /// the patch size): the predicted depth, `h × w`.
     pub fn forward(&self, pixels: &[f32], h: usize, w: usize) -> Vec<f32> {
         let p = self.config.patch_size;
-        assert!(h % p == 0 && w % p == 0 && pixels.len() == 3 * h * w, "DepthAnything::forward: bad input size");
+        assert!(h.is_multiple_of(p) && w.is_multiple_of(p) && pixels.len() == 3 * h * w, "DepthAnything::forward: bad input size");
         let stages = self.vit.forward(pixels, h, w);
         self.dpt.forward(&stages, h / p, w / p)
     }

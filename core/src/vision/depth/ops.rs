@@ -67,8 +67,8 @@ impl Norm {
         let mut y = vec![0f32; d * n];
         y.par_chunks_mut(n).zip(x.par_chunks(n)).enumerate().for_each(|(c, (out, row))| {
             let (g, b) = (self.w[c], self.b[c]);
-            for j in 0..n {
-                out[j] = (row[j] - mean[j]) * inv[j] * g + b;
+            for (((o, &v), &m), &s) in out.iter_mut().zip(row).zip(&mean).zip(&inv) {
+                *o = (v - m) * s * g + b;
             }
         });
         y
@@ -87,8 +87,25 @@ fn erf(x: f32) -> f32 {
     let a = x.abs();
     let t = 1.0 / (1.0 + 0.327_591_1 * a);
     let poly = t * (0.254_829_6 + t * (-0.284_496_74 + t * (1.421_413_8 + t * (-1.453_152_1 + t * 1.061_405_4))));
-    let y = 1.0 - poly * (-a * a).exp();
+    let y = 1.0 - poly * exp(-a * a);
     y.copysign(x)
+}
+
+/// `eˣ` without branches or library calls, so loops over it vectorise (the
+/// softmax and GELU evaluate it ~160 M times per 518² pass): `x = n·ln2 + r`
+/// with `n` rounded by the 1.5·2²³ trick, a degree-6 Taylor polynomial for
+/// `eʳ` (|r| ≤ ln2/2, relative error ~2e-7), and `2ⁿ` put in the exponent bits.
+/// Inputs are clamped to [−87, 88]; below that the result is ~1e-38, not 0.
+#[inline]
+fn exp(x: f32) -> f32 {
+    const MAGIC: f32 = 12_582_912.0; // 1.5 · 2²³
+    let x = x.clamp(-87.0, 88.0);
+    let m = x * std::f32::consts::LOG2_E + MAGIC;
+    let n = m - MAGIC;
+    let r = (x - n * 0.693_145_75) - n * 1.428_606_8e-6;
+    let p = 1.0 + r * (1.0 + r * (0.5 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0))))));
+    let k = (m.to_bits() as i32).wrapping_sub(0x4B40_0000);
+    p * f32::from_bits(((k + 127) << 23) as u32)
 }
 
 /// Multi-head self-attention on `q`, `k`, `v` (each `d × n`, channel-major,
@@ -127,7 +144,7 @@ fn softmax_columns(s: &mut [f32], n: usize) {
         .par_chunks(n)
         .fold(|| vec![f32::NEG_INFINITY; n], combine(f32::max))
         .reduce(|| vec![f32::NEG_INFINITY; n], merge(f32::max));
-    s.par_chunks_mut(n).for_each(|row| row.iter_mut().zip(&max).for_each(|(v, &m)| *v = (*v - m).exp()));
+    s.par_chunks_mut(n).for_each(|row| row.iter_mut().zip(&max).for_each(|(v, &m)| *v = exp(*v - m)));
     let add = |a: f32, b: f32| a + b;
     let sum = s.par_chunks(n).fold(|| vec![0f32; n], combine(add)).reduce(|| vec![0f32; n], merge(add));
     let inv: Vec<f32> = sum.iter().map(|&t| 1.0 / t).collect();
@@ -227,13 +244,16 @@ impl ConvUp {
     }
 }
 
+/// An HWC resizer: `(src, h, w, c, oh, ow) → dst`, as in [`crate::vision::resize`].
+pub(crate) type Resizer = fn(&[f32], usize, usize, usize, usize, usize) -> Vec<f32>;
+
 /// Each channel of a `c × h × w` array resampled to `oh × ow` by `resize`
 /// (an HWC resizer called with one channel).
 pub(crate) fn resize_planes(
     x: &[f32],
     (c, h, w): (usize, usize, usize),
     (oh, ow): (usize, usize),
-    resize: fn(&[f32], usize, usize, usize, usize, usize) -> Vec<f32>,
+    resize: Resizer,
 ) -> Vec<f32> {
     let mut y = vec![0f32; c * oh * ow];
     y.par_chunks_mut(oh * ow).zip(x.par_chunks(h * w)).for_each(|(out, plane)| {
@@ -245,6 +265,17 @@ pub(crate) fn resize_planes(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fast_exp_matches_std() {
+        let mut worst = 0f32;
+        for i in -8000..=8000 {
+            let x = i as f32 * 0.01;
+            worst = worst.max((exp(x) - x.exp()).abs() / x.exp());
+        }
+        assert!(worst < 5e-7, "worst relative error {worst}");
+        assert!(exp(-200.0) < 1e-37 && exp(-200.0) >= 0.0);
+    }
 
     #[test]
     fn erf_matches_known_values() {
@@ -268,10 +299,10 @@ mod tests {
         let (oh, ow) = conv.out_size(h, w);
         assert_eq!((oh, ow), (3, 2));
         let y = conv.forward(&x, h, w);
-        for o in 0..3 {
+        for (o, &bias) in conv.b.iter().enumerate() {
             for oy in 0..oh {
                 for ox in 0..ow {
-                    let mut s = conv.b[o];
+                    let mut s = bias;
                     for c in 0..c_in {
                         for ky in 0..3 {
                             for kx in 0..3 {

@@ -129,8 +129,8 @@ impl Vit {
         let emb = self.patch.forward(&patches, np);
         let pos = self.position_embeddings(rows, cols);
         let mut x = vec![0f32; d * n];
-        for c in 0..d {
-            x[c * n] = self.cls[c] + pos[c];
+        for (c, &cls) in self.cls.iter().enumerate() {
+            x[c * n] = cls + pos[c];
             for t in 0..np {
                 x[c * n + 1 + t] = emb[c * np + t] + pos[(1 + t) * d + c];
             }
