@@ -93,8 +93,9 @@ pub struct Measures {
     /// Fraction of pixels covered (alpha ≥ 0.5) in the style views; shows holes and blow-ups.
     pub coverage: f32,
     /// Mean luminance and chroma of the covered pixels of the style views (the
-    /// colour-collapse detector's input).
-    #[serde(default)]
+    /// colour-collapse detector's input), flattened into `luminance` and
+    /// `chroma` so every measure in `results.json` stays a number.
+    #[serde(flatten)]
     pub colour: CoveredColour,
     /// [`Measures::sliced_wasserstein`] over the feature positions the
     /// colour-matched scene covers ([`crate::style::focus::coverage_mask`]):

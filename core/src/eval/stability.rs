@@ -252,6 +252,7 @@ pub fn coverage_growth(before: f32, after: f32, th: &StabilityThresholds) -> Opt
 
 /// Mean colour of the pixels a scene covers in some views.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct CoveredColour {
     /// Mean Rec. 709 luminance `0.2126 R + 0.7152 G + 0.0722 B`, in [0, 1].
     pub luminance: f32,
