@@ -213,10 +213,10 @@ fn controls_edit_the_config_and_presets_round_trip() {
     let mut harness = egui_kittest::Harness::builder()
         .with_size(egui::vec2(1280.0, 1400.0))
         .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
-    harness.run_steps(2);
+    settle(&mut harness);
     // Texture scale buttons set the config.
     harness.get_by_label("2×").click();
-    harness.run_steps(2);
+    settle(&mut harness);
     assert_eq!(harness.state().config.texture_scale, 512);
     // Mode menu.
     harness.get_by_label("mode").click();
@@ -283,6 +283,20 @@ fn app_with_a_run(
     (app, crx, etx)
 }
 
+/// Steps the harness until no background job (style maps and depth,
+/// inspection) is running, so a click does not race a late layout change.
+fn settle(harness: &mut egui_kittest::Harness<'_, StudioApp>) {
+    for _ in 0..600 {
+        harness.run_steps(1);
+        if harness.state().jobs.running == 0 {
+            harness.run_steps(2);
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    panic!("background jobs still running after 600 frames");
+}
+
 #[test]
 fn session_events_and_snapshots_reach_the_window() {
     use gast_core::session::Event;
@@ -290,7 +304,7 @@ fn session_events_and_snapshots_reach_the_window() {
     let mut harness = egui_kittest::Harness::builder()
         .with_size(egui::vec2(1280.0, 1400.0))
         .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
-    harness.run_steps(3);
+    settle(&mut harness);
     assert!(
         harness.state().snapshot.as_ref().is_some_and(|s| matches!(s.gaussians, SharedGaussians::Snapshot(_))),
         "the snapshot is shown as the current scene, without a copy"
