@@ -164,6 +164,8 @@ fn gpu_steps_give_the_cpu_losses() {
             resolution: 64,
             texture_scale: 64,
             mode,
+            // The GPU engine runs the paper's whole-frame losses (focus object is CPU-only).
+            focus: gast_core::style::Focus::Frame,
             ..Default::default()
         };
         let Some(cpu_inputs) = inputs(config) else { return };
