@@ -330,4 +330,3 @@ pub struct RunSummary {
     /// Every trial.
     pub trials: Vec<Record>,
 }
-

@@ -245,7 +245,10 @@ fn without_a_display_gast_runs_the_headless_demo_and_studio_fails() {
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(folder.join("report.json")).expect("report")).expect("json");
     assert_eq!(report["steps"].as_array().map(Vec::len), Some(24), "the demo's schedule");
-    assert!(err.contains("optimisation on CPU") && err.contains(": 24 steps"), "the stylization's summary is missing:\n{err}");
+    assert!(
+        err.contains("optimisation on CPU") && err.contains(": 24 steps"),
+        "the stylization's summary is missing:\n{err}"
+    );
 
     let o = gast_without_display(&["studio"], &dir, &weights);
     assert!(!o.status.success(), "`gast studio` without a display must fail");

@@ -87,7 +87,10 @@ pub fn run_raster(args: RasterArgs) -> anyhow::Result<ExitCode> {
             small = Some((name.clone(), gast_core::session::subset(&scene, &keep)));
         }
         for &size in &args.sizes {
-            let views = views_for(&scene, &ViewArgs { cameras: None, views: args.views, size, fov: 50.0, framing: Framing::Full, crop: false })?;
+            let views = views_for(
+                &scene,
+                &ViewArgs { cameras: None, views: args.views, size, fov: 50.0, framing: Framing::Full, crop: false },
+            )?;
             let (fwd, bwd) = time_views(&scene, &views, &opts);
             let (peak, _) = memory_mib();
             println!(
@@ -134,7 +137,10 @@ fn time_views(scene: &gast_core::Gaussians, views: &[Camera], opts: &RenderOptio
 /// The dense reference against the tiled path on a small scene (every n-th
 /// Gaussian of a real one), from an orbit view at 96².
 fn dense_ratio(name: &str, scene: &gast_core::Gaussians) -> anyhow::Result<()> {
-    let views = views_for(scene, &ViewArgs { cameras: None, views: 1, size: 96, fov: 50.0, framing: Framing::Full, crop: false })?;
+    let views = views_for(
+        scene,
+        &ViewArgs { cameras: None, views: 1, size: 96, fov: 50.0, framing: Framing::Full, crop: false },
+    )?;
     let cam = &views[0];
     let opts = RenderOptions::default();
     let t = Instant::now();
@@ -244,7 +250,11 @@ pub fn run_depth(args: DepthArgs) -> anyhow::Result<ExitCode> {
 /// included) and the median of `reps` forward passes at 518×518. Uses the
 /// checkpoint found on this machine, else random weights at the Small model's
 /// sizes (same cost, meaningless output), and says which.
-fn time_style_depth(style: &gast_core::session::StyleImage, explicit: Option<&std::path::Path>, reps: usize) -> anyhow::Result<()> {
+fn time_style_depth(
+    style: &gast_core::session::StyleImage,
+    explicit: Option<&std::path::Path>,
+    reps: usize,
+) -> anyhow::Result<()> {
     use anyhow::Context;
     use gast_core::vision::depth::{DepthAnything, DepthConfig, DepthModelLocations, INPUT_SIZE, input_size};
     let t = Instant::now();
@@ -307,7 +317,17 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     let style = StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
     let vgg = std::sync::Arc::new(super::stylize::load_vgg(weights.as_deref())?);
     let config = StyleConfig { resolution: args.resolution, ..StyleConfig::default() };
-    let views = views_for(&scene, &ViewArgs { cameras: None, views: args.views, size: args.resolution, fov: 50.0, framing: Framing::Full, crop: false })?;
+    let views = views_for(
+        &scene,
+        &ViewArgs {
+            cameras: None,
+            views: args.views,
+            size: args.resolution,
+            fov: 50.0,
+            framing: Framing::Full,
+            crop: false,
+        },
+    )?;
     println!(
         "step benchmark: {} ({} Gaussians), style {}, {} views at {} px, {} threads",
         scene_path.display(),
@@ -576,7 +596,17 @@ fn run_fast_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     args.fast.apply(&mut new_config);
     let problems = new_config.problems();
     anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
-    let views = views_for(&scene, &ViewArgs { cameras: None, views: args.views, size: args.resolution, fov: 50.0, framing: super::Framing::Full, crop: false })?;
+    let views = views_for(
+        &scene,
+        &ViewArgs {
+            cameras: None,
+            views: args.views,
+            size: args.resolution,
+            fov: 50.0,
+            framing: super::Framing::Full,
+            crop: false,
+        },
+    )?;
     let (cam_h, cam_w) = (views[0].height as usize, views[0].width as usize);
     let mc = new_config.matching;
     println!(

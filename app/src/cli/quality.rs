@@ -105,7 +105,16 @@ impl Grid {
                 let id = format!("{:03}-{}", self.trials.len(), label_id(study, label, style));
                 let checkpoints = vec![0];
                 let (style, views) = (style.clone(), framing);
-                self.trials.push(TrialSpec { id, scene, style, config, lr_scale, checkpoints, framing: views, eval_on_object });
+                self.trials.push(TrialSpec {
+                    id,
+                    scene,
+                    style,
+                    config,
+                    lr_scale,
+                    checkpoints,
+                    framing: views,
+                    eval_on_object,
+                });
                 self.trials.len() - 1
             }
         };
@@ -278,7 +287,15 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
         let quarters: Vec<u32> = [4u32, 2].iter().map(|d| total / d).filter(|s| *s > 0).collect();
         for scene in 0..sizes.scenes.len() {
             for style in &sizes.styles {
-                g.want_framed((Study::Collapse, "decoupled"), scene, &file(style), default.clone(), 1.0, &quarters, plain_on_object);
+                g.want_framed(
+                    (Study::Collapse, "decoupled"),
+                    scene,
+                    &file(style),
+                    default.clone(),
+                    1.0,
+                    &quarters,
+                    plain_on_object,
+                );
             }
         }
         let block2 = sizes.styles.iter().find(|s| s.contains("block2")).or(sizes.styles.first());
@@ -386,18 +403,17 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
             styles.insert(spec.style.clone(), (image, prepared));
         }
         let Some((image, prepared)) = styles.get(&spec.style) else { continue };
-        let views =
-            views_for(
-                scene,
-                &ViewArgs {
-                    cameras: None,
-                    views: sizes.views,
-                    size: spec.config.resolution,
-                    fov: 50.0,
-                    framing: spec.framing,
-                    crop: false,
-                },
-            )?;
+        let views = views_for(
+            scene,
+            &ViewArgs {
+                cameras: None,
+                views: sizes.views,
+                size: spec.config.resolution,
+                fov: 50.0,
+                framing: spec.framing,
+                crop: false,
+            },
+        )?;
         let inputs = SessionInputs {
             scene: scene.clone(),
             cameras: views,

@@ -7,8 +7,8 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::Args;
-use gast_core::io::{write_depth_png, write_exr_depth, write_png_rgb};
 use gast_core::Gaussians;
+use gast_core::io::{write_depth_png, write_exr_depth, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
 
 use super::{ViewArgs, load_scene, views_for};
@@ -78,7 +78,12 @@ pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
 }
 
 /// Writes the turntable of `scene` (beside `--compare`'s scene when given).
-fn run_turntable(args: &RenderArgs, scene: &Gaussians, frames: usize, background: [f32; 3]) -> anyhow::Result<ExitCode> {
+fn run_turntable(
+    args: &RenderArgs,
+    scene: &Gaussians,
+    frames: usize,
+    background: [f32; 3],
+) -> anyhow::Result<ExitCode> {
     let after = args.compare.as_deref().map(load_scene).transpose()?;
     let opts = TurntableOptions {
         frames,

@@ -11,9 +11,9 @@ use clap::Args;
 use gast_core::Camera;
 use gast_core::camera::{framing_subject, subject_span};
 use gast_core::eval::{inverse_depth_change, mean_std_distance, nn_cosine_distance};
+use gast_core::gpu::DeviceChoice;
 use gast_core::io::{write_bytes, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
-use gast_core::gpu::DeviceChoice;
 use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::{Focus, MatchMethod, Mode, StyleConfig};
 use gast_core::vision::ConvAlgo;
@@ -278,12 +278,13 @@ pub fn resolve_style_depth(
     };
     let t = Instant::now();
     let pb = progress::bytes_bar("depth model");
-    let (source, warning) = StyleDepthSource::resolve(config.depth_provider, image, model, style, &mut |done, total| {
-        if let Some(t) = total {
-            pb.set_length(t);
-        }
-        pb.set_position(done);
-    });
+    let (source, warning) =
+        StyleDepthSource::resolve(config.depth_provider, image, model, style, &mut |done, total| {
+            if let Some(t) = total {
+                pb.set_length(t);
+            }
+            pb.set_position(done);
+        });
     pb.finish_and_clear();
     if let Some(w) = warning {
         eprintln!("warning: {w}");

@@ -72,15 +72,20 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         let seed = rows.iter().find(|(r, t)| r.label == FOCUS_SEED && t.scene_name() == scene);
         let floor = |f: fn(&Measures) -> f32| -> f32 {
             let twin = seed.and_then(|(r, t)| {
-                let base = rows.iter().find(|(r2, t2)| r2.label == FOCUS_FRAME && t2.scene_name() == scene && t2.style == t.style)?;
+                let base = rows
+                    .iter()
+                    .find(|(r2, t2)| r2.label == FOCUS_FRAME && t2.scene_name() == scene && t2.style == t.style)?;
                 Some((f(&t.at(r.step)?.measures) - f(&base.1.at(base.0.step)?.measures)).abs())
             });
             twin.unwrap_or(0.0)
         };
         let step = row.step;
-        let (Some(sw_f), Some(sw_o), Some(nn_f), Some(nn_o)) =
-            (decrease(frame, step, sw), decrease(object, step, sw), decrease(frame, step, nn), decrease(object, step, nn))
-        else {
+        let (Some(sw_f), Some(sw_o), Some(nn_f), Some(nn_o)) = (
+            decrease(frame, step, sw),
+            decrease(object, step, sw),
+            decrease(frame, step, nn),
+            decrease(object, step, nn),
+        ) else {
             continue;
         };
         let rmse = |r: &Record| r.at(step).map_or(f32::NAN, |c| c.measures.consistency_long);

@@ -4,7 +4,7 @@
 
 mod axis;
 pub mod chart;
+pub mod focus;
 mod glyphs;
 pub mod quality;
-pub mod focus;
 pub mod sheet;

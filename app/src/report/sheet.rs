@@ -51,7 +51,11 @@ impl Tile {
     pub fn from_gray(width: u32, height: u32, values: &[f32]) -> Self {
         let (lo, hi) = gast_core::io::finite_range(values);
         let s = if hi > lo { 255.0 / (hi - lo) } else { 0.0 };
-        Self { width, height, rgb: values.iter().flat_map(|&v| [((v - lo) * s).round().clamp(0.0, 255.0) as u8; 3]).collect() }
+        Self {
+            width,
+            height,
+            rgb: values.iter().flat_map(|&v| [((v - lo) * s).round().clamp(0.0, 255.0) as u8; 3]).collect(),
+        }
     }
 
     /// The colour of a render.
@@ -86,7 +90,11 @@ pub fn session_views(session: &Session, input: &Gaussians, count: usize) -> Vec<
     let result = session.result();
     spread(session.cameras(), count)
         .map(|cam| {
-            [raster::render(input, cam, &opts), raster::render(session.colour_matched(), cam, &opts), raster::render(&result, cam, &opts)]
+            [
+                raster::render(input, cam, &opts),
+                raster::render(session.colour_matched(), cam, &opts),
+                raster::render(&result, cam, &opts),
+            ]
         })
         .collect()
 }
@@ -231,7 +239,9 @@ mod tests {
         let after = img.get_pixel(GAP + 2 * (TILE + GAP) + TILE / 2, last + TILE / 2).0;
         assert_eq!(after, [204, 128, 51]);
         // Labels are drawn: light pixels in the title line.
-        let bright = (0..img.width()).flat_map(|x| (0..LABEL).map(move |y| (x, y))).filter(|&(x, y)| img.get_pixel(x, y).0[0] > 150);
+        let bright = (0..img.width())
+            .flat_map(|x| (0..LABEL).map(move |y| (x, y)))
+            .filter(|&(x, y)| img.get_pixel(x, y).0[0] > 150);
         assert!(bright.count() > 100, "no title text");
         // Not blank: many distinct colours.
         let mut colours: Vec<[u8; 3]> = img.pixels().map(|p| p.0).collect();

@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use crossbeam_channel::{Receiver, Sender};
-use gast_core::session::StyleImage;
 use gast_core::session::StyleDepthSource;
+use gast_core::session::StyleImage;
 use gast_core::style::stage1;
 use gast_core::vision::style_depth::{DepthPolarity, DepthProvider, HeuristicDepth};
 use gast_core::{Camera, Gaussians};
@@ -122,7 +122,9 @@ pub fn style_maps(style: &StyleImage, key: &StyleMapsKey) -> (Maps, Option<Strin
     let (path, scale, polarity, provider, image) = key;
     let (source, warning) = super::style_depth::source_for(path, style, *provider, image.as_deref());
     let m = match &source {
-        StyleDepthSource::Image(img) => stage1::style_maps(&style.rgb, style.height, style.width, *scale as usize, img, *polarity),
+        StyleDepthSource::Image(img) => {
+            stage1::style_maps(&style.rgb, style.height, style.width, *scale as usize, img, *polarity)
+        }
         StyleDepthSource::Heuristic => {
             let heuristic = HeuristicDepth::default();
             stage1::style_maps(&style.rgb, style.height, style.width, *scale as usize, &heuristic, *polarity)

@@ -150,7 +150,8 @@ pub fn run_with(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Re
             let Some(rs) = cc.wgpu_render_state.as_ref() else {
                 return Err("the studio needs the wgpu renderer, which did not start".into());
             };
-            let gpu = gast_core::gpu::GpuContext::from_device(rs.device.clone(), rs.queue.clone(), rs.adapter.get_info());
+            let gpu =
+                gast_core::gpu::GpuContext::from_device(rs.device.clone(), rs.queue.clone(), rs.adapter.get_info());
             let mut resources = ViewportResources::new(&rs.device, rs.target_format);
             resources.use_gpu_sort(gpu.clone());
             rs.renderer.write().callback_resources.insert(resources);

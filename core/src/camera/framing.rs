@@ -75,12 +75,21 @@ pub fn fit_view(cam: &Camera, points: &[Vec3], longer_side: u32) -> Camera {
     let size = (hi - lo).max(Vec2::splat(1e-6));
     let aspect = (size.x / size.y).clamp(1.0 / MAX_ASPECT, MAX_ASPECT);
     let long = longer_side.max(1) as f32;
-    let (w, h) = if aspect >= 1.0 { (long, (long / aspect).round().max(1.0)) } else { ((long * aspect).round().max(1.0), long) };
+    let (w, h) =
+        if aspect >= 1.0 { (long, (long / aspect).round().max(1.0)) } else { ((long * aspect).round().max(1.0), long) };
     // The same focal length on both axes (square pixels), the largest at which
     // the box fits in FILL of both sides.
     let f = (FILL * w / size.x).min(FILL * h / size.y);
     let mid = 0.5 * (lo + hi);
-    Camera { width: w as u32, height: h as u32, fx: f, fy: f, cx: 0.5 * w - f * mid.x, cy: 0.5 * h - f * mid.y, ..cam.clone() }
+    Camera {
+        width: w as u32,
+        height: h as u32,
+        fx: f,
+        fy: f,
+        cx: 0.5 * w - f * mid.x,
+        cy: 0.5 * h - f * mid.y,
+        ..cam.clone()
+    }
 }
 
 /// How much of `cam`'s frame the points take: the longer side of their

@@ -15,8 +15,8 @@ use std::sync::Arc;
 use super::consistency::{DEFAULT_DEPTH_TOLERANCE, warp_consistency};
 use super::content::content_distance;
 use super::geometry::{inverse_depth_change, normal_change};
-use super::style::{NearestStyle, StyleReference};
 use super::stability::CoveredColour;
+use super::style::{NearestStyle, StyleReference};
 use crate::camera::{Camera, OrbitLayout, OrbitOptions, fit_view, framing_subject, orbit_cameras};
 use crate::raster::{self, Render, RenderOptions};
 use crate::scene::Gaussians;
@@ -55,7 +55,13 @@ pub struct EvalOptions {
 
 impl Default for EvalOptions {
     fn default() -> Self {
-        Self { resolution: 192, elevation_degrees: 15.0, fov_y_degrees: 50.0, background: [0.0; 3], fit_to_object: false }
+        Self {
+            resolution: 192,
+            elevation_degrees: 15.0,
+            fov_y_degrees: 50.0,
+            background: [0.0; 3],
+            fit_to_object: false,
+        }
     }
 }
 

@@ -24,7 +24,9 @@ pub use consistency::{Consistency, ViewPairs, pick_view_pairs, warp_consistency}
 pub use content::{ContentDistance, content_distance};
 pub use geometry::{NormalChange, depth_normals, inverse_depth_change, normal_change};
 pub use measure::{EvalOptions, Evaluator, Measures};
-pub use stability::{CoveredColour, Degeneration, DegenerationKind, StabilityReport, StabilityThresholds, assess_stability};
+pub use stability::{
+    CoveredColour, Degeneration, DegenerationKind, StabilityReport, StabilityThresholds, assess_stability,
+};
 pub use style::{
     NearestStyle, StyleReference, gram_distance, gram_matrix, mean_std_distance, nn_cosine_distance,
     sliced_wasserstein_distance,

@@ -426,7 +426,8 @@ mod tests {
         for i in (0..after.len()).filter(|i| i % 5 < 3) {
             after.sh[i * k..i * k + 3].copy_from_slice(&[-2.0; 3]);
         }
-        let cams = orbit_cameras(&before.means, &OrbitOptions { count: 2, width: 48, height: 48, ..Default::default() });
+        let cams =
+            orbit_cameras(&before.means, &OrbitOptions { count: 2, width: 48, height: 48, ..Default::default() });
         let measure = |g: &Gaussians| {
             let r = render(g, &cams[0], &RenderOptions::default());
             CoveredColour::of(&r.rgb, &r.alpha)

@@ -106,7 +106,12 @@ impl GpuAdam {
         // The uniform is written before the encoder is submitted; one buffer per
         // state is enough because each state steps at most once per submission.
         ctx.queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
-        kernel.0.dispatch(ctx, encoder, &[&self.uniform, params, grads, &self.m, &self.v], Kernel::groups_1d(self.len, WORKGROUP));
+        kernel.0.dispatch(
+            ctx,
+            encoder,
+            &[&self.uniform, params, grads, &self.m, &self.v],
+            Kernel::groups_1d(self.len, WORKGROUP),
+        );
     }
 }
 

@@ -97,7 +97,11 @@ impl GpuEngine {
         config: &StyleConfig,
     ) -> Result<Self, GpuError> {
         let before = ctx.allocated_bytes();
-        let k = Kernels { raster: RasterKernels::new(ctx), loss: StepLossKernels::new(ctx, vgg), adam: AdamKernel::new(ctx) };
+        let k = Kernels {
+            raster: RasterKernels::new(ctx),
+            loss: StepLossKernels::new(ctx, vgg),
+            adam: AdamKernel::new(ctx),
+        };
         let g = GpuGaussians::upload(ctx, g_ref);
         let g_ref_gpu = GpuGaussians::upload(ctx, g_ref);
         let grads = GpuGrads::new(ctx, &g);
@@ -224,7 +228,19 @@ impl GpuEngine {
         let (rgb, inv_depth) = (&plan.raster.rgb, &plan.raster.inv_depth);
         let depth_ref = geometry.then_some(&target.inv_depth);
         let content = Some(&target.content);
-        plan.loss.record(ctx, &k.loss, &mut enc, &self.style, rgb, inv_depth, None, content, depth_ref, geometry, &self.scalars);
+        plan.loss.record(
+            ctx,
+            &k.loss,
+            &mut enc,
+            &self.style,
+            rgb,
+            inv_depth,
+            None,
+            content,
+            depth_ref,
+            geometry,
+            &self.scalars,
+        );
         let (v_rgb, v_inv_depth) = (plan.loss.v_rgb(), plan.loss.v_inv_depth());
         plan.raster.backward(ctx, &k.raster, &mut enc, &self.g, v_rgb, v_inv_depth, &self.grads);
 
@@ -235,7 +251,14 @@ impl GpuEngine {
         }
         if geometry {
             let (g, r, v) = (&self.g, &self.g_ref, &self.grads);
-            self.regs[0].record(ctx, &mut enc, &g.opacity_logits, &r.opacity_logits, &v.v_opacity_logits, &self.scalars);
+            self.regs[0].record(
+                ctx,
+                &mut enc,
+                &g.opacity_logits,
+                &r.opacity_logits,
+                &v.v_opacity_logits,
+                &self.scalars,
+            );
             self.regs[1].record(ctx, &mut enc, &g.log_scales, &r.log_scales, &v.v_log_scales, &self.scalars);
             self.regs[2].record(ctx, &mut enc, &g.quats, &r.quats, &v.v_quats, &self.scalars);
             self.opt.means.step(ctx, &k.adam, &mut enc, &g.means, &v.v_means, lr.means_per_extent * extent);

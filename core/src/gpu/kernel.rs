@@ -28,9 +28,10 @@ pub struct Kernel {
 impl Kernel {
     /// Compiles `entry` of `source` (a file of `shaders/`, by `include_str!`).
     pub fn new(ctx: &GpuContext, label: &str, source: &str, entry: &str, binds: &[Bind]) -> Self {
-        let module = ctx
-            .device
-            .create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(source.into()) });
+        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
         let entries: Vec<wgpu::BindGroupLayoutEntry> = binds
             .iter()
             .enumerate()
@@ -49,8 +50,9 @@ impl Kernel {
                 count: None,
             })
             .collect();
-        let layout =
-            ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries });
+        let layout = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries });
         let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some(label),
             bind_group_layouts: &[Some(&layout)],
@@ -78,11 +80,21 @@ impl Kernel {
             .enumerate()
             .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
             .collect();
-        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(&self.label), layout: &self.layout, entries: &entries })
+        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(&self.label),
+            layout: &self.layout,
+            entries: &entries,
+        })
     }
 
     /// Records a dispatch of `groups` workgroups (x, y, z) with a fresh bind group of `buffers`.
-    pub fn dispatch(&self, ctx: &GpuContext, encoder: &mut wgpu::CommandEncoder, buffers: &[&wgpu::Buffer], groups: [u32; 3]) {
+    pub fn dispatch(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        buffers: &[&wgpu::Buffer],
+        groups: [u32; 3],
+    ) {
         let bind = self.bind(ctx, buffers);
         self.dispatch_bound(encoder, &bind, groups);
     }
@@ -92,8 +104,8 @@ impl Kernel {
         if groups.contains(&0) {
             return;
         }
-        let mut pass =
-            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(&self.label), timestamp_writes: None });
+        let mut pass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(&self.label), timestamp_writes: None });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, bind, &[]);
         pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
@@ -110,8 +122,8 @@ impl Kernel {
         offset: u64,
     ) {
         let bind = self.bind(ctx, buffers);
-        let mut pass =
-            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(&self.label), timestamp_writes: None });
+        let mut pass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(&self.label), timestamp_writes: None });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &bind, &[]);
         pass.dispatch_workgroups_indirect(indirect, offset);

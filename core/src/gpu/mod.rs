@@ -24,14 +24,14 @@ mod gemm;
 mod kernel;
 mod losses;
 mod ops_bench;
+#[cfg(test)]
+mod ops_chain_tests;
 mod raster_backward;
 mod raster_forward;
 mod raster_project;
 mod raster_run;
 #[cfg(test)]
 mod raster_tests;
-#[cfg(test)]
-mod ops_chain_tests;
 mod reduce;
 mod resize;
 mod scan;

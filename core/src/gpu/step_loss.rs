@@ -13,8 +13,8 @@ use std::sync::Arc;
 
 use super::content::ContentLoss;
 use super::{
-    CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, GcfmWorkspace, GpuContext, GpuError,
-    GpuGcfm, GpuStyle, GpuVgg, GpuVggState, GpuVggWorkspace, LossKernels, ReduceKernels, RefLoss, ResizeKernels, TvLoss,
+    CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, GcfmWorkspace, GpuContext, GpuError, GpuGcfm,
+    GpuStyle, GpuVgg, GpuVggState, GpuVggWorkspace, LossKernels, ReduceKernels, RefLoss, ResizeKernels, TvLoss,
 };
 use crate::style::config::LossWeights;
 use crate::style::gcfm::Matches;
@@ -282,7 +282,19 @@ pub fn step_loss_gpu(
         target
     });
     let dref = depth_ref.map(|d| ctx.upload("loss.in.depth_ref", d));
-    plan.record(ctx, k, &mut enc, &gstyle, &rgb, &inv_depth, Some(&edge), content.as_ref(), dref.as_ref(), depth_grad, &scalars);
+    plan.record(
+        ctx,
+        k,
+        &mut enc,
+        &gstyle,
+        &rgb,
+        &inv_depth,
+        Some(&edge),
+        content.as_ref(),
+        dref.as_ref(),
+        depth_grad,
+        &scalars,
+    );
     ctx.submit(enc);
     let s: Vec<f32> = ctx.read(&scalars)?;
     let m: Vec<u32> = ctx.read(plan.matches())?;

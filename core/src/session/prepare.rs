@@ -72,11 +72,17 @@ impl StyleDepthSource {
             DepthProvider::Heuristic => (Self::Heuristic, None),
             DepthProvider::Image => match image {
                 Some(img) => (Self::Image(img), None),
-                None => (Self::Heuristic, Some("no depth image was given for this style; using the built-in heuristic depth".into())),
+                None => (
+                    Self::Heuristic,
+                    Some("no depth image was given for this style; using the built-in heuristic depth".into()),
+                ),
             },
             DepthProvider::Learned => match learned_style_depth(style, model, progress) {
                 Ok(img) => (Self::Image(img), None),
-                Err(e) => (Self::Heuristic, Some(format!("learned style depth unavailable ({e}); using the built-in heuristic depth"))),
+                Err(e) => (
+                    Self::Heuristic,
+                    Some(format!("learned style depth unavailable ({e}); using the built-in heuristic depth")),
+                ),
             },
         }
     }

@@ -12,10 +12,10 @@ use crate::scene::Gaussians;
 use crate::style::StyleConfig;
 use crate::style::adam::Adam;
 use crate::style::color_transfer::ColorTransfer;
+use crate::style::focus::coverage_mask;
 use crate::style::gcfm::{Matches, match_features};
 use crate::style::matching::{MatchIndex, MatchMethod, agreement, find_matches};
 use crate::style::regularizers::l2_distance;
-use crate::style::focus::coverage_mask;
 use crate::style::step::{FeatureMap, RenderedMaps, content_target, step_loss_with};
 use crate::vision::Vgg;
 use crate::vision::canny::render_edges;
@@ -207,7 +207,9 @@ impl Session {
                     ));
                 }
                 if config.color_floor {
-                    on_event(Event::Warning("the colour floor is a CPU engine option; the GPU engine runs without it".into()));
+                    on_event(Event::Warning(
+                        "the colour floor is a CPU engine option; the GPU engine runs without it".into(),
+                    ));
                 }
                 if config.matching.method != crate::style::MatchMethod::Exact {
                     on_event(Event::Warning(

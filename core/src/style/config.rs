@@ -7,8 +7,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::adam::AdamConfig;
-pub use super::matching::{MatchMethod, MatchingConfig};
 use super::focus::Focus;
+pub use super::matching::{MatchMethod, MatchingConfig};
 use super::schedule::{Mode, Schedule};
 pub use crate::vision::ConvAlgo;
 pub use crate::vision::style_depth::{DepthPolarity, DepthProvider};

@@ -94,7 +94,8 @@ pub fn feature_mask(pixels: &[bool], h: usize, w: usize, fh: usize, fw: usize) -
         let (r0, r1) = (i * h / fh, ((i + 1) * h / fh).max(i * h / fh + 1).min(h));
         for j in 0..fw {
             let (c0, c1) = (j * w / fw, ((j + 1) * w / fw).max(j * w / fw + 1).min(w));
-            let covered = (r0..r1).flat_map(|y| (c0..c1).map(move |x| (y, x))).filter(|&(y, x)| pixels[y * w + x]).count();
+            let covered =
+                (r0..r1).flat_map(|y| (c0..c1).map(move |x| (y, x))).filter(|&(y, x)| pixels[y * w + x]).count();
             out[i * fw + j] = 2 * covered >= (r1 - r0) * (c1 - c0);
         }
     }
@@ -138,8 +139,9 @@ mod tests {
     fn erosion_removes_the_rim_and_cells_follow_the_pixels() {
         let (h, w) = (16, 16);
         // A covered square of rows/cols 2..14.
-        let alpha: Vec<f32> =
-            (0..h * w).map(|k| if (2..14).contains(&(k / w)) && (2..14).contains(&(k % w)) { 0.9 } else { 0.1 }).collect();
+        let alpha: Vec<f32> = (0..h * w)
+            .map(|k| if (2..14).contains(&(k / w)) && (2..14).contains(&(k % w)) { 0.9 } else { 0.1 })
+            .collect();
         let m = coverage_mask(&alpha, h, w);
         for k in 0..h * w {
             let inner = (4..12).contains(&(k / w)) && (4..12).contains(&(k % w));

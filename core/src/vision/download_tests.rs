@@ -75,7 +75,9 @@ pub(crate) fn serve_routes(routes: Vec<Route>, cut_first: usize) -> Server {
                     body.len(),
                     body.len() - s
                 ),
-                None => format!("HTTP/1.1 200 OK\r\nContent-Length: {}\r\n{extra}Connection: close\r\n\r\n", body.len()),
+                None => {
+                    format!("HTTP/1.1 200 OK\r\nContent-Length: {}\r\n{extra}Connection: close\r\n\r\n", body.len())
+                }
             };
             let _ = stream.write_all(head.as_bytes());
             let end = if i < cut_first { s + (body.len() - s) / 2 } else { body.len() };

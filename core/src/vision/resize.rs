@@ -242,9 +242,7 @@ fn torch_cubic_taps(src: usize, dst: usize) -> Taps {
             let i = real.floor();
             let t = real - i;
             let wts = [far(t + 1.0), near(t), near(1.0 - t), far(2.0 - t)];
-            (0..4)
-                .map(|k| ((i as isize + k as isize - 1).clamp(0, src as isize - 1) as usize, wts[k] as f32))
-                .collect()
+            (0..4).map(|k| ((i as isize + k as isize - 1).clamp(0, src as isize - 1) as usize, wts[k] as f32)).collect()
         })
         .collect()
 }
@@ -277,8 +275,7 @@ fn pil_cubic_taps(src: usize, dst: usize) -> Taps {
             let center = (d as f64 + 0.5) * scale;
             let lo = ((center - support + 0.5).floor().max(0.0)) as usize;
             let hi = ((center + support + 0.5).floor() as usize).min(src);
-            let raw: Vec<(usize, f64)> =
-                (lo..hi).map(|x| (x, cubic((x as f64 - center + 0.5) / fscale))).collect();
+            let raw: Vec<(usize, f64)> = (lo..hi).map(|x| (x, cubic((x as f64 - center + 0.5) / fscale))).collect();
             let sum: f64 = raw.iter().map(|t| t.1).sum();
             let sum = if sum == 0.0 { 1.0 } else { sum };
             raw.into_iter().map(|(x, v)| (x, (v / sum) as f32)).collect()

@@ -52,7 +52,13 @@ impl DepthSortKernels {
 
     /// Records the keys of `projected` and the sort of `order` by them:
     /// afterwards `order` lists every Gaussian, farthest first, culled ones last.
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, s: &SceneSort, projected: &wgpu::Buffer, order: &wgpu::Buffer) {
+    pub fn record(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        s: &SceneSort,
+        projected: &wgpu::Buffer,
+        order: &wgpu::Buffer,
+    ) {
         let groups = Kernel::groups_1d(s.n, WORKGROUP);
         self.keys.dispatch(&self.ctx, encoder, &[&s.uniform, projected, &s.keys, order], groups);
         s.sort.record(&self.ctx, &self.sort, encoder, s.sort.everything(), &s.keys, order, 32);

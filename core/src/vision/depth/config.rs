@@ -130,7 +130,9 @@ impl DepthConfig {
             return names
                 .iter()
                 .map(|n| {
-                    n.strip_prefix("stage").and_then(|s| s.parse().ok()).ok_or_else(|| format!("out_features entry `{n}`"))
+                    n.strip_prefix("stage")
+                        .and_then(|s| s.parse().ok())
+                        .ok_or_else(|| format!("out_features entry `{n}`"))
                 })
                 .collect();
         }

@@ -55,7 +55,12 @@ pub(crate) struct Dpt {
     scale: f32,
 }
 
-fn conv(ck: &Checkpoint, prefix: &str, (c_out, c_in, k): (usize, usize, usize), bias: bool) -> Result<Conv, DepthModelError> {
+fn conv(
+    ck: &Checkpoint,
+    prefix: &str,
+    (c_out, c_in, k): (usize, usize, usize),
+    bias: bool,
+) -> Result<Conv, DepthModelError> {
     let w = ck.take(&format!("{prefix}.weight"), &[c_out, c_in, k, k])?;
     let b = if bias { ck.take(&format!("{prefix}.bias"), &[c_out])? } else { vec![0.0; c_out] };
     Ok(Conv { w, b, c_in, k, stride: 1, pad: k / 2 })

@@ -85,7 +85,9 @@ pub enum DepthModelError {
         found: String,
     },
     /// The file ends before a tensor's data does.
-    #[error("{path}: tensor `{name}`: its data ends at byte {needed} but the file has {found} bytes (truncated download?)")]
+    #[error(
+        "{path}: tensor `{name}`: its data ends at byte {needed} but the file has {found} bytes (truncated download?)"
+    )]
     Truncated {
         /// The file.
         path: PathBuf,
@@ -187,7 +189,10 @@ impl DepthAnything {
     /// the patch size): the predicted depth, `h × w`.
     pub fn forward(&self, pixels: &[f32], h: usize, w: usize) -> Vec<f32> {
         let p = self.config.patch_size;
-        assert!(h.is_multiple_of(p) && w.is_multiple_of(p) && pixels.len() == 3 * h * w, "DepthAnything::forward: bad input size");
+        assert!(
+            h.is_multiple_of(p) && w.is_multiple_of(p) && pixels.len() == 3 * h * w,
+            "DepthAnything::forward: bad input size"
+        );
         let stages = self.vit.forward(pixels, h, w);
         self.dpt.forward(&stages, h / p, w / p)
     }

@@ -77,9 +77,8 @@ impl Norm {
 
 /// GELU with the exact error function, as `nn.GELU()` computes it.
 pub(crate) fn gelu_in_place(x: &mut [f32]) {
-    x.par_chunks_mut(1 << 14).for_each(|c| {
-        c.iter_mut().for_each(|v| *v = 0.5 * *v * (1.0 + erf(*v * std::f32::consts::FRAC_1_SQRT_2)))
-    });
+    x.par_chunks_mut(1 << 14)
+        .for_each(|c| c.iter_mut().for_each(|v| *v = 0.5 * *v * (1.0 + erf(*v * std::f32::consts::FRAC_1_SQRT_2))));
 }
 
 /// The error function (Abramowitz & Stegun 7.1.26, absolute error below 1.5e-7).
@@ -279,7 +278,9 @@ mod tests {
 
     #[test]
     fn erf_matches_known_values() {
-        for (x, e) in [(0.0f32, 0.0f32), (0.5, 0.520_499_9), (1.0, 0.842_700_8), (-2.0, -0.995_322_3), (3.0, 0.999_977_9)] {
+        for (x, e) in
+            [(0.0f32, 0.0f32), (0.5, 0.520_499_9), (1.0, 0.842_700_8), (-2.0, -0.995_322_3), (3.0, 0.999_977_9)]
+        {
             assert!((erf(x) - e).abs() < 3e-7, "erf({x}) = {} (expected {e})", erf(x));
         }
     }

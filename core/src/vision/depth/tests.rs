@@ -81,11 +81,17 @@ fn loader_errors_name_the_file_and_the_tensor() {
     assert!(e.contains(name) && e.contains(wrong), "{e}");
 
     // config.json that disagrees with the weights: the neck is wider than the file's.
-    let wider = config.replace("\"neck_hidden_sizes\": [\n    8,\n    16,\n    24,\n    32\n  ]", "\"neck_hidden_sizes\": [8, 16, 24, 40]");
+    let wider = config.replace(
+        "\"neck_hidden_sizes\": [\n    8,\n    16,\n    24,\n    32\n  ]",
+        "\"neck_hidden_sizes\": [8, 16, 24, 40]",
+    );
     assert_ne!(wider, config, "the golden config's layout changed; update this test");
     let e = load_error("shape", "model.safetensors", &golden, Some(&wider));
     assert!(
-        e.contains("model.safetensors") && e.contains("neck.reassemble_stage.layers.3.resize.weight") && e.contains("[40, 40, 3, 3]") && e.contains("[32, 32, 3, 3]"),
+        e.contains("model.safetensors")
+            && e.contains("neck.reassemble_stage.layers.3.resize.weight")
+            && e.contains("[40, 40, 3, 3]")
+            && e.contains("[32, 32, 3, 3]"),
         "{e}"
     );
 

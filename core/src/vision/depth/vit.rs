@@ -44,13 +44,23 @@ pub(crate) struct Vit {
 }
 
 /// Reads `prefix.weight` and `prefix.bias` of a linear layer or 1×1 convolution.
-pub(crate) fn linear(ck: &Checkpoint, prefix: &str, out: usize, inp: usize, conv: bool) -> Result<Linear, DepthModelError> {
+pub(crate) fn linear(
+    ck: &Checkpoint,
+    prefix: &str,
+    out: usize,
+    inp: usize,
+    conv: bool,
+) -> Result<Linear, DepthModelError> {
     let shape = if conv { vec![out, inp, 1, 1] } else { vec![out, inp] };
     Ok(Linear { w: ck.take(&format!("{prefix}.weight"), &shape)?, b: ck.take(&format!("{prefix}.bias"), &[out])?, inp })
 }
 
 fn norm(ck: &Checkpoint, prefix: &str, d: usize, eps: f64) -> Result<Norm, DepthModelError> {
-    Ok(Norm { w: ck.take(&format!("{prefix}.weight"), &[d])?, b: ck.take(&format!("{prefix}.bias"), &[d])?, eps: eps as f32 })
+    Ok(Norm {
+        w: ck.take(&format!("{prefix}.weight"), &[d])?,
+        b: ck.take(&format!("{prefix}.bias"), &[d])?,
+        eps: eps as f32,
+    })
 }
 
 impl Vit {
@@ -92,7 +102,9 @@ impl Vit {
             layers,
             final_norm: norm(ck, "backbone.layernorm", d, eps)?,
             heads: b.num_attention_heads,
-            out_indices: cfg.out_indices().map_err(|detail| DepthModelError::Config { path: ck.path().into(), detail })?,
+            out_indices: cfg
+                .out_indices()
+                .map_err(|detail| DepthModelError::Config { path: ck.path().into(), detail })?,
             apply_layernorm: b.apply_layernorm,
         })
     }

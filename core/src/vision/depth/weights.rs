@@ -73,7 +73,14 @@ impl Checkpoint {
     /// network: the real sizes' cost without the real weights.
     pub(crate) fn random(seed: u64) -> Self {
         let path = PathBuf::from(format!("<random weights, seed {seed}>"));
-        Self { path, bytes: Vec::new(), data_start: 0, entries: HashMap::new(), metadata: HashMap::new(), random: Some(seed) }
+        Self {
+            path,
+            bytes: Vec::new(),
+            data_start: 0,
+            entries: HashMap::new(),
+            metadata: HashMap::new(),
+            random: Some(seed),
+        }
     }
 
     /// The path the checkpoint was read from.
@@ -84,7 +91,9 @@ impl Checkpoint {
     /// The tensor `name` as f32, checked to have `shape`.
     pub(crate) fn take(&self, name: &str, shape: &[usize]) -> Result<Vec<f32>, DepthModelError> {
         if let Some(seed) = self.random {
-            let mut state = name.bytes().fold(seed ^ 0x9e37_79b9_7f4a_7c15, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3));
+            let mut state = name
+                .bytes()
+                .fold(seed ^ 0x9e37_79b9_7f4a_7c15, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3));
             let count: usize = shape.iter().product();
             return Ok((0..count)
                 .map(|_| {
@@ -134,7 +143,10 @@ impl Checkpoint {
                 .chunks_exact(8)
                 .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f32)
                 .collect(),
-            "BF16" => data.chunks_exact(2).map(|c| f32::from_bits(u32::from(u16::from_le_bytes([c[0], c[1]])) << 16)).collect(),
+            "BF16" => data
+                .chunks_exact(2)
+                .map(|c| f32::from_bits(u32::from(u16::from_le_bytes([c[0], c[1]])) << 16))
+                .collect(),
             _ => data.chunks_exact(2).map(|c| f16_to_f32(u16::from_le_bytes([c[0], c[1]]))).collect(),
         })
     }
