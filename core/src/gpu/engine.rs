@@ -181,6 +181,8 @@ impl GpuEngine {
 
     /// New cameras (a new working resolution or background): per-view targets are recomputed.
     pub fn reset_views(&mut self, views: usize, background: [f32; 3]) {
+        // Plans are per image size: the old size's are not needed any more.
+        self.plans.clear();
         self.targets = (0..views).map(|_| None).collect();
         self.background = background;
     }
