@@ -290,10 +290,35 @@ fn time_style_depth(
     Ok(())
 }
 
+/// What both step benchmarks load: the scene, the style and the network.
+struct StepInputs {
+    scene_path: PathBuf,
+    scene: gast_core::Gaussians,
+    style_path: PathBuf,
+    style: gast_core::session::StyleImage,
+    vgg: std::sync::Arc<gast_core::vision::Vgg>,
+}
+
+/// Loads `args`' scene, style and weights (the shared data's guitar, wave and
+/// VGG file by default), after resetting the peak-memory mark.
+fn step_inputs(args: &StepArgs) -> anyhow::Result<StepInputs> {
+    let shared = shared_dir();
+    let scene_path = args.scene.clone().unwrap_or_else(|| shared.join("data/scenes/guitar.compressed.ply"));
+    let style_path = args.style.clone().unwrap_or_else(|| shared.join("data/styles/wave.jpg"));
+    let weights = args.weights.clone().or_else(|| {
+        let p = shared.join("data/weights/vgg19-conv3.safetensors");
+        p.exists().then_some(p)
+    });
+    reset_peak_memory();
+    let scene = load_scene(&scene_path)?;
+    let style = gast_core::session::StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
+    let vgg = std::sync::Arc::new(super::stylize::load_vgg(weights.as_deref())?);
+    Ok(StepInputs { scene_path, scene, style_path, style, vgg })
+}
+
 /// Per-step breakdown of the optimisation, the whole schedule's time, and memory.
 pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     use gast_core::gpu::DeviceChoice;
-    use gast_core::session::StyleImage;
     use gast_core::style::{Phase, StyleConfig};
 
     let f = &args.fast;
@@ -305,17 +330,7 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     {
         return run_fast_step(args);
     }
-    let shared = shared_dir();
-    let scene_path = args.scene.clone().unwrap_or_else(|| shared.join("data/scenes/guitar.compressed.ply"));
-    let style_path = args.style.clone().unwrap_or_else(|| shared.join("data/styles/wave.jpg"));
-    let weights = args.weights.clone().or_else(|| {
-        let p = shared.join("data/weights/vgg19-conv3.safetensors");
-        p.exists().then_some(p)
-    });
-    reset_peak_memory();
-    let scene = load_scene(&scene_path)?;
-    let style = StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
-    let vgg = std::sync::Arc::new(super::stylize::load_vgg(weights.as_deref())?);
+    let StepInputs { scene_path, scene, style_path, style, vgg } = step_inputs(&args)?;
     let config = StyleConfig { resolution: args.resolution, ..StyleConfig::default() };
     let views = views_for(
         &scene,
@@ -577,20 +592,10 @@ fn phase_rows(reports: &[(gast_core::session::StepReport, f64)]) -> Vec<(gast_co
 /// load), their ratio, FLOP counts per stage against the gemm floor, the
 /// whole schedule's time, and memory.
 fn run_fast_step(args: StepArgs) -> anyhow::Result<ExitCode> {
-    use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource, StyleImage};
+    use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource};
     use gast_core::style::{MatchMethod, Phase, StyleConfig};
 
-    let shared = shared_dir();
-    let scene_path = args.scene.clone().unwrap_or_else(|| shared.join("data/scenes/guitar.compressed.ply"));
-    let style_path = args.style.clone().unwrap_or_else(|| shared.join("data/styles/wave.jpg"));
-    let weights = args.weights.clone().or_else(|| {
-        let p = shared.join("data/weights/vgg19-conv3.safetensors");
-        p.exists().then_some(p)
-    });
-    reset_peak_memory();
-    let scene = load_scene(&scene_path)?;
-    let style = StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
-    let vgg = std::sync::Arc::new(super::stylize::load_vgg(weights.as_deref())?);
+    let StepInputs { scene_path, scene, style_path, style, vgg } = step_inputs(&args)?;
     let old_config = StyleConfig { resolution: args.resolution, ..StyleConfig::default() };
     let mut new_config = old_config.clone();
     args.fast.apply(&mut new_config);
