@@ -220,3 +220,23 @@ fn fast_options_keep_the_exact_results() {
     assert_eq!(kept.len(), 8);
     assert!(kept.iter().all(|l| l.is_finite()));
 }
+
+/// Warming every view's targets before the first step (what the step
+/// benchmark does) changes no step: the same losses, bit for bit, as targets
+/// computed on each view's first visit.
+#[test]
+fn warmed_view_targets_give_the_same_steps() {
+    use gast_core::session::Session;
+    let config = StyleConfig { cycles: 1, steps_per_cycle: 6, resolution: 48, texture_scale: 48, ..Default::default() };
+    let Some(inputs) = inputs(config) else { return };
+    let mut lazy = Session::prepare(inputs.clone(), &mut |_| {}).expect("session");
+    let mut warm = Session::prepare(inputs, &mut |_| {}).expect("session");
+    let seconds = warm.warm_view_targets().expect("CPU targets");
+    assert!(seconds >= 0.0);
+    while let Some(a) = lazy.step() {
+        let b = warm.step().expect("the warmed session runs the same schedule");
+        assert_eq!((a.iter, a.view, a.phase), (b.iter, b.view, b.phase));
+        assert_eq!(a.losses, b.losses, "step {}", a.iter);
+    }
+    assert!(warm.step().is_none());
+}

@@ -329,6 +329,24 @@ impl GpuEngine {
     }
 
     /// The content features and inverse depth of `G^c` from view `view`, once.
+    /// Computes view `view`'s targets now if it has none yet (what its first
+    /// step would do): benchmarks time steady steps after warming every view.
+    pub fn warm_target(&mut self, view: usize, cam: &Camera, weights: &LossWeights) -> Result<(), GpuError> {
+        let size = (cam.width, cam.height);
+        if !self.plans.contains_key(&size) {
+            let before = self.ctx.allocated_bytes();
+            let plan = self.plan(cam, weights)?;
+            self.plans.insert(size, plan);
+            self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
+        }
+        if self.targets.get(view).is_none_or(Option::is_none) {
+            let before = self.ctx.allocated_bytes();
+            self.make_target(view, cam)?;
+            self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
+        }
+        Ok(())
+    }
+
     fn make_target(&mut self, view: usize, cam: &Camera) -> Result<(), GpuError> {
         let size = (cam.width, cam.height);
         let Some(plan) = self.plans.get(&size) else {

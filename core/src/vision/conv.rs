@@ -60,8 +60,38 @@ fn band_rows(k: usize, h: usize, w: usize, band_elems: usize) -> usize {
 
 /// `dst[i·dst_rs + j] (+)= Σ_p lhs[i·lhs_rs + p·lhs_cs] · rhs[p·rhs_rs + j]`
 /// for `i < m, j < n, p < k`, on gemm's rayon threads.
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn matmul(
+    dst: &mut [f32],
+    dst_rs: usize,
+    lhs: (&[f32], usize, usize),
+    rhs: (&[f32], usize),
+    (m, n, k): (usize, usize, usize),
+    accumulate: bool,
+) {
+    let threads = rayon::current_num_threads();
+    let par =
+        if threads > 1 && m * n * k > 1 << 16 { gemm::Parallelism::Rayon(threads) } else { gemm::Parallelism::None };
+    matmul_on(par, dst, dst_rs, lhs, rhs, (m, n, k), accumulate);
+}
+
+/// [`matmul`] on the calling thread only: for callers that already share
+/// independent products out among the threads.
+pub(crate) fn matmul_serial(
+    dst: &mut [f32],
+    dst_rs: usize,
+    lhs: (&[f32], usize, usize),
+    rhs: (&[f32], usize),
+    mnk: (usize, usize, usize),
+    accumulate: bool,
+) {
+    matmul_on(gemm::Parallelism::None, dst, dst_rs, lhs, rhs, mnk, accumulate);
+}
+
+/// `dst[i·dst_rs + j] (+)= Σ_p lhs[i·lhs_rs + p·lhs_cs] · rhs[p·rhs_rs + j]`
+/// for `i < m, j < n, p < k`, with gemm's parallelism `par`.
+#[allow(clippy::too_many_arguments)]
+fn matmul_on(
+    par: gemm::Parallelism,
     dst: &mut [f32],
     dst_rs: usize,
     (lhs, lhs_rs, lhs_cs): (&[f32], usize, usize),
@@ -75,9 +105,6 @@ pub(crate) fn matmul(
     assert!((m - 1) * dst_rs + n <= dst.len(), "matmul: dst too small");
     assert!((m - 1) * lhs_rs + (k - 1) * lhs_cs < lhs.len(), "matmul: lhs too small");
     assert!((k - 1) * rhs_rs + n <= rhs.len(), "matmul: rhs too small");
-    let threads = rayon::current_num_threads();
-    let par =
-        if threads > 1 && m * n * k > 1 << 16 { gemm::Parallelism::Rayon(threads) } else { gemm::Parallelism::None };
     // SAFETY: the asserts above keep every element gemm touches, at the
     // strides given, inside the three slices; dst is borrowed mutably, so it
     // aliases neither input.

@@ -21,7 +21,7 @@
 
 use rayon::prelude::*;
 
-use super::conv::matmul;
+use super::conv::matmul_serial;
 
 /// Output tile side.
 const TILE: usize = 4;
@@ -176,22 +176,23 @@ pub(crate) fn winograd_conv_banded(
                 }
             }
         });
-        // M_ξ = U_ξ · V_ξ, M: [co][ξ][tile].
-        for xi in 0..XI {
+        // M_ξ = U_ξ · V_ξ, M: [ξ][co][tile]. The 36 products are independent and
+        // small (a few MFLOP at relu3), so the threads share them out rather
+        // than splitting each one: one rayon hand-off per band, not per ξ.
+        m_buf[..XI * c_out * stride].par_chunks_mut(c_out * stride).enumerate().for_each(|(xi, dst)| {
             let u = &kernel.u[xi * c_out * c_in..(xi + 1) * c_out * c_in];
-            let (dst, rhs) = (&mut m_buf[xi * stride..], &v_buf[xi * stride..]);
-            matmul(dst, XI * stride, (u, c_in, 1), (rhs, XI * stride), (c_out, nt, c_in), false);
-        }
+            let rhs = &v_buf[xi * stride..];
+            matmul_serial(dst, stride, (u, c_in, 1), (rhs, XI * stride), (c_out, nt, c_in), false);
+        });
         // Y = Aᵀ M A per output channel and tile.
         let (m, y_hi) = (&*m_buf, (ty1 * TILE).min(h));
         out[..c_out * h * w].par_chunks_mut(h * w).enumerate().for_each(|(co, plane)| {
-            let mc = &m[co * XI * stride..(co + 1) * XI * stride];
             let mut tile = [0f32; XI];
             for ty in ty0..ty1 {
                 let t0 = (ty - ty0) * tiles_x;
                 for tx in 0..tiles_x {
                     for (xi, v) in tile.iter_mut().enumerate() {
-                        *v = mc[xi * stride + t0 + tx];
+                        *v = m[(xi * c_out + co) * stride + t0 + tx];
                     }
                     let y = output_transform(&tile);
                     let (oy, ox) = (ty * TILE, tx * TILE);
