@@ -99,6 +99,22 @@ pub enum BenchCommand {
     /// ablation tables. Writes a folder with an index.md, CSV/JSON tables, charts and renders
     /// (about 30 minutes on two cores; `--quick` takes a few).
     Quality(quality::QualityArgs),
+    /// What the studio viewport pays per optimiser step to show a GPU run: a CPU
+    /// snapshot against the copy from the engine's buffers (headless, any adapter).
+    ViewportLive {
+        /// Scene (default: guitar.compressed.ply from the shared data folder).
+        #[arg(long)]
+        scene: Option<PathBuf>,
+        /// Style image (default: styles/wave.jpg from the shared data folder).
+        #[arg(long)]
+        style: Option<PathBuf>,
+        /// VGG weights (default: the shared vgg19-conv3.safetensors, else the usual resolution).
+        #[arg(long)]
+        weights: Option<PathBuf>,
+        /// Updates to time (one optimiser step before each).
+        #[arg(long, default_value_t = 5)]
+        reps: u32,
+    },
     /// The studio viewport's frame time on the first GPU adapter (headless).
     Viewport {
         /// A scene; a synthetic scene of `--count` Gaussians when absent.
@@ -180,6 +196,17 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Bench(BenchCommand::Step(args)) => return bench::run_step(args),
         Command::Bench(BenchCommand::Depth(args)) => return bench::run_depth(args),
         Command::Bench(BenchCommand::Quality(args)) => return quality::run(args),
+        Command::Bench(BenchCommand::ViewportLive { scene, style, weights, reps }) => {
+            let shared = bench::shared_dir();
+            let scene = scene.unwrap_or_else(|| shared.join("data/scenes/guitar.compressed.ply"));
+            let style = style.unwrap_or_else(|| shared.join("data/styles/wave.jpg"));
+            let weights =
+                weights.or_else(|| Some(shared.join("data/weights/vgg19-conv3.safetensors")).filter(|p| p.exists()));
+            let g = load_scene(&scene)?;
+            let style = gast_core::session::StyleImage::open(&style).map_err(anyhow::Error::msg)?;
+            let vgg = std::sync::Arc::new(stylize::load_vgg(weights.as_deref())?);
+            println!("{}", studio::viewport::bench_live::run(g, style, vgg, reps)?);
+        }
         Command::Bench(BenchCommand::Viewport { scene, count, frames, width, height }) => {
             println!("{}", studio::viewport::bench::run(scene.as_deref(), count, frames, width, height)?);
         }

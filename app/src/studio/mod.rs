@@ -35,7 +35,7 @@ use gast_core::{Camera, Gaussians};
 
 use session_link::{RunMonitor, RunStatus, SessionStarter};
 use view::ViewState;
-use viewport::{FrameStats, SceneRef, SharedGaussians, ViewportCallback, ViewportNotes, ViewportResources};
+use viewport::{FrameStats, LiveRef, SceneRef, SharedGaussians, ViewportCallback, ViewportNotes, ViewportResources};
 
 /// What `gast studio` was asked to open.
 #[derive(Clone, Debug, Default)]
@@ -79,6 +79,8 @@ struct ScreenshotState {
 pub struct StudioApp {
     scene: Option<LoadedScene>,
     snapshot: Option<SceneRef>,
+    /// The running optimisation's GPU buffers, drawn instead of the snapshot when the viewport can.
+    live: Option<LiveRef>,
     next_version: u64,
     styles: Vec<LoadedStyle>,
     style: Option<usize>,
@@ -128,6 +130,8 @@ struct ScriptedRun {
     steps: usize,
     export: Option<PathBuf>,
     started: bool,
+    /// Pause was sent; the export waits for the paused state's snapshot.
+    pausing: bool,
     done: bool,
 }
 
@@ -195,6 +199,7 @@ impl StudioApp {
         let mut app = Self {
             scene: None,
             snapshot: None,
+            live: None,
             next_version: 1,
             styles: Vec::new(),
             style: None,
@@ -232,6 +237,7 @@ impl StudioApp {
                 steps: n as usize,
                 export: std::env::var_os("GAST_STUDIO_EXPORT").map(PathBuf::from),
                 started: false,
+                pausing: false,
                 done: false,
             }),
         };
@@ -463,6 +469,15 @@ impl StudioApp {
             self.snapshot = Some(SceneRef { version: self.next_version, gaussians: SharedGaussians::Snapshot(snap) });
             self.next_version += 1;
         }
+        // While the run is live its GPU buffers are drawn; once it ends, its final snapshot.
+        match self.run.live() {
+            Some(l) if self.live.as_ref().is_some_and(|r| r.live.same_run(&l)) => {}
+            Some(l) => {
+                self.live = Some(LiveRef { version: self.next_version, live: l });
+                self.next_version += 1;
+            }
+            None => self.live = None,
+        }
         if let RunStatus::Failed(msg) = &self.run.status {
             let msg = format!("the run failed: {msg}");
             if self.errors.last() != Some(&msg) {
@@ -556,10 +571,16 @@ impl StudioApp {
         }
         let finished = matches!(self.run.status, RunStatus::Finished { .. } | RunStatus::Failed(_));
         let have_snapshot = self.snapshot.as_ref().is_some_and(|s| !s.gaussians.is_empty());
-        if (self.run.steps.len() >= script.steps && have_snapshot) || finished {
+        if !script.pausing && self.run.steps.len() >= script.steps && have_snapshot {
+            // The worker puts the paused state's snapshot in the slot before it
+            // reports Paused, so the export below is exactly what the run holds.
+            script.pausing = true;
+            self.run.send(Command::Pause);
+        }
+        let paused = script.pausing && self.run.status == RunStatus::Paused;
+        if paused || finished {
             script.done = true;
             let export = script.export.clone();
-            self.run.send(Command::Pause);
             eprintln!("studio: scripted run paused after {} steps ({:?})", self.run.steps.len(), self.run.status);
             if let (Some(path), Some(g)) = (export, self.current()) {
                 match gast_core::scene::save(&path, &g, &Default::default()) {
@@ -646,6 +667,7 @@ impl StudioApp {
             camera,
             before: self.scene.as_ref().map(|s| s.scene.clone()),
             after: self.snapshot.clone(),
+            live: self.live.clone(),
             split: self.split,
             background: self.background,
             stats: self.stats.clone(),

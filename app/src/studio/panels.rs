@@ -101,6 +101,9 @@ impl StudioApp {
                 "drawn {}  sort {:.1} ms  prepare {:.1} ms",
                 stats.drawn, stats.sort_ms, stats.prepare_ms
             ));
+            if let Some(step) = stats.live_step {
+                ui.label(format!("after: step {step} from the optimiser's GPU buffers"));
+            }
             if self.jobs.running > 0 {
                 ui.separator();
                 ui.spinner();

@@ -24,6 +24,9 @@ pub struct SessionLink {
     pub events: Receiver<Event>,
     /// The newest Gaussians.
     pub snapshots: Arc<Slot<Snapshot>>,
+    /// The GPU engine's buffers, when the run steps on the GPU (the viewport
+    /// draws from them when it shares the device).
+    pub live: Arc<Slot<gast_core::gpu::LiveGaussians>>,
     /// The worker thread, stopped when the link is dropped (`None` in tests
     /// that play the worker's part themselves).
     #[expect(dead_code, reason = "held for its Drop, which stops the worker")]
@@ -109,6 +112,12 @@ impl RunMonitor {
         self.link.as_ref().is_some_and(|l| l.commands.send(command).is_ok())
     }
 
+    /// The running optimisation's GPU buffers, while the run is live and steps on the GPU.
+    pub fn live(&self) -> Option<gast_core::gpu::LiveGaussians> {
+        let link = self.link.as_ref().filter(|_| self.is_live())?;
+        link.live.latest().map(|l| (*l).clone())
+    }
+
     /// Drains pending events; returns a newer snapshot when the slot holds one.
     pub fn poll(&mut self) -> Option<Arc<Snapshot>> {
         let Some(link) = &self.link else { return None };
@@ -168,7 +177,13 @@ mod tests {
         let (etx, erx) = crossbeam_channel::unbounded();
         let slot = Arc::new(Slot::default());
         let mut m = RunMonitor::default();
-        m.attach(SessionLink { commands: ctx, events: erx, snapshots: slot.clone(), worker: None });
+        m.attach(SessionLink {
+            commands: ctx,
+            events: erx,
+            snapshots: slot.clone(),
+            live: Arc::default(),
+            worker: None,
+        });
         assert!(m.send(Command::Pause));
         assert_eq!(crx.try_recv().ok(), Some(Command::Pause));
         let step = |iter| {

@@ -253,7 +253,13 @@ fn app_with_a_run(
     let (ctx, crx) = crossbeam_channel::unbounded();
     let (etx, erx) = crossbeam_channel::unbounded();
     let slot = Arc::new(Slot::default());
-    app.run.attach(session_link::SessionLink { commands: ctx, events: erx, snapshots: slot.clone(), worker: None });
+    app.run.attach(session_link::SessionLink {
+        commands: ctx,
+        events: erx,
+        snapshots: slot.clone(),
+        live: Arc::default(),
+        worker: None,
+    });
     for iter in 0..steps {
         let t = iter as f32 / steps as f32;
         let losses = LossTerms {

@@ -22,6 +22,7 @@ mod gaussians;
 mod gcfm;
 mod gemm;
 mod kernel;
+mod live;
 mod losses;
 mod ops_bench;
 #[cfg(test)]
@@ -50,6 +51,7 @@ pub use gaussians::{GpuGaussians, GpuGrads};
 pub use gcfm::{GcfmWorkspace, GpuGcfm, GpuStyle, bench_gcfm};
 pub use gemm::{Gemm, GemmPlan, GemmSpec, Strided, bench_gemm};
 pub use kernel::{Bind, Kernel};
+pub use live::LiveGaussians;
 pub use losses::{LossKernels, RefLoss, TvLoss};
 pub use ops_bench::bench_image_ops;
 pub use raster_backward::Accumulation;

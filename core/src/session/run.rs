@@ -6,7 +6,7 @@ use std::time::Instant;
 use super::events::{Event, LossTerms, StepReport, StepTimings};
 use super::prepare::{PreparedStyle, StyleDepthSource, StyleImage, prepare_style, scatter, subset, survey_views};
 use crate::camera::{Camera, scene_extent};
-use crate::gpu::{GpuContext, GpuEngine, GpuError};
+use crate::gpu::{GpuContext, GpuEngine, GpuError, LiveGaussians};
 use crate::raster::{self, RenderOptions};
 use crate::scene::Gaussians;
 use crate::style::StyleConfig;
@@ -97,6 +97,8 @@ pub struct Session {
     /// The GPU engine when the steps run there (it then holds the optimised
     /// Gaussians; `g` keeps the colour-matched start).
     engine: Option<Box<GpuEngine>>,
+    /// The engine's buffers as a viewer on its device reads them, once asked for.
+    live: Option<LiveGaussians>,
     /// Why stepping stopped early, if it did.
     failure: Option<String>,
     /// The style's matching index (when the config asks for one).
@@ -242,6 +244,7 @@ impl Session {
             step: 0,
             elapsed_s: 0.0,
             engine,
+            live: None,
             failure: None,
             coverage,
             config,
@@ -313,6 +316,25 @@ impl Session {
             _ => scatter(&mut out, &self.keep, &self.g),
         }
         out
+    }
+
+    /// The GPU engine's buffers for a viewer on the same device, made on the
+    /// first call (it copies the whole scene once); `None` on the CPU engine.
+    /// Their step count follows [`Session::steps_done`].
+    pub fn live(&mut self) -> Option<LiveGaussians> {
+        let engine = self.engine.as_ref()?;
+        if self.live.is_none() {
+            let (base, keep) = (Arc::new(self.full.clone()), Arc::new(self.keep.clone()));
+            let live = LiveGaussians::new(engine.context(), engine.gaussians(), base, keep);
+            live.publish(u64::from(self.step));
+            self.live = Some(live);
+        }
+        self.live.clone()
+    }
+
+    /// Whether [`Session::live`] has handed the engine's buffers to a viewer.
+    pub fn is_shared_live(&self) -> bool {
+        self.live.is_some()
     }
 
     /// Where the steps run: the GPU adapter's description, or the CPU.
@@ -462,6 +484,9 @@ impl Session {
                 elapsed_s: self.elapsed_s,
             };
             self.step += 1;
+            if let Some(live) = &self.live {
+                live.publish(u64::from(self.step));
+            }
             return Some(report);
         }
         let opts = RenderOptions { background: self.config.background };

@@ -12,10 +12,15 @@ use super::Snapshot;
 use super::events::{Command, Event};
 use super::run::{Session, SessionInputs};
 use super::slot::Slot;
+use crate::gpu::LiveGaussians;
 use crate::scene::Gaussians;
 
 /// How often at most a snapshot of the whole scene is published.
 const SNAPSHOT_INTERVAL: Duration = Duration::from_millis(500);
+
+/// The same while a viewer may draw the GPU engine's buffers directly: the
+/// snapshots then serve the CPU-side readers (inspection maps, exports) only.
+const LIVE_SNAPSHOT_INTERVAL: Duration = Duration::from_secs(2);
 
 /// The front end's side of a running session.
 pub struct SessionHandle {
@@ -25,6 +30,9 @@ pub struct SessionHandle {
     pub events: Receiver<Event>,
     /// The newest snapshot of the scene.
     pub snapshots: Arc<Slot<Snapshot>>,
+    /// The GPU engine's buffers, once the session is prepared on a GPU (for a
+    /// viewer on the same device; see [`crate::gpu::LiveGaussians`]).
+    pub live: Arc<Slot<LiveGaussians>>,
     thread: Option<JoinHandle<Option<Gaussians>>>,
 }
 
@@ -64,12 +72,13 @@ where
     let (cmd_tx, cmd_rx) = crossbeam_channel::unbounded();
     let (ev_tx, ev_rx) = crossbeam_channel::unbounded();
     let slot = Arc::new(Slot::default());
-    let slot_w = slot.clone();
+    let live = Arc::new(Slot::default());
+    let (slot_w, live_w) = (slot.clone(), live.clone());
     let thread = std::thread::Builder::new()
         .name("gast-session".into())
-        .spawn(move || worker(load, cmd_rx, ev_tx, slot_w, waker))
+        .spawn(move || worker(load, cmd_rx, ev_tx, slot_w, live_w, waker))
         .ok();
-    SessionHandle { commands: cmd_tx, events: ev_rx, snapshots: slot, thread }
+    SessionHandle { commands: cmd_tx, events: ev_rx, snapshots: slot, live, thread }
 }
 
 fn worker<F>(
@@ -77,6 +86,7 @@ fn worker<F>(
     commands: Receiver<Command>,
     events: Sender<Event>,
     slot: Arc<Slot<Snapshot>>,
+    live: Arc<Slot<LiveGaussians>>,
     waker: Arc<dyn Fn() + Send + Sync>,
 ) -> Option<Gaussians>
 where
@@ -100,6 +110,9 @@ where
             return None;
         }
     };
+    if let Some(l) = session.live() {
+        live.put(l);
+    }
     slot.put(Snapshot { step: 0, gaussians: session.result() });
     waker();
     run_loop(&mut session, &commands, &emit, &slot, &*waker);
@@ -120,6 +133,7 @@ pub fn run_loop(
 ) {
     let mut paused = false;
     let mut last_snapshot = Instant::now();
+    let interval = if session.is_shared_live() { LIVE_SNAPSHOT_INTERVAL } else { SNAPSHOT_INTERVAL };
     loop {
         let cmd = if paused {
             match commands.recv() {
@@ -167,7 +181,7 @@ pub fn run_loop(
                     emit(Event::Warning(format!("step {}: the loss is not finite; stopping", report.iter)));
                     return;
                 }
-                if last_snapshot.elapsed() >= SNAPSHOT_INTERVAL {
+                if last_snapshot.elapsed() >= interval {
                     slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
                     last_snapshot = Instant::now();
                     waker();

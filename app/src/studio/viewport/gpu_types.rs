@@ -73,3 +73,15 @@ pub struct BlitUniform {
     pub split: [f32; 4],
 }
 const _: () = assert!(std::mem::size_of::<BlitUniform>() == 32);
+
+/// `Params` in splat_from_engine.wgsl: the shapes of one engine-to-viewport copy.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct FromEngineParams {
+    /// Optimised Gaussians, SH floats drawn per Gaussian, the engine's SH floats
+    /// per Gaussian, u32 words of packed SH per Gaussian in the viewport.
+    pub counts: [u32; 4],
+    /// x: the Gaussian index where the viewport's second SH binding starts; yzw unused.
+    pub split: [u32; 4],
+}
+const _: () = assert!(std::mem::size_of::<FromEngineParams>() == 32);

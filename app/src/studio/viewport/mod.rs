@@ -1,27 +1,36 @@
 //! The wgpu splat viewport: the scene's Gaussians on the GPU, projected by a
-//! compute pass, sorted back to front on the CPU, drawn as instanced quads into
-//! an offscreen float target, and blitted into egui's frame by a paint callback.
+//! compute pass, sorted back to front (on the GPU in the studio), drawn as
+//! instanced quads into an offscreen float target, and blitted into egui's
+//! frame by a paint callback. A run whose GPU engine shares the viewport's
+//! device is drawn from the engine's buffers ([`splat_from_engine`]); other
+//! runs from their CPU snapshots.
 //!
 //! The same [`SplatRenderer`] renders headless (tests, benchmarks) and inside the
 //! window, so what the tests compare is what the user sees.
 
 pub mod bench;
+pub mod bench_live;
 pub mod blit;
+mod callback;
 pub mod gpu_types;
 pub mod sort;
 pub mod splat_draw;
+pub mod splat_from_engine;
+#[cfg(test)]
+mod splat_from_engine_tests;
 pub mod splat_project;
 pub mod splat_sort;
 
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Instant;
 
-use gast_core::gpu::GpuContext;
+use gast_core::gpu::{GpuContext, LiveGaussians};
 use gast_core::{Camera, Gaussians};
 use glam::Vec3;
 use wgpu::util::DeviceExt as _;
 
-use gpu_types::{BlitUniform, ProjectedSplat, ViewUniform};
+pub use callback::{LiveRef, SceneRef, ViewportCallback, ViewportResources};
+use gpu_types::{ProjectedSplat, ViewUniform};
 
 /// Gaussians shared without copying: a loaded scene, or a session snapshot as
 /// it came out of the slot (snapshots are large and arrive often).
@@ -75,10 +84,14 @@ struct GpuScene {
     sorted_for: Option<([f32; 4], u32)>,
     /// The GPU sort's workspace, when the renderer sorts on the GPU.
     gpu_sort: Option<splat_sort::SceneSort>,
-    /// Kept alive for the bind groups.
-    _buffers: Vec<wgpu::Buffer>,
+    /// The scene's geometry and SH (the projection reads them; a live scene's copy writes them).
+    geom: wgpu::Buffer,
+    sh_a: wgpu::Buffer,
+    sh_b: wgpu::Buffer,
     /// The projection pass's output (the GPU sort reads the depths there).
     projected: wgpu::Buffer,
+    /// The GPU engine's buffers this scene follows, when it is drawn from them.
+    live: Option<splat_from_engine::LiveScatter>,
 }
 
 /// An offscreen render target.
@@ -96,6 +109,8 @@ pub struct FrameStats {
     pub sort_ms: f32,
     /// Milliseconds spent recording and uploading (sort included).
     pub prepare_ms: f32,
+    /// The optimiser's step drawn from its GPU buffers, when a side is drawn from them.
+    pub live_step: Option<u64>,
 }
 
 /// What the viewport has to tell the user about the scenes it was given
@@ -104,6 +119,8 @@ pub struct FrameStats {
 pub struct ViewportNotes {
     /// Scene versions the notes are about.
     pub versions: [u64; 2],
+    /// The version of the live run the notes are about.
+    pub live_version: u64,
     /// Errors (the scene is not drawn).
     pub errors: Vec<String>,
     /// Warnings (drawn with a limitation).
@@ -167,7 +184,7 @@ fn storage_init(device: &wgpu::Device, label: &str, bytes: &[u8]) -> wgpu::Buffe
     device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some(label),
         contents,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
     })
 }
 
@@ -175,6 +192,7 @@ fn storage_init(device: &wgpu::Device, label: &str, bytes: &[u8]) -> wgpu::Buffe
 pub struct SplatRenderer {
     project: splat_project::ProjectPipeline,
     draw: splat_draw::DrawPipeline,
+    from_engine: splat_from_engine::FromEnginePipeline,
     scenes: [Option<GpuScene>; 2],
     targets: [Option<Target>; 2],
     /// Statistics of the last [`SplatRenderer::render`] calls since [`SplatRenderer::begin_frame`].
@@ -183,6 +201,8 @@ pub struct SplatRenderer {
     pub sh_binding_limit: Option<usize>,
     /// Sorts on the GPU when set ([`SplatRenderer::use_gpu_sort`]); on the CPU otherwise.
     gpu_sort: Option<splat_sort::DepthSortKernels>,
+    /// The live run version [`SplatRenderer::set_live_scene`] last refused, and why.
+    refused_live: Option<(u64, String)>,
 }
 
 /// Which scene slot: the original Gaussians or the current (optimised) ones.
@@ -200,11 +220,13 @@ impl SplatRenderer {
         Self {
             project: splat_project::ProjectPipeline::new(device),
             draw: splat_draw::DrawPipeline::new(device),
+            from_engine: splat_from_engine::FromEnginePipeline::new(device),
             scenes: [None, None],
             targets: [None, None],
             stats: FrameStats::default(),
             sh_binding_limit: None,
             gpu_sort: None,
+            refused_live: None,
         }
     }
 
@@ -234,6 +256,91 @@ impl SplatRenderer {
             return Ok(None);
         }
         self.scenes[side as usize] = None;
+        let (scene, note) = self.build_scene(device, version, g)?;
+        self.scenes[side as usize] = Some(scene);
+        Ok(note)
+    }
+
+    /// Draws in `side` the run whose GPU engine owns `live`, from the engine's
+    /// buffers: the whole scene is uploaded once, then every frame after a step
+    /// copies the optimised Gaussians on the device ([`splat_from_engine`]).
+    /// An error says why this cannot be (the engine is on another device, the
+    /// viewport sorts on the CPU, …); the caller then draws snapshots.
+    pub fn set_live_scene(
+        &mut self,
+        device: &wgpu::Device,
+        side: Side,
+        version: u64,
+        live: &LiveGaussians,
+    ) -> Result<Option<String>, String> {
+        if self.scenes[side as usize].as_ref().is_some_and(|s| s.version == version && s.live.is_some()) {
+            return Ok(None);
+        }
+        if let Some((v, why)) = &self.refused_live
+            && *v == version
+        {
+            return Err(why.clone());
+        }
+        let result = self.build_live_scene(device, version, live);
+        match result {
+            Ok((scene, note)) => {
+                self.scenes[side as usize] = Some(scene);
+                Ok(note)
+            }
+            Err(why) => {
+                self.refused_live = Some((version, why.clone()));
+                Err(why)
+            }
+        }
+    }
+
+    fn build_live_scene(
+        &self,
+        device: &wgpu::Device,
+        version: u64,
+        live: &LiveGaussians,
+    ) -> Result<(GpuScene, Option<String>), String> {
+        if self.gpu_sort.is_none() {
+            // The CPU sort reads the means on the host, which a live scene does not have.
+            return Err("the viewport sorts on the CPU, which needs the Gaussians on the host".into());
+        }
+        if !live.is_on(device) {
+            return Err("the optimiser runs on another device".into());
+        }
+        let (mut scene, note) = self.build_scene(device, version, &SharedGaussians::Owned(live.base().clone()))?;
+        let targets = splat_from_engine::Targets {
+            geom: &scene.geom,
+            sh_a: &scene.sh_a,
+            sh_b: &scene.sh_b,
+            sh_degree: scene.sh_degree,
+            sh_words: scene.sh_words,
+            sh_split: scene.sh_split,
+        };
+        scene.live = Some(splat_from_engine::LiveScatter::new(device, &self.from_engine, live, targets)?);
+        Ok((scene, note))
+    }
+
+    /// Copies a live scene's optimised Gaussians into its buffers now if the
+    /// engine stepped since the last copy (rendering does this by itself).
+    pub fn sync_live(&mut self, encoder: &mut wgpu::CommandEncoder, side: Side) -> bool {
+        let k = &self.from_engine;
+        self.scenes[side as usize].as_mut().and_then(|s| s.live.as_mut()).is_some_and(|l| l.record(encoder, k))
+    }
+
+    /// The buffers of `side` in the layout the projection reads (geometry, SH
+    /// below and from the split), for tests that compare them.
+    #[cfg(test)]
+    pub fn scene_buffers(&self, side: Side) -> Option<[&wgpu::Buffer; 3]> {
+        self.scenes[side as usize].as_ref().map(|s| [&s.geom, &s.sh_a, &s.sh_b])
+    }
+
+    /// Uploads `g` into a new scene's buffers.
+    fn build_scene(
+        &self,
+        device: &wgpu::Device,
+        version: u64,
+        g: &SharedGaussians,
+    ) -> Result<(GpuScene, Option<String>), String> {
         let n = g.len();
         let device_limit = device.limits().max_storage_buffer_binding_size as usize;
         if n * std::mem::size_of::<ProjectedSplat>() > device_limit {
@@ -277,7 +384,7 @@ impl SplatRenderer {
         });
         let project_bind = self.project.bind_group(device, &view, &geom, &sh_a, &sh_b, &projected);
         let draw_bind = self.draw.bind_group(device, &view, &projected, &order);
-        self.scenes[side as usize] = Some(GpuScene {
+        let scene = GpuScene {
             version,
             gaussians: g.clone(),
             view,
@@ -289,10 +396,13 @@ impl SplatRenderer {
             sh_degree: degree,
             sorted_for: None,
             gpu_sort: self.gpu_sort.as_ref().map(|k| k.scene(n)),
-            _buffers: vec![geom, sh_a, sh_b],
+            geom,
+            sh_a,
+            sh_b,
             projected,
-        });
-        Ok(note)
+            live: None,
+        };
+        Ok((scene, note))
     }
 
     /// Forgets the scene of `side`.
@@ -340,6 +450,10 @@ impl SplatRenderer {
         let (w, h) = (cam.width.max(1), cam.height.max(1));
         self.ensure_target(device, side, w, h);
         let Some(scene) = &mut self.scenes[side as usize] else { return false };
+        if let Some(live) = &mut scene.live {
+            live.record(encoder, &self.from_engine);
+            self.stats.live_step = live.copied_steps();
+        }
         if let (Some(kernels), Some(sort)) = (&self.gpu_sort, &scene.gpu_sort) {
             // Project, then sort every splat on the device (culled ones last, drawn degenerate).
             let n = scene.gaussians.len() as u32;
@@ -385,119 +499,6 @@ impl SplatRenderer {
     /// The target of `side` (after a render).
     pub fn target(&self, side: Side) -> Option<(&wgpu::Texture, &wgpu::TextureView)> {
         self.targets[side as usize].as_ref().map(|t| (&t.texture, &t.view))
-    }
-}
-
-/// What lives in egui-wgpu's callback resources for the viewport.
-pub struct ViewportResources {
-    renderer: SplatRenderer,
-    blit: blit::BlitPipeline,
-    blit_bind: Option<wgpu::BindGroup>,
-}
-
-impl ViewportResources {
-    /// Pipelines for a device and egui's output format.
-    pub fn new(device: &wgpu::Device, target_format: wgpu::TextureFormat) -> Self {
-        Self {
-            renderer: SplatRenderer::new(device),
-            blit: blit::BlitPipeline::new(device, target_format),
-            blit_bind: None,
-        }
-    }
-
-    /// Sorts by depth on the GPU (`ctx` wraps the same device).
-    pub fn use_gpu_sort(&mut self, ctx: GpuContext) {
-        self.renderer.use_gpu_sort(ctx);
-    }
-}
-
-/// A scene handed to the viewport: a version number (changes when the
-/// Gaussians change) and the Gaussians.
-#[derive(Clone)]
-pub struct SceneRef {
-    /// Bumped by the owner on every change.
-    pub version: u64,
-    /// The Gaussians.
-    pub gaussians: SharedGaussians,
-}
-
-/// One frame of the viewport, as an egui-wgpu paint callback.
-pub struct ViewportCallback {
-    /// The camera (its size is the viewport's size in physical pixels).
-    pub camera: Camera,
-    /// The original scene.
-    pub before: Option<SceneRef>,
-    /// The current snapshot, when there is one.
-    pub after: Option<SceneRef>,
-    /// Split position in [0, 1]: left of it shows `before`.
-    pub split: f32,
-    /// Background colour.
-    pub background: [f32; 3],
-    /// Where the frame's statistics go.
-    pub stats: Arc<Mutex<FrameStats>>,
-    /// Where problems with the scenes go.
-    pub notes: Arc<Mutex<ViewportNotes>>,
-}
-
-impl egui_wgpu::CallbackTrait for ViewportCallback {
-    fn prepare(
-        &self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        _screen: &egui_wgpu::ScreenDescriptor,
-        encoder: &mut wgpu::CommandEncoder,
-        resources: &mut egui_wgpu::CallbackResources,
-    ) -> Vec<wgpu::CommandBuffer> {
-        let Some(res) = resources.get_mut::<ViewportResources>() else { return Vec::new() };
-        let r = &mut res.renderer;
-        r.begin_frame();
-        for (side, scene) in [(Side::Before, &self.before), (Side::After, &self.after)] {
-            match scene {
-                Some(s) => {
-                    let result = r.set_scene(device, side, s.version, &s.gaussians);
-                    if let Ok(mut notes) = self.notes.lock()
-                        && notes.versions[side as usize] != s.version
-                    {
-                        notes.versions[side as usize] = s.version;
-                        match result {
-                            Ok(Some(w)) => notes.warnings.push(w),
-                            Ok(None) => {}
-                            Err(e) => notes.errors.push(e),
-                        }
-                    }
-                }
-                None => r.clear_scene(side),
-            }
-        }
-        // Draw the "before" side even without a scene so that the target exists (and is clear).
-        r.render(device, queue, encoder, Side::Before, &self.camera);
-        let has_after = self.after.is_some() && self.split < 1.0;
-        if has_after {
-            r.render(device, queue, encoder, Side::After, &self.camera);
-        }
-        if let Ok(mut s) = self.stats.lock() {
-            *s = r.stats;
-        }
-        let Some((_, before)) = r.target(Side::Before) else { return Vec::new() };
-        let after = if has_after { r.target(Side::After).map(|t| t.1).unwrap_or(before) } else { before };
-        let split = if has_after { self.split } else { 1.0 };
-        let bg = self.background;
-        let params = BlitUniform { background: [bg[0], bg[1], bg[2], 1.0], split: [split, 0.0, 0.0, 0.0] };
-        res.blit_bind = Some(res.blit.prepare(device, queue, params, before, after));
-        Vec::new()
-    }
-
-    fn paint(
-        &self,
-        _info: egui::PaintCallbackInfo,
-        pass: &mut wgpu::RenderPass<'static>,
-        resources: &egui_wgpu::CallbackResources,
-    ) {
-        if let Some(res) = resources.get::<ViewportResources>()
-            && let Some(bind) = &res.blit_bind
-        {
-            res.blit.draw(pass, bind);
-        }
     }
 }
 
