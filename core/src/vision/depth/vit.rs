@@ -11,6 +11,7 @@
 use super::DepthModelError;
 use super::config::DepthConfig;
 use super::ops::{Linear, Norm, attention, gelu_in_place};
+use super::profile::Clock;
 use super::weights::Checkpoint;
 use crate::vision::resize::resize_bicubic;
 
@@ -117,7 +118,7 @@ impl Vit {
     /// Runs the backbone on a normalised CHW image whose sides are multiples
     /// of the patch size. Returns the hidden states the neck reads, each
     /// `d × (1 + rows·cols)` channel-major with the CLS token first.
-    pub(crate) fn forward(&self, img: &[f32], h: usize, w: usize) -> Vec<Vec<f32>> {
+    pub(crate) fn forward(&self, img: &[f32], h: usize, w: usize, clock: &mut Clock) -> Vec<Vec<f32>> {
         let (p, d) = (self.patch_size, self.width());
         let (rows, cols) = (h / p, w / p);
         let np = rows * cols;
@@ -147,16 +148,18 @@ impl Vit {
                 x[c * n + 1 + t] = emb[c * np + t] + pos[(1 + t) * d + c];
             }
         }
+        clock.lap("patch embed");
         let mut stages = Vec::with_capacity(self.out_indices.len());
-        let mut keep = |i: usize, x: &[f32]| {
+        let mut keep = |i: usize, x: &[f32], clock: &mut Clock| {
             if self.out_indices.contains(&i) {
                 stages.push(if self.apply_layernorm { self.final_norm.forward(x, n) } else { x.to_vec() });
+                clock.lap("final norm");
             }
         };
-        keep(0, &x);
+        keep(0, &x, clock);
         for (i, layer) in self.layers.iter().enumerate() {
-            layer.forward(&mut x, n, self.heads);
-            keep(i + 1, &x);
+            layer.forward(&mut x, n, self.heads, clock);
+            keep(i + 1, &x, clock);
         }
         stages
     }
@@ -176,19 +179,31 @@ impl Vit {
 
 impl Layer {
     /// `x ← x + λ₁·attn(norm1 x)`, then `x ← x + λ₂·mlp(norm2 x)`, on `d × n` tokens.
-    fn forward(&self, x: &mut [f32], n: usize, heads: usize) {
+    fn forward(&self, x: &mut [f32], n: usize, heads: usize, clock: &mut Clock) {
         let d = self.scale1.len();
         let h = self.norm1.forward(x, n);
+        clock.lap("layer norm");
         let mut q = self.query.forward(&h, n);
         let scale = 1.0 / ((d / heads) as f32).sqrt();
         q.iter_mut().for_each(|v| *v *= scale);
         let (k, v) = (self.key.forward(&h, n), self.value.forward(&h, n));
-        let a = self.output.forward(&attention(&q, &k, &v, d, n, heads), n);
+        clock.lap("qkv");
+        let a = attention(&q, &k, &v, d, n, heads);
+        clock.lap("attention");
+        let a = self.output.forward(&a, n);
+        clock.lap("attention output");
         residual(x, &a, &self.scale1, n);
+        clock.lap("residual");
         let h = self.norm2.forward(x, n);
+        clock.lap("layer norm");
         let mut m = self.fc1.forward(&h, n);
+        clock.lap("mlp fc1");
         gelu_in_place(&mut m);
-        residual(x, &self.fc2.forward(&m, n), &self.scale2, n);
+        clock.lap("gelu");
+        let m = self.fc2.forward(&m, n);
+        clock.lap("mlp fc2");
+        residual(x, &m, &self.scale2, n);
+        clock.lap("residual");
     }
 }
 
