@@ -64,10 +64,38 @@ fn band_rows(k: usize, h: usize, w: usize, band_elems: usize) -> usize {
 pub(crate) fn matmul(
     dst: &mut [f32],
     dst_rs: usize,
+    lhs: (&[f32], usize, usize),
+    rhs: (&[f32], usize),
+    (m, n, k): (usize, usize, usize),
+    accumulate: bool,
+) {
+    let threads = rayon::current_num_threads();
+    let par =
+        if threads > 1 && m * n * k > 1 << 16 { gemm::Parallelism::Rayon(threads) } else { gemm::Parallelism::None };
+    gemm_strided(dst, dst_rs, lhs, rhs, (m, n, k), accumulate, par);
+}
+
+/// [`matmul`] on the calling thread only: for products that are themselves
+/// tasks of a rayon loop (the depth network's attention blocks).
+pub(crate) fn matmul_serial(
+    dst: &mut [f32],
+    dst_rs: usize,
+    lhs: (&[f32], usize, usize),
+    rhs: (&[f32], usize),
+    mnk: (usize, usize, usize),
+    accumulate: bool,
+) {
+    gemm_strided(dst, dst_rs, lhs, rhs, mnk, accumulate, gemm::Parallelism::None);
+}
+
+fn gemm_strided(
+    dst: &mut [f32],
+    dst_rs: usize,
     (lhs, lhs_rs, lhs_cs): (&[f32], usize, usize),
     (rhs, rhs_rs): (&[f32], usize),
     (m, n, k): (usize, usize, usize),
     accumulate: bool,
+    par: gemm::Parallelism,
 ) {
     if m == 0 || n == 0 || k == 0 {
         return;
@@ -75,9 +103,6 @@ pub(crate) fn matmul(
     assert!((m - 1) * dst_rs + n <= dst.len(), "matmul: dst too small");
     assert!((m - 1) * lhs_rs + (k - 1) * lhs_cs < lhs.len(), "matmul: lhs too small");
     assert!((k - 1) * rhs_rs + n <= rhs.len(), "matmul: rhs too small");
-    let threads = rayon::current_num_threads();
-    let par =
-        if threads > 1 && m * n * k > 1 << 16 { gemm::Parallelism::Rayon(threads) } else { gemm::Parallelism::None };
     // SAFETY: the asserts above keep every element gemm touches, at the
     // strides given, inside the three slices; dst is borrowed mutably, so it
     // aliases neither input.
@@ -190,8 +215,9 @@ pub(crate) fn conv_relu(
     conv_relu_banded(input, dims, weight, bias, out, scratch, BAND_ELEMS, true);
 }
 
-/// `out = conv3x3(input) + bias`, without the ReLU (the depth network's
-/// convolutions, and tests of the linearised network).
+/// `out = conv3x3(input) + bias`, without the ReLU: the reference the
+/// Winograd convolutions and the linearised network are tested against.
+#[cfg(test)]
 pub(crate) fn conv_affine(
     input: &[f32],
     dims: (usize, usize, usize),

@@ -64,7 +64,7 @@ fn conv(
 ) -> Result<Conv, DepthModelError> {
     let w = ck.take(&format!("{prefix}.weight"), &[c_out, c_in, k, k])?;
     let b = if bias { ck.take(&format!("{prefix}.bias"), &[c_out])? } else { vec![0.0; c_out] };
-    Ok(Conv { w, b, c_in, k, stride: 1, pad: k / 2 })
+    Ok(Conv::new(w, b, c_in, k, 1, k / 2))
 }
 
 fn residual(ck: &Checkpoint, prefix: &str, f: usize) -> Result<Residual, DepthModelError> {
@@ -94,9 +94,9 @@ impl Dpt {
             } else if factor == 1.0 {
                 Resize::Same
             } else {
-                let mut down = conv(ck, &format!("{r}.resize"), (c, c, 3), true)?;
-                down.stride = (1.0 / factor).round() as usize;
-                Resize::Down(down)
+                let w = ck.take(&format!("{r}.resize.weight"), &[c, c, 3, 3])?;
+                let b = ck.take(&format!("{r}.resize.bias"), &[c])?;
+                Resize::Down(Conv::new(w, b, c, 3, (1.0 / factor).round() as usize, 1))
             };
             reassemble.push(Reassemble { projection: linear(ck, &format!("{r}.projection"), c, d, true)?, resize });
             convs.push(conv(ck, &format!("neck.convs.{i}"), (f, c, 3), false)?);
