@@ -28,7 +28,7 @@ use std::path::{Path, PathBuf};
 
 pub use config::{BackboneConfig, DepthConfig};
 pub use profile::StageTimes;
-pub use resolve::{DepthModelLocations, resolve_depth_model};
+pub use resolve::{DepthModelLocations, checkpoint_digest, resolve_depth_model};
 
 use super::resize::{resize_bicubic, resize_bicubic_antialias};
 use super::style_depth::{DepthImage, StyleDepthProvider};
