@@ -229,6 +229,10 @@ pub struct DepthArgs {
     /// Forward passes at 518×518 to time (the median is printed).
     #[arg(long, default_value_t = 3)]
     pub reps: usize,
+    /// Also print the wall time of each stage of one forward at 518×518 and
+    /// one at the style's input size.
+    #[arg(long)]
+    pub stages: bool,
 }
 
 /// CPU time this process has used (user + system), from `/proc/self/stat`;
@@ -247,7 +251,7 @@ pub fn run_depth(args: DepthArgs) -> anyhow::Result<ExitCode> {
     let style_path = args.style.clone().unwrap_or_else(|| shared_dir().join("data/styles/wave.jpg"));
     let style = gast_core::session::StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
     println!("depth benchmark: style {}, {} threads", style_path.display(), rayon::current_num_threads());
-    time_style_depth(&style, args.depth_model.as_deref(), args.reps.max(1))?;
+    time_style_depth(&style, args.depth_model.as_deref(), args.reps.max(1), args.stages)?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -259,6 +263,7 @@ fn time_style_depth(
     style: &gast_core::session::StyleImage,
     explicit: Option<&std::path::Path>,
     reps: usize,
+    stages: bool,
 ) -> anyhow::Result<()> {
     use anyhow::Context;
     use gast_core::vision::depth::{DepthAnything, DepthConfig, DepthModelLocations, INPUT_SIZE, input_size};
@@ -276,9 +281,9 @@ fn time_style_depth(
     let load_s = t.elapsed().as_secs_f64();
     let (h, w) = (style.height, style.width);
     let (ih, iw) = input_size(h, w, INPUT_SIZE, model.config().patch_size);
-    let t = Instant::now();
+    let (t, c) = (Instant::now(), cpu_seconds());
     let _ = model.estimate_rgb(&style.to_f32(), h, w);
-    let per_style = t.elapsed().as_secs_f64();
+    let (per_style, per_style_cpu) = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
     let x = vec![0.25f32; 3 * INPUT_SIZE * INPUT_SIZE];
     let (walls, cpus): (Vec<f64>, Vec<f64>) = (0..reps)
         .map(|_| {
@@ -288,10 +293,19 @@ fn time_style_depth(
         })
         .unzip();
     println!(
-        "style depth (Depth Anything V2, {what}): load {load_s:.2} s; per style {per_style:.2} s ({w}×{h} image, network input {iw}×{ih}); forward at {INPUT_SIZE}×{INPUT_SIZE}: {:.2} s wall, {:.2} s CPU (medians of {reps})",
+        "style depth (Depth Anything V2, {what}): load {load_s:.2} s; per style {per_style:.2} s wall, {per_style_cpu:.2} s CPU ({w}×{h} image, network input {iw}×{ih}); forward at {INPUT_SIZE}×{INPUT_SIZE}: {:.2} s wall, {:.2} s CPU (medians of {reps})",
         median(walls),
         median(cpus)
     );
+    if stages {
+        let (_, square) = model.forward_timed(&x, INPUT_SIZE, INPUT_SIZE);
+        let (_, style_sized) = model.forward_timed(&vec![0.25f32; 3 * ih * iw], ih, iw);
+        println!("{:<24} {:>10} {:>10}", "stage (wall s)", format!("{INPUT_SIZE}×{INPUT_SIZE}"), format!("{iw}×{ih}"));
+        for (name, s) in &square.stages {
+            println!("{name:<24} {s:>10.3} {:>10.3}", style_sized.get(name));
+        }
+        println!("{:<24} {:>10.3} {:>10.3}", "total", square.total(), style_sized.total());
+    }
     Ok(())
 }
 
@@ -417,7 +431,7 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
             100.0 * (flops / gemm / 1e9) / vt.forward_s
         );
     }
-    time_style_depth(&style, args.depth_model.as_deref(), 1)?;
+    time_style_depth(&style, args.depth_model.as_deref(), 1, false)?;
     if !runs.iter().all(|r| r.device.starts_with("CPU")) {
         let ctx = gast_core::gpu::DeviceChoice::Gpu.resolve()?.context("no GPU adapter for the per-part figures")?;
         gpu_parts(&ctx, &vgg, &scene, &views[0], args.resolution as usize)?;

@@ -14,7 +14,7 @@ use gast_core::eval::{inverse_depth_change, mean_std_distance, nn_cosine_distanc
 use gast_core::gpu::DeviceChoice;
 use gast_core::io::{write_bytes, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
-use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource, StyleImage};
+use gast_core::session::{Event, Session, SessionInputs, Stage1Cache, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::{Focus, MatchMethod, Mode, StyleConfig};
 use gast_core::vision::ConvAlgo;
 use gast_core::vision::Vgg;
@@ -278,19 +278,24 @@ pub fn resolve_style_depth(
     };
     let t = Instant::now();
     let pb = progress::bytes_bar("depth model");
-    let (source, warning) =
-        StyleDepthSource::resolve(config.depth_provider, image, model, style, &mut |done, total| {
+    let cache = Stage1Cache::from_env();
+    let resolved =
+        StyleDepthSource::resolve(config.depth_provider, image, model, cache.as_ref(), style, &mut |done, total| {
             if let Some(t) = total {
                 pb.set_length(t);
             }
             pb.set_position(done);
         });
     pb.finish_and_clear();
-    if let Some(w) = warning {
+    if let Some(w) = &resolved.warning {
         eprintln!("warning: {w}");
-    } else if config.depth_provider == DepthProvider::Learned {
+    }
+    if let Some(p) = &resolved.cached {
+        eprintln!("  style depth (Depth Anything V2): from the Stage-1 cache {}", p.display());
+    } else if config.depth_provider == DepthProvider::Learned && matches!(resolved.source, StyleDepthSource::Image(_)) {
         eprintln!("  style depth (Depth Anything V2): {:.2} s", t.elapsed().as_secs_f64());
     }
+    let source = resolved.source;
     Ok(source)
 }
 

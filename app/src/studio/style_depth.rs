@@ -2,7 +2,8 @@
 //!
 //! The learned depth costs a network pass (and, the first time, a download),
 //! so the studio keeps each resolved source for the life of the process: the
-//! inspection strip and every run of the same style share one pass. The
+//! inspection strip and every run of the same style share one pass, and the
+//! pass itself is kept in the Stage-1 cache on disk for the next session. The
 //! warning that comes with a fallback to the heuristic is kept with it, so the
 //! panel can show it next to the selector.
 
@@ -10,7 +11,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{LazyLock, Mutex};
 
-use gast_core::session::{StyleDepthSource, StyleImage};
+use gast_core::session::{Stage1Cache, StyleDepthSource, StyleImage};
 use gast_core::vision::style_depth::{DepthImage, DepthProvider};
 
 /// A resolved source and the warning to show with it, if any.
@@ -33,7 +34,18 @@ pub fn source_for(style_path: &Path, style: &StyleImage, provider: DepthProvider
     }
     let resolved = match image.as_deref().map(DepthImage::from_file) {
         Some(Err(e)) => (StyleDepthSource::Heuristic, Some(format!("{e}; using the built-in heuristic depth"))),
-        read => StyleDepthSource::resolve(provider, read.and_then(Result::ok), None, style, &mut |_, _| {}),
+        read => {
+            let cache = Stage1Cache::from_env();
+            let r = StyleDepthSource::resolve(
+                provider,
+                read.and_then(Result::ok),
+                None,
+                cache.as_ref(),
+                style,
+                &mut |_, _| {},
+            );
+            (r.source, r.warning)
+        }
     };
     cache.insert(key, resolved.clone());
     resolved

@@ -9,14 +9,17 @@ mod events;
 mod prepare;
 mod run;
 mod slot;
+mod stage1_cache;
 mod worker;
 
 pub use events::{Command, Event, LossTerms, StepReport, StepTimings};
 pub use prepare::{
-    PreparedStyle, StyleDepthSource, StyleImage, ViewSurvey, prepare_style, scatter, subset, survey_views,
+    PreparedStyle, ResolvedDepth, StyleDepthSource, StyleImage, ViewSurvey, prepare_style, scatter, subset,
+    survey_views,
 };
 pub use run::{Session, SessionError, SessionInputs};
 pub use slot::Slot;
+pub use stage1_cache::{CacheOutcome, Stage1Cache, depth_key};
 pub use worker::{SessionHandle, run_loop, spawn, spawn_with};
 
 /// The newest state of the Gaussians, for viewers and exports.

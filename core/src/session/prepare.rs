@@ -1,17 +1,18 @@
 //! Preparing a run: the style image, colour matching of the scene, and setting
 //! aside the Gaussians that no optimisation camera can see.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
+use super::stage1_cache::{CacheOutcome, Stage1Cache, depth_key};
 use crate::camera::Camera;
 use crate::raster::{self, RenderOptions};
 use crate::scene::Gaussians;
 use crate::style::stage1::{StyleMaps, style_maps};
 use crate::style::step::StyleTargets;
 use crate::vision::Vgg;
-use crate::vision::depth::{DepthAnything, DepthModelError, resolve_depth_model};
+use crate::vision::depth::{DepthAnything, DepthModelError, INPUT_SIZE, checkpoint_digest, resolve_depth_model};
 use crate::vision::style_depth::{DepthImage, DepthPolarity, DepthProvider, HeuristicDepth};
 
 /// An 8-bit RGB image (the style), row-major HWC.
@@ -54,50 +55,89 @@ pub enum StyleDepthSource {
     Image(DepthImage),
 }
 
+/// What [`StyleDepthSource::resolve`] settled on.
+#[derive(Clone, Debug)]
+pub struct ResolvedDepth {
+    /// The source to use.
+    pub source: StyleDepthSource,
+    /// Why the choice could not be honoured (the heuristic is used), or a
+    /// damaged cache file that was recomputed; for the CLI and the studio to show.
+    pub warning: Option<String>,
+    /// The Stage-1 cache file the learned depth was read from, when it was.
+    pub cached: Option<PathBuf>,
+}
+
 impl StyleDepthSource {
     /// The source `provider` asks for: the learned network's estimate of
     /// `style` (its checkpoint resolved from `model`, `$GAST_DEPTH_MODEL`, the
-    /// caches, or a download reported through `progress`), the user's `image`,
-    /// or the heuristic. When the choice cannot be honoured the heuristic is
-    /// used and the second value says why, for the CLI and the studio to show.
+    /// caches, or a download reported through `progress`; the estimate read
+    /// from `cache` when it holds one, else computed and written there), the
+    /// user's `image`, or the heuristic. When the choice cannot be honoured
+    /// the heuristic is used and the warning says why.
     /// Compute this once per style: the result serves every texture scale and polarity.
     pub fn resolve(
         provider: DepthProvider,
         image: Option<DepthImage>,
         model: Option<&Path>,
+        cache: Option<&Stage1Cache>,
         style: &StyleImage,
         progress: &mut dyn FnMut(u64, Option<u64>),
-    ) -> (Self, Option<String>) {
+    ) -> ResolvedDepth {
+        let plain = |source, warning: Option<&str>| ResolvedDepth {
+            source,
+            warning: warning.map(str::to_string),
+            cached: None,
+        };
         match provider {
-            DepthProvider::Heuristic => (Self::Heuristic, None),
+            DepthProvider::Heuristic => plain(Self::Heuristic, None),
             DepthProvider::Image => match image {
-                Some(img) => (Self::Image(img), None),
-                None => (
+                Some(img) => plain(Self::Image(img), None),
+                None => plain(
                     Self::Heuristic,
-                    Some("no depth image was given for this style; using the built-in heuristic depth".into()),
+                    Some("no depth image was given for this style; using the built-in heuristic depth"),
                 ),
             },
-            DepthProvider::Learned => match learned_style_depth(style, model, progress) {
-                Ok(img) => (Self::Image(img), None),
-                Err(e) => (
-                    Self::Heuristic,
-                    Some(format!("learned style depth unavailable ({e}); using the built-in heuristic depth")),
-                ),
-            },
+            DepthProvider::Learned => {
+                let mut warnings = Vec::new();
+                match learned_style_depth(style, model, cache, progress, &mut warnings) {
+                    Ok((img, outcome)) => ResolvedDepth {
+                        source: Self::Image(img),
+                        warning: (!warnings.is_empty()).then(|| warnings.join("; ")),
+                        cached: match outcome {
+                            CacheOutcome::Hit(p) => Some(p),
+                            CacheOutcome::Computed => None,
+                        },
+                    },
+                    Err(e) => plain(
+                        Self::Heuristic,
+                        Some(&format!("learned style depth unavailable ({e}); using the built-in heuristic depth")),
+                    ),
+                }
+            }
         }
     }
 }
 
 /// Depth Anything V2's relative inverse depth of `style`, at the network's
 /// input size (near = larger); [`DepthImage`] resizes it to each texture scale.
+/// With a `cache`, read from it when it holds this style's depth for this
+/// checkpoint, else computed and written to it; what went wrong with the
+/// cache (not an error) is pushed onto `warnings`.
 pub fn learned_style_depth(
     style: &StyleImage,
     model: Option<&Path>,
+    cache: Option<&Stage1Cache>,
     progress: &mut dyn FnMut(u64, Option<u64>),
-) -> Result<DepthImage, DepthModelError> {
+    warnings: &mut Vec<String>,
+) -> Result<(DepthImage, CacheOutcome), DepthModelError> {
     let path = resolve_depth_model(model, progress)?;
-    let net = DepthAnything::load_path(&path)?;
-    Ok(net.depth_image(&style.to_f32(), style.height, style.width))
+    let compute = || {
+        let net = DepthAnything::load_path(&path)?;
+        Ok(net.depth_image(&style.to_f32(), style.height, style.width))
+    };
+    let Some(cache) = cache else { return Ok((compute()?, CacheOutcome::Computed)) };
+    let key = depth_key(style, &checkpoint_digest(&path)?, INPUT_SIZE);
+    cache.depth_or_compute(&key, compute, warnings)
 }
 
 /// The style's maps at texture scale and their features.
@@ -202,19 +242,21 @@ mod tests {
     fn depth_choice_falls_back_with_a_warning() {
         let style = StyleImage { width: 40, height: 28, rgb: (0..40 * 28 * 3).map(|i| (i * 7 % 251) as u8).collect() };
         let none = &mut |_: u64, _: Option<u64>| {};
-        let (s, w) = StyleDepthSource::resolve(DepthProvider::Heuristic, None, None, &style, none);
-        assert!(matches!(s, StyleDepthSource::Heuristic) && w.is_none());
-        let (s, w) = StyleDepthSource::resolve(DepthProvider::Image, None, None, &style, none);
-        assert!(matches!(s, StyleDepthSource::Heuristic) && w.is_some_and(|w| w.contains("no depth image")));
+        let r = StyleDepthSource::resolve(DepthProvider::Heuristic, None, None, None, &style, none);
+        assert!(matches!(r.source, StyleDepthSource::Heuristic) && r.warning.is_none());
+        let r = StyleDepthSource::resolve(DepthProvider::Image, None, None, None, &style, none);
+        assert!(
+            matches!(r.source, StyleDepthSource::Heuristic) && r.warning.is_some_and(|w| w.contains("no depth image"))
+        );
         let absent = std::env::temp_dir().join("gast-no-such-depth-model");
-        let (s, w) = StyleDepthSource::resolve(DepthProvider::Learned, None, Some(&absent), &style, none);
-        let w = w.unwrap_or_default();
-        assert!(matches!(s, StyleDepthSource::Heuristic) && w.contains("gast-no-such-depth-model"), "{w}");
+        let r = StyleDepthSource::resolve(DepthProvider::Learned, None, Some(&absent), None, &style, none);
+        let w = r.warning.unwrap_or_default();
+        assert!(matches!(r.source, StyleDepthSource::Heuristic) && w.contains("gast-no-such-depth-model"), "{w}");
         // The golden file is a complete (small, random) checkpoint with its config inside.
         let Some(p) = crate::vision::weights::tests::shared("golden/depth/depth_seed1.safetensors") else { return };
-        let (s, w) = StyleDepthSource::resolve(DepthProvider::Learned, None, Some(&p), &style, none);
-        assert!(w.is_none(), "{w:?}");
-        let StyleDepthSource::Image(img) = s else { panic!("expected the learned depth") };
+        let r = StyleDepthSource::resolve(DepthProvider::Learned, None, Some(&p), None, &style, none);
+        assert!(r.warning.is_none() && r.cached.is_none(), "{r:?}");
+        let StyleDepthSource::Image(img) = r.source else { panic!("expected the learned depth") };
         // 28 × 40 is enlarged: the scale closer to 1 brings the longer side to
         // 518 (as transformers does), the height follows, snapped to 14.
         assert_eq!((img.height, img.width), (364, 518));

@@ -60,6 +60,7 @@ fn band_rows(k: usize, h: usize, w: usize, band_elems: usize) -> usize {
 
 /// `dst[i·dst_rs + j] (+)= Σ_p lhs[i·lhs_rs + p·lhs_cs] · rhs[p·rhs_rs + j]`
 /// for `i < m, j < n, p < k`, on gemm's rayon threads.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn matmul(
     dst: &mut [f32],
     dst_rs: usize,
@@ -71,11 +72,11 @@ pub(crate) fn matmul(
     let threads = rayon::current_num_threads();
     let par =
         if threads > 1 && m * n * k > 1 << 16 { gemm::Parallelism::Rayon(threads) } else { gemm::Parallelism::None };
-    matmul_on(par, dst, dst_rs, lhs, rhs, (m, n, k), accumulate);
+    gemm_strided(dst, dst_rs, lhs, rhs, (m, n, k), accumulate, par);
 }
 
-/// [`matmul`] on the calling thread only: for callers that already share
-/// independent products out among the threads.
+/// [`matmul`] on the calling thread only: for products that are themselves
+/// tasks of a rayon loop (the depth network's attention blocks).
 pub(crate) fn matmul_serial(
     dst: &mut [f32],
     dst_rs: usize,
@@ -84,20 +85,17 @@ pub(crate) fn matmul_serial(
     mnk: (usize, usize, usize),
     accumulate: bool,
 ) {
-    matmul_on(gemm::Parallelism::None, dst, dst_rs, lhs, rhs, mnk, accumulate);
+    gemm_strided(dst, dst_rs, lhs, rhs, mnk, accumulate, gemm::Parallelism::None);
 }
 
-/// `dst[i·dst_rs + j] (+)= Σ_p lhs[i·lhs_rs + p·lhs_cs] · rhs[p·rhs_rs + j]`
-/// for `i < m, j < n, p < k`, with gemm's parallelism `par`.
-#[allow(clippy::too_many_arguments)]
-fn matmul_on(
-    par: gemm::Parallelism,
+fn gemm_strided(
     dst: &mut [f32],
     dst_rs: usize,
     (lhs, lhs_rs, lhs_cs): (&[f32], usize, usize),
     (rhs, rhs_rs): (&[f32], usize),
     (m, n, k): (usize, usize, usize),
     accumulate: bool,
+    par: gemm::Parallelism,
 ) {
     if m == 0 || n == 0 || k == 0 {
         return;
@@ -217,8 +215,9 @@ pub(crate) fn conv_relu(
     conv_relu_banded(input, dims, weight, bias, out, scratch, BAND_ELEMS, true);
 }
 
-/// `out = conv3x3(input) + bias`, without the ReLU (the depth network's
-/// convolutions, and tests of the linearised network).
+/// `out = conv3x3(input) + bias`, without the ReLU: the reference the
+/// Winograd convolutions and the linearised network are tested against.
+#[cfg(test)]
 pub(crate) fn conv_affine(
     input: &[f32],
     dims: (usize, usize, usize),

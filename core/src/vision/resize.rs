@@ -13,6 +13,8 @@
 //!
 //! All images are HWC `f32` (or `u8`) with `c` interleaved channels.
 
+use rayon::prelude::*;
+
 /// Output size of the style image for texture scale `s`: height `s`, width
 /// `floor(w · s / h)` (the reference's `int(w * (s / h))`).
 pub fn size_for_height(h: usize, w: usize, s: usize) -> (usize, usize) {
@@ -205,27 +207,29 @@ pub fn downscale_half_backward(v_out: &[f32], h: usize, w: usize, c: usize) -> V
 /// Source taps of one output sample along one axis: `(source index, weight)`.
 type Taps = Vec<Vec<(usize, f32)>>;
 
-/// Applies per-axis taps to an HWC image: columns first, then rows.
+/// Applies per-axis taps to an HWC image: columns first, then rows, each
+/// pass parallel over output rows (a style photo brought to the depth
+/// network's size is millions of pixels with a dozen taps each).
 fn resample_separable(src: &[f32], (h, w, c): (usize, usize, usize), ty: &Taps, tx: &Taps) -> Vec<f32> {
     assert_eq!(src.len(), h * w * c, "resample: image size mismatch");
     let ow = tx.len();
+    if h == 0 || w == 0 || ow == 0 || c == 0 {
+        return vec![0f32; ty.len() * ow * c];
+    }
     let mut mid = vec![0f32; h * ow * c];
-    for i in 0..h {
-        for (j, taps) in tx.iter().enumerate() {
+    mid.par_chunks_mut(ow * c).zip(src.par_chunks(w * c)).for_each(|(mid_row, src_row)| {
+        for (out, taps) in mid_row.chunks_exact_mut(c).zip(tx) {
             for &(x, wt) in taps {
-                for k in 0..c {
-                    mid[(i * ow + j) * c + k] += wt * src[(i * w + x) * c + k];
-                }
+                out.iter_mut().zip(&src_row[x * c..(x + 1) * c]).for_each(|(o, &v)| *o += wt * v);
             }
         }
-    }
+    });
     let mut out = vec![0f32; ty.len() * ow * c];
-    for (i, taps) in ty.iter().enumerate() {
-        let row = &mut out[i * ow * c..(i + 1) * ow * c];
+    out.par_chunks_mut(ow * c).zip(ty).for_each(|(row, taps)| {
         for &(y, wt) in taps {
             row.iter_mut().zip(&mid[y * ow * c..(y + 1) * ow * c]).for_each(|(o, &m)| *o += wt * m);
         }
-    }
+    });
     out
 }
 

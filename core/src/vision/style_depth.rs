@@ -123,7 +123,7 @@ pub fn style_depth_map(
 
 /// A depth image supplied by the user, resized (bilinear, as the reference
 /// resizes its estimate) to whatever style image it is asked about.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct DepthImage {
     /// Values, `height × width`, row-major, as read (8-bit and 16-bit PNGs
     /// scaled to [0, 1]).

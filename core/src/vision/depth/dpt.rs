@@ -15,6 +15,7 @@
 use super::DepthModelError;
 use super::config::DepthConfig;
 use super::ops::{Conv, ConvUp, Linear, resize_planes};
+use super::profile::Clock;
 use super::vit::linear;
 use super::weights::Checkpoint;
 use crate::vision::resize::{resize_bilinear, resize_bilinear_align_corners};
@@ -63,7 +64,7 @@ fn conv(
 ) -> Result<Conv, DepthModelError> {
     let w = ck.take(&format!("{prefix}.weight"), &[c_out, c_in, k, k])?;
     let b = if bias { ck.take(&format!("{prefix}.bias"), &[c_out])? } else { vec![0.0; c_out] };
-    Ok(Conv { w, b, c_in, k, stride: 1, pad: k / 2 })
+    Ok(Conv::new(w, b, c_in, k, 1, k / 2))
 }
 
 fn residual(ck: &Checkpoint, prefix: &str, f: usize) -> Result<Residual, DepthModelError> {
@@ -93,9 +94,9 @@ impl Dpt {
             } else if factor == 1.0 {
                 Resize::Same
             } else {
-                let mut down = conv(ck, &format!("{r}.resize"), (c, c, 3), true)?;
-                down.stride = (1.0 / factor).round() as usize;
-                Resize::Down(down)
+                let w = ck.take(&format!("{r}.resize.weight"), &[c, c, 3, 3])?;
+                let b = ck.take(&format!("{r}.resize.bias"), &[c])?;
+                Resize::Down(Conv::new(w, b, c, 3, (1.0 / factor).round() as usize, 1))
             };
             reassemble.push(Reassemble { projection: linear(ck, &format!("{r}.projection"), c, d, true)?, resize });
             convs.push(conv(ck, &format!("neck.convs.{i}"), (f, c, 3), false)?);
@@ -122,7 +123,7 @@ impl Dpt {
 
     /// Depth at `patch_size · (rows × cols)` from the backbone stages (each
     /// `d × (1 + rows·cols)`, CLS first).
-    pub(crate) fn forward(&self, stages: &[Vec<f32>], rows: usize, cols: usize) -> Vec<f32> {
+    pub(crate) fn forward(&self, stages: &[Vec<f32>], rows: usize, cols: usize, clock: &mut Clock) -> Vec<f32> {
         let n = rows * cols + 1;
         // Reassemble and bring every map to the fusion width.
         let mut maps: Vec<(Vec<f32>, usize, usize)> = Vec::with_capacity(stages.len());
@@ -141,7 +142,9 @@ impl Dpt {
                     (down.forward(&x, rows, cols), h, w)
                 }
             };
+            clock.lap("reassemble");
             maps.push((conv.forward(&x, h, w), h, w));
+            clock.lap("neck convs");
         }
         // Fusion, coarsest first.
         let f = self.fusion[0].projection.out();
@@ -162,6 +165,7 @@ impl Dpt {
                 }
             };
             x = layer.residual2.forward(&x, (f, h, w));
+            clock.lap("fusion residual units");
             let (oh, ow) = if idx + 1 < maps.len() {
                 let (_, nh, nw) = &maps[maps.len() - 2 - idx];
                 (*nh, *nw)
@@ -169,15 +173,20 @@ impl Dpt {
                 (2 * h, 2 * w)
             };
             let up = resize_planes(&x, (f, h, w), (oh, ow), resize_bilinear_align_corners);
+            clock.lap("fusion resize");
             fused = Some((layer.projection.forward(&up, oh * ow), oh, ow));
+            clock.lap("fusion projection");
         }
         let Some((x, h, w)) = fused else { return Vec::new() };
         // Head.
         let y = self.head1.forward(&x, h, w);
+        clock.lap("head conv1");
         let (oh, ow) = (rows * self.patch_size, cols * self.patch_size);
         let y = resize_planes(&y, (self.head1.c_out(), h, w), (oh, ow), resize_bilinear_align_corners);
+        clock.lap("head resize");
         let mut y = self.head2.forward(&y, oh, ow);
         y.iter_mut().for_each(|v| *v = v.max(0.0));
+        clock.lap("head conv2");
         let mut depth = self.head3.forward(&y, oh * ow);
         let scale = self.scale;
         if self.metric {
@@ -185,6 +194,7 @@ impl Dpt {
         } else {
             depth.iter_mut().for_each(|v| *v = v.max(0.0) * scale);
         }
+        clock.lap("head conv3");
         depth
     }
 }

@@ -19,6 +19,7 @@
 mod config;
 mod dpt;
 mod ops;
+mod profile;
 pub mod resolve;
 mod vit;
 mod weights;
@@ -26,11 +27,13 @@ mod weights;
 use std::path::{Path, PathBuf};
 
 pub use config::{BackboneConfig, DepthConfig};
-pub use resolve::{DepthModelLocations, resolve_depth_model};
+pub use profile::StageTimes;
+pub use resolve::{DepthModelLocations, checkpoint_digest, resolve_depth_model};
 
 use super::resize::{resize_bicubic, resize_bicubic_antialias};
 use super::style_depth::{DepthImage, StyleDepthProvider};
 use super::weights::WeightsError;
+use profile::Clock;
 use weights::Checkpoint;
 
 /// Why the depth network could not be found, fetched or read.
@@ -188,13 +191,24 @@ impl DepthAnything {
     /// The network on a normalised CHW image (`3 × h × w`, sides multiples of
     /// the patch size): the predicted depth, `h × w`.
     pub fn forward(&self, pixels: &[f32], h: usize, w: usize) -> Vec<f32> {
+        self.forward_clocked(pixels, h, w, &mut Clock::new(None))
+    }
+
+    /// [`forward`](Self::forward), also returning the wall time of each stage.
+    pub fn forward_timed(&self, pixels: &[f32], h: usize, w: usize) -> (Vec<f32>, StageTimes) {
+        let mut times = StageTimes::default();
+        let depth = self.forward_clocked(pixels, h, w, &mut Clock::new(Some(&mut times)));
+        (depth, times)
+    }
+
+    fn forward_clocked(&self, pixels: &[f32], h: usize, w: usize, clock: &mut Clock) -> Vec<f32> {
         let p = self.config.patch_size;
         assert!(
             h.is_multiple_of(p) && w.is_multiple_of(p) && pixels.len() == 3 * h * w,
             "DepthAnything::forward: bad input size"
         );
-        let stages = self.vit.forward(pixels, h, w);
-        self.dpt.forward(&stages, h / p, w / p)
+        let stages = self.vit.forward(pixels, h, w, clock);
+        self.dpt.forward(&stages, h / p, w / p, clock)
     }
 
     /// Relative inverse depth of an RGB image (HWC in [0, 1], `h × w`) at its

@@ -8,7 +8,8 @@
 
 use rayon::prelude::*;
 
-use crate::vision::conv::{conv_affine, matmul};
+use crate::vision::conv::{matmul, matmul_serial};
+use crate::vision::winograd::{WinogradKernel, winograd_conv};
 
 /// A linear layer, or equally a 1×1 convolution: `y = W x + b` on `in × n` columns.
 pub(crate) struct Linear {
@@ -32,6 +33,41 @@ impl Linear {
         matmul(&mut y, n, (&self.w, self.inp, 1), (x, n), (self.out(), n, self.inp), false);
         add_bias(&mut y, &self.b, n);
         y
+    }
+
+    /// `y += W x + b` in place (`y` is `out × n`): a residual branch's last
+    /// layer adding onto the stream without an intermediate array.
+    pub(crate) fn accumulate(&self, x: &[f32], n: usize, y: &mut [f32]) {
+        matmul(y, n, (&self.w, self.inp, 1), (x, n), (self.out(), n, self.inp), true);
+        add_bias(y, &self.b, n);
+    }
+
+    /// `GELU(W x + b)`, the bias and the activation in one pass over the output.
+    pub(crate) fn forward_gelu(&self, x: &[f32], n: usize) -> Vec<f32> {
+        let mut y = vec![0f32; self.out() * n];
+        matmul(&mut y, n, (&self.w, self.inp, 1), (x, n), (self.out(), n, self.inp), false);
+        y.par_chunks_mut(n).zip(&self.b).for_each(|(row, &bc)| row.iter_mut().for_each(|v| *v = gelu(*v + bc)));
+        y
+    }
+
+    /// The layer followed by a scale per output: `diag(s) (W x + b)`, folded into the weights.
+    pub(crate) fn scaled_rows(mut self, s: &[f32]) -> Self {
+        let inp = self.inp;
+        self.w.chunks_exact_mut(inp).zip(s).for_each(|(row, &sc)| row.iter_mut().for_each(|v| *v *= sc));
+        self.b.iter_mut().zip(s).for_each(|(b, &sc)| *b *= sc);
+        self
+    }
+
+    /// Layers on the same input stacked into one (their outputs concatenated).
+    pub(crate) fn stacked(layers: Vec<Linear>) -> Self {
+        let inp = layers.first().map_or(0, |l| l.inp);
+        let (mut w, mut b) = (Vec::new(), Vec::new());
+        for l in layers {
+            debug_assert_eq!(l.inp, inp, "Linear::stacked: input widths differ");
+            w.extend(l.w);
+            b.extend(l.b);
+        }
+        Self { w, b, inp }
     }
 }
 
@@ -76,9 +112,9 @@ impl Norm {
 }
 
 /// GELU with the exact error function, as `nn.GELU()` computes it.
-pub(crate) fn gelu_in_place(x: &mut [f32]) {
-    x.par_chunks_mut(1 << 14)
-        .for_each(|c| c.iter_mut().for_each(|v| *v = 0.5 * *v * (1.0 + erf(*v * std::f32::consts::FRAC_1_SQRT_2))));
+#[inline]
+fn gelu(v: f32) -> f32 {
+    0.5 * v * (1.0 + erf(v * std::f32::consts::FRAC_1_SQRT_2))
 }
 
 /// The error function (Abramowitz & Stegun 7.1.26, absolute error below 1.5e-7).
@@ -104,50 +140,70 @@ fn exp(x: f32) -> f32 {
     let r = (x - n * 0.693_145_75) - n * 1.428_606_8e-6;
     let p = 1.0 + r * (1.0 + r * (0.5 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0))))));
     let k = (m.to_bits() as i32).wrapping_sub(0x4B40_0000);
-    p * f32::from_bits(((k + 127) << 23) as u32)
+    p * f32::from_bits((k.wrapping_add(127) << 23) as u32)
 }
+
+/// Queries per attention block: the block's scores (`n × QUERY_BLOCK`)
+/// stay in the L2 cache between the two products and the softmax (at the
+/// wave image's 2,887 tokens, 740 KB), where a whole head's `n × n` scores
+/// (33 MB) would go through memory three times.
+const QUERY_BLOCK: usize = 64;
 
 /// Multi-head self-attention on `q`, `k`, `v` (each `d × n`, channel-major,
 /// heads in consecutive row blocks); `q` must already carry the `1/√d_head`
 /// scale. Returns the heads' outputs concatenated, `d × n`.
+///
+/// Each (head, block of queries) is one rayon task on single-threaded
+/// products: scores `Kᵀ q` (keys × queries), the softmax's max and
+/// exponentials down each column, `V · e`, and the division by the column
+/// sums applied to the `d_head × block` output rather than to the scores.
 pub(crate) fn attention(q: &[f32], k: &[f32], v: &[f32], d: usize, n: usize, heads: usize) -> Vec<f32> {
     let dh = d / heads;
+    let blocks = n.div_ceil(QUERY_BLOCK);
+    let parts: Vec<Vec<f32>> = (0..heads * blocks)
+        .into_par_iter()
+        .map_init(
+            || vec![0f32; n * QUERY_BLOCK],
+            |s, t| {
+                let (h, q0) = (t / blocks, (t % blocks) * QUERY_BLOCK);
+                let bq = QUERY_BLOCK.min(n - q0);
+                let head = h * dh * n..(h + 1) * dh * n;
+                let s = &mut s[..n * bq];
+                matmul_serial(s, bq, (&k[head.clone()], 1, n), (&q[head.start + q0..], n), (n, bq, dh), false);
+                let inv = exp_columns(s, bq);
+                let mut o = vec![0f32; dh * bq];
+                matmul_serial(&mut o, bq, (&v[head], n, 1), (s, bq), (dh, bq, n), false);
+                o.chunks_exact_mut(bq).for_each(|row| row.iter_mut().zip(&inv).for_each(|(x, &r)| *x *= r));
+                o
+            },
+        )
+        .collect();
     let mut out = vec![0f32; d * n];
-    // Scores are kept transposed (keys × queries) so both products read
-    // their operands at the strides the kernel takes.
-    let mut s = vec![0f32; n * n];
-    for h in 0..heads {
-        let rows = h * dh * n..(h + 1) * dh * n;
-        matmul(&mut s, n, (&k[rows.clone()], 1, n), (&q[rows.clone()], n), (n, n, dh), false);
-        softmax_columns(&mut s, n);
-        matmul(&mut out[rows.clone()], n, (&v[rows], n, 1), (&s, n), (dh, n, n), false);
+    for (t, o) in parts.iter().enumerate() {
+        let (h, q0) = (t / blocks, (t % blocks) * QUERY_BLOCK);
+        let bq = QUERY_BLOCK.min(n - q0);
+        for (c, row) in o.chunks_exact(bq).enumerate() {
+            out[(h * dh + c) * n + q0..][..bq].copy_from_slice(row);
+        }
     }
     out
 }
 
-/// Softmax down each column of an `n × n` array (over keys, for each query).
-fn softmax_columns(s: &mut [f32], n: usize) {
-    let combine = |f: fn(f32, f32) -> f32| {
-        move |mut acc: Vec<f32>, row: &[f32]| {
-            acc.iter_mut().zip(row).for_each(|(a, &v)| *a = f(*a, v));
-            acc
+/// The unnormalised softmax down each column of a `rows × w` array: every
+/// value becomes `exp(v − max of its column)`. Returns `1 / Σ` per column.
+fn exp_columns(s: &mut [f32], w: usize) -> Vec<f32> {
+    let mut max = vec![f32::NEG_INFINITY; w];
+    for row in s.chunks_exact(w) {
+        max.iter_mut().zip(row).for_each(|(m, &v)| *m = m.max(v));
+    }
+    let mut sum = vec![0f32; w];
+    for row in s.chunks_exact_mut(w) {
+        for ((v, &m), t) in row.iter_mut().zip(&max).zip(sum.iter_mut()) {
+            *v = exp(*v - m);
+            *t += *v;
         }
-    };
-    let merge = |f: fn(f32, f32) -> f32| {
-        move |mut a: Vec<f32>, b: Vec<f32>| {
-            a.iter_mut().zip(&b).for_each(|(x, &y)| *x = f(*x, y));
-            a
-        }
-    };
-    let max = s
-        .par_chunks(n)
-        .fold(|| vec![f32::NEG_INFINITY; n], combine(f32::max))
-        .reduce(|| vec![f32::NEG_INFINITY; n], merge(f32::max));
-    s.par_chunks_mut(n).for_each(|row| row.iter_mut().zip(&max).for_each(|(v, &m)| *v = exp(*v - m)));
-    let add = |a: f32, b: f32| a + b;
-    let sum = s.par_chunks(n).fold(|| vec![0f32; n], combine(add)).reduce(|| vec![0f32; n], merge(add));
-    let inv: Vec<f32> = sum.iter().map(|&t| 1.0 / t).collect();
-    s.par_chunks_mut(n).for_each(|row| row.iter_mut().zip(&inv).for_each(|(v, &r)| *v *= r));
+    }
+    sum.iter().map(|&t| 1.0 / t).collect()
 }
 
 /// A 2-D convolution with square kernel `k`, stride and zero padding.
@@ -164,9 +220,17 @@ pub(crate) struct Conv {
     pub stride: usize,
     /// Zero padding on every side.
     pub pad: usize,
+    /// The kernel in the Winograd domain, for the 3×3 "same" convolutions.
+    wino: Option<WinogradKernel>,
 }
 
 impl Conv {
+    /// A convolution from OIHW weights (`c_out × c_in·k·k`) and `c_out` biases.
+    pub(crate) fn new(w: Vec<f32>, b: Vec<f32>, c_in: usize, k: usize, stride: usize, pad: usize) -> Self {
+        let wino = (k == 3 && stride == 1 && pad == 1).then(|| WinogradKernel::forward(&w, b.len(), c_in));
+        Self { w, b, c_in, k, stride, pad, wino }
+    }
+
     /// Output channels.
     pub(crate) fn c_out(&self) -> usize {
         self.b.len()
@@ -181,9 +245,10 @@ impl Conv {
     pub(crate) fn forward(&self, x: &[f32], h: usize, w: usize) -> Vec<f32> {
         let (oh, ow) = self.out_size(h, w);
         let mut y = vec![0f32; self.c_out() * oh * ow];
-        if self.k == 3 && self.stride == 1 && self.pad == 1 {
-            // The banded im2col kernel VGG runs on.
-            conv_affine(x, (self.c_in, h, w), &self.w, &self.b, &mut y, &mut Vec::new());
+        if let Some(kernel) = &self.wino {
+            // Winograd F(4×4, 3×3), as VGG runs: a quarter of im2col's multiplies.
+            winograd_conv(x, (self.c_in, h, w), kernel, &mut y, &mut Vec::new());
+            add_bias(&mut y, &self.b, oh * ow);
             return y;
         }
         let rows = self.c_in * self.k * self.k;
@@ -285,39 +350,102 @@ mod tests {
         }
     }
 
-    #[test]
-    fn strided_conv_matches_a_direct_sum() {
-        let (c_in, h, w) = (2, 5, 4);
-        let x: Vec<f32> = (0..c_in * h * w).map(|i| ((i * 7) % 11) as f32 - 5.0).collect();
-        let conv = Conv {
-            w: (0..3 * c_in * 9).map(|i| ((i * 5) % 7) as f32 * 0.1 - 0.3).collect(),
-            b: vec![0.5, -1.0, 0.25],
-            c_in,
-            k: 3,
-            stride: 2,
-            pad: 1,
-        };
-        let (oh, ow) = conv.out_size(h, w);
-        assert_eq!((oh, ow), (3, 2));
-        let y = conv.forward(&x, h, w);
-        for (o, &bias) in conv.b.iter().enumerate() {
-            for oy in 0..oh {
-                for ox in 0..ow {
-                    let mut s = bias;
-                    for c in 0..c_in {
-                        for ky in 0..3 {
-                            for kx in 0..3 {
-                                let (iy, ix) = ((oy * 2 + ky) as isize - 1, (ox * 2 + kx) as isize - 1);
-                                if iy >= 0 && ix >= 0 && (iy as usize) < h && (ix as usize) < w {
-                                    s += conv.w[((o * c_in + c) * 3 + ky) * 3 + kx]
-                                        * x[(c * h + iy as usize) * w + ix as usize];
-                                }
-                            }
-                        }
+    /// `conv`'s output at `(o, oy, ox)` as the plain sum over its window.
+    fn direct(conv: &Conv, x: &[f32], h: usize, w: usize, (o, oy, ox): (usize, usize, usize)) -> f32 {
+        let (k, c_in) = (conv.k, conv.c_in);
+        let mut s = conv.b[o];
+        for c in 0..c_in {
+            for ky in 0..k {
+                for kx in 0..k {
+                    let iy = (oy * conv.stride + ky) as isize - conv.pad as isize;
+                    let ix = (ox * conv.stride + kx) as isize - conv.pad as isize;
+                    if iy >= 0 && ix >= 0 && (iy as usize) < h && (ix as usize) < w {
+                        s += conv.w[((o * c_in + c) * k + ky) * k + kx] * x[(c * h + iy as usize) * w + ix as usize];
                     }
-                    assert!((y[(o * oh + oy) * ow + ox] - s).abs() < 1e-4);
                 }
             }
+        }
+        s
+    }
+
+    #[test]
+    fn convolutions_match_a_direct_sum() {
+        // Stride 2 (im2col), and stride 1 (Winograd) at a size that is not a
+        // multiple of its 4×4 tiles.
+        for (stride, h, w, expect) in [(2, 5, 4, (3, 2)), (1, 9, 7, (9, 7))] {
+            let c_in = 2;
+            let x: Vec<f32> = (0..c_in * h * w).map(|i| ((i * 7) % 11) as f32 - 5.0).collect();
+            let conv = Conv::new(
+                (0..3 * c_in * 9).map(|i| ((i * 5) % 7) as f32 * 0.1 - 0.3).collect(),
+                vec![0.5, -1.0, 0.25],
+                c_in,
+                3,
+                stride,
+                1,
+            );
+            let (oh, ow) = conv.out_size(h, w);
+            assert_eq!((oh, ow), expect);
+            let y = conv.forward(&x, h, w);
+            for o in 0..3 {
+                for oy in 0..oh {
+                    for ox in 0..ow {
+                        let s = direct(&conv, &x, h, w, (o, oy, ox));
+                        let got = y[(o * oh + oy) * ow + ox];
+                        assert!((got - s).abs() < 1e-4, "stride {stride}: ({o}, {oy}, {ox}) {got} against {s}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn blocked_attention_matches_the_textbook_one() {
+        // Three query blocks, the last one partial; two heads.
+        let (d, n, heads) = (8, 2 * QUERY_BLOCK + 19, 2);
+        let val = |i: usize, m: usize| ((i * m) % 23) as f32 / 23.0 - 0.5;
+        let q: Vec<f32> = (0..d * n).map(|i| val(i, 7)).collect();
+        let k: Vec<f32> = (0..d * n).map(|i| val(i, 11)).collect();
+        let v: Vec<f32> = (0..d * n).map(|i| val(i, 13)).collect();
+        let out = attention(&q, &k, &v, d, n, heads);
+        let dh = d / heads;
+        let mut worst = 0f32;
+        for h in 0..heads {
+            for i in 0..n {
+                let at = |a: &[f32], c: usize, t: usize| a[(h * dh + c) * n + t];
+                let scores: Vec<f64> =
+                    (0..n).map(|j| (0..dh).map(|c| f64::from(at(&q, c, i) * at(&k, c, j))).sum()).collect();
+                let m = scores.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                let e: Vec<f64> = scores.iter().map(|s| (s - m).exp()).collect();
+                let z: f64 = e.iter().sum();
+                for c in 0..dh {
+                    let want: f64 = (0..n).map(|j| e[j] / z * f64::from(at(&v, c, j))).sum();
+                    worst = worst.max((out[(h * dh + c) * n + i] - want as f32).abs());
+                }
+            }
+        }
+        assert!(worst < 1e-5, "worst difference {worst}");
+    }
+
+    #[test]
+    fn folded_layers_equal_the_plain_ones() {
+        let lin = |seed: usize| Linear {
+            w: (0..12).map(|i| ((i * seed) % 7) as f32 - 3.0).collect(),
+            b: vec![0.5, -1.0, 2.0],
+            inp: 4,
+        };
+        let n = 5;
+        let x: Vec<f32> = (0..4 * n).map(|i| (i % 5) as f32 * 0.3 - 0.6).collect();
+        let (plain_a, plain_b) = (lin(3).forward(&x, n), lin(5).forward(&x, n));
+        let s = [2.0, 0.5, -1.0];
+        let stacked = Linear::stacked(vec![lin(3).scaled_rows(&s), lin(5)]).forward(&x, n);
+        for (i, (&a, &b)) in plain_a.iter().zip(&plain_b).enumerate() {
+            assert!((stacked[i] - a * s[i / n]).abs() < 1e-5 && (stacked[3 * n + i] - b).abs() < 1e-5);
+        }
+        let mut y = vec![1f32; 3 * n];
+        lin(3).accumulate(&x, n, &mut y);
+        let g = lin(3).forward_gelu(&x, n);
+        for (i, &a) in plain_a.iter().enumerate() {
+            assert!((y[i] - (1.0 + a)).abs() < 1e-5 && (g[i] - gelu(a)).abs() < 1e-6);
         }
     }
 }

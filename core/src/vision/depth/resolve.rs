@@ -128,3 +128,31 @@ pub fn resolve_depth_model(
 ) -> Result<PathBuf, DepthModelError> {
     DepthModelLocations::from_env(explicit).resolve(progress)
 }
+
+/// The identity of the checkpoint at `path` (a folder or a `.safetensors`
+/// file, as [`DepthAnything::load_path`](super::DepthAnything::load_path)
+/// takes): the SHA-256 of its weights file and of the `config.json` beside
+/// it, if any. Cached results computed with the network are keyed by it.
+pub fn checkpoint_digest(path: &Path) -> Result<String, DepthModelError> {
+    use sha2::{Digest, Sha256};
+    use std::io::Read;
+    let weights = if path.is_dir() { path.join("model.safetensors") } else { path.to_path_buf() };
+    let mut h = Sha256::new();
+    for file in [weights.clone(), weights.with_file_name("config.json")] {
+        if file != weights && !file.is_file() {
+            continue;
+        }
+        let io = |source| DepthModelError::Io { path: file.clone(), source };
+        let mut f = std::fs::File::open(&file).map_err(io)?;
+        let mut buf = vec![0u8; 1 << 20];
+        loop {
+            let n = f.read(&mut buf).map_err(io)?;
+            if n == 0 {
+                break;
+            }
+            h.update(&buf[..n]);
+        }
+        h.update(b"\n--\n");
+    }
+    Ok(h.finalize().iter().map(|b| format!("{b:02x}")).collect())
+}

@@ -10,22 +10,24 @@
 
 use super::DepthModelError;
 use super::config::DepthConfig;
-use super::ops::{Linear, Norm, attention, gelu_in_place};
+use super::ops::{Linear, Norm, attention};
+use super::profile::Clock;
 use super::weights::Checkpoint;
 use crate::vision::resize::resize_bicubic;
 
 /// One transformer layer.
+///
+/// The loader folds what is linear into the weights: query, key and value
+/// are one `3d × d` product whose query rows carry `1/√d_head`, and the layer
+/// scales λ₁, λ₂ multiply the rows of the attention output and of fc2, which
+/// then add onto the token stream in place.
 struct Layer {
     norm1: Norm,
-    query: Linear,
-    key: Linear,
-    value: Linear,
+    qkv: Linear,
     output: Linear,
-    scale1: Vec<f32>,
     norm2: Norm,
     fc1: Linear,
     fc2: Linear,
-    scale2: Vec<f32>,
 }
 
 /// The backbone's weights and sizes.
@@ -79,17 +81,20 @@ impl Vit {
             .map(|i| {
                 let l = format!("backbone.encoder.layer.{i}");
                 let a = format!("{l}.attention.attention");
+                let q_scale = vec![1.0 / ((d / b.num_attention_heads) as f32).sqrt(); d];
+                let scale1 = ck.take(&format!("{l}.layer_scale1.lambda1"), &[d])?;
+                let scale2 = ck.take(&format!("{l}.layer_scale2.lambda1"), &[d])?;
                 Ok(Layer {
                     norm1: norm(ck, &format!("{l}.norm1"), d, eps)?,
-                    query: linear(ck, &format!("{a}.query"), d, d, false)?,
-                    key: linear(ck, &format!("{a}.key"), d, d, false)?,
-                    value: linear(ck, &format!("{a}.value"), d, d, false)?,
-                    output: linear(ck, &format!("{l}.attention.output.dense"), d, d, false)?,
-                    scale1: ck.take(&format!("{l}.layer_scale1.lambda1"), &[d])?,
+                    qkv: Linear::stacked(vec![
+                        linear(ck, &format!("{a}.query"), d, d, false)?.scaled_rows(&q_scale),
+                        linear(ck, &format!("{a}.key"), d, d, false)?,
+                        linear(ck, &format!("{a}.value"), d, d, false)?,
+                    ]),
+                    output: linear(ck, &format!("{l}.attention.output.dense"), d, d, false)?.scaled_rows(&scale1),
                     norm2: norm(ck, &format!("{l}.norm2"), d, eps)?,
                     fc1: linear(ck, &format!("{l}.mlp.fc1"), mlp, d, false)?,
-                    fc2: linear(ck, &format!("{l}.mlp.fc2"), d, mlp, false)?,
-                    scale2: ck.take(&format!("{l}.layer_scale2.lambda1"), &[d])?,
+                    fc2: linear(ck, &format!("{l}.mlp.fc2"), d, mlp, false)?.scaled_rows(&scale2),
                 })
             })
             .collect::<Result<Vec<_>, DepthModelError>>()?;
@@ -117,7 +122,7 @@ impl Vit {
     /// Runs the backbone on a normalised CHW image whose sides are multiples
     /// of the patch size. Returns the hidden states the neck reads, each
     /// `d × (1 + rows·cols)` channel-major with the CLS token first.
-    pub(crate) fn forward(&self, img: &[f32], h: usize, w: usize) -> Vec<Vec<f32>> {
+    pub(crate) fn forward(&self, img: &[f32], h: usize, w: usize, clock: &mut Clock) -> Vec<Vec<f32>> {
         let (p, d) = (self.patch_size, self.width());
         let (rows, cols) = (h / p, w / p);
         let np = rows * cols;
@@ -147,16 +152,18 @@ impl Vit {
                 x[c * n + 1 + t] = emb[c * np + t] + pos[(1 + t) * d + c];
             }
         }
+        clock.lap("patch embed");
         let mut stages = Vec::with_capacity(self.out_indices.len());
-        let mut keep = |i: usize, x: &[f32]| {
+        let mut keep = |i: usize, x: &[f32], clock: &mut Clock| {
             if self.out_indices.contains(&i) {
                 stages.push(if self.apply_layernorm { self.final_norm.forward(x, n) } else { x.to_vec() });
+                clock.lap("final norm");
             }
         };
-        keep(0, &x);
+        keep(0, &x, clock);
         for (i, layer) in self.layers.iter().enumerate() {
-            layer.forward(&mut x, n, self.heads);
-            keep(i + 1, &x);
+            layer.forward(&mut x, n, self.heads, clock);
+            keep(i + 1, &x, clock);
         }
         stages
     }
@@ -176,26 +183,22 @@ impl Vit {
 
 impl Layer {
     /// `x ← x + λ₁·attn(norm1 x)`, then `x ← x + λ₂·mlp(norm2 x)`, on `d × n` tokens.
-    fn forward(&self, x: &mut [f32], n: usize, heads: usize) {
-        let d = self.scale1.len();
+    fn forward(&self, x: &mut [f32], n: usize, heads: usize, clock: &mut Clock) {
+        let d = self.output.out();
         let h = self.norm1.forward(x, n);
-        let mut q = self.query.forward(&h, n);
-        let scale = 1.0 / ((d / heads) as f32).sqrt();
-        q.iter_mut().for_each(|v| *v *= scale);
-        let (k, v) = (self.key.forward(&h, n), self.value.forward(&h, n));
-        let a = self.output.forward(&attention(&q, &k, &v, d, n, heads), n);
-        residual(x, &a, &self.scale1, n);
+        clock.lap("layer norm");
+        let qkv = self.qkv.forward(&h, n);
+        clock.lap("qkv");
+        let (q, kv) = qkv.split_at(d * n);
+        let a = attention(q, &kv[..d * n], &kv[d * n..], d, n, heads);
+        clock.lap("attention");
+        self.output.accumulate(&a, n, x);
+        clock.lap("attention output");
         let h = self.norm2.forward(x, n);
-        let mut m = self.fc1.forward(&h, n);
-        gelu_in_place(&mut m);
-        residual(x, &self.fc2.forward(&m, n), &self.scale2, n);
+        clock.lap("layer norm");
+        let m = self.fc1.forward_gelu(&h, n);
+        clock.lap("mlp fc1 + gelu");
+        self.fc2.accumulate(&m, n, x);
+        clock.lap("mlp fc2");
     }
-}
-
-/// `x[c, ·] += λ[c] · y[c, ·]`.
-fn residual(x: &mut [f32], y: &[f32], lambda: &[f32], n: usize) {
-    use rayon::prelude::*;
-    x.par_chunks_mut(n).zip(y.par_chunks(n)).zip(lambda).for_each(|((xr, yr), &l)| {
-        xr.iter_mut().zip(yr).for_each(|(a, &b)| *a += l * b);
-    });
 }
