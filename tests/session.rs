@@ -137,8 +137,8 @@ fn a_bad_configuration_fails_with_a_message() {
 /// session, the same views, step by step. The first step starts from the same
 /// Gaussians, so its losses agree to float rounding; the second follows one
 /// Adam update, which the first step's gradients decide on both devices.
-#[test]
-fn gpu_steps_give_the_cpu_losses() {
+/// Returns the two sessions' second-step losses.
+fn gpu_and_cpu_agree(label: &str, config: StyleConfig) -> Option<[gast_core::session::LossTerms; 2]> {
     use gast_core::gpu::DeviceChoice;
     use gast_core::session::{LossTerms, Session};
     let ctx = match DeviceChoice::Gpu.resolve() {
@@ -157,6 +157,37 @@ fn gpu_steps_give_the_cpu_losses() {
             ("reg_rotation", l.reg_rotation),
         ]
     };
+    let cpu_inputs = inputs(config)?;
+    let gpu_inputs = SessionInputs { gpu: Some(ctx.clone()), ..cpu_inputs.clone() };
+    let mut warnings = Vec::new();
+    let mut cpu = Session::prepare(cpu_inputs, &mut |_| {}).expect("CPU session");
+    let mut gpu = Session::prepare(gpu_inputs, &mut |e| {
+        if let Event::Warning(w) = e {
+            warnings.push(w)
+        }
+    })
+    .expect("GPU session");
+    assert!(warnings.is_empty(), "{label}: the GPU engine warns: {warnings:?}");
+    let mut last = None;
+    for (step, tol) in [(0, 1e-4f32), (1, 1e-3)] {
+        let a = cpu.step().expect("CPU step");
+        let b = gpu.step().unwrap_or_else(|| panic!("GPU step failed: {:?}", gpu.failure()));
+        assert_eq!((a.phase, a.view), (b.phase, b.view), "{label} step {step}: same schedule and view");
+        let mut off = Vec::new();
+        for ((name, x), (_, y)) in terms(&a.losses).into_iter().zip(terms(&b.losses)) {
+            let err = (x - y).abs() / x.abs().max(1e-6);
+            if err > tol {
+                off.push(format!("{name}: CPU {x} GPU {y} (relative {err:.1e})"));
+            }
+        }
+        assert!(off.is_empty(), "{label} step {step} ({:?}): {}", a.phase, off.join("; "));
+        last = Some([a.losses, b.losses]);
+    }
+    last
+}
+
+#[test]
+fn gpu_steps_give_the_cpu_losses() {
     for mode in [Mode::Decoupled, Mode::GeometryOnly] {
         let config = StyleConfig {
             cycles: 1,
@@ -164,28 +195,54 @@ fn gpu_steps_give_the_cpu_losses() {
             resolution: 64,
             texture_scale: 64,
             mode,
-            // The GPU engine runs the paper's whole-frame losses (focus object is CPU-only).
             focus: gast_core::style::Focus::Frame,
             ..Default::default()
         };
-        let Some(cpu_inputs) = inputs(config) else { return };
-        let gpu_inputs = SessionInputs { gpu: Some(ctx.clone()), ..cpu_inputs.clone() };
-        let mut cpu = Session::prepare(cpu_inputs, &mut |_| {}).expect("CPU session");
-        let mut gpu = Session::prepare(gpu_inputs, &mut |_| {}).expect("GPU session");
-        for (step, tol) in [(0, 1e-4f32), (1, 1e-3)] {
-            let a = cpu.step().expect("CPU step");
-            let b = gpu.step().unwrap_or_else(|| panic!("GPU step failed: {:?}", gpu.failure()));
-            assert_eq!((a.phase, a.view), (b.phase, b.view), "{mode:?} step {step}: same schedule and view");
-            let mut off = Vec::new();
-            for ((name, x), (_, y)) in terms(&a.losses).into_iter().zip(terms(&b.losses)) {
-                let err = (x - y).abs() / x.abs().max(1e-6);
-                if err > tol {
-                    off.push(format!("{name}: CPU {x} GPU {y} (relative {err:.1e})"));
-                }
-            }
-            assert!(off.is_empty(), "{mode:?} step {step} ({:?}): {}", a.phase, off.join("; "));
-        }
+        gpu_and_cpu_agree(&format!("frame {mode:?}"), config);
     }
+}
+
+/// The object focus (masked GCFM, content, TV and depth normalisation) on
+/// both devices, in a colour and a geometry step.
+#[test]
+fn gpu_object_focus_gives_the_cpu_losses() {
+    for mode in [Mode::Decoupled, Mode::GeometryOnly] {
+        let config = StyleConfig {
+            cycles: 1,
+            steps_per_cycle: 4,
+            resolution: 64,
+            texture_scale: 64,
+            mode,
+            focus: gast_core::style::Focus::Object,
+            ..Default::default()
+        };
+        gpu_and_cpu_agree(&format!("object {mode:?}"), config);
+    }
+}
+
+/// The colour floor on both devices, with a colour learning rate large
+/// enough that the first update pushes DC colours below the floor (the
+/// second step's losses show whether it was applied: without it they differ).
+#[test]
+fn gpu_colour_floor_gives_the_cpu_losses() {
+    use gast_core::session::Session;
+    let config = StyleConfig {
+        cycles: 1,
+        steps_per_cycle: 4,
+        resolution: 64,
+        texture_scale: 64,
+        mode: Mode::Decoupled,
+        color_floor: true,
+        lr: gast_core::style::config::LearningRates { color: 1.0, ..Default::default() },
+        ..Default::default()
+    };
+    let Some([floored, _]) = gpu_and_cpu_agree("colour floor", config.clone()) else { return };
+    let Some(inputs) = inputs(StyleConfig { color_floor: false, ..config }) else { return };
+    let mut free = Session::prepare(inputs, &mut |_| {}).expect("CPU session");
+    free.step().expect("step");
+    let unfloored = free.step().expect("step").losses;
+    let rel = (unfloored.total - floored.total).abs() / floored.total.abs();
+    assert!(rel > 1e-3, "the floor changes nothing here: {} vs {}", unfloored.total, floored.total);
 }
 
 /// Issue 10's options on a real scene and style: Winograd gives the reference
