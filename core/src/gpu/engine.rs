@@ -6,9 +6,9 @@
 //! sampler, colour matching, culling, Stage 1 of the style) and hands the step
 //! to a [`GpuEngine`] when it runs on the GPU. The engine holds the optimised
 //! Gaussians and the frozen colour-matched ones (`G^c`) in device buffers, the
-//! Adam states, the style's features, per-view targets (the content features
-//! and the inverse depth of `G^c`), and one [`ViewPlan`] of scratch buffers
-//! per image size. A step records, in one command encoder: render → clamp →
+//! Adam states, the style's features, per-view targets (the content features,
+//! the inverse depth and the object focus of `G^c`), and one [`ViewPlan`] of
+//! scratch buffers per image size. A step records, in one command encoder: render → clamp →
 //! 0.5× downscale; the depth map and the edge map; three VGG forwards; GCFM;
 //! content; the two VGG backwards and the image-space adjoints; TV and the
 //! depth regulariser; the rasterizer's backward; the parameter regularisers
