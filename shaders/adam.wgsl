@@ -3,7 +3,8 @@
 // Element i of the state updates params[(i / group) * stride + i % group] (and
 // the same gradient element), so one kernel serves whole arrays (group = stride
 // = 1) and the colour phase's DC coefficients inside the SH array (group 3,
-// stride = 3 × coefficients per Gaussian).
+// stride = 3 × coefficients per Gaussian). The updated value is raised to at
+// least `floor` (the colour floor; the lowest f32 when off).
 
 struct AdamParams {
     len: u32,
@@ -16,6 +17,10 @@ struct AdamParams {
     bc2_sqrt: f32,
     group: u32,
     stride: u32,
+    floor: f32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> u: AdamParams;
@@ -36,5 +41,5 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let vi = u.beta2 * v[i] + (1.0 - u.beta2) * g * g;
     m[i] = mi;
     v[i] = vi;
-    params[j] = params[j] - u.step_size * mi / (sqrt(vi) / u.bc2_sqrt + u.eps);
+    params[j] = max(params[j] - u.step_size * mi / (sqrt(vi) / u.bc2_sqrt + u.eps), u.floor);
 }

@@ -1,12 +1,18 @@
-// Content loss on features (core/src/gpu/content.rs; CPU twin: style/content.rs):
-// L = mean((f − t)²); grad += λ · 2(f − t)/n; sq holds (f − t)² for the reduction.
+// Content loss on features (core/src/gpu/content.rs; CPU twin:
+// content_loss_masked in style/content.rs): over the covered positions,
+// L = mean((f − t)²) and grad += λ · 2(f − t)/count; sq holds (f − t)²/count
+// there (0 elsewhere) for the reduction. Features are channel-major
+// (c × positions); cells is the position mask (all ones for the whole frame)
+// and counts[0] the number of covered positions (see focus.wgsl).
 
 struct ContentParams {
+    // Floats in a feature map (c × positions).
     n: u32,
-    // λ · 2 / n
-    grad_scale: f32,
+    // Feature positions (the mask's length).
+    positions: u32,
+    // λ
+    weight: f32,
     _pad0: u32,
-    _pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> u: ContentParams;
@@ -14,6 +20,8 @@ struct ContentParams {
 @group(0) @binding(2) var<storage, read> t: array<f32>;
 @group(0) @binding(3) var<storage, read_write> grad: array<f32>;
 @group(0) @binding(4) var<storage, read_write> sq: array<f32>;
+@group(0) @binding(5) var<storage, read> cells: array<f32>;
+@group(0) @binding(6) var<storage, read> counts: array<f32>;
 
 @compute @workgroup_size(256)
 fn content(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -21,7 +29,12 @@ fn content(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     if i >= u.n {
         return;
     }
-    let d = f[i] - t[i];
-    sq[i] = d * d;
-    grad[i] = grad[i] + u.grad_scale * d;
+    let covered = counts[0] * f32(u.n / u.positions);
+    var inv = 0.0;
+    if covered > 0.0 {
+        inv = 1.0 / covered;
+    }
+    let d = (f[i] - t[i]) * cells[i % u.positions];
+    sq[i] = d * d * inv;
+    grad[i] = grad[i] + u.weight * 2.0 * inv * d;
 }

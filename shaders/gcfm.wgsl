@@ -2,7 +2,10 @@
 // Features are CHW: rendered c × n (n positions), style c × m. The joint
 // scores ⟨r(x), s(y)⟩ of a chunk of rendered rows come from the GEMM; here:
 // the arg-extrema per row, the per-position cosines and coefficients, the
-// gradient, and the loss terms.
+// gradient, and the loss terms. The loss and the gradient count only the
+// positions in `cells` (1 or 0; all ones for the whole frame), averaging over
+// their number counts[0] (see focus.wgsl); the search runs for every row, and
+// the rows outside the mask are not used.
 
 struct GcfmParams {
     n: u32,
@@ -30,6 +33,16 @@ struct GcfmParams {
 @group(0) @binding(3) var<storage, read_write> matches: array<u32>;
 @group(0) @binding(4) var<storage, read> rc: array<f32>;
 @group(0) @binding(5) var<storage, read_write> out: array<f32>;
+@group(0) @binding(6) var<storage, read> cells: array<f32>;
+@group(0) @binding(7) var<storage, read> counts: array<f32>;
+
+// 1 / the number of covered positions (0 for none).
+fn inv_count() -> f32 {
+    if counts[0] > 0.0 {
+        return 1.0 / counts[0];
+    }
+    return 0.0;
+}
 
 const EPS: f32 = 1e-8;
 
@@ -92,11 +105,20 @@ fn argext(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) w
 // One thread per rendered position x of one modality: ra = rendered (c × n),
 // rb = style (c × m), rc = the style's 1/(‖s‖ + ε) (m). Writes out[4x..4x+4] =
 // (loss at x, α+, α−, β) with the gradient
-// v(x) = −α+ s(y+) + α− s(y−) + β r(x) (CPU: style/gcfm.rs modality_loss).
+// v(x) = −α+ s(y+) + α− s(y−) + β r(x) (CPU: style/gcfm.rs modality_loss);
+// all four 0 outside the mask.
 @compute @workgroup_size(256)
 fn stats(@builtin(global_invocation_id) gid: vec3<u32>) {
     let x = gid.x;
     if x >= u.n {
+        return;
+    }
+    let o = 4u * (u.modality * u.n + x);
+    if cells[x] == 0.0 {
+        out[o] = 0.0;
+        out[o + 1u] = 0.0;
+        out[o + 2u] = 0.0;
+        out[o + 3u] = 0.0;
         return;
     }
     let yb = matches[x];
@@ -110,7 +132,7 @@ fn stats(@builtin(global_invocation_id) gid: vec3<u32>) {
         dot_w = fma(v, rb[ch * u.m + yw], dot_w);
         sq = fma(v, v, sq);
     }
-    let inv_n = 1.0 / f32(u.n);
+    let inv_n = inv_count();
     let nr = sqrt(sq);
     let ar = 1.0 / (nr + EPS);
     let sb = rc[yb];
@@ -121,7 +143,6 @@ fn stats(@builtin(global_invocation_id) gid: vec3<u32>) {
     if nr > 0.0 {
         beta = inv_n * (ar * ar / nr) * (dot_b * sb - dot_w * sw);
     }
-    let o = 4u * (u.modality * u.n + x);
     out[o] = (1.0 - cos_b) + (1.0 + cos_w);
     out[o + 1u] = inv_n * sb * ar;
     out[o + 2u] = inv_n * sw * ar;
@@ -147,7 +168,7 @@ fn grad(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
 var<workgroup> partial: array<f32, 256>;
 
 // One workgroup: ra = the three modalities' stats (3 · n · 4). out[out_off + k]
-// = the loss of modality k (mean over x), out[out_off + 3] = their sum.
+// = the loss of modality k (mean over the covered x), out[out_off + 3] = their sum.
 @compute @workgroup_size(256)
 fn reduce(@builtin(local_invocation_id) lid: vec3<u32>) {
     let t = lid.x;
@@ -165,7 +186,7 @@ fn reduce(@builtin(local_invocation_id) lid: vec3<u32>) {
             }
             workgroupBarrier();
         }
-        let term = partial[0] / f32(max(u.n, 1u));
+        let term = partial[0] * inv_count();
         total += term;
         if t == 0u {
             out[u.out_off + k] = term;

@@ -12,9 +12,9 @@ struct LossParams {
     n: u32,
     // λ, applied to the gradient.
     weight: f32,
-    // TV: 1 / #horizontal differences; depth L1: 1 / n.
+    // Depth L1: 1 / n.
     kh: f32,
-    // TV: 1 / #vertical differences.
+    // Unused.
     kv: f32,
     // Parameter L2: index of its norm in `scalars`.
     norm_index: u32,
@@ -31,9 +31,12 @@ fn flat_index(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return gid.x + gid.y * nwg.x * 256u;
 }
 
-// TV = (mean(Δ_h²) + mean(Δ_v²)) / 2 over an HWC image; each value's
-// gradient gathers the differences it takes part in (no scatter, no atomics).
-// scratch: [Δ_h² · kh/2 | Δ_v² · kv/2], 2n values summing to the loss.
+// TV = (mean(Δ_h²) + mean(Δ_v²)) / 2 over an HWC image, the means over the
+// differences whose two pixels are both covered: x_ref is the pixel mask
+// (h × w, 1 or 0; all ones for the whole frame) and scalars the focus's
+// counts ([1] horizontal, [2] vertical covered pairs, see focus.wgsl). Each
+// value's gradient gathers the differences it takes part in (no scatter, no
+// atomics). scratch: [Δ_h² · kh/2 | Δ_v² · kv/2], 2n values summing to the loss.
 @compute @workgroup_size(256)
 fn tv(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let e = flat_index(gid, nwg);
@@ -41,31 +44,41 @@ fn tv(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nw
         return;
     }
     let wc = u.w * u.c;
-    let j = (e / u.c) % u.w;
-    let i = e / wc;
+    let p = e / u.c;
+    let j = p % u.w;
+    let i = p / u.w;
+    let m = x_ref[p];
+    var kh = 0.0;
+    var kv = 0.0;
+    if scalars[1] > 0.0 {
+        kh = 1.0 / (scalars[1] * f32(u.c));
+    }
+    if scalars[2] > 0.0 {
+        kv = 1.0 / (scalars[2] * f32(u.c));
+    }
     let v = x[e];
     var g = 0.0;
     var sh = 0.0;
     var sv = 0.0;
     if i > 0u {
-        g = g + u.kv * (v - x[e - wc]);
+        g = g + kv * m * x_ref[p - u.w] * (v - x[e - wc]);
     }
     if j > 0u {
-        g = g + u.kh * (v - x[e - u.c]);
+        g = g + kh * m * x_ref[p - 1u] * (v - x[e - u.c]);
     }
     if j + 1u < u.w {
-        let d = x[e + u.c] - v;
-        g = g - u.kh * d;
+        let d = (x[e + u.c] - v) * m * x_ref[p + 1u];
+        g = g - kh * d;
         sh = d * d;
     }
     if i + 1u < u.h {
-        let d = x[e + wc] - v;
-        g = g - u.kv * d;
+        let d = (x[e + wc] - v) * m * x_ref[p + u.w];
+        g = g - kv * d;
         sv = d * d;
     }
     grad[e] = grad[e] + u.weight * g;
-    scratch[e] = sh * (0.5 * u.kh);
-    scratch[u.n + e] = sv * (0.5 * u.kv);
+    scratch[e] = sh * (0.5 * kh);
+    scratch[u.n + e] = sv * (0.5 * kv);
 }
 
 // Depth L1 = mean|D − D^c|, subgradient sign(D − D^c) / n (0 on equality).

@@ -18,7 +18,8 @@ struct ReduceParams {
     sqrt_result: u32,
     // The result is multiplied by this (after the square root).
     scale: f32,
-    _pad0: u32,
+    // Lane 0 starts at input[in_offset].
+    in_offset: u32,
     _pad1: u32,
 }
 
@@ -52,7 +53,7 @@ fn tree(l: u32) {
 @compute @workgroup_size(256)
 fn partial(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {
     let lane = wid.y;
-    let base = lane * u.len;
+    let base = u.in_offset + lane * u.len;
     // Min and max start from the lane's first element (a neutral value that
     // needs no infinity); sums from zero.
     var acc = 0.0;

@@ -137,8 +137,8 @@ fn a_bad_configuration_fails_with_a_message() {
 /// session, the same views, step by step. The first step starts from the same
 /// Gaussians, so its losses agree to float rounding; the second follows one
 /// Adam update, which the first step's gradients decide on both devices.
-#[test]
-fn gpu_steps_give_the_cpu_losses() {
+/// Returns the CPU and GPU sessions after those two steps.
+fn gpu_and_cpu_agree(label: &str, config: StyleConfig) -> Option<[gast_core::session::Session; 2]> {
     use gast_core::gpu::DeviceChoice;
     use gast_core::session::{LossTerms, Session};
     let ctx = match DeviceChoice::Gpu.resolve() {
@@ -157,6 +157,35 @@ fn gpu_steps_give_the_cpu_losses() {
             ("reg_rotation", l.reg_rotation),
         ]
     };
+    let cpu_inputs = inputs(config)?;
+    let gpu_inputs = SessionInputs { gpu: Some(ctx.clone()), ..cpu_inputs.clone() };
+    let mut warnings = Vec::new();
+    let mut cpu = Session::prepare(cpu_inputs, &mut |_| {}).expect("CPU session");
+    let mut gpu = Session::prepare(gpu_inputs, &mut |e| {
+        if let Event::Warning(w) = e {
+            warnings.push(w)
+        }
+    })
+    .expect("GPU session");
+    assert!(warnings.is_empty(), "{label}: the GPU engine warns: {warnings:?}");
+    for (step, tol) in [(0, 1e-4f32), (1, 1e-3)] {
+        let a = cpu.step().expect("CPU step");
+        let b = gpu.step().unwrap_or_else(|| panic!("GPU step failed: {:?}", gpu.failure()));
+        assert_eq!((a.phase, a.view), (b.phase, b.view), "{label} step {step}: same schedule and view");
+        let mut off = Vec::new();
+        for ((name, x), (_, y)) in terms(&a.losses).into_iter().zip(terms(&b.losses)) {
+            let err = (x - y).abs() / x.abs().max(1e-6);
+            if err > tol {
+                off.push(format!("{name}: CPU {x} GPU {y} (relative {err:.1e})"));
+            }
+        }
+        assert!(off.is_empty(), "{label} step {step} ({:?}): {}", a.phase, off.join("; "));
+    }
+    Some([cpu, gpu])
+}
+
+#[test]
+fn gpu_steps_give_the_cpu_losses() {
     for mode in [Mode::Decoupled, Mode::GeometryOnly] {
         let config = StyleConfig {
             cycles: 1,
@@ -164,27 +193,10 @@ fn gpu_steps_give_the_cpu_losses() {
             resolution: 64,
             texture_scale: 64,
             mode,
-            // The GPU engine runs the paper's whole-frame losses (focus object is CPU-only).
             focus: gast_core::style::Focus::Frame,
             ..Default::default()
         };
-        let Some(cpu_inputs) = inputs(config) else { return };
-        let gpu_inputs = SessionInputs { gpu: Some(ctx.clone()), ..cpu_inputs.clone() };
-        let mut cpu = Session::prepare(cpu_inputs, &mut |_| {}).expect("CPU session");
-        let mut gpu = Session::prepare(gpu_inputs, &mut |_| {}).expect("GPU session");
-        for (step, tol) in [(0, 1e-4f32), (1, 1e-3)] {
-            let a = cpu.step().expect("CPU step");
-            let b = gpu.step().unwrap_or_else(|| panic!("GPU step failed: {:?}", gpu.failure()));
-            assert_eq!((a.phase, a.view), (b.phase, b.view), "{mode:?} step {step}: same schedule and view");
-            let mut off = Vec::new();
-            for ((name, x), (_, y)) in terms(&a.losses).into_iter().zip(terms(&b.losses)) {
-                let err = (x - y).abs() / x.abs().max(1e-6);
-                if err > tol {
-                    off.push(format!("{name}: CPU {x} GPU {y} (relative {err:.1e})"));
-                }
-            }
-            assert!(off.is_empty(), "{mode:?} step {step} ({:?}): {}", a.phase, off.join("; "));
-        }
+        gpu_and_cpu_agree(&format!("frame {mode:?}"), config);
     }
 }
 
@@ -232,6 +244,77 @@ fn a_gpu_worker_shares_its_buffers_and_counts_its_steps() {
     let on_device = live.gaussians().download(&ctx).expect("read back");
     assert_eq!(on_device, gast_core::session::subset(&result.gaussians, live.keep()));
     assert_ne!(on_device, gast_core::session::subset(live.base(), live.keep()), "the steps changed nothing");
+
+/// The object focus (masked GCFM, content, TV and depth normalisation) on
+/// both devices, in colour and in geometry steps (four steps of `Decoupled`
+/// would all be geometry steps at the default ratio).
+#[test]
+fn gpu_object_focus_gives_the_cpu_losses() {
+    for mode in [Mode::ColorOnly, Mode::GeometryOnly] {
+        let config = StyleConfig {
+            cycles: 1,
+            steps_per_cycle: 4,
+            resolution: 64,
+            texture_scale: 64,
+            mode,
+            focus: gast_core::style::Focus::Object,
+            ..Default::default()
+        };
+        gpu_and_cpu_agree(&format!("object {mode:?}"), config);
+    }
+}
+
+/// The colour floor on both devices, with a colour learning rate large
+/// enough that the first updates push DC colours below the floor: after two
+/// colour steps both devices hold the same DC coefficients, none below the
+/// floor and some exactly on it (where the projection put them).
+#[test]
+fn gpu_colour_floor_gives_the_cpu_losses() {
+    use gast_core::style::DC_FLOOR;
+    let config = StyleConfig {
+        cycles: 1,
+        steps_per_cycle: 4,
+        resolution: 64,
+        texture_scale: 64,
+        mode: Mode::ColorOnly,
+        focus: gast_core::style::Focus::Frame,
+        color_floor: true,
+        lr: gast_core::style::config::LearningRates { color: 1.0, ..Default::default() },
+        ..Default::default()
+    };
+    let Some([cpu, gpu]) = gpu_and_cpu_agree("colour floor", config) else { return };
+    let dc = |g: &gast_core::Gaussians| -> Vec<f32> {
+        let k = g.sh_coeffs() * 3;
+        (0..g.len()).flat_map(|i| g.sh[i * k..i * k + 3].to_vec()).collect()
+    };
+    // The optimised Gaussians are those whose DC changed (the floor raises
+    // even those without a gradient); the rest of the scene keeps its colours.
+    let (a, b, before) = (dc(&cpu.result()), dc(&gpu.result()), dc(cpu.colour_matched()));
+    let on = |v: &[f32]| v.iter().filter(|&&x| x == DC_FLOOR).count();
+    let moved: Vec<usize> = (0..a.len()).filter(|&i| a[i] != before[i] || b[i] != before[i]).collect();
+    assert!(moved.len() > a.len() / 10, "only {} of {} DC coefficients moved", moved.len(), a.len());
+    let below = moved.iter().filter(|&&i| a[i] < DC_FLOOR || b[i] < DC_FLOOR).count();
+    assert_eq!(below, 0, "updated DC coefficients below the floor");
+    assert!(on(&a) > 0 && on(&b) > 0, "the floor did not engage: CPU {} GPU {} on it", on(&a), on(&b));
+    // Adam's first steps move each coefficient by about ±lr whatever the
+    // gradient's size, so a gradient near 0 may step either way on the two
+    // devices: a few coefficients may differ, not more.
+    let apart = a.iter().zip(&b).filter(|(x, y)| (*x - *y).abs() > 1e-3).count();
+    assert!(
+        apart * 100 <= a.len(),
+        "{apart} of {} DC coefficients differ between CPU and GPU; {} and {} on the floor",
+        a.len(),
+        on(&a),
+        on(&b)
+    );
+    println!(
+        "colour floor: {} DC coefficients moved, on the floor CPU {} GPU {}, {apart} apart by more than 1e-3",
+        moved.len(),
+        on(&a),
+        on(&b)
+    );
+    let (fa, fb) = (on(&a) as f64, on(&b) as f64);
+    assert!((fa - fb).abs() <= 0.02 * fa.max(fb), "CPU {fa} and GPU {fb} coefficients on the floor");
 }
 
 /// Issue 10's options on a real scene and style: Winograd gives the reference

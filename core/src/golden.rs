@@ -351,7 +351,7 @@ fn check_losses(file: &GoldenFile, ctx: &CheckContext) -> Result<Vec<OutputCheck
     let run = |with_content: bool, weights: LossWeights, depth_grad: bool| match &gpu {
         Some((c, k)) => {
             let content = with_content.then_some(content_rgb.as_slice());
-            crate::gpu::step_loss_gpu(c, k, &style, maps, content, None, &weights, depth_grad)
+            crate::gpu::step_loss_gpu(c, k, &style, maps, content, None, &weights, depth_grad, None)
                 .map_err(|e| run_err(format!("GPU: {e}")))
         }
         None => Ok(step_loss(&vgg, &style, maps, with_content.then_some(&content), None, &weights, depth_grad)),

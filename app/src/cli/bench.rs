@@ -193,11 +193,14 @@ pub struct StepArgs {
     /// Run the same steps on the CPU and on the GPU (any adapter) in this process and print the ratio.
     #[arg(long)]
     pub compare: bool,
-    /// Where GCFM, content and TV look, in every run of the benchmark: frame (every pixel, the
-    /// paper), object (the pixels the scene covers), auto (object when the scene covers less than
-    /// half of the views).
+    /// Which pixels the losses average over: frame, object or auto (auto: the object when it
+    /// covers less than half of the views).
     #[arg(long, default_value = "auto")]
     pub focus: gast_core::style::Focus,
+    /// Run the same steps on --device twice in this process, with the losses over the whole
+    /// frame and focused on the object, and print what the focus costs.
+    #[arg(long, conflicts_with = "compare")]
+    pub compare_focus: bool,
     /// Depth Anything V2 checkpoint for the style depth line (else $GAST_DEPTH_MODEL or the
     /// caches; never downloaded here).
     #[arg(long)]
@@ -377,6 +380,15 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         None if args.full => schedule.total_steps(),
         None => schedule.color_steps + args.geometry_steps,
     };
+    if args.compare_focus {
+        return compare_focus(
+            &args,
+            &StepInputs { scene_path, scene, style_path, style, vgg },
+            &views,
+            &config,
+            budget,
+        );
+    }
     let devices: Vec<DeviceChoice> =
         if args.compare { vec![DeviceChoice::Cpu, DeviceChoice::Gpu] } else { vec![args.device] };
     let mut runs = Vec::new();
@@ -472,6 +484,46 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     }
     let (peak, rss) = memory_mib();
     println!("memory: peak resident {peak:.0} MiB, now {rss:.0} MiB");
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `gast bench step --compare-focus`: the same steps on one device with the
+/// losses over the whole frame, then focused on the object, and the ratio of
+/// their per-phase medians.
+fn compare_focus(
+    args: &StepArgs,
+    inputs: &StepInputs,
+    views: &[Camera],
+    config: &gast_core::style::StyleConfig,
+    budget: u32,
+) -> anyhow::Result<ExitCode> {
+    use gast_core::style::Focus;
+    let mut runs = Vec::new();
+    for focus in [Focus::Frame, Focus::Object] {
+        println!("\nfocus {focus:?}:");
+        let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
+        let config = gast_core::style::StyleConfig { focus, ..config.clone() };
+        runs.push(time_steps(&inputs.scene, views, &inputs.style, &inputs.vgg, &config, gpu, budget)?);
+    }
+    let [frame, object] = &runs[..] else { return Ok(ExitCode::FAILURE) };
+    println!("\nframe against object focus on {}, the same {} steps in one process:", frame.device, frame.steps);
+    for (phase, frame_ms) in &frame.per_phase {
+        if let Some((_, object_ms)) = object.per_phase.iter().find(|p| p.0 == *phase) {
+            println!(
+                "  {:<9} step median: frame {:>9.2} ms, object {:>9.2} ms, object/frame {:.3}",
+                format!("{phase:?}").to_lowercase(),
+                frame_ms,
+                object_ms,
+                object_ms / frame_ms.max(1e-9)
+            );
+        }
+    }
+    println!(
+        "  whole run: frame {:.2} s, object {:.2} s, object/frame {:.3}",
+        frame.wall_s,
+        object.wall_s,
+        object.wall_s / frame.wall_s.max(1e-9)
+    );
     Ok(ExitCode::SUCCESS)
 }
 

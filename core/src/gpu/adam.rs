@@ -1,5 +1,7 @@
 //! Adam on the GPU (`shaders/adam.wgsl`): one instance per parameter group and
 //! phase, as [`crate::style::adam::Adam`] on the CPU, whose numbers it repeats.
+//! An optional floor projects the updated parameters (the colour floor,
+//! [`crate::style::StyleConfig::color_floor`]) in the same pass.
 
 use super::{Bind, GpuContext, Kernel};
 use crate::style::adam::AdamConfig;
@@ -19,8 +21,13 @@ struct AdamParams {
     bc2_sqrt: f32,
     group: u32,
     stride: u32,
+    floor: f32,
+    _pad: [u32; 3],
 }
-const _: () = assert!(std::mem::size_of::<AdamParams>() == 32);
+const _: () = assert!(std::mem::size_of::<AdamParams>() == 48);
+
+/// The floor that lets every value through.
+const NO_FLOOR: f32 = f32::MIN;
 
 /// Adam state for one flat parameter buffer, on the device.
 #[derive(Debug)]
@@ -30,6 +37,7 @@ pub struct GpuAdam {
     step: u32,
     group: u32,
     stride: u32,
+    floor: f32,
     m: wgpu::Buffer,
     v: wgpu::Buffer,
     uniform: wgpu::Buffer,
@@ -69,10 +77,17 @@ impl GpuAdam {
             step: 0,
             group: group.max(1),
             stride: stride.max(1),
+            floor: NO_FLOOR,
             m: ctx.upload("adam.m", &zeros),
             v: ctx.upload("adam.v", &zeros),
             uniform: ctx.uniform("adam.params", &AdamParams::zeroed()),
         }
+    }
+
+    /// From the next step on, raises every updated parameter to at least
+    /// `floor` after the update (`None`: no floor).
+    pub fn set_floor(&mut self, floor: Option<f32>) {
+        self.floor = floor.unwrap_or(NO_FLOOR);
     }
 
     /// Steps taken so far.
@@ -102,6 +117,8 @@ impl GpuAdam {
             bc2_sqrt: (1.0 - beta2.powi(t)).sqrt(),
             group: self.group,
             stride: self.stride,
+            floor: self.floor,
+            _pad: [0; 3],
         };
         // The uniform is written before the encoder is submitted; one buffer per
         // state is enough because each state steps at most once per submission.
@@ -168,6 +185,42 @@ mod tests {
             for k in 0..12 {
                 let want = if k < 3 { dc[i * 3 + k] } else { sh[i * 12 + k] };
                 assert!((out[i * 12 + k] - want).abs() < 1e-6, "gaussian {i} coefficient {k}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_floor_projects_the_updated_dc_only() {
+        // The colour floor's setting: DC of 4 coefficients × 3 channels, some pushed below the floor.
+        let ctx = ctx();
+        let kernel = AdamKernel::new(ctx);
+        let (n, stride) = (50usize, 12u32);
+        let floor = crate::style::DC_FLOOR;
+        let sh: Vec<f32> = noise(n * 12, 5).iter().map(|v| v * 2.0).collect();
+        let grads_full: Vec<f32> = noise(n * 12, 6).iter().map(|v| v + 0.5).collect();
+        let params = ctx.upload("sh", &sh);
+        let grads = ctx.upload("v_sh", &grads_full);
+        let mut gpu = GpuAdam::strided(ctx, n * 3, 3, stride, AdamConfig::default());
+        let mut cpu = Adam::new(n * 3, AdamConfig::default());
+        let mut dc: Vec<f32> = (0..n).flat_map(|i| sh[i * 12..i * 12 + 3].to_vec()).collect();
+        let v_dc: Vec<f32> = (0..n).flat_map(|i| grads_full[i * 12..i * 12 + 3].to_vec()).collect();
+        for (s, on) in [true, false, true].into_iter().enumerate() {
+            gpu.set_floor(on.then_some(floor));
+            let mut enc = ctx.encoder("adam floor");
+            gpu.step(ctx, &kernel, &mut enc, &params, &grads, 0.5);
+            ctx.submit(enc);
+            cpu.step(&mut dc, &v_dc, 0.5);
+            if on {
+                dc.iter_mut().for_each(|v| *v = v.max(floor));
+            }
+            let out: Vec<f32> = ctx.read(&params).expect("read back");
+            let clamped = dc.iter().filter(|&&v| v == floor).count();
+            assert!(!on || clamped > 0, "step {s}: the test pushes some DC below the floor");
+            for i in 0..n {
+                for k in 0..12 {
+                    let want = if k < 3 { dc[i * 3 + k] } else { sh[i * 12 + k] };
+                    assert!((out[i * 12 + k] - want).abs() < 1e-5, "step {s} gaussian {i} coefficient {k}");
+                }
             }
         }
     }

@@ -1,10 +1,12 @@
 //! The content loss on the GPU (`shaders/content.wgsl`): the mean squared
 //! difference between the render's features and the colour-matched scene's
-//! from the same view, as [`crate::style::content::content_loss`].
+//! from the same view, as [`crate::style::content::content_loss_masked`]:
+//! over the feature positions a [`GpuFocus`] covers (every one for the frame),
+//! whose count the kernel reads from the device.
 
 use std::sync::Arc;
 
-use super::{Bind, GpuContext, GpuError, Kernel, ReduceKernels, ReduceOp, ReduceSpec, Reduction};
+use super::{Bind, GpuContext, GpuError, GpuFocus, Kernel, ReduceKernels, ReduceOp, ReduceSpec, Reduction};
 
 /// Threads per workgroup in `content.wgsl`.
 const WORKGROUP: u32 = 256;
@@ -14,8 +16,9 @@ const WORKGROUP: u32 = 256;
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 struct ContentParams {
     n: u32,
-    grad_scale: f32,
-    _pad: [u32; 2],
+    positions: u32,
+    weight: f32,
+    _pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<ContentParams>() == 16);
 
@@ -24,60 +27,67 @@ const _: () = assert!(std::mem::size_of::<ContentParams>() == 16);
 pub struct ContentLoss {
     kernel: Kernel,
     n: usize,
+    positions: usize,
     uniform: wgpu::Buffer,
     sq: wgpu::Buffer,
     reduction: Reduction,
 }
 
 impl ContentLoss {
-    /// Plans the loss over `n` features with weight `weight`, its unweighted
-    /// value going to `scalars[loss_offset]`.
+    /// Plans the loss over `n`-float feature maps of `positions` positions
+    /// (channel-major) with weight `weight`, its unweighted value going to
+    /// `scalars[loss_offset]`.
     pub fn new(
         ctx: &GpuContext,
         reduce: &Arc<ReduceKernels>,
         n: usize,
+        positions: usize,
         weight: f32,
         loss_offset: usize,
     ) -> Result<Self, GpuError> {
-        let inv = if n > 0 { (1.0 / n as f64) as f32 } else { 0.0 };
+        let positions = positions.max(1);
         let kernel = Kernel::new(
             ctx,
             "content",
             include_str!("../../../shaders/content.wgsl"),
             "content",
-            &[Bind::Uniform, Bind::Read, Bind::Read, Bind::ReadWrite, Bind::ReadWrite],
+            &[Bind::Uniform, Bind::Read, Bind::Read, Bind::ReadWrite, Bind::ReadWrite, Bind::Read, Bind::Read],
         );
         Ok(Self {
             kernel,
             n,
-            uniform: ctx.uniform("content.params", &Self::params(n, weight)),
+            positions,
+            uniform: ctx.uniform("content.params", &Self::params(n, positions, weight)),
             sq: ctx.zeros("content.sq", n),
-            reduction: Reduction::new(ctx, reduce, ReduceSpec::new(ReduceOp::Sum, n).to(loss_offset).scaled(inv))?,
+            reduction: Reduction::new(ctx, reduce, ReduceSpec::new(ReduceOp::Sum, n).to(loss_offset))?,
         })
     }
 
-    fn params(n: usize, weight: f32) -> ContentParams {
-        let scale = if n > 0 { (2.0 / n as f64) as f32 } else { 0.0 };
-        ContentParams { n: n as u32, grad_scale: weight * scale, _pad: [0; 2] }
+    fn params(n: usize, positions: usize, weight: f32) -> ContentParams {
+        ContentParams { n: n as u32, positions: positions as u32, weight, _pad: 0 }
     }
 
     /// Changes λ (from the next submission on).
     pub fn set_weight(&self, ctx: &GpuContext, weight: f32) {
-        ctx.queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&Self::params(self.n, weight)));
+        ctx.queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&Self::params(self.n, self.positions, weight)));
     }
 
-    /// Records `v_features += λ·2(f − t)/n` and `scalars[loss_offset] = mean((f − t)²)`.
+    /// Records, over the positions `focus` covers, `v_features += λ·2(f − t)/count`
+    /// and `scalars[loss_offset] = mean((f − t)²)` (`count` = covered positions × channels).
+    #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
         features: &wgpu::Buffer,
         target: &wgpu::Buffer,
+        focus: &GpuFocus,
         v_features: &wgpu::Buffer,
         scalars: &wgpu::Buffer,
     ) {
         let groups = Kernel::groups_1d(self.n, WORKGROUP);
-        self.kernel.dispatch(ctx, encoder, &[&self.uniform, features, target, v_features, &self.sq], groups);
+        let b = [&self.uniform, features, target, v_features, &self.sq, focus.cells(), focus.counts()];
+        self.kernel.dispatch(ctx, encoder, &b, groups);
         self.reduction.record(ctx, encoder, &self.sq, scalars);
     }
 }
@@ -86,26 +96,44 @@ impl ContentLoss {
 mod tests {
     use super::*;
     use crate::gpu::test_util::{ctx, noise};
-    use crate::style::content::content_loss;
+    use crate::style::content::content_loss_masked;
+
+    /// A mask's focus: its cells uploaded, the pixel mask unused (1 × 1).
+    fn focus_of(ctx: &GpuContext, cells: &[bool]) -> GpuFocus {
+        let f = GpuFocus::frame(ctx, 1, 1, cells.len(), 1);
+        let on: Vec<f32> = cells.iter().map(|&v| f32::from(u8::from(v))).collect();
+        ctx.write(f.cells(), &on);
+        ctx.write(f.counts(), &[on.iter().sum::<f32>(), 0.0, 0.0, 0.0]);
+        f
+    }
 
     #[test]
     fn matches_the_cpu_content_loss_and_accumulates() {
         let ctx = ctx();
         let reduce = ReduceKernels::new(ctx);
-        for n in [1usize, 777, 70_001] {
+        for (c, positions, masked) in
+            [(1usize, 1usize, false), (7, 111, false), (11, 6_364, false), (7, 111, true), (11, 6_364, true)]
+        {
+            let n = c * positions;
             let (f, t, g0) = (noise(n, 1), noise(n, 2), noise(n, 3));
-            let loss = ContentLoss::new(ctx, &reduce, n, 0.5, 3).expect("plan");
+            let cells: Vec<bool> = noise(positions, 4).iter().map(|&v| !masked || v > 0.2).collect();
+            let loss = ContentLoss::new(ctx, &reduce, n, positions, 0.5, 3).expect("plan");
             let (fb, tb, gb) = (ctx.upload("f", &f), ctx.upload("t", &t), ctx.upload("g", &g0));
+            let focus = focus_of(ctx, &cells);
             let scalars = ctx.upload("scalars", &noise(8, 4));
+            ctx.write(&loss.sq, &noise(n, 5));
             let mut enc = ctx.encoder("content test");
-            loss.record(ctx, &mut enc, &fb, &tb, &gb, &scalars);
+            loss.record(ctx, &mut enc, &fb, &tb, &focus, &gb, &scalars);
             ctx.submit(enc);
-            let (want, grad) = content_loss(&f, &t);
+            let (want, grad) = content_loss_masked(&f, &t, masked.then_some(cells.as_slice()));
             let got: Vec<f32> = ctx.read(&scalars).expect("scalars");
             assert!((got[3] - want).abs() <= 1e-5 * want.abs().max(1e-6), "n {n}: {} vs {want}", got[3]);
             let g: Vec<f32> = ctx.read(&gb).expect("grad");
             let worst = (0..n).map(|i| (g[i] - (g0[i] + 0.5 * grad[i])).abs()).fold(0.0f32, f32::max);
             assert!(worst < 1e-6, "n {n}: gradient off by {worst}");
+            for i in (0..n).filter(|i| !cells[i % positions]) {
+                assert_eq!(g[i], g0[i], "n {n}: element {i} is outside the mask");
+            }
         }
     }
 }

@@ -6,9 +6,9 @@
 //! sampler, colour matching, culling, Stage 1 of the style) and hands the step
 //! to a [`GpuEngine`] when it runs on the GPU. The engine holds the optimised
 //! Gaussians and the frozen colour-matched ones (`G^c`) in device buffers, the
-//! Adam states, the style's features, per-view targets (the content features
-//! and the inverse depth of `G^c`), and one [`ViewPlan`] of scratch buffers
-//! per image size. A step records, in one command encoder: render → clamp →
+//! Adam states, the style's features, per-view targets (the content features,
+//! the inverse depth and the object focus of `G^c`), and one [`ViewPlan`] of
+//! scratch buffers per image size. A step records, in one command encoder: render → clamp →
 //! 0.5× downscale; the depth map and the edge map; three VGG forwards; GCFM;
 //! content; the two VGG backwards and the image-space adjoints; TV and the
 //! depth regulariser; the rasterizer's backward; the parameter regularisers
@@ -19,7 +19,9 @@ use std::collections::HashMap;
 
 use super::adam::AdamKernel;
 use super::step_loss::{StepLossKernels, StepLossPlan, slot};
-use super::{GpuAdam, GpuContext, GpuError, GpuGaussians, GpuGrads, GpuRaster, GpuStyle, RasterKernels, RefLoss};
+use super::{
+    GpuAdam, GpuContext, GpuError, GpuFocus, GpuGaussians, GpuGrads, GpuRaster, GpuStyle, RasterKernels, RefLoss,
+};
 use crate::camera::Camera;
 use crate::raster::RenderOptions;
 use crate::scene::Gaussians;
@@ -50,6 +52,9 @@ struct ViewPlan {
 struct ViewTarget {
     content: wgpu::Buffer,
     inv_depth: wgpu::Buffer,
+    /// What `G^c` covers from the view (`None` when it covers no feature
+    /// position: the losses then look at the whole frame, as on the CPU).
+    focus: Option<GpuFocus>,
 }
 
 /// One Adam state per parameter group, colour and geometry phases.
@@ -76,6 +81,8 @@ pub struct GpuEngine {
     scalars: wgpu::Buffer,
     weights: LossWeights,
     background: [f32; 3],
+    /// Whether the losses focus on the object ([`GpuEngine::set_object_focus`]).
+    object_focus: bool,
     /// (tile, splat) pairs each new plan's rasterizer holds.
     pair_capacity: usize,
     /// Bytes of device memory the engine allocated.
@@ -136,6 +143,7 @@ impl GpuEngine {
             scalars: ctx.zeros("engine.scalars", slot::LEN),
             weights: config.weights,
             background: config.background,
+            object_focus: false,
             pair_capacity: ((pair_capacity as f64 * PAIR_HEADROOM) as usize).max(4096),
             bytes: 0,
             warnings: Vec::new(),
@@ -187,6 +195,13 @@ impl GpuEngine {
         self.background = background;
     }
 
+    /// Whether the next steps' GCFM, content, TV and depth normalisation look
+    /// only at what the colour-matched scene covers from each view (the
+    /// session's resolved [`crate::style::Focus`]), or at the whole frame.
+    pub fn set_object_focus(&mut self, on: bool) {
+        self.object_focus = on;
+    }
+
     /// One optimisation step from view `view` seen by `cam` in `phase`.
     pub fn step(
         &mut self,
@@ -230,6 +245,7 @@ impl GpuEngine {
         let (rgb, inv_depth) = (&plan.raster.rgb, &plan.raster.inv_depth);
         let depth_ref = geometry.then_some(&target.inv_depth);
         let content = Some(&target.content);
+        let focus = if self.object_focus { target.focus.as_ref() } else { None };
         plan.loss.record(
             ctx,
             &k.loss,
@@ -241,6 +257,7 @@ impl GpuEngine {
             content,
             depth_ref,
             geometry,
+            focus,
             &self.scalars,
         );
         let (v_rgb, v_inv_depth) = (plan.loss.v_rgb(), plan.loss.v_inv_depth());
@@ -249,6 +266,7 @@ impl GpuEngine {
         // The phase's parameters: regularisers on the raw geometry, then Adam.
         let lr = &config.lr;
         if phase.updates_color() {
+            self.opt.color.set_floor(config.color_floor.then_some(crate::style::DC_FLOOR));
             self.opt.color.step(ctx, &k.adam, &mut enc, &self.g.sh, &self.grads.v_sh, lr.color);
         }
         if geometry {
@@ -360,11 +378,14 @@ impl GpuEngine {
         plan.raster.forward(ctx, &k.raster, &mut enc, &self.g_ref, cam, &opts);
         plan.loss.record_content_target(ctx, &k.loss, &mut enc, &plan.raster.rgb, &content);
         enc.copy_buffer_to_buffer(&plan.raster.inv_depth, 0, &inv_depth, 0, u64::from(cam.width * cam.height) * 4);
+        let focus = plan.loss.record_focus(ctx, &k.loss, &mut enc, &plan.raster.alpha)?;
         ctx.submit(enc);
+        // One scalar per view, once: a view the scene does not cover falls back to the frame.
+        let focus = (focus.covered_cells(ctx)? > 0).then_some(focus);
         if view >= self.targets.len() {
             self.targets.resize_with(view + 1, || None);
         }
-        self.targets[view] = Some(ViewTarget { content, inv_depth });
+        self.targets[view] = Some(ViewTarget { content, inv_depth, focus });
         Ok(())
     }
 }

@@ -13,13 +13,18 @@
 //! first index on exact ties), so the two may differ where two style positions
 //! score within rounding of each other: the tests count those.
 //!
+//! With the object focus ([`super::GpuFocus`]), the loss and gradients count
+//! only the covered rendered positions and average over their number (read on
+//! the device); the search still runs over every row, whose matches outside
+//! the mask go unused, so its cost is the frame's.
+//!
 //! The style side ([`GpuStyle`]) is uploaded once per style image with the
 //! norms [`StyleFeatures`] computed; a [`GcfmWorkspace`] holds the scratch and
 //! every launch's uniform for one rendered size, made once.
 
 use super::gemm::{Gemm, GemmPlan, GemmSpec, Strided};
 use super::kernel::Launch;
-use super::{Bind, GpuContext, Kernel};
+use super::{Bind, GpuContext, GpuFocus, Kernel};
 use crate::style::gcfm::StyleFeatures;
 
 /// Threads per workgroup of the `gcfm.wgsl` kernels.
@@ -134,12 +139,12 @@ impl GpuGcfm {
     pub fn new(ctx: &GpuContext) -> Self {
         let src = include_str!("../../../shaders/gcfm.wgsl");
         use Bind::{Read, ReadWrite, Uniform};
-        let all = [Uniform, Read, Read, ReadWrite, Read, ReadWrite];
+        let all = [Uniform, Read, Read, ReadWrite, Read, ReadWrite, Read, Read];
         Self {
             gemm: Gemm::new(ctx),
             argext: Kernel::new(ctx, "gcfm.argext", src, "argext", &all[..4]),
             stats: Kernel::new(ctx, "gcfm.stats", src, "stats", &all),
-            grad: Kernel::new(ctx, "gcfm.grad", src, "grad", &all),
+            grad: Kernel::new(ctx, "gcfm.grad", src, "grad", &all[..6]),
             reduce: Kernel::new(ctx, "gcfm.reduce", src, "reduce", &all),
             dummy: ctx.zeros("gcfm.dummy", 1),
         }
@@ -220,8 +225,9 @@ impl GpuGcfm {
 
     /// Records the matching, the loss terms (into `scalars`) and the
     /// gradients w.r.t. the rendered RGB and depth features (`v_rgb`,
-    /// `v_depth`, each `c × n` CHW like `rendered`, overwritten). `rendered`
-    /// are the RGB, depth and edge features (`c × n` CHW each).
+    /// `v_depth`, each `c × n` CHW like `rendered`, overwritten; 0 at the
+    /// positions `focus` does not cover). `rendered` are the RGB, depth and
+    /// edge features (`c × n` CHW each).
     ///
     /// # Panics
     /// When the workspace was made for another style (a caller bug).
@@ -233,6 +239,7 @@ impl GpuGcfm {
         ws: &GcfmWorkspace,
         style: &GpuStyle,
         rendered: [&wgpu::Buffer; 3],
+        focus: &GpuFocus,
         v_rgb: &wgpu::Buffer,
         v_depth: &wgpu::Buffer,
         scalars: &wgpu::Buffer,
@@ -249,7 +256,8 @@ impl GpuGcfm {
             self.argext.dispatch(ctx, enc, &[&l.uniform, &ws.scores, &style.joint_inv_norm, &ws.matches], l.groups);
         }
         for (k, l) in ws.stats_launch.iter().enumerate() {
-            let b = [&l.uniform, rendered[k], &style.feats[k], &ws.matches, &style.modal_inv_norm[k], &ws.stats];
+            let (m, c) = (focus.cells(), focus.counts());
+            let b = [&l.uniform, rendered[k], &style.feats[k], &ws.matches, &style.modal_inv_norm[k], &ws.stats, m, c];
             self.stats.dispatch(ctx, enc, &b, l.groups);
         }
         for (k, (l, out)) in ws.grad_launch.iter().zip([v_rgb, v_depth]).enumerate() {
@@ -260,7 +268,7 @@ impl GpuGcfm {
         self.reduce.dispatch(
             ctx,
             enc,
-            &[&l.uniform, &ws.stats, &self.dummy, &ws.matches, &self.dummy, scalars],
+            &[&l.uniform, &ws.stats, &self.dummy, &ws.matches, &self.dummy, scalars, focus.cells(), focus.counts()],
             l.groups,
         );
     }
@@ -277,11 +285,12 @@ pub fn bench_gcfm(ctx: &GpuContext, c: usize, n: usize, m: usize, reps: usize) -
     let ws = gcfm.workspace(ctx, &style, n, 0, 1.0);
     let r: Vec<wgpu::Buffer> = [0.31f32, 0.17, 0.05].iter().map(|&f| ctx.upload("bench.r", &wave(c * n, f))).collect();
     let (v_rgb, v_depth, scalars) = (ctx.zeros("bench.v", c * n), ctx.zeros("bench.v", c * n), ctx.zeros("bench.s", 4));
+    let frame = GpuFocus::frame(ctx, 1, 1, n, 1);
     let mut best = f64::INFINITY;
     for _ in 0..reps.max(1) + 1 {
         let t = std::time::Instant::now();
         let mut enc = ctx.encoder("bench gcfm");
-        gcfm.record(ctx, &mut enc, &ws, &style, [&r[0], &r[1], &r[2]], &v_rgb, &v_depth, &scalars);
+        gcfm.record(ctx, &mut enc, &ws, &style, [&r[0], &r[1], &r[2]], &frame, &v_rgb, &v_depth, &scalars);
         ctx.submit(enc);
         if ctx.wait().is_err() {
             return Vec::new();

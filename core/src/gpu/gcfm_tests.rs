@@ -1,8 +1,10 @@
 //! The GPU GCFM against the CPU one: matches (near-ties counted), loss terms
-//! and gradients, with the score matrix in one chunk or several.
+//! and gradients, with the score matrix in one chunk or several, over every
+//! position or a mask of them.
 
 use super::*;
 use crate::gpu::test_util::{ctx, noise};
+use crate::style::focus::{gather_positions, scatter_positions};
 use crate::style::gcfm::{gcfm_loss, gcfm_loss_with_matches};
 
 /// ReLU-like features: non-negative, some zeros.
@@ -34,8 +36,18 @@ fn search_loss_and_gradients_match_the_cpu_gcfm() {
     let style = GpuStyle::new(ctx, &st);
     let mut failures = Vec::new();
     let mut report = Vec::new();
-    for (n, limit) in [(300usize, SCORE_ELEMS), (211, 37 * m)] {
+    for (n, limit, masked) in
+        [(300usize, SCORE_ELEMS, false), (211, 37 * m, false), (300, SCORE_ELEMS, true), (211, 37 * m, true)]
+    {
         let r: [Vec<f32>; 3] = std::array::from_fn(|k| feats(c, n, 10 + k as u64 + n as u64));
+        // About 60% of the positions covered with the mask.
+        let idx: Vec<usize> =
+            noise(n, 70).iter().enumerate().filter(|(_, v)| !masked || **v > -0.2).map(|(x, _)| x).collect();
+        let focus = GpuFocus::frame(ctx, 1, 1, n, 1);
+        let mut on = vec![0.0f32; n];
+        idx.iter().for_each(|&x| on[x] = 1.0);
+        ctx.write(focus.cells(), &on);
+        ctx.write(focus.counts(), &[idx.len() as f32, 0.0, 0.0, 0.0]);
         let ws = gcfm.workspace_chunked(ctx, &style, n, 2, 2.0, limit);
         for (i, b) in [&ws.scores, &ws.matches, &ws.stats].into_iter().enumerate() {
             ctx.write(
@@ -48,7 +60,7 @@ fn search_loss_and_gradients_match_the_cpu_gcfm() {
         let v_depth = ctx.upload("v_depth", &noise(c * n, 61));
         let scalars = ctx.upload("scalars", &noise(8, 62));
         let mut enc = ctx.encoder("gcfm test");
-        gcfm.record(ctx, &mut enc, &ws, &style, [&rb[0], &rb[1], &rb[2]], &v_rgb, &v_depth, &scalars);
+        gcfm.record(ctx, &mut enc, &ws, &style, [&rb[0], &rb[1], &rb[2]], &focus, &v_rgb, &v_depth, &scalars);
         ctx.submit(enc);
         let mt: Vec<u32> = ctx.read(&ws.matches).expect("matches");
         let s: Vec<f32> = ctx.read(&scalars).expect("scalars");
@@ -73,8 +85,15 @@ fn search_loss_and_gradients_match_the_cpu_gcfm() {
             failures.push(format!("n {n}: {ties} near-tie differences of {} matches", 2 * n));
         }
 
-        // Loss and gradients: against the CPU with the GPU's matches.
-        let want = gcfm_loss_with_matches(&st, [&r[0], &r[1], &r[2]], n, gpu_matches);
+        // Loss and gradients: against the CPU with the GPU's matches, on the
+        // covered positions (as the CPU's masked step), zero elsewhere.
+        let parts = r.each_ref().map(|f| gather_positions(f, c, n, &idx));
+        let kept = crate::style::gcfm::Matches {
+            best: idx.iter().map(|&x| gpu_matches.best[x]).collect(),
+            worst: idx.iter().map(|&x| gpu_matches.worst[x]).collect(),
+        };
+        let mut want = gcfm_loss_with_matches(&st, [&parts[0], &parts[1], &parts[2]], idx.len(), kept);
+        want.v_rendered = want.v_rendered.map(|v| scatter_positions(&v, c, n, &idx));
         for k in 0..3 {
             let rel = (s[2 + k] - want.terms[k]).abs() / want.terms[k].abs().max(1e-6);
             if rel > 1e-4 {
@@ -93,8 +112,15 @@ fn search_loss_and_gradients_match_the_cpu_gcfm() {
                 failures.push(format!("n {n} modality {k}: gradient differs by {err} (largest {largest})"));
             }
         }
+        for (k, gk) in g.iter().enumerate() {
+            let outside = (0..c * n).filter(|&i| on[i % n] == 0.0 && gk[i] != 0.0).count();
+            if outside > 0 {
+                failures.push(format!("n {n} modality {k}: {outside} gradients outside the mask are not 0"));
+            }
+        }
         report.push(format!(
-            "n {n}, m {m}, {} chunks: {ties} near-tie differences; loss {} vs CPU {}; gradient error {worst_rel:.1e} of the largest",
+            "n {n} (covered {}), m {m}, {} chunks: {ties} near-tie differences; loss {} vs CPU {}; gradient error {worst_rel:.1e} of the largest",
+            idx.len(),
             ws.chunks.len(),
             s[5],
             want.loss

@@ -14,7 +14,7 @@
 
 use std::sync::Arc;
 
-use super::{Bind, GpuContext, GpuError, Kernel, ReduceKernels, ReduceOp, ReduceSpec, Reduction};
+use super::{Bind, GpuContext, GpuError, GpuFocus, Kernel, ReduceKernels, ReduceOp, ReduceSpec, Reduction};
 
 /// Threads per workgroup in `losses.wgsl`.
 const WORKGROUP: u32 = 256;
@@ -112,7 +112,8 @@ fn inverse(count: usize) -> f32 {
 }
 
 /// TV `(mean(Δ_h I)² + mean(Δ_v I)²)/2` of an `h × w × c` image (the paper's
-/// formula, as [`crate::style::tv::tv_loss`]).
+/// formula, as [`crate::style::tv::tv_loss_masked`]), over the differences
+/// whose two pixels a [`GpuFocus`] covers (all of them for the frame).
 #[derive(Debug)]
 pub struct TvLoss(LossPlan);
 
@@ -130,16 +131,8 @@ impl TvLoss {
         loss_offset: usize,
     ) -> Result<Self, GpuError> {
         let n = h * w * c;
-        let params = LossParams {
-            h: h as u32,
-            w: w as u32,
-            c: c as u32,
-            n: n as u32,
-            weight,
-            kh: inverse(h * w.saturating_sub(1) * c),
-            kv: inverse(h.saturating_sub(1) * w * c),
-            norm_index: 0,
-        };
+        let params =
+            LossParams { h: h as u32, w: w as u32, c: c as u32, n: n as u32, weight, kh: 0.0, kv: 0.0, norm_index: 0 };
         let spec = ReduceSpec::new(ReduceOp::Sum, 2 * n).to(loss_offset);
         Ok(Self(LossPlan::new(ctx, kernels, reduce, params, 2 * n, spec)?))
     }
@@ -149,16 +142,19 @@ impl TvLoss {
         self.0.set_weight(ctx, weight);
     }
 
-    /// Records `v_img += λ ∂TV/∂img` and `scalars[loss_offset] = TV(img)`.
+    /// Records `v_img += λ ∂TV/∂img` and `scalars[loss_offset] = TV(img)`,
+    /// over the pixels `focus` covers.
     pub fn record(
         &self,
         ctx: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
         img: &wgpu::Buffer,
+        focus: &GpuFocus,
         v_img: &wgpu::Buffer,
         scalars: &wgpu::Buffer,
     ) {
-        self.0.dispatch(ctx, encoder, &self.0.kernels.tv, img, img, v_img, scalars);
+        // The mask takes x_ref's binding and the counts the scalars'.
+        self.0.dispatch(ctx, encoder, &self.0.kernels.tv, img, focus.pixels(), v_img, focus.counts());
         self.0.reduction.record(ctx, encoder, &self.0.scratch, scalars);
     }
 }

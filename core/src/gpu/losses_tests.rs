@@ -4,7 +4,7 @@
 use super::*;
 use crate::gpu::test_util::{ctx, noise};
 use crate::style::regularizers::{depth_l1, l2_distance};
-use crate::style::tv::tv_loss;
+use crate::style::tv::tv_loss_masked;
 
 /// Checks a term's value (relative 1e-4) and its accumulated gradient
 /// (`before + λ·g`, within 1e-3 of the largest `λ·g`).
@@ -25,15 +25,28 @@ fn scratch_noise(ctx: &GpuContext, plan: &LossPlan, len: usize) {
     ctx.write(&plan.scratch, &noise(len, 77));
 }
 
+/// The focus of an `h × w` pixel mask, its counts computed here (the cells are unused).
+fn focus_of(ctx: &GpuContext, h: usize, w: usize, mask: &[bool]) -> crate::gpu::GpuFocus {
+    let f = crate::gpu::GpuFocus::frame(ctx, h, w, 1, 1);
+    let pairs_h = (0..h * w).filter(|&p| p % w + 1 < w && mask[p] && mask[p + 1]).count();
+    let pairs_v = (0..h * w).filter(|&p| p / w + 1 < h && mask[p] && mask[p + w]).count();
+    let on: Vec<f32> = mask.iter().map(|&v| f32::from(u8::from(v))).collect();
+    ctx.write(f.pixels(), &on);
+    ctx.write(f.counts(), &[1.0, pairs_h as f32, pairs_v as f32, 0.0]);
+    f
+}
+
 #[test]
 fn tv_matches_the_cpu_at_odd_sizes() {
     let ctx = ctx();
     let kernels = LossKernels::new(ctx);
     let reduce = ReduceKernels::new(ctx);
-    for (s, &(h, w, c)) in
-        [(13usize, 17usize, 3usize), (1, 9, 3), (31, 1, 1), (64, 45, 3), (2, 2, 1)].iter().enumerate()
-    {
+    let cases = [(13usize, 17usize, 3usize, false), (1, 9, 3, false), (31, 1, 1, false), (64, 45, 3, false)];
+    let masked = [(2, 2, 1, false), (13, 17, 3, true), (64, 45, 3, true), (1, 9, 3, true)];
+    for (s, &(h, w, c, masked)) in cases.iter().chain(&masked).enumerate() {
         let seed = 200 + s as u64;
+        let mask: Vec<bool> = noise(h * w, seed + 3).iter().map(|&v| !masked || v > -0.5).collect();
+        let focus = focus_of(ctx, h, w, &mask);
         let img: Vec<f32> = noise(h * w * c, seed).iter().map(|v| 0.5 + 0.5 * v).collect();
         let weight = 0.02;
         let tv = TvLoss::new(ctx, &kernels, &reduce, h, w, c, weight, 3).expect("plan");
@@ -44,11 +57,15 @@ fn tv_matches_the_cpu_at_odd_sizes() {
         let scalars = ctx.upload("scalars", &scalars_init);
         let img_buf = ctx.upload("img", &img);
         let mut enc = ctx.encoder("tv test");
-        tv.record(ctx, &mut enc, &img_buf, &grad, &scalars);
+        tv.record(ctx, &mut enc, &img_buf, &focus, &grad, &scalars);
         ctx.submit(enc);
-        let (want, g) = tv_loss(&img, h, w, c);
+        let (want, g) = tv_loss_masked(&img, h, w, c, masked.then_some(mask.as_slice()));
         let got: Vec<f32> = ctx.read(&scalars).expect("read");
-        check(&format!("TV {h}×{w}×{c}"), got[3], want, &ctx.read::<f32>(&grad).expect("read"), &before, &g, weight);
+        let v = ctx.read::<f32>(&grad).expect("read");
+        check(&format!("TV {h}×{w}×{c} masked {masked}"), got[3], want, &v, &before, &g, weight);
+        for (e, (&a, &b)) in v.iter().zip(&before).enumerate() {
+            assert!(mask[e / c] || a == b, "TV {h}×{w}×{c}: element {e} is outside the mask");
+        }
         let others: Vec<usize> = vec![0, 1, 2, 4, 5];
         assert!(others.iter().all(|&i| got[i] == scalars_init[i]), "TV wrote outside its offset");
     }

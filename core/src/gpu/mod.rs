@@ -18,6 +18,7 @@ mod context;
 mod depth_map;
 mod engine;
 mod feature_net;
+mod focus;
 mod gaussians;
 mod gcfm;
 mod gemm;
@@ -47,6 +48,7 @@ pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descripto
 pub use depth_map::{DepthMap, DepthMapKernels};
 pub use engine::GpuEngine;
 pub use feature_net::{GpuFeatureNet, GpuFeatureState};
+pub use focus::{FocusKernels, GpuFocus};
 pub use gaussians::{GpuGaussians, GpuGrads};
 pub use gcfm::{GcfmWorkspace, GpuGcfm, GpuStyle, bench_gcfm};
 pub use gemm::{Gemm, GemmPlan, GemmSpec, Strided, bench_gemm};

@@ -65,6 +65,8 @@ pub fn bench_image_ops(
         let edges = EdgeMap::new(ctx, &canny_k, &reduce, h, w)?;
         let tv = TvLoss::new(ctx, &loss_k, &reduce, h, w, 3, 0.02, 0)?;
         let l1 = RefLoss::depth_l1(ctx, &loss_k, &reduce, n, 10.0, 1)?;
+        let frame = crate::gpu::GpuFocus::frame(ctx, h, w, 1, 1);
+        let ones = frame.pixels();
         let ops: [(&str, Record<'_>); 8] = [
             ("clamp fwd+bwd", &|e| {
                 clamp.forward(ctx, e, &v_full3, &full3);
@@ -72,10 +74,10 @@ pub fn bench_image_ops(
             }),
             ("downscale rgb fwd", &|e| down.forward(ctx, e, &rgb, &small3)),
             ("downscale rgb bwd", &|e| down.backward(ctx, e, &v_small3, &full3, false)),
-            ("depth map fwd", &|e| map.forward(ctx, e, &depth, &full3)),
-            ("depth map bwd", &|e| map.backward(ctx, e, &depth, &v_full3, &v_depth, false)),
+            ("depth map fwd", &|e| map.forward(ctx, e, &depth, ones, &full3)),
+            ("depth map bwd", &|e| map.backward(ctx, e, &depth, ones, &v_full3, &v_depth, false)),
             ("edge map", &|e| edges.record(ctx, e, &rgb, &full3)),
-            ("tv", &|e| tv.record(ctx, e, &rgb, &full3, &scalars)),
+            ("tv", &|e| tv.record(ctx, e, &rgb, &frame, &full3, &scalars)),
             ("depth l1", &|e| l1.record(ctx, e, &depth, &depth_ref, &v_depth, &scalars)),
         ];
         for (name, record) in ops {

@@ -69,19 +69,20 @@ fn the_maps_and_image_gradients_of_a_step_match_the_cpu() {
     let (vs_rgb, vs_depth) = (ctx.upload("v_small_rgb", &v_small_rgb), ctx.upload("v_small_depth", &v_small_depth));
     let (v_rgb_b, v_depth3_b, v_inv_b) = (buf("v_rgb", 3 * n, 30), buf("v_depth3", 3 * n, 31), buf("v_inv", n, 32));
     let scalars = buf("scalars", 2, 33);
+    let frame = crate::gpu::GpuFocus::frame(ctx, h, w, 1, 1);
 
     let mut enc = ctx.encoder("step chain");
     clamp.forward(ctx, &mut enc, &raw_b, &rgb_b);
     edges.record(ctx, &mut enc, &rgb_b, &edge3_b);
-    depth_map.forward(ctx, &mut enc, &inv_b, &depth3_b);
+    depth_map.forward(ctx, &mut enc, &inv_b, frame.pixels(), &depth3_b);
     for (map, out) in [&rgb_b, &depth3_b, &edge3_b].into_iter().zip(&small) {
         down.forward(ctx, &mut enc, map, out);
     }
     down.backward(ctx, &mut enc, &vs_rgb, &v_rgb_b, false);
-    tv_term.record(ctx, &mut enc, &rgb_b, &v_rgb_b, &scalars);
+    tv_term.record(ctx, &mut enc, &rgb_b, &frame, &v_rgb_b, &scalars);
     clamp.backward(ctx, &mut enc, &raw_b, &v_rgb_b);
     down.backward(ctx, &mut enc, &vs_depth, &v_depth3_b, false);
-    depth_map.backward(ctx, &mut enc, &inv_b, &v_depth3_b, &v_inv_b, false);
+    depth_map.backward(ctx, &mut enc, &inv_b, frame.pixels(), &v_depth3_b, &v_inv_b, false);
     depth_term.record(ctx, &mut enc, &inv_b, &ref_b, &v_inv_b, &scalars);
     ctx.submit(enc);
 

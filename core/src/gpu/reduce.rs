@@ -55,7 +55,8 @@ struct ReduceParams {
     out_offset: u32,
     sqrt_result: u32,
     scale: f32,
-    _pad: [u32; 2],
+    in_offset: u32,
+    _pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<ReduceParams>() == 32);
 
@@ -93,12 +94,14 @@ pub struct ReduceSpec {
     pub sqrt: bool,
     /// Multiply the result by this (after the square root): `1/n` makes a mean.
     pub scale: f32,
+    /// Index in the input buffer of lane 0's first element.
+    pub in_offset: usize,
 }
 
 impl ReduceSpec {
     /// `op` over `len` elements into `out[0]`, unscaled.
     pub fn new(op: ReduceOp, len: usize) -> Self {
-        Self { op, len, lanes: 1, out_offset: 0, sqrt: false, scale: 1.0 }
+        Self { op, len, lanes: 1, out_offset: 0, sqrt: false, scale: 1.0, in_offset: 0 }
     }
 
     /// The same with `lanes` lanes.
@@ -109,6 +112,11 @@ impl ReduceSpec {
     /// The same writing to `out[offset..]`.
     pub fn to(self, offset: usize) -> Self {
         Self { out_offset: offset, ..self }
+    }
+
+    /// The same reading its lanes from `input[offset..]`.
+    pub fn from(self, offset: usize) -> Self {
+        Self { in_offset: offset, ..self }
     }
 
     /// The same with the square root taken.
@@ -135,7 +143,7 @@ pub struct Reduction {
 impl Reduction {
     /// Plans `spec`; fails when the input would exceed one storage binding.
     pub fn new(ctx: &GpuContext, kernels: &Arc<ReduceKernels>, spec: ReduceSpec) -> Result<Self, GpuError> {
-        let bytes = (spec.len as u64) * (spec.lanes as u64) * 4;
+        let bytes = (spec.in_offset as u64 + (spec.len as u64) * (spec.lanes as u64)) * 4;
         if bytes > ctx.max_binding_bytes() || spec.len > u32::MAX as usize {
             return Err(GpuError::TooLarge(format!(
                 "a reduction over {} × {} floats ({bytes} bytes) exceeds the device's storage binding of {} bytes",
@@ -152,7 +160,8 @@ impl Reduction {
             out_offset: spec.out_offset as u32,
             sqrt_result: u32::from(spec.sqrt),
             scale: spec.scale,
-            _pad: [0; 2],
+            in_offset: spec.in_offset as u32,
+            _pad: 0,
         };
         Ok(Self {
             kernels: Arc::clone(kernels),

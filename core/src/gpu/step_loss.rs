@@ -7,14 +7,19 @@
 //! three VGG forwards, GCFM, content, the two VGG backwards and the image-space
 //! adjoints, TV and the depth regulariser. The engine ([`super::GpuEngine`])
 //! records it between the rasterizer's forward and backward passes;
-//! [`step_loss_gpu`] runs it on uploaded maps (the golden checks).
+//! [`step_loss_gpu`] runs it on uploaded maps (the golden checks). With a
+//! [`GpuFocus`] (the object focus), GCFM, content, TV and the depth map's
+//! normalisation look only at what it covers, as
+//! [`crate::style::step::step_loss_masked`] does; without one, at the whole
+//! frame (an all-ones focus the plan keeps).
 
 use std::sync::Arc;
 
 use super::content::ContentLoss;
 use super::{
-    CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, GcfmWorkspace, GpuContext, GpuError, GpuGcfm,
-    GpuStyle, GpuVgg, GpuVggState, GpuVggWorkspace, LossKernels, ReduceKernels, RefLoss, ResizeKernels, TvLoss,
+    CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, FocusKernels, GcfmWorkspace, GpuContext,
+    GpuError, GpuFocus, GpuGcfm, GpuStyle, GpuVgg, GpuVggState, GpuVggWorkspace, LossKernels, ReduceKernels, RefLoss,
+    ResizeKernels, TvLoss,
 };
 use crate::style::config::LossWeights;
 use crate::style::gcfm::Matches;
@@ -51,6 +56,7 @@ pub struct StepLossKernels {
     pub(crate) canny: Arc<CannyKernels>,
     pub(crate) losses: Arc<LossKernels>,
     pub(crate) reduce: Arc<ReduceKernels>,
+    pub(crate) focus: Arc<FocusKernels>,
     pub(crate) vgg: GpuVgg,
     pub(crate) gcfm: GpuGcfm,
 }
@@ -64,6 +70,7 @@ impl StepLossKernels {
             canny: CannyKernels::new(ctx),
             losses: LossKernels::new(ctx),
             reduce: ReduceKernels::new(ctx),
+            focus: FocusKernels::new(ctx),
             vgg: GpuVgg::new(ctx, vgg),
             gcfm: GpuGcfm::new(ctx),
         }
@@ -87,6 +94,10 @@ pub struct StepLossPlan {
     content: ContentLoss,
     /// λ_GC baked into the GCFM workspace.
     gcfm_weight: f32,
+    /// The whole frame (all-ones masks), the focus when none is given.
+    frame: GpuFocus,
+    /// Render and feature sizes, `(h, w)` and `(fh, fw)`.
+    sizes: [(usize, usize); 2],
     rgb: wgpu::Buffer,
     depth3: wgpu::Buffer,
     edge3: wgpu::Buffer,
@@ -123,8 +134,10 @@ impl StepLossPlan {
             depth_l1: RefLoss::depth_l1(ctx, &k.losses, &k.reduce, h * w, weights.depth, slot::DEPTH)?,
             vgg_ws: k.vgg.workspace(ctx, sh, sw),
             gcfm_ws: k.gcfm.workspace(ctx, style, positions, slot::GCFM, weights.gcfm),
-            content: ContentLoss::new(ctx, &k.reduce, feature_len, weights.content, slot::CONTENT)?,
+            content: ContentLoss::new(ctx, &k.reduce, feature_len, positions, weights.content, slot::CONTENT)?,
             gcfm_weight: weights.gcfm,
+            frame: GpuFocus::frame(ctx, h, w, fh, fw),
+            sizes: [(h, w), (fh, fw)],
             states,
             rgb: ctx.zeros("loss.rgb", h * w * 3),
             depth3: ctx.zeros("loss.depth3", h * w * 3),
@@ -173,6 +186,18 @@ impl StepLossPlan {
         self.gcfm_ws.matches()
     }
 
+    /// Records the object focus of a render with alpha `alpha` (`h × w`):
+    /// the masks and counts the loss uses with it ([`GpuFocus::from_alpha`]).
+    pub fn record_focus(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        enc: &mut wgpu::CommandEncoder,
+        alpha: &wgpu::Buffer,
+    ) -> Result<GpuFocus, GpuError> {
+        GpuFocus::from_alpha(ctx, &k.focus, &k.reduce, enc, alpha, self.sizes[0], self.sizes[1])
+    }
+
     /// Records into `out` (`feature_len` floats) the content target of a raw
     /// render: the features of the clamped, downscaled image.
     pub fn record_content_target(
@@ -193,7 +218,9 @@ impl StepLossPlan {
     /// the clamp) and `inv_depth` (`h × w`); `edge` the render's edge map
     /// (`h × w`) when given, else computed from the clamped render; `content`
     /// a content target and `depth_ref` the inverse depth of `G^c`, when the
-    /// step uses them; the depth map's gradient only when `depth_grad`. The
+    /// step uses them; the depth map's gradient only when `depth_grad`;
+    /// `focus` the object focus ([`StepLossPlan::record_focus`]), the whole
+    /// frame without one. The
     /// unweighted terms go to `scalars` ([`slot`]), the gradients of the
     /// weighted total to [`StepLossPlan::v_rgb`] and [`StepLossPlan::v_inv_depth`].
     #[allow(clippy::too_many_arguments)]
@@ -209,12 +236,14 @@ impl StepLossPlan {
         content: Option<&wgpu::Buffer>,
         depth_ref: Option<&wgpu::Buffer>,
         depth_grad: bool,
+        focus: Option<&GpuFocus>,
         scalars: &wgpu::Buffer,
     ) {
+        let focus = focus.unwrap_or(&self.frame);
         // The three maps VGG sees.
         self.clamp.forward(ctx, enc, rgb_raw, &self.rgb);
         self.down.forward(ctx, enc, &self.rgb, &self.small[0]);
-        self.depth_map.forward(ctx, enc, inv_depth, &self.depth3);
+        self.depth_map.forward(ctx, enc, inv_depth, focus.pixels(), &self.depth3);
         self.down.forward(ctx, enc, &self.depth3, &self.small[1]);
         match edge {
             Some(e) => self.down.forward(ctx, enc, e, &self.small[2]),
@@ -229,20 +258,20 @@ impl StepLossPlan {
 
         // Feature space: GCFM (gradients scaled by λ_GC), then content on the RGB features.
         let feats = [self.states[0].features(), self.states[1].features(), self.states[2].features()];
-        k.gcfm.record(ctx, enc, &self.gcfm_ws, style, feats, &self.v_feat[0], &self.v_feat[1], scalars);
+        k.gcfm.record(ctx, enc, &self.gcfm_ws, style, feats, focus, &self.v_feat[0], &self.v_feat[1], scalars);
         if let Some(target) = content {
-            self.content.record(ctx, enc, feats[0], target, &self.v_feat[0], scalars);
+            self.content.record(ctx, enc, feats[0], target, focus, &self.v_feat[0], scalars);
         }
 
         // Image space: RGB through VGG and the downscale, plus TV, then the clamp's mask.
         k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[0], &self.v_feat[0], &self.v_small[0]);
         self.down.backward(ctx, enc, &self.v_small[0], &self.v_rgb, false);
-        self.tv.record(ctx, enc, &self.rgb, &self.v_rgb, scalars);
+        self.tv.record(ctx, enc, &self.rgb, focus, &self.v_rgb, scalars);
         self.clamp.backward(ctx, enc, rgb_raw, &self.v_rgb);
         if depth_grad {
             k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[1], &self.v_feat[1], &self.v_small[1]);
             self.down.backward(ctx, enc, &self.v_small[1], &self.v_depth3, false);
-            self.depth_map.backward(ctx, enc, inv_depth, &self.v_depth3, &self.v_inv_depth, false);
+            self.depth_map.backward(ctx, enc, inv_depth, focus.pixels(), &self.v_depth3, &self.v_inv_depth, false);
         } else {
             enc.clear_buffer(&self.v_inv_depth, 0, None);
         }
@@ -253,9 +282,12 @@ impl StepLossPlan {
 }
 
 /// The whole per-step loss of uploaded maps on the GPU, read back: the twin
-/// of [`crate::style::step::step_loss`] (same arguments, but the content
-/// target is the colour-matched *image*, whose features are computed here).
-/// For checks against the CPU and the golden files, not for the loop.
+/// of [`crate::style::step::step_loss_masked`] (same arguments, but the
+/// content target is the colour-matched *image*, whose features are computed
+/// here, and the focus is given by the alpha its mask is made from,
+/// [`crate::style::focus::coverage_mask`]). A focus that covers no feature
+/// position falls back to the whole frame, as on the CPU. For checks against
+/// the CPU and the golden files, not for the loop.
 #[allow(clippy::too_many_arguments)]
 pub fn step_loss_gpu(
     ctx: &GpuContext,
@@ -266,6 +298,7 @@ pub fn step_loss_gpu(
     depth_ref: Option<&[f32]>,
     weights: &LossWeights,
     depth_grad: bool,
+    focus_alpha: Option<&[f32]>,
 ) -> Result<StepLoss, GpuError> {
     let (h, w) = (maps.height, maps.width);
     let gstyle = GpuStyle::new(ctx, &style.features);
@@ -274,6 +307,15 @@ pub fn step_loss_gpu(
     let inv_depth = ctx.upload("loss.in.inv_depth", maps.inv_depth);
     let edge = ctx.upload("loss.in.edge", &replicate3(maps.edge));
     let scalars = ctx.zeros("loss.scalars", slot::LEN);
+    let focus = match focus_alpha {
+        Some(a) => {
+            let mut enc = ctx.encoder("step_loss_gpu.focus");
+            let f = plan.record_focus(ctx, k, &mut enc, &ctx.upload("loss.in.alpha", a))?;
+            ctx.submit(enc);
+            (f.covered_cells(ctx)? > 0).then_some(f)
+        }
+        None => None,
+    };
     let mut enc = ctx.encoder("step_loss_gpu");
     let content = content_rgb.map(|c| {
         let image = ctx.upload("loss.in.content", c);
@@ -293,12 +335,20 @@ pub fn step_loss_gpu(
         content.as_ref(),
         dref.as_ref(),
         depth_grad,
+        focus.as_ref(),
         &scalars,
     );
     ctx.submit(enc);
     let s: Vec<f32> = ctx.read(&scalars)?;
-    let m: Vec<u32> = ctx.read(plan.matches())?;
+    let mut m: Vec<u32> = ctx.read(plan.matches())?;
     let n = m.len() / 2;
+    if let Some(f) = &focus {
+        // As the CPU: no matches where the focus does not look.
+        let cells: Vec<f32> = ctx.read(f.cells())?;
+        for x in (0..n).filter(|&x| cells[x] == 0.0) {
+            (m[x], m[n + x]) = (u32::MAX, u32::MAX);
+        }
+    }
     let gcfm = s[slot::GCFM + 3];
     let content_value = if content.is_some() { s[slot::CONTENT] } else { 0.0 };
     let depth_value = if dref.is_some() { s[slot::DEPTH] } else { 0.0 };
@@ -315,3 +365,7 @@ pub fn step_loss_gpu(
         matches: Matches { best: m[..n].to_vec(), worst: m[n..2 * n].to_vec() },
     })
 }
+
+#[cfg(test)]
+#[path = "step_loss_tests.rs"]
+mod tests;

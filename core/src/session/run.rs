@@ -201,18 +201,6 @@ impl Session {
                     ),
                     seconds: t.elapsed().as_secs_f64(),
                 });
-                if config.focus.is_object(coverage) {
-                    on_event(Event::Warning(
-                        "the GPU engine averages the losses over the whole frame: focus on the object (masked losses) \
-                         runs on the CPU engine; the views stay framed on the object"
-                            .into(),
-                    ));
-                }
-                if config.color_floor {
-                    on_event(Event::Warning(
-                        "the colour floor is a CPU engine option; the GPU engine runs without it".into(),
-                    ));
-                }
                 if config.matching.method != crate::style::MatchMethod::Exact {
                     on_event(Event::Warning(
                         "the GPU engine searches matches exactly; the matching index and re-use are CPU options".into(),
@@ -463,7 +451,9 @@ impl Session {
         let (cycle, phase) = schedule.at(self.step)?;
         let started = Instant::now();
         let view = self.sampler.next();
+        let object = self.focus_on_object();
         if let Some(engine) = &mut self.engine {
+            engine.set_object_focus(object);
             let cam = &self.cameras[view];
             let (losses, timings) = match engine.step(view, cam, phase, &self.config, self.extent) {
                 Ok(r) => r,
@@ -629,8 +619,7 @@ fn with_conv(vgg: Arc<Vgg>, conv: crate::vision::ConvAlgo) -> Arc<Vgg> {
 /// Projects DC colour coefficients out of the clamp's dead zone: every
 /// channel's base colour `0.5 + C0·f_dc` is raised to at least 0.
 fn floor_dc(dc: &mut [f32]) {
-    let lowest = -0.5 / crate::scene::SH_C0;
-    dc.iter_mut().for_each(|v| *v = v.max(lowest));
+    dc.iter_mut().for_each(|v| *v = v.max(crate::style::DC_FLOOR));
 }
 
 /// `(x − x^c)/‖x − x^c‖` scaled by λ, plus the loss gradient: `reg ← λ·reg + loss`.

@@ -13,6 +13,10 @@ use super::schedule::{Mode, Schedule};
 pub use crate::vision::ConvAlgo;
 pub use crate::vision::style_depth::{DepthPolarity, DepthProvider};
 
+/// The lowest DC colour coefficient [`StyleConfig::color_floor`] allows: the
+/// channel's base colour `0.5 + C0·f_dc` is then at least 0.
+pub const DC_FLOOR: f32 = -0.5 / crate::scene::SH_C0;
+
 /// Loss weights (λ of ALGORITHM.md).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]

@@ -21,7 +21,7 @@ pub mod step;
 pub mod tv;
 
 pub use color_transfer::ColorTransfer;
-pub use config::StyleConfig;
+pub use config::{DC_FLOOR, StyleConfig};
 pub use focus::Focus;
 pub use gcfm::{GcfmOutput, Matches, StyleFeatures};
 pub use matching::{MatchIndex, MatchMethod, MatchingConfig};

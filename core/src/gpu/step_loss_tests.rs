@@ -1,0 +1,119 @@
+//! The whole GPU step loss against the CPU's ([`crate::style::step::step_loss_masked`])
+//! with the object focus, and an all-ones focus against the whole frame, on
+//! a random VGG and noise maps.
+
+use super::*;
+use crate::gpu::test_util::{ctx, noise};
+use crate::style::focus::coverage_mask;
+use crate::style::step::{content_target, step_loss_masked};
+use crate::vision::vgg::tests::random_vgg;
+
+/// The maps, style, content image, reference depth and alpha of one test view.
+struct Inputs {
+    vgg: Vgg,
+    style: StyleTargets,
+    rgb: Vec<f32>,
+    inv_depth: Vec<f32>,
+    edge: Vec<f32>,
+    content: Vec<f32>,
+    depth_ref: Vec<f32>,
+    alpha: Vec<f32>,
+    h: usize,
+    w: usize,
+}
+
+fn inputs() -> Inputs {
+    let (h, w) = (48, 40);
+    let vgg = random_vgg(5);
+    let unit = |len: usize, seed: u64| -> Vec<f32> { noise(len, seed).iter().map(|v| 0.5 + 0.45 * v).collect() };
+    let (sh, sw) = (32, 28);
+    let edge_of = |len: usize, seed: u64| -> Vec<f32> {
+        noise(len, seed).iter().map(|&v| f32::from(u8::from(v > 0.6))).collect()
+    };
+    let style = StyleTargets::new(&vgg, &unit(sh * sw * 3, 1), &unit(sh * sw, 2), &edge_of(sh * sw, 3), sh, sw);
+    // A soft blob off the centre with a ragged rim: about a third of the frame covered.
+    let wobble = noise(h * w, 9);
+    let alpha = (0..h * w)
+        .map(|p| {
+            let (y, x) = ((p / w) as f32 / h as f32 - 0.45, (p % w) as f32 / w as f32 - 0.55);
+            (1.6 - 3.5 * (x * x + y * y).sqrt() + 0.2 * wobble[p]).clamp(0.0, 1.0)
+        })
+        .collect();
+    Inputs {
+        style,
+        rgb: unit(h * w * 3, 4),
+        inv_depth: noise(h * w, 5).iter().map(|v| 0.4 + 0.2 * v).collect(),
+        edge: edge_of(h * w, 6),
+        content: unit(h * w * 3, 7),
+        depth_ref: noise(h * w, 8).iter().map(|v| 0.4 + 0.2 * v).collect(),
+        alpha,
+        vgg,
+        h,
+        w,
+    }
+}
+
+/// Differences between two losses: values (relative `tol`), gradients (`tol`
+/// of the largest) and the matches, each as a line.
+fn differences(what: &str, a: &StepLoss, b: &StepLoss, tol: f32) -> Vec<String> {
+    let mut off = Vec::new();
+    for (name, x, y) in [
+        ("gcfm", a.gcfm, b.gcfm),
+        ("content", a.content, b.content),
+        ("tv", a.tv, b.tv),
+        ("depth", a.depth, b.depth),
+        ("total", a.total, b.total),
+    ] {
+        if (x - y).abs() > tol * x.abs().max(1e-6) {
+            off.push(format!("{what} {name}: {x} vs {y}"));
+        }
+    }
+    for (name, x, y) in [("v_rgb", &a.v_rgb, &b.v_rgb), ("v_inv_depth", &a.v_inv_depth, &b.v_inv_depth)] {
+        let largest = x.iter().fold(0f32, |m, v| m.max(v.abs()));
+        let err = x.iter().zip(y).map(|(p, q)| (p - q).abs()).fold(0f32, f32::max);
+        if err > tol * largest {
+            off.push(format!("{what} {name}: off by {err}, largest {largest}"));
+        }
+    }
+    if a.matches != b.matches {
+        off.push(format!("{what}: the matches differ"));
+    }
+    off
+}
+
+#[test]
+fn the_object_focus_gives_the_cpu_masked_loss_and_all_ones_the_frame() {
+    let ctx = ctx();
+    let t = inputs();
+    let k = StepLossKernels::new(ctx, &t.vgg);
+    let (h, w) = (t.h, t.w);
+    let maps = RenderedMaps { rgb: &t.rgb, inv_depth: &t.inv_depth, edge: &t.edge, height: h, width: w };
+    let weights = LossWeights::default();
+    let target = content_target(&t.vgg, &t.content, h, w);
+    let mask = coverage_mask(&t.alpha, h, w);
+    let on = mask.iter().filter(|&&v| v).count();
+    assert!(on > h * w / 8 && on < h * w / 2, "the test blob covers {on} of {} pixels", h * w);
+    let mut failures = Vec::new();
+    for depth_grad in [true, false] {
+        let dref = depth_grad.then_some(t.depth_ref.as_slice());
+        let cpu = step_loss_masked(&t.vgg, &t.style, maps, Some(&target), dref, &weights, depth_grad, Some(&mask));
+        let gpu = step_loss_gpu(ctx, &k, &t.style, maps, Some(&t.content), dref, &weights, depth_grad, Some(&t.alpha))
+            .expect("GPU loss");
+        failures.extend(differences(&format!("object focus, depth grad {depth_grad}:"), &cpu, &gpu, 1e-3));
+        // Every position matched on the GPU lies in the focus, as on the CPU.
+        assert!(gpu.matches.best.contains(&u32::MAX) && gpu.matches.best.iter().any(|&m| m != u32::MAX));
+
+        // An all-ones focus is the whole frame, on both devices.
+        let ones = vec![1.0f32; h * w];
+        let frame =
+            step_loss_gpu(ctx, &k, &t.style, maps, Some(&t.content), dref, &weights, depth_grad, None).expect("GPU");
+        let all = step_loss_gpu(ctx, &k, &t.style, maps, Some(&t.content), dref, &weights, depth_grad, Some(&ones))
+            .expect("GPU");
+        failures.extend(differences(&format!("GPU all-ones vs frame, depth grad {depth_grad}:"), &frame, &all, 0.0));
+        let cpu_frame = step_loss_masked(&t.vgg, &t.style, maps, Some(&target), dref, &weights, depth_grad, None);
+        failures.extend(differences(&format!("frame CPU vs GPU, depth grad {depth_grad}:"), &cpu_frame, &frame, 1e-3));
+        // The focus changes the loss (the test would pass vacuously otherwise).
+        assert!((cpu_frame.gcfm - cpu.gcfm).abs() > 1e-3 * cpu.gcfm.abs(), "focus and frame give the same GCFM");
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
