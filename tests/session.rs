@@ -200,51 +200,6 @@ fn gpu_steps_give_the_cpu_losses() {
     }
 }
 
-/// A GPU run shares its engine's buffers through the handle's second slot
-/// (a CPU run does not); their step count follows the steps, and at the end
-/// they hold exactly the final result's optimised Gaussians.
-#[test]
-fn a_gpu_worker_shares_its_buffers_and_counts_its_steps() {
-    use gast_core::gpu::DeviceChoice;
-    let ctx = match DeviceChoice::Gpu.resolve() {
-        Ok(Some(c)) => c,
-        other => panic!("the GPU tests need a wgpu adapter (lavapipe: mesa-vulkan-drivers): {other:?}"),
-    };
-    let config = StyleConfig {
-        cycles: 1,
-        steps_per_cycle: 3,
-        resolution: 48,
-        texture_scale: 48,
-        focus: gast_core::style::Focus::Frame,
-        ..Default::default()
-    };
-    let Some(inputs) = inputs(config) else { return };
-    let cpu = spawn(inputs.clone(), Arc::new(|| {}));
-    while !matches!(next(&cpu.events), Event::Step(_)) {}
-    assert!(cpu.live.latest().is_none(), "a CPU run has no GPU buffers to share");
-    drop(cpu);
-    let handle = spawn(SessionInputs { gpu: Some(ctx.clone()), ..inputs }, Arc::new(|| {}));
-    let mut kept = 0;
-    loop {
-        match next(&handle.events) {
-            Event::Culled { kept: k, .. } => kept = k,
-            Event::Finished { completed, steps, .. } => {
-                assert!(completed && steps == 3);
-                break;
-            }
-            Event::Failed(e) => panic!("the GPU run failed: {e}"),
-            _ => {}
-        }
-    }
-    let live = handle.live.latest().expect("the GPU run published its buffers");
-    assert_eq!(live.steps(), 3);
-    assert!(live.is_on(&ctx.device) && live.problem().is_none());
-    assert_eq!(live.keep().len(), kept);
-    let result = handle.snapshots.latest().expect("final snapshot");
-    let on_device = live.gaussians().download(&ctx).expect("read back");
-    assert_eq!(on_device, gast_core::session::subset(&result.gaussians, live.keep()));
-    assert_ne!(on_device, gast_core::session::subset(live.base(), live.keep()), "the steps changed nothing");
-
 /// The object focus (masked GCFM, content, TV and depth normalisation) on
 /// both devices, in colour and in geometry steps (four steps of `Decoupled`
 /// would all be geometry steps at the default ratio).
@@ -348,6 +303,52 @@ fn fast_options_keep_the_exact_results() {
     let (kept, _) = run(StyleConfig { matching: reused, cycles: 2, ..base }, 0).expect("inputs");
     assert_eq!(kept.len(), 8);
     assert!(kept.iter().all(|l| l.is_finite()));
+}
+
+/// A GPU run shares its engine's buffers through the handle's second slot
+/// (a CPU run does not); their step count follows the steps, and at the end
+/// they hold exactly the final result's optimised Gaussians.
+#[test]
+fn a_gpu_worker_shares_its_buffers_and_counts_its_steps() {
+    use gast_core::gpu::DeviceChoice;
+    let ctx = match DeviceChoice::Gpu.resolve() {
+        Ok(Some(c)) => c,
+        other => panic!("the GPU tests need a wgpu adapter (lavapipe: mesa-vulkan-drivers): {other:?}"),
+    };
+    let config = StyleConfig {
+        cycles: 1,
+        steps_per_cycle: 3,
+        resolution: 48,
+        texture_scale: 48,
+        focus: gast_core::style::Focus::Frame,
+        ..Default::default()
+    };
+    let Some(inputs) = inputs(config) else { return };
+    let cpu = spawn(inputs.clone(), Arc::new(|| {}));
+    while !matches!(next(&cpu.events), Event::Step(_)) {}
+    assert!(cpu.live.latest().is_none(), "a CPU run has no GPU buffers to share");
+    drop(cpu);
+    let handle = spawn(SessionInputs { gpu: Some(ctx.clone()), ..inputs }, Arc::new(|| {}));
+    let mut kept = 0;
+    loop {
+        match next(&handle.events) {
+            Event::Culled { kept: k, .. } => kept = k,
+            Event::Finished { completed, steps, .. } => {
+                assert!(completed && steps == 3);
+                break;
+            }
+            Event::Failed(e) => panic!("the GPU run failed: {e}"),
+            _ => {}
+        }
+    }
+    let live = handle.live.latest().expect("the GPU run published its buffers");
+    assert_eq!(live.steps(), 3);
+    assert!(live.is_on(&ctx.device) && live.problem().is_none());
+    assert_eq!(live.keep().len(), kept);
+    let result = handle.snapshots.latest().expect("final snapshot");
+    let on_device = live.gaussians().download(&ctx).expect("read back");
+    assert_eq!(on_device, gast_core::session::subset(&result.gaussians, live.keep()));
+    assert_ne!(on_device, gast_core::session::subset(live.base(), live.keep()), "the steps changed nothing");
 }
 
 /// Warming every view's targets before the first step (what the step
