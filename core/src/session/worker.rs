@@ -8,10 +8,10 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender, TryRecvError};
 
-use super::Snapshot;
 use super::events::{Command, Event};
 use super::run::{Session, SessionInputs};
 use super::slot::Slot;
+use super::{RunStart, Snapshot};
 use crate::scene::Gaussians;
 
 /// How often at most a snapshot of the whole scene is published.
@@ -25,6 +25,8 @@ pub struct SessionHandle {
     pub events: Receiver<Event>,
     /// The newest snapshot of the scene.
     pub snapshots: Arc<Slot<Snapshot>>,
+    /// The run's start, put once when preparation is done.
+    pub start: Arc<Slot<RunStart>>,
     thread: Option<JoinHandle<Option<Gaussians>>>,
 }
 
@@ -64,19 +66,26 @@ where
     let (cmd_tx, cmd_rx) = crossbeam_channel::unbounded();
     let (ev_tx, ev_rx) = crossbeam_channel::unbounded();
     let slot = Arc::new(Slot::default());
-    let slot_w = slot.clone();
+    let start = Arc::new(Slot::default());
+    let (slot_w, start_w) = (slot.clone(), start.clone());
     let thread = std::thread::Builder::new()
         .name("gast-session".into())
-        .spawn(move || worker(load, cmd_rx, ev_tx, slot_w, waker))
+        .spawn(move || worker(load, cmd_rx, ev_tx, WorkerSlots { snapshots: slot_w, start: start_w }, waker))
         .ok();
-    SessionHandle { commands: cmd_tx, events: ev_rx, snapshots: slot, thread }
+    SessionHandle { commands: cmd_tx, events: ev_rx, snapshots: slot, start, thread }
+}
+
+/// The slots a worker fills.
+struct WorkerSlots {
+    snapshots: Arc<Slot<Snapshot>>,
+    start: Arc<Slot<RunStart>>,
 }
 
 fn worker<F>(
     load: F,
     commands: Receiver<Command>,
     events: Sender<Event>,
-    slot: Arc<Slot<Snapshot>>,
+    slots: WorkerSlots,
     waker: Arc<dyn Fn() + Send + Sync>,
 ) -> Option<Gaussians>
 where
@@ -100,9 +109,11 @@ where
             return None;
         }
     };
+    let slot = &slots.snapshots;
+    slots.start.put(RunStart::of(&session));
     slot.put(Snapshot { step: 0, gaussians: session.result() });
     waker();
-    run_loop(&mut session, &commands, &emit, &slot, &*waker);
+    run_loop(&mut session, &commands, &emit, slot, &*waker);
     let result = session.result();
     slot.put(Snapshot { step: session.steps_done(), gaussians: result.clone() });
     emit(Event::Finished { completed: session.is_done(), steps: session.steps_done(), seconds: session.elapsed_s() });
