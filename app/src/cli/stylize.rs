@@ -496,22 +496,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         args.preview_views,
     )?;
     let sheet_path = args.out.join("sheet.png");
-    let focus = if session.focus_on_object() { "object" } else { "frame" };
-    let settings = format!(
-        "{} {} steps ({} cycles x {}), {} px, texture {} px, focus {focus} (asked {:?}, coverage {:.0}%), lr colour {}, colour floor {}; {:.0} s ({:.2} s/step)",
-        config.mode.name(),
-        total,
-        config.cycles,
-        config.steps_per_cycle,
-        config.resolution,
-        config.texture_scale,
-        config.focus,
-        100.0 * session.coverage(),
-        config.lr.color,
-        if config.color_floor { "on" } else { "off" },
-        optimisation_s,
-        optimisation_s / f64::from(total.max(1)),
-    );
+    let settings = sheet::settings_line(&config, total, optimisation_s, session.focus_on_object(), session.coverage());
     let title = format!(
         "{} x {}",
         args.scene.file_name().unwrap_or_default().to_string_lossy(),

@@ -66,6 +66,7 @@ pub fn starter() -> SessionStarter {
             commands: handle.commands.clone(),
             events: handle.events.clone(),
             snapshots: handle.snapshots.clone(),
+            start: handle.start.clone(),
             worker: Some(handle),
         })
     })
