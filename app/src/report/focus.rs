@@ -31,7 +31,7 @@ fn nn(m: &Measures) -> f32 {
 }
 
 /// The rows of `study` with their records.
-fn rows_of<'a>(run: &'a RunSummary, study: Study) -> Vec<(&'a Row, &'a Record)> {
+fn rows_of(run: &RunSummary, study: Study) -> Vec<(&Row, &Record)> {
     run.rows
         .iter()
         .filter(|r| r.study == study)

@@ -9,6 +9,11 @@
 //! carry consistency: a short baseline of 5° ([`SHORT_PAIRS`]) and a long one of
 //! 37.5° ([`LONG_PAIRS`]). The ring is not the optimisation's camera set, so
 //! the measures also see the scene between training views.
+//!
+//! Small objects leave most of a view to the background, which the whole-view
+//! measures average in; the `_object` measures read only the pixels (or
+//! feature positions) the colour-matched scene covers in each view
+//! ([`coverage_mask`]), so a study of object focus compares on the object.
 
 use std::sync::Arc;
 
