@@ -166,6 +166,28 @@ impl Sizes {
         }
     }
 
+    /// Sizes from a JSON file with the fields of this struct (as `results.json`
+    /// records them under `sizes`), e.g. one scene and three styles to run a
+    /// study on a subset; missing fields take the full grid's values.
+    pub fn from_file(path: &std::path::Path) -> anyhow::Result<Self> {
+        use anyhow::Context as _;
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the sizes", path.display()))?;
+        let mut value = serde_json::to_value(Self::full()).context("the full sizes as JSON")?;
+        let given: serde_json::Value = serde_json::from_str(&text)
+            .with_context(|| format!("{}: expected a JSON object of grid sizes", path.display()))?;
+        let (Some(base), Some(given)) = (value.as_object_mut(), given.as_object()) else {
+            anyhow::bail!("{}: expected a JSON object of grid sizes, found {given}", path.display());
+        };
+        for (k, v) in given {
+            if !base.contains_key(k) {
+                anyhow::bail!("{}: unknown size {k:?} (known: {})", path.display(), known_keys(base));
+            }
+            base.insert(k.clone(), v.clone());
+        }
+        serde_json::from_value(value).with_context(|| format!("{}: not valid grid sizes", path.display()))
+    }
+
     /// The `--quick` grid: the guitar, two styles, small images, a few minutes.
     pub fn quick() -> Self {
         Self {
@@ -186,6 +208,10 @@ impl Sizes {
             collapse_resolution: 64,
         }
     }
+}
+
+fn known_keys(m: &serde_json::Map<String, serde_json::Value>) -> String {
+    m.keys().cloned().collect::<Vec<_>>().join(", ")
 }
 
 /// One run of the grid.
@@ -329,4 +355,36 @@ pub struct RunSummary {
     pub rows: Vec<Row>,
     /// Every trial.
     pub trials: Vec<Record>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_from_a_file_override_the_full_grid_and_refuse_unknown_fields() {
+        let dir = std::env::temp_dir().join(format!("gast-sizes-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let path = dir.join("sizes.json");
+        std::fs::write(&path, r#"{"scenes": ["data/scenes/guitar.compressed.ply"], "focus_budget": 120}"#)
+            .expect("write");
+        let s = Sizes::from_file(&path).expect("sizes");
+        assert_eq!(s.scenes, vec!["data/scenes/guitar.compressed.ply".to_string()]);
+        assert_eq!(s.focus_budget, 120);
+        assert_eq!(s.styles.len(), 9, "missing fields keep the full grid's");
+        assert_eq!(s.resolution, Sizes::full().resolution);
+
+        std::fs::write(&path, r#"{"focus_budgets": 120}"#).expect("write");
+        let e = format!("{:#}", Sizes::from_file(&path).expect_err("unknown field"));
+        assert!(e.contains("sizes.json") && e.contains("focus_budgets") && e.contains("focus_budget"), "{e}");
+        std::fs::write(&path, r#"{"focus_budget": "many"}"#).expect("write");
+        let e = format!("{:#}", Sizes::from_file(&path).expect_err("wrong type"));
+        assert!(e.contains("sizes.json") && e.contains("not valid grid sizes"), "{e}");
+        std::fs::write(&path, "[1, 2]").expect("write");
+        let e = format!("{:#}", Sizes::from_file(&path).expect_err("not an object"));
+        assert!(e.contains("expected a JSON object"), "{e}");
+        let e = format!("{:#}", Sizes::from_file(&dir.join("missing.json")).expect_err("missing"));
+        assert!(e.contains("missing.json") && e.contains("cannot read"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }

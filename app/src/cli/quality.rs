@@ -43,9 +43,14 @@ pub struct QualityArgs {
     /// VGG weights (default: the shared vgg19-conv3.safetensors, else the usual resolution).
     #[arg(long)]
     pub weights: Option<PathBuf>,
+    /// The grid's sizes from a JSON file (the fields of `sizes` in results.json;
+    /// missing ones take the full grid's): scenes, styles, budgets and
+    /// resolutions, e.g. to run a study on a subset.
+    #[arg(long, value_name = "FILE", conflicts_with = "quick")]
+    pub sizes: Option<PathBuf>,
     /// Redraw the tables, charts and index of an earlier run's folder from its
     /// results.json, without running anything.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["quick", "studies", "out"])]
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["quick", "studies", "out", "sizes"])]
     pub report: Option<PathBuf>,
 }
 
@@ -357,7 +362,11 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let shared = shared_dir();
-    let sizes = if args.quick { Sizes::quick() } else { Sizes::full() };
+    let sizes = match &args.sizes {
+        Some(path) => Sizes::from_file(path)?,
+        None if args.quick => Sizes::quick(),
+        None => Sizes::full(),
+    };
     let studies = if args.studies.is_empty() { Study::ALL.to_vec() } else { args.studies.clone() };
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("gast-quality-{}", utc_stamp())));
     std::fs::create_dir_all(&out).with_context(|| format!("could not create the output folder {}", out.display()))?;

@@ -10,7 +10,9 @@ use anyhow::Context;
 use clap::Args;
 use gast_core::Camera;
 use gast_core::camera::{framing_subject, subject_span};
-use gast_core::eval::{inverse_depth_change, mean_std_distance, nn_cosine_distance};
+use gast_core::eval::{
+    CoveredColour, Degeneration, StabilityThresholds, inverse_depth_change, mean_std_distance, nn_cosine_distance,
+};
 use gast_core::gpu::DeviceChoice;
 use gast_core::io::{write_bytes, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
@@ -379,6 +381,9 @@ struct PreviewMetrics {
     nn_distance_before: f32,
     nn_distance_after: f32,
     inverse_depth_change: f32,
+    /// Mean colour of the covered pixels (alpha ≥ 0.5) of the colour-matched and after renders.
+    colour_matched: CoveredColour,
+    colour_after: CoveredColour,
 }
 
 #[derive(Serialize, Default)]
@@ -388,6 +393,11 @@ struct Summary {
     nn_distance_before: f32,
     nn_distance_after: f32,
     inverse_depth_change: f32,
+    /// The colour-collapse detector on the preview views: covered luminance
+    /// and chroma, colour-matched and after, and what fired (null: nothing).
+    colour_matched: CoveredColour,
+    colour_after: CoveredColour,
+    colour_collapse: Option<Degeneration>,
 }
 
 /// Runs the stylization and writes the outputs.
@@ -501,22 +511,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         args.preview_views,
     )?;
     let sheet_path = args.out.join("sheet.png");
-    let focus = if session.focus_on_object() { "object" } else { "frame" };
-    let settings = format!(
-        "{} {} steps ({} cycles x {}), {} px, texture {} px, focus {focus} (asked {:?}, coverage {:.0}%), lr colour {}, colour floor {}; {:.0} s ({:.2} s/step)",
-        config.mode.name(),
-        total,
-        config.cycles,
-        config.steps_per_cycle,
-        config.resolution,
-        config.texture_scale,
-        config.focus,
-        100.0 * session.coverage(),
-        config.lr.color,
-        if config.color_floor { "on" } else { "off" },
-        optimisation_s,
-        optimisation_s / f64::from(total.max(1)),
-    );
+    let settings = sheet::settings_line(&config, total, optimisation_s, session.focus_on_object(), session.coverage());
     let title = format!(
         "{} x {}",
         args.scene.file_name().unwrap_or_default().to_string_lossy(),
@@ -540,7 +535,27 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         summary.nn_distance_before += p.nn_distance_before / n;
         summary.nn_distance_after += p.nn_distance_after / n;
         summary.inverse_depth_change += p.inverse_depth_change / n;
+        summary.colour_matched.luminance += p.colour_matched.luminance / n;
+        summary.colour_matched.chroma += p.colour_matched.chroma / n;
+        summary.colour_after.luminance += p.colour_after.luminance / n;
+        summary.colour_after.chroma += p.colour_after.chroma / n;
     }
+    summary.colour_collapse = gast_core::eval::stability::colour_collapse(
+        summary.colour_matched,
+        summary.colour_after,
+        &StabilityThresholds::default(),
+    );
+    eprintln!(
+        "  covered colour: luminance {:.3} -> {:.3}, chroma {:.3} -> {:.3} (colour-matched -> after); colour collapse: {}",
+        summary.colour_matched.luminance,
+        summary.colour_after.luminance,
+        summary.colour_matched.chroma,
+        summary.colour_after.chroma,
+        summary
+            .colour_collapse
+            .as_ref()
+            .map_or("no".to_string(), |d| format!("yes ({:.2} > {:.2})", d.value, d.threshold))
+    );
     eprintln!(
         "  style distance (mean-std of VGG relu3) {:.4} -> {:.4}; nearest-neighbour {:.4} -> {:.4}; inverse depth changed by {:.1}%",
         summary.mean_std_before,
@@ -614,6 +629,9 @@ fn write_previews(
                 &matched.alpha,
                 &after.alpha,
             ),
+            // As the detector of `gast bench quality` reads them: each render's own covered pixels.
+            colour_matched: CoveredColour::of(&matched.rgb, &matched.alpha),
+            colour_after: CoveredColour::of(&after.rgb, &after.alpha),
         });
     }
     Ok(metrics)

@@ -9,10 +9,10 @@
 
 use std::path::Path;
 
-use anyhow::Context;
 use gast_core::io::depth_to_gray;
 use gast_core::raster::{self, Render, RenderOptions};
 use gast_core::session::Session;
+use gast_core::style::{StyleConfig, StyleMaps};
 use gast_core::{Camera, Gaussians};
 use image::{Rgb, RgbImage};
 use vello_cpu::color::AlphaColor;
@@ -86,17 +86,44 @@ pub struct SheetContent {
 /// before, the colour-matched scene, and the current result, from `count`
 /// optimisation cameras spread over the set.
 pub fn session_views(session: &Session, input: &Gaussians, count: usize) -> Vec<[Render; 3]> {
-    let opts = RenderOptions { background: session.config().background };
-    let result = session.result();
-    spread(session.cameras(), count)
-        .map(|cam| {
-            [
-                raster::render(input, cam, &opts),
-                raster::render(session.colour_matched(), cam, &opts),
-                raster::render(&result, cam, &opts),
-            ]
-        })
-        .collect()
+    let run = RunViews {
+        input,
+        colour_matched: session.colour_matched(),
+        result: &session.result(),
+        cameras: session.cameras(),
+        background: session.config().background,
+    };
+    run.render(count)
+}
+
+/// The three scenes of a run and the cameras they are seen from.
+pub struct RunViews<'a> {
+    /// The scene as loaded.
+    pub input: &'a Gaussians,
+    /// The colour-matched scene before optimisation.
+    pub colour_matched: &'a Gaussians,
+    /// The current (or final) result.
+    pub result: &'a Gaussians,
+    /// The optimisation cameras.
+    pub cameras: &'a [Camera],
+    /// Background colour of the renders.
+    pub background: [f32; 3],
+}
+
+impl RunViews<'_> {
+    /// Before, colour-matched and after renders from `count` cameras spread over the set.
+    pub fn render(&self, count: usize) -> Vec<[Render; 3]> {
+        let opts = RenderOptions { background: self.background };
+        spread(self.cameras, count)
+            .map(|cam| {
+                [
+                    raster::render(self.input, cam, &opts),
+                    raster::render(self.colour_matched, cam, &opts),
+                    raster::render(self.result, cam, &opts),
+                ]
+            })
+            .collect()
+    }
 }
 
 /// `count` cameras evenly spread over `cameras` (all of them when fewer).
@@ -107,9 +134,33 @@ pub fn spread(cameras: &[Camera], count: usize) -> impl Iterator<Item = &Camera>
 
 /// The style's three maps of a session as tiles.
 pub fn style_tiles(session: &Session) -> [Tile; 3] {
-    let m = &session.style().maps;
+    maps_tiles(&session.style().maps)
+}
+
+/// Style maps (RGB, depth, edges) as tiles.
+pub fn maps_tiles(m: &StyleMaps) -> [Tile; 3] {
     let (w, h) = (m.width as u32, m.height as u32);
     [Tile::from_rgb(w, h, &m.rgb), Tile::from_gray(w, h, &m.depth), Tile::from_gray(w, h, &m.edge)]
+}
+
+/// The sheet's settings line: mode, steps, sizes, focus, colour settings and time.
+pub fn settings_line(config: &StyleConfig, steps: u32, seconds: f64, focus_on_object: bool, coverage: f32) -> String {
+    let focus = if focus_on_object { "object" } else { "frame" };
+    format!(
+        "{} {} steps ({} cycles x {}), {} px, texture {} px, focus {focus} (asked {:?}, coverage {:.0}%), lr colour {}, colour floor {}; {:.0} s ({:.2} s/step)",
+        config.mode.name(),
+        steps,
+        config.cycles,
+        config.steps_per_cycle,
+        config.resolution,
+        config.texture_scale,
+        config.focus,
+        100.0 * coverage,
+        config.lr.color,
+        if config.color_floor { "on" } else { "off" },
+        seconds,
+        seconds / f64::from(steps.max(1)),
+    )
 }
 
 /// The sheet as an RGB image.
@@ -148,8 +199,9 @@ pub fn contact_sheet(content: &SheetContent) -> RgbImage {
 /// Writes the sheet as a PNG (atomically).
 pub fn write_sheet(path: &Path, content: &SheetContent) -> anyhow::Result<()> {
     let img = contact_sheet(content);
+    // The error names the file already; its Display carries the cause.
     gast_core::io::write_png_rgb8(path, img.width(), img.height(), img.as_raw())
-        .with_context(|| format!("writing the contact sheet {}", path.display()))
+        .map_err(|e| anyhow::anyhow!("cannot write the contact sheet: {e}"))
 }
 
 /// Draws `tile` scaled (nearest neighbour) into the `TILE × TILE` square at

@@ -13,6 +13,8 @@ use gast_core::vision::style_depth::{DepthPolarity, DepthProvider, HeuristicDept
 use gast_core::{Camera, Gaussians};
 
 use super::viewport::SharedGaussians;
+use crate::report::sheet::{RunViews, SheetContent, maps_tiles, write_sheet};
+use gast_core::session::RunStart;
 
 use gast_core::raster::{RenderOptions, render};
 
@@ -139,6 +141,23 @@ pub fn style_maps(style: &StyleImage, key: &StyleMapsKey) -> (Maps, Option<Strin
     (maps, warning)
 }
 
+/// Views on a contact sheet exported from the studio (as `gast stylize` writes by default).
+const SHEET_VIEWS: usize = 4;
+
+/// What a contact sheet of a run is drawn from.
+pub struct SheetJob {
+    /// The scene as loaded.
+    pub input: SharedGaussians,
+    /// The newest snapshot of the run.
+    pub result: SharedGaussians,
+    /// The run's start: colour-matched scene, cameras, style maps, parameters.
+    pub start: Arc<RunStart>,
+    /// The sheet's first line.
+    pub title: String,
+    /// The sheet's second line.
+    pub settings: String,
+}
+
 impl Jobs {
     /// A job runner that calls `waker` when a job finishes.
     pub fn new(waker: Arc<dyn Fn() + Send + Sync>) -> Self {
@@ -210,6 +229,31 @@ impl Jobs {
         self.spawn(move || match crate::turntable::write(&dir, &g, after.as_deref(), &opts, &mut |_, _| {}) {
             Ok(made) => JobDone::Exported(made.gif),
             Err(e) => JobDone::Failed(format!("exporting the turntable: {}", crate::error_text(&e))),
+        });
+    }
+
+    /// Renders the before / colour-matched / after views of a run and writes
+    /// its contact sheet ([`crate::report::sheet`]) as PNG, atomically.
+    pub fn export_sheet(&mut self, sheet: SheetJob, path: PathBuf) {
+        self.spawn(move || {
+            let views = RunViews {
+                input: &sheet.input,
+                colour_matched: &sheet.start.colour_matched,
+                result: &sheet.result,
+                cameras: &sheet.start.cameras,
+                background: sheet.start.config.background,
+            }
+            .render(SHEET_VIEWS);
+            let content = SheetContent {
+                title: sheet.title,
+                settings: sheet.settings,
+                style: maps_tiles(&sheet.start.style_maps),
+                views,
+            };
+            match write_sheet(&path, &content) {
+                Ok(()) => JobDone::Exported(path),
+                Err(e) => JobDone::Failed(format!("{e:#}")),
+            }
         });
     }
 

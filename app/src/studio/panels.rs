@@ -8,9 +8,12 @@ use egui::{Color32, RichText, Ui};
 use gast_core::session::Command;
 use gast_core::style::StyleConfig;
 
+use super::inspect::SheetJob;
 use super::session_link::{RunStatus, StartRequest};
 use super::view::{UpAxis, ViewState};
+use super::viewport::SharedGaussians;
 use super::{StudioApp, controls};
+use crate::report::sheet;
 use crate::turntable::TurntableOptions;
 
 impl StudioApp {
@@ -51,6 +54,17 @@ impl StudioApp {
             {
                 self.jobs.export_scene(g.clone(), p);
             }
+            let have_run = self.run.start().is_some() && self.snapshot.is_some();
+            if ui
+                .add_enabled(have_run, egui::Button::new("Contact sheet of the run (PNG)…"))
+                .on_hover_text("the style and four views before / colour-matched / after, in RGB and depth")
+                .on_disabled_hover_text("start a run first")
+                .clicked()
+                && let Some(p) =
+                    rfd::FileDialog::new().add_filter("PNG", &["png"]).set_file_name("sheet.png").save_file()
+            {
+                self.export_sheet(p);
+            }
             if ui.button("Current view as PNG…").clicked()
                 && let Some(p) =
                     rfd::FileDialog::new().add_filter("PNG", &["png"]).set_file_name("view.png").save_file()
@@ -87,6 +101,42 @@ impl StudioApp {
         let opts = TurntableOptions { up: self.view.up.vector().to_array(), background: self.background, ..opts };
         self.notice = format!("writing a turntable into {}…", dir.display());
         self.jobs.export_turntable(before, after, opts, dir);
+    }
+
+    /// Starts writing the contact sheet of the current run (the loaded scene,
+    /// the run's colour-matched start and its newest snapshot) to `path` in the
+    /// background; the path appears in the status line when it is written, an
+    /// error in the bottom panel.
+    pub(super) fn export_sheet(&mut self, path: std::path::PathBuf) {
+        let (Some(scene), Some(start), Some(snapshot)) = (&self.scene, self.run.start(), &self.snapshot) else {
+            self.report(anyhow::anyhow!("{}: no contact sheet without a run; start one first", path.display()));
+            return;
+        };
+        let step = match &snapshot.gaussians {
+            SharedGaussians::Snapshot(s) => s.step,
+            SharedGaussians::Owned(_) => 0,
+        };
+        let style = self
+            .style
+            .and_then(|k| self.styles.get(k))
+            .and_then(|s| s.path.file_name())
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let job = SheetJob {
+            input: scene.scene.gaussians.clone(),
+            result: snapshot.gaussians.clone(),
+            title: format!("{} x {style}", scene.name),
+            settings: sheet::settings_line(
+                &start.config,
+                step,
+                self.run.elapsed_s(),
+                start.focus_on_object,
+                start.coverage,
+            ),
+            start,
+        };
+        self.notice = format!("writing the contact sheet {}…", path.display());
+        self.jobs.export_sheet(job, path);
     }
 
     pub(super) fn status_panel(&mut self, ui: &mut Ui) {

@@ -13,7 +13,7 @@ use std::sync::Arc;
 
 use crossbeam_channel::{Receiver, Sender};
 use gast_core::Gaussians;
-use gast_core::session::{Command, Event, Slot, Snapshot, StepReport};
+use gast_core::session::{Command, Event, RunStart, Slot, Snapshot, StepReport};
 use gast_core::style::StyleConfig;
 
 /// The channels of one running session.
@@ -27,6 +27,8 @@ pub struct SessionLink {
     /// The GPU engine's buffers, when the run steps on the GPU (the viewport
     /// draws from them when it shares the device).
     pub live: Arc<Slot<gast_core::gpu::LiveGaussians>>,
+    /// The run's start (colour-matched scene, cameras, style maps), once prepared.
+    pub start: Arc<Slot<RunStart>>,
     /// The worker thread, stopped when the link is dropped (`None` in tests
     /// that play the worker's part themselves).
     #[expect(dead_code, reason = "held for its Drop, which stops the worker")]
@@ -107,6 +109,16 @@ impl RunMonitor {
         self.link.is_some() && matches!(self.status, RunStatus::Running | RunStatus::Paused)
     }
 
+    /// The run's start, once the worker has prepared it.
+    pub fn start(&self) -> Option<Arc<RunStart>> {
+        self.link.as_ref().and_then(|l| l.start.latest())
+    }
+
+    /// Seconds of optimisation so far, from the last step report.
+    pub fn elapsed_s(&self) -> f64 {
+        self.steps.last().map_or(0.0, |s| s.elapsed_s)
+    }
+
     /// Sends a command; false when no run is connected.
     pub fn send(&self, command: Command) -> bool {
         self.link.as_ref().is_some_and(|l| l.commands.send(command).is_ok())
@@ -182,6 +194,7 @@ mod tests {
             events: erx,
             snapshots: slot.clone(),
             live: Arc::default(),
+            start: Arc::default(),
             worker: None,
         });
         assert!(m.send(Command::Pause));

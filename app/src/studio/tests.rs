@@ -258,6 +258,7 @@ fn app_with_a_run(
         events: erx,
         snapshots: slot.clone(),
         live: Arc::default(),
+        start: Arc::default(),
         worker: None,
     });
     for iter in 0..steps {
@@ -584,4 +585,145 @@ fn turntable_export_runs_in_the_background_and_shows_its_gif() {
     assert_eq!(frames.len(), 5);
     assert_eq!(frames[0].buffer().dimensions(), (40, 40), "no snapshot: one panel per frame");
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A file of the shared data (`$GAST_SHARED`, else `../shared` beside the workspace).
+fn shared_file(rel: &str) -> Option<PathBuf> {
+    let base = std::env::var_os("GAST_SHARED")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
+    let p = base.join(rel);
+    p.exists().then_some(p)
+}
+
+/// Steps the app's workers until `done` holds (or panics after `seconds`).
+fn poll_until(app: &mut StudioApp, seconds: u64, what: &str, done: impl Fn(&StudioApp) -> bool) {
+    let end = std::time::Instant::now() + std::time::Duration::from_secs(seconds);
+    while !done(app) {
+        assert!(std::time::Instant::now() < end, "{what}: not done after {seconds} s; errors {:?}", app.errors);
+        app.poll_workers();
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
+/// The contact sheet of a real run (the core session worker on the demo scene
+/// and style, a few CPU steps): refused with a message before any run, then
+/// written with every tile; a path that cannot be written shows its error in
+/// the bottom panel.
+#[test]
+fn the_contact_sheet_of_a_run_is_exported() {
+    let Some(weights) = shared_file("data/weights/vgg19-conv3.safetensors") else {
+        assert!(!in_ci(), "the shared VGG weights are missing (CI=true, so this is a failure)");
+        eprintln!("SKIPPED the_contact_sheet_of_a_run_is_exported: no shared VGG weights (set GAST_SHARED)");
+        return;
+    };
+    let dir = std::env::temp_dir().join(format!("gast-studio-sheet-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = dir.join("sheet.png");
+    let mut app = test_app();
+    app.export_sheet(path.clone());
+    assert!(
+        app.errors.len() == 1 && app.errors[0].contains("start one first"),
+        "no run yet, no sheet: {:?}",
+        app.errors
+    );
+    assert!(!path.exists());
+    app.errors.clear();
+
+    let vgg = Arc::new(gast_core::vision::Vgg::load(&weights).expect("weights"));
+    app.set_session_starter(Box::new(move |req: session_link::StartRequest| {
+        let scene = Arc::unwrap_or_clone(req.scene);
+        let opts = gast_core::camera::OrbitOptions {
+            count: 8,
+            width: req.config.resolution,
+            height: req.config.resolution,
+            ..Default::default()
+        };
+        let cameras = gast_core::camera::framed_orbit(&scene, &opts);
+        let inputs = gast_core::session::SessionInputs {
+            scene,
+            cameras,
+            style: (*req.style).clone(),
+            style_depth: gast_core::session::StyleDepthSource::Heuristic,
+            vgg: vgg.clone(),
+            config: req.config,
+            gpu: None,
+        };
+        let handle = gast_core::session::spawn(inputs, req.waker);
+        Ok(session_link::SessionLink {
+            commands: handle.commands.clone(),
+            events: handle.events.clone(),
+            snapshots: handle.snapshots.clone(),
+            start: handle.start.clone(),
+            worker: Some(handle),
+        })
+    }));
+    app.config = StyleConfig {
+        resolution: 64,
+        texture_scale: 64,
+        cycles: 1,
+        steps_per_cycle: 6,
+        ratio_geo: 0.5,
+        ..StyleConfig::default()
+    };
+    app.start_run();
+    poll_until(&mut app, 600, "the run", |a| matches!(a.run.status, RunStatus::Finished { .. } | RunStatus::Failed(_)));
+    assert_eq!(app.run.status, RunStatus::Finished { completed: true }, "{:?}", app.errors);
+    poll_until(&mut app, 10, "the last snapshot", |a| {
+        a.snapshot.as_ref().is_some_and(|s| matches!(&s.gaussians, SharedGaussians::Snapshot(s) if s.step == 6))
+    });
+
+    app.export_sheet(path.clone());
+    poll_until(&mut app, 300, "the sheet", |a| a.jobs.running == 0);
+    assert!(app.errors.is_empty(), "{:?}", app.errors);
+    assert!(app.notice.contains(&path.display().to_string()), "the notice does not name the sheet: {}", app.notice);
+    let img = image::open(&path).unwrap_or_else(|e| panic!("{}: not an image ({e})", path.display())).to_rgb8();
+    // Six columns of 200 px tiles; a header, the style row and four view rows.
+    assert_eq!(img.width(), 6 * 200 + 7 * 6);
+    assert_eq!(img.height(), 2 * 22 + 6 + 5 * (22 + 200 + 6) + 6);
+    let mut colours: Vec<[u8; 3]> = img.pixels().map(|p| p.0).collect();
+    colours.sort_unstable();
+    colours.dedup();
+    // Every view's before and after RGB tiles show the scene (not one flat colour) and differ.
+    let tile = |row: u32, col: u32| {
+        let (x0, y0) = (6 + col * 206, 2 * 22 + 6 + row * 228 + 22);
+        (0..200u32).flat_map(move |y| (0..200u32).map(move |x| (x0 + x, y0 + y))).collect::<Vec<_>>()
+    };
+    let luminance = |p: [u8; 3]| 0.299 * f64::from(p[0]) + 0.587 * f64::from(p[1]) + 0.114 * f64::from(p[2]);
+    for view in 1..=4 {
+        let before: Vec<[u8; 3]> = tile(view, 0).iter().map(|&(x, y)| img.get_pixel(x, y).0).collect();
+        let after: Vec<[u8; 3]> = tile(view, 2).iter().map(|&(x, y)| img.get_pixel(x, y).0).collect();
+        let mean = after.iter().map(|&p| luminance(p)).sum::<f64>() / after.len() as f64;
+        let spread = (after.iter().map(|&p| (luminance(p) - mean).powi(2)).sum::<f64>() / after.len() as f64).sqrt();
+        let changed = before.iter().zip(&after).filter(|(a, b)| a != b).count();
+        println!("view {view}: after tile luminance {mean:.1} ± {spread:.1}, {changed} of 40000 pixels changed");
+        assert!(spread > 5.0, "view {view}: the after tile is flat ({spread:.1})");
+        assert!(changed > 1000, "view {view}: the after tile equals the before tile");
+    }
+    println!("sheet {} ({}×{}, {} colours)", path.display(), img.width(), img.height(), colours.len());
+    assert!(colours.len() > 500, "{} colours: the sheet looks blank", colours.len());
+
+    // A file as the folder: the error names the path and shows in the bottom panel.
+    let bad = path.join("sheet.png");
+    app.export_sheet(bad.clone());
+    poll_until(&mut app, 300, "the failing sheet", |a| a.jobs.running == 0);
+    assert!(
+        app.errors.len() == 1
+            && app.errors[0].starts_with("cannot write the contact sheet: ")
+            && app.errors[0].contains("sheet.png/sheet.png"),
+        "{:?}",
+        app.errors
+    );
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    harness.run_steps(3);
+    harness.get_by_label_contains("cannot write the contact sheet");
+    harness.get_by_label("1 error(s)");
+    if std::env::var_os("GAST_KEEP_SCREENSHOTS").is_none() {
+        std::fs::remove_dir_all(&dir).ok();
+    } else {
+        println!("kept {}", dir.display());
+    }
 }

@@ -67,6 +67,7 @@ pub fn starter() -> SessionStarter {
             events: handle.events.clone(),
             snapshots: handle.snapshots.clone(),
             live: handle.live.clone(),
+            start: handle.start.clone(),
             worker: Some(handle),
         })
     })

@@ -40,6 +40,40 @@ pub struct Consistency {
 /// [`Consistency`] and [`DEFAULT_DEPTH_TOLERANCE`] for `depth_tolerance`.
 /// Renders whose size does not match their camera give the default (empty) result.
 pub fn warp_consistency(a: &Render, cam_a: &Camera, b: &Render, cam_b: &Camera, depth_tolerance: f32) -> Consistency {
+    warp(a, cam_a, b, cam_b, depth_tolerance, None)
+}
+
+/// [`warp_consistency`] on the object: only pixels of A marked in `mask_a`
+/// are warped and only pixels of B marked in `mask_b` are compared (and count
+/// as covered for [`Consistency::valid_fraction`]). With the coverage masks of
+/// the colour-matched renders ([`crate::style::focus::coverage_mask`]), what a
+/// stylization adds around the object (grown or drifting splats over the
+/// background) does not enter the measure. Masks of all ones give
+/// [`warp_consistency`]; masks whose size does not match their render give the
+/// default (empty) result.
+pub fn warp_consistency_masked(
+    a: &Render,
+    cam_a: &Camera,
+    b: &Render,
+    cam_b: &Camera,
+    depth_tolerance: f32,
+    (mask_a, mask_b): (&[bool], &[bool]),
+) -> Consistency {
+    let pixels = |r: &Render| r.width as usize * r.height as usize;
+    if mask_a.len() != pixels(a) || mask_b.len() != pixels(b) {
+        return Consistency::default();
+    }
+    warp(a, cam_a, b, cam_b, depth_tolerance, Some((mask_a, mask_b)))
+}
+
+fn warp(
+    a: &Render,
+    cam_a: &Camera,
+    b: &Render,
+    cam_b: &Camera,
+    depth_tolerance: f32,
+    masks: Option<(&[bool], &[bool])>,
+) -> Consistency {
     let (wa, ha) = (a.width as usize, a.height as usize);
     let (wb, hb) = (b.width as usize, b.height as usize);
     let sized = |r: &Render, c: &Camera, w: usize, h: usize| {
@@ -48,12 +82,17 @@ pub fn warp_consistency(a: &Render, cam_a: &Camera, b: &Render, cam_b: &Camera, 
     if !sized(a, cam_a, wa, ha) || !sized(b, cam_b, wb, hb) {
         return Consistency::default();
     }
+    let in_a = |i: usize| masks.is_none_or(|(m, _)| m[i]);
+    let in_b = |j: usize| masks.is_none_or(|(_, m)| m[j]);
     // z-buffer of the warped samples in B: (depth in B, source pixel in A).
     let mut zbuf: Vec<Option<(f32, usize)>> = vec![None; wb * hb];
     let a_to_world = cam_a.rotation.transpose();
     for y in 0..ha {
         for x in 0..wa {
             let i = y * wa + x;
+            if !in_a(i) {
+                continue;
+            }
             let Some(z) = pixel_depth(a, i) else { continue };
             let world = a_to_world * (back_project(cam_a, x, y, z) - cam_a.translation);
             let pb: Vec3 = cam_b.world_to_camera(world);
@@ -71,7 +110,7 @@ pub fn warp_consistency(a: &Render, cam_a: &Camera, b: &Render, cam_b: &Camera, 
         }
     }
     let (mut sq, mut valid, mut covered) = (0.0f64, 0usize, 0usize);
-    for (j, slot) in zbuf.iter().enumerate() {
+    for (j, slot) in zbuf.iter().enumerate().filter(|(j, _)| in_b(*j)) {
         let Some(zb) = pixel_depth(b, j) else { continue };
         covered += 1;
         let Some((zw, i)) = *slot else { continue };
@@ -180,6 +219,46 @@ mod tests {
         let differ = warp_consistency(&ra, &ca, &rb_other, &cb, DEFAULT_DEPTH_TOLERANCE);
         assert!(differ.valid_fraction > 0.6, "{differ:?}");
         assert!(differ.rmse > 0.2 && differ.rmse > 10.0 * same.rmse, "{differ:?} vs {same:?}");
+    }
+
+    #[test]
+    fn the_masked_measure_ignores_pixels_outside_the_masks() {
+        let scene = plane(|x, y| [0.5 + 0.3 * x, 0.5 + 0.3 * y, 0.5]);
+        let (ca, cb) = (cam_at(0.0), cam_at(12.0));
+        let opts = RenderOptions::default();
+        let (ra, rb) = (render(&scene, &ca, &opts), render(&scene, &cb, &opts));
+        let ones = |r: &Render| vec![true; r.alpha.len()];
+        let plain = warp_consistency(&ra, &ca, &rb, &cb, DEFAULT_DEPTH_TOLERANCE);
+        let all = warp_consistency_masked(&ra, &ca, &rb, &cb, DEFAULT_DEPTH_TOLERANCE, (&ones(&ra), &ones(&rb)));
+        assert_eq!(all, plain, "masks of all ones are the unmasked measure");
+
+        // The right half of each image keeps only its left half: repainting the
+        // right halves (in A and in B) changes the plain measure, not the masked one.
+        let left = |r: &Render| -> Vec<bool> { (0..r.alpha.len()).map(|i| i % r.width as usize <= 40).collect() };
+        let (ma, mb) = (left(&ra), left(&rb));
+        let masked = warp_consistency_masked(&ra, &ca, &rb, &cb, DEFAULT_DEPTH_TOLERANCE, (&ma, &mb));
+        assert!(masked.valid > 100 && masked.valid < plain.valid, "{masked:?} vs {plain:?}");
+        let repaint = |r: &Render, colour: [f32; 3]| {
+            let mut r = r.clone();
+            let w = r.width as usize;
+            for (i, px) in r.rgb.chunks_exact_mut(3).enumerate() {
+                if i % w > 40 {
+                    px.copy_from_slice(&colour);
+                }
+            }
+            r
+        };
+        let (pa, pb) = (repaint(&ra, [1.0, 0.0, 0.0]), repaint(&rb, [0.0, 0.0, 1.0]));
+        let plain_painted = warp_consistency(&pa, &ca, &pb, &cb, DEFAULT_DEPTH_TOLERANCE);
+        assert!(plain_painted.rmse > 5.0 * plain.rmse.max(0.01), "{plain_painted:?} vs {plain:?}");
+        let masked_painted = warp_consistency_masked(&pa, &ca, &pb, &cb, DEFAULT_DEPTH_TOLERANCE, (&ma, &mb));
+        assert_eq!(masked_painted, masked);
+        // A mask of the wrong size: no result.
+        let short = vec![true; 3];
+        assert_eq!(
+            warp_consistency_masked(&ra, &ca, &rb, &cb, DEFAULT_DEPTH_TOLERANCE, (&short, &mb)),
+            Consistency::default()
+        );
     }
 
     #[test]

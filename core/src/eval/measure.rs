@@ -9,11 +9,16 @@
 //! carry consistency: a short baseline of 5° ([`SHORT_PAIRS`]) and a long one of
 //! 37.5° ([`LONG_PAIRS`]). The ring is not the optimisation's camera set, so
 //! the measures also see the scene between training views.
+//!
+//! Small objects leave most of a view to the background, which the whole-view
+//! measures average in; the `_object` measures read only the pixels (or
+//! feature positions) the colour-matched scene covers in each view
+//! ([`coverage_mask`]), so a study of object focus compares on the object.
 
 use std::sync::Arc;
 
-use super::consistency::{DEFAULT_DEPTH_TOLERANCE, warp_consistency};
-use super::content::content_distance;
+use super::consistency::{DEFAULT_DEPTH_TOLERANCE, warp_consistency, warp_consistency_masked};
+use super::content::{content_distance, content_distance_masked};
 use super::geometry::{inverse_depth_change, normal_change};
 use super::stability::CoveredColour;
 use super::style::{NearestStyle, StyleReference};
@@ -111,6 +116,17 @@ pub struct Measures {
     /// [`Measures::nn_cosine`] over the covered feature positions.
     #[serde(default)]
     pub nn_cosine_object: f32,
+    /// [`Measures::content`] over the covered feature positions
+    /// ([`super::content::content_distance_masked`]); unitless.
+    #[serde(default)]
+    pub content_object: f32,
+    /// [`Measures::consistency_short`] over the pixels the colour-matched
+    /// scene covers in both views ([`warp_consistency_masked`]), RGB in `[0, 1]`.
+    #[serde(default)]
+    pub consistency_short_object: f32,
+    /// [`Measures::consistency_long`] over the covered pixels, RGB in `[0, 1]`.
+    #[serde(default)]
+    pub consistency_long_object: f32,
 }
 
 /// The fixed views, the colour-matched renders and the style's features that
@@ -129,6 +145,10 @@ pub struct Evaluator {
     reference_features: Vec<[FeatureMap; 3]>,
     /// Per style view, the feature positions the colour-matched scene covers.
     covered_positions: Vec<Vec<usize>>,
+    /// The same as flags, one per feature position.
+    covered_cells: Vec<Vec<bool>>,
+    /// Per entry of `cameras`, the pixels the colour-matched render covers ([`coverage_mask`]).
+    covered_pixels: Vec<Vec<bool>>,
 }
 
 impl Evaluator {
@@ -177,18 +197,23 @@ impl Evaluator {
             reference,
             reference_features: Vec::new(),
             covered_positions: Vec::new(),
+            covered_cells: Vec::new(),
+            covered_pixels: Vec::new(),
         };
+        out.covered_pixels =
+            out.reference.iter().map(|r| coverage_mask(&r.alpha, r.height as usize, r.width as usize)).collect();
         out.reference_features = STYLE_VIEWS.iter().map(|&v| out.features(&out.reference[out.slot(v)])).collect();
-        out.covered_positions = STYLE_VIEWS
+        out.covered_cells = STYLE_VIEWS
             .iter()
             .zip(&out.reference_features)
             .map(|(&v, f)| {
                 let r = &out.reference[out.slot(v)];
                 let (h, w) = (r.height as usize, r.width as usize);
-                let cells = feature_mask(&coverage_mask(&r.alpha, h, w), h, w, f[0].height, f[0].width);
-                (0..cells.len()).filter(|&x| cells[x]).collect()
+                feature_mask(&out.covered_pixels[out.slot(v)], h, w, f[0].height, f[0].width)
             })
             .collect();
+        out.covered_positions =
+            out.covered_cells.iter().map(|cells| (0..cells.len()).filter(|&x| cells[x]).collect()).collect();
         out
     }
 
@@ -296,7 +321,11 @@ impl Evaluator {
                 let v: Vec<f32> = feats[k].iter().flat_map(|f| f.data.iter().copied()).collect();
                 m.nn_cosine_joint += s.nn_cosine(&v) / n;
             }
-            m.content += content_distance(f, &self.reference_features[k][0].data).map_or(0.0, |d| d.relative) / n;
+            let reference = &self.reference_features[k][0];
+            m.content += content_distance(f, &reference.data).map_or(0.0, |d| d.relative) / n;
+            m.content_object += content_distance_masked(f, &reference.data, reference.channels, &self.covered_cells[k])
+                .map_or(0.0, |d| d.relative)
+                / n;
             let (before, after) = (&self.reference[self.slot(v)], &renders[self.slot(v)]);
             let cam = &self.cameras[self.slot(v)].1;
             m.depth_change +=
@@ -308,25 +337,27 @@ impl Evaluator {
             m.colour.luminance += colour.luminance / n;
             m.colour.chroma += colour.chroma / n;
         }
-        let pair_rmse = |pairs: &[(usize, usize)]| {
+        let pair_rmse = |pairs: &[(usize, usize)], on_object: bool| {
             pairs
                 .iter()
                 .map(|&(a, b)| {
                     let (ia, ib) = (self.slot(a), self.slot(b));
-                    warp_consistency(
-                        &renders[ia],
-                        &self.cameras[ia].1,
-                        &renders[ib],
-                        &self.cameras[ib].1,
-                        DEFAULT_DEPTH_TOLERANCE,
-                    )
-                    .rmse
+                    let (ra, ca, rb, cb) = (&renders[ia], &self.cameras[ia].1, &renders[ib], &self.cameras[ib].1);
+                    let masks = (self.covered_pixels[ia].as_slice(), self.covered_pixels[ib].as_slice());
+                    let c = if on_object {
+                        warp_consistency_masked(ra, ca, rb, cb, DEFAULT_DEPTH_TOLERANCE, masks)
+                    } else {
+                        warp_consistency(ra, ca, rb, cb, DEFAULT_DEPTH_TOLERANCE)
+                    };
+                    c.rmse
                 })
                 .sum::<f32>()
                 / pairs.len() as f32
         };
-        m.consistency_short = pair_rmse(&SHORT_PAIRS);
-        m.consistency_long = pair_rmse(&LONG_PAIRS);
+        m.consistency_short = pair_rmse(&SHORT_PAIRS, false);
+        m.consistency_long = pair_rmse(&LONG_PAIRS, false);
+        m.consistency_short_object = pair_rmse(&SHORT_PAIRS, true);
+        m.consistency_long_object = pair_rmse(&LONG_PAIRS, true);
         m
     }
 }

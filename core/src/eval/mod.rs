@@ -20,8 +20,8 @@ pub mod stability;
 pub mod style;
 pub mod trial;
 
-pub use consistency::{Consistency, ViewPairs, pick_view_pairs, warp_consistency};
-pub use content::{ContentDistance, content_distance};
+pub use consistency::{Consistency, ViewPairs, pick_view_pairs, warp_consistency, warp_consistency_masked};
+pub use content::{ContentDistance, content_distance, content_distance_masked};
 pub use geometry::{NormalChange, depth_normals, inverse_depth_change, normal_change};
 pub use measure::{EvalOptions, Evaluator, Measures};
 pub use stability::{

@@ -22,6 +22,9 @@ pub use slot::Slot;
 pub use stage1_cache::{CacheOutcome, Stage1Cache, depth_key};
 pub use worker::{SessionHandle, run_loop, spawn, spawn_with};
 
+use crate::camera::Camera;
+use crate::style::{StyleConfig, StyleMaps};
+
 /// The newest state of the Gaussians, for viewers and exports.
 #[derive(Clone, Debug)]
 pub struct Snapshot {
@@ -29,4 +32,37 @@ pub struct Snapshot {
     pub step: u32,
     /// The whole scene (Gaussians set aside by culling included).
     pub gaussians: crate::Gaussians,
+}
+
+/// Where a prepared run starts from, published once by the worker right after
+/// preparation: what a front end needs, beside the newest [`Snapshot`], to
+/// draw the run's before / colour-matched / after pictures (the contact sheet).
+#[derive(Clone, Debug)]
+pub struct RunStart {
+    /// The colour-matched scene before optimisation (`G^c`, whole).
+    pub colour_matched: crate::Gaussians,
+    /// The optimisation cameras at the working resolution.
+    pub cameras: Vec<Camera>,
+    /// The style's maps at texture scale.
+    pub style_maps: StyleMaps,
+    /// The parameters the run started with.
+    pub config: StyleConfig,
+    /// Mean share of the optimisation views' pixels the input scene covers.
+    pub coverage: f32,
+    /// Whether the losses focus on the object (`auto` resolved).
+    pub focus_on_object: bool,
+}
+
+impl RunStart {
+    /// The start of a prepared session.
+    pub fn of(session: &Session) -> Self {
+        Self {
+            colour_matched: session.colour_matched().clone(),
+            cameras: session.cameras().to_vec(),
+            style_maps: session.style().maps.clone(),
+            config: session.config().clone(),
+            coverage: session.coverage(),
+            focus_on_object: session.focus_on_object(),
+        }
+    }
 }

@@ -8,10 +8,10 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender, TryRecvError};
 
-use super::Snapshot;
 use super::events::{Command, Event};
 use super::run::{Session, SessionInputs};
 use super::slot::Slot;
+use super::{RunStart, Snapshot};
 use crate::gpu::LiveGaussians;
 use crate::scene::Gaussians;
 
@@ -33,6 +33,8 @@ pub struct SessionHandle {
     /// The GPU engine's buffers, once the session is prepared on a GPU (for a
     /// viewer on the same device; see [`crate::gpu::LiveGaussians`]).
     pub live: Arc<Slot<LiveGaussians>>,
+    /// The run's start, put once when preparation is done.
+    pub start: Arc<Slot<RunStart>>,
     thread: Option<JoinHandle<Option<Gaussians>>>,
 }
 
@@ -72,21 +74,28 @@ where
     let (cmd_tx, cmd_rx) = crossbeam_channel::unbounded();
     let (ev_tx, ev_rx) = crossbeam_channel::unbounded();
     let slot = Arc::new(Slot::default());
+    let start = Arc::new(Slot::default());
     let live = Arc::new(Slot::default());
-    let (slot_w, live_w) = (slot.clone(), live.clone());
+    let slots = WorkerSlots { snapshots: slot.clone(), start: start.clone(), live: live.clone() };
     let thread = std::thread::Builder::new()
         .name("gast-session".into())
-        .spawn(move || worker(load, cmd_rx, ev_tx, slot_w, live_w, waker))
+        .spawn(move || worker(load, cmd_rx, ev_tx, slots, waker))
         .ok();
-    SessionHandle { commands: cmd_tx, events: ev_rx, snapshots: slot, live, thread }
+    SessionHandle { commands: cmd_tx, events: ev_rx, snapshots: slot, live, start, thread }
+}
+
+/// The slots a worker fills.
+struct WorkerSlots {
+    snapshots: Arc<Slot<Snapshot>>,
+    start: Arc<Slot<RunStart>>,
+    live: Arc<Slot<LiveGaussians>>,
 }
 
 fn worker<F>(
     load: F,
     commands: Receiver<Command>,
     events: Sender<Event>,
-    slot: Arc<Slot<Snapshot>>,
-    live: Arc<Slot<LiveGaussians>>,
+    slots: WorkerSlots,
     waker: Arc<dyn Fn() + Send + Sync>,
 ) -> Option<Gaussians>
 where
@@ -110,12 +119,14 @@ where
             return None;
         }
     };
+    let slot = &slots.snapshots;
+    slots.start.put(RunStart::of(&session));
     if let Some(l) = session.live() {
-        live.put(l);
+        slots.live.put(l);
     }
     slot.put(Snapshot { step: 0, gaussians: session.result() });
     waker();
-    run_loop(&mut session, &commands, &emit, &slot, &*waker);
+    run_loop(&mut session, &commands, &emit, slot, &*waker);
     let result = session.result();
     slot.put(Snapshot { step: session.steps_done(), gaussians: result.clone() });
     emit(Event::Finished { completed: session.is_done(), steps: session.steps_done(), seconds: session.elapsed_s() });
