@@ -4,6 +4,7 @@
 
 mod axis;
 pub mod chart;
+mod fast;
 pub mod focus;
 mod glyphs;
 pub mod quality;

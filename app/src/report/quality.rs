@@ -264,6 +264,7 @@ fn write_charts(out: &Path, rows: &[Row], records: &[Record]) -> anyhow::Result<
             made.push((stem.into(), format!("{} against the N_g ratio", label_head(y_label))));
         }
     }
+    made.extend(super::fast::fast_charts(out, rows, records)?);
     Ok(made)
 }
 
