@@ -655,6 +655,7 @@ fn the_contact_sheet_of_a_run_is_exported() {
             commands: handle.commands.clone(),
             events: handle.events.clone(),
             snapshots: handle.snapshots.clone(),
+            live: handle.live.clone(),
             start: handle.start.clone(),
             worker: Some(handle),
         })
