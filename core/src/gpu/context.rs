@@ -165,7 +165,7 @@ impl GpuContext {
 
     /// The largest storage-buffer binding, in bytes.
     pub fn max_binding_bytes(&self) -> u64 {
-        u64::from(self.device.limits().max_storage_buffer_binding_size)
+        self.device.limits().max_storage_buffer_binding_size
     }
 
     /// A storage buffer holding `data` (read and written by kernels, copyable both ways).

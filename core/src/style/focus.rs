@@ -143,9 +143,9 @@ mod tests {
             .map(|k| if (2..14).contains(&(k / w)) && (2..14).contains(&(k % w)) { 0.9 } else { 0.1 })
             .collect();
         let m = coverage_mask(&alpha, h, w);
-        for k in 0..h * w {
+        for (k, &covered) in m.iter().enumerate() {
             let inner = (4..12).contains(&(k / w)) && (4..12).contains(&(k % w));
-            assert_eq!(m[k], inner, "pixel {k}");
+            assert_eq!(covered, inner, "pixel {k}");
         }
         let f = feature_mask(&m, h, w, 4, 4);
         // Cells of 4×4: only the four central ones are fully covered.

@@ -1,0 +1,101 @@
+//! `gast bench depth`: the style depth network's time per style and per stage.
+
+use std::process::ExitCode;
+use std::time::Instant;
+
+use clap::Args;
+
+use super::{median, shared_dir};
+use std::path::PathBuf;
+
+/// Arguments of `gast bench depth`.
+#[derive(Args, Debug)]
+pub struct DepthArgs {
+    /// Style image (default: styles/wave.jpg from the shared data folder).
+    #[arg(long)]
+    pub style: Option<PathBuf>,
+    /// Depth Anything V2 checkpoint (else $GAST_DEPTH_MODEL or the caches; never downloaded here).
+    #[arg(long)]
+    pub depth_model: Option<PathBuf>,
+    /// Forward passes at 518×518 to time (the median is printed).
+    #[arg(long, default_value_t = 3)]
+    pub reps: usize,
+    /// Also print the wall time of each stage of one forward at 518×518 and
+    /// one at the style's input size.
+    #[arg(long)]
+    pub stages: bool,
+}
+
+/// CPU time this process has used (user + system), from `/proc/self/stat`;
+/// on a shared machine it tells what a pass costs when the wall clock cannot.
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // Fields after the command name (which may hold spaces) start at index 2.
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    (ticks(11) + ticks(12)) / 100.0
+}
+
+/// The style depth network's time per style, and its forward at 518×518.
+pub fn run_depth(args: DepthArgs) -> anyhow::Result<ExitCode> {
+    let style_path = args.style.clone().unwrap_or_else(|| shared_dir().join("data/styles/wave.jpg"));
+    let style = gast_core::session::StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
+    println!("depth benchmark: style {}, {} threads", style_path.display(), rayon::current_num_threads());
+    time_style_depth(&style, args.depth_model.as_deref(), args.reps.max(1), args.stages)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Prints the depth network's time for one style (pre- and post-processing
+/// included) and the median of `reps` forward passes at 518×518. Uses the
+/// checkpoint found on this machine, else random weights at the Small model's
+/// sizes (same cost, meaningless output), and says which.
+pub(super) fn time_style_depth(
+    style: &gast_core::session::StyleImage,
+    explicit: Option<&std::path::Path>,
+    reps: usize,
+    stages: bool,
+) -> anyhow::Result<()> {
+    use anyhow::Context;
+    use gast_core::vision::depth::{DepthAnything, DepthConfig, DepthModelLocations, INPUT_SIZE, input_size};
+    let t = Instant::now();
+    let (model, what) = match DepthModelLocations::from_env(explicit).find() {
+        Ok(p) => (
+            DepthAnything::load_path(&p).with_context(|| format!("loading the depth model {}", p.display()))?,
+            format!("checkpoint {}", p.display()),
+        ),
+        Err(_) => (
+            DepthAnything::random(DepthConfig::small(), 1)?,
+            "no checkpoint here: random weights at the Small model's sizes".to_string(),
+        ),
+    };
+    let load_s = t.elapsed().as_secs_f64();
+    let (h, w) = (style.height, style.width);
+    let (ih, iw) = input_size(h, w, INPUT_SIZE, model.config().patch_size);
+    let (t, c) = (Instant::now(), cpu_seconds());
+    let _ = model.estimate_rgb(&style.to_f32(), h, w);
+    let (per_style, per_style_cpu) = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
+    let x = vec![0.25f32; 3 * INPUT_SIZE * INPUT_SIZE];
+    let (walls, cpus): (Vec<f64>, Vec<f64>) = (0..reps)
+        .map(|_| {
+            let (t, c) = (Instant::now(), cpu_seconds());
+            let _ = model.forward(&x, INPUT_SIZE, INPUT_SIZE);
+            (t.elapsed().as_secs_f64(), cpu_seconds() - c)
+        })
+        .unzip();
+    println!(
+        "style depth (Depth Anything V2, {what}): load {load_s:.2} s; per style {per_style:.2} s wall, {per_style_cpu:.2} s CPU ({w}×{h} image, network input {iw}×{ih}); forward at {INPUT_SIZE}×{INPUT_SIZE}: {:.2} s wall, {:.2} s CPU (medians of {reps})",
+        median(walls),
+        median(cpus)
+    );
+    if stages {
+        let (_, square) = model.forward_timed(&x, INPUT_SIZE, INPUT_SIZE);
+        let (_, style_sized) = model.forward_timed(&vec![0.25f32; 3 * ih * iw], ih, iw);
+        println!("{:<24} {:>10} {:>10}", "stage (wall s)", format!("{INPUT_SIZE}×{INPUT_SIZE}"), format!("{iw}×{ih}"));
+        for (name, s) in &square.stages {
+            println!("{name:<24} {s:>10.3} {:>10.3}", style_sized.get(name));
+        }
+        println!("{:<24} {:>10.3} {:>10.3}", "total", square.total(), style_sized.total());
+    }
+    Ok(())
+}

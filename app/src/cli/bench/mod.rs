@@ -1,0 +1,165 @@
+//! `gast bench …`: benchmarks that print figures. Timings are medians over
+//! several views after a warm-up; memory is the process's peak resident set,
+//! reset before each scene (Linux `clear_refs`).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use clap::Args;
+use gast_core::camera::Camera;
+use gast_core::raster::{self, RenderOptions};
+
+use super::{Framing, ViewArgs, load_scene, views_for};
+
+mod depth;
+mod step;
+mod step_fast;
+
+pub use depth::{DepthArgs, run_depth};
+pub use step::{StepArgs, run_step};
+
+/// Arguments of `gast bench raster`.
+#[derive(Args, Debug)]
+pub struct RasterArgs {
+    /// Scenes to measure (default: playbot-sog and guitar from the shared data folder,
+    /// `$GAST_SHARED` or `../shared`).
+    pub scenes: Vec<PathBuf>,
+    /// Image sizes (longer side, pixels).
+    #[arg(long, value_delimiter = ',', default_values_t = [256u32, 512])]
+    pub sizes: Vec<u32>,
+    /// Orbit views per scene and size (each timed once after a warm-up).
+    #[arg(long, default_value_t = 8)]
+    pub views: usize,
+}
+
+/// The shared data folder: `$GAST_SHARED`, else `../shared`.
+pub(super) fn shared_dir() -> PathBuf {
+    std::env::var_os("GAST_SHARED").map(PathBuf::from).unwrap_or_else(|| PathBuf::from("../shared"))
+}
+
+/// Peak and current resident memory of this process in MiB (0 where unknown).
+pub fn memory_mib() -> (f64, f64) {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let field = |key: &str| {
+        status
+            .lines()
+            .find(|l| l.starts_with(key))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|v| v.parse::<f64>().ok())
+            .map_or(0.0, |kib| kib / 1024.0)
+    };
+    (field("VmHWM:"), field("VmRSS:"))
+}
+
+/// Resets the peak resident set size to the current one (Linux ≥ 4.0).
+pub fn reset_peak_memory() {
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() { 0.0 } else { v[v.len() / 2] }
+}
+
+/// Times forward and backward on every scene and size, then the dense reference.
+pub fn run_raster(args: RasterArgs) -> anyhow::Result<ExitCode> {
+    let scenes = if args.scenes.is_empty() {
+        let d = shared_dir().join("data/scenes");
+        vec![d.join("playbot-sog"), d.join("guitar.compressed.ply")]
+    } else {
+        args.scenes.clone()
+    };
+    println!(
+        "rasterizer benchmark: {} threads, {} orbit views per row, median ms",
+        rayon::current_num_threads(),
+        args.views
+    );
+    println!(
+        "{:<24} {:>9} {:>6} {:>11} {:>12} {:>14} {:>10} {:>10}",
+        "scene", "gaussians", "size", "forward ms", "backward ms", "Mgaussians/s", "peak MiB", "load s"
+    );
+    let opts = RenderOptions::default();
+    let mut small = None;
+    for path in &scenes {
+        reset_peak_memory();
+        let t = Instant::now();
+        let scene = load_scene(path)?;
+        let load_s = t.elapsed().as_secs_f64();
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        if small.is_none() {
+            let step = (scene.len() / 2_000).max(1);
+            let keep: Vec<u32> = (0..scene.len() as u32).step_by(step).take(2_000).collect();
+            small = Some((name.clone(), gast_core::session::subset(&scene, &keep)));
+        }
+        for &size in &args.sizes {
+            let views = views_for(
+                &scene,
+                &ViewArgs { cameras: None, views: args.views, size, fov: 50.0, framing: Framing::Full, crop: false },
+            )?;
+            let (fwd, bwd) = time_views(&scene, &views, &opts);
+            let (peak, _) = memory_mib();
+            println!(
+                "{:<24} {:>9} {:>6} {:>11.1} {:>12.1} {:>14.1} {:>10.0} {:>10.2}",
+                name,
+                scene.len(),
+                size,
+                fwd,
+                bwd,
+                scene.len() as f64 / (fwd / 1e3) / 1e6,
+                peak,
+                load_s
+            );
+        }
+    }
+    if let Some((name, scene)) = small {
+        dense_ratio(&name, &scene)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Median forward and backward milliseconds over the views (first view warms up).
+fn time_views(scene: &gast_core::Gaussians, views: &[Camera], opts: &RenderOptions) -> (f64, f64) {
+    let mut fwd = Vec::new();
+    let mut bwd = Vec::new();
+    for (i, cam) in views.iter().enumerate() {
+        let t = Instant::now();
+        let (img, state) = raster::forward(scene, cam, opts);
+        let f = t.elapsed().as_secs_f64() * 1e3;
+        let v_rgb: Vec<f32> = (0..img.rgb.len()).map(|k| ((k * 7919) % 13) as f32 / 13.0 - 0.5).collect();
+        let v_depth: Vec<f32> = (0..img.inv_depth.len()).map(|k| ((k * 104_729) % 11) as f32 / 11.0 - 0.5).collect();
+        let t = Instant::now();
+        let grads = raster::backward(scene, cam, opts, &state, &v_rgb, &v_depth);
+        let b = t.elapsed().as_secs_f64() * 1e3;
+        std::hint::black_box(&grads);
+        if i > 0 || views.len() == 1 {
+            fwd.push(f);
+            bwd.push(b);
+        }
+    }
+    (median(fwd), median(bwd))
+}
+
+/// The dense reference against the tiled path on a small scene (every n-th
+/// Gaussian of a real one), from an orbit view at 96².
+fn dense_ratio(name: &str, scene: &gast_core::Gaussians) -> anyhow::Result<()> {
+    let views = views_for(
+        scene,
+        &ViewArgs { cameras: None, views: 1, size: 96, fov: 50.0, framing: Framing::Full, crop: false },
+    )?;
+    let cam = &views[0];
+    let opts = RenderOptions::default();
+    let t = Instant::now();
+    let tiled = raster::render(scene, cam, &opts);
+    let t_tiled = t.elapsed().as_secs_f64() * 1e3;
+    let t = Instant::now();
+    let dense = raster::dense::render(scene, cam, &opts);
+    let t_dense = t.elapsed().as_secs_f64() * 1e3;
+    let diff = tiled.rgb.iter().zip(&dense.rgb).fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+    println!(
+        "dense reference, {} Gaussians of {name} at 96x96: dense {t_dense:.1} ms, tiled {t_tiled:.2} ms, ratio {:.0}x, max |diff| {diff:.1e}",
+        scene.len(),
+        t_dense / t_tiled.max(1e-6)
+    );
+    Ok(())
+}

@@ -1,0 +1,432 @@
+//! `gast bench step`: one optimisation step part by part on a device (or two,
+//! `--compare`), the focus's cost (`--compare-focus`), the whole schedule's time
+//! and memory.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use clap::Args;
+use gast_core::camera::Camera;
+
+use anyhow::Context as _;
+
+use super::depth::time_style_depth;
+use super::step_fast::run_fast_step;
+use super::{Framing, ViewArgs, load_scene, median, memory_mib, reset_peak_memory, shared_dir, views_for};
+
+/// Arguments of `gast bench step`.
+#[derive(Args, Debug)]
+pub struct StepArgs {
+    /// Scene (default: guitar.compressed.ply from the shared data folder).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Style image (default: styles/wave.jpg from the shared data folder).
+    #[arg(long)]
+    pub style: Option<PathBuf>,
+    /// VGG weights (default: the shared vgg19-conv3.safetensors, else the usual resolution).
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+    /// Working resolution (longer side, pixels).
+    #[arg(long, default_value_t = 256)]
+    pub resolution: u32,
+    /// Orbit views.
+    #[arg(long, default_value_t = 36)]
+    pub views: usize,
+    /// Geometry steps to time after the first cycle's colour steps.
+    #[arg(long, default_value_t = 20)]
+    pub geometry_steps: u32,
+    /// Run the whole default schedule (3,000 steps) instead of extrapolating from the timed steps.
+    #[arg(long)]
+    pub full: bool,
+    /// Run exactly this many steps of the default schedule and report their measured time
+    /// (overrides --geometry-steps and --full).
+    #[arg(long)]
+    pub steps: Option<u32>,
+    /// Where the steps run: auto (a hardware GPU when there is one, else the CPU), cpu, or gpu
+    /// (any adapter, lavapipe included).
+    #[arg(long, default_value_t = gast_core::gpu::DeviceChoice::Auto)]
+    pub device: gast_core::gpu::DeviceChoice,
+    /// Run the same steps on the CPU and on the GPU (any adapter) in this process and print the ratio.
+    #[arg(long)]
+    pub compare: bool,
+    /// Which pixels the losses average over: frame, object or auto (auto: the object when it
+    /// covers less than half of the views).
+    #[arg(long, default_value = "auto")]
+    pub focus: gast_core::style::Focus,
+    /// Run the same steps on --device twice in this process, with the losses over the whole
+    /// frame and focused on the object, and print what the focus costs.
+    #[arg(long, conflicts_with = "compare")]
+    pub compare_focus: bool,
+    /// Depth Anything V2 checkpoint for the style depth line (else $GAST_DEPTH_MODEL or the
+    /// caches; never downloaded here).
+    #[arg(long)]
+    pub depth_model: Option<PathBuf>,
+    /// The new settings, timed step by step beside the reference (im2col, exact matching);
+    /// giving any of them runs that comparison on the CPU instead of the device runs.
+    #[command(flatten)]
+    pub fast: super::super::stylize::FastArgs,
+}
+
+/// What one device's run of the step benchmark measured.
+struct StepRun {
+    device: String,
+    steps: usize,
+    wall_s: f64,
+    per_phase: Vec<(gast_core::style::Phase, f64)>,
+    first_losses: Option<gast_core::session::LossTerms>,
+}
+
+/// What both step benchmarks load: the scene, the style and the network.
+pub(super) struct StepInputs {
+    pub(super) scene_path: PathBuf,
+    pub(super) scene: gast_core::Gaussians,
+    pub(super) style_path: PathBuf,
+    pub(super) style: gast_core::session::StyleImage,
+    pub(super) vgg: std::sync::Arc<gast_core::vision::Vgg>,
+}
+
+/// Loads `args`' scene, style and weights (the shared data's guitar, wave and
+/// VGG file by default), after resetting the peak-memory mark.
+pub(super) fn step_inputs(args: &StepArgs) -> anyhow::Result<StepInputs> {
+    let shared = shared_dir();
+    let scene_path = args.scene.clone().unwrap_or_else(|| shared.join("data/scenes/guitar.compressed.ply"));
+    let style_path = args.style.clone().unwrap_or_else(|| shared.join("data/styles/wave.jpg"));
+    let weights = args.weights.clone().or_else(|| {
+        let p = shared.join("data/weights/vgg19-conv3.safetensors");
+        p.exists().then_some(p)
+    });
+    reset_peak_memory();
+    let scene = load_scene(&scene_path)?;
+    let style = gast_core::session::StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
+    let vgg = std::sync::Arc::new(super::super::stylize::load_vgg(weights.as_deref())?);
+    Ok(StepInputs { scene_path, scene, style_path, style, vgg })
+}
+
+/// Per-step breakdown of the optimisation, the whole schedule's time, and memory.
+pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
+    use gast_core::gpu::DeviceChoice;
+    use gast_core::style::{Phase, StyleConfig};
+
+    let f = &args.fast;
+    if f.conv.is_some()
+        || f.matching.is_some()
+        || f.matching_dims.is_some()
+        || f.matching_candidates.is_some()
+        || f.matching_reuse.is_some()
+    {
+        return run_fast_step(args);
+    }
+    let StepInputs { scene_path, scene, style_path, style, vgg } = step_inputs(&args)?;
+    let config = StyleConfig { resolution: args.resolution, focus: args.focus, ..StyleConfig::default() };
+    let views = views_for(
+        &scene,
+        &ViewArgs {
+            cameras: None,
+            views: args.views,
+            size: args.resolution,
+            fov: 50.0,
+            framing: Framing::Full,
+            crop: false,
+        },
+    )?;
+    println!(
+        "step benchmark: {} ({} Gaussians), style {}, {} views at {} px, {} threads",
+        scene_path.display(),
+        scene.len(),
+        style_path.display(),
+        views.len(),
+        args.resolution,
+        rayon::current_num_threads()
+    );
+    let schedule = config.schedule();
+    let budget = match args.steps {
+        Some(n) => n,
+        None if args.full => schedule.total_steps(),
+        None => schedule.color_steps + args.geometry_steps,
+    };
+    if args.compare_focus {
+        return compare_focus(
+            &args,
+            &StepInputs { scene_path, scene, style_path, style, vgg },
+            &views,
+            &config,
+            budget,
+        );
+    }
+    let devices: Vec<DeviceChoice> =
+        if args.compare { vec![DeviceChoice::Cpu, DeviceChoice::Gpu] } else { vec![args.device] };
+    let mut runs = Vec::new();
+    for device in devices {
+        let gpu = device.resolve().with_context(|| format!("--device {device}"))?;
+        let run = time_steps(&scene, &views, &style, &vgg, &config, gpu, budget)?;
+        runs.push(run);
+    }
+    if let [cpu, gpu] = &runs[..] {
+        println!("\nCPU against GPU, the same {} steps in one process:", cpu.steps.min(gpu.steps));
+        for (phase, cpu_ms) in &cpu.per_phase {
+            if let Some((_, gpu_ms)) = gpu.per_phase.iter().find(|p| p.0 == *phase) {
+                println!(
+                    "  {:<9} step median: CPU {:>9.1} ms, GPU {:>8.2} ms, ratio {:>7.1}x",
+                    format!("{phase:?}").to_lowercase(),
+                    cpu_ms,
+                    gpu_ms,
+                    cpu_ms / gpu_ms.max(1e-9)
+                );
+            }
+        }
+        println!(
+            "  whole run: CPU {:.1} s, GPU {:.2} s, ratio {:.1}x",
+            cpu.wall_s,
+            gpu.wall_s,
+            cpu.wall_s / gpu.wall_s.max(1e-9)
+        );
+        if let (Some(a), Some(b)) = (cpu.first_losses, gpu.first_losses) {
+            let rel = |x: f32, y: f32| f64::from((x - y).abs()) / f64::from(x.abs().max(1e-12));
+            println!(
+                "  first step's losses, relative difference: total {:.1e}, GCFM {:.1e}, content {:.1e}, TV {:.1e} ({} on the GPU)",
+                rel(a.total, b.total),
+                rel(a.gcfm, b.gcfm),
+                rel(a.content, b.content),
+                rel(a.tv, b.tv),
+                gpu.device
+            );
+        }
+    }
+    let side = (args.resolution / 2) as usize;
+    if runs.iter().any(|r| r.device.starts_with("CPU")) {
+        // One modality at the VGG input size (the render downscaled 0.5×), and the gemm floor.
+        let vt = gast_core::vision::vgg::bench(&vgg, side, side, 3);
+        let gemm = gast_core::vision::gemm_gflops(256, 64 * 64, 2304, 3);
+        let flops = vgg.forward_flops(side, side);
+        println!("\none modality on the CPU: {vt}");
+        println!(
+            "gemm floor: {gemm:.0} GFLOP/s measured (256×4096×2304); one VGG forward at {side}² is {:.2} GFLOP = {:.0} ms at that rate, measured {:.0} ms ({:.0}% of the floor's speed)",
+            flops * 1e-9,
+            flops / gemm / 1e6,
+            vt.forward_s * 1e3,
+            100.0 * (flops / gemm / 1e9) / vt.forward_s
+        );
+    }
+    time_style_depth(&style, args.depth_model.as_deref(), 1, false)?;
+    if !runs.iter().all(|r| r.device.starts_with("CPU")) {
+        let ctx = gast_core::gpu::DeviceChoice::Gpu.resolve()?.context("no GPU adapter for the per-part figures")?;
+        gpu_parts(&ctx, &vgg, &scene, &views[0], args.resolution as usize)?;
+    }
+    for run in &runs {
+        let total = f64::from(schedule.total_steps());
+        if run.steps as u32 >= schedule.total_steps() {
+            println!(
+                "\nwhole schedule on {}: {} steps in {:.1} s ({:.1} min), measured",
+                run.device,
+                run.steps,
+                run.wall_s,
+                run.wall_s / 60.0
+            );
+        } else if args.steps.is_some() {
+            println!(
+                "\n{} steps on {} in {:.2} s measured ({:.2} ms a step; the default schedule has {total} steps)",
+                run.steps,
+                run.device,
+                run.wall_s,
+                run.wall_s * 1e3 / run.steps.max(1) as f64
+            );
+        } else {
+            let colour = run.per_phase.iter().find(|p| p.0 == Phase::Color).map_or(0.0, |p| p.1);
+            let geometry = run.per_phase.iter().find(|p| p.0 == Phase::Geometry).map_or(0.0, |p| p.1);
+            let est = (f64::from(schedule.cycles * schedule.color_steps) * colour
+                + f64::from(schedule.cycles * schedule.geometry_steps) * geometry)
+                / 1e3;
+            println!(
+                "\nwhole default schedule on {} ({} colour + {} geometry steps), extrapolated from the medians: {:.0} s ({:.1} min); `--steps 3000` measures it",
+                run.device,
+                schedule.cycles * schedule.color_steps,
+                schedule.cycles * schedule.geometry_steps,
+                est,
+                est / 60.0
+            );
+        }
+    }
+    let (peak, rss) = memory_mib();
+    println!("memory: peak resident {peak:.0} MiB, now {rss:.0} MiB");
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `gast bench step --compare-focus`: the same steps on one device with the
+/// losses over the whole frame, then focused on the object, and the ratio of
+/// their per-phase medians.
+fn compare_focus(
+    args: &StepArgs,
+    inputs: &StepInputs,
+    views: &[Camera],
+    config: &gast_core::style::StyleConfig,
+    budget: u32,
+) -> anyhow::Result<ExitCode> {
+    use gast_core::style::Focus;
+    let mut runs = Vec::new();
+    for focus in [Focus::Frame, Focus::Object] {
+        println!("\nfocus {focus:?}:");
+        let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
+        let config = gast_core::style::StyleConfig { focus, ..config.clone() };
+        runs.push(time_steps(&inputs.scene, views, &inputs.style, &inputs.vgg, &config, gpu, budget)?);
+    }
+    let [frame, object] = &runs[..] else { return Ok(ExitCode::FAILURE) };
+    println!("\nframe against object focus on {}, the same {} steps in one process:", frame.device, frame.steps);
+    for (phase, frame_ms) in &frame.per_phase {
+        if let Some((_, object_ms)) = object.per_phase.iter().find(|p| p.0 == *phase) {
+            println!(
+                "  {:<9} step median: frame {:>9.2} ms, object {:>9.2} ms, object/frame {:.3}",
+                format!("{phase:?}").to_lowercase(),
+                frame_ms,
+                object_ms,
+                object_ms / frame_ms.max(1e-9)
+            );
+        }
+    }
+    println!(
+        "  whole run: frame {:.2} s, object {:.2} s, object/frame {:.3}",
+        frame.wall_s,
+        object.wall_s,
+        object.wall_s / frame.wall_s.max(1e-9)
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Runs `budget` steps of a fresh session on `gpu` (the CPU when `None`) and
+/// prints the per-phase table.
+fn time_steps(
+    scene: &gast_core::Gaussians,
+    views: &[Camera],
+    style: &gast_core::session::StyleImage,
+    vgg: &std::sync::Arc<gast_core::vision::Vgg>,
+    config: &gast_core::style::StyleConfig,
+    gpu: Option<gast_core::gpu::GpuContext>,
+    budget: u32,
+) -> anyhow::Result<StepRun> {
+    use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource};
+    use gast_core::style::Phase;
+
+    let inputs = SessionInputs {
+        scene: scene.clone(),
+        cameras: views.to_vec(),
+        style: style.clone(),
+        style_depth: StyleDepthSource::Heuristic,
+        vgg: vgg.clone(),
+        config: config.clone(),
+        gpu,
+    };
+    let mut session = Session::prepare(inputs, &mut |e| match e {
+        Event::Stage { name, seconds } => println!("  prepare: {name:<20} {:>8.0} ms", seconds * 1e3),
+        Event::Culled { total, kept } => println!("  culling: optimising {kept} of {total} Gaussians"),
+        _ => {}
+    })?;
+    let device = session.device();
+    println!("\n{device}");
+    if let Some(bytes) = session.gpu_memory_bytes() {
+        println!("  GPU memory allocated by the engine: {:.1} MiB", bytes as f64 / f64::from(1u32 << 20));
+    }
+    let warm = session.warm_view_targets().map_err(|e| anyhow::anyhow!("{device}: {e}"))?;
+    println!(
+        "  per-view targets (G^c render, content features) of {} views, once per run: {:.0} ms",
+        views.len(),
+        warm * 1e3
+    );
+    let pb = crate::progress::bar(u64::from(budget), "steps");
+    let mut reports: Vec<(StepReport, f64)> = Vec::new();
+    let t_all = Instant::now();
+    for _ in 0..budget {
+        let t = Instant::now();
+        let Some(r) = session.step() else { break };
+        reports.push((r, t.elapsed().as_secs_f64() * 1e3));
+        pb.inc(1);
+    }
+    let wall_s = t_all.elapsed().as_secs_f64();
+    pb.finish_and_clear();
+    if let Some(why) = session.failure() {
+        anyhow::bail!("{device}: the run stopped at {why}");
+    }
+    println!("per-step medians (ms), every view's targets computed before the timed steps");
+    println!(
+        "{:<10} {:>6} {:>8} {:>10} {:>9} {:>10} {:>10} {:>8} {:>9}",
+        "phase", "steps", "render", "vgg fwd×3", "matching", "vgg bwd", "raster bwd", "adam", "step"
+    );
+    let mut per_phase = Vec::new();
+    for phase in [Phase::Color, Phase::Geometry] {
+        let rows: Vec<&(StepReport, f64)> = reports.iter().filter(|(r, _)| r.phase == phase).collect();
+        if rows.is_empty() {
+            continue;
+        }
+        let m = |f: &dyn Fn(&StepReport) -> f32| median(rows.iter().map(|(r, _)| f64::from(f(r))).collect());
+        let wall = median(rows.iter().map(|(_, w)| *w).collect());
+        per_phase.push((phase, wall));
+        println!(
+            "{:<10} {:>6} {:>8.1} {:>10.1} {:>9.1} {:>10.1} {:>10.1} {:>8.1} {:>9.2}",
+            format!("{phase:?}").to_lowercase(),
+            rows.len(),
+            m(&|r| r.timings.render_ms),
+            m(&|r| r.timings.features_ms),
+            m(&|r| r.timings.matching_ms),
+            m(&|r| r.timings.vgg_backward_ms),
+            m(&|r| r.timings.raster_backward_ms),
+            m(&|r| r.timings.update_ms),
+            wall
+        );
+    }
+    if session.gpu_memory_bytes().is_some() {
+        println!("(on the GPU the parts run back to back in one submission; their times are below)");
+    }
+    Ok(StepRun { device, steps: reports.len(), wall_s, per_phase, first_losses: reports.first().map(|r| r.0.losses) })
+}
+
+/// Each GPU part of a step timed on its own at the benchmark's size.
+fn gpu_parts(
+    ctx: &gast_core::gpu::GpuContext,
+    vgg: &gast_core::vision::Vgg,
+    scene: &gast_core::Gaussians,
+    cam: &Camera,
+    resolution: usize,
+) -> anyhow::Result<()> {
+    use gast_core::gpu;
+    println!("\nGPU parts on {} (median ms)", ctx.describe());
+    let mut rows = gpu::bench_raster(ctx, scene, cam)?;
+    let side = resolution / 2;
+    rows.extend(gpu::bench_vgg(ctx, vgg, side, side, 5));
+    let n = (side / 4) * (side / 4);
+    rows.extend(gpu::bench_gcfm(ctx, 768, n, 4096, 5));
+    rows.extend(gpu::bench_image_ops(ctx, &[resolution], scene.len(), 5)?);
+    for (name, ms) in rows {
+        println!("  {name:<36} {ms:>9.3}");
+    }
+    Ok(())
+}
+
+/// Medians of one phase: render, VGG forwards, matching, VGG backwards, raster backward, Adam, step (ms).
+pub(super) type PhaseRow = [f64; 7];
+
+/// Per-phase medians of `reports` (each with its step's wall time in ms).
+pub(super) fn phase_rows(
+    reports: &[(gast_core::session::StepReport, f64)],
+) -> Vec<(gast_core::style::Phase, usize, PhaseRow)> {
+    use gast_core::style::Phase;
+    let mut out = Vec::new();
+    for phase in [Phase::Color, Phase::Geometry] {
+        let rows: Vec<_> = reports.iter().filter(|(r, _)| r.phase == phase).collect();
+        if rows.is_empty() {
+            continue;
+        }
+        let m = |f: &dyn Fn(&gast_core::session::StepTimings) -> f32| {
+            median(rows.iter().map(|(r, _)| f64::from(f(&r.timings))).collect())
+        };
+        let row = [
+            m(&|t| t.render_ms),
+            m(&|t| t.features_ms),
+            m(&|t| t.matching_ms),
+            m(&|t| t.vgg_backward_ms),
+            m(&|t| t.raster_backward_ms),
+            m(&|t| t.update_ms),
+            median(rows.iter().map(|(_, w)| *w).collect()),
+        ];
+        out.push((phase, rows.len(), row));
+    }
+    out
+}
