@@ -77,17 +77,17 @@ struct StepRun {
     first_losses: Option<gast_core::session::LossTerms>,
 }
 
-/// What both step benchmarks load: the scene, the style and the network.
+/// What both step benchmarks load: the scene, its orbit views, the style and the network.
 pub(super) struct StepInputs {
-    pub(super) scene_path: PathBuf,
     pub(super) scene: gast_core::Gaussians,
-    pub(super) style_path: PathBuf,
+    pub(super) views: Vec<Camera>,
     pub(super) style: gast_core::session::StyleImage,
     pub(super) vgg: std::sync::Arc<gast_core::vision::Vgg>,
 }
 
 /// Loads `args`' scene, style and weights (the shared data's guitar, wave and
-/// VGG file by default), after resetting the peak-memory mark.
+/// VGG file by default), after resetting the peak-memory mark, makes the
+/// orbit views and prints the benchmark's first line.
 pub(super) fn step_inputs(args: &StepArgs) -> anyhow::Result<StepInputs> {
     let shared = shared_dir();
     let scene_path = args.scene.clone().unwrap_or_else(|| shared.join("data/scenes/guitar.compressed.ply"));
@@ -100,25 +100,6 @@ pub(super) fn step_inputs(args: &StepArgs) -> anyhow::Result<StepInputs> {
     let scene = load_scene(&scene_path)?;
     let style = gast_core::session::StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
     let vgg = std::sync::Arc::new(super::super::stylize::load_vgg(weights.as_deref())?);
-    Ok(StepInputs { scene_path, scene, style_path, style, vgg })
-}
-
-/// Per-step breakdown of the optimisation, the whole schedule's time, and memory.
-pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
-    use gast_core::gpu::DeviceChoice;
-    use gast_core::style::{Phase, StyleConfig};
-
-    let f = &args.fast;
-    if f.conv.is_some()
-        || f.matching.is_some()
-        || f.matching_dims.is_some()
-        || f.matching_candidates.is_some()
-        || f.matching_reuse.is_some()
-    {
-        return run_fast_step(args);
-    }
-    let StepInputs { scene_path, scene, style_path, style, vgg } = step_inputs(&args)?;
-    let config = StyleConfig { resolution: args.resolution, focus: args.focus, ..StyleConfig::default() };
     let views = views_for(
         &scene,
         &ViewArgs {
@@ -139,6 +120,25 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         args.resolution,
         rayon::current_num_threads()
     );
+    Ok(StepInputs { scene, views, style, vgg })
+}
+
+/// Per-step breakdown of the optimisation, the whole schedule's time, and memory.
+pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
+    use gast_core::gpu::DeviceChoice;
+    use gast_core::style::{Phase, StyleConfig};
+
+    let f = &args.fast;
+    if f.conv.is_some()
+        || f.matching.is_some()
+        || f.matching_dims.is_some()
+        || f.matching_candidates.is_some()
+        || f.matching_reuse.is_some()
+    {
+        return run_fast_step(args);
+    }
+    let inputs = step_inputs(&args)?;
+    let config = StyleConfig { resolution: args.resolution, focus: args.focus, ..StyleConfig::default() };
     let schedule = config.schedule();
     let budget = match args.steps {
         Some(n) => n,
@@ -146,20 +146,14 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         None => schedule.color_steps + args.geometry_steps,
     };
     if args.compare_focus {
-        return compare_focus(
-            &args,
-            &StepInputs { scene_path, scene, style_path, style, vgg },
-            &views,
-            &config,
-            budget,
-        );
+        return compare_focus(&args, &inputs, &config, budget);
     }
     let devices: Vec<DeviceChoice> =
         if args.compare { vec![DeviceChoice::Cpu, DeviceChoice::Gpu] } else { vec![args.device] };
     let mut runs = Vec::new();
     for device in devices {
         let gpu = device.resolve().with_context(|| format!("--device {device}"))?;
-        let run = time_steps(&scene, &views, &style, &vgg, &config, gpu, budget)?;
+        let run = time_steps(&inputs, &config, gpu, budget)?;
         runs.push(run);
     }
     if let [cpu, gpu] = &runs[..] {
@@ -196,9 +190,9 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     let side = (args.resolution / 2) as usize;
     if runs.iter().any(|r| r.device.starts_with("CPU")) {
         // One modality at the VGG input size (the render downscaled 0.5×), and the gemm floor.
-        let vt = gast_core::vision::vgg::bench(&vgg, side, side, 3);
+        let vt = gast_core::vision::vgg::bench(&inputs.vgg, side, side, 3);
         let gemm = gast_core::vision::gemm_gflops(256, 64 * 64, 2304, 3);
-        let flops = vgg.forward_flops(side, side);
+        let flops = inputs.vgg.forward_flops(side, side);
         println!("\none modality on the CPU: {vt}");
         println!(
             "gemm floor: {gemm:.0} GFLOP/s measured (256×4096×2304); one VGG forward at {side}² is {:.2} GFLOP = {:.0} ms at that rate, measured {:.0} ms ({:.0}% of the floor's speed)",
@@ -208,10 +202,10 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
             100.0 * (flops / gemm / 1e9) / vt.forward_s
         );
     }
-    time_style_depth(&style, args.depth_model.as_deref(), 1, false)?;
+    time_style_depth(&inputs.style, args.depth_model.as_deref(), 1, false)?;
     if !runs.iter().all(|r| r.device.starts_with("CPU")) {
         let ctx = gast_core::gpu::DeviceChoice::Gpu.resolve()?.context("no GPU adapter for the per-part figures")?;
-        gpu_parts(&ctx, &vgg, &scene, &views[0], args.resolution as usize)?;
+        gpu_parts(&ctx, &inputs.vgg, &inputs.scene, &inputs.views[0], args.resolution as usize)?;
     }
     for run in &runs {
         let total = f64::from(schedule.total_steps());
@@ -258,7 +252,6 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
 fn compare_focus(
     args: &StepArgs,
     inputs: &StepInputs,
-    views: &[Camera],
     config: &gast_core::style::StyleConfig,
     budget: u32,
 ) -> anyhow::Result<ExitCode> {
@@ -268,7 +261,7 @@ fn compare_focus(
         println!("\nfocus {focus:?}:");
         let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
         let config = gast_core::style::StyleConfig { focus, ..config.clone() };
-        runs.push(time_steps(&inputs.scene, views, &inputs.style, &inputs.vgg, &config, gpu, budget)?);
+        runs.push(time_steps(inputs, &config, gpu, budget)?);
     }
     let [frame, object] = &runs[..] else { return Ok(ExitCode::FAILURE) };
     println!("\nframe against object focus on {}, the same {} steps in one process:", frame.device, frame.steps);
@@ -295,10 +288,7 @@ fn compare_focus(
 /// Runs `budget` steps of a fresh session on `gpu` (the CPU when `None`) and
 /// prints the per-phase table.
 fn time_steps(
-    scene: &gast_core::Gaussians,
-    views: &[Camera],
-    style: &gast_core::session::StyleImage,
-    vgg: &std::sync::Arc<gast_core::vision::Vgg>,
+    step_inputs: &StepInputs,
     config: &gast_core::style::StyleConfig,
     gpu: Option<gast_core::gpu::GpuContext>,
     budget: u32,
@@ -306,9 +296,10 @@ fn time_steps(
     use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource};
     use gast_core::style::Phase;
 
+    let StepInputs { scene, views, style, vgg } = step_inputs;
     let inputs = SessionInputs {
         scene: scene.clone(),
-        cameras: views.to_vec(),
+        cameras: views.clone(),
         style: style.clone(),
         style_depth: StyleDepthSource::Heuristic,
         vgg: vgg.clone(),

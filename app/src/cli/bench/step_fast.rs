@@ -4,8 +4,8 @@
 
 use std::process::ExitCode;
 
+use super::memory_mib;
 use super::step::{StepArgs, StepInputs, phase_rows, step_inputs};
-use super::{ViewArgs, memory_mib, views_for};
 
 /// Per-step breakdown of the optimisation for the reference settings and the
 /// new ones side by side (steps interleaved, so both see the same machine
@@ -15,34 +15,14 @@ pub(super) fn run_fast_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource};
     use gast_core::style::{MatchMethod, Phase, StyleConfig};
 
-    let StepInputs { scene_path, scene, style_path, style, vgg } = step_inputs(&args)?;
+    let StepInputs { scene, views, style, vgg } = step_inputs(&args)?;
     let old_config = StyleConfig { resolution: args.resolution, focus: args.focus, ..StyleConfig::default() };
     let mut new_config = old_config.clone();
     args.fast.apply(&mut new_config);
     let problems = new_config.problems();
     anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
-    let views = views_for(
-        &scene,
-        &ViewArgs {
-            cameras: None,
-            views: args.views,
-            size: args.resolution,
-            fov: 50.0,
-            framing: super::Framing::Full,
-            crop: false,
-        },
-    )?;
     let (cam_h, cam_w) = (views[0].height as usize, views[0].width as usize);
     let mc = new_config.matching;
-    println!(
-        "step benchmark: {} ({} Gaussians), style {}, {} views at {} px, {} threads",
-        scene_path.display(),
-        scene.len(),
-        style_path.display(),
-        views.len(),
-        args.resolution,
-        rayon::current_num_threads()
-    );
     println!(
         "old: conv im2col, matching exact | new: conv {}, matching {} (dims {}, candidates {}, reuse {})",
         new_config.conv, mc.method, mc.dims, mc.candidates, mc.reuse
