@@ -216,19 +216,10 @@ impl GpuEngine {
             // λ_GC is baked into the GCFM workspace's uniforms.
             self.plans.clear();
         }
-        if !self.plans.contains_key(&size) {
-            let before = self.ctx.allocated_bytes();
-            let plan = self.plan(cam, &config.weights)?;
-            self.plans.insert(size, plan);
-            self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
-        }
+        // The view's plan and targets (which do not depend on the weights).
+        self.warm_target(view, cam, &config.weights)?;
         if config.weights != self.weights {
             self.set_weights(&config.weights);
-        }
-        if self.targets.get(view).is_none_or(Option::is_none) {
-            let before = self.ctx.allocated_bytes();
-            self.make_target(view, cam)?;
-            self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
         }
         let Some(Some(target)) = self.targets.get(view) else {
             return Err(GpuError::TooLarge(format!("no target for view {view}")));
@@ -347,8 +338,9 @@ impl GpuEngine {
     }
 
     /// The content features and inverse depth of `G^c` from view `view`, once.
-    /// Computes view `view`'s targets now if it has none yet (what its first
-    /// step would do): benchmarks time steady steps after warming every view.
+    /// Makes the plan for `cam`'s size and view `view`'s targets if they do
+    /// not exist yet: each step calls it, and benchmarks call it for every view
+    /// first so that they time steady steps.
     pub fn warm_target(&mut self, view: usize, cam: &Camera, weights: &LossWeights) -> Result<(), GpuError> {
         let size = (cam.width, cam.height);
         if !self.plans.contains_key(&size) {
