@@ -237,6 +237,10 @@ pub struct FastArgs {
     /// Visits of a view that share one search of its matches (1: search every step) [default: 1].
     #[arg(long)]
     pub matching_reuse: Option<u32>,
+    /// With object focus, run VGG on the window of the frame the object's feature positions
+    /// depend on (true), or on the whole frame (false); the same losses either way [default: true].
+    #[arg(long)]
+    pub vgg_window: Option<bool>,
 }
 
 impl FastArgs {
@@ -253,6 +257,7 @@ impl FastArgs {
             }
         }
         c.conv = self.conv.unwrap_or(c.conv);
+        c.vgg_window = self.vgg_window.unwrap_or(c.vgg_window);
         c.matching.method = self.matching.unwrap_or(c.matching.method);
     }
 }

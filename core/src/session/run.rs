@@ -16,7 +16,7 @@ use crate::style::focus::coverage_mask;
 use crate::style::gcfm::{Matches, match_features};
 use crate::style::matching::{MatchIndex, MatchMethod, agreement, find_matches};
 use crate::style::regularizers::l2_distance;
-use crate::style::step::{FeatureMap, RenderedMaps, content_target, step_loss_with};
+use crate::style::step::{FeatureMap, LossFocus, RenderedMaps, content_target, step_loss_with};
 use crate::vision::Vgg;
 use crate::vision::canny::render_edges;
 
@@ -434,6 +434,28 @@ impl Session {
         self.audit_every = every;
     }
 
+    /// The mean share of the feature grid VGG runs on, over the views whose
+    /// targets are made (CPU steps; `style::window`): 1 with the losses over
+    /// the whole frame or the window off, `None` before any target exists.
+    pub fn vgg_window_share(&self) -> Option<f32> {
+        let object = self.focus_on_object() && self.config.vgg_window;
+        let shares: Vec<f32> = self
+            .targets
+            .iter()
+            .zip(&self.cameras)
+            .filter_map(|(t, cam)| t.as_ref().map(|t| (t, cam.height as usize, cam.width as usize)))
+            .map(|(t, h, w)| {
+                let (fh, fw) = (h / 2 / 4, w / 2 / 4);
+                if !object || t.coverage.len() != h * w {
+                    return 1.0;
+                }
+                let fmask = crate::style::focus::feature_mask(&t.coverage, h, w, fh, fw);
+                crate::style::window::FeatureWindow::covering(&fmask, fh, fw).map_or(1.0, |win| win.share())
+            })
+            .collect();
+        (!shares.is_empty()).then(|| shares.iter().sum::<f32>() / shares.len() as f32)
+    }
+
     /// Mean fractions of matches identical to the exact search (nearest,
     /// farthest) over the audited steps, and their number.
     pub fn match_agreement(&self) -> Option<(f64, f64, u32)> {
@@ -522,7 +544,10 @@ impl Session {
             geometry.then_some(target.inv_depth.as_slice()),
             &self.config.weights,
             geometry,
-            self.focus_on_object().then_some(target.coverage.as_slice()),
+            LossFocus {
+                mask: self.focus_on_object().then_some(target.coverage.as_slice()),
+                window: self.config.vgg_window,
+            },
             &mut matcher,
         );
         if let Some((b, w)) = audited {

@@ -106,6 +106,10 @@ pub struct StyleConfig {
     /// channel renders below 0 (`0.5 + C0·f_dc ≥ 0`), out of the clamp's dead
     /// zone where no gradient reaches it again. Off in the reference.
     pub color_floor: bool,
+    /// With object focus, run VGG on the window of the input the covered
+    /// feature positions depend on, not the whole frame (`style::window`):
+    /// the same losses up to rounding. On by default; off to measure what it buys.
+    pub vgg_window: bool,
 }
 
 impl Default for StyleConfig {
@@ -128,6 +132,7 @@ impl Default for StyleConfig {
             matching: MatchingConfig::default(),
             focus: Focus::default(),
             color_floor: false,
+            vgg_window: true,
         }
     }
 }

@@ -19,6 +19,7 @@ pub mod schedule;
 pub mod stage1;
 pub mod step;
 pub mod tv;
+pub mod window;
 
 pub use color_transfer::ColorTransfer;
 pub use config::{DC_FLOOR, StyleConfig};
@@ -27,4 +28,4 @@ pub use gcfm::{GcfmOutput, Matches, StyleFeatures};
 pub use matching::{MatchIndex, MatchMethod, MatchingConfig};
 pub use schedule::{Mode, Phase, Schedule};
 pub use stage1::{StyleMaps, style_maps};
-pub use step::{FeatureNet, RenderedMaps, StepLoss, StyleTargets, step_loss, step_loss_masked};
+pub use step::{FeatureNet, LossFocus, RenderedMaps, StepLoss, StyleTargets, step_loss, step_loss_masked};

@@ -16,6 +16,7 @@ use super::focus::{feature_mask, gather_positions, scatter_positions};
 use super::gcfm::{GcfmOutput, Matches, StyleFeatures, gcfm_loss_with_matches, match_features};
 use super::regularizers::depth_l1;
 use super::tv::tv_loss_masked;
+use super::window::FeatureWindow;
 use crate::vision::resize::{downscale_half, downscale_half_backward};
 
 /// A CHW feature map.
@@ -29,6 +30,19 @@ pub struct FeatureMap {
     pub width: usize,
     /// `channels · height · width` values, channel-major.
     pub data: Vec<f32>,
+}
+
+/// Where the image-space losses look ([`super::focus`]) and whether VGG runs
+/// on the covered positions' window only ([`super::window`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LossFocus<'a> {
+    /// The covered pixels (`h × w`); `None` is the whole frame.
+    pub mask: Option<&'a [bool]>,
+    /// With a mask, run VGG's forwards and backwards on the window the covered
+    /// positions' receptive fields span, not the whole frame: the same losses
+    /// and gradients (up to rounding) for less work. Exact for VGG's relu3
+    /// and for any network whose receptive field is no larger.
+    pub window: bool,
 }
 
 /// A frozen feature extractor with an input gradient (VGG relu3_1..3).
@@ -226,7 +240,7 @@ pub fn step_loss_masked<N: FeatureNet>(
     mask: Option<&[bool]>,
 ) -> StepLoss {
     let exact = &mut |rendered: [&[f32]; 3], n: usize| match_features(&style.features, rendered, n);
-    step_loss_with(net, style, maps, content, depth_ref, weights, depth_grad, mask, exact)
+    step_loss_with(net, style, maps, content, depth_ref, weights, depth_grad, LossFocus { mask, window: true }, exact)
 }
 
 /// [`step_loss`] with the focus on the pixels in `mask` (`h × w`, see
@@ -249,9 +263,10 @@ pub fn step_loss_with<N: FeatureNet>(
     depth_ref: Option<&[f32]>,
     weights: &LossWeights,
     depth_grad: bool,
-    mask: Option<&[bool]>,
+    focus: LossFocus<'_>,
     matcher: &mut dyn FnMut([&[f32]; 3], usize) -> Matches,
 ) -> StepLoss {
+    let mask = focus.mask;
     use rayon::prelude::*;
     let (h, w) = (maps.height, maps.width);
     assert_eq!(maps.rgb.len(), h * w * 3, "step_loss: rgb size");
@@ -275,6 +290,12 @@ pub fn step_loss_with<N: FeatureNet>(
     let images = [maps.rgb.to_vec(), replicate3(&depth_n), replicate3(maps.edge)];
     let downs: Vec<(Vec<f32>, usize, usize)> = images.iter().map(|im| downscale_half(im, h, w, 3)).collect();
     let (sh, sw) = (downs[0].1, downs[0].2);
+    // The feature grid (two floor-halving pools), the covered positions on
+    // it, and the window of the input VGG needs for them.
+    let (fh, fw) = (sh / 4, sw / 4);
+    let n = fh * fw;
+    let fmask = mask.map(|m| feature_mask(m, h, w, fh, fw)).filter(|f| f.contains(&true));
+    let window = fmask.as_deref().filter(|_| focus.window).and_then(|f| FeatureWindow::covering(f, fh, fw));
 
     // Features: RGB (and depth, when its gradient is wanted) keep their state
     // for the backward pass; edges are a constant.
@@ -282,19 +303,29 @@ pub fn step_loss_with<N: FeatureNet>(
         .par_iter()
         .enumerate()
         .map(|(k, (img, _, _))| {
-            if k == 0 || (k == 1 && depth_grad) {
-                let (f, s) = net.forward(img, sh, sw);
+            let keep = k == 0 || (k == 1 && depth_grad);
+            let Some(win) = &window else {
+                return if keep {
+                    let (f, s) = net.forward(img, sh, sw);
+                    (f, Some(s))
+                } else {
+                    (net.features(img, sh, sw), None)
+                };
+            };
+            let (part, ph, pw) = win.crop_image(img, sh, sw, 3);
+            let (f, s) = if keep {
+                let (f, s) = net.forward(&part, ph, pw);
                 (f, Some(s))
             } else {
-                (net.features(img, sh, sw), None)
-            }
+                (net.features(&part, ph, pw), None)
+            };
+            let data = win.embed_features(&f.data, f.channels);
+            (FeatureMap { channels: f.channels, height: fh, width: fw, data }, s)
         })
         .collect();
     timings.features_ms = t.elapsed().as_secs_f32() * 1e3;
     let t = std::time::Instant::now();
-    let (fh, fw) = (fwd[0].0.height, fwd[0].0.width);
-    let n = fh * fw;
-    let fmask = mask.map(|m| feature_mask(m, h, w, fh, fw)).filter(|f| f.contains(&true));
+    debug_assert_eq!((fwd[0].0.height, fwd[0].0.width), (fh, fw), "step_loss: the feature grid");
     let feats = [&fwd[0].0.data, &fwd[1].0.data, &fwd[2].0.data];
     let out = match &fmask {
         None => {
@@ -317,9 +348,17 @@ pub fn step_loss_with<N: FeatureNet>(
     let v_feat_depth: Vec<f32> = out.v_rendered[1].iter().map(|v| v * weights.gcfm).collect();
     timings.matching_ms = t.elapsed().as_secs_f32() * 1e3;
     let t = std::time::Instant::now();
+    // Through VGG, on the window when the forward ran on it.
+    let backward = |state: &N::State, v: &[f32]| match &window {
+        None => net.backward(state, v),
+        Some(win) => {
+            let v_part = net.backward(state, &win.crop_features(v, fwd[0].0.channels));
+            win.uncrop_image(&v_part, sh, sw, 3)
+        }
+    };
     let (v_small_rgb, v_small_depth) = rayon::join(
-        || fwd[0].1.as_ref().map(|s| net.backward(s, &v_feat_rgb)),
-        || fwd[1].1.as_ref().map(|s| net.backward(s, &v_feat_depth)),
+        || fwd[0].1.as_ref().map(|s| backward(s, &v_feat_rgb)),
+        || fwd[1].1.as_ref().map(|s| backward(s, &v_feat_depth)),
     );
     let mut v_rgb = downscale_half_backward(&v_small_rgb.unwrap_or_else(|| vec![0.0; sh * sw * 3]), h, w, 3);
     let mut v_inv_depth = match v_small_depth {

@@ -246,3 +246,63 @@ fn a_mask_ignores_uncovered_positions_with_exactly_zero_gradient() {
     assert_eq!((moved.gcfm, moved.content, moved.tv, moved.total), (base.gcfm, base.content, base.tv, base.total));
     assert!(base.matches.best[2] == u32::MAX && base.matches.best[0] != u32::MAX);
 }
+
+/// VGG on the covered window gives the whole frame's losses and gradients:
+/// random VGG weights, both convolutions, a small object in a larger frame.
+#[test]
+fn vgg_on_the_covered_window_equals_the_whole_frame() {
+    use crate::vision::ConvAlgo;
+    use crate::vision::vgg::tests::random_vgg;
+    let (h, w) = (254, 198);
+    let (hs, ws) = (40, 36);
+    // The object: a disc left of the centre; its windows' share of the frame is printed.
+    let mask: Vec<bool> = (0..h * w)
+        .map(|k| {
+            let (y, x) = ((k / w) as f32 - 140.0, (k % w) as f32 - 80.0);
+            y * y + x * x < 30.0 * 30.0
+        })
+        .collect();
+    let weights = LossWeights { gcfm: 2.0, content: 1e-3, tv: 0.02, depth: 10.0, ..LossWeights::default() };
+    for conv in ConvAlgo::ALL {
+        let net = random_vgg(3).with_conv(conv);
+        let st = StyleTargets::new(
+            &net,
+            &noise(hs * ws * 3, 21, 0.0, 1.0),
+            &noise(hs * ws, 22, 0.0, 1.0),
+            &noise(hs * ws, 23, 0.0, 1.0).iter().map(|v| v.round()).collect::<Vec<_>>(),
+            hs,
+            ws,
+        );
+        let rgb = noise(h * w * 3, 25, 0.0, 1.0);
+        let (inv_depth, dref) = (noise(h * w, 26, 0.3, 1.0), noise(h * w, 27, 0.3, 1.0));
+        let edge: Vec<f32> = noise(h * w, 28, 0.0, 1.0).iter().map(|v| v.round()).collect();
+        let content = content_target(&net, &noise(h * w * 3, 29, 0.0, 1.0), h, w);
+        let run = |window: bool| {
+            let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
+            let exact = &mut |r: [&[f32]; 3], n: usize| match_features(&st.features, r, n);
+            let focus = LossFocus { mask: Some(&mask), window };
+            step_loss_with(&net, &st, maps, Some(&content), Some(&dref), &weights, true, focus, exact)
+        };
+        let (whole, windowed) = (run(false), run(true));
+        let fmask = feature_mask(&mask, h, w, h / 2 / 4, w / 2 / 4);
+        let win = FeatureWindow::covering(&fmask, h / 2 / 4, w / 2 / 4).expect("the disc needs less than the frame");
+        println!("{conv}: window {:?}, {:.0}% of the feature grid", win, 100.0 * win.share());
+        assert!(win.share() < 0.8);
+        assert_eq!(whole.matches, windowed.matches, "{conv}: matches");
+        for (name, a, b) in [
+            ("gcfm", whole.gcfm, windowed.gcfm),
+            ("content", whole.content, windowed.content),
+            ("tv", whole.tv, windowed.tv),
+            ("total", whole.total, windowed.total),
+        ] {
+            assert!((a - b).abs() <= 1e-5 * a.abs().max(1e-3), "{conv} {name}: whole frame {a}, window {b}");
+        }
+        for (name, u, v) in
+            [("v_rgb", &whole.v_rgb, &windowed.v_rgb), ("v_inv_depth", &whole.v_inv_depth, &windowed.v_inv_depth)]
+        {
+            let scale = u.iter().fold(0.0f32, |m, x| m.max(x.abs()));
+            let worst = u.iter().zip(v.iter()).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+            assert!(scale > 0.0 && worst <= 1e-5 * scale, "{conv} {name}: worst difference {worst} of {scale}");
+        }
+    }
+}

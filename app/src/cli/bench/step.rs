@@ -134,6 +134,7 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         || f.matching_dims.is_some()
         || f.matching_candidates.is_some()
         || f.matching_reuse.is_some()
+        || f.vgg_window.is_some()
     {
         return run_fast_step(args);
     }
