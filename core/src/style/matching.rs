@@ -208,7 +208,8 @@ impl MatchIndex {
                 let t = tile.min(n - x0);
                 let mut scores = vec![0f32; t * m];
                 gemm_tile(&mut scores, t, m, &proj, n, x0, l, &self.projected, false);
-                let mut order: Vec<u32> = (0..m as u32).collect();
+                let mut order: Vec<u32> = if k >= m { (0..m as u32).collect() } else { Vec::new() };
+                let (mut hi, mut lo) = (TopK::new(k), TopK::new(k));
                 let mut joint = vec![0f32; d];
                 let (mut best, mut worst) = (Vec::with_capacity(t), Vec::with_capacity(t));
                 for i in 0..t {
@@ -218,13 +219,22 @@ impl MatchIndex {
                             joint[mo * c + ch] = r[ch * n + x0 + i];
                         }
                     }
+                    if k < m {
+                        // The k highest and k lowest subspace scores, in one pass.
+                        hi.clear();
+                        lo.clear();
+                        for (y, &v) in row.iter().enumerate() {
+                            hi.offer(v, y as u32);
+                            lo.offer(-v, y as u32);
+                        }
+                    }
                     for want_max in [true, false] {
                         let cands = if k >= m {
                             &mut order[..]
+                        } else if want_max {
+                            hi.finish()
                         } else {
-                            let key = |y: &u32| if want_max { -row[*y as usize] } else { row[*y as usize] };
-                            order.select_nth_unstable_by(k - 1, |a, b| key(a).total_cmp(&key(b)));
-                            &mut order[..k]
+                            lo.finish()
                         };
                         cands.sort_unstable();
                         let pick = self.rerank(&joint, cands, want_max);
@@ -258,6 +268,58 @@ impl MatchIndex {
             }
         }
         arg
+    }
+}
+
+/// The `k` largest keys offered, kept in a buffer of up to `2k` that is cut
+/// back to the best `k` when it fills: one comparison per offer against the
+/// current `k`-th key, so a pass over `m` scores costs O(m) with few inserts.
+struct TopK {
+    k: usize,
+    /// `(key, index)` pairs; the best `k` of all offered are among them.
+    buf: Vec<(f32, u32)>,
+    /// No key at or below this can be among the best `k` (−∞ until the first cut).
+    floor: f32,
+    /// The indices of the last [`TopK::finish`].
+    out: Vec<u32>,
+}
+
+impl TopK {
+    fn new(k: usize) -> Self {
+        Self { k, buf: Vec::with_capacity(2 * k), floor: f32::NEG_INFINITY, out: Vec::with_capacity(k) }
+    }
+
+    fn clear(&mut self) {
+        self.buf.clear();
+        self.floor = f32::NEG_INFINITY;
+    }
+
+    #[inline(always)]
+    fn offer(&mut self, key: f32, index: u32) {
+        if key > self.floor {
+            self.buf.push((key, index));
+            if self.buf.len() == 2 * self.k {
+                self.cut();
+            }
+        }
+    }
+
+    /// Keeps the best `k` of the buffer and raises the floor to the least of them.
+    fn cut(&mut self) {
+        let k = self.k;
+        self.buf.select_nth_unstable_by(k - 1, |a, b| b.0.total_cmp(&a.0));
+        self.buf.truncate(k);
+        self.floor = self.buf.iter().map(|p| p.0).fold(f32::INFINITY, f32::min);
+    }
+
+    /// The indices of the best `k` keys offered (fewer if fewer were).
+    fn finish(&mut self) -> &mut [u32] {
+        if self.buf.len() > self.k {
+            self.cut();
+        }
+        self.out.clear();
+        self.out.extend(self.buf.iter().map(|p| p.1));
+        &mut self.out
     }
 }
 

@@ -62,3 +62,24 @@ fn full_subspace_with_few_candidates_is_exact_and_a_small_one_mostly_agrees() {
     );
     assert!(b > 0.5 && w > 0.5, "the index should find most matches of rank-4 features: {b} {w}");
 }
+
+/// The one-pass selection keeps exactly the k largest keys, ties included
+/// up to which of the tied ones it keeps.
+#[test]
+fn top_k_keeps_the_largest_keys() {
+    let keys: Vec<f32> = noise(5000, 31).iter().map(|v| (v * 40.0).round()).collect();
+    for k in [1, 7, 32, 4999] {
+        let mut top = TopK::new(k);
+        for round in 0..2 {
+            top.clear();
+            keys.iter().enumerate().for_each(|(y, &v)| top.offer(if round == 0 { v } else { -v }, y as u32));
+            let mut got: Vec<f32> =
+                top.finish().iter().map(|&y| if round == 0 { keys[y as usize] } else { -keys[y as usize] }).collect();
+            let mut want: Vec<f32> = keys.iter().map(|&v| if round == 0 { v } else { -v }).collect();
+            want.sort_by(|a, b| b.total_cmp(a));
+            want.truncate(k);
+            got.sort_by(|a, b| b.total_cmp(a));
+            assert_eq!(got, want, "k = {k}, round {round}");
+        }
+    }
+}
