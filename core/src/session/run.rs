@@ -434,10 +434,12 @@ impl Session {
         self.audit_every = every;
     }
 
-    /// The mean share of the feature grid VGG runs on, over the views whose
-    /// targets are made (CPU steps; `style::window`): 1 with the losses over
-    /// the whole frame or the window off, `None` before any target exists.
-    pub fn vgg_window_share(&self) -> Option<f32> {
+    /// The mean share of a whole-frame VGG pass's multiply-adds that a CPU
+    /// step's passes do, over the views whose targets are made: less than 1
+    /// with object focus, where VGG computes only the cone of the covered
+    /// positions (`style::window`, `vision::vgg_cone`); 1 with the losses over
+    /// the whole frame or `vgg_window` off; `None` before any target exists.
+    pub fn vgg_work_share(&self) -> Option<f32> {
         let object = self.focus_on_object() && self.config.vgg_window;
         let shares: Vec<f32> = self
             .targets
@@ -445,12 +447,14 @@ impl Session {
             .zip(&self.cameras)
             .filter_map(|(t, cam)| t.as_ref().map(|t| (t, cam.height as usize, cam.width as usize)))
             .map(|(t, h, w)| {
-                let (fh, fw) = (h / 2 / 4, w / 2 / 4);
-                if !object || t.coverage.len() != h * w {
+                let (sh, sw) = (h / 2, w / 2);
+                let (fh, fw) = (sh / 4, sw / 4);
+                if !object || t.coverage.len() != h * w || fh * fw == 0 {
                     return 1.0;
                 }
                 let fmask = crate::style::focus::feature_mask(&t.coverage, h, w, fh, fw);
-                crate::style::window::FeatureWindow::covering(&fmask, fh, fw).map_or(1.0, |win| win.share())
+                crate::style::window::covered_box(&fmask, fh, fw)
+                    .map_or(1.0, |cells| crate::vision::vgg_cone::work_share(cells, (sh, sw)) as f32)
             })
             .collect();
         (!shares.is_empty()).then(|| shares.iter().sum::<f32>() / shares.len() as f32)

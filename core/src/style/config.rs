@@ -106,9 +106,10 @@ pub struct StyleConfig {
     /// channel renders below 0 (`0.5 + C0·f_dc ≥ 0`), out of the clamp's dead
     /// zone where no gradient reaches it again. Off in the reference.
     pub color_floor: bool,
-    /// With object focus, run VGG on the window of the input the covered
-    /// feature positions depend on, not the whole frame (`style::window`):
-    /// the same losses up to rounding. On by default; off to measure what it buys.
+    /// With object focus, run VGG only on the part of each layer the covered
+    /// feature positions depend on, not the whole frame (`style::window`,
+    /// `vision::vgg_cone`): the same losses up to rounding. On by default;
+    /// off to measure what it buys.
     pub vgg_window: bool,
 }
 

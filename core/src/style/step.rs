@@ -16,8 +16,9 @@ use super::focus::{feature_mask, gather_positions, scatter_positions};
 use super::gcfm::{GcfmOutput, Matches, StyleFeatures, gcfm_loss_with_matches, match_features};
 use super::regularizers::depth_l1;
 use super::tv::tv_loss_masked;
-use super::window::FeatureWindow;
+use super::window::{FeatureWindow, covered_box};
 use crate::vision::resize::{downscale_half, downscale_half_backward};
+use crate::vision::vgg_cone::Region;
 
 /// A CHW feature map.
 #[derive(Clone, Debug, PartialEq)]
@@ -39,9 +40,10 @@ pub struct LossFocus<'a> {
     /// The covered pixels (`h × w`); `None` is the whole frame.
     pub mask: Option<&'a [bool]>,
     /// With a mask, run VGG's forwards and backwards on the window the covered
-    /// positions' receptive fields span, not the whole frame: the same losses
-    /// and gradients (up to rounding) for less work. Exact for VGG's relu3
-    /// and for any network whose receptive field is no larger.
+    /// positions' receptive fields span, not the whole frame, and inside it
+    /// only on the cone of their box ([`FeatureNet::forward_within`]): the
+    /// same losses and gradients up to rounding for less work. Exact for
+    /// VGG's relu3 and any network whose receptive field is no larger.
     pub window: bool,
 }
 
@@ -55,6 +57,19 @@ pub trait FeatureNet: Sync {
     fn forward(&self, rgb: &[f32], h: usize, w: usize) -> (FeatureMap, Self::State);
     /// Gradient w.r.t. the input image (HWC) given the features' gradient.
     fn backward(&self, state: &Self::State, v_features: &[f32]) -> Vec<f32>;
+    /// As [`FeatureNet::forward`] when only the features in the box `cells`
+    /// of the feature grid are read (and only they get a gradient): a network
+    /// may skip the rest, whose features are then unspecified. The default
+    /// runs the whole forward.
+    fn forward_within(&self, rgb: &[f32], h: usize, w: usize, cells: Region) -> (FeatureMap, Self::State) {
+        let _ = cells;
+        self.forward(rgb, h, w)
+    }
+    /// As [`FeatureNet::features`] when only those in `cells` are read.
+    fn features_within(&self, rgb: &[f32], h: usize, w: usize, cells: Region) -> FeatureMap {
+        let _ = cells;
+        self.features(rgb, h, w)
+    }
 }
 
 /// The studio's network: VGG relu3_1..3 ([`crate::vision::Vgg`]).
@@ -70,6 +85,14 @@ impl FeatureNet for crate::vision::Vgg {
     }
     fn backward(&self, state: &Self::State, v_features: &[f32]) -> Vec<f32> {
         crate::vision::Vgg::backward(self, state, v_features)
+    }
+    fn forward_within(&self, rgb: &[f32], h: usize, w: usize, cells: Region) -> (FeatureMap, Self::State) {
+        let (f, s) = crate::vision::Vgg::forward_within(self, rgb, h, w, cells);
+        (FeatureMap { channels: f.c, height: f.h, width: f.w, data: f.data }, s)
+    }
+    fn features_within(&self, rgb: &[f32], h: usize, w: usize, cells: Region) -> FeatureMap {
+        let f = crate::vision::Vgg::features_within(self, rgb, h, w, cells);
+        FeatureMap { channels: f.c, height: f.h, width: f.w, data: f.data }
     }
 }
 
@@ -295,7 +318,8 @@ pub fn step_loss_with<N: FeatureNet>(
     let (fh, fw) = (sh / 4, sw / 4);
     let n = fh * fw;
     let fmask = mask.map(|m| feature_mask(m, h, w, fh, fw)).filter(|f| f.contains(&true));
-    let window = fmask.as_deref().filter(|_| focus.window).and_then(|f| FeatureWindow::covering(f, fh, fw));
+    let cells = fmask.as_deref().filter(|_| focus.window).and_then(|f| covered_box(f, fh, fw));
+    let window = cells.and_then(|b| FeatureWindow::around(b, fh, fw));
 
     // Features: RGB (and depth, when its gradient is wanted) keep their state
     // for the backward pass; edges are a constant.
@@ -304,21 +328,23 @@ pub fn step_loss_with<N: FeatureNet>(
         .enumerate()
         .map(|(k, (img, _, _))| {
             let keep = k == 0 || (k == 1 && depth_grad);
-            let Some(win) = &window else {
-                return if keep {
-                    let (f, s) = net.forward(img, sh, sw);
+            let run = |img: &[f32], ih: usize, iw: usize, cells: Option<Region>| match (cells, keep) {
+                (None, true) => {
+                    let (f, s) = net.forward(img, ih, iw);
                     (f, Some(s))
-                } else {
-                    (net.features(img, sh, sw), None)
-                };
+                }
+                (None, false) => (net.features(img, ih, iw), None),
+                (Some(c), true) => {
+                    let (f, s) = net.forward_within(img, ih, iw, c);
+                    (f, Some(s))
+                }
+                (Some(c), false) => (net.features_within(img, ih, iw, c), None),
+            };
+            let Some(win) = &window else {
+                return run(img, sh, sw, cells);
             };
             let (part, ph, pw) = win.crop_image(img, sh, sw, 3);
-            let (f, s) = if keep {
-                let (f, s) = net.forward(&part, ph, pw);
-                (f, Some(s))
-            } else {
-                (net.features(&part, ph, pw), None)
-            };
+            let (f, s) = run(&part, ph, pw, cells.map(|c| win.local(c)));
             let data = win.embed_features(&f.data, f.channels);
             (FeatureMap { channels: f.channels, height: fh, width: fw, data }, s)
         })

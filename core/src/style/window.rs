@@ -19,11 +19,28 @@
 //! bottom or right edge exactly when it includes the last feature row or
 //! column, so the floor of the pools and the zero padding there are the
 //! frame's own.
+//!
+//! Inside the window, VGG computes only the cone of the covered box
+//! ([`crate::vision::vgg_cone`]), which is smaller still at the deep layers.
+
+use crate::vision::vgg_cone::Region;
 
 /// Feature cells added on each side of the covered bounding box (≥ 18 input pixels).
 pub const MARGIN_CELLS: usize = 5;
 /// The window's origin is a multiple of this many feature cells.
 pub const ALIGN_CELLS: usize = 4;
+
+/// The bounding box of the covered positions of `fmask` (`fh × fw`), or `None`
+/// when nothing is covered.
+pub fn covered_box(fmask: &[bool], fh: usize, fw: usize) -> Option<Region> {
+    assert_eq!(fmask.len(), fh * fw, "covered_box: mask size");
+    let (mut y0, mut y1, mut x0, mut x1) = (usize::MAX, 0, usize::MAX, 0);
+    for (k, _) in fmask.iter().enumerate().filter(|(_, c)| **c) {
+        let (y, x) = (k / fw, k % fw);
+        (y0, y1, x0, x1) = (y0.min(y), y1.max(y + 1), x0.min(x), x1.max(x + 1));
+    }
+    (y1 > 0).then_some(Region { y0, y1, x0, x1 })
+}
 
 /// A rectangle of the feature grid, `y0..y1 × x0..x1`, and the frame it lies in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -46,19 +63,27 @@ impl FeatureWindow {
     /// The window VGG needs for the covered positions of `fmask` (`fh × fw`),
     /// or `None` when nothing is covered or the window is the whole grid.
     pub fn covering(fmask: &[bool], fh: usize, fw: usize) -> Option<Self> {
-        assert_eq!(fmask.len(), fh * fw, "FeatureWindow: mask size");
-        let (mut y0, mut y1, mut x0, mut x1) = (usize::MAX, 0, usize::MAX, 0);
-        for (k, _) in fmask.iter().enumerate().filter(|(_, c)| **c) {
-            let (y, x) = (k / fw, k % fw);
-            (y0, y1, x0, x1) = (y0.min(y), y1.max(y + 1), x0.min(x), x1.max(x + 1));
-        }
-        if y1 == 0 {
-            return None;
-        }
+        covered_box(fmask, fh, fw).and_then(|b| Self::around(b, fh, fw))
+    }
+
+    /// The window around the box `cells` of an `fh × fw` grid, or `None` when
+    /// it is the whole grid.
+    pub fn around(cells: Region, fh: usize, fw: usize) -> Option<Self> {
         let lo = |v: usize| v.saturating_sub(MARGIN_CELLS) / ALIGN_CELLS * ALIGN_CELLS;
-        let win =
-            Self { y0: lo(y0), y1: (y1 + MARGIN_CELLS).min(fh), x0: lo(x0), x1: (x1 + MARGIN_CELLS).min(fw), fh, fw };
+        let win = Self {
+            y0: lo(cells.y0),
+            y1: (cells.y1 + MARGIN_CELLS).min(fh),
+            x0: lo(cells.x0),
+            x1: (cells.x1 + MARGIN_CELLS).min(fw),
+            fh,
+            fw,
+        };
         (win.cells() < fh * fw).then_some(win)
+    }
+
+    /// `cells` (a box of the whole grid inside the window) in the window's own grid.
+    pub fn local(&self, cells: Region) -> Region {
+        Region { y0: cells.y0 - self.y0, y1: cells.y1 - self.y0, x0: cells.x0 - self.x0, x1: cells.x1 - self.x0 }
     }
 
     /// Feature positions inside the window.

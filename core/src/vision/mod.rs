@@ -22,6 +22,7 @@ mod pth;
 pub mod resize;
 pub mod style_depth;
 pub mod vgg;
+pub mod vgg_cone;
 pub mod weights;
 pub mod winograd;
 

@@ -16,6 +16,7 @@
 use rayon::prelude::*;
 
 use super::conv::{ConvAlgo, add_bias, conv_backward, conv_relu, max_pool, max_pool_backward};
+use super::vgg_cone::{ConePlan, Region, crop_planes, embed_planes};
 use super::weights::VggWeights;
 use super::winograd::{WinogradKernel, winograd_conv, winograd_flops};
 
@@ -45,10 +46,14 @@ pub struct Features {
 pub struct VggState {
     /// Input size (H, W).
     size: (usize, usize),
-    /// For each of the seven convolutions, whether its ReLU passed (output > 0).
+    /// For each of the seven convolutions, whether its ReLU passed (output > 0),
+    /// on the region of its output that was kept.
     relu_open: Vec<Vec<bool>>,
     /// For the two max-pools, the in-plane index of each output's maximum.
     pool_argmax: [Vec<u32>; 2],
+    /// The regions each convolution ran on and kept ([`super::vgg_cone`]);
+    /// `None` when the input had no features.
+    plan: Option<ConePlan>,
 }
 
 /// The network: the seven convolutions conv1_1 … conv3_3.
@@ -143,13 +148,13 @@ impl Vgg {
     /// # Panics
     /// If `rgb.len() != h·w·3`.
     pub fn features(&self, rgb: &[f32], h: usize, w: usize) -> Features {
-        self.run(rgb, h, w, None)
+        self.run(rgb, h, w, None, None)
     }
 
     /// As [`Vgg::features`], also returning what [`Vgg::backward`] needs.
     pub fn forward(&self, rgb: &[f32], h: usize, w: usize) -> (Features, VggState) {
         let mut state = VggState::default();
-        let f = self.run(rgb, h, w, Some(&mut state));
+        let f = self.run(rgb, h, w, None, Some(&mut state));
         (f, state)
     }
 
@@ -161,44 +166,53 @@ impl Vgg {
     /// If `v_features` does not have the feature map's size.
     pub fn backward(&self, state: &VggState, v_features: &[f32]) -> Vec<f32> {
         let (h, w) = state.size;
-        let dims = [(h, w), (h / 2, w / 2), (h / 4, w / 4)];
-        let n3 = dims[2].0 * dims[2].1;
+        let (fh, fw) = (h / 4, w / 4);
+        let n3 = fh * fw;
         assert_eq!(v_features.len(), FEATURE_CHANNELS * n3, "backward: v_features has the wrong size");
-        if n3 == 0 {
+        let Some(plan) = state.plan.filter(|_| n3 > 0) else {
             return vec![0.0; h * w * 3];
-        }
+        };
+        let grid = Region::full(fh, fw);
+        let block = |k: usize, r: Region| crop_planes(&v_features[k * 256 * n3..(k + 1) * 256 * n3], 256, grid, r);
         let convs = &self.weights.convs;
         let mut scratch = Vec::new();
-        // v holds the gradient of the current layer's output (post-ReLU).
-        let mut v = v_features[2 * 256 * n3..].to_vec();
-        let mut v_in = vec![0.0; 256 * n3];
+        // v holds the gradient of the current layer's kept output (post-ReLU).
+        let mut v = block(2, plan.output[6]);
+        let mut v_in = Vec::new();
         for layer in (0..7).rev() {
             let c = &convs[layer];
-            let (lh, lw) = dims[STAGE[layer]];
+            let (inr, outr) = (plan.input[layer], plan.output[layer]);
             if layer == 5 || layer == 4 {
                 // relu3_2 and relu3_1 are features themselves as well as the next layer's input.
-                let block = &v_features[(layer - 4) * 256 * n3..(layer - 3) * 256 * n3];
-                v.par_iter_mut().zip(block).for_each(|(a, b)| *a += b);
+                let b = block(layer - 4, outr);
+                v.par_iter_mut().zip(&b).for_each(|(a, b)| *a += b);
             }
             v.par_iter_mut().zip(&state.relu_open[layer]).for_each(|(g, &open)| {
                 if !open {
                     *g = 0.0;
                 }
             });
-            v_in.resize(c.c_in * lh * lw, 0.0);
-            self.conv_backward(layer, &v, (lh, lw), &mut v_in, &mut scratch);
+            // The convolution ran on its input's region; the cut ring has no gradient.
+            if inr != outr {
+                v = embed_planes(&v, c.c_out, inr, outr);
+            }
+            v_in.resize(c.c_in * inr.area(), 0.0);
+            self.conv_backward(layer, &v, (inr.height(), inr.width()), &mut v_in, &mut scratch);
             std::mem::swap(&mut v, &mut v_in);
             if layer == 4 || layer == 2 {
-                // Through the pool in front of this stage.
+                // Through the pool in front of this stage, onto the previous convolution's kept output.
                 let p = if layer == 2 { 0 } else { 1 };
-                let (ph, pw) = dims[STAGE[layer] - 1];
-                let ch = c.c_in;
-                v_in.resize(ch * ph * pw, 0.0);
-                max_pool_backward(&v, &state.pool_argmax[p], (ch, ph, pw), &mut v_in);
+                let prev = plan.output[layer - 1];
+                v_in.resize(c.c_in * prev.area(), 0.0);
+                max_pool_backward(&v, &state.pool_argmax[p], (c.c_in, prev.height(), prev.width()), &mut v_in);
                 std::mem::swap(&mut v, &mut v_in);
             }
         }
-        // v is the gradient of the normalised CHW input.
+        // v is the gradient of the normalised CHW input on the first region.
+        let r0 = plan.input[0];
+        if r0 != Region::full(h, w) {
+            v = embed_planes(&v, 3, Region::full(h, w), r0);
+        }
         let n = h * w;
         let mut v_rgb = vec![0.0; n * 3];
         for (p, px) in v_rgb.chunks_exact_mut(3).enumerate() {
@@ -209,58 +223,85 @@ impl Vgg {
         v_rgb
     }
 
-    fn run(&self, rgb: &[f32], h: usize, w: usize, mut save: Option<&mut VggState>) -> Features {
+    /// As [`Vgg::forward`], computing only the cone of the relu3 positions in
+    /// `cells` ([`super::vgg_cone`]): the features there (and the input
+    /// gradient of a loss on them) equal the whole pass's; the features
+    /// elsewhere are 0.
+    pub fn forward_within(&self, rgb: &[f32], h: usize, w: usize, cells: Region) -> (Features, VggState) {
+        let mut state = VggState::default();
+        let f = self.run(rgb, h, w, Some(cells), Some(&mut state));
+        (f, state)
+    }
+
+    /// As [`Vgg::features`] on the cone of `cells` (see [`Vgg::forward_within`]).
+    pub fn features_within(&self, rgb: &[f32], h: usize, w: usize, cells: Region) -> Features {
+        self.run(rgb, h, w, Some(cells), None)
+    }
+
+    fn run(&self, rgb: &[f32], h: usize, w: usize, cells: Option<Region>, mut save: Option<&mut VggState>) -> Features {
         assert_eq!(rgb.len(), h * w * 3, "VGG input must be h·w·3 RGB values");
-        let dims = [(h, w), (h / 2, w / 2), (h / 4, w / 4)];
+        let (fh, fw) = (h / 4, w / 4);
         if let Some(s) = save.as_deref_mut() {
             s.size = (h, w);
             s.relu_open.clear();
+            s.plan = None;
         }
-        if dims[2].0 == 0 || dims[2].1 == 0 {
-            return Features { c: FEATURE_CHANNELS, h: dims[2].0, w: dims[2].1, data: Vec::new() };
+        if fh == 0 || fw == 0 {
+            return Features { c: FEATURE_CHANNELS, h: fh, w: fw, data: Vec::new() };
         }
-        let n = h * w;
-        let mut x = vec![0.0; 3 * n];
-        for (p, px) in rgb.chunks_exact(3).enumerate() {
-            for ch in 0..3 {
-                x[ch * n + p] = (px[ch] - IMAGENET_MEAN[ch]) / IMAGENET_STD[ch];
+        let grid = Region::full(fh, fw);
+        let plan = ConePlan::new(cells.unwrap_or(grid), (h, w));
+        let r0 = plan.input[0];
+        let mut x = vec![0.0; 3 * r0.area()];
+        for y in r0.y0..r0.y1 {
+            for xx in r0.x0..r0.x1 {
+                let (p, q) = (y * w + xx, (y - r0.y0) * r0.width() + xx - r0.x0);
+                for ch in 0..3 {
+                    x[ch * r0.area() + q] = (rgb[3 * p + ch] - IMAGENET_MEAN[ch]) / IMAGENET_STD[ch];
+                }
             }
         }
         let convs = &self.weights.convs;
         let mut scratch = Vec::new();
         let mut y = Vec::new();
-        let n3 = dims[2].0 * dims[2].1;
+        let n3 = fh * fw;
         let mut feats = vec![0.0; FEATURE_CHANNELS * n3];
-        for layer in 0..4 {
-            let c = &convs[layer];
-            let (lh, lw) = dims[STAGE[layer]];
-            y.resize(c.c_out * lh * lw, 0.0);
-            self.conv_relu(layer, &x, (lh, lw), &mut y, &mut scratch);
-            if let Some(s) = save.as_deref_mut() {
-                s.relu_open.push(y.par_iter().map(|&v| v > 0.0).collect());
+        for (layer, c) in convs.iter().enumerate().take(7) {
+            let (inr, outr) = (plan.input[layer], plan.output[layer]);
+            y.resize(c.c_out * inr.area(), 0.0);
+            self.conv_relu(layer, &x, (inr.height(), inr.width()), &mut y, &mut scratch);
+            // x becomes the kept output (y keeps a buffer to reuse).
+            if inr == outr {
+                std::mem::swap(&mut x, &mut y);
+            } else {
+                x = crop_planes(&y, c.c_out, inr, outr);
             }
-            std::mem::swap(&mut x, &mut y);
+            if let Some(s) = save.as_deref_mut() {
+                s.relu_open.push(x.par_iter().map(|&v| v > 0.0).collect());
+            }
+            if layer >= 4 {
+                // relu3_1..3 on the cells, into the concatenated feature map.
+                let part = crop_planes(&x, 256, outr, plan.output[6]);
+                let full = embed_planes(&part, 256, grid, plan.output[6]);
+                feats[(layer - 4) * 256 * n3..(layer - 3) * 256 * n3].copy_from_slice(&full);
+            }
             if layer == 1 || layer == 3 {
-                let (ph, pw) = dims[STAGE[layer] + 1];
-                y.resize(c.c_out * ph * pw, 0.0);
+                let next = plan.input[layer + 1];
+                y.resize(c.c_out * next.area(), 0.0);
                 let p = layer / 2;
-                max_pool(&x, (c.c_out, lh, lw), &mut y, save.as_deref_mut().map(|s| &mut s.pool_argmax[p]));
+                max_pool(
+                    &x,
+                    (c.c_out, outr.height(), outr.width()),
+                    &mut y,
+                    save.as_deref_mut().map(|s| &mut s.pool_argmax[p]),
+                );
                 std::mem::swap(&mut x, &mut y);
             }
         }
-        // Stage 3 writes straight into the concatenated feature map.
-        let (h3, w3) = dims[2];
-        let (f1, rest) = feats.split_at_mut(256 * n3);
-        let (f2, f3) = rest.split_at_mut(256 * n3);
-        self.conv_relu(4, &x, (h3, w3), f1, &mut scratch);
-        self.conv_relu(5, f1, (h3, w3), f2, &mut scratch);
-        self.conv_relu(6, f2, (h3, w3), f3, &mut scratch);
         if let Some(s) = save {
-            for f in [&*f1, &*f2, &*f3] {
-                s.relu_open.push(f.par_iter().map(|&v| v > 0.0).collect());
-            }
+            s.plan = Some(plan);
         }
-        Features { c: FEATURE_CHANNELS, h: h3, w: w3, data: feats }
+        Features { c: FEATURE_CHANNELS, h: fh, w: fw, data: feats }
     }
 
     /// Floating-point operations of one forward pass at `h × w` (multiply and add counted apart).

@@ -33,6 +33,10 @@ pub struct StepArgs {
     /// Orbit views.
     #[arg(long, default_value_t = 36)]
     pub views: usize,
+    /// Orbit framing: full (the paper's orbit, the object as the scene's extent frames it) or
+    /// object (each view fitted to the object, as `gast stylize` does by default).
+    #[arg(long, value_enum, default_value_t = Framing::Full)]
+    pub framing: Framing,
     /// Geometry steps to time after the first cycle's colour steps.
     #[arg(long, default_value_t = 20)]
     pub geometry_steps: u32,
@@ -107,17 +111,18 @@ pub(super) fn step_inputs(args: &StepArgs) -> anyhow::Result<StepInputs> {
             views: args.views,
             size: args.resolution,
             fov: 50.0,
-            framing: Framing::Full,
+            framing: args.framing,
             crop: false,
         },
     )?;
     println!(
-        "step benchmark: {} ({} Gaussians), style {}, {} views at {} px, {} threads",
+        "step benchmark: {} ({} Gaussians), style {}, {} views at {} px ({:?} framing), {} threads",
         scene_path.display(),
         scene.len(),
         style_path.display(),
         views.len(),
         args.resolution,
+        args.framing,
         rayon::current_num_threads()
     );
     Ok(StepInputs { scene, views, style, vgg })

@@ -24,7 +24,7 @@ pub(super) fn run_fast_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
     let (cam_h, cam_w) = (views[0].height as usize, views[0].width as usize);
     let mc = new_config.matching;
-    let window = |on: bool| if on { "the object's window" } else { "the whole frame" };
+    let window = |on: bool| if on { "the object's cone" } else { "the whole frame" };
     println!(
         "old: conv im2col, matching exact, VGG on the whole frame | new: conv {}, matching {} (dims {}, candidates {}, reuse {}), VGG on {}",
         new_config.conv,
@@ -59,9 +59,9 @@ pub(super) fn run_fast_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         let warm = session.warm_view_targets().map_err(anyhow::Error::msg)?;
         println!("  {label} per-view targets (G^c render, content features), once per run: {:.0} ms", warm * 1e3);
     }
-    if let Some(share) = new.vgg_window_share() {
+    if let Some(share) = new.vgg_work_share() {
         println!(
-            "  new VGG window: {:.0}% of the feature grid on average over the views (focus {})",
+            "  new VGG work: {:.0}% of a whole-frame pass's multiply-adds on average over the views (focus {})",
             share * 100.0,
             if new.focus_on_object() { "object" } else { "frame" }
         );
@@ -131,8 +131,8 @@ pub(super) fn run_fast_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     let (sh, sw) = (cam_h / 2, cam_w / 2);
     let fwd_direct = vgg.forward_flops(sh, sw);
     let new_vgg = (*vgg).clone().with_conv(new_config.conv);
-    // VGG's work scales with the pixels it runs on: the window's share of the frame.
-    let fwd_new = new_vgg.executed_forward_flops(sh, sw) * f64::from(new.vgg_window_share().unwrap_or(1.0));
+    // VGG's work with the focus on the object: the cone of the covered positions.
+    let fwd_new = new_vgg.executed_forward_flops(sh, sw) * f64::from(new.vgg_work_share().unwrap_or(1.0));
     // With the focus on the object only the covered positions are matched:
     // the mean covered share of the views stands for their number.
     let share = if old.focus_on_object() { f64::from(old.coverage()) } else { 1.0 };
