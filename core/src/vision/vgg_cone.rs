@@ -156,8 +156,8 @@ mod tests {
         for (h, w) in [(128, 128), (90, 67), (13, 22)] {
             let plan = ConePlan::new(Region::full(h / 4, w / 4), (h, w));
             let d = [(h, w), (h, w), (h / 2, w / 2), (h / 2, w / 2), (h / 4, w / 4), (h / 4, w / 4), (h / 4, w / 4)];
-            for l in 0..7 {
-                assert_eq!(plan.input[l], Region::full(d[l].0, d[l].1), "{h}×{w} conv {l}");
+            for (l, &(lh, lw)) in d.iter().enumerate() {
+                assert_eq!(plan.input[l], Region::full(lh, lw), "{h}×{w} conv {l}");
                 assert_eq!(plan.output[l], plan.input[l], "{h}×{w} conv {l}");
             }
         }

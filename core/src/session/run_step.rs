@@ -1,0 +1,198 @@
+//! One optimisation step of a [`Session`]: render a view, the losses through
+//! VGG, the rasterizer's backward and the phase's Adam update, on the CPU or
+//! as one submission of the GPU engine.
+
+use super::*;
+
+impl Session {
+    /// Runs the next scheduled step; `None` when the schedule is complete or
+    /// the GPU engine failed ([`Session::failure`] then says why).
+    pub fn step(&mut self) -> Option<StepReport> {
+        if self.failure.is_some() {
+            return None;
+        }
+        let schedule = self.config.schedule();
+        let (cycle, phase) = schedule.at(self.step)?;
+        let started = Instant::now();
+        let view = self.sampler.next();
+        let object = self.focus_on_object();
+        if let Some(engine) = &mut self.engine {
+            engine.set_object_focus(object);
+            let cam = &self.cameras[view];
+            let (losses, timings) = match engine.step(view, cam, phase, &self.config, self.extent) {
+                Ok(r) => r,
+                Err(e) => {
+                    self.failure = Some(format!("step {}: {e}", self.step));
+                    return None;
+                }
+            };
+            self.elapsed_s += started.elapsed().as_secs_f64();
+            let report = StepReport {
+                iter: self.step,
+                total: schedule.total_steps(),
+                cycle,
+                phase,
+                view: view as u32,
+                losses,
+                timings,
+                elapsed_s: self.elapsed_s,
+            };
+            self.step += 1;
+            if let Some(live) = &self.live {
+                live.publish(u64::from(self.step));
+            }
+            return Some(report);
+        }
+        let opts = RenderOptions { background: self.config.background };
+        let cam = self.cameras[view].clone();
+        let (h, w) = (cam.height as usize, cam.width as usize);
+        let mut timings = StepTimings::default();
+
+        self.make_target(view);
+
+        let t = Instant::now();
+        let (img, state) = raster::forward(&self.g, &cam, &opts);
+        timings.render_ms = ms(t);
+        let rgb: Vec<f32> = img.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+        let edge = render_edges(&rgb, h, w);
+        let target = self.targets[view].as_ref()?;
+        let geometry = phase.updates_geometry();
+        // Matches: kept from this view's last visits, or searched (and, when
+        // auditing, compared with the exact search off the clock).
+        let mc = self.config.matching;
+        let kept = self.view_matches[view].take().filter(|(_, uses)| *uses < mc.reuse);
+        let uses = kept.as_ref().map_or(0, |k| k.1);
+        let audit_now =
+            self.audit_every > 0 && self.step.is_multiple_of(self.audit_every) && mc.method != MatchMethod::Exact;
+        let (features, index) = (&self.style.targets.features, self.index.as_ref());
+        let (mut audited, mut audit_s) = (None, 0.0);
+        let mut matcher = |r: [&[f32]; 3], n: usize| match &kept {
+            Some((m, _)) => m.clone(),
+            None => {
+                let m = find_matches(features, index, &mc, r, n);
+                if audit_now {
+                    let t = Instant::now();
+                    audited = Some(agreement(&m, &match_features(features, r, n)));
+                    audit_s = t.elapsed().as_secs_f64();
+                }
+                m
+            }
+        };
+        let loss = step_loss_with(
+            &*self.vgg,
+            &self.style.targets,
+            RenderedMaps { rgb: &rgb, inv_depth: &img.inv_depth, edge: &edge, height: h, width: w },
+            Some(&target.content),
+            geometry.then_some(target.inv_depth.as_slice()),
+            &self.config.weights,
+            geometry,
+            LossFocus {
+                mask: self.focus_on_object().then_some(target.coverage.as_slice()),
+                window: self.config.vgg_window,
+            },
+            &mut matcher,
+        );
+        if let Some((b, w)) = audited {
+            self.audit = (self.audit.0 + b, self.audit.1 + w, self.audit.2 + 1);
+        }
+        self.view_matches[view] = Some((loss.matches.clone(), uses + 1));
+        timings.features_ms = loss.timings.features_ms;
+        timings.matching_ms = loss.timings.matching_ms - (audit_s * 1e3) as f32;
+        timings.vgg_backward_ms = loss.timings.backward_ms;
+
+        // The clamp to [0, 1] passes no gradient outside the range.
+        let mut v_rgb = loss.v_rgb;
+        for (g, &raw) in v_rgb.iter_mut().zip(&img.rgb) {
+            if !(0.0..=1.0).contains(&raw) {
+                *g = 0.0;
+            }
+        }
+        let t = Instant::now();
+        let grads = raster::backward(&self.g, &cam, &opts, &state, &v_rgb, &loss.v_inv_depth);
+        timings.raster_backward_ms = ms(t);
+
+        let t = Instant::now();
+        let mut terms = LossTerms {
+            gcfm: loss.gcfm,
+            content: loss.content,
+            tv: loss.tv,
+            depth: loss.depth,
+            total: loss.total,
+            ..LossTerms::default()
+        };
+        let lr = self.config.lr;
+        let wts = self.config.weights;
+        if phase.updates_color() {
+            let k = self.g.sh_coeffs() * 3;
+            let mut dc: Vec<f32> = (0..self.g.len())
+                .flat_map(|i| [self.g.sh[i * k], self.g.sh[i * k + 1], self.g.sh[i * k + 2]])
+                .collect();
+            let v_dc: Vec<f32> = (0..self.g.len())
+                .flat_map(|i| [grads.v_sh[i * k], grads.v_sh[i * k + 1], grads.v_sh[i * k + 2]])
+                .collect();
+            self.opt.color.step(&mut dc, &v_dc, lr.color);
+            if self.config.color_floor {
+                floor_dc(&mut dc);
+            }
+            for i in 0..self.g.len() {
+                self.g.sh[i * k..i * k + 3].copy_from_slice(&dc[3 * i..3 * i + 3]);
+            }
+        }
+        if geometry {
+            let (l_o, mut v_o) = l2_distance(&self.g.opacity_logits, &self.g_ref.opacity_logits);
+            let (l_s, mut v_s) = l2_distance(flat(&self.g.log_scales), flat(&self.g_ref.log_scales));
+            let (l_q, mut v_q) = l2_distance(flat(&self.g.quats), flat(&self.g_ref.quats));
+            terms.reg_opacity = l_o;
+            terms.reg_scale = l_s;
+            terms.reg_rotation = l_q;
+            terms.total += wts.opacity * l_o + wts.scale * l_s + wts.rotation * l_q;
+            add_scaled(&mut v_o, &grads.v_opacity_logits, wts.opacity);
+            add_scaled(&mut v_s, flat(&grads.v_log_scales), wts.scale);
+            add_scaled(&mut v_q, flat(&grads.v_quats), wts.rotation);
+            self.opt.means.step(flat_mut(&mut self.g.means), flat(&grads.v_means), lr.means_per_extent * self.extent);
+            self.opt.scales.step(flat_mut(&mut self.g.log_scales), &v_s, lr.scales);
+            self.opt.quats.step(flat_mut(&mut self.g.quats), &v_q, lr.quats);
+            self.opt.opacity.step(&mut self.g.opacity_logits, &v_o, lr.opacity);
+        }
+        timings.update_ms = ms(t);
+
+        self.elapsed_s += started.elapsed().as_secs_f64() - audit_s;
+        let report = StepReport {
+            iter: self.step,
+            total: schedule.total_steps(),
+            cycle,
+            phase,
+            view: view as u32,
+            losses: terms,
+            timings,
+            elapsed_s: self.elapsed_s,
+        };
+        self.step += 1;
+        Some(report)
+    }
+}
+
+/// Projects DC colour coefficients out of the clamp's dead zone: every
+/// channel's base colour `0.5 + C0·f_dc` is raised to at least 0.
+fn floor_dc(dc: &mut [f32]) {
+    dc.iter_mut().for_each(|v| *v = v.max(crate::style::DC_FLOOR));
+}
+
+/// `(x − x^c)/‖x − x^c‖` scaled by λ, plus the loss gradient: `reg ← λ·reg + loss`.
+fn add_scaled(reg: &mut [f32], loss_grad: &[f32], lambda: f32) {
+    for (r, &g) in reg.iter_mut().zip(loss_grad) {
+        *r = lambda * *r + g;
+    }
+}
+
+fn flat<const N: usize>(v: &[[f32; N]]) -> &[f32] {
+    v.as_flattened()
+}
+
+fn flat_mut<const N: usize>(v: &mut [[f32; N]]) -> &mut [f32] {
+    v.as_flattened_mut()
+}
+
+fn ms(t: Instant) -> f32 {
+    t.elapsed().as_secs_f32() * 1e3
+}
