@@ -1,0 +1,256 @@
+//! The flags of `gast stylize` (shared with `bench step` and `check golden`
+//! through [`FastArgs`]) and the configuration they make.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+use gast_core::gpu::DeviceChoice;
+use gast_core::style::{Focus, MatchMethod, Mode, StyleConfig};
+use gast_core::vision::ConvAlgo;
+use gast_core::vision::style_depth::{DepthPolarity, DepthProvider};
+
+use super::super::Framing;
+
+/// Arguments of `gast stylize`.
+#[derive(Args, Debug)]
+pub struct StylizeArgs {
+    /// The scene: INRIA .ply, .compressed.ply, .spz, or a SOG folder.
+    pub scene: PathBuf,
+    /// The style image (PNG, JPEG, WebP).
+    pub style: PathBuf,
+    /// Output folder.
+    #[arg(long, default_value = "out/stylize")]
+    pub out: PathBuf,
+    /// Name of the stylized scene in the output folder; its ending picks the
+    /// format: .ply, .compressed.ply, .spz, .sog, or a SOG folder (ending in /).
+    #[arg(long, default_value = "stylized.ply")]
+    pub scene_name: PathBuf,
+    #[command(flatten)]
+    pub save: super::super::convert::SaveArgs,
+    /// Optimisation cameras (COLMAP sparse/0, cameras.json, transforms.json);
+    /// without it, `--views` orbit views are generated around the scene.
+    #[arg(long)]
+    pub cameras: Option<PathBuf>,
+    /// Number of generated orbit views (without --cameras).
+    #[arg(long, default_value_t = 36)]
+    pub views: usize,
+    /// Vertical field of view of generated views, degrees.
+    #[arg(long, default_value_t = 50.0)]
+    pub fov: f32,
+    /// Generated views: `object` fits each view to the object (it spans 90% of
+    /// the longer side), `full` is the plain orbit around its bounding sphere.
+    #[arg(long, value_enum, default_value_t = Framing::Object)]
+    pub framing: Framing,
+    /// With --cameras: crop each view to the region the object covers.
+    #[arg(long)]
+    pub crop: bool,
+    /// A preset file (JSON StyleConfig); flags below override it.
+    #[arg(long)]
+    pub preset: Option<PathBuf>,
+    /// Write the effective configuration to this preset file and continue.
+    #[arg(long)]
+    pub save_preset: Option<PathBuf>,
+    /// VGG weights (.safetensors or .pth); else $GAST_WEIGHTS, the caches, or a download.
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+    /// A depth image for the style (PNG 8/16-bit or EXR); implies `--depth-provider image`.
+    #[arg(long)]
+    pub style_depth: Option<PathBuf>,
+    /// Where the style's depth comes from: learned (Depth Anything V2), image (`--style-depth`)
+    /// or heuristic [default: learned, or image with `--style-depth`].
+    #[arg(long, value_parser = DepthProvider::parse)]
+    pub depth_provider: Option<DepthProvider>,
+    /// Depth Anything V2 checkpoint: a folder with model.safetensors and config.json, or the
+    /// file; else $GAST_DEPTH_MODEL, the caches, or a one-time download of the Small model.
+    #[arg(long)]
+    pub depth_model: Option<PathBuf>,
+    /// Cycles K [default: 30].
+    #[arg(long)]
+    pub cycles: Option<u32>,
+    /// Steps per cycle N_c + N_g [default: 100].
+    #[arg(long)]
+    pub steps_per_cycle: Option<u32>,
+    /// Geometry share of a cycle N_g / (N_c + N_g) [default: 0.9].
+    #[arg(long)]
+    pub ratio_geo: Option<f32>,
+    /// decoupled, joint, color-only or geometry-only [default: decoupled].
+    #[arg(long)]
+    pub mode: Option<Mode>,
+    /// Texture scale: the style's height in pixels (128, 256, 512 = 0.5x, 1x, 2x) [default: 256].
+    #[arg(long)]
+    pub texture_scale: Option<u32>,
+    /// Working resolution: longer side of the optimisation renders [default:
+    /// follows the object: the smallest size (a multiple of 32) at which it
+    /// spans 64 relu3 positions across its longer side, at most the size where a
+    /// CPU step takes about 1 s; on a 2-core CPU a step takes about 0.6 s at
+    /// 256 px, 1.4 s at 384 px and 2.4 s at 512 px (the time grows with the
+    /// pixel count)].
+    #[arg(long)]
+    pub resolution: Option<u32>,
+    /// λ_GC, contrastive feature matching [default: 2].
+    #[arg(long)]
+    pub lambda_gc: Option<f32>,
+    /// λ_cont, content [default: 0.001].
+    #[arg(long)]
+    pub lambda_content: Option<f32>,
+    /// λ_TV, total variation [default: 0.02].
+    #[arg(long)]
+    pub lambda_tv: Option<f32>,
+    /// λ_α, opacity regulariser [default: 1].
+    #[arg(long)]
+    pub lambda_opacity: Option<f32>,
+    /// λ_s, scale regulariser [default: 1].
+    #[arg(long)]
+    pub lambda_scale: Option<f32>,
+    /// λ_r, rotation regulariser [default: 1].
+    #[arg(long)]
+    pub lambda_rotation: Option<f32>,
+    /// λ_d, depth regulariser [default: 10].
+    #[arg(long)]
+    pub lambda_depth: Option<f32>,
+    /// Learning rate of the SH DC colour [default: 0.01].
+    #[arg(long)]
+    pub lr_color: Option<f32>,
+    /// Learning rate of the means, times the scene extent [default: 1e-4].
+    #[arg(long)]
+    pub lr_means: Option<f32>,
+    /// Learning rate of the log-scales [default: 0.005].
+    #[arg(long)]
+    pub lr_scales: Option<f32>,
+    /// Learning rate of the quaternions [default: 0.001].
+    #[arg(long)]
+    pub lr_quats: Option<f32>,
+    /// Learning rate of the opacity logits [default: 0.05].
+    #[arg(long)]
+    pub lr_opacity: Option<f32>,
+    /// Style depth polarity: near-bright (like the rendered inverse depth) or
+    /// near-dark (the reference implementation's) [default: near-bright].
+    #[arg(long, value_parser = parse_polarity)]
+    pub depth_polarity: Option<DepthPolarity>,
+    /// Seed of the view order [default: 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Convolution and matching choices.
+    #[command(flatten)]
+    pub fast: FastArgs,
+    /// Where GCFM, content and TV look: frame (every pixel, the paper), object
+    /// (the pixels the scene covers), auto (object when the scene covers less
+    /// than half of the views) [default: auto].
+    #[arg(long)]
+    pub focus: Option<Focus>,
+    /// Keep colours out of the clamp's dead zone: after each colour step no
+    /// channel of a Gaussian's base colour goes below 0 [default: off].
+    #[arg(long)]
+    pub color_floor: Option<bool>,
+    /// Views rendered before/after into the output folder.
+    #[arg(long, default_value_t = 4)]
+    pub preview_views: usize,
+    /// Where the optimisation runs: auto (a hardware GPU when there is one,
+    /// else the CPU), cpu, or gpu (any adapter, software ones included).
+    #[arg(long, default_value_t = DeviceChoice::Auto)]
+    pub device: DeviceChoice,
+}
+
+impl StylizeArgs {
+    /// The preset (if any) with the flags applied.
+    pub fn config(&self) -> anyhow::Result<StyleConfig> {
+        let mut c = match &self.preset {
+            Some(p) => {
+                let text =
+                    std::fs::read_to_string(p).with_context(|| format!("could not read the preset {}", p.display()))?;
+                StyleConfig::from_json(&text)
+                    .with_context(|| format!("{}: expected a StyleConfig JSON preset", p.display()))?
+            }
+            None => StyleConfig::default(),
+        };
+        macro_rules! set {
+            ($flag:expr, $field:expr) => {
+                if let Some(v) = $flag {
+                    $field = v;
+                }
+            };
+        }
+        set!(self.cycles, c.cycles);
+        set!(self.steps_per_cycle, c.steps_per_cycle);
+        set!(self.ratio_geo, c.ratio_geo);
+        set!(self.mode, c.mode);
+        set!(self.texture_scale, c.texture_scale);
+        set!(self.resolution, c.resolution);
+        set!(self.lambda_gc, c.weights.gcfm);
+        set!(self.lambda_content, c.weights.content);
+        set!(self.lambda_tv, c.weights.tv);
+        set!(self.lambda_opacity, c.weights.opacity);
+        set!(self.lambda_scale, c.weights.scale);
+        set!(self.lambda_rotation, c.weights.rotation);
+        set!(self.lambda_depth, c.weights.depth);
+        set!(self.lr_color, c.lr.color);
+        set!(self.lr_means, c.lr.means_per_extent);
+        set!(self.lr_scales, c.lr.scales);
+        set!(self.lr_quats, c.lr.quats);
+        set!(self.lr_opacity, c.lr.opacity);
+        set!(self.depth_polarity, c.depth_polarity);
+        if self.style_depth.is_some() {
+            c.depth_provider = DepthProvider::Image;
+        }
+        set!(self.depth_provider, c.depth_provider);
+        set!(self.seed, c.seed);
+        self.fast.apply(&mut c);
+        set!(self.focus, c.focus);
+        set!(self.color_floor, c.color_floor);
+        let problems = c.problems();
+        anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
+        Ok(c)
+    }
+}
+
+/// The choices of issue 10 (fewer operations per step), shared by `stylize` and `bench step`.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct FastArgs {
+    /// VGG convolutions: im2col (the reference) or winograd (4× fewer multiplies, exact) [default: im2col].
+    #[arg(long)]
+    pub conv: Option<ConvAlgo>,
+    /// GCFM matching: exact, or pca (a principal-subspace index with exact re-ranking) [default: exact].
+    #[arg(long)]
+    pub matching: Option<MatchMethod>,
+    /// Dimensions the pca index keeps, of 2304 [default: 128].
+    #[arg(long)]
+    pub matching_dims: Option<u32>,
+    /// Candidates the pca index re-ranks exactly per position, nearest and farthest each [default: 32].
+    #[arg(long)]
+    pub matching_candidates: Option<u32>,
+    /// Visits of a view that share one search of its matches (1: search every step) [default: 1].
+    #[arg(long)]
+    pub matching_reuse: Option<u32>,
+    /// With object focus, run VGG on the window of the frame the object's feature positions
+    /// depend on (true), or on the whole frame (false); the same losses either way [default: true].
+    #[arg(long)]
+    pub vgg_window: Option<bool>,
+}
+
+impl FastArgs {
+    /// Writes the given flags into `c`.
+    pub fn apply(&self, c: &mut StyleConfig) {
+        let pairs = [
+            (self.matching_dims, &mut c.matching.dims),
+            (self.matching_candidates, &mut c.matching.candidates),
+            (self.matching_reuse, &mut c.matching.reuse),
+        ];
+        for (flag, field) in pairs {
+            if let Some(v) = flag {
+                *field = v;
+            }
+        }
+        c.conv = self.conv.unwrap_or(c.conv);
+        c.vgg_window = self.vgg_window.unwrap_or(c.vgg_window);
+        c.matching.method = self.matching.unwrap_or(c.matching.method);
+    }
+}
+
+fn parse_polarity(s: &str) -> Result<DepthPolarity, String> {
+    match s {
+        "near-bright" => Ok(DepthPolarity::NearBright),
+        "near-dark" | "reference" => Ok(DepthPolarity::NearDark),
+        _ => Err(format!("expected near-bright or near-dark, found {s:?}")),
+    }
+}
