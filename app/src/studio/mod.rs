@@ -16,7 +16,9 @@
 pub mod assets;
 pub mod controls;
 pub mod inspect;
+mod open;
 mod panels;
+mod scripted;
 pub mod session_link;
 pub mod style_depth;
 pub mod view;
@@ -283,179 +285,6 @@ impl StudioApp {
         self.snapshot.as_ref().or(self.scene.as_ref().map(|s| &s.scene)).map(|s| s.gaussians.clone())
     }
 
-    fn set_scene(&mut self, name: String, g: Gaussians) {
-        let g = Arc::new(g);
-        self.view.fit(&g);
-        self.cameras = view::orbit_ring(&g, self.view.up, 12, 800, 600);
-        self.camera_source = "orbit".into();
-        self.scene = Some(LoadedScene { name, scene: SceneRef { version: self.next_version, gaussians: g.into() } });
-        self.next_version += 1;
-        self.snapshot = None;
-        self.maps = None;
-        self.inspected_view = None;
-    }
-
-    /// Loads a scene file (on a worker thread once the window runs); on failure
-    /// the error is shown and the previous scene stays.
-    pub fn open_scene(&mut self, path: &Path) {
-        if self.load_in_background {
-            self.notice = format!("loading {}…", path.display());
-            self.jobs.load_scene(path.to_path_buf());
-        } else {
-            let result = inspect::read_scene_file(path);
-            self.finish_open_scene(path, result);
-        }
-    }
-
-    fn finish_open_scene(&mut self, path: &Path, result: anyhow::Result<inspect::SceneFile>) {
-        match result {
-            Ok(f) if f.gaussians.is_empty() => {
-                let keep = self.keeping_scene();
-                self.report(anyhow::anyhow!("{}: the scene holds no Gaussians; {keep}", path.display()))
-            }
-            Ok(f) => {
-                let g = f.gaussians;
-                let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-                self.notice = format!("opened {} ({} Gaussians, SH degree {})", path.display(), g.len(), g.sh_degree);
-                self.set_scene(name, g);
-                self.run.log.extend(f.warnings.iter().map(|w| format!("scene: {w}")));
-                if let Some((set, dir)) = f.cameras {
-                    self.set_cameras(set, &dir);
-                }
-            }
-            Err(e) => {
-                let keep = self.keeping_scene();
-                self.report(anyhow::anyhow!("{e:#}; {keep}"))
-            }
-        }
-    }
-
-    /// What a failed open leaves on screen, for the end of its message.
-    fn keeping_scene(&self) -> &'static str {
-        if self.scene.is_some() { "keeping the previous scene" } else { "no scene is open" }
-    }
-
-    fn open_demo_scene(&mut self) {
-        let path = assets::source_assets_dir().join(assets::DEMO_SCENE);
-        if path.exists() {
-            self.open_scene(&path);
-        } else {
-            self.set_scene("demo scene (generated)".into(), assets::demo_scene());
-        }
-    }
-
-    fn add_style(&mut self, path: PathBuf, img: image::RgbImage) {
-        let thumb = image::imageops::thumbnail(&img, 96, (96 * img.height() / img.width().max(1)).max(1));
-        let color = egui::ColorImage::from_rgb([thumb.width() as usize, thumb.height() as usize], thumb.as_raw());
-        let texture =
-            self.ctx.load_texture(format!("style {}", path.display()), color.clone(), egui::TextureOptions::LINEAR);
-        let size = [img.width() as usize, img.height() as usize];
-        let image = Arc::new(gast_core::session::StyleImage { width: size[0], height: size[1], rgb: img.into_raw() });
-        self.styles.retain(|s| s.path != path);
-        self.styles.insert(0, LoadedStyle { path, image, thumb: color, texture, size });
-        self.styles.truncate(8);
-        self.style = Some(0);
-    }
-
-    /// Loads a style image; on failure the error is shown and the previous style stays.
-    pub fn open_style(&mut self, path: &Path) {
-        match image::open(path) {
-            Ok(img) => self.add_style(path.to_path_buf(), img.to_rgb8()),
-            Err(e) => {
-                let keep = if self.styles.is_empty() { "no style is open" } else { "keeping the previous style" };
-                self.report(anyhow::anyhow!(
-                    "{}: not a style image this build can read (PNG, JPEG, WebP): {e}; {keep}",
-                    path.display()
-                ))
-            }
-        }
-    }
-
-    fn open_generated_styles(&mut self) {
-        for (name, img) in assets::demo_styles().into_iter().rev() {
-            self.add_style(PathBuf::from(name), img);
-        }
-    }
-
-    fn set_cameras(&mut self, set: gast_core::camera::CameraSet, from: &Path) {
-        self.cameras = set.cameras;
-        self.camera_source = from.display().to_string();
-        for w in set.warnings {
-            self.run.log.push(format!("cameras: {w}"));
-        }
-    }
-
-    /// Loads optimisation cameras (COLMAP, `cameras.json`, `transforms.json`) for the snap list.
-    pub fn open_cameras(&mut self, path: &Path) {
-        match gast_core::camera::load(path) {
-            Ok(set) if set.cameras.is_empty() => {
-                self.report(anyhow::anyhow!("{}: no cameras in the file", path.display()))
-            }
-            Ok(set) => {
-                self.notice = format!("{} cameras from {}", set.cameras.len(), path.display());
-                self.set_cameras(set, path);
-            }
-            Err(e) => self.report(anyhow::anyhow!("{e}; keeping the current camera list")),
-        }
-    }
-
-    /// Opens a file by what it is: a style image, a preset, cameras or a scene.
-    pub fn open_any(&mut self, path: &Path) {
-        let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
-        match ext.as_str() {
-            "png" | "jpg" | "jpeg" | "webp" => self.open_style(path),
-            "bin" | "txt" => self.open_cameras(path),
-            "json" => {
-                // cameras.json is a list, transforms.json has frames, SOG's meta.json has means; the rest are presets.
-                let text = std::fs::read_to_string(path).unwrap_or_default();
-                let value: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
-                if value.is_array() || value.get("frames").is_some() {
-                    self.open_cameras(path);
-                } else if value.get("means").is_some() {
-                    self.open_scene(path);
-                } else {
-                    self.load_preset(path);
-                }
-            }
-            _ if path.is_dir() && !path.join("meta.json").exists() => self.open_cameras(path),
-            _ => self.open_scene(path),
-        }
-    }
-
-    /// Loads a preset file into the configuration.
-    pub fn load_preset(&mut self, path: &Path) {
-        let result = std::fs::read_to_string(path)
-            .with_context(|| format!("{}: cannot read the preset", path.display()))
-            .and_then(|t| {
-                StyleConfig::from_json(&t).with_context(|| format!("{}: not a style preset", path.display()))
-            });
-        match result {
-            Ok(c) => {
-                let problems = c.problems();
-                if problems.is_empty() {
-                    self.config = c;
-                    self.notice = format!("preset {} loaded", path.display());
-                } else {
-                    self.report(anyhow::anyhow!(
-                        "{}: {}; keeping the current parameters",
-                        path.display(),
-                        problems.join("; ")
-                    ));
-                }
-            }
-            Err(e) => self.report(e),
-        }
-    }
-
-    /// Saves the configuration as a preset (atomically).
-    pub fn save_preset(&mut self, path: &Path) {
-        let json = self.config.to_json();
-        match gast_core::io::write_bytes(path, json.as_bytes()) {
-            Ok(()) => self.notice = format!("preset saved to {}", path.display()),
-            Err(e) => self.report(anyhow::Error::new(e).context("saving the preset")),
-        }
-    }
-
     fn viewport_camera(&self) -> Camera {
         self.view.camera(self.viewport_px[0], self.viewport_px[1])
     }
@@ -555,47 +384,6 @@ impl StudioApp {
         self.test_switches(ui.ctx());
     }
 
-    /// Drives the `GAST_STUDIO_RUN_STEPS` switch; true once it is done (or absent).
-    fn scripted_run(&mut self, ctx: &egui::Context) -> bool {
-        let Some(script) = &mut self.script else { return true };
-        if script.done {
-            return true;
-        }
-        ctx.request_repaint();
-        if !script.started {
-            if self.scene.is_some() && self.style.is_some() && self.starter.is_some() {
-                script.started = true;
-                self.start_run();
-            }
-            return false;
-        }
-        let finished = matches!(self.run.status, RunStatus::Finished { .. } | RunStatus::Failed(_));
-        let have_snapshot = self.snapshot.as_ref().is_some_and(|s| !s.gaussians.is_empty());
-        if !script.pausing && self.run.steps.len() >= script.steps && have_snapshot {
-            // The worker puts the paused state's snapshot in the slot before it
-            // reports Paused, so the export below is exactly what the run holds.
-            script.pausing = true;
-            self.run.send(Command::Pause);
-        }
-        let paused = script.pausing && self.run.status == RunStatus::Paused;
-        if paused || finished {
-            script.done = true;
-            let export = script.export.clone();
-            eprintln!("studio: scripted run paused after {} steps ({:?})", self.run.steps.len(), self.run.status);
-            if let (Some(path), Some(g)) = (export, self.current()) {
-                match gast_core::scene::save(&path, &g, &Default::default()) {
-                    Ok(()) => eprintln!("studio: exported {} Gaussians to {}", g.len(), path.display()),
-                    Err(e) => self.report(anyhow::Error::new(e).context("exporting the scripted run")),
-                }
-            }
-            if let Some(n) = self.exit_after {
-                self.exit_after = Some(self.frames + n);
-            }
-            return true;
-        }
-        false
-    }
-
     /// Starts the selected style's maps when the style, texture scale or depth
     /// polarity changed since they were last made or asked for.
     fn request_style_maps(&mut self) {
@@ -615,38 +403,6 @@ impl StudioApp {
         self.style_maps_requested = Some(key.clone());
         let image = style.image.clone();
         self.jobs.style_maps(key, image);
-    }
-
-    fn test_switches(&mut self, ctx: &egui::Context) {
-        if !self.scripted_run(ctx) {
-            return;
-        }
-        let Some(n) = self.exit_after else { return };
-        ctx.request_repaint();
-        if let Some(path) = self.screenshot_path.clone()
-            && !self.screenshot.requested
-            && self.frames + 2 >= n
-        {
-            self.screenshot.requested = true;
-            let done = self.screenshot.done.clone();
-            ctx.send_viewport_cmd(egui::ViewportCommand::Screenshot(egui::ScreenshotCallback::new(move |img| {
-                let rgb: Vec<f32> =
-                    img.pixels.iter().flat_map(|c| [c.r(), c.g(), c.b()].map(|v| v as f32 / 255.0)).collect();
-                match gast_core::io::write_png_rgb(&path, img.size[0] as u32, img.size[1] as u32, &rgb) {
-                    Ok(()) => eprintln!("studio: screenshot saved to {}", path.display()),
-                    Err(e) => eprintln!("studio: screenshot failed: {e}"),
-                }
-                done.store(true, Ordering::SeqCst);
-            })));
-        }
-        let shot_pending = self.screenshot.requested && !self.screenshot.done.load(Ordering::SeqCst);
-        if self.frames >= n && !shot_pending {
-            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
-        }
-        if self.frames >= n + 600 {
-            eprintln!("studio: the screenshot never arrived; closing");
-            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
-        }
     }
 
     fn viewport(&mut self, ui: &mut Ui) {

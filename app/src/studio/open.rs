@@ -1,0 +1,181 @@
+//! What the studio opens: scenes, styles, camera sets and presets, from
+//! dialogs, drops and the command line. Loading runs off the UI thread once
+//! the window exists; a bad file is reported in the error panel and what was
+//! open before stays.
+
+use super::*;
+
+impl StudioApp {
+    pub(super) fn set_scene(&mut self, name: String, g: Gaussians) {
+        let g = Arc::new(g);
+        self.view.fit(&g);
+        self.cameras = view::orbit_ring(&g, self.view.up, 12, 800, 600);
+        self.camera_source = "orbit".into();
+        self.scene = Some(LoadedScene { name, scene: SceneRef { version: self.next_version, gaussians: g.into() } });
+        self.next_version += 1;
+        self.snapshot = None;
+        self.maps = None;
+        self.inspected_view = None;
+    }
+
+    /// Loads a scene file (on a worker thread once the window runs); on failure
+    /// the error is shown and the previous scene stays.
+    pub fn open_scene(&mut self, path: &Path) {
+        if self.load_in_background {
+            self.notice = format!("loading {}…", path.display());
+            self.jobs.load_scene(path.to_path_buf());
+        } else {
+            let result = inspect::read_scene_file(path);
+            self.finish_open_scene(path, result);
+        }
+    }
+
+    pub(super) fn finish_open_scene(&mut self, path: &Path, result: anyhow::Result<inspect::SceneFile>) {
+        match result {
+            Ok(f) if f.gaussians.is_empty() => {
+                let keep = self.keeping_scene();
+                self.report(anyhow::anyhow!("{}: the scene holds no Gaussians; {keep}", path.display()))
+            }
+            Ok(f) => {
+                let g = f.gaussians;
+                let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+                self.notice = format!("opened {} ({} Gaussians, SH degree {})", path.display(), g.len(), g.sh_degree);
+                self.set_scene(name, g);
+                self.run.log.extend(f.warnings.iter().map(|w| format!("scene: {w}")));
+                if let Some((set, dir)) = f.cameras {
+                    self.set_cameras(set, &dir);
+                }
+            }
+            Err(e) => {
+                let keep = self.keeping_scene();
+                self.report(anyhow::anyhow!("{e:#}; {keep}"))
+            }
+        }
+    }
+
+    /// What a failed open leaves on screen, for the end of its message.
+    pub(super) fn keeping_scene(&self) -> &'static str {
+        if self.scene.is_some() { "keeping the previous scene" } else { "no scene is open" }
+    }
+
+    pub(super) fn open_demo_scene(&mut self) {
+        let path = assets::source_assets_dir().join(assets::DEMO_SCENE);
+        if path.exists() {
+            self.open_scene(&path);
+        } else {
+            self.set_scene("demo scene (generated)".into(), assets::demo_scene());
+        }
+    }
+
+    pub(super) fn add_style(&mut self, path: PathBuf, img: image::RgbImage) {
+        let thumb = image::imageops::thumbnail(&img, 96, (96 * img.height() / img.width().max(1)).max(1));
+        let color = egui::ColorImage::from_rgb([thumb.width() as usize, thumb.height() as usize], thumb.as_raw());
+        let texture =
+            self.ctx.load_texture(format!("style {}", path.display()), color.clone(), egui::TextureOptions::LINEAR);
+        let size = [img.width() as usize, img.height() as usize];
+        let image = Arc::new(gast_core::session::StyleImage { width: size[0], height: size[1], rgb: img.into_raw() });
+        self.styles.retain(|s| s.path != path);
+        self.styles.insert(0, LoadedStyle { path, image, thumb: color, texture, size });
+        self.styles.truncate(8);
+        self.style = Some(0);
+    }
+
+    /// Loads a style image; on failure the error is shown and the previous style stays.
+    pub fn open_style(&mut self, path: &Path) {
+        match image::open(path) {
+            Ok(img) => self.add_style(path.to_path_buf(), img.to_rgb8()),
+            Err(e) => {
+                let keep = if self.styles.is_empty() { "no style is open" } else { "keeping the previous style" };
+                self.report(anyhow::anyhow!(
+                    "{}: not a style image this build can read (PNG, JPEG, WebP): {e}; {keep}",
+                    path.display()
+                ))
+            }
+        }
+    }
+
+    pub(super) fn open_generated_styles(&mut self) {
+        for (name, img) in assets::demo_styles().into_iter().rev() {
+            self.add_style(PathBuf::from(name), img);
+        }
+    }
+
+    pub(super) fn set_cameras(&mut self, set: gast_core::camera::CameraSet, from: &Path) {
+        self.cameras = set.cameras;
+        self.camera_source = from.display().to_string();
+        for w in set.warnings {
+            self.run.log.push(format!("cameras: {w}"));
+        }
+    }
+
+    /// Loads optimisation cameras (COLMAP, `cameras.json`, `transforms.json`) for the snap list.
+    pub fn open_cameras(&mut self, path: &Path) {
+        match gast_core::camera::load(path) {
+            Ok(set) if set.cameras.is_empty() => {
+                self.report(anyhow::anyhow!("{}: no cameras in the file", path.display()))
+            }
+            Ok(set) => {
+                self.notice = format!("{} cameras from {}", set.cameras.len(), path.display());
+                self.set_cameras(set, path);
+            }
+            Err(e) => self.report(anyhow::anyhow!("{e}; keeping the current camera list")),
+        }
+    }
+
+    /// Opens a file by what it is: a style image, a preset, cameras or a scene.
+    pub fn open_any(&mut self, path: &Path) {
+        let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+        match ext.as_str() {
+            "png" | "jpg" | "jpeg" | "webp" => self.open_style(path),
+            "bin" | "txt" => self.open_cameras(path),
+            "json" => {
+                // cameras.json is a list, transforms.json has frames, SOG's meta.json has means; the rest are presets.
+                let text = std::fs::read_to_string(path).unwrap_or_default();
+                let value: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
+                if value.is_array() || value.get("frames").is_some() {
+                    self.open_cameras(path);
+                } else if value.get("means").is_some() {
+                    self.open_scene(path);
+                } else {
+                    self.load_preset(path);
+                }
+            }
+            _ if path.is_dir() && !path.join("meta.json").exists() => self.open_cameras(path),
+            _ => self.open_scene(path),
+        }
+    }
+
+    /// Loads a preset file into the configuration.
+    pub fn load_preset(&mut self, path: &Path) {
+        let result = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read the preset", path.display()))
+            .and_then(|t| {
+                StyleConfig::from_json(&t).with_context(|| format!("{}: not a style preset", path.display()))
+            });
+        match result {
+            Ok(c) => {
+                let problems = c.problems();
+                if problems.is_empty() {
+                    self.config = c;
+                    self.notice = format!("preset {} loaded", path.display());
+                } else {
+                    self.report(anyhow::anyhow!(
+                        "{}: {}; keeping the current parameters",
+                        path.display(),
+                        problems.join("; ")
+                    ));
+                }
+            }
+            Err(e) => self.report(e),
+        }
+    }
+
+    /// Saves the configuration as a preset (atomically).
+    pub fn save_preset(&mut self, path: &Path) {
+        let json = self.config.to_json();
+        match gast_core::io::write_bytes(path, json.as_bytes()) {
+            Ok(()) => self.notice = format!("preset saved to {}", path.display()),
+            Err(e) => self.report(anyhow::Error::new(e).context("saving the preset")),
+        }
+    }
+}

@@ -1,0 +1,80 @@
+//! The studio's test switches (see the module docs of `studio`): a scripted
+//! run that presses Start, pauses after N steps and exports, and the frame
+//! count, screenshot and close that the GUI tests drive it with.
+
+use super::*;
+
+impl StudioApp {
+    /// Drives the `GAST_STUDIO_RUN_STEPS` switch; true once it is done (or absent).
+    pub(super) fn scripted_run(&mut self, ctx: &egui::Context) -> bool {
+        let Some(script) = &mut self.script else { return true };
+        if script.done {
+            return true;
+        }
+        ctx.request_repaint();
+        if !script.started {
+            if self.scene.is_some() && self.style.is_some() && self.starter.is_some() {
+                script.started = true;
+                self.start_run();
+            }
+            return false;
+        }
+        let finished = matches!(self.run.status, RunStatus::Finished { .. } | RunStatus::Failed(_));
+        let have_snapshot = self.snapshot.as_ref().is_some_and(|s| !s.gaussians.is_empty());
+        if !script.pausing && self.run.steps.len() >= script.steps && have_snapshot {
+            // The worker puts the paused state's snapshot in the slot before it
+            // reports Paused, so the export below is exactly what the run holds.
+            script.pausing = true;
+            self.run.send(Command::Pause);
+        }
+        let paused = script.pausing && self.run.status == RunStatus::Paused;
+        if paused || finished {
+            script.done = true;
+            let export = script.export.clone();
+            eprintln!("studio: scripted run paused after {} steps ({:?})", self.run.steps.len(), self.run.status);
+            if let (Some(path), Some(g)) = (export, self.current()) {
+                match gast_core::scene::save(&path, &g, &Default::default()) {
+                    Ok(()) => eprintln!("studio: exported {} Gaussians to {}", g.len(), path.display()),
+                    Err(e) => self.report(anyhow::Error::new(e).context("exporting the scripted run")),
+                }
+            }
+            if let Some(n) = self.exit_after {
+                self.exit_after = Some(self.frames + n);
+            }
+            return true;
+        }
+        false
+    }
+
+    pub(super) fn test_switches(&mut self, ctx: &egui::Context) {
+        if !self.scripted_run(ctx) {
+            return;
+        }
+        let Some(n) = self.exit_after else { return };
+        ctx.request_repaint();
+        if let Some(path) = self.screenshot_path.clone()
+            && !self.screenshot.requested
+            && self.frames + 2 >= n
+        {
+            self.screenshot.requested = true;
+            let done = self.screenshot.done.clone();
+            ctx.send_viewport_cmd(egui::ViewportCommand::Screenshot(egui::ScreenshotCallback::new(move |img| {
+                let rgb: Vec<f32> =
+                    img.pixels.iter().flat_map(|c| [c.r(), c.g(), c.b()].map(|v| v as f32 / 255.0)).collect();
+                match gast_core::io::write_png_rgb(&path, img.size[0] as u32, img.size[1] as u32, &rgb) {
+                    Ok(()) => eprintln!("studio: screenshot saved to {}", path.display()),
+                    Err(e) => eprintln!("studio: screenshot failed: {e}"),
+                }
+                done.store(true, Ordering::SeqCst);
+            })));
+        }
+        let shot_pending = self.screenshot.requested && !self.screenshot.done.load(Ordering::SeqCst);
+        if self.frames >= n && !shot_pending {
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+        }
+        if self.frames >= n + 600 {
+            eprintln!("studio: the screenshot never arrived; closing");
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+        }
+    }
+}
