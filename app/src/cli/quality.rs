@@ -340,6 +340,8 @@ fn fast_options(base: &StyleConfig) -> Vec<(&'static str, StyleConfig)> {
     let pca = MatchingConfig { method: MatchMethod::Pca, ..MatchingConfig::default() };
     let reuse = MatchingConfig { reuse: 3, ..MatchingConfig::default() };
     let all = MatchingConfig { reuse: 3, ..pca };
+    // The reference: im2col convolutions and the exact search.
+    let base = &StyleConfig { conv: ConvAlgo::Im2col, ..base.clone() };
     vec![
         ("exact", base.clone()),
         ("exact, seed 1", StyleConfig { seed: 1, ..base.clone() }),

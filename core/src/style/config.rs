@@ -95,7 +95,8 @@ pub struct StyleConfig {
     pub depth_provider: DepthProvider,
     /// Seed of the view shuffling.
     pub seed: u64,
-    /// How VGG's convolutions are computed (both exact; Winograd does 4× fewer multiplies).
+    /// How VGG's convolutions are computed: both exact up to rounding; Winograd
+    /// (the default) does 4× fewer multiplies, im2col is the reference.
     pub conv: ConvAlgo,
     /// How the GCFM matches are searched (exact by default) and how long they are kept.
     pub matching: MatchingConfig,
@@ -129,7 +130,7 @@ impl Default for StyleConfig {
             depth_polarity: DepthPolarity::NearBright,
             depth_provider: DepthProvider::Learned,
             seed: 0,
-            conv: ConvAlgo::Im2col,
+            conv: ConvAlgo::Winograd,
             matching: MatchingConfig::default(),
             focus: Focus::default(),
             color_floor: false,

@@ -16,9 +16,15 @@ pub(super) fn run_fast_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     use gast_core::style::{MatchMethod, Phase, StyleConfig};
 
     let StepInputs { scene, views, style, vgg } = step_inputs(&args)?;
-    let old_config =
-        StyleConfig { resolution: args.resolution, focus: args.focus, vgg_window: false, ..StyleConfig::default() };
-    let mut new_config = StyleConfig { vgg_window: true, ..old_config.clone() };
+    let old_config = StyleConfig {
+        resolution: args.resolution,
+        focus: args.focus,
+        conv: gast_core::vision::ConvAlgo::Im2col,
+        vgg_window: false,
+        ..StyleConfig::default()
+    };
+    // The new settings: today's defaults (Winograd, the cone) with the flags applied.
+    let mut new_config = StyleConfig { resolution: args.resolution, focus: args.focus, ..StyleConfig::default() };
     args.fast.apply(&mut new_config);
     let problems = new_config.problems();
     anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));

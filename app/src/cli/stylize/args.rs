@@ -207,7 +207,7 @@ impl StylizeArgs {
 /// The choices of issue 10 (fewer operations per step), shared by `stylize` and `bench step`.
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct FastArgs {
-    /// VGG convolutions: im2col (the reference) or winograd (4× fewer multiplies, exact) [default: im2col].
+    /// VGG convolutions: im2col (the reference) or winograd (4× fewer multiplies, exact) [default: winograd].
     #[arg(long)]
     pub conv: Option<ConvAlgo>,
     /// GCFM matching: exact, or pca (a principal-subspace index with exact re-ranking) [default: exact].
