@@ -1,9 +1,13 @@
-//! `gast bench depth`: the style depth network's time per style and per stage.
+//! `gast bench depth`: the style depth network's time per style and per
+//! stage, on the CPU and (`--device gpu`) on the GPU engine.
 
 use std::process::ExitCode;
 use std::time::Instant;
 
+use anyhow::Context;
 use clap::Args;
+use gast_core::gpu::{DeviceChoice, GpuContext, GpuDepthNet, bench_depth_net};
+use gast_core::vision::depth::{DepthAnything, INPUT_SIZE, input_size};
 
 use super::{median, shared_dir};
 use std::path::PathBuf;
@@ -24,6 +28,10 @@ pub struct DepthArgs {
     /// one at the style's input size.
     #[arg(long)]
     pub stages: bool,
+    /// Also time the network on the GPU engine: `gpu` (any adapter, lavapipe
+    /// included), `auto` (a hardware adapter if there is one), `cpu` (not).
+    #[arg(long, default_value_t = DeviceChoice::Cpu)]
+    pub device: DeviceChoice,
 }
 
 /// CPU time this process has used (user + system), from `/proc/self/stat`;
@@ -42,22 +50,51 @@ pub fn run_depth(args: DepthArgs) -> anyhow::Result<ExitCode> {
     let style_path = args.style.clone().unwrap_or_else(|| shared_dir().join("data/styles/wave.jpg"));
     let style = gast_core::session::StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
     println!("depth benchmark: style {}, {} threads", style_path.display(), rayon::current_num_threads());
-    time_style_depth(&style, args.depth_model.as_deref(), args.reps.max(1), args.stages)?;
+    let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
+    let (model, cpu_forward) = time_style_depth(&style, args.depth_model.as_deref(), args.reps.max(1), args.stages)?;
+    if let Some(ctx) = gpu {
+        time_gpu_depth(&ctx, model, &style, args.reps.max(1), cpu_forward)?;
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Prints the same figures for the network on the GPU engine, and the ratio
+/// of the CPU's forward time to the GPU's, both measured in this process.
+fn time_gpu_depth(
+    ctx: &GpuContext,
+    model: DepthAnything,
+    style: &gast_core::session::StyleImage,
+    reps: usize,
+    cpu_forward: f64,
+) -> anyhow::Result<()> {
+    let t = Instant::now();
+    let net = GpuDepthNet::new(ctx, model);
+    let upload_s = t.elapsed().as_secs_f64();
+    let (h, w) = (style.height, style.width);
+    let (ih, iw) = input_size(h, w, INPUT_SIZE, net.cpu().config().patch_size);
+    let (per_style, forward) = bench_depth_net(ctx, &net, &style.to_f32(), (h, w), INPUT_SIZE, reps)
+        .with_context(|| format!("the depth network on {}", ctx.describe()))?;
+    let software = if ctx.is_software() { "; a software rasterizer: CPU emulation, not a GPU figure" } else { "" };
+    println!(
+        "style depth on the GPU engine ({}{software}): weights upload + kernels {upload_s:.2} s; per style {per_style:.2} s wall ({w}×{h} image, network input {iw}×{ih}); forward at {INPUT_SIZE}×{INPUT_SIZE}: {forward:.2} s wall (median of {reps}, after a warm-up); CPU/GPU forward ratio {:.2}",
+        ctx.describe(),
+        cpu_forward / forward
+    );
+    Ok(())
 }
 
 /// Prints the depth network's time for one style (pre- and post-processing
 /// included) and the median of `reps` forward passes at 518×518. Uses the
 /// checkpoint found on this machine, else random weights at the Small model's
-/// sizes (same cost, meaningless output), and says which.
+/// sizes (same cost, meaningless output), and says which. Returns the
+/// network and the median forward's wall seconds.
 pub(super) fn time_style_depth(
     style: &gast_core::session::StyleImage,
     explicit: Option<&std::path::Path>,
     reps: usize,
     stages: bool,
-) -> anyhow::Result<()> {
-    use anyhow::Context;
-    use gast_core::vision::depth::{DepthAnything, DepthConfig, DepthModelLocations, INPUT_SIZE, input_size};
+) -> anyhow::Result<(DepthAnything, f64)> {
+    use gast_core::vision::depth::{DepthConfig, DepthModelLocations};
     let t = Instant::now();
     let (model, what) = match DepthModelLocations::from_env(explicit).find() {
         Ok(p) => (
@@ -83,9 +120,9 @@ pub(super) fn time_style_depth(
             (t.elapsed().as_secs_f64(), cpu_seconds() - c)
         })
         .unzip();
+    let forward = median(walls);
     println!(
-        "style depth (Depth Anything V2, {what}): load {load_s:.2} s; per style {per_style:.2} s wall, {per_style_cpu:.2} s CPU ({w}×{h} image, network input {iw}×{ih}); forward at {INPUT_SIZE}×{INPUT_SIZE}: {:.2} s wall, {:.2} s CPU (medians of {reps})",
-        median(walls),
+        "style depth (Depth Anything V2, {what}): load {load_s:.2} s; per style {per_style:.2} s wall, {per_style_cpu:.2} s CPU ({w}×{h} image, network input {iw}×{ih}); forward at {INPUT_SIZE}×{INPUT_SIZE}: {forward:.2} s wall, {:.2} s CPU (medians of {reps})",
         median(cpus)
     );
     if stages {
@@ -97,5 +134,5 @@ pub(super) fn time_style_depth(
         }
         println!("{:<24} {:>10.3} {:>10.3}", "total", square.total(), style_sized.total());
     }
-    Ok(())
+    Ok((model, forward))
 }
