@@ -417,8 +417,12 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let scene = load_scene(&args.scene)?;
     let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
     let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
+    // On a software rasterizer (lavapipe) the network's GEMMs run at about
+    // 1 GFLOP/s, ~40× slower than the CPU kernels (`gast bench depth
+    // --device gpu`): there the depth stays on the CPU.
+    let depth_gpu = gpu.as_ref().filter(|g| !g.is_software());
     let style_depth =
-        resolve_style_depth(&config, &style, args.style_depth.as_deref(), args.depth_model.as_deref(), gpu.as_ref())?;
+        resolve_style_depth(&config, &style, args.style_depth.as_deref(), args.depth_model.as_deref(), depth_gpu)?;
     let cameras = views_for(
         &scene,
         &ViewArgs {
