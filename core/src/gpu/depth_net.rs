@@ -405,33 +405,6 @@ impl GpuDepthNet {
     }
 }
 
-/// Seconds of the style depth on the GPU for `gast bench depth`: the whole
-/// estimate of `rgb` (`h × w`, pre- and post-processing on the CPU included)
-/// once, and the median of `reps` forwards on a `side × side` input, after a
-/// warm-up pass.
-pub fn bench_depth_net(
-    ctx: &GpuContext,
-    net: &GpuDepthNet,
-    rgb: &[f32],
-    (h, w): (usize, usize),
-    side: usize,
-    reps: usize,
-) -> Result<(f64, f64), GpuError> {
-    let x = vec![0.25f32; 3 * side * side];
-    net.forward(ctx, &x, side, side)?;
-    let t = std::time::Instant::now();
-    net.estimate_rgb(ctx, rgb, h, w)?;
-    let per_style = t.elapsed().as_secs_f64();
-    let mut times = Vec::with_capacity(reps.max(1));
-    for _ in 0..reps.max(1) {
-        let t = std::time::Instant::now();
-        net.forward(ctx, &x, side, side)?;
-        times.push(t.elapsed().as_secs_f64());
-    }
-    times.sort_by(f64::total_cmp);
-    Ok((per_style, times[times.len() / 2]))
-}
-
 #[cfg(test)]
 #[path = "depth_net_tests.rs"]
 mod tests;

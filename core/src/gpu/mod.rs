@@ -48,7 +48,7 @@ pub use canny::{CannyKernels, EdgeMap};
 pub use content::ContentLoss;
 pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};
 pub use depth_map::{DepthMap, DepthMapKernels};
-pub use depth_net::{GpuDepthNet, bench_depth_net};
+pub use depth_net::GpuDepthNet;
 pub use engine::GpuEngine;
 pub use feature_net::{GpuFeatureNet, GpuFeatureState};
 pub use focus::{FocusKernels, GpuFocus};
