@@ -16,7 +16,7 @@ fn check_with(rel: &str, conv: ConvAlgo) {
     check_on(rel, conv, None);
 }
 
-/// The same check with the rasterizer and the losses on the GPU engine
+/// The same check with the rasterizer, the losses and the depth network on the GPU engine
 /// (lavapipe in CI), to the same tolerances (`gast check golden --device gpu`).
 fn check_on_gpu(rel: &str) {
     let gpu = match gast_core::gpu::DeviceChoice::Gpu.resolve() {
@@ -83,6 +83,11 @@ fn rasterizer_matches_golden_degree_3() {
 #[test]
 fn losses_match_golden_on_the_gpu() {
     check_on_gpu("golden/losses_seed1.safetensors");
+}
+
+#[test]
+fn depth_anything_matches_golden_on_the_gpu() {
+    check_on_gpu("golden/depth/depth_seed1.safetensors");
 }
 
 #[test]

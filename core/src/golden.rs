@@ -226,8 +226,9 @@ pub struct CheckContext {
     /// VGG weights for the `losses_*` files (else the usual resolution: `$GAST_WEIGHTS`,
     /// the caches, a download).
     pub weights: Option<PathBuf>,
-    /// Run the rasterizer and the losses on this GPU (`--device gpu`) instead
-    /// of the CPU; the colour transfer runs on the CPU either way.
+    /// Run the rasterizer, the losses and the depth network on this GPU
+    /// (`--device gpu`) instead of the CPU; the colour transfer runs on the
+    /// CPU either way.
     pub gpu: Option<crate::gpu::GpuContext>,
     /// How VGG computes its convolutions for the `losses_*` files.
     pub conv: crate::vision::ConvAlgo,
@@ -240,7 +241,7 @@ pub fn check_file(path: &Path, ctx: &CheckContext) -> Result<Vec<OutputCheck>, G
         Some(GoldenKind::Raster) => check_raster(&file, ctx.gpu.as_ref()),
         Some(GoldenKind::Losses) => check_losses(&file, ctx),
         Some(GoldenKind::Color) => check_color(&file),
-        Some(GoldenKind::Depth) => check_depth(&file),
+        Some(GoldenKind::Depth) => check_depth(&file, ctx.gpu.as_ref()),
         None => Err(GoldenError::Format {
             path: path.to_path_buf(),
             what: "tensor names".into(),
@@ -261,8 +262,8 @@ const GRAD_TOL: Tolerance = Tolerance::RelToMax(1e-3);
 const DEPTH_TOL: Tolerance = Tolerance::RelToMax(1e-4);
 
 /// Builds the network from the file's own weights and config metadata and
-/// runs it on `input_pixel_values`.
-fn check_depth(file: &GoldenFile) -> Result<Vec<OutputCheck>, GoldenError> {
+/// runs it on `input_pixel_values`, on `gpu` when one is given.
+fn check_depth(file: &GoldenFile, gpu: Option<&crate::gpu::GpuContext>) -> Result<Vec<OutputCheck>, GoldenError> {
     let model = crate::vision::depth::DepthAnything::load_with_metadata_config(&file.path)
         .map_err(|e| GoldenError::Run { path: file.path.clone(), message: e.to_string() })?;
     let x = file.get("input_pixel_values")?;
@@ -287,7 +288,12 @@ fn check_depth(file: &GoldenFile) -> Result<Vec<OutputCheck>, GoldenError> {
         });
     }
     let expected = file.get_shaped("out_predicted_depth", &[1, h, w])?;
-    let out = model.forward(&x.to_f32(), h, w);
+    let out = match gpu {
+        Some(c) => crate::gpu::GpuDepthNet::new(c, model)
+            .forward(c, &x.to_f32(), h, w)
+            .map_err(|e| GoldenError::Run { path: file.path.clone(), message: e.to_string() })?,
+        None => model.forward(&x.to_f32(), h, w),
+    };
     Ok(vec![compare("out_predicted_depth", &widen(&out), expected, DEPTH_TOL)])
 }
 

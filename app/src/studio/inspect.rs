@@ -122,7 +122,7 @@ pub type StyleMapsKey = (PathBuf, u32, DepthPolarity, DepthProvider, Option<Path
 /// warning when the chosen depth fell back to the heuristic.
 pub fn style_maps(style: &StyleImage, key: &StyleMapsKey) -> (Maps, Option<String>) {
     let (path, scale, polarity, provider, image) = key;
-    let (source, warning) = super::style_depth::source_for(path, style, *provider, image.as_deref());
+    let (source, warning) = super::style_depth::source_for(path, style, *provider, image.as_deref(), None);
     let m = match &source {
         StyleDepthSource::Image(img) => {
             stage1::style_maps(&style.rgb, style.height, style.width, *scale as usize, img, *polarity)

@@ -11,6 +11,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{LazyLock, Mutex};
 
+use gast_core::gpu::GpuContext;
 use gast_core::session::{Stage1Cache, StyleDepthSource, StyleImage};
 use gast_core::vision::style_depth::{DepthImage, DepthProvider};
 
@@ -24,8 +25,16 @@ static CACHE: LazyLock<Mutex<HashMap<Key, Resolved>>> = LazyLock::new(|| Mutex::
 /// The depth source for the style at `style_path` under `provider`, with the
 /// user's depth image for that style when the provider is `image`. Computed
 /// on first use (holding the cache, so a second caller waits for the same
-/// pass instead of running another), then served from the cache.
-pub fn source_for(style_path: &Path, style: &StyleImage, provider: DepthProvider, image: Option<&Path>) -> Resolved {
+/// pass instead of running another), then served from the cache. The learned
+/// network runs on `gpu` when one is given (a run on a hardware adapter),
+/// else on the CPU; the two agree to 3e-7, so one cached source serves both.
+pub fn source_for(
+    style_path: &Path,
+    style: &StyleImage,
+    provider: DepthProvider,
+    image: Option<&Path>,
+    gpu: Option<&GpuContext>,
+) -> Resolved {
     let image = if provider == DepthProvider::Image { image.map(Path::to_path_buf) } else { None };
     let key = (style_path.to_path_buf(), provider, image.clone());
     let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
@@ -36,12 +45,13 @@ pub fn source_for(style_path: &Path, style: &StyleImage, provider: DepthProvider
         Some(Err(e)) => (StyleDepthSource::Heuristic, Some(format!("{e}; using the built-in heuristic depth"))),
         read => {
             let cache = Stage1Cache::from_env();
-            let r = StyleDepthSource::resolve(
+            let r = StyleDepthSource::resolve_on(
                 provider,
                 read.and_then(Result::ok),
                 None,
                 cache.as_ref(),
                 style,
+                gpu,
                 &mut |_, _| {},
             );
             (r.source, r.warning)

@@ -7,6 +7,7 @@ use rayon::prelude::*;
 
 use super::stage1_cache::{CacheOutcome, Stage1Cache, depth_key};
 use crate::camera::Camera;
+use crate::gpu::{GpuContext, GpuDepthNet};
 use crate::raster::{self, RenderOptions};
 use crate::scene::Gaussians;
 use crate::style::stage1::{StyleMaps, style_maps};
@@ -83,6 +84,20 @@ impl StyleDepthSource {
         style: &StyleImage,
         progress: &mut dyn FnMut(u64, Option<u64>),
     ) -> ResolvedDepth {
+        Self::resolve_on(provider, image, model, cache, style, None, progress)
+    }
+
+    /// [`resolve`](Self::resolve) with the learned network on `gpu` when one
+    /// is given (the session's GPU engine), else on the CPU.
+    pub fn resolve_on(
+        provider: DepthProvider,
+        image: Option<DepthImage>,
+        model: Option<&Path>,
+        cache: Option<&Stage1Cache>,
+        style: &StyleImage,
+        gpu: Option<&GpuContext>,
+        progress: &mut dyn FnMut(u64, Option<u64>),
+    ) -> ResolvedDepth {
         let plain = |source, warning: Option<&str>| ResolvedDepth {
             source,
             warning: warning.map(str::to_string),
@@ -99,7 +114,7 @@ impl StyleDepthSource {
             },
             DepthProvider::Learned => {
                 let mut warnings = Vec::new();
-                match learned_style_depth(style, model, cache, progress, &mut warnings) {
+                match learned_style_depth(style, model, cache, gpu, progress, &mut warnings) {
                     Ok((img, outcome)) => ResolvedDepth {
                         source: Self::Image(img),
                         warning: (!warnings.is_empty()).then(|| warnings.join("; ")),
@@ -120,24 +135,46 @@ impl StyleDepthSource {
 
 /// Depth Anything V2's relative inverse depth of `style`, at the network's
 /// input size (near = larger); [`DepthImage`] resizes it to each texture scale.
+/// The network runs on `gpu` when one is given ([`GpuDepthNet`]; the CPU
+/// takes over, with a warning, if the device fails), else on the CPU.
 /// With a `cache`, read from it when it holds this style's depth for this
 /// checkpoint, else computed and written to it; what went wrong with the
 /// cache (not an error) is pushed onto `warnings`.
+///
+/// The cache key does not name the device: the GPU pass equals the CPU one
+/// to within 3e-7 of the depth's largest value on the golden and random
+/// networks (`gpu::depth_net`'s tests hold it to 1e-4, the golden file's
+/// criterion), far below anything the depth's min-max normalisation and the
+/// GCFM loss can tell apart, so an entry computed on either serves both.
 pub fn learned_style_depth(
     style: &StyleImage,
     model: Option<&Path>,
     cache: Option<&Stage1Cache>,
+    gpu: Option<&GpuContext>,
     progress: &mut dyn FnMut(u64, Option<u64>),
     warnings: &mut Vec<String>,
 ) -> Result<(DepthImage, CacheOutcome), DepthModelError> {
     let path = resolve_depth_model(model, progress)?;
-    let compute = || {
+    let mut gpu_failure = None;
+    let mut compute = || {
         let net = DepthAnything::load_path(&path)?;
-        Ok(net.depth_image(&style.to_f32(), style.height, style.width))
+        let (rgb, h, w) = (style.to_f32(), style.height, style.width);
+        let Some(ctx) = gpu else { return Ok(net.depth_image(&rgb, h, w)) };
+        let on_gpu = GpuDepthNet::new(ctx, net);
+        Ok(on_gpu.depth_image(ctx, &rgb, h, w).unwrap_or_else(|e| {
+            gpu_failure = Some(format!("the depth network failed on the GPU ({e}); ran it on the CPU"));
+            on_gpu.cpu().depth_image(&rgb, h, w)
+        }))
     };
-    let Some(cache) = cache else { return Ok((compute()?, CacheOutcome::Computed)) };
-    let key = depth_key(style, &checkpoint_digest(&path)?, INPUT_SIZE);
-    cache.depth_or_compute(&key, compute, warnings)
+    let result = match cache {
+        None => compute().map(|d| (d, CacheOutcome::Computed)),
+        Some(cache) => {
+            let key = depth_key(style, &checkpoint_digest(&path)?, INPUT_SIZE);
+            cache.depth_or_compute(&key, compute, warnings)
+        }
+    };
+    warnings.extend(gpu_failure);
+    result
 }
 
 /// The style's maps at texture scale and their features.

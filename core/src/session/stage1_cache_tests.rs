@@ -121,3 +121,28 @@ fn resolve_reads_the_learned_depth_from_the_cache() {
     assert_eq!(a, b);
     let _ = std::fs::remove_dir_all(cache.dir());
 }
+
+#[test]
+fn the_gpu_depth_matches_the_cpu_one_and_shares_its_cache_entry() {
+    let Some(p) = golden() else { return };
+    let cache = temp_cache("gpu");
+    let none = &mut |_: u64, _: Option<u64>| {};
+    let gpu = crate::gpu::test_util::ctx();
+    let learned = DepthProvider::Learned;
+    let on_gpu = StyleDepthSource::resolve_on(learned, None, Some(&p), Some(&cache), &style(3), Some(gpu), none);
+    let on_cpu = StyleDepthSource::resolve(learned, None, Some(&p), None, &style(3), none);
+    let again = StyleDepthSource::resolve(learned, None, Some(&p), Some(&cache), &style(3), none);
+    assert!(on_gpu.warning.is_none() && on_gpu.cached.is_none(), "{:?}", on_gpu.warning);
+    assert!(again.warning.is_none() && again.cached.is_some(), "the CPU run missed the GPU run's entry");
+    let (StyleDepthSource::Image(g), StyleDepthSource::Image(c), StyleDepthSource::Image(a)) =
+        (&on_gpu.source, &on_cpu.source, &again.source)
+    else {
+        panic!("expected the learned depth three times")
+    };
+    assert_eq!(g, a);
+    assert_eq!((g.height, g.width), (c.height, c.width));
+    let largest = c.values.iter().fold(0f32, |m, v| m.max(v.abs()));
+    let err = g.values.iter().zip(&c.values).fold(0f32, |m, (x, y)| m.max((x - y).abs()));
+    assert!(largest > 0.0 && err <= 1e-4 * largest, "GPU against CPU: {err} (largest {largest})");
+    let _ = std::fs::remove_dir_all(cache.dir());
+}

@@ -113,7 +113,7 @@ pub fn resize_area_u8(src: &[u8], h: usize, w: usize, c: usize, oh: usize, ow: u
 
 /// Source taps of PyTorch's bilinear (`align_corners=False`) along one axis,
 /// with `scale` source pixels per output pixel: `(i0, i1, w0, w1)`.
-fn bilinear_taps(src: usize, dst: usize, scale: f64) -> Vec<(usize, usize, f32, f32)> {
+pub(crate) fn bilinear_taps(src: usize, dst: usize, scale: f64) -> Vec<(usize, usize, f32, f32)> {
     (0..dst)
         .map(|d| {
             let x = ((d as f64 + 0.5) * scale - 0.5).max(0.0);
@@ -205,7 +205,7 @@ pub fn downscale_half_backward(v_out: &[f32], h: usize, w: usize, c: usize) -> V
 }
 
 /// Source taps of one output sample along one axis: `(source index, weight)`.
-type Taps = Vec<Vec<(usize, f32)>>;
+pub(crate) type Taps = Vec<Vec<(usize, f32)>>;
 
 /// Applies per-axis taps to an HWC image: columns first, then rows, each
 /// pass parallel over output rows (a style photo brought to the depth
@@ -295,7 +295,7 @@ pub fn resize_bicubic_antialias(src: &[f32], h: usize, w: usize, c: usize, oh: u
 }
 
 /// Bilinear taps with the corners aligned: output `d` samples source `d·(src−1)/(dst−1)`.
-fn aligned_linear_taps(src: usize, dst: usize) -> Taps {
+pub(crate) fn aligned_linear_taps(src: usize, dst: usize) -> Taps {
     let scale = if dst > 1 { (src as f64 - 1.0) / (dst as f64 - 1.0) } else { 0.0 };
     (0..dst)
         .map(|d| {

@@ -1,9 +1,13 @@
-//! `gast bench depth`: the style depth network's time per style and per stage.
+//! `gast bench depth`: the style depth network's time per style and per
+//! stage, on the CPU and (`--device gpu`) on the GPU engine.
 
 use std::process::ExitCode;
 use std::time::Instant;
 
+use anyhow::Context;
 use clap::Args;
+use gast_core::gpu::{DeviceChoice, GpuContext, GpuDepthNet};
+use gast_core::vision::depth::{DepthAnything, INPUT_SIZE, input_size};
 
 use super::{median, shared_dir};
 use std::path::PathBuf;
@@ -24,6 +28,10 @@ pub struct DepthArgs {
     /// one at the style's input size.
     #[arg(long)]
     pub stages: bool,
+    /// Also time the network on the GPU engine: `gpu` (any adapter, lavapipe
+    /// included), `auto` (a hardware adapter if there is one), `cpu` (not).
+    #[arg(long, default_value_t = DeviceChoice::Cpu)]
+    pub device: DeviceChoice,
 }
 
 /// CPU time this process has used (user + system), from `/proc/self/stat`;
@@ -42,22 +50,67 @@ pub fn run_depth(args: DepthArgs) -> anyhow::Result<ExitCode> {
     let style_path = args.style.clone().unwrap_or_else(|| shared_dir().join("data/styles/wave.jpg"));
     let style = gast_core::session::StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
     println!("depth benchmark: style {}, {} threads", style_path.display(), rayon::current_num_threads());
-    time_style_depth(&style, args.depth_model.as_deref(), args.reps.max(1), args.stages)?;
+    let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
+    let (model, cpu_forward) = time_style_depth(&style, args.depth_model.as_deref(), args.reps.max(1), args.stages)?;
+    if let Some(ctx) = gpu {
+        time_gpu_depth(&ctx, model, &style, args.reps.max(1), cpu_forward)?;
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Prints the same figures for the network on the GPU engine (the estimate
+/// for the style, then `reps` forwards at 518×518), and the ratios of the
+/// CPU's forward to the GPU's, wall and process CPU time, both measured in
+/// this process. On a software rasterizer the CPU-time ratio is the one to
+/// read: both run on the same cores, whatever else the machine is doing.
+fn time_gpu_depth(
+    ctx: &GpuContext,
+    model: DepthAnything,
+    style: &gast_core::session::StyleImage,
+    reps: usize,
+    (cpu_wall, cpu_cpu): (f64, f64),
+) -> anyhow::Result<()> {
+    let t = Instant::now();
+    let net = GpuDepthNet::new(ctx, model);
+    let upload_s = t.elapsed().as_secs_f64();
+    let (h, w) = (style.height, style.width);
+    let (ih, iw) = input_size(h, w, INPUT_SIZE, net.cpu().config().patch_size);
+    let on = || format!("the depth network on {}", ctx.describe());
+    let (t, c) = (Instant::now(), cpu_seconds());
+    net.estimate_rgb(ctx, &style.to_f32(), h, w).with_context(on)?;
+    let (per_style, per_style_cpu) = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
+    let x = vec![0.25f32; 3 * INPUT_SIZE * INPUT_SIZE];
+    let mut walls = Vec::with_capacity(reps);
+    let mut cpus = Vec::with_capacity(reps);
+    for _ in 0..reps {
+        let (t, c) = (Instant::now(), cpu_seconds());
+        net.forward(ctx, &x, INPUT_SIZE, INPUT_SIZE).with_context(on)?;
+        walls.push(t.elapsed().as_secs_f64());
+        cpus.push(cpu_seconds() - c);
+    }
+    let (wall, cpu) = (median(walls), median(cpus));
+    let software = if ctx.is_software() { "; software rasterizer: a CPU emulation, not a GPU figure" } else { "" };
+    println!(
+        "style depth on the GPU engine ({}{software}): weights upload + kernels {upload_s:.2} s; per style {per_style:.2} s wall, {per_style_cpu:.2} s CPU ({w}×{h} image, network input {iw}×{ih}); forward at {INPUT_SIZE}×{INPUT_SIZE}: {wall:.2} s wall, {cpu:.2} s CPU (medians of {reps}); CPU engine / GPU engine forward: {:.3} wall, {:.3} CPU time",
+        ctx.describe(),
+        cpu_wall / wall,
+        cpu_cpu / cpu.max(1e-9),
+    );
+    Ok(())
 }
 
 /// Prints the depth network's time for one style (pre- and post-processing
 /// included) and the median of `reps` forward passes at 518×518. Uses the
 /// checkpoint found on this machine, else random weights at the Small model's
-/// sizes (same cost, meaningless output), and says which.
+/// sizes (same cost, meaningless output), and says which. Returns the
+/// network and the median forward's wall and CPU seconds.
 pub(super) fn time_style_depth(
     style: &gast_core::session::StyleImage,
     explicit: Option<&std::path::Path>,
     reps: usize,
     stages: bool,
-) -> anyhow::Result<()> {
-    use anyhow::Context;
-    use gast_core::vision::depth::{DepthAnything, DepthConfig, DepthModelLocations, INPUT_SIZE, input_size};
+) -> anyhow::Result<(DepthAnything, (f64, f64))> {
+    use gast_core::vision::depth::{DepthConfig, DepthModelLocations};
     let t = Instant::now();
     let (model, what) = match DepthModelLocations::from_env(explicit).find() {
         Ok(p) => (
@@ -83,10 +136,10 @@ pub(super) fn time_style_depth(
             (t.elapsed().as_secs_f64(), cpu_seconds() - c)
         })
         .unzip();
+    let forward = (median(walls), median(cpus));
     println!(
         "style depth (Depth Anything V2, {what}): load {load_s:.2} s; per style {per_style:.2} s wall, {per_style_cpu:.2} s CPU ({w}×{h} image, network input {iw}×{ih}); forward at {INPUT_SIZE}×{INPUT_SIZE}: {:.2} s wall, {:.2} s CPU (medians of {reps})",
-        median(walls),
-        median(cpus)
+        forward.0, forward.1
     );
     if stages {
         let (_, square) = model.forward_timed(&x, INPUT_SIZE, INPUT_SIZE);
@@ -97,5 +150,5 @@ pub(super) fn time_style_depth(
         }
         println!("{:<24} {:>10.3} {:>10.3}", "total", square.total(), style_sized.total());
     }
-    Ok(())
+    Ok((model, forward))
 }

@@ -12,6 +12,7 @@ use gast_core::camera::{framing_subject, subject_span};
 use gast_core::eval::{
     CoveredColour, Degeneration, StabilityThresholds, inverse_depth_change, mean_std_distance, nn_cosine_distance,
 };
+use gast_core::gpu::GpuContext;
 use gast_core::io::{write_bytes, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
 use gast_core::session::{Event, Session, SessionInputs, Stage1Cache, StepReport, StyleDepthSource, StyleImage};
@@ -29,12 +30,13 @@ pub use args::{FastArgs, StylizeArgs};
 
 /// The style's depth as the config's provider asks, with a progress bar for a
 /// download of the depth network and a visible warning when it falls back to
-/// the heuristic.
+/// the heuristic. The learned network runs on `gpu` when the run has one.
 pub fn resolve_style_depth(
     config: &StyleConfig,
     style: &StyleImage,
     image: Option<&Path>,
     model: Option<&Path>,
+    gpu: Option<&GpuContext>,
 ) -> anyhow::Result<StyleDepthSource> {
     let image = match image {
         Some(p) => Some(DepthImage::from_file(p)?),
@@ -43,13 +45,20 @@ pub fn resolve_style_depth(
     let t = Instant::now();
     let pb = progress::bytes_bar("depth model");
     let cache = Stage1Cache::from_env();
-    let resolved =
-        StyleDepthSource::resolve(config.depth_provider, image, model, cache.as_ref(), style, &mut |done, total| {
+    let resolved = StyleDepthSource::resolve_on(
+        config.depth_provider,
+        image,
+        model,
+        cache.as_ref(),
+        style,
+        gpu,
+        &mut |done, total| {
             if let Some(t) = total {
                 pb.set_length(t);
             }
             pb.set_position(done);
-        });
+        },
+    );
     pb.finish_and_clear();
     if let Some(w) = &resolved.warning {
         eprintln!("warning: {w}");
@@ -57,7 +66,8 @@ pub fn resolve_style_depth(
     if let Some(p) = &resolved.cached {
         eprintln!("  style depth (Depth Anything V2): from the Stage-1 cache {}", p.display());
     } else if config.depth_provider == DepthProvider::Learned && matches!(resolved.source, StyleDepthSource::Image(_)) {
-        eprintln!("  style depth (Depth Anything V2): {:.2} s", t.elapsed().as_secs_f64());
+        let on = gpu.map_or_else(|| "CPU".to_string(), GpuContext::describe);
+        eprintln!("  style depth (Depth Anything V2 on {on}): {:.2} s", t.elapsed().as_secs_f64());
     }
     let source = resolved.source;
     Ok(source)
@@ -169,7 +179,13 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     super::convert::check_output_name(&args.scene_name)?;
     let scene = load_scene(&args.scene)?;
     let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
-    let style_depth = resolve_style_depth(&config, &style, args.style_depth.as_deref(), args.depth_model.as_deref())?;
+    let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
+    // On a software rasterizer (lavapipe) the network's GEMMs run at about
+    // 1 GFLOP/s, ~40× slower than the CPU kernels (`gast bench depth
+    // --device gpu`): there the depth stays on the CPU.
+    let depth_gpu = gpu.as_ref().filter(|g| !g.is_software());
+    let style_depth =
+        resolve_style_depth(&config, &style, args.style_depth.as_deref(), args.depth_model.as_deref(), depth_gpu)?;
     let cameras = views_for(
         &scene,
         &ViewArgs {
@@ -182,7 +198,6 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         },
     )?;
     let mut config = config;
-    let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
     if args.resolution.is_none() && args.preset.is_none() {
         let subject = framing_subject(&scene);
         let span = cameras.iter().map(|c| subject_span(c, &subject)).sum::<f32>() / cameras.len().max(1) as f32;

@@ -20,40 +20,40 @@ use super::vit::linear;
 use super::weights::Checkpoint;
 use crate::vision::resize::{resize_bilinear, resize_bilinear_align_corners};
 
-enum Resize {
+pub(crate) enum Resize {
     Up(ConvUp),
     Same,
     Down(Conv),
 }
 
-struct Reassemble {
-    projection: Linear,
-    resize: Resize,
+pub(crate) struct Reassemble {
+    pub(crate) projection: Linear,
+    pub(crate) resize: Resize,
 }
 
 /// Pre-activation residual unit: `x + conv2(relu(conv1(relu(x))))`.
-struct Residual {
-    conv1: Conv,
-    conv2: Conv,
+pub(crate) struct Residual {
+    pub(crate) conv1: Conv,
+    pub(crate) conv2: Conv,
 }
 
-struct Fusion {
-    residual1: Residual,
-    residual2: Residual,
-    projection: Linear,
+pub(crate) struct Fusion {
+    pub(crate) residual1: Residual,
+    pub(crate) residual2: Residual,
+    pub(crate) projection: Linear,
 }
 
 /// The neck and head's weights.
 pub(crate) struct Dpt {
-    reassemble: Vec<Reassemble>,
-    convs: Vec<Conv>,
-    fusion: Vec<Fusion>,
-    head1: Conv,
-    head2: Conv,
-    head3: Linear,
-    patch_size: usize,
-    metric: bool,
-    scale: f32,
+    pub(crate) reassemble: Vec<Reassemble>,
+    pub(crate) convs: Vec<Conv>,
+    pub(crate) fusion: Vec<Fusion>,
+    pub(crate) head1: Conv,
+    pub(crate) head2: Conv,
+    pub(crate) head3: Linear,
+    pub(crate) patch_size: usize,
+    pub(crate) metric: bool,
+    pub(crate) scale: f32,
 }
 
 fn conv(

@@ -17,12 +17,12 @@
 //! [`DepthPolarity`](super::style_depth::DepthPolarity) as a user's depth image.
 
 mod config;
-mod dpt;
-mod ops;
+pub(crate) mod dpt;
+pub(crate) mod ops;
 mod profile;
 pub mod resolve;
-mod vit;
-mod weights;
+pub(crate) mod vit;
+pub(crate) mod weights;
 
 use std::path::{Path, PathBuf};
 
@@ -188,6 +188,17 @@ impl DepthAnything {
         &self.config
     }
 
+    /// The backbone and the neck with head, for the GPU engine to upload.
+    pub(crate) fn parts(&self) -> (&vit::Vit, &dpt::Dpt) {
+        (&self.vit, &self.dpt)
+    }
+
+    /// The backbone and the neck with head, for tests to reshape a random network.
+    #[cfg(test)]
+    pub(crate) fn parts_mut(&mut self) -> (&mut vit::Vit, &mut dpt::Dpt) {
+        (&mut self.vit, &mut self.dpt)
+    }
+
     /// The network on a normalised CHW image (`3 × h × w`, sides multiples of
     /// the patch size): the predicted depth, `h × w`.
     pub fn forward(&self, pixels: &[f32], h: usize, w: usize) -> Vec<f32> {
@@ -221,7 +232,7 @@ impl DepthAnything {
 
     /// The image resized to `ih × iw` (bicubic with antialiasing) and
     /// ImageNet-normalised, as CHW.
-    fn preprocess(&self, rgb: &[f32], h: usize, w: usize, ih: usize, iw: usize) -> Vec<f32> {
+    pub(crate) fn preprocess(&self, rgb: &[f32], h: usize, w: usize, ih: usize, iw: usize) -> Vec<f32> {
         const MEAN: [f32; 3] = [0.485, 0.456, 0.406];
         const STD: [f32; 3] = [0.229, 0.224, 0.225];
         let resized = resize_bicubic_antialias(rgb, h, w, 3, ih, iw);

@@ -21,28 +21,28 @@ use crate::vision::resize::resize_bicubic;
 /// are one `3d × d` product whose query rows carry `1/√d_head`, and the layer
 /// scales λ₁, λ₂ multiply the rows of the attention output and of fc2, which
 /// then add onto the token stream in place.
-struct Layer {
-    norm1: Norm,
-    qkv: Linear,
-    output: Linear,
-    norm2: Norm,
-    fc1: Linear,
-    fc2: Linear,
+pub(crate) struct Layer {
+    pub(crate) norm1: Norm,
+    pub(crate) qkv: Linear,
+    pub(crate) output: Linear,
+    pub(crate) norm2: Norm,
+    pub(crate) fc1: Linear,
+    pub(crate) fc2: Linear,
 }
 
 /// The backbone's weights and sizes.
 pub(crate) struct Vit {
-    patch: Linear,
-    patch_size: usize,
-    cls: Vec<f32>,
+    pub(crate) patch: Linear,
+    pub(crate) patch_size: usize,
+    pub(crate) cls: Vec<f32>,
     /// `(grid² + 1) × d`, token-major as stored.
     pos: Vec<f32>,
     grid: usize,
-    layers: Vec<Layer>,
-    final_norm: Norm,
-    heads: usize,
-    out_indices: Vec<usize>,
-    apply_layernorm: bool,
+    pub(crate) layers: Vec<Layer>,
+    pub(crate) final_norm: Norm,
+    pub(crate) heads: usize,
+    pub(crate) out_indices: Vec<usize>,
+    pub(crate) apply_layernorm: bool,
 }
 
 /// Reads `prefix.weight` and `prefix.bias` of a linear layer or 1×1 convolution.
@@ -170,7 +170,7 @@ impl Vit {
 
     /// The position embeddings for a `rows × cols` patch grid, token-major
     /// (`(1 + rows·cols) × d`), CLS first.
-    fn position_embeddings(&self, rows: usize, cols: usize) -> Vec<f32> {
+    pub(crate) fn position_embeddings(&self, rows: usize, cols: usize) -> Vec<f32> {
         let (d, g) = (self.width(), self.grid);
         if rows == g && cols == g {
             return self.pos.clone();
