@@ -140,6 +140,52 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         ));
     }
     out.push(String::new());
+    out.extend(breakdown_lines(&rows));
+    out
+}
+
+/// Where each arm's SW decrease on the object comes from ([`gast_core::eval::sliced`]):
+/// the decrease of its mean-shift and shape parts, of SW between unit-length
+/// features (directions only, what NN-cos and GCFM see), and the mean feature
+/// length over the style's before and after. Empty for runs recorded before
+/// these measures existed.
+fn breakdown_lines(rows: &[(&Row, &Record)]) -> Vec<String> {
+    let measured = |r: &Record| r.checkpoints.first().is_some_and(|c| c.measures.feature_norm_object > 0.0);
+    let arms: Vec<(&Row, &Record)> = rows
+        .iter()
+        .copied()
+        .filter(|(r, t)| (r.label == FOCUS_FRAME || r.label == FOCUS_OBJECT) && measured(t))
+        .collect();
+    if arms.is_empty() {
+        return Vec::new();
+    }
+    let mut out = vec![
+        "### Where the SW decreases come from (object's pixels; SW² = mean² + shape²; unit: SW of unit-length features)".to_string(),
+        String::new(),
+        "| scene | style | arm | ΔSW | ΔSW mean | ΔSW shape | ΔSW unit | ΔNN | feature length / style's, before → after | luminance before → after |".into(),
+        "|---|---|---|---|---|---|---|---|---|---|".into(),
+    ];
+    for (row, r) in arms {
+        let d = |f: fn(&Measures) -> f32| decrease(r, row.step, f).map_or("–".to_string(), |v| format!("{v:.4}"));
+        let ends = |f: fn(&Measures) -> f32| match (r.checkpoints.first(), r.at(row.step)) {
+            (Some(a), Some(b)) => format!("{:.3} → {:.3}", f(&a.measures), f(&b.measures)),
+            _ => "–".into(),
+        };
+        out.push(format!(
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            r.scene_name(),
+            r.style,
+            row.label,
+            d(sw),
+            d(|m| m.sliced_wasserstein_object_mean),
+            d(|m| m.sliced_wasserstein_object_shape),
+            d(|m| m.sliced_wasserstein_object_unit),
+            d(nn),
+            ends(|m| m.feature_norm_object),
+            ends(|m| m.colour.luminance),
+        ));
+    }
+    out.push(String::new());
     out
 }
 
