@@ -20,6 +20,7 @@ use std::sync::Arc;
 use super::consistency::{DEFAULT_DEPTH_TOLERANCE, warp_consistency, warp_consistency_masked};
 use super::content::{content_distance, content_distance_masked};
 use super::geometry::{inverse_depth_change, normal_change};
+use super::sliced::SlicedBreakdown;
 use super::stability::CoveredColour;
 use super::style::{NearestStyle, StyleReference};
 use crate::camera::{Camera, OrbitLayout, OrbitOptions, fit_view, framing_subject, orbit_cameras};
@@ -127,6 +128,20 @@ pub struct Measures {
     /// [`Measures::consistency_long`] over the covered pixels, RGB in `[0, 1]`.
     #[serde(default)]
     pub consistency_long_object: f32,
+    /// The part of [`Measures::sliced_wasserstein_object`] that is a shift of
+    /// the mean ([`super::sliced`]), feature units.
+    #[serde(default)]
+    pub sliced_wasserstein_object_mean: f32,
+    /// The part that is the centred distribution's shape (`mean² + shape² = SW²`), feature units.
+    #[serde(default)]
+    pub sliced_wasserstein_object_shape: f32,
+    /// The sliced Wasserstein distance between unit-length features on the
+    /// object (directions only, as NN-cos and GCFM see them); unitless.
+    #[serde(default)]
+    pub sliced_wasserstein_object_unit: f32,
+    /// Mean relu3 feature length on the object over the style's mean feature length.
+    #[serde(default)]
+    pub feature_norm_object: f32,
 }
 
 /// The fixed views, the colour-matched renders and the style's features that
@@ -135,6 +150,8 @@ pub struct Evaluator {
     net: Arc<Vgg>,
     /// Statistics of the style's RGB features (see [`StyleFeatures`]).
     style: Option<StyleReference>,
+    /// The same features for splitting the object's SW into its parts.
+    breakdown: Option<SlicedBreakdown>,
     /// The style's depth, edge and joint features, for nearest neighbours.
     nearest: [Option<NearestStyle>; 3],
     cameras: Vec<(usize, Camera)>,
@@ -187,10 +204,12 @@ impl Evaluator {
             NearestStyle::new(style.modality(2), c),
             NearestStyle::new(&joint, 3 * c),
         ];
+        let breakdown = SlicedBreakdown::new(style.modality(0), c, SW_PROJECTIONS);
         let style = StyleReference::new(style.modality(0), c, SW_PROJECTIONS);
         let mut out = Self {
             net,
             style,
+            breakdown,
             nearest,
             cameras,
             opts,
@@ -308,6 +327,13 @@ impl Evaluator {
                     let on = gather_positions(f, fm.channels, fm.height * fm.width, idx);
                     m.sliced_wasserstein_object += s.sliced_wasserstein(&on) / n;
                     m.nn_cosine_object += s.nn_cosine(&on) / n;
+                    if let Some(b) = &self.breakdown {
+                        let p = b.parts(&on);
+                        m.sliced_wasserstein_object_mean += p.mean / n;
+                        m.sliced_wasserstein_object_shape += p.shape / n;
+                        m.sliced_wasserstein_object_unit += p.unit / n;
+                        m.feature_norm_object += p.norm_ratio / n;
+                    }
                 }
             }
             let [depth, edge, joint] = &self.nearest;

@@ -4,6 +4,8 @@
 //! One file per concept, so each measure can be read and checked on its own:
 //! - [`style`]: how close the render's VGG features are to the style's (Gram,
 //!   mean–std, sliced Wasserstein, nearest-neighbour cosine);
+//! - [`sliced`]: which part of a sliced Wasserstein distance moved (the mean,
+//!   the shape, or only the features' lengths);
 //! - [`content`]: how far the features moved from the colour-matched render;
 //! - [`consistency`]: whether views agree once warped into each other;
 //! - [`geometry`]: how much depth and surface orientation changed;
@@ -16,6 +18,7 @@ pub mod consistency;
 pub mod content;
 pub mod geometry;
 pub mod measure;
+pub mod sliced;
 pub mod stability;
 pub mod style;
 pub mod trial;
@@ -24,6 +27,7 @@ pub use consistency::{Consistency, ViewPairs, pick_view_pairs, warp_consistency,
 pub use content::{ContentDistance, content_distance, content_distance_masked};
 pub use geometry::{NormalChange, depth_normals, inverse_depth_change, normal_change};
 pub use measure::{EvalOptions, Evaluator, Measures};
+pub use sliced::{SlicedBreakdown, SlicedParts};
 pub use stability::{
     CoveredColour, Degeneration, DegenerationKind, StabilityReport, StabilityThresholds, assess_stability,
 };

@@ -39,14 +39,7 @@ impl StyleReference {
         }
         let n = b.len() / channels;
         let b = &b[..n * channels];
-        let mut rng = SplitMix(SLICED_WASSERSTEIN_SEED);
-        let directions: Vec<f32> = (0..projections)
-            .flat_map(|_| {
-                let v: Vec<f64> = (0..channels).map(|_| rng.gaussian()).collect();
-                let len = v.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-12);
-                v.into_iter().map(move |x| (x / len) as f32)
-            })
-            .collect();
+        let directions = projection_directions(channels, projections);
         let sorted = sorted_projections(&directions, projections, b, channels);
         Some(Self {
             channels,
@@ -183,7 +176,7 @@ fn moments(x: &[f32], channels: usize) -> Vec<(f64, f64)> {
 }
 
 /// The CHW map with every position's feature vector scaled to unit length.
-fn unit_columns(x: &[f32], channels: usize) -> Vec<f32> {
+pub(super) fn unit_columns(x: &[f32], channels: usize) -> Vec<f32> {
     let n = x.len() / channels;
     let mut norm = vec![0.0f32; n];
     for c in 0..channels {
@@ -203,7 +196,7 @@ fn unit_columns(x: &[f32], channels: usize) -> Vec<f32> {
 
 /// Projections of every position of the CHW map `x` on each of the
 /// `projections` directions (`P × C`), one gemm, each row sorted.
-fn sorted_projections(directions: &[f32], projections: usize, x: &[f32], channels: usize) -> Vec<Vec<f64>> {
+pub(super) fn sorted_projections(directions: &[f32], projections: usize, x: &[f32], channels: usize) -> Vec<Vec<f64>> {
     let n = x.len() / channels;
     let mut p = vec![0.0f32; projections * n];
     matmul(&mut p, n, (directions, channels, 1), (x, n), (projections, n, channels), false);
@@ -280,9 +273,22 @@ pub fn sliced_wasserstein_distance(a: &[f32], b: &[f32], channels: usize, projec
     StyleReference::new(b, channels, projections).map_or(0.0, |r| r.sliced_wasserstein(a))
 }
 
+/// `projections` unit directions in `R^channels` (`P × C`, row-major):
+/// Gaussian draws from the fixed [`SLICED_WASSERSTEIN_SEED`], normalised.
+pub(super) fn projection_directions(channels: usize, projections: usize) -> Vec<f32> {
+    let mut rng = SplitMix(SLICED_WASSERSTEIN_SEED);
+    (0..projections)
+        .flat_map(|_| {
+            let v: Vec<f64> = (0..channels).map(|_| rng.gaussian()).collect();
+            let len = v.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-12);
+            v.into_iter().map(move |x| (x / len) as f32)
+        })
+        .collect()
+}
+
 /// The `q` quantile of sorted, non-empty `s`, linearly interpolated between
 /// sample `i` at position `(i + ½)/n`.
-fn quantile(s: &[f64], q: f64) -> f64 {
+pub(super) fn quantile(s: &[f64], q: f64) -> f64 {
     let x = (q * s.len() as f64 - 0.5).clamp(0.0, (s.len() - 1) as f64);
     let i = x.floor() as usize;
     let j = (i + 1).min(s.len() - 1);
