@@ -11,7 +11,9 @@
 //!
 //! Convolutions are im2col + `gemm` (see `conv.rs`) or Winograd F(4×4, 3×3)
 //! (`winograd.rs`), chosen by [`Vgg::with_conv`]; the ImageNet normalisation
-//! torchvision's weights expect happens inside.
+//! torchvision's weights expect happens inside. [`Vgg::forward_within`]
+//! computes only the cone of a box of relu3 positions (`vgg_cone.rs`), for
+//! losses that read only the object's positions.
 
 use rayon::prelude::*;
 
