@@ -164,10 +164,10 @@ pub struct ViewArgs {
 /// How generated views frame the scene (see [`ViewArgs::framing`]).
 #[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Framing {
-    /// Each view fitted to the object ([`gast_core::camera::framed_orbit`]).
+    /// Each view fitted to the object, which spans 90% of its longer side (`camera::framed_orbit`).
     #[default]
     Object,
-    /// The plain orbit ([`gast_core::camera::orbit_cameras`]).
+    /// The plain orbit around the scene's bounding sphere, square images (`camera::orbit_cameras`).
     Full,
 }
 

@@ -222,8 +222,9 @@ pub struct FastArgs {
     /// Visits of a view that share one search of its matches (1: search every step) [default: 1].
     #[arg(long)]
     pub matching_reuse: Option<u32>,
-    /// With object focus, run VGG on the window of the frame the object's feature positions
-    /// depend on (true), or on the whole frame (false); the same losses either way [default: true].
+    /// With object focus, run VGG only on what the object's feature positions depend on: their
+    /// receptive-field window and, inside it, the cone of their box (true), or on the whole
+    /// frame (false); the same losses up to rounding either way [default: true].
     #[arg(long)]
     pub vgg_window: Option<bool>,
 }
