@@ -10,6 +10,11 @@
 //! the object. If darkening alone lowers SW by as much as a frame run does,
 //! and leaves NN-cos where it was, SW is reading brightness, not style.
 //!
+//! The renders' background is black, as in the study; with
+//! `GAST_PROBE_BACKGROUND=style` (the style image's mean colour) or `=R,G,B`
+//! the ring is rendered over that colour instead, to see how much of what SW
+//! reads comes from the object's rim against black.
+//!
 //! Usage: `cargo run --release -p gast-core --example focus_sw_probe -- SCENE STYLE [WEIGHTS]`
 //! (the weights default to `$GAST_SHARED/data/weights/vgg19-conv3.safetensors`).
 
@@ -42,6 +47,25 @@ fn recolour(g: &Gaussians, dim: f32, k: f32) -> Gaussians {
         sh[3..].iter_mut().for_each(|v| *v *= dim * k);
     }
     out
+}
+
+/// The background `GAST_PROBE_BACKGROUND` asks for: unset, black; `style`,
+/// the style image's mean colour; else `R,G,B` in 0–1.
+fn background(style: &StyleImage) -> Result<[f32; 3], Box<dyn std::error::Error>> {
+    match std::env::var("GAST_PROBE_BACKGROUND").ok().as_deref() {
+        None | Some("") => Ok([0.0; 3]),
+        Some("style") => {
+            let n = (style.rgb.len() / 3).max(1) as f32;
+            Ok(std::array::from_fn(|ch| style.rgb.iter().skip(ch).step_by(3).map(|&v| v as f32).sum::<f32>() / n / 255.0))
+        }
+        Some(s) => {
+            let v: Vec<f32> = s.split(',').map(|t| t.trim().parse::<f32>()).collect::<Result<_, _>>()?;
+            let [r, g, b] = v.as_slice() else {
+                return Err(format!("GAST_PROBE_BACKGROUND: expected `style` or R,G,B, found {s:?}").into());
+            };
+            Ok([*r, *g, *b])
+        }
+    }
 }
 
 fn line(label: &str, m: &Measures, base: &Measures) -> String {
@@ -77,10 +101,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &g.means,
         &OrbitOptions { count: 36, width: 128, height: 128, fov_y_degrees: 50.0, ..OrbitOptions::default() },
     );
+    let style_image = StyleImage::open(std::path::Path::new(style))?;
+    let background = background(&style_image)?;
     let inputs = SessionInputs {
         scene: g,
         cameras,
-        style: StyleImage::open(std::path::Path::new(style))?,
+        style: style_image,
         style_depth: StyleDepthSource::Heuristic,
         vgg: Arc::clone(&vgg),
         config,
@@ -92,10 +118,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         vgg,
         &session.style().targets.features,
         gc,
-        &EvalOptions { fit_to_object: true, ..EvalOptions::default() },
+        &EvalOptions { fit_to_object: true, background, ..EvalOptions::default() },
     );
     let base = eval.measure_reference();
-    println!("{scene} × {style}, fitted ring at 192 px, object positions");
+    println!("{scene} × {style}, fitted ring at 192 px over {background:.3?}, object positions");
     println!("{}", line("colour-matched", &base, &base));
     for dim in [0.9f32, 0.8, 0.7] {
         println!("{}", line(&format!("darkened ×{dim}"), &eval.measure(&recolour(gc, dim, 1.0)), &base));
