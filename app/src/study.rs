@@ -38,7 +38,8 @@ pub enum Study {
     Focus,
     /// The decoupled default at 1,000 steps on every pair, watched by the
     /// colour-collapse detector; on the first scene × block2 also object focus,
-    /// colour learning rates 1e-3 and 1e-4, and the colour floor. Runs only when named.
+    /// colour learning rates 1e-3 and 1e-4, the colour floor, and a tenth of
+    /// the means' learning rate. Runs only when named.
     Collapse,
 }
 

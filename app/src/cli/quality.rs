@@ -314,6 +314,12 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
                 c.lr.color = lr;
                 arms.push((format!("lr colour {lr:e}"), c, plain_on_object));
             }
+            // The geometry steps' moving means darken the object (frozen
+            // means keep its luminance, frozen opacity, scales or rotations
+            // do not): a tenth of the reference's learning rate of the means.
+            let mut c = default.clone();
+            c.lr.means_per_extent = 1e-5;
+            arms.push(("lr means 1e-5".to_string(), c, plain_on_object));
             for (label, config, framing) in arms {
                 g.want_framed((Study::Collapse, &label), 0, &style, config, 1.0, &quarters, framing);
             }
@@ -533,6 +539,40 @@ mod tests {
         }
         let ids: std::collections::HashSet<&str> = g.trials.iter().map(|t| t.id.as_str()).collect();
         assert_eq!(ids.len(), g.trials.len());
+    }
+
+    #[test]
+    fn the_collapse_study_has_its_arms_each_changing_one_setting() {
+        let sizes = Sizes::full();
+        let g = build_grid(&sizes, Path::new("/shared"), &[Study::Collapse]);
+        let config_of = |label: &str| {
+            let rows: Vec<_> = g.rows.iter().filter(|r| r.study == Study::Collapse && r.label == label).collect();
+            let t = g.trials.iter().find(|t| t.id == rows[0].trial).expect("trial");
+            (rows.len(), t.config.clone(), t.style.clone())
+        };
+        let (pairs, default, _) = config_of("decoupled");
+        assert_eq!(pairs, sizes.scenes.len() * sizes.styles.len(), "the default on every pair");
+        assert_eq!(default.schedule().total_steps(), sizes.collapse_budget);
+        assert_eq!(default.resolution, sizes.collapse_resolution);
+        let arms = [
+            ("object focus", StyleConfig { focus: Focus::Object, ..default.clone() }),
+            ("colour floor", StyleConfig { color_floor: true, ..default.clone() }),
+        ];
+        let mut lrs = Vec::new();
+        for (label, color, means) in
+            [("lr colour 1e-3", 1e-3, 1e-4), ("lr colour 1e-4", 1e-4, 1e-4), ("lr means 1e-5", 0.01, 1e-5)]
+        {
+            let mut c = default.clone();
+            c.lr.color = color;
+            c.lr.means_per_extent = means;
+            lrs.push((label, c));
+        }
+        for (label, want) in arms.into_iter().chain(lrs) {
+            let (n, config, style) = config_of(label);
+            assert_eq!(n, 1, "{label}: one run");
+            assert!(format!("{style:?}").contains("block2"), "{label} runs on block2: {style:?}");
+            assert_eq!(format!("{config:?}"), format!("{want:?}"), "{label}");
+        }
     }
 
     #[test]
