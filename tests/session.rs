@@ -381,3 +381,51 @@ fn warmed_view_targets_give_the_same_steps() {
     }
     assert!(warm.step().is_none());
 }
+
+/// The colour watch on both devices: a view's first step renders the scene
+/// the colour-matched reference was rendered from, so the first reading is 1;
+/// both devices read the same reference; and after geometry steps with a
+/// large learning rate of the means the CPU's reading has moved.
+#[test]
+fn the_colour_watch_reads_the_renders_on_both_devices() {
+    use gast_core::gpu::DeviceChoice;
+    use gast_core::session::Session;
+    let config = StyleConfig {
+        cycles: 1,
+        steps_per_cycle: 12,
+        resolution: 64,
+        texture_scale: 64,
+        mode: Mode::GeometryOnly,
+        focus: gast_core::style::Focus::Frame,
+        lr: gast_core::style::config::LearningRates { means_per_extent: 1e-2, ..Default::default() },
+        ..Default::default()
+    };
+    let Some(cpu_inputs) = inputs(config) else { return };
+    let ctx = match DeviceChoice::Gpu.resolve() {
+        Ok(Some(c)) => c,
+        other => panic!("the GPU tests need a wgpu adapter (lavapipe: mesa-vulkan-drivers): {other:?}"),
+    };
+    let gpu_inputs = SessionInputs { gpu: Some(ctx), ..cpu_inputs.clone() };
+    let mut cpu = Session::prepare(cpu_inputs, &mut |_| {}).expect("CPU session");
+    let mut gpu = Session::prepare(gpu_inputs, &mut |_| {}).expect("GPU session");
+    assert_eq!(cpu.colour_reading(), None, "nothing read before the first step");
+    let a = cpu.step().expect("CPU step").colour.expect("a CPU reading after one step");
+    let b = gpu.step().expect("GPU step").colour.expect("a GPU reading after one step");
+    assert_eq!(a.views, 1);
+    assert_eq!(b.views, 1);
+    assert!(a.reference.luminance > 0.01, "the guitar covers the view: {a:?}");
+    for r in [a, b] {
+        assert!((r.luminance_ratio() - 1.0).abs() < 1e-5 && (r.chroma_ratio() - 1.0).abs() < 1e-5, "{r:?}");
+    }
+    let rel = |x: f32, y: f32| (x - y).abs() / x.abs().max(1e-6);
+    assert!(
+        rel(a.reference.luminance, b.reference.luminance) < 1e-4 && rel(a.reference.chroma, b.reference.chroma) < 1e-4,
+        "the devices' references differ: CPU {a:?} GPU {b:?}"
+    );
+    let mut last = a;
+    while let Some(r) = cpu.step() {
+        last = r.colour.expect("a reading");
+    }
+    assert!(last.views >= 2, "{last:?}");
+    assert!((last.luminance_ratio() - 1.0).abs() > 1e-4, "the moved means changed nothing: {last:?}");
+}

@@ -56,7 +56,9 @@ fn background(style: &StyleImage) -> Result<[f32; 3], Box<dyn std::error::Error>
         None | Some("") => Ok([0.0; 3]),
         Some("style") => {
             let n = (style.rgb.len() / 3).max(1) as f32;
-            Ok(std::array::from_fn(|ch| style.rgb.iter().skip(ch).step_by(3).map(|&v| v as f32).sum::<f32>() / n / 255.0))
+            Ok(std::array::from_fn(|ch| {
+                style.rgb.iter().skip(ch).step_by(3).map(|&v| v as f32).sum::<f32>() / n / 255.0
+            }))
         }
         Some(s) => {
             let v: Vec<f32> = s.split(',').map(|t| t.trim().parse::<f32>()).collect::<Result<_, _>>()?;

@@ -216,6 +216,9 @@ impl StudioApp {
         if let Some((p, eta)) = self.run.progress() {
             ui.add(egui::ProgressBar::new(p).text(format!("{:.0}%  ETA {:.0} s", p * 100.0, eta)));
         }
+        if let Some(c) = self.run.steps.last().and_then(|s| s.colour) {
+            colour_line(ui, &c);
+        }
         if let Some(g) = self.current() {
             ui.weak(format!("current: {} Gaussians", g.len()));
         }
@@ -484,5 +487,33 @@ impl StudioApp {
         self.inspect_pending = None;
         let cam = self.viewport_camera().with_longer_side(240);
         self.jobs.inspect(g, cam, self.background);
+    }
+}
+
+/// The colour watch's reading under the progress bar: the object's luminance
+/// and chroma against the colour-matched state's, and a warning in red with
+/// what to change when the colours collapse.
+fn colour_line(ui: &mut Ui, c: &gast_core::session::ColourReading) {
+    let text = format!(
+        "object colour: luminance {:.2}×, chroma {:.2}× the colour-matched ({} views)",
+        c.luminance_ratio(),
+        c.chroma_ratio(),
+        c.views
+    );
+    match c.collapse() {
+        None => {
+            ui.weak(text);
+        }
+        Some(d) => {
+            ui.colored_label(Color32::from_rgb(255, 130, 110), text);
+            ui.colored_label(
+                Color32::from_rgb(255, 130, 110),
+                format!(
+                    "Colour collapse: {:.0}% of the colour is lost. The geometry steps' moving means darken \
+                     captured objects: set Focus to object, or lower the learning rate 'means / extent' to 1e-5.",
+                    d.value * 100.0
+                ),
+            );
+        }
     }
 }

@@ -209,6 +209,7 @@ mod tests {
                 losses: LossTerms { total: 1.0 / (iter + 1) as f32, ..LossTerms::default() },
                 timings: Default::default(),
                 elapsed_s: (iter + 1) as f64,
+                colour: None,
             })
         };
         etx.send(step(0)).expect("send");

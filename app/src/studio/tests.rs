@@ -277,6 +277,15 @@ fn app_with_a_run(
             losses,
             timings: Default::default(),
             elapsed_s: iter as f64 * 0.5 + 0.5,
+            // The object slowly darkening, as the colour watch would read it.
+            colour: Some(gast_core::session::ColourReading {
+                reference: gast_core::eval::CoveredColour { luminance: 0.4, chroma: 0.3 },
+                now: gast_core::eval::CoveredColour {
+                    luminance: 0.4 * (1.0 - 0.25 * t),
+                    chroma: 0.3 * (1.0 - 0.2 * t),
+                },
+                views: 36,
+            }),
         };
         etx.send(Event::Step(report)).expect("send");
     }
@@ -318,6 +327,19 @@ fn session_events_and_snapshots_reach_the_window() {
     );
     assert_eq!(harness.state().run.steps.len(), 5);
     harness.get_by_label_contains("ETA");
+    // The colour watch's reading under the progress bar; a collapse adds the warning.
+    harness.get_by_label_contains("object colour: luminance");
+    assert!(harness.query_by_label_contains("Colour collapse").is_none());
+    let mut collapsed = harness.state().run.steps.last().cloned().expect("a step");
+    collapsed.iter += 1;
+    collapsed.colour = Some(gast_core::session::ColourReading {
+        reference: gast_core::eval::CoveredColour { luminance: 0.4, chroma: 0.3 },
+        now: gast_core::eval::CoveredColour { luminance: 0.1, chroma: 0.1 },
+        views: 36,
+    });
+    etx.send(Event::Step(collapsed)).expect("send");
+    harness.run_steps(2);
+    harness.get_by_label_contains("Colour collapse: 75% of the colour is lost");
     harness.get_by_label("Pause").click();
     harness.run_steps(2);
     assert_eq!(crx.try_recv().ok(), Some(Command::Pause));

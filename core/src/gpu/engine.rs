@@ -23,6 +23,7 @@ use super::{
     GpuAdam, GpuContext, GpuError, GpuFocus, GpuGaussians, GpuGrads, GpuRaster, GpuStyle, RasterKernels, RefLoss,
 };
 use crate::camera::Camera;
+use crate::eval::stability::CoveredColour;
 use crate::raster::RenderOptions;
 use crate::scene::Gaussians;
 use crate::session::{LossTerms, StepTimings};
@@ -55,6 +56,8 @@ struct ViewTarget {
     /// What `G^c` covers from the view (`None` when it covers no feature
     /// position: the losses then look at the whole frame, as on the CPU).
     focus: Option<GpuFocus>,
+    /// `G^c`'s covered colour from the view (the colour watch's reference).
+    colour: CoveredColour,
 }
 
 /// One Adam state per parameter group, colour and geometry phases.
@@ -374,11 +377,30 @@ impl GpuEngine {
         ctx.submit(enc);
         // One scalar per view, once: a view the scene does not cover falls back to the frame.
         let focus = (focus.covered_cells(ctx)? > 0).then_some(focus);
+        let colour = self.rendered_colour(cam)?;
         if view >= self.targets.len() {
             self.targets.resize_with(view + 1, || None);
         }
-        self.targets[view] = Some(ViewTarget { content, inv_depth, focus });
+        self.targets[view] = Some(ViewTarget { content, inv_depth, focus, colour });
         Ok(())
+    }
+
+    /// The covered colour ([`CoveredColour::of`]) of the last render at
+    /// `cam`'s size: the last step's, read back (`h·w·16` bytes).
+    pub fn rendered_colour(&self, cam: &Camera) -> Result<CoveredColour, GpuError> {
+        let size = (cam.width, cam.height);
+        let Some(plan) = self.plans.get(&size) else {
+            return Err(GpuError::TooLarge(format!("no plan for {}×{}", size.0, size.1)));
+        };
+        let n = u64::from(cam.width) * u64::from(cam.height);
+        let rgb: Vec<f32> = self.ctx.read_range(&plan.raster.rgb, 0, n * 12)?;
+        let alpha: Vec<f32> = self.ctx.read_range(&plan.raster.alpha, 0, n * 4)?;
+        Ok(CoveredColour::of(&rgb, &alpha))
+    }
+
+    /// `G^c`'s covered colour from `view`, once its target exists.
+    pub fn reference_colour(&self, view: usize) -> Option<CoveredColour> {
+        self.targets.get(view)?.as_ref().map(|t| t.colour)
     }
 }
 

@@ -78,6 +78,9 @@ pub struct StepReport {
     pub timings: StepTimings,
     /// Seconds since the optimisation started (pauses excluded).
     pub elapsed_s: f64,
+    /// The object's colour against the colour-matched state's
+    /// ([`super::ColourWatch`]); `None` before any view is read.
+    pub colour: Option<super::ColourReading>,
 }
 
 /// What a running session reports.

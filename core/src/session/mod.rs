@@ -5,6 +5,7 @@
 //! the newest Gaussians go into a latest-value [`Slot`], and [`Command`]s come in
 //! between steps.
 
+mod colour_watch;
 mod events;
 mod prepare;
 mod run;
@@ -12,6 +13,7 @@ mod slot;
 mod stage1_cache;
 mod worker;
 
+pub use colour_watch::{ColourReading, ColourWatch};
 pub use events::{Command, Event, LossTerms, StepReport, StepTimings};
 pub use prepare::{
     PreparedStyle, ResolvedDepth, StyleDepthSource, StyleImage, ViewSurvey, prepare_style, scatter, subset,

@@ -5,9 +5,11 @@
 use std::sync::Arc;
 use std::time::Instant;
 
+use super::colour_watch::ColourWatch;
 use super::events::{Event, LossTerms, StepReport, StepTimings};
 use super::prepare::{PreparedStyle, StyleDepthSource, StyleImage, prepare_style, scatter, subset, survey_views};
 use crate::camera::{Camera, scene_extent};
+use crate::eval::stability::CoveredColour;
 use crate::gpu::{GpuContext, GpuEngine, GpuError, LiveGaussians};
 use crate::raster::{self, RenderOptions};
 use crate::scene::Gaussians;
@@ -113,6 +115,8 @@ pub struct Session {
     audit: (f64, f64, u32),
     /// Mean share of the optimisation views' pixels the scene covers (alpha ≥ 0.5).
     coverage: f32,
+    /// The object's colour in the steps' renders against `G^c`'s.
+    colour_watch: ColourWatch,
 }
 
 impl Session {
@@ -215,6 +219,7 @@ impl Session {
         Ok(Self {
             targets: (0..work_cams.len()).map(|_| None).collect(),
             view_matches: (0..work_cams.len()).map(|_| None).collect(),
+            colour_watch: ColourWatch::new(work_cams.len()),
             index,
             audit_every: 0,
             audit: (0.0, 0.0, 0),
@@ -386,6 +391,7 @@ impl Session {
         if config.resolution != self.config.resolution || config.background != self.config.background {
             self.cameras = self.base_cameras.iter().map(|c| c.with_longer_side(config.resolution)).collect();
             self.targets.iter_mut().for_each(|t| *t = None);
+            self.colour_watch.reset();
             if let Some(e) = &mut self.engine {
                 e.reset_views(self.cameras.len(), config.background);
             }
@@ -422,6 +428,7 @@ impl Session {
         let (h, w) = (cam.height as usize, cam.width as usize);
         let r = raster::render(&self.g_ref, cam, &opts);
         let rgb: Vec<f32> = r.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+        self.colour_watch.set_reference(view, CoveredColour::of(&rgb, &r.alpha));
         self.targets[view] = Some(ViewTarget {
             content: content_target(&*self.vgg, &rgb, h, w),
             coverage: coverage_mask(&r.alpha, h, w),
@@ -460,6 +467,12 @@ impl Session {
             })
             .collect();
         (!shares.is_empty()).then(|| shares.iter().sum::<f32>() / shares.len() as f32)
+    }
+
+    /// The object's colour in the steps' latest renders against the
+    /// colour-matched state's ([`ColourWatch`]); `None` before any view is read.
+    pub fn colour_reading(&self) -> Option<super::ColourReading> {
+        self.colour_watch.reading()
     }
 
     /// Mean fractions of matches identical to the exact search (nearest,

@@ -4,6 +4,10 @@
 
 use super::*;
 
+/// Every how many GPU steps the colour watch reads the step's render back
+/// (besides each view's first visit).
+const GPU_COLOUR_EVERY: u32 = 10;
+
 impl Session {
     /// Runs the next scheduled step; `None` when the schedule is complete or
     /// the GPU engine failed ([`Session::failure`] then says why).
@@ -26,6 +30,16 @@ impl Session {
                     return None;
                 }
             };
+            // The colour watch: each view's first visit, then every few steps
+            // (a read-back of the render).
+            if self.step.is_multiple_of(GPU_COLOUR_EVERY) || !self.colour_watch.has_reference(view) {
+                if let Some(r) = engine.reference_colour(view) {
+                    self.colour_watch.set_reference(view, r);
+                }
+                if let Ok(c) = engine.rendered_colour(cam) {
+                    self.colour_watch.observe(view, c);
+                }
+            }
             self.elapsed_s += started.elapsed().as_secs_f64();
             let report = StepReport {
                 iter: self.step,
@@ -36,6 +50,7 @@ impl Session {
                 losses,
                 timings,
                 elapsed_s: self.elapsed_s,
+                colour: self.colour_watch.reading(),
             };
             self.step += 1;
             if let Some(live) = &self.live {
@@ -54,6 +69,7 @@ impl Session {
         let (img, state) = raster::forward(&self.g, &cam, &opts);
         timings.render_ms = ms(t);
         let rgb: Vec<f32> = img.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+        self.colour_watch.observe(view, CoveredColour::of(&rgb, &img.alpha));
         let edge = render_edges(&rgb, h, w);
         let target = self.targets[view].as_ref()?;
         let geometry = phase.updates_geometry();
@@ -166,6 +182,7 @@ impl Session {
             losses: terms,
             timings,
             elapsed_s: self.elapsed_s,
+            colour: self.colour_watch.reading(),
         };
         self.step += 1;
         Some(report)

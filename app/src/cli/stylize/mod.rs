@@ -116,6 +116,16 @@ fn resolution_for(span: f32, cap: u32) -> (u32, u32) {
     (wanted.clamp(128, cap.max(128)), wanted)
 }
 
+/// What a user reads when the colour watch sees the object's colours
+/// collapse after `steps` steps (`loss`: the share of luminance or chroma lost).
+pub fn collapse_advice(steps: u32, loss: f32) -> String {
+    format!(
+        "after {steps} steps the object has lost {:.0}% of its colour-matched luminance or chroma (colour collapse); \
+         the geometry steps' moving means darken captured objects: try --focus object, or --lr-means 1e-5 (a tenth of the default)",
+        loss * 100.0
+    )
+}
+
 /// Loads the VGG weights the usual way, with a progress bar for a download.
 pub fn load_vgg(explicit: Option<&Path>) -> anyhow::Result<Vgg> {
     let pb = progress::bytes_bar("weights");
@@ -254,9 +264,21 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let total = session.total_steps();
     let pb = progress::bar(total as u64, "stylize");
     let mut steps = Vec::with_capacity(total as usize);
+    let mut warned_collapse = false;
     while let Some(r) = session.step() {
-        pb.set_message(format!("cycle {}/{} {:?} loss {:.4}", r.cycle + 1, config.cycles, r.phase, r.losses.total));
+        let lum = r.colour.map_or(String::new(), |c| format!(" luminance {:.2}x", c.luminance_ratio()));
+        pb.set_message(format!(
+            "cycle {}/{} {:?} loss {:.4}{lum}",
+            r.cycle + 1,
+            config.cycles,
+            r.phase,
+            r.losses.total
+        ));
         pb.inc(1);
+        if let Some(d) = r.colour.and_then(|c| c.collapse()).filter(|_| !warned_collapse) {
+            warned_collapse = true;
+            pb.println(format!("warning: {}", collapse_advice(r.iter + 1, d.value)));
+        }
         if !r.losses.total.is_finite() {
             pb.abandon();
             anyhow::bail!("step {}: the loss became {}; stopping (try lower learning rates)", r.iter, r.losses.total);
@@ -428,5 +450,22 @@ mod tests {
         assert!(auto_resolution(0.3).1 > 1600);
         assert_eq!(auto_resolution(0.0).1, 4096);
         assert!(step_time_hint(512).contains("2.4 s"), "{}", step_time_hint(512));
+    }
+
+    /// The collapse warning's advice names flags `stylize` takes, with values it accepts.
+    #[test]
+    fn the_collapse_advice_names_real_flags() {
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            args: StylizeArgs,
+        }
+        let advice = collapse_advice(300, 0.52);
+        assert!(advice.contains("300 steps") && advice.contains("52%"), "{advice}");
+        for (flag, value) in [("--focus", "object"), ("--lr-means", "1e-5")] {
+            assert!(advice.contains(&format!("{flag} {value}")), "{advice}");
+            let parsed = <Cli as clap::Parser>::try_parse_from(["stylize", "scene.ply", "style.png", flag, value]);
+            assert!(parsed.is_ok(), "{flag} {value}: {:?}", parsed.err());
+        }
     }
 }
