@@ -429,3 +429,42 @@ fn the_colour_watch_reads_the_renders_on_both_devices() {
     assert!(last.views >= 2, "{last:?}");
     assert!((last.luminance_ratio() - 1.0).abs() > 1e-4, "the moved means changed nothing: {last:?}");
 }
+
+/// `EvalOptions::over_style_colour`: the evaluation ring is rendered over the
+/// style's mean colour (a corner of a ring view shows it), not the run's
+/// black, and the object's measures change with it.
+#[test]
+fn the_evaluation_ring_can_be_rendered_over_the_style_colour() {
+    use gast_core::eval::trial::mean_colour;
+    use gast_core::eval::{EvalOptions, StabilityThresholds, run_trial};
+    let config = StyleConfig { cycles: 1, steps_per_cycle: 1, resolution: 32, texture_scale: 64, ..Default::default() };
+    let Some(inputs) = inputs(config) else { return };
+    let eval = |over_style_colour| {
+        let opts = EvalOptions { resolution: 48, fit_to_object: true, over_style_colour, ..EvalOptions::default() };
+        run_trial(inputs.clone(), None, &[0], &opts, &StabilityThresholds::default(), &mut |_, _| {}).expect("trial")
+    };
+    let (black, over) = (eval(false), eval(true));
+    let style = gast_core::session::prepare_style(
+        &inputs.vgg,
+        &inputs.style,
+        64,
+        &inputs.style_depth,
+        inputs.config.depth_polarity,
+    );
+    let want = mean_colour(&style.maps.rgb);
+    assert!(want.iter().any(|&v| v > 0.05), "mosaic is not black: {want:?}");
+    let corner = |o: &gast_core::eval::TrialOutcome| {
+        let (_, _, rgb) = o.evaluator.sample_sheet(&o.result, 0);
+        [rgb[0], rgb[1], rgb[2]]
+    };
+    assert_eq!(corner(&black), [0.0; 3]);
+    let got = corner(&over);
+    assert!(got.iter().zip(&want).all(|(a, b)| (a - b).abs() < 1e-5), "corner {got:?}, style mean {want:?}");
+    let (b, o) = (black.checkpoints[0].measures, over.checkpoints[0].measures);
+    assert!(
+        (b.sliced_wasserstein_object - o.sliced_wasserstein_object).abs() > 1e-3,
+        "the background changed no measure: {} and {}",
+        b.sliced_wasserstein_object,
+        o.sliced_wasserstein_object
+    );
+}

@@ -136,6 +136,10 @@ pub struct Sizes {
     /// Working resolution of the collapse study (the issue saw the collapse at 256 px).
     #[serde(default)]
     pub collapse_resolution: u32,
+    /// Render the evaluation ring over each style's mean colour instead of
+    /// black ([`gast_core::eval::EvalOptions::over_style_colour`]).
+    #[serde(default)]
+    pub eval_over_style_colour: bool,
 }
 
 const ALL_STYLES: [&str; 9] =
@@ -164,6 +168,7 @@ impl Sizes {
             focus_budget: 200,
             collapse_budget: 1000,
             collapse_resolution: 256,
+            eval_over_style_colour: false,
         }
     }
 
@@ -207,6 +212,7 @@ impl Sizes {
             focus_budget: 10,
             collapse_budget: 100,
             collapse_resolution: 64,
+            eval_over_style_colour: false,
         }
     }
 }

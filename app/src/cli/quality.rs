@@ -446,7 +446,11 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
             inputs,
             Some(prepared.clone()),
             &spec.checkpoints,
-            &EvalOptions { fit_to_object: spec.eval_on_object, ..eval },
+            &EvalOptions {
+                fit_to_object: spec.eval_on_object,
+                over_style_colour: sizes.eval_over_style_colour,
+                ..eval
+            },
             &StabilityThresholds::default(),
             &mut |done, _| bar.set_position(base + u64::from(done)),
         )

@@ -59,8 +59,9 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
     let find = |label: &str, scene: &str, style: &str| {
         rows.iter().find(|(r, t)| r.label == label && t.scene_name() == scene && t.style == style).copied()
     };
+    let over = if run.sizes.eval_over_style_colour { " rendered over the style's mean colour" } else { "" };
     let mut out = vec![
-        "## Focus: frame against object (SW, NN-cos and content on relu3, RMSE on the 37.5° pairs; all on the object's pixels of the fitted ring)".to_string(),
+        format!("## Focus: frame against object (SW, NN-cos and content on relu3, RMSE on the 37.5° pairs; all on the object's pixels of the fitted ring{over})"),
         String::new(),
         "| scene | style | steps | ΔSW frame | ΔSW object | ratio | ΔNN frame | ΔNN object | ratio | content frame | content object | RMSE frame | RMSE object | RMSE ratio | passes |"
             .into(),

@@ -57,6 +57,11 @@ pub struct EvalOptions {
     /// Fit every ring view to the object ([`crate::camera::fit_view`]) so the
     /// measures rest on its pixels; the plain ring otherwise. Default false.
     pub fit_to_object: bool,
+    /// Render the ring over the style image's mean colour instead of the
+    /// run's background ([`super::run_trial`]), so that the object's rim is
+    /// not measured against black: over black, the rim's features are long
+    /// and darkening the object shortens them. Default false.
+    pub over_style_colour: bool,
 }
 
 impl Default for EvalOptions {
@@ -67,6 +72,7 @@ impl Default for EvalOptions {
             fov_y_degrees: 50.0,
             background: [0.0; 3],
             fit_to_object: false,
+            over_style_colour: false,
         }
     }
 }

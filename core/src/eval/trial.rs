@@ -14,6 +14,12 @@ use super::stability::{StabilityReport, StabilityThresholds, assess_stability};
 use crate::scene::Gaussians;
 use crate::session::{PreparedStyle, Session, SessionError, SessionInputs};
 
+/// The mean of an RGB (HWC) image; black when it is empty.
+pub fn mean_colour(rgb: &[f32]) -> [f32; 3] {
+    let n = (rgb.len() / 3).max(1) as f64;
+    std::array::from_fn(|ch| (rgb.iter().skip(ch).step_by(3).map(|&v| f64::from(v)).sum::<f64>() / n) as f32)
+}
+
 /// The measures of a scene after `step` steps.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Checkpoint {
@@ -62,11 +68,14 @@ pub fn run_trial(
     progress: &mut dyn FnMut(u32, u32),
 ) -> Result<TrialOutcome, SessionError> {
     let vgg = inputs.vgg.clone();
-    let background = inputs.config.background;
+    let mut background = inputs.config.background;
     let t = Instant::now();
     let mut session = Session::prepare_with_style(inputs, style, &mut |_| {})?;
     let prepare_s = t.elapsed().as_secs_f64();
 
+    if eval.over_style_colour {
+        background = mean_colour(&session.style().maps.rgb);
+    }
     let t = Instant::now();
     let evaluator = Evaluator::new(
         Arc::clone(&vgg),
