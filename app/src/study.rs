@@ -39,7 +39,8 @@ pub enum Study {
     /// The decoupled default at 1,000 steps on every pair, watched by the
     /// colour-collapse detector; on the first scene × block2 also object focus,
     /// colour learning rates 1e-3 and 1e-4, the colour floor, and a tenth of
-    /// the means' learning rate. Runs only when named.
+    /// the means' learning rate (`collapse_arms` and
+    /// `collapse_object_on_every_pair` of [`Sizes`] choose). Runs only when named.
     Collapse,
 }
 
@@ -140,6 +141,22 @@ pub struct Sizes {
     /// black ([`gast_core::eval::EvalOptions::over_style_colour`]).
     #[serde(default)]
     pub eval_over_style_colour: bool,
+    /// Which runs of the collapse study to make ([`COLLAPSE_ARMS`]; all by default).
+    #[serde(default = "all_collapse_arms")]
+    pub collapse_arms: Vec<String>,
+    /// Run the collapse study's "object focus" arm on every pair, not only
+    /// on the first scene × block2.
+    #[serde(default)]
+    pub collapse_object_on_every_pair: bool,
+}
+
+/// The collapse study's runs: the decoupled default on every pair; the others
+/// on the first scene × block2 (object focus on every pair when asked).
+pub const COLLAPSE_ARMS: [&str; 6] =
+    ["decoupled", "object focus", "colour floor", "lr colour 1e-3", "lr colour 1e-4", "lr means 1e-5"];
+
+fn all_collapse_arms() -> Vec<String> {
+    COLLAPSE_ARMS.iter().map(|s| s.to_string()).collect()
 }
 
 const ALL_STYLES: [&str; 9] =
@@ -169,6 +186,8 @@ impl Sizes {
             collapse_budget: 1000,
             collapse_resolution: 256,
             eval_over_style_colour: false,
+            collapse_arms: all_collapse_arms(),
+            collapse_object_on_every_pair: false,
         }
     }
 
@@ -191,7 +210,12 @@ impl Sizes {
             }
             base.insert(k.clone(), v.clone());
         }
-        serde_json::from_value(value).with_context(|| format!("{}: not valid grid sizes", path.display()))
+        let sizes: Self =
+            serde_json::from_value(value).with_context(|| format!("{}: not valid grid sizes", path.display()))?;
+        if let Some(bad) = sizes.collapse_arms.iter().find(|a| !COLLAPSE_ARMS.contains(&a.as_str())) {
+            anyhow::bail!("{}: unknown collapse arm {bad:?} (known: {})", path.display(), COLLAPSE_ARMS.join(", "));
+        }
+        Ok(sizes)
     }
 
     /// The `--quick` grid: the guitar, two styles, small images, a few minutes.
@@ -213,6 +237,8 @@ impl Sizes {
             collapse_budget: 100,
             collapse_resolution: 64,
             eval_over_style_colour: false,
+            collapse_arms: all_collapse_arms(),
+            collapse_object_on_every_pair: false,
         }
     }
 }
@@ -387,6 +413,9 @@ mod tests {
         std::fs::write(&path, r#"{"focus_budget": "many"}"#).expect("write");
         let e = format!("{:#}", Sizes::from_file(&path).expect_err("wrong type"));
         assert!(e.contains("sizes.json") && e.contains("not valid grid sizes"), "{e}");
+        std::fs::write(&path, r#"{"collapse_arms": ["decoupled", "lr means 1e-6"]}"#).expect("write");
+        let e = format!("{:#}", Sizes::from_file(&path).expect_err("unknown arm"));
+        assert!(e.contains("sizes.json") && e.contains("lr means 1e-6") && e.contains("lr means 1e-5"), "{e}");
         std::fs::write(&path, "[1, 2]").expect("write");
         let e = format!("{:#}", Sizes::from_file(&path).expect_err("not an object"));
         assert!(e.contains("expected a JSON object"), "{e}");

@@ -290,21 +290,11 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
         };
         let total = default.schedule().total_steps();
         let quarters: Vec<u32> = [4u32, 2].iter().map(|d| total / d).filter(|s| *s > 0).collect();
-        for scene in 0..sizes.scenes.len() {
-            for style in &sizes.styles {
-                g.want_framed(
-                    (Study::Collapse, "decoupled"),
-                    scene,
-                    &file(style),
-                    default.clone(),
-                    1.0,
-                    &quarters,
-                    plain_on_object,
-                );
-            }
-        }
-        let block2 = sizes.styles.iter().find(|s| s.contains("block2")).or(sizes.styles.first());
-        if let Some(style) = block2.map(file) {
+        let wanted = |label: &str| sizes.collapse_arms.iter().any(|a| a == label);
+        let every_pair =
+            |label: &str| label == "decoupled" || (label == "object focus" && sizes.collapse_object_on_every_pair);
+        let block2 = sizes.styles.iter().find(|s| s.contains("block2")).or(sizes.styles.first()).cloned();
+        if let Some(block2) = block2 {
             let mut arms = vec![
                 ("object focus".to_string(), StyleConfig { focus: Focus::Object, ..default.clone() }, fitted),
                 ("colour floor".to_string(), StyleConfig { color_floor: true, ..default.clone() }, plain_on_object),
@@ -320,8 +310,23 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
             let mut c = default.clone();
             c.lr.means_per_extent = 1e-5;
             arms.push(("lr means 1e-5".to_string(), c, plain_on_object));
-            for (label, config, framing) in arms {
-                g.want_framed((Study::Collapse, &label), 0, &style, config, 1.0, &quarters, framing);
+            arms.insert(0, ("decoupled".to_string(), default.clone(), plain_on_object));
+            for (label, config, framing) in arms.into_iter().filter(|a| wanted(&a.0)) {
+                for scene in 0..sizes.scenes.len() {
+                    for style in &sizes.styles {
+                        if every_pair(&label) || (scene == 0 && *style == block2) {
+                            g.want_framed(
+                                (Study::Collapse, &label),
+                                scene,
+                                &file(style),
+                                config.clone(),
+                                1.0,
+                                &quarters,
+                                framing,
+                            );
+                        }
+                    }
+                }
             }
         }
     }
@@ -577,6 +582,13 @@ mod tests {
             assert!(format!("{style:?}").contains("block2"), "{label} runs on block2: {style:?}");
             assert_eq!(format!("{config:?}"), format!("{want:?}"), "{label}");
         }
+        // Only object focus, on every pair.
+        let only =
+            Sizes { collapse_arms: vec!["object focus".into()], collapse_object_on_every_pair: true, ..sizes.clone() };
+        let g = build_grid(&only, Path::new("/shared"), &[Study::Collapse]);
+        assert_eq!(g.rows.len(), sizes.scenes.len() * sizes.styles.len());
+        assert!(g.rows.iter().all(|r| r.label == "object focus"), "{:?}", g.rows);
+        assert!(g.trials.iter().all(|t| t.config.focus == Focus::Object));
     }
 
     #[test]
