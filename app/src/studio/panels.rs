@@ -217,7 +217,8 @@ impl StudioApp {
             ui.add(egui::ProgressBar::new(p).text(format!("{:.0}%  ETA {:.0} s", p * 100.0, eta)));
         }
         if let Some(c) = self.run.steps.last().and_then(|s| s.colour) {
-            colour_line(ui, &c);
+            let object = self.run.start().is_some_and(|s| s.focus_on_object);
+            colour_line(ui, &c, object);
         }
         if let Some(g) = self.current() {
             ui.weak(format!("current: {} Gaussians", g.len()));
@@ -492,8 +493,9 @@ impl StudioApp {
 
 /// The colour watch's reading under the progress bar: the object's luminance
 /// and chroma against the colour-matched state's, and a warning in red with
-/// what to change when the colours collapse.
-fn colour_line(ui: &mut Ui, c: &gast_core::session::ColourReading) {
+/// what to change when the colours collapse (`object`: whether the run's
+/// losses focus on the object already).
+fn colour_line(ui: &mut Ui, c: &gast_core::session::ColourReading, object: bool) {
     let text = format!(
         "object colour: luminance {:.2}×, chroma {:.2}× the colour-matched ({} views)",
         c.luminance_ratio(),
@@ -506,11 +508,12 @@ fn colour_line(ui: &mut Ui, c: &gast_core::session::ColourReading) {
         }
         Some(d) => {
             ui.colored_label(Color32::from_rgb(255, 130, 110), text);
+            let focus = if object { "" } else { "set Focus to object, or " };
             ui.colored_label(
                 Color32::from_rgb(255, 130, 110),
                 format!(
                     "Colour collapse: {:.0}% of the colour is lost. The geometry steps' moving means darken \
-                     captured objects: set Focus to object, or lower the learning rate 'means / extent' to 1e-5.",
+                     captured objects: {focus}lower the learning rate 'means / extent' to 1e-5.",
                     d.value * 100.0
                 ),
             );

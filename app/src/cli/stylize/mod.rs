@@ -117,11 +117,13 @@ fn resolution_for(span: f32, cap: u32) -> (u32, u32) {
 }
 
 /// What a user reads when the colour watch sees the object's colours
-/// collapse after `steps` steps (`loss`: the share of luminance or chroma lost).
-pub fn collapse_advice(steps: u32, loss: f32) -> String {
+/// collapse after `steps` steps (`loss`: the share of luminance or chroma
+/// lost; `object`: whether the losses already focus on the object).
+pub fn collapse_advice(steps: u32, loss: f32, object: bool) -> String {
+    let focus = if object { "" } else { "--focus object, or " };
     format!(
         "after {steps} steps the object has lost {:.0}% of its colour-matched luminance or chroma (colour collapse); \
-         the geometry steps' moving means darken captured objects: try --focus object, or --lr-means 1e-5 (a tenth of the default)",
+         the geometry steps' moving means darken captured objects: try {focus}--lr-means 1e-5 (a tenth of the default)",
         loss * 100.0
     )
 }
@@ -277,7 +279,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         pb.inc(1);
         if let Some(d) = r.colour.and_then(|c| c.collapse()).filter(|_| !warned_collapse) {
             warned_collapse = true;
-            pb.println(format!("warning: {}", collapse_advice(r.iter + 1, d.value)));
+            pb.println(format!("warning: {}", collapse_advice(r.iter + 1, d.value, session.focus_on_object())));
         }
         if !r.losses.total.is_finite() {
             pb.abandon();
@@ -460,7 +462,8 @@ mod tests {
             #[command(flatten)]
             args: StylizeArgs,
         }
-        let advice = collapse_advice(300, 0.52);
+        assert!(!collapse_advice(300, 0.52, true).contains("--focus"), "the focus is on the object already");
+        let advice = collapse_advice(300, 0.52, false);
         assert!(advice.contains("300 steps") && advice.contains("52%"), "{advice}");
         for (flag, value) in [("--focus", "object"), ("--lr-means", "1e-5")] {
             assert!(advice.contains(&format!("{flag} {value}")), "{advice}");
