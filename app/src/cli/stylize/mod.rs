@@ -279,7 +279,9 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         pb.inc(1);
         if let Some(d) = r.colour.and_then(|c| c.collapse()).filter(|_| !warned_collapse) {
             warned_collapse = true;
-            pb.println(format!("warning: {}", collapse_advice(r.iter + 1, d.value, session.focus_on_object())));
+            // Not `pb.println`: a hidden bar (output not a terminal) drops its lines.
+            let advice = collapse_advice(r.iter + 1, d.value, session.focus_on_object());
+            pb.suspend(|| eprintln!("warning: {advice}"));
         }
         if !r.losses.total.is_finite() {
             pb.abandon();
