@@ -18,6 +18,8 @@
 
 use rayon::prelude::*;
 
+use super::distinct::search_distinct;
+
 /// The epsilon of the reference's normalisations.
 pub(super) const EPS: f64 = 1e-8;
 /// Score-matrix elements per tile (4 MiB of `f32`).
@@ -166,8 +168,18 @@ pub(super) fn gemm_tile(
 }
 
 /// Matches rendered features (three modalities, each `channels × n` CHW with
-/// `n` positions) against the style: tiled `gemm`, parallel over tiles.
+/// `n` positions) against the style: tiled `gemm`, parallel over tiles, once
+/// per distinct joint vector ([`search_distinct`]: the background's copies
+/// take their representative's matches).
 pub fn match_features(style: &StyleFeatures, rendered: [&[f32]; 3], n: usize) -> Matches {
+    for r in &rendered {
+        assert_eq!(r.len(), style.channels * n, "match_features: rendered feature size mismatch");
+    }
+    search_distinct(rendered, style.channels, n, |r, u| match_every_position(style, r, u))
+}
+
+/// [`match_features`] searching every position, copies included.
+pub fn match_every_position(style: &StyleFeatures, rendered: [&[f32]; 3], n: usize) -> Matches {
     let (c, m) = (style.channels, style.positions());
     for r in &rendered {
         assert_eq!(r.len(), c * n, "match_features: rendered feature size mismatch");

@@ -72,3 +72,20 @@ fn gradient_matches_finite_differences() {
     }
     assert!(bad.is_empty(), "{}", bad.join("\n"));
 }
+
+#[test]
+fn matching_with_copied_positions_equals_dense() {
+    // Most positions copy one of three vectors (a background), a few are their own.
+    let (c, n) = (24, 200);
+    let st = style(c, 9, 13);
+    let base = [feats(c, 8, 7), feats(c, 8, 8), feats(c, 8, 9)];
+    let src = |x: usize| if x % 17 == 0 { 3 + x % 5 } else { x % 3 };
+    let r: [Vec<f32>; 3] = std::array::from_fn(|k| {
+        (0..c).flat_map(|ch| (0..n).map(move |x| (ch, src(x)))).map(|(ch, s)| base[k][ch * 8 + s]).collect()
+    });
+    let rr = [&r[0][..], &r[1][..], &r[2][..]];
+    assert!(crate::style::distinct::representatives(rr, c, n).1 <= 8);
+    let fast = match_features(&st, rr, n);
+    assert_eq!(fast, match_features_dense(&st, rr, n));
+    assert_eq!(fast, match_every_position(&st, rr, n));
+}

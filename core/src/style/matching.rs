@@ -23,6 +23,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::distinct::search_distinct;
 use super::gcfm::{EPS, Matches, StyleFeatures, gemm_tile, match_features};
 use crate::vision::matmul;
 
@@ -332,7 +333,9 @@ pub fn find_matches(
     n: usize,
 ) -> Matches {
     match (config.method, index) {
-        (MatchMethod::Pca, Some(ix)) => ix.search(rendered, n, config.candidates as usize),
+        (MatchMethod::Pca, Some(ix)) => {
+            search_distinct(rendered, style.channels, n, |r, u| ix.search(r, u, config.candidates as usize))
+        }
         _ => match_features(style, rendered, n),
     }
 }

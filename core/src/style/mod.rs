@@ -11,6 +11,7 @@ pub mod adam;
 pub mod color_transfer;
 pub mod config;
 pub mod content;
+pub mod distinct;
 pub mod focus;
 pub mod gcfm;
 pub mod matching;
