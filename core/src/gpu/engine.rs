@@ -58,6 +58,10 @@ struct ViewTarget {
     focus: Option<GpuFocus>,
     /// `G^c`'s covered colour from the view (the colour watch's reference).
     colour: CoveredColour,
+    /// The view's last searched GCFM matches and the steps that used them,
+    /// when the matching keeps them for several visits
+    /// ([`crate::style::MatchingConfig::reuse`], as the CPU session does).
+    kept: Option<(wgpu::Buffer, u32)>,
 }
 
 /// One Adam state per parameter group, colour and geometry phases.
@@ -231,6 +235,7 @@ impl GpuEngine {
             return Err(GpuError::TooLarge(format!("no plan for {}×{}", size.0, size.1)));
         };
         let (ctx, k) = (&self.ctx, &self.k);
+        let allocated = ctx.allocated_bytes();
         let opts = RenderOptions { background: self.background };
         let geometry = phase.updates_geometry();
         let mut enc = ctx.encoder("engine.step");
@@ -240,6 +245,13 @@ impl GpuEngine {
         let depth_ref = geometry.then_some(&target.inv_depth);
         let content = Some(&target.content);
         let focus = if self.object_focus { target.focus.as_ref() } else { None };
+        // Matches kept from this view's last visits (copied in), or searched.
+        let reuse = config.matching.reuse.max(1);
+        let kept = target.kept.as_ref().filter(|(_, uses)| *uses < reuse);
+        if let Some((m, _)) = kept {
+            enc.copy_buffer_to_buffer(m, 0, plan.loss.matches(), 0, m.size());
+        }
+        let searched = kept.is_none();
         plan.loss.record(
             ctx,
             &k.loss,
@@ -253,7 +265,19 @@ impl GpuEngine {
             geometry,
             focus,
             &self.scalars,
+            searched,
         );
+        let keep = if searched && reuse > 1 {
+            // The buffer of an earlier search of this view, or a new one.
+            let m = match &target.kept {
+                Some((m, _)) => m.clone(),
+                None => ctx.zeros("engine.target.matches", (plan.loss.matches().size() / 4) as usize),
+            };
+            enc.copy_buffer_to_buffer(plan.loss.matches(), 0, &m, 0, m.size());
+            Some((m, 1))
+        } else {
+            kept.map(|(m, uses)| (m.clone(), uses + 1))
+        };
         let (v_rgb, v_inv_depth) = (plan.loss.v_rgb(), plan.loss.v_inv_depth());
         plan.raster.backward(ctx, &k.raster, &mut enc, &self.g, v_rgb, v_inv_depth, &self.grads);
 
@@ -282,6 +306,10 @@ impl GpuEngine {
         }
         enc.copy_buffer_to_buffer(plan.raster.pair_count(), 0, &self.scalars, (slot::PAIRS * 4) as u64, 4);
         ctx.submit(enc);
+        if let Some(Some(t)) = self.targets.get_mut(view) {
+            t.kept = keep;
+        }
+        self.bytes += self.ctx.allocated_bytes().saturating_sub(allocated);
 
         let s: Vec<f32> = ctx.read(&self.scalars)?;
         let pairs = s[slot::PAIRS].to_bits() as usize;
@@ -381,7 +409,7 @@ impl GpuEngine {
         if view >= self.targets.len() {
             self.targets.resize_with(view + 1, || None);
         }
-        self.targets[view] = Some(ViewTarget { content, inv_depth, focus, colour });
+        self.targets[view] = Some(ViewTarget { content, inv_depth, focus, colour, kept: None });
         Ok(())
     }
 

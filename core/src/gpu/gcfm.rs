@@ -227,7 +227,9 @@ impl GpuGcfm {
     /// gradients w.r.t. the rendered RGB and depth features (`v_rgb`,
     /// `v_depth`, each `c × n` CHW like `rendered`, overwritten; 0 at the
     /// positions `focus` does not cover). `rendered` are the RGB, depth and
-    /// edge features (`c × n` CHW each).
+    /// edge features (`c × n` CHW each). With `search` false the search is
+    /// skipped and the loss uses the matches [`GcfmWorkspace::matches`]
+    /// already holds (a view's kept matches, copied in by the caller).
     ///
     /// # Panics
     /// When the workspace was made for another style (a caller bug).
@@ -243,12 +245,13 @@ impl GpuGcfm {
         v_rgb: &wgpu::Buffer,
         v_depth: &wgpu::Buffer,
         scalars: &wgpu::Buffer,
+        search: bool,
     ) {
         assert_eq!(ws.m, style.positions, "GpuGcfm::record: workspace made for another style");
         if ws.n == 0 || ws.m == 0 {
             return;
         }
-        for chunk in &ws.chunks {
+        for chunk in ws.chunks.iter().filter(|_| search) {
             for (k, plan) in chunk.gemms.iter().enumerate() {
                 self.gemm.record(ctx, enc, plan, rendered[k], &style.feats[k], None, &ws.scores);
             }
@@ -290,7 +293,7 @@ pub fn bench_gcfm(ctx: &GpuContext, c: usize, n: usize, m: usize, reps: usize) -
     for _ in 0..reps.max(1) + 1 {
         let t = std::time::Instant::now();
         let mut enc = ctx.encoder("bench gcfm");
-        gcfm.record(ctx, &mut enc, &ws, &style, [&r[0], &r[1], &r[2]], &frame, &v_rgb, &v_depth, &scalars);
+        gcfm.record(ctx, &mut enc, &ws, &style, [&r[0], &r[1], &r[2]], &frame, &v_rgb, &v_depth, &scalars, true);
         ctx.submit(enc);
         if ctx.wait().is_err() {
             return Vec::new();

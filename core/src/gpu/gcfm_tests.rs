@@ -60,7 +60,7 @@ fn search_loss_and_gradients_match_the_cpu_gcfm() {
         let v_depth = ctx.upload("v_depth", &noise(c * n, 61));
         let scalars = ctx.upload("scalars", &noise(8, 62));
         let mut enc = ctx.encoder("gcfm test");
-        gcfm.record(ctx, &mut enc, &ws, &style, [&rb[0], &rb[1], &rb[2]], &focus, &v_rgb, &v_depth, &scalars);
+        gcfm.record(ctx, &mut enc, &ws, &style, [&rb[0], &rb[1], &rb[2]], &focus, &v_rgb, &v_depth, &scalars, true);
         ctx.submit(enc);
         let mt: Vec<u32> = ctx.read(&ws.matches).expect("matches");
         let s: Vec<f32> = ctx.read(&scalars).expect("scalars");

@@ -220,7 +220,8 @@ impl StepLossPlan {
     /// a content target and `depth_ref` the inverse depth of `G^c`, when the
     /// step uses them; the depth map's gradient only when `depth_grad`;
     /// `focus` the object focus ([`StepLossPlan::record_focus`]), the whole
-    /// frame without one. The
+    /// frame without one; `search` false keeps the GCFM matches that
+    /// [`StepLossPlan::matches`] holds instead of searching. The
     /// unweighted terms go to `scalars` ([`slot`]), the gradients of the
     /// weighted total to [`StepLossPlan::v_rgb`] and [`StepLossPlan::v_inv_depth`].
     #[allow(clippy::too_many_arguments)]
@@ -238,6 +239,7 @@ impl StepLossPlan {
         depth_grad: bool,
         focus: Option<&GpuFocus>,
         scalars: &wgpu::Buffer,
+        search: bool,
     ) {
         let focus = focus.unwrap_or(&self.frame);
         // The three maps VGG sees.
@@ -258,7 +260,7 @@ impl StepLossPlan {
 
         // Feature space: GCFM (gradients scaled by λ_GC), then content on the RGB features.
         let feats = [self.states[0].features(), self.states[1].features(), self.states[2].features()];
-        k.gcfm.record(ctx, enc, &self.gcfm_ws, style, feats, focus, &self.v_feat[0], &self.v_feat[1], scalars);
+        k.gcfm.record(ctx, enc, &self.gcfm_ws, style, feats, focus, &self.v_feat[0], &self.v_feat[1], scalars, search);
         if let Some(target) = content {
             self.content.record(ctx, enc, feats[0], target, focus, &self.v_feat[0], scalars);
         }
@@ -337,6 +339,7 @@ pub fn step_loss_gpu(
         depth_grad,
         focus.as_ref(),
         &scalars,
+        true,
     );
     ctx.submit(enc);
     let s: Vec<f32> = ctx.read(&scalars)?;

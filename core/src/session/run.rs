@@ -209,7 +209,7 @@ impl Session {
                 });
                 if config.matching.method != crate::style::MatchMethod::Exact {
                     on_event(Event::Warning(
-                        "the GPU engine searches matches exactly; the matching index and re-use are CPU options".into(),
+                        "the GPU engine searches matches exactly (it keeps them for --matching-reuse visits); the matching index is a CPU option".into(),
                     ));
                 }
                 Some(Box::new(e))
