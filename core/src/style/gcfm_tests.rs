@@ -79,7 +79,7 @@ fn matching_with_copied_positions_equals_dense() {
     let (c, n) = (24, 200);
     let st = style(c, 9, 13);
     let base = [feats(c, 8, 7), feats(c, 8, 8), feats(c, 8, 9)];
-    let src = |x: usize| if x % 17 == 0 { 3 + x % 5 } else { x % 3 };
+    let src = |x: usize| if x.is_multiple_of(17) { 3 + x % 5 } else { x % 3 };
     let r: [Vec<f32>; 3] = std::array::from_fn(|k| {
         (0..c).flat_map(|ch| (0..n).map(move |x| (ch, src(x)))).map(|(ch, s)| base[k][ch * 8 + s]).collect()
     });
