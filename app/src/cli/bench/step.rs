@@ -1,6 +1,7 @@
 //! `gast bench step`: one optimisation step part by part on a device (or two,
-//! `--compare`), the focus's cost (`--compare-focus`), the whole schedule's time
-//! and memory.
+//! `--compare`), the focus's cost (`--compare-focus`), what re-used matches buy
+//! on a GPU (`--matching-reuse N` alone with a GPU device), the whole
+//! schedule's time and memory.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -67,7 +68,9 @@ pub struct StepArgs {
     #[arg(long)]
     pub depth_model: Option<PathBuf>,
     /// The new settings, timed step by step beside the reference (im2col, exact matching);
-    /// giving any of them runs that comparison on the CPU instead of the device runs.
+    /// giving any of them runs that comparison on the CPU instead of the device runs, except
+    /// --matching-reuse alone with a GPU device (gpu, or auto on a hardware GPU): the GPU
+    /// engine's steps searching every visit, then keeping the matches.
     #[command(flatten)]
     pub fast: super::super::stylize::FastArgs,
 }
@@ -134,6 +137,17 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     use gast_core::style::{Phase, StyleConfig};
 
     let f = &args.fast;
+    // Re-used matches alone on a GPU: the engine with and without them.
+    let reuse_only = f.conv.is_none()
+        && f.matching.is_none()
+        && f.matching_dims.is_none()
+        && f.matching_candidates.is_none()
+        && f.vgg_window.is_none();
+    if let (Some(reuse), true, false) = (f.matching_reuse, reuse_only, args.compare || args.compare_focus) {
+        if let Some(ctx) = args.device.resolve().with_context(|| format!("--device {}", args.device))? {
+            return compare_reuse_gpu(&args, ctx, reuse);
+        }
+    }
     if f.conv.is_some()
         || f.matching.is_some()
         || f.matching_dims.is_some()
@@ -261,34 +275,61 @@ fn compare_focus(
     config: &gast_core::style::StyleConfig,
     budget: u32,
 ) -> anyhow::Result<ExitCode> {
-    use gast_core::style::Focus;
+    use gast_core::style::{Focus, StyleConfig};
+    let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
+    let arms = [
+        ("frame", StyleConfig { focus: Focus::Frame, ..config.clone() }),
+        ("object", StyleConfig { focus: Focus::Object, ..config.clone() }),
+    ];
+    compare_arms(inputs, arms, gpu, budget)
+}
+
+/// The same steps on one device with two configurations (`arms`, the
+/// reference first), and the ratio of their per-phase medians.
+fn compare_arms(
+    inputs: &StepInputs,
+    arms: [(&str, gast_core::style::StyleConfig); 2],
+    gpu: Option<gast_core::gpu::GpuContext>,
+    budget: u32,
+) -> anyhow::Result<ExitCode> {
     let mut runs = Vec::new();
-    for focus in [Focus::Frame, Focus::Object] {
-        println!("\nfocus {focus:?}:");
-        let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
-        let config = gast_core::style::StyleConfig { focus, ..config.clone() };
-        runs.push(time_steps(inputs, &config, gpu, budget)?);
+    for (label, config) in &arms {
+        println!("\n{label}:");
+        runs.push(time_steps(inputs, config, gpu.clone(), budget)?);
     }
-    let [frame, object] = &runs[..] else { return Ok(ExitCode::FAILURE) };
-    println!("\nframe against object focus on {}, the same {} steps in one process:", frame.device, frame.steps);
-    for (phase, frame_ms) in &frame.per_phase {
-        if let Some((_, object_ms)) = object.per_phase.iter().find(|p| p.0 == *phase) {
+    let ([a, b], [(la, _), (lb, _)]) = (&runs[..], &arms) else { return Ok(ExitCode::FAILURE) };
+    println!("\n{la} against {lb} on {}, the same {} steps in one process:", a.device, a.steps);
+    for (phase, a_ms) in &a.per_phase {
+        if let Some((_, b_ms)) = b.per_phase.iter().find(|p| p.0 == *phase) {
             println!(
-                "  {:<9} step median: frame {:>9.2} ms, object {:>9.2} ms, object/frame {:.3}",
+                "  {:<9} step median: {la} {:>9.2} ms, {lb} {:>9.2} ms, {lb}/{la} {:.3}",
                 format!("{phase:?}").to_lowercase(),
-                frame_ms,
-                object_ms,
-                object_ms / frame_ms.max(1e-9)
+                a_ms,
+                b_ms,
+                b_ms / a_ms.max(1e-9)
             );
         }
     }
     println!(
-        "  whole run: frame {:.2} s, object {:.2} s, object/frame {:.3}",
-        frame.wall_s,
-        object.wall_s,
-        object.wall_s / frame.wall_s.max(1e-9)
+        "  whole run: {la} {:.2} s, {lb} {:.2} s, {lb}/{la} {:.3}",
+        a.wall_s,
+        b.wall_s,
+        b.wall_s / a.wall_s.max(1e-9)
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// `gast bench step --matching-reuse N` on a GPU: the GPU engine's steps
+/// searching at every visit, then keeping each view's matches for N visits.
+fn compare_reuse_gpu(args: &StepArgs, ctx: gast_core::gpu::GpuContext, reuse: u32) -> anyhow::Result<ExitCode> {
+    use gast_core::style::{MatchingConfig, StyleConfig};
+    let inputs = step_inputs(args)?;
+    let config = StyleConfig { resolution: args.resolution, focus: args.focus, ..StyleConfig::default() };
+    let schedule = config.schedule();
+    let budget = args.steps.unwrap_or(schedule.color_steps + args.geometry_steps);
+    let kept = StyleConfig { matching: MatchingConfig { reuse, ..MatchingConfig::default() }, ..config.clone() };
+    let label = format!("reuse {reuse}");
+    compare_arms(&inputs, [("reuse 1", config), (label.as_str(), kept)], Some(ctx), budget)
 }
 
 /// Runs `budget` steps of a fresh session on `gpu` (the CPU when `None`) and
