@@ -143,10 +143,10 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         && f.matching_dims.is_none()
         && f.matching_candidates.is_none()
         && f.vgg_window.is_none();
-    if let (Some(reuse), true, false) = (f.matching_reuse, reuse_only, args.compare || args.compare_focus) {
-        if let Some(ctx) = args.device.resolve().with_context(|| format!("--device {}", args.device))? {
-            return compare_reuse_gpu(&args, ctx, reuse);
-        }
+    if let (Some(reuse), true, false) = (f.matching_reuse, reuse_only, args.compare || args.compare_focus)
+        && let Some(ctx) = args.device.resolve().with_context(|| format!("--device {}", args.device))?
+    {
+        return compare_reuse_gpu(&args, ctx, reuse);
     }
     if f.conv.is_some()
         || f.matching.is_some()
