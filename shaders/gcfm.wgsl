@@ -4,8 +4,9 @@
 // the arg-extrema per row, the per-position cosines and coefficients, the
 // gradient, and the loss terms. The loss and the gradient count only the
 // positions in `cells` (1 or 0; all ones for the whole frame), averaging over
-// their number counts[0] (see focus.wgsl); the search runs for every row, and
-// the rows outside the mask are not used.
+// their number counts[0] (see focus.wgsl); the search runs for every row
+// (argext) or, with a subset of the positions, only for those (gather,
+// argext_at), and the rows outside the mask are not used.
 
 struct GcfmParams {
     n: u32,
@@ -51,13 +52,10 @@ var<workgroup> best_i: array<u32, 256>;
 var<workgroup> worst_v: array<f32, 256>;
 var<workgroup> worst_i: array<u32, 256>;
 
-// One workgroup per rendered row of the chunk: ra = scores (len × m), rb =
-// the style's joint 1/norm (m). matches[x] = argmax (y+), matches[n + x] =
-// argmin (y−) of the scaled scores, the first index on ties.
-@compute @workgroup_size(256)
-fn argext(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {
-    let row = wid.x;
-    let t = lid.x;
+// The arg-extrema of chunk row `row` of the scores ra (len × m) scaled by
+// the style's joint 1/norm rb (m): (argmax y+, argmin y−), the first index on
+// ties; every thread of the workgroup calls it and gets the result.
+fn row_extrema(row: u32, t: u32) -> vec2<u32> {
     var bv = -3.4e38;
     var bi = 0xffffffffu;
     var wv = 3.4e38;
@@ -95,11 +93,47 @@ fn argext(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) w
         }
         workgroupBarrier();
     }
-    if t == 0u {
-        let x = u.x0 + row;
-        matches[x] = min(best_i[0], u.m - 1u);
-        matches[u.n + x] = min(worst_i[0], u.m - 1u);
+    let r = vec2<u32>(min(best_i[0], u.m - 1u), min(worst_i[0], u.m - 1u));
+    workgroupBarrier();
+    return r;
+}
+
+// One workgroup per rendered row of the chunk: ra = scores (len × m), rb =
+// the style's joint 1/norm (m). matches[x] = argmax (y+), matches[n + x] =
+// argmin (y−) of the scaled scores, the first index on ties.
+@compute @workgroup_size(256)
+fn argext(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {
+    let r = row_extrema(wid.x, lid.x);
+    if lid.x == 0u {
+        let x = u.x0 + wid.x;
+        matches[x] = r.x;
+        matches[u.n + x] = r.y;
     }
+}
+
+// argext over a subset of the rendered positions (the object focus's covered
+// ones): chunk row j is position rc[x0 + j] (u32 bits), whose matches it writes.
+@compute @workgroup_size(256)
+fn argext_at(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {
+    let r = row_extrema(wid.x, lid.x);
+    if lid.x == 0u {
+        let x = bitcast<u32>(rc[u.x0 + wid.x]);
+        matches[x] = r.x;
+        matches[u.n + x] = r.y;
+    }
+}
+
+// The subset's columns of one modality: out (c × len) = ra (c × n) at the
+// positions rc[0..len] (u32 bits), one thread per element.
+@compute @workgroup_size(256)
+fn gather(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = gid.x + gid.y * nwg.x * 256u;
+    if i >= u.c * u.len {
+        return;
+    }
+    let ch = i / u.len;
+    let j = i % u.len;
+    out[i] = ra[ch * u.n + bitcast<u32>(rc[j])];
 }
 
 // One thread per rendered position x of one modality: ra = rendered (c × n),

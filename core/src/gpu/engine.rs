@@ -20,7 +20,8 @@ use std::collections::HashMap;
 use super::adam::AdamKernel;
 use super::step_loss::{StepLossKernels, StepLossPlan, slot};
 use super::{
-    GpuAdam, GpuContext, GpuError, GpuFocus, GpuGaussians, GpuGrads, GpuRaster, GpuStyle, RasterKernels, RefLoss,
+    GcfmSubset, GpuAdam, GpuContext, GpuError, GpuFocus, GpuGaussians, GpuGrads, GpuRaster, GpuStyle, RasterKernels,
+    RefLoss, Search,
 };
 use crate::camera::Camera;
 use crate::eval::stability::CoveredColour;
@@ -62,7 +63,14 @@ struct ViewTarget {
     /// when the matching keeps them for several visits
     /// ([`crate::style::MatchingConfig::reuse`], as the CPU session does).
     kept: Option<(wgpu::Buffer, u32)>,
+    /// The GCFM search of the covered feature positions only, when the
+    /// focus covers at most [`SUBSET_SHARE`] of them.
+    subset: Option<GcfmSubset>,
 }
+
+/// Above this share of covered feature positions, the object focus searches
+/// every position (the gather would cost more than it saves).
+const SUBSET_SHARE: f64 = 0.75;
 
 /// One Adam state per parameter group, colour and geometry phases.
 struct Optimisers {
@@ -96,6 +104,8 @@ pub struct GpuEngine {
     bytes: u64,
     /// Warnings for the session to pass on (a render that ran out of pair room).
     warnings: Vec<String>,
+    /// One modality's gathered columns for the subset searches (grown to the largest).
+    subset_scratch: Option<wgpu::Buffer>,
 }
 
 impl GpuEngine {
@@ -154,6 +164,7 @@ impl GpuEngine {
             pair_capacity: ((pair_capacity as f64 * PAIR_HEADROOM) as usize).max(4096),
             bytes: 0,
             warnings: Vec::new(),
+            subset_scratch: None,
         };
         engine.bytes = ctx.allocated_bytes().saturating_sub(before);
         Ok(engine)
@@ -189,9 +200,21 @@ impl GpuEngine {
     pub fn set_style(&mut self, style: &StyleFeatures) {
         let before = self.ctx.allocated_bytes();
         self.style = GpuStyle::new(&self.ctx, style);
-        // GCFM workspaces depend on the style's size: rebuild the plans.
+        // GCFM workspaces depend on the style's size: rebuild the plans; the
+        // views' subset searches and kept matches belong to the old style.
         self.plans.clear();
+        for t in self.targets.iter_mut().flatten() {
+            t.subset = None;
+            t.kept = None;
+        }
         self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
+    }
+
+    /// Forgets every view's kept matches (the matching settings changed).
+    pub fn forget_matches(&mut self) {
+        for t in self.targets.iter_mut().flatten() {
+            t.kept = None;
+        }
     }
 
     /// New cameras (a new working resolution or background): per-view targets are recomputed.
@@ -252,6 +275,11 @@ impl GpuEngine {
             enc.copy_buffer_to_buffer(m, 0, plan.loss.matches(), 0, m.size());
         }
         let searched = kept.is_none();
+        let search = match (kept, focus.and(target.subset.as_ref()), &self.subset_scratch) {
+            (Some(_), _, _) => Search::Kept,
+            (None, Some(subset), Some(scratch)) => Search::Subset { subset, scratch },
+            _ => Search::Every,
+        };
         plan.loss.record(
             ctx,
             &k.loss,
@@ -265,7 +293,7 @@ impl GpuEngine {
             geometry,
             focus,
             &self.scalars,
-            searched,
+            search,
         );
         let keep = if searched && reuse > 1 {
             // The buffer of an earlier search of this view, or a new one.
@@ -404,12 +432,27 @@ impl GpuEngine {
         let focus = plan.loss.record_focus(ctx, &k.loss, &mut enc, &plan.raster.alpha)?;
         ctx.submit(enc);
         // One scalar per view, once: a view the scene does not cover falls back to the frame.
-        let focus = (focus.covered_cells(ctx)? > 0).then_some(focus);
+        let covered = focus.covered_cells(ctx)?;
+        let focus = (covered > 0).then_some(focus);
+        // With few covered positions, their list (read once) for a search of those only.
+        let positions = plan.loss.positions();
+        let subset = match &focus {
+            Some(f) if (covered as f64) <= SUBSET_SHARE * positions as f64 => {
+                let cells: Vec<f32> = ctx.read(f.cells())?;
+                let at: Vec<u32> = (0..positions as u32).filter(|&x| cells[x as usize] != 0.0).collect();
+                Some(plan.loss.gcfm_subset(ctx, &k.loss, &self.style, &at))
+            }
+            _ => None,
+        };
+        let need = subset.as_ref().map_or(0, |s| s.scratch_len(plan.loss.feature_len() / positions.max(1)));
+        if need > self.subset_scratch.as_ref().map_or(0, |b| (b.size() / 4) as usize) {
+            self.subset_scratch = Some(ctx.zeros("engine.subset_scratch", need));
+        }
         let colour = self.rendered_colour(cam)?;
         if view >= self.targets.len() {
             self.targets.resize_with(view + 1, || None);
         }
-        self.targets[view] = Some(ViewTarget { content, inv_depth, focus, colour, kept: None });
+        self.targets[view] = Some(ViewTarget { content, inv_depth, focus, colour, kept: None, subset });
         Ok(())
     }
 

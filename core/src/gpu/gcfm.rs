@@ -15,8 +15,10 @@
 //!
 //! With the object focus ([`super::GpuFocus`]), the loss and gradients count
 //! only the covered rendered positions and average over their number (read on
-//! the device); the search still runs over every row, whose matches outside
-//! the mask go unused, so its cost is the frame's.
+//! the device). The search runs over every row, or, given a [`GcfmSubset`] of
+//! the covered positions (the engine makes one per view), gathers their
+//! columns and searches only those rows: its cost follows the object, not
+//! the frame.
 //!
 //! The style side ([`GpuStyle`]) is uploaded once per style image with the
 //! norms [`StyleFeatures`] computed; a [`GcfmWorkspace`] holds the scratch and
@@ -96,6 +98,8 @@ struct Chunk {
 pub struct GcfmWorkspace {
     n: usize,
     m: usize,
+    /// Most rendered rows in one chunk of scores.
+    rows: usize,
     scores: wgpu::Buffer,
     matches: wgpu::Buffer,
     stats: wgpu::Buffer,
@@ -119,15 +123,68 @@ impl GcfmWorkspace {
     }
 }
 
+/// The search over a subset of one view's rendered positions (the object
+/// focus's covered ones), made once per view: their indices, the gather of
+/// each modality's columns into a scratch of `c × len`, and the GEMM chunks
+/// and arg-extrema over those rows only, which write the matches of the
+/// subset's positions (the others keep what they held; the masked loss does
+/// not read them).
+#[derive(Debug)]
+pub struct GcfmSubset {
+    len: usize,
+    m: usize,
+    positions: wgpu::Buffer,
+    gather: Launch,
+    chunks: Vec<Chunk>,
+}
+
+impl GcfmSubset {
+    /// Positions searched.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether it searches no position.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// `f32`s of the scratch [`Search::Subset`] needs.
+    pub fn scratch_len(&self, channels: usize) -> usize {
+        channels * self.len
+    }
+}
+
+/// Where a GCFM run takes its matches from.
+#[derive(Clone, Copy, Debug)]
+pub enum Search<'a> {
+    /// Searched for every rendered position.
+    Every,
+    /// Searched for the subset's positions only; `scratch` holds at least
+    /// [`GcfmSubset::scratch_len`] `f32`s.
+    Subset {
+        /// The positions and their launches.
+        subset: &'a GcfmSubset,
+        /// One modality's gathered columns.
+        scratch: &'a wgpu::Buffer,
+    },
+    /// Not searched: [`GcfmWorkspace::matches`] already holds them (a view's
+    /// kept matches, copied in by the caller).
+    Kept,
+}
+
 /// The compiled kernels.
 #[derive(Debug)]
 pub struct GpuGcfm {
     gemm: Gemm,
     argext: Kernel,
+    argext_at: Kernel,
+    gather: Kernel,
     stats: Kernel,
     grad: Kernel,
     reduce: Kernel,
     dummy: wgpu::Buffer,
+    dummy_rw: wgpu::Buffer,
 }
 
 fn u32_of(v: usize) -> u32 {
@@ -143,10 +200,13 @@ impl GpuGcfm {
         Self {
             gemm: Gemm::new(ctx),
             argext: Kernel::new(ctx, "gcfm.argext", src, "argext", &all[..4]),
+            argext_at: Kernel::new(ctx, "gcfm.argext_at", src, "argext_at", &all[..5]),
+            gather: Kernel::new(ctx, "gcfm.gather", src, "gather", &all[..6]),
             stats: Kernel::new(ctx, "gcfm.stats", src, "stats", &all),
             grad: Kernel::new(ctx, "gcfm.grad", src, "grad", &all[..6]),
             reduce: Kernel::new(ctx, "gcfm.reduce", src, "reduce", &all),
             dummy: ctx.zeros("gcfm.dummy", 1),
+            dummy_rw: ctx.zeros("gcfm.dummy_rw", 1),
         }
     }
 
@@ -213,6 +273,7 @@ impl GpuGcfm {
         GcfmWorkspace {
             n,
             m,
+            rows,
             scores: ctx.zeros("gcfm.scores", rows * m),
             matches: ctx.zeros("gcfm.matches", 2 * n),
             stats: ctx.zeros("gcfm.stats", 3 * 4 * n),
@@ -223,13 +284,49 @@ impl GpuGcfm {
         }
     }
 
+    /// The search of `ws`'s rendered positions at `positions` only (each
+    /// `< n`, for the style `ws` was made with).
+    pub fn subset(&self, ctx: &GpuContext, ws: &GcfmWorkspace, style: &GpuStyle, positions: &[u32]) -> GcfmSubset {
+        let (c, m, len) = (style.channels, style.positions, positions.len());
+        let base = GcfmParams { n: u32_of(ws.n), m: u32_of(m), c: u32_of(c), len: u32_of(len), ..Default::default() };
+        let mut chunks = Vec::new();
+        let mut x0 = 0;
+        while x0 < len {
+            let t = ws.rows.min(len - x0);
+            let gemms = (0..3)
+                .map(|k| {
+                    let spec = GemmSpec {
+                        a: Strided { offset: x0, row_stride: 1, col_stride: len, batch_stride: 0 },
+                        b: Strided::rows(0, m),
+                        c: Strided::rows(0, m),
+                        accumulate: k > 0,
+                        ..GemmSpec::plain(t, m, c)
+                    };
+                    self.gemm.plan(ctx, &spec)
+                })
+                .collect();
+            let p = GcfmParams { x0: u32_of(x0), len: u32_of(t), ..base };
+            chunks.push(Chunk {
+                gemms,
+                argext: Launch { uniform: ctx.uniform("gcfm.argext_at", &p), groups: [u32_of(t), 1, 1] },
+            });
+            x0 += t;
+        }
+        GcfmSubset {
+            len,
+            m,
+            positions: ctx.upload("gcfm.subset", if positions.is_empty() { &[0u32][..] } else { positions }),
+            gather: Launch::new(ctx, "gcfm.gather", &base, c * len, WORKGROUP),
+            chunks,
+        }
+    }
+
     /// Records the matching, the loss terms (into `scalars`) and the
     /// gradients w.r.t. the rendered RGB and depth features (`v_rgb`,
     /// `v_depth`, each `c × n` CHW like `rendered`, overwritten; 0 at the
     /// positions `focus` does not cover). `rendered` are the RGB, depth and
-    /// edge features (`c × n` CHW each). With `search` false the search is
-    /// skipped and the loss uses the matches [`GcfmWorkspace::matches`]
-    /// already holds (a view's kept matches, copied in by the caller).
+    /// edge features (`c × n` CHW each); `search` says where the matches
+    /// come from ([`Search`]).
     ///
     /// # Panics
     /// When the workspace was made for another style (a caller bug).
@@ -245,18 +342,38 @@ impl GpuGcfm {
         v_rgb: &wgpu::Buffer,
         v_depth: &wgpu::Buffer,
         scalars: &wgpu::Buffer,
-        search: bool,
+        search: Search<'_>,
     ) {
         assert_eq!(ws.m, style.positions, "GpuGcfm::record: workspace made for another style");
         if ws.n == 0 || ws.m == 0 {
             return;
         }
-        for chunk in ws.chunks.iter().filter(|_| search) {
-            for (k, plan) in chunk.gemms.iter().enumerate() {
-                self.gemm.record(ctx, enc, plan, rendered[k], &style.feats[k], None, &ws.scores);
+        match search {
+            Search::Every => {
+                for chunk in &ws.chunks {
+                    for (k, plan) in chunk.gemms.iter().enumerate() {
+                        self.gemm.record(ctx, enc, plan, rendered[k], &style.feats[k], None, &ws.scores);
+                    }
+                    let l = &chunk.argext;
+                    let b = [&l.uniform, &ws.scores, &style.joint_inv_norm, &ws.matches];
+                    self.argext.dispatch(ctx, enc, &b, l.groups);
+                }
             }
-            let l = &chunk.argext;
-            self.argext.dispatch(ctx, enc, &[&l.uniform, &ws.scores, &style.joint_inv_norm, &ws.matches], l.groups);
+            Search::Subset { subset: sub, scratch } => {
+                assert_eq!(sub.m, style.positions, "GpuGcfm::record: subset made for another style");
+                for chunk in &sub.chunks {
+                    for (k, plan) in chunk.gemms.iter().enumerate() {
+                        let g = &sub.gather;
+                        let b = [&g.uniform, rendered[k], &self.dummy, &self.dummy_rw, &sub.positions, scratch];
+                        self.gather.dispatch(ctx, enc, &b, g.groups);
+                        self.gemm.record(ctx, enc, plan, scratch, &style.feats[k], None, &ws.scores);
+                    }
+                    let l = &chunk.argext;
+                    let b = [&l.uniform, &ws.scores, &style.joint_inv_norm, &ws.matches, &sub.positions];
+                    self.argext_at.dispatch(ctx, enc, &b, l.groups);
+                }
+            }
+            Search::Kept => {}
         }
         for (k, l) in ws.stats_launch.iter().enumerate() {
             let (m, c) = (focus.cells(), focus.counts());
@@ -293,7 +410,18 @@ pub fn bench_gcfm(ctx: &GpuContext, c: usize, n: usize, m: usize, reps: usize) -
     for _ in 0..reps.max(1) + 1 {
         let t = std::time::Instant::now();
         let mut enc = ctx.encoder("bench gcfm");
-        gcfm.record(ctx, &mut enc, &ws, &style, [&r[0], &r[1], &r[2]], &frame, &v_rgb, &v_depth, &scalars, true);
+        gcfm.record(
+            ctx,
+            &mut enc,
+            &ws,
+            &style,
+            [&r[0], &r[1], &r[2]],
+            &frame,
+            &v_rgb,
+            &v_depth,
+            &scalars,
+            Search::Every,
+        );
         ctx.submit(enc);
         if ctx.wait().is_err() {
             return Vec::new();

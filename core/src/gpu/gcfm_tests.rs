@@ -60,7 +60,18 @@ fn search_loss_and_gradients_match_the_cpu_gcfm() {
         let v_depth = ctx.upload("v_depth", &noise(c * n, 61));
         let scalars = ctx.upload("scalars", &noise(8, 62));
         let mut enc = ctx.encoder("gcfm test");
-        gcfm.record(ctx, &mut enc, &ws, &style, [&rb[0], &rb[1], &rb[2]], &focus, &v_rgb, &v_depth, &scalars, true);
+        gcfm.record(
+            ctx,
+            &mut enc,
+            &ws,
+            &style,
+            [&rb[0], &rb[1], &rb[2]],
+            &focus,
+            &v_rgb,
+            &v_depth,
+            &scalars,
+            Search::Every,
+        );
         ctx.submit(enc);
         let mt: Vec<u32> = ctx.read(&ws.matches).expect("matches");
         let s: Vec<f32> = ctx.read(&scalars).expect("scalars");
@@ -128,4 +139,70 @@ fn search_loss_and_gradients_match_the_cpu_gcfm() {
     }
     println!("{}", report.join("\n"));
     assert!(failures.is_empty(), "{}\n{}", failures.join("\n"), report.join("\n"));
+}
+
+/// The search of a subset of the positions (the object focus's covered ones)
+/// gives those positions the matches the search of every position gives them,
+/// in one chunk of scores and in several, and the same loss and gradients.
+#[test]
+fn a_subset_search_matches_the_full_search_at_its_positions() {
+    let ctx = ctx();
+    let gcfm = GpuGcfm::new(ctx);
+    let (c, hs, ws_) = (64, 7, 11);
+    let m = hs * ws_;
+    let st = StyleFeatures::new([feats(c, m, 21), feats(c, m, 22), feats(c, m, 23)], c, hs, ws_);
+    let style = GpuStyle::new(ctx, &st);
+    for (n, limit) in [(257usize, SCORE_ELEMS), (190, 23 * m)] {
+        let r: [Vec<f32>; 3] = std::array::from_fn(|k| feats(c, n, 30 + k as u64 + n as u64));
+        let rb: Vec<wgpu::Buffer> = r.iter().map(|v| ctx.upload("r", v)).collect();
+        // About a third of the positions, ragged.
+        let at: Vec<u32> = noise(n, 80).iter().enumerate().filter(|(_, v)| **v > 0.3).map(|(x, _)| x as u32).collect();
+        let focus = GpuFocus::frame(ctx, 1, 1, n, 1);
+        let mut on = vec![0.0f32; n];
+        at.iter().for_each(|&x| on[x as usize] = 1.0);
+        ctx.write(focus.cells(), &on);
+        ctx.write(focus.counts(), &[at.len() as f32, 0.0, 0.0, 0.0]);
+        let run = |subset: Option<&GcfmSubset>| {
+            let ws = gcfm.workspace_chunked(ctx, &style, n, 0, 1.0, limit);
+            let scratch = ctx.upload("scratch", &noise(c * n, 81));
+            let search = match subset {
+                Some(subset) => Search::Subset { subset, scratch: &scratch },
+                None => Search::Every,
+            };
+            let (v_rgb, v_depth, scalars) = (ctx.zeros("v", c * n), ctx.zeros("v", c * n), ctx.zeros("s", 4));
+            let mut enc = ctx.encoder("gcfm subset test");
+            gcfm.record(
+                ctx,
+                &mut enc,
+                &ws,
+                &style,
+                [&rb[0], &rb[1], &rb[2]],
+                &focus,
+                &v_rgb,
+                &v_depth,
+                &scalars,
+                search,
+            );
+            ctx.submit(enc);
+            let mt: Vec<u32> = ctx.read(&ws.matches).expect("matches");
+            let (s, g): (Vec<f32>, Vec<f32>) = (ctx.read(&scalars).expect("s"), ctx.read(&v_rgb).expect("v"));
+            (mt, s, g, ws.chunks.len())
+        };
+        let (full, full_s, full_g, chunks) = run(None);
+        let ws = gcfm.workspace_chunked(ctx, &style, n, 0, 1.0, limit);
+        let subset = gcfm.subset(ctx, &ws, &style, &at);
+        assert_eq!(subset.len(), at.len());
+        let (part, part_s, part_g, _) = run(Some(&subset));
+        for &x in &at {
+            let x = x as usize;
+            assert_eq!((part[x], part[n + x]), (full[x], full[n + x]), "n {n} position {x}");
+        }
+        assert_eq!(part_s, full_s, "n {n}: loss terms");
+        assert_eq!(part_g, full_g, "n {n}: gradients");
+        println!(
+            "n {n}: {} of {n} positions searched, {chunks} chunk(s) of the full search, {} of the subset's",
+            at.len(),
+            subset.chunks.len()
+        );
+    }
 }

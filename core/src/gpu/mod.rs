@@ -53,7 +53,7 @@ pub use engine::GpuEngine;
 pub use feature_net::{GpuFeatureNet, GpuFeatureState};
 pub use focus::{FocusKernels, GpuFocus};
 pub use gaussians::{GpuGaussians, GpuGrads};
-pub use gcfm::{GcfmWorkspace, GpuGcfm, GpuStyle, bench_gcfm};
+pub use gcfm::{GcfmSubset, GcfmWorkspace, GpuGcfm, GpuStyle, Search, bench_gcfm};
 pub use gemm::{Gemm, GemmPlan, GemmSpec, Strided, bench_gemm};
 pub use kernel::{Bind, Kernel};
 pub use live::LiveGaussians;

@@ -17,9 +17,9 @@ use std::sync::Arc;
 
 use super::content::ContentLoss;
 use super::{
-    CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, FocusKernels, GcfmWorkspace, GpuContext,
-    GpuError, GpuFocus, GpuGcfm, GpuStyle, GpuVgg, GpuVggState, GpuVggWorkspace, LossKernels, ReduceKernels, RefLoss,
-    ResizeKernels, TvLoss,
+    CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, FocusKernels, GcfmSubset, GcfmWorkspace,
+    GpuContext, GpuError, GpuFocus, GpuGcfm, GpuStyle, GpuVgg, GpuVggState, GpuVggWorkspace, LossKernels,
+    ReduceKernels, RefLoss, ResizeKernels, Search, TvLoss,
 };
 use crate::style::config::LossWeights;
 use crate::style::gcfm::Matches;
@@ -186,6 +186,23 @@ impl StepLossPlan {
         self.gcfm_ws.matches()
     }
 
+    /// Feature positions of a render (relu3 height × width).
+    pub fn positions(&self) -> usize {
+        self.gcfm_ws.positions()
+    }
+
+    /// The GCFM search of this plan's rendered positions at `positions` only
+    /// ([`GpuGcfm::subset`]).
+    pub fn gcfm_subset(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        style: &GpuStyle,
+        positions: &[u32],
+    ) -> GcfmSubset {
+        k.gcfm.subset(ctx, &self.gcfm_ws, style, positions)
+    }
+
     /// Records the object focus of a render with alpha `alpha` (`h × w`):
     /// the masks and counts the loss uses with it ([`GpuFocus::from_alpha`]).
     pub fn record_focus(
@@ -220,8 +237,9 @@ impl StepLossPlan {
     /// a content target and `depth_ref` the inverse depth of `G^c`, when the
     /// step uses them; the depth map's gradient only when `depth_grad`;
     /// `focus` the object focus ([`StepLossPlan::record_focus`]), the whole
-    /// frame without one; `search` false keeps the GCFM matches that
-    /// [`StepLossPlan::matches`] holds instead of searching. The
+    /// frame without one; `search` where the GCFM matches come from (a
+    /// search of every position or of a subset, or the ones
+    /// [`StepLossPlan::matches`] holds). The
     /// unweighted terms go to `scalars` ([`slot`]), the gradients of the
     /// weighted total to [`StepLossPlan::v_rgb`] and [`StepLossPlan::v_inv_depth`].
     #[allow(clippy::too_many_arguments)]
@@ -239,7 +257,7 @@ impl StepLossPlan {
         depth_grad: bool,
         focus: Option<&GpuFocus>,
         scalars: &wgpu::Buffer,
-        search: bool,
+        search: Search<'_>,
     ) {
         let focus = focus.unwrap_or(&self.frame);
         // The three maps VGG sees.
@@ -339,7 +357,7 @@ pub fn step_loss_gpu(
         depth_grad,
         focus.as_ref(),
         &scalars,
-        true,
+        Search::Every,
     );
     ctx.submit(enc);
     let s: Vec<f32> = ctx.read(&scalars)?;

@@ -387,6 +387,9 @@ impl Session {
         }
         if restyled || config.matching != self.config.matching {
             self.view_matches.iter_mut().for_each(|m| *m = None);
+            if let Some(e) = &mut self.engine {
+                e.forget_matches();
+            }
         }
         if config.resolution != self.config.resolution || config.background != self.config.background {
             self.cameras = self.base_cameras.iter().map(|c| c.with_longer_side(config.resolution)).collect();
