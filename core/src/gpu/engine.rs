@@ -201,12 +201,10 @@ impl GpuEngine {
         let before = self.ctx.allocated_bytes();
         self.style = GpuStyle::new(&self.ctx, style);
         // GCFM workspaces depend on the style's size: rebuild the plans; the
-        // views' subset searches and kept matches belong to the old style.
+        // views' subset searches and kept matches belong to the old style, so
+        // their targets are made anew at their next visit.
         self.plans.clear();
-        for t in self.targets.iter_mut().flatten() {
-            t.subset = None;
-            t.kept = None;
-        }
+        self.targets.iter_mut().for_each(|t| *t = None);
         self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
     }
 
