@@ -156,13 +156,19 @@ pub fn run_with(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Re
             let Some(rs) = cc.wgpu_render_state.as_ref() else {
                 return Err("the studio needs the wgpu renderer, which did not start".into());
             };
-            let gpu =
-                gast_core::gpu::GpuContext::from_device(rs.device.clone(), rs.queue.clone(), rs.adapter.get_info());
-            let mut resources = ViewportResources::new(&rs.device, rs.target_format);
-            resources.use_gpu_sort(gpu.clone());
-            rs.renderer.write().callback_resources.insert(resources);
             let mut app = StudioApp::new(cc.egui_ctx.clone(), args);
-            app.set_gpu(gpu);
+            match viewport_support(&rs.device.limits(), &rs.adapter.get_info().name) {
+                Ok(()) => {
+                    let info = rs.adapter.get_info();
+                    let gpu = gast_core::gpu::GpuContext::from_device(rs.device.clone(), rs.queue.clone(), info);
+                    let mut resources = ViewportResources::new(&rs.device, rs.target_format);
+                    resources.use_gpu_sort(gpu.clone());
+                    rs.renderer.write().callback_resources.insert(resources);
+                    app.set_gpu(gpu);
+                }
+                // The window still opens (menus, export, CPU runs); the viewport stays empty.
+                Err(why) => app.report(anyhow::anyhow!(why)),
+            }
             if let Some(starter) = starter {
                 app.set_session_starter(starter);
             }
@@ -170,6 +176,25 @@ pub fn run_with(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Re
         }),
     )
     .map_err(|e| anyhow::anyhow!("the studio window failed: {e}"))
+}
+
+/// Storage buffers the viewport's kernels bind in one shader stage (its
+/// projection pass; `shaders/splat_project.wgsl`).
+const VIEWPORT_STORAGE_BUFFERS: u32 = 4;
+
+/// Whether the window's device can run the viewport's compute passes: a GL
+/// fallback without compute storage buffers cannot (wgpu would refuse the
+/// pipelines), and the studio then says so instead of stopping.
+fn viewport_support(limits: &wgpu::Limits, adapter: &str) -> Result<(), String> {
+    let found = limits.max_storage_buffers_per_shader_stage;
+    if found >= VIEWPORT_STORAGE_BUFFERS {
+        return Ok(());
+    }
+    Err(format!(
+        "the viewport cannot draw on this graphics driver: it needs {VIEWPORT_STORAGE_BUFFERS} storage buffers per \
+         shader stage and \"{adapter}\" offers {found} (a GL fallback); install a Vulkan driver (Debian: \
+         mesa-vulkan-drivers) and restart. Runs on the CPU and exports still work."
+    ))
 }
 
 /// eframe's device, created with the adapter's limits and the optional

@@ -750,3 +750,15 @@ fn the_contact_sheet_of_a_run_is_exported() {
         println!("kept {}", dir.display());
     }
 }
+
+/// A driver without compute storage buffers (the GL fallback's WebGL2-like
+/// limits) gets a message naming what is missing and what to install, not
+/// the wgpu validation panic; a Vulkan device's limits pass.
+#[test]
+fn the_viewport_explains_a_driver_it_cannot_use() {
+    let gl = wgpu::Limits::downlevel_webgl2_defaults();
+    let why = super::viewport_support(&gl, "llvmpipe (GL)").expect_err("no storage buffers");
+    assert!(why.contains("offers 0") && why.contains("\"llvmpipe (GL)\""), "{why}");
+    assert!(why.contains("mesa-vulkan-drivers"), "{why}");
+    assert_eq!(super::viewport_support(&wgpu::Limits::default(), "Vulkan"), Ok(()));
+}
