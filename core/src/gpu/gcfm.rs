@@ -246,29 +246,7 @@ impl GpuGcfm {
             scale,
             ..Default::default()
         };
-        let mut chunks = Vec::new();
-        let mut x0 = 0;
-        while x0 < n {
-            let t = rows.min(n - x0);
-            let gemms = (0..3)
-                .map(|k| {
-                    let spec = GemmSpec {
-                        a: Strided { offset: x0, row_stride: 1, col_stride: n, batch_stride: 0 },
-                        b: Strided::rows(0, m),
-                        c: Strided::rows(0, m),
-                        accumulate: k > 0,
-                        ..GemmSpec::plain(t, m, c)
-                    };
-                    self.gemm.plan(ctx, &spec)
-                })
-                .collect();
-            let p = GcfmParams { x0: u32_of(x0), len: u32_of(t), ..base };
-            chunks.push(Chunk {
-                gemms,
-                argext: Launch { uniform: ctx.uniform("gcfm.argext", &p), groups: [u32_of(t), 1, 1] },
-            });
-            x0 += t;
-        }
+        let chunks = self.chunks(ctx, &base, n, rows, "gcfm.argext");
         let per = |k: usize, len: usize| GcfmParams { modality: u32_of(k), len: u32_of(len), ..base };
         GcfmWorkspace {
             n,
@@ -284,15 +262,15 @@ impl GpuGcfm {
         }
     }
 
-    /// The search of `ws`'s rendered positions at `positions` only (each
-    /// `< n`, for the style `ws` was made with).
-    pub fn subset(&self, ctx: &GpuContext, ws: &GcfmWorkspace, style: &GpuStyle, positions: &[u32]) -> GcfmSubset {
-        let (c, m, len) = (style.channels, style.positions, positions.len());
-        let base = GcfmParams { n: u32_of(ws.n), m: u32_of(m), c: u32_of(c), len: u32_of(len), ..Default::default() };
+    /// The search's chunks over `len` rows (`c × len` CHW features, `base`'s
+    /// `m` style positions and `c` channels), at most `rows` rows each: three
+    /// accumulating GEMMs and the arg-extrema launch (`label`) per chunk.
+    fn chunks(&self, ctx: &GpuContext, base: &GcfmParams, len: usize, rows: usize, label: &str) -> Vec<Chunk> {
+        let (m, c) = (base.m as usize, base.c as usize);
         let mut chunks = Vec::new();
         let mut x0 = 0;
         while x0 < len {
-            let t = ws.rows.min(len - x0);
+            let t = rows.min(len - x0);
             let gemms = (0..3)
                 .map(|k| {
                     let spec = GemmSpec {
@@ -305,13 +283,19 @@ impl GpuGcfm {
                     self.gemm.plan(ctx, &spec)
                 })
                 .collect();
-            let p = GcfmParams { x0: u32_of(x0), len: u32_of(t), ..base };
-            chunks.push(Chunk {
-                gemms,
-                argext: Launch { uniform: ctx.uniform("gcfm.argext_at", &p), groups: [u32_of(t), 1, 1] },
-            });
+            let p = GcfmParams { x0: u32_of(x0), len: u32_of(t), ..*base };
+            chunks.push(Chunk { gemms, argext: Launch { uniform: ctx.uniform(label, &p), groups: [u32_of(t), 1, 1] } });
             x0 += t;
         }
+        chunks
+    }
+
+    /// The search of `ws`'s rendered positions at `positions` only (each
+    /// `< n`, for the style `ws` was made with).
+    pub fn subset(&self, ctx: &GpuContext, ws: &GcfmWorkspace, style: &GpuStyle, positions: &[u32]) -> GcfmSubset {
+        let (c, m, len) = (style.channels, style.positions, positions.len());
+        let base = GcfmParams { n: u32_of(ws.n), m: u32_of(m), c: u32_of(c), len: u32_of(len), ..Default::default() };
+        let chunks = self.chunks(ctx, &base, len, ws.rows, "gcfm.argext_at");
         GcfmSubset {
             len,
             m,
