@@ -15,7 +15,8 @@
 //! whole-frame search does a third less work; Winograd's 4×4 output tiles
 //! round the same input differently at different offsets in a tile, which
 //! leaves 940–977 distinct, and the search then runs on every position (the
-//! hashing costs a few milliseconds against the search's hundreds).
+//! hashing reads each feature twice: two passes over the `3c × n` values
+//! against the search's `3c × n × m` multiply-adds).
 
 use super::gcfm::Matches;
 
