@@ -157,9 +157,9 @@ pub fn run_with(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Re
                 return Err("the studio needs the wgpu renderer, which did not start".into());
             };
             let mut app = StudioApp::new(cc.egui_ctx.clone(), args);
-            match viewport_support(&rs.device.limits(), &rs.adapter.get_info().name) {
+            let info = rs.adapter.get_info();
+            match viewport_support(&rs.device.limits(), &info.name) {
                 Ok(()) => {
-                    let info = rs.adapter.get_info();
                     let gpu = gast_core::gpu::GpuContext::from_device(rs.device.clone(), rs.queue.clone(), info);
                     let mut resources = ViewportResources::new(&rs.device, rs.target_format);
                     resources.use_gpu_sort(gpu.clone());
