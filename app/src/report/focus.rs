@@ -30,6 +30,19 @@ fn nn(m: &Measures) -> f32 {
     m.nn_cosine_object
 }
 
+/// Whether the colour-collapse detector fired on `r`'s run.
+fn collapsed(r: &Record) -> bool {
+    r.issues.iter().any(|d| d.kind == DegenerationKind::ColourCollapse)
+}
+
+fn yes_no(b: bool) -> &'static str {
+    if b {
+        "yes"
+    } else {
+        "no"
+    }
+}
+
 /// The rows of `study` with their records.
 fn rows_of(run: &RunSummary, study: Study) -> Vec<(&Row, &Record)> {
     run.rows
@@ -63,27 +76,30 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
     let mut out = vec![
         format!("## Focus: frame against object (SW, NN-cos and content on relu3, RMSE on the 37.5° pairs; all on the object's pixels of the fitted ring{over})"),
         String::new(),
-        "| scene | style | steps | ΔSW frame | ΔSW object | ratio | ΔNN frame | ΔNN object | ratio | content frame | content object | RMSE frame | RMSE object | RMSE ratio | passes |"
+        "| scene | style | steps | ΔSW frame | ΔSW object | ratio | ΔNN frame | ΔNN object | ratio | content frame | content object | RMSE frame | RMSE object | RMSE ratio | colours collapsed (frame, object) | passes |"
             .into(),
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|".into(),
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|".into(),
     ];
     let (mut ratios, mut nn_ratios, mut rmse_ratios) = (Vec::new(), Vec::new(), Vec::new());
-    let mut per_scene: Vec<(String, usize, usize)> = Vec::new();
+    // Per scene: pairs passing, pairs measured, pairs whose frame run collapsed.
+    let mut per_scene: Vec<(String, usize, usize, usize)> = Vec::new();
     for &(row, frame) in rows.iter().filter(|(r, _)| r.label == FOCUS_FRAME) {
         let (scene, style) = (frame.scene_name(), frame.style.clone());
         let step = row.step;
-        let count = |per_scene: &mut Vec<(String, usize, usize)>, pass: bool| match per_scene
+        let frame_collapsed = collapsed(frame);
+        let count = |per_scene: &mut Vec<(String, usize, usize, usize)>, pass: bool| match per_scene
             .iter_mut()
-            .find(|(s, _, _)| *s == scene)
+            .find(|(s, ..)| *s == scene)
         {
             Some(e) => {
                 e.1 += usize::from(pass);
                 e.2 += 1;
+                e.3 += usize::from(frame_collapsed);
             }
-            None => per_scene.push((scene.clone(), usize::from(pass), 1)),
+            None => per_scene.push((scene.clone(), usize::from(pass), 1, usize::from(frame_collapsed))),
         };
         let Some((_, object)) = find(FOCUS_OBJECT, &scene, &style) else {
-            out.push(format!("| {scene} | {style} | {step} | no object arm in this run |||||||||||| no |"));
+            out.push(format!("| {scene} | {style} | {step} | no object arm in this run ||||||||||||| no |"));
             count(&mut per_scene, false);
             continue;
         };
@@ -105,7 +121,7 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
             decrease(object, step, nn),
         ) else {
             out.push(format!(
-                "| {scene} | {style} | {step} | failed: frame {} ({} steps), object {} ({} steps) |||||||||||| no |",
+                "| {scene} | {style} | {step} | failed: frame {} ({} steps), object {} ({} steps) ||||||||||||| no |",
                 frame.health(),
                 frame.steps,
                 object.health(),
@@ -124,8 +140,10 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         rmse_ratios.push(ratio_rmse);
         count(&mut per_scene, pass);
         out.push(format!(
-            "| {scene} | {style} | {step} | {sw_f:.4} | {sw_o:.4} | {ratio_sw:.2} | {nn_f:.4} | {nn_o:.4} | {ratio_nn:.2} | {content_f:.4} | {content_o:.4} | {rmse_f:.4} | {rmse_o:.4} | {ratio_rmse:.2} | {} |",
-            if pass { "yes" } else { "no" }
+            "| {scene} | {style} | {step} | {sw_f:.4} | {sw_o:.4} | {ratio_sw:.2} | {nn_f:.4} | {nn_o:.4} | {ratio_nn:.2} | {content_f:.4} | {content_o:.4} | {rmse_f:.4} | {rmse_o:.4} | {ratio_rmse:.2} | {}, {} | {} |",
+            yes_no(frame_collapsed),
+            yes_no(collapsed(object)),
+            yes_no(pass)
         ));
     }
     out.push(String::new());
@@ -135,9 +153,10 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
             out.push(format!("Median ratio of the {name} (object / frame) over {n} measured pairs: {m:.2}."));
         }
     }
-    for (scene, pass, n) in per_scene {
+    for (scene, pass, n, frame_collapsed) in per_scene {
         out.push(format!(
-            "{scene}: object beats frame beyond the seed floor, with RMSE within {RMSE_FACTOR}x, on {pass} of {n} styles."
+            "{scene}: object beats frame beyond the seed floor, with RMSE within {RMSE_FACTOR}x, on {pass} of {n} styles \
+             (the colour-collapse detector fired on the frame run of {frame_collapsed} of them)."
         ));
     }
     out.push(String::new());
@@ -216,7 +235,6 @@ fn collapse_lines(run: &RunSummary) -> Vec<String> {
                 .collect::<Vec<_>>()
                 .join(", ")
         };
-        let collapsed = r.issues.iter().any(|d| d.kind == DegenerationKind::ColourCollapse);
         out.push(format!(
             "| {} | {} | {} | {} | {} | {:.4} | {} | {} |",
             row.label,
@@ -225,7 +243,7 @@ fn collapse_lines(run: &RunSummary) -> Vec<String> {
             rel(|m| m.colour.luminance),
             rel(|m| m.colour.chroma),
             r.at(row.step).map_or(f32::NAN, |c| c.measures.sliced_wasserstein_object),
-            if collapsed { "yes" } else { "no" },
+            yes_no(collapsed(r)),
             r.health()
         ));
     }
@@ -313,5 +331,35 @@ mod tests {
             object_line.contains("| -0.2000 | – | – | – |") && object_line.contains("0.400 → 0.380"),
             "{object_line}"
         );
+    }
+
+    #[test]
+    fn the_focus_table_says_which_arms_colours_collapsed() {
+        let row =
+            |label: &str, trial: &str| Row { study: Study::Focus, label: label.into(), trial: trial.into(), step: 200 };
+        let mut frame =
+            record("f", "block2", measures(5.0, 4.0, 0.23, 1.0, 0.16), measures(4.0, 3.0, 0.22, 0.5, 0.03));
+        frame.stable = false;
+        frame.issues = vec![gast_core::eval::Degeneration {
+            kind: DegenerationKind::ColourCollapse,
+            value: 0.8,
+            threshold: 0.5,
+        }];
+        let object =
+            record("o", "block2", measures(5.0, 4.0, 0.23, 1.0, 0.16), measures(4.8, 3.9, 0.21, 0.9, 0.15));
+        let run = RunSummary {
+            command: String::new(),
+            threads: 2,
+            sizes: Sizes::quick(),
+            wall_s: 0.0,
+            rows: vec![row(FOCUS_FRAME, "f"), row(FOCUS_OBJECT, "o")],
+            trials: vec![frame, object],
+        };
+        let lines = focus_lines(&run);
+        let pair = lines.iter().find(|l| l.starts_with("| guitar | block2 | 200 |")).expect("pair line");
+        // Frame lowered SW more (by collapsing), so the pair fails, and the line says why.
+        assert!(pair.ends_with("| yes, no | no |"), "{pair}");
+        let tally = lines.iter().find(|l| l.starts_with("guitar: object beats frame")).expect("tally");
+        assert!(tally.contains("on 0 of 1 styles") && tally.contains("fired on the frame run of 1 of them"), "{tally}");
     }
 }
