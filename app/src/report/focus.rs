@@ -36,11 +36,7 @@ fn collapsed(r: &Record) -> bool {
 }
 
 fn yes_no(b: bool) -> &'static str {
-    if b {
-        "yes"
-    } else {
-        "no"
-    }
+    if b { "yes" } else { "no" }
 }
 
 /// The rows of `study` with their records.
@@ -337,16 +333,11 @@ mod tests {
     fn the_focus_table_says_which_arms_colours_collapsed() {
         let row =
             |label: &str, trial: &str| Row { study: Study::Focus, label: label.into(), trial: trial.into(), step: 200 };
-        let mut frame =
-            record("f", "block2", measures(5.0, 4.0, 0.23, 1.0, 0.16), measures(4.0, 3.0, 0.22, 0.5, 0.03));
+        let mut frame = record("f", "block2", measures(5.0, 4.0, 0.23, 1.0, 0.16), measures(4.0, 3.0, 0.22, 0.5, 0.03));
         frame.stable = false;
-        frame.issues = vec![gast_core::eval::Degeneration {
-            kind: DegenerationKind::ColourCollapse,
-            value: 0.8,
-            threshold: 0.5,
-        }];
-        let object =
-            record("o", "block2", measures(5.0, 4.0, 0.23, 1.0, 0.16), measures(4.8, 3.9, 0.21, 0.9, 0.15));
+        frame.issues =
+            vec![gast_core::eval::Degeneration { kind: DegenerationKind::ColourCollapse, value: 0.8, threshold: 0.5 }];
+        let object = record("o", "block2", measures(5.0, 4.0, 0.23, 1.0, 0.16), measures(4.8, 3.9, 0.21, 0.9, 0.15));
         let run = RunSummary {
             command: String::new(),
             threads: 2,
