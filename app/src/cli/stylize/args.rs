@@ -83,9 +83,10 @@ pub struct StylizeArgs {
     /// Working resolution: longer side of the optimisation renders [default:
     /// follows the object: the smallest size (a multiple of 32) at which it
     /// spans 64 relu3 positions across its longer side, at most the size where a
-    /// CPU step takes about 1 s; on a 2-core CPU a step takes about 0.6 s at
-    /// 256 px, 1.4 s at 384 px and 2.4 s at 512 px (the time grows with the
-    /// pixel count)].
+    /// CPU step takes about 1 s; on a 2-core CPU a step with the object focus
+    /// takes about 0.18 s at 256 px, 0.36 s at 384 px, 0.58 s at 512 px and
+    /// 1 s at 672 px; with whole-frame losses 0.57 s at 256 px and 2.3 s at
+    /// 512 px].
     #[arg(long)]
     pub resolution: Option<u32>,
     /// λ_GC, contrastive feature matching [default: 2].
