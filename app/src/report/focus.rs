@@ -30,6 +30,15 @@ fn nn(m: &Measures) -> f32 {
     m.nn_cosine_object
 }
 
+/// Wall seconds `r` spent stepping from the colour-matched state to `step`
+/// (preparation and measuring left out).
+fn optimising_s(r: &Record, step: u32) -> f64 {
+    match (r.checkpoints.first(), r.at(step)) {
+        (Some(a), Some(b)) => b.seconds - a.seconds,
+        _ => f64::NAN,
+    }
+}
+
 /// Whether the colour-collapse detector fired on `r`'s run.
 fn collapsed(r: &Record) -> bool {
     r.issues.iter().any(|d| d.kind == DegenerationKind::ColourCollapse)
@@ -72,11 +81,12 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
     let mut out = vec![
         format!("## Focus: frame against object (SW, NN-cos and content on relu3, RMSE on the 37.5° pairs; all on the object's pixels of the fitted ring{over})"),
         String::new(),
-        "| scene | style | steps | ΔSW frame | ΔSW object | ratio | ΔNN frame | ΔNN object | ratio | content frame | content object | RMSE frame | RMSE object | RMSE ratio | colours collapsed (frame, object) | passes |"
+        "| scene | style | steps | ΔSW frame | ΔSW object | ratio | ΔNN frame | ΔNN object | ratio | content frame | content object | RMSE frame | RMSE object | RMSE ratio | colours collapsed (frame, object) | optimising s (frame, object) | passes |"
             .into(),
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|".into(),
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|".into(),
     ];
-    let (mut ratios, mut nn_ratios, mut rmse_ratios) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut ratios, mut nn_ratios, mut rmse_ratios, mut time_ratios) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     // Per scene: pairs passing, pairs measured, pairs whose frame run collapsed.
     let mut per_scene: Vec<(String, usize, usize, usize)> = Vec::new();
     for &(row, frame) in rows.iter().filter(|(r, _)| r.label == FOCUS_FRAME) {
@@ -95,7 +105,7 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
             None => per_scene.push((scene.clone(), usize::from(pass), 1, usize::from(frame_collapsed))),
         };
         let Some((_, object)) = find(FOCUS_OBJECT, &scene, &style) else {
-            out.push(format!("| {scene} | {style} | {step} | no object arm in this run ||||||||||||| no |"));
+            out.push(format!("| {scene} | {style} | {step} | no object arm in this run |||||||||||||| no |"));
             count(&mut per_scene, false);
             continue;
         };
@@ -117,7 +127,7 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
             decrease(object, step, nn),
         ) else {
             out.push(format!(
-                "| {scene} | {style} | {step} | failed: frame {} ({} steps), object {} ({} steps) ||||||||||||| no |",
+                "| {scene} | {style} | {step} | failed: frame {} ({} steps), object {} ({} steps) |||||||||||||| no |",
                 frame.health(),
                 frame.steps,
                 object.health(),
@@ -131,19 +141,26 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         let (content_f, content_o) = (at(frame, |m| m.content_object), at(object, |m| m.content_object));
         let pass = sw_o - sw_f > floor(sw) && nn_o - nn_f > floor(nn) && rmse_o <= RMSE_FACTOR * rmse_f;
         let (ratio_sw, ratio_nn, ratio_rmse) = (sw_o / sw_f, nn_o / nn_f, rmse_o / rmse_f);
+        let (time_f, time_o) = (optimising_s(frame, step), optimising_s(object, step));
+        time_ratios.push((time_o / time_f) as f32);
         ratios.push(ratio_sw);
         nn_ratios.push(ratio_nn);
         rmse_ratios.push(ratio_rmse);
         count(&mut per_scene, pass);
         out.push(format!(
-            "| {scene} | {style} | {step} | {sw_f:.4} | {sw_o:.4} | {ratio_sw:.2} | {nn_f:.4} | {nn_o:.4} | {ratio_nn:.2} | {content_f:.4} | {content_o:.4} | {rmse_f:.4} | {rmse_o:.4} | {ratio_rmse:.2} | {}, {} | {} |",
+            "| {scene} | {style} | {step} | {sw_f:.4} | {sw_o:.4} | {ratio_sw:.2} | {nn_f:.4} | {nn_o:.4} | {ratio_nn:.2} | {content_f:.4} | {content_o:.4} | {rmse_f:.4} | {rmse_o:.4} | {ratio_rmse:.2} | {}, {} | {time_f:.0}, {time_o:.0} | {} |",
             yes_no(frame_collapsed),
             yes_no(collapsed(object)),
             yes_no(pass)
         ));
     }
     out.push(String::new());
-    for (name, v) in [("SW decreases", ratios), ("NN-cos decreases", nn_ratios), ("object RMSEs", rmse_ratios)] {
+    for (name, v) in [
+        ("SW decreases", ratios),
+        ("NN-cos decreases", nn_ratios),
+        ("object RMSEs", rmse_ratios),
+        ("optimising times (the same steps; both arms interleaved in one process)", time_ratios),
+    ] {
         let n = v.len();
         if let Some(m) = median(v) {
             out.push(format!("Median ratio of the {name} (object / frame) over {n} measured pairs: {m:.2}."));
@@ -335,9 +352,12 @@ mod tests {
             |label: &str, trial: &str| Row { study: Study::Focus, label: label.into(), trial: trial.into(), step: 200 };
         let mut frame = record("f", "block2", measures(5.0, 4.0, 0.23, 1.0, 0.16), measures(4.0, 3.0, 0.22, 0.5, 0.03));
         frame.stable = false;
+        frame.checkpoints[1].seconds = 90.0;
         frame.issues =
             vec![gast_core::eval::Degeneration { kind: DegenerationKind::ColourCollapse, value: 0.8, threshold: 0.5 }];
         let object = record("o", "block2", measures(5.0, 4.0, 0.23, 1.0, 0.16), measures(4.8, 3.9, 0.21, 0.9, 0.15));
+        let mut object = object;
+        object.checkpoints[1].seconds = 30.0;
         let run = RunSummary {
             command: String::new(),
             threads: 2,
@@ -349,7 +369,8 @@ mod tests {
         let lines = focus_lines(&run);
         let pair = lines.iter().find(|l| l.starts_with("| guitar | block2 | 200 |")).expect("pair line");
         // Frame lowered SW more (by collapsing), so the pair fails, and the line says why.
-        assert!(pair.ends_with("| yes, no | no |"), "{pair}");
+        assert!(pair.ends_with("| yes, no | 90, 30 | no |"), "{pair}");
+        assert!(lines.iter().any(|l| l.starts_with("Median ratio of the optimising times") && l.contains(": 0.33.")));
         let tally = lines.iter().find(|l| l.starts_with("guitar: object beats frame")).expect("tally");
         assert!(tally.contains("on 0 of 1 styles") && tally.contains("fired on the frame run of 1 of them"), "{tally}");
     }
