@@ -17,6 +17,7 @@ use gast_core::io::{write_bytes, write_depth_png, write_exr_depth, write_png_gra
 use gast_core::raster::{self, RenderOptions};
 use gast_core::session::{Event, Session, SessionInputs, Stage1Cache, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::StyleConfig;
+use gast_core::style::focus::Focus;
 use gast_core::vision::Vgg;
 use gast_core::vision::style_depth::{DepthImage, DepthProvider};
 use serde::Serialize;
@@ -261,8 +262,14 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     if args.resolution.is_none() && args.preset.is_none() {
         let subject = framing_subject(&scene);
         let span = cameras.iter().map(|c| subject_span(c, &subject)).sum::<f32>() / cameras.len().max(1) as f32;
-        let object =
-            config.focus.is_object(mean_coverage(&scene, &cameras, &RenderOptions { background: config.background }));
+        // `auto` decides on the views' coverage, which only it needs rendering.
+        let object = match config.focus {
+            Focus::Frame => false,
+            Focus::Object => true,
+            Focus::Auto => {
+                Focus::Auto.is_object(mean_coverage(&scene, &cameras, &RenderOptions { background: config.background }))
+            }
+        };
         let (chosen, wanted) =
             if gpu.is_some() { auto_resolution_gpu(span) } else { auto_resolution(span, StepModel::for_focus(object)) };
         let hint = match &gpu {
