@@ -39,6 +39,21 @@ fn optimising_s(r: &Record, step: u32) -> f64 {
     }
 }
 
+/// One scene's counts over its pairs in the focus table.
+#[derive(Default)]
+struct SceneTally {
+    scene: String,
+    pairs: usize,
+    /// Pairs where object beats frame beyond the seed floor with RMSE in bounds.
+    passing: usize,
+    frame_collapsed: usize,
+    object_collapsed: usize,
+    /// Pairs where object's NN-cos decrease is the larger, whatever the floor.
+    nn_more: usize,
+    /// The same for SW.
+    sw_more: usize,
+}
+
 /// Whether the colour-collapse detector fired on `r`'s run.
 fn collapsed(r: &Record) -> bool {
     r.issues.iter().any(|d| d.kind == DegenerationKind::ColourCollapse)
@@ -87,26 +102,32 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
     ];
     let (mut ratios, mut nn_ratios, mut rmse_ratios, mut time_ratios) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    // Per scene: pairs passing, pairs measured, pairs whose frame run collapsed.
-    let mut per_scene: Vec<(String, usize, usize, usize)> = Vec::new();
+    let mut per_scene: Vec<SceneTally> = Vec::new();
     for &(row, frame) in rows.iter().filter(|(r, _)| r.label == FOCUS_FRAME) {
         let (scene, style) = (frame.scene_name(), frame.style.clone());
         let step = row.step;
         let frame_collapsed = collapsed(frame);
-        let count = |per_scene: &mut Vec<(String, usize, usize, usize)>, pass: bool| match per_scene
-            .iter_mut()
-            .find(|(s, ..)| *s == scene)
-        {
-            Some(e) => {
-                e.1 += usize::from(pass);
-                e.2 += 1;
-                e.3 += usize::from(frame_collapsed);
-            }
-            None => per_scene.push((scene.clone(), usize::from(pass), 1, usize::from(frame_collapsed))),
+        let object_arm = find(FOCUS_OBJECT, &scene, &style).map(|(_, t)| t);
+        let object_collapsed = object_arm.is_some_and(collapsed);
+        let count = |per_scene: &mut Vec<SceneTally>, pass: bool, nn_more: bool, sw_more: bool| {
+            let i = match per_scene.iter().position(|t| t.scene == scene) {
+                Some(i) => i,
+                None => {
+                    per_scene.push(SceneTally { scene: scene.clone(), ..SceneTally::default() });
+                    per_scene.len() - 1
+                }
+            };
+            let t = &mut per_scene[i];
+            t.pairs += 1;
+            t.passing += usize::from(pass);
+            t.frame_collapsed += usize::from(frame_collapsed);
+            t.object_collapsed += usize::from(object_collapsed);
+            t.nn_more += usize::from(nn_more);
+            t.sw_more += usize::from(sw_more);
         };
-        let Some((_, object)) = find(FOCUS_OBJECT, &scene, &style) else {
+        let Some(object) = object_arm else {
             out.push(format!("| {scene} | {style} | {step} | no object arm in this run |||||||||||||| no |"));
-            count(&mut per_scene, false);
+            count(&mut per_scene, false, false, false);
             continue;
         };
         // The seed floor: the spread of the two frame runs' final measures on this scene.
@@ -133,7 +154,7 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
                 object.health(),
                 object.steps
             ));
-            count(&mut per_scene, false);
+            count(&mut per_scene, false, false, false);
             continue;
         };
         let at = |r: &Record, f: fn(&Measures) -> f32| r.at(step).map_or(f32::NAN, |c| f(&c.measures));
@@ -146,7 +167,7 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         ratios.push(ratio_sw);
         nn_ratios.push(ratio_nn);
         rmse_ratios.push(ratio_rmse);
-        count(&mut per_scene, pass);
+        count(&mut per_scene, pass, nn_o > nn_f, sw_o > sw_f);
         out.push(format!(
             "| {scene} | {style} | {step} | {sw_f:.4} | {sw_o:.4} | {ratio_sw:.2} | {nn_f:.4} | {nn_o:.4} | {ratio_nn:.2} | {content_f:.4} | {content_o:.4} | {rmse_f:.4} | {rmse_o:.4} | {ratio_rmse:.2} | {}, {} | {time_f:.0}, {time_o:.0} | {} |",
             yes_no(frame_collapsed),
@@ -166,10 +187,12 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
             out.push(format!("Median ratio of the {name} (object / frame) over {n} measured pairs: {m:.2}."));
         }
     }
-    for (scene, pass, n, frame_collapsed) in per_scene {
+    for t in per_scene {
+        let SceneTally { scene, pairs, passing, frame_collapsed, object_collapsed, nn_more, sw_more } = t;
         out.push(format!(
-            "{scene}: object beats frame beyond the seed floor, with RMSE within {RMSE_FACTOR}x, on {pass} of {n} styles \
-             (the colour-collapse detector fired on the frame run of {frame_collapsed} of them)."
+            "{scene}: object beats frame beyond the seed floor, with RMSE within {RMSE_FACTOR}x, on {passing} of {pairs} styles \
+             (the colour-collapse detector fired on the frame run of {frame_collapsed} of them and on the object run of \
+             {object_collapsed}); object lowers NN-cos more on {nn_more} and SW more on {sw_more}, seed floor aside."
         ));
     }
     out.push(String::new());
@@ -373,5 +396,8 @@ mod tests {
         assert!(lines.iter().any(|l| l.starts_with("Median ratio of the optimising times") && l.contains(": 0.33.")));
         let tally = lines.iter().find(|l| l.starts_with("guitar: object beats frame")).expect("tally");
         assert!(tally.contains("on 0 of 1 styles") && tally.contains("fired on the frame run of 1 of them"), "{tally}");
+        assert!(tally.contains("on the object run of 0)"), "{tally}");
+        // Object: SW 5.0 → 4.8 (0.2) against frame's 1.0, NN-cos 0.23 → 0.21 (0.02) against 0.01.
+        assert!(tally.contains("lowers NN-cos more on 1 and SW more on 0"), "{tally}");
     }
 }
