@@ -177,6 +177,18 @@ pub fn collapse_advice(steps: u32, loss: f32, object: bool) -> String {
     )
 }
 
+/// The message of a failed weights lookup; where no file was given and none
+/// was found or fetched, it also names the flag that gives one.
+fn with_weights_flag(e: &gast_core::vision::weights::WeightsError, explicit: bool) -> String {
+    use gast_core::vision::weights::WeightsError as E;
+    match e {
+        E::NotFound { .. } | E::Download { .. } if !explicit => {
+            format!("{e}; or pass --weights FILE (a torchvision VGG16 or VGG19 .pth or .safetensors)")
+        }
+        _ => e.to_string(),
+    }
+}
+
 /// Loads the VGG weights the usual way, with a progress bar for a download.
 pub fn load_vgg(explicit: Option<&Path>) -> anyhow::Result<Vgg> {
     let pb = progress::bytes_bar("weights");
@@ -185,8 +197,9 @@ pub fn load_vgg(explicit: Option<&Path>) -> anyhow::Result<Vgg> {
             pb.set_length(t);
         }
         pb.set_position(done);
-    })?;
+    });
     pb.finish_and_clear();
+    let path = path.map_err(|e| anyhow::anyhow!(with_weights_flag(&e, explicit.is_some())))?;
     let w = gast_core::vision::weights::VggWeights::load(&path)?;
     Ok(Vgg::from_weights(w))
 }
@@ -519,6 +532,29 @@ mod tests {
         assert!((object.seconds(512) - 0.58).abs() < 0.02, "{}", object.seconds(512));
         assert!(step_time_hint(512, false).contains("2.28 s"), "{}", step_time_hint(512, false));
         assert!(step_time_hint(256, true).contains("0.18 s") && step_time_hint(256, true).contains("object focus"));
+    }
+
+    #[test]
+    fn a_failed_weights_lookup_names_the_flag_only_when_none_was_given() {
+        use gast_core::vision::weights::WeightsError;
+        let download = WeightsError::Download { url: "https://example.org/vgg16.pth".into(), detail: "offline".into() };
+        let m = with_weights_flag(&download, false);
+        assert!(
+            m.contains("https://example.org/vgg16.pth") && m.contains("offline") && m.contains("--weights FILE"),
+            "{m}"
+        );
+        assert!(!with_weights_flag(&download, true).contains("--weights"));
+        let bad = WeightsError::Format { path: "w.pth".into(), expected: "a zip".into(), found: "text".into() };
+        assert_eq!(with_weights_flag(&bad, false), bad.to_string());
+        // The flag the message names is one `stylize` takes.
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            args: StylizeArgs,
+        }
+        let cli =
+            <Cli as clap::Parser>::try_parse_from(["stylize", "s.ply", "t.jpg", "--weights", "w.pth"]).expect("parses");
+        assert_eq!(cli.args.weights.as_deref(), Some(Path::new("w.pth")));
     }
 
     /// The collapse warning's advice names flags `stylize` takes, with values it accepts.
