@@ -102,11 +102,23 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
 }
 
 /// Draws every loss term of the steps so far as a line, each on its own
-/// scale (min to max of that term, printed beside its name), over a strip
-/// that marks each step's phase (colour steps amber, geometry steps blue,
-/// joint steps violet).
+/// scale (min to max of that term, printed beside its name in a legend band
+/// above the curves, so no curve runs under a label), over a strip that
+/// marks each step's phase (colour steps amber, geometry steps blue, joint
+/// steps violet).
 pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
-    let (rect, _) = ui.allocate_exact_size(egui::vec2(ui.available_width(), 130.0), egui::Sense::hover());
+    type Series = (&'static str, Color32, fn(&StepReport) -> f32);
+    const SERIES: [Series; 5] = [
+        ("total", Color32::from_rgb(250, 200, 60), |s| s.losses.total),
+        ("GCFM", Color32::from_rgb(90, 170, 250), |s| s.losses.gcfm),
+        ("content", Color32::from_rgb(120, 220, 120), |s| s.losses.content),
+        ("TV", Color32::from_rgb(230, 110, 110), |s| s.losses.tv),
+        ("depth", Color32::from_rgb(200, 200, 200), |s| s.losses.depth),
+    ];
+    const ROW: f32 = 13.0;
+    let legend_rows = SERIES.len().div_ceil(2) as f32;
+    let band = 4.0 + ROW * legend_rows + 2.0;
+    let (rect, _) = ui.allocate_exact_size(egui::vec2(ui.available_width(), 110.0 + band), egui::Sense::hover());
     let painter = ui.painter_at(rect);
     painter.rect_filled(rect, 4.0, ui.visuals().extreme_bg_color);
     if steps.len() < 2 {
@@ -136,22 +148,19 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
             color,
         );
     }
-    type Series = (&'static str, Color32, fn(&StepReport) -> f32);
-    let series: [Series; 5] = [
-        ("total", Color32::from_rgb(250, 200, 60), |s| s.losses.total),
-        ("GCFM", Color32::from_rgb(90, 170, 250), |s| s.losses.gcfm),
-        ("content", Color32::from_rgb(120, 220, 120), |s| s.losses.content),
-        ("TV", Color32::from_rgb(230, 110, 110), |s| s.losses.tv),
-        ("depth", Color32::from_rgb(200, 200, 200), |s| s.losses.depth),
-    ];
-    let (top, bottom) = (rect.top() + 4.0, rect.bottom() - strip - 3.0);
-    for (k, (name, color, get)) in series.iter().enumerate() {
+    let (top, bottom) = (rect.top() + band + 4.0, rect.bottom() - strip - 3.0);
+    painter.hline(rect.x_range(), rect.top() + band, egui::Stroke::new(1.0, ui.visuals().faint_bg_color));
+    let column = rect.width() / 2.0;
+    for (k, (name, color, get)) in SERIES.iter().enumerate() {
         let values: Vec<f32> = steps.iter().map(get).collect();
         let (lo, hi) = values
             .iter()
             .filter(|v| v.is_finite())
             .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        let at = rect.left_top() + egui::vec2(6.0 + column * (k % 2) as f32, 4.0 + ROW * (k / 2) as f32);
+        let font = egui::FontId::proportional(10.5);
         if lo > hi {
+            painter.text(at, egui::Align2::LEFT_TOP, format!("{name} –"), font, *color);
             continue;
         }
         let span = (hi - lo).max(1e-12);
@@ -162,12 +171,13 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
             .map(|(i, v)| egui::pos2(x(i), bottom - (bottom - top) * (v - lo) / span))
             .collect();
         painter.add(egui::Shape::line(pts, egui::Stroke::new(1.3, *color)));
-        painter.text(
-            rect.left_top() + egui::vec2(6.0, 4.0 + 13.0 * k as f32),
-            egui::Align2::LEFT_TOP,
-            format!("{name} {lo:.3}–{hi:.3}"),
-            egui::FontId::proportional(10.5),
-            *color,
-        );
+        painter.text(at, egui::Align2::LEFT_TOP, format!("{name} {}–{}", loss_label(lo), loss_label(hi)), font, *color);
     }
+}
+
+/// A loss value for the chart's legend: three decimals, or three significant
+/// digits in scientific notation when it is small (content and TV losses sit
+/// around 1e-4 and would all read 0.000).
+pub(super) fn loss_label(v: f32) -> String {
+    if v == 0.0 || v.abs() >= 0.01 { format!("{v:.3}") } else { format!("{v:.2e}") }
 }
