@@ -340,21 +340,26 @@ mod tests {
         }
     }
 
-    #[test]
-    fn the_breakdown_shows_each_arms_parts_and_dashes_for_older_runs() {
+    /// A focus run of one pair: the frame arm's trial "f", the object's "o".
+    fn two_arm_run(frame: Record, object: Record) -> RunSummary {
         let row =
             |label: &str, trial: &str| Row { study: Study::Focus, label: label.into(), trial: trial.into(), step: 200 };
-        let frame = record("f", "galaxy", measures(6.7, 5.9, 0.29, 1.5, 0.4), measures(4.8, 4.4, 0.25, 1.25, 0.32));
-        // An object arm recorded before the SW parts existed (its lengths are 0).
-        let object = record("o", "galaxy", measures(6.7, 0.0, 0.29, 0.0, 0.4), measures(6.9, 0.0, 0.25, 0.0, 0.38));
-        let run = RunSummary {
+        RunSummary {
             command: String::new(),
             threads: 2,
             sizes: Sizes::quick(),
             wall_s: 0.0,
             rows: vec![row(FOCUS_FRAME, "f"), row(FOCUS_OBJECT, "o")],
             trials: vec![frame, object],
-        };
+        }
+    }
+
+    #[test]
+    fn the_breakdown_shows_each_arms_parts_and_dashes_for_older_runs() {
+        let frame = record("f", "galaxy", measures(6.7, 5.9, 0.29, 1.5, 0.4), measures(4.8, 4.4, 0.25, 1.25, 0.32));
+        // An object arm recorded before the SW parts existed (its lengths are 0).
+        let object = record("o", "galaxy", measures(6.7, 0.0, 0.29, 0.0, 0.4), measures(6.9, 0.0, 0.25, 0.0, 0.38));
+        let run = two_arm_run(frame, object);
         let lines = focus_lines(&run);
         let frame_line = lines.iter().find(|l| l.contains("| galaxy | frame |")).expect("frame breakdown line");
         assert!(frame_line.contains("| 1.9000 | 1.5000 |"), "{frame_line}");
@@ -371,8 +376,6 @@ mod tests {
 
     #[test]
     fn the_focus_table_says_which_arms_colours_collapsed() {
-        let row =
-            |label: &str, trial: &str| Row { study: Study::Focus, label: label.into(), trial: trial.into(), step: 200 };
         let mut frame = record("f", "block2", measures(5.0, 4.0, 0.23, 1.0, 0.16), measures(4.0, 3.0, 0.22, 0.5, 0.03));
         frame.stable = false;
         frame.checkpoints[1].seconds = 90.0;
@@ -381,14 +384,7 @@ mod tests {
         let object = record("o", "block2", measures(5.0, 4.0, 0.23, 1.0, 0.16), measures(4.8, 3.9, 0.21, 0.9, 0.15));
         let mut object = object;
         object.checkpoints[1].seconds = 30.0;
-        let run = RunSummary {
-            command: String::new(),
-            threads: 2,
-            sizes: Sizes::quick(),
-            wall_s: 0.0,
-            rows: vec![row(FOCUS_FRAME, "f"), row(FOCUS_OBJECT, "o")],
-            trials: vec![frame, object],
-        };
+        let run = two_arm_run(frame, object);
         let lines = focus_lines(&run);
         let pair = lines.iter().find(|l| l.starts_with("| guitar | block2 | 200 |")).expect("pair line");
         // Frame lowered SW more (by collapsing), so the pair fails, and the line says why.
