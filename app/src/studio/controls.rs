@@ -116,7 +116,8 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
         ("depth", Color32::from_rgb(200, 200, 200), |s| s.losses.depth),
     ];
     const ROW: f32 = 13.0;
-    let legend_rows = SERIES.len().div_ceil(2) as f32;
+    const COLUMNS: usize = 2;
+    let legend_rows = SERIES.len().div_ceil(COLUMNS) as f32;
     let band = 4.0 + ROW * legend_rows + 2.0;
     let (rect, _) = ui.allocate_exact_size(egui::vec2(ui.available_width(), 110.0 + band), egui::Sense::hover());
     let painter = ui.painter_at(rect);
@@ -150,14 +151,14 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
     }
     let (top, bottom) = (rect.top() + band + 4.0, rect.bottom() - strip - 3.0);
     painter.hline(rect.x_range(), rect.top() + band, egui::Stroke::new(1.0, ui.visuals().faint_bg_color));
-    let column = rect.width() / 2.0;
+    let column = rect.width() / COLUMNS as f32;
     for (k, (name, color, get)) in SERIES.iter().enumerate() {
         let values: Vec<f32> = steps.iter().map(get).collect();
         let (lo, hi) = values
             .iter()
             .filter(|v| v.is_finite())
             .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-        let at = rect.left_top() + egui::vec2(6.0 + column * (k % 2) as f32, 4.0 + ROW * (k / 2) as f32);
+        let at = rect.left_top() + egui::vec2(6.0 + column * (k % COLUMNS) as f32, 4.0 + ROW * (k / COLUMNS) as f32);
         let font = egui::FontId::proportional(10.5);
         if lo > hi {
             painter.text(at, egui::Align2::LEFT_TOP, format!("{name} –"), font, *color);
