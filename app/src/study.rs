@@ -34,7 +34,8 @@ pub enum Study {
     Fast,
     /// Frame against object focus (plain orbit and whole-frame losses against
     /// fitted views and masked losses) on every scene × style pair, measured on
-    /// the object's pixels of the fitted evaluation ring. Runs only when named.
+    /// the object's pixels of the fitted evaluation ring; with `focus_halves`
+    /// of [`Sizes`] also each half alone. Runs only when named.
     Focus,
     /// The decoupled default at 1,000 steps on every pair, watched by the
     /// colour-collapse detector; on the first scene × block2 also object focus,
@@ -148,6 +149,11 @@ pub struct Sizes {
     /// on the first scene × block2.
     #[serde(default)]
     pub collapse_object_on_every_pair: bool,
+    /// Also run the focus study's two halves apart on every pair: the fitted
+    /// views with the paper's whole-frame losses, and the plain orbit with
+    /// the masked losses (which half buys what).
+    #[serde(default)]
+    pub focus_halves: bool,
 }
 
 /// The collapse study's runs: the decoupled default on every pair; the others
@@ -188,6 +194,7 @@ impl Sizes {
             eval_over_style_colour: false,
             collapse_arms: all_collapse_arms(),
             collapse_object_on_every_pair: false,
+            focus_halves: false,
         }
     }
 
@@ -239,6 +246,7 @@ impl Sizes {
             eval_over_style_colour: false,
             collapse_arms: all_collapse_arms(),
             collapse_object_on_every_pair: false,
+            focus_halves: false,
         }
     }
 }

@@ -258,6 +258,11 @@ pub const FOCUS_FRAME: &str = "frame";
 pub const FOCUS_OBJECT: &str = "object";
 /// See [`FOCUS_FRAME`]: the frame arm with another view order.
 pub const FOCUS_SEED: &str = "frame, seed 1";
+/// See [`FOCUS_FRAME`]: object focus's fitted views alone (the paper's
+/// whole-frame losses on them; `focus_halves` of [`Sizes`]).
+pub const FOCUS_FITTED_VIEWS: &str = "fitted views, frame losses";
+/// See [`FOCUS_FITTED_VIEWS`]: object focus's masked losses alone, on the plain orbit.
+pub const FOCUS_MASKED_LOSSES: &str = "orbit, masked losses";
 
 /// The rows of the focus and collapse studies (see [`Study::Focus`], [`Study::Collapse`]).
 fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], base: &StyleConfig) {
@@ -273,6 +278,18 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
                 let style = file(style);
                 g.want_framed((Study::Focus, FOCUS_FRAME), scene, &style, frame.clone(), 1.0, &[], plain_on_object);
                 g.want_framed((Study::Focus, FOCUS_OBJECT), scene, &style, object.clone(), 1.0, &[], fitted);
+                if sizes.focus_halves {
+                    g.want_framed((Study::Focus, FOCUS_FITTED_VIEWS), scene, &style, frame.clone(), 1.0, &[], fitted);
+                    g.want_framed(
+                        (Study::Focus, FOCUS_MASKED_LOSSES),
+                        scene,
+                        &style,
+                        object.clone(),
+                        1.0,
+                        &[],
+                        plain_on_object,
+                    );
+                }
                 if k == 0 {
                     let seed = StyleConfig { seed: 1, ..frame.clone() };
                     g.want_framed((Study::Focus, FOCUS_SEED), scene, &style, seed, 1.0, &[], plain_on_object);
@@ -589,6 +606,27 @@ mod tests {
         assert_eq!(g.rows.len(), sizes.scenes.len() * sizes.styles.len());
         assert!(g.rows.iter().all(|r| r.label == "object focus"), "{:?}", g.rows);
         assert!(g.trials.iter().all(|t| t.config.focus == Focus::Object));
+    }
+
+    #[test]
+    fn the_focus_halves_each_take_one_half_of_object_focus() {
+        let sizes = Sizes { focus_halves: true, ..Sizes::full() };
+        let g = build_grid(&sizes, Path::new("/shared"), &[Study::Focus]);
+        let trial_of = |label: &str| {
+            let rows: Vec<_> = g.rows.iter().filter(|r| r.study == Study::Focus && r.label == label).collect();
+            assert_eq!(rows.len(), sizes.scenes.len() * sizes.styles.len(), "{label} on every pair");
+            g.trials.iter().find(|t| t.id == rows[0].trial).expect("trial").clone()
+        };
+        let (frame, object) = (trial_of(FOCUS_FRAME), trial_of(FOCUS_OBJECT));
+        let (fitted, masked) = (trial_of(FOCUS_FITTED_VIEWS), trial_of(FOCUS_MASKED_LOSSES));
+        // The fitted views with frame's losses, the orbit with object's losses.
+        assert_eq!((fitted.framing, format!("{:?}", fitted.config)), (object.framing, format!("{:?}", frame.config)));
+        assert_eq!((masked.framing, format!("{:?}", masked.config)), (frame.framing, format!("{:?}", object.config)));
+        assert_ne!(frame.framing, object.framing);
+        assert!([&frame, &object, &fitted, &masked].iter().all(|t| t.eval_on_object));
+        // Without the flag, neither half runs.
+        let g = build_grid(&Sizes::full(), Path::new("/shared"), &[Study::Focus]);
+        assert!(!g.rows.iter().any(|r| r.label == FOCUS_FITTED_VIEWS || r.label == FOCUS_MASKED_LOSSES));
     }
 
     #[test]

@@ -10,7 +10,7 @@ use std::path::Path;
 
 use gast_core::eval::{DegenerationKind, Measures};
 
-use crate::cli::quality::{FOCUS_FRAME, FOCUS_OBJECT, FOCUS_SEED};
+use crate::cli::quality::{FOCUS_FITTED_VIEWS, FOCUS_FRAME, FOCUS_MASKED_LOSSES, FOCUS_OBJECT, FOCUS_SEED};
 use crate::study::{Record, Row, RunSummary, Study};
 
 /// Object's RMSE may be at most this factor of frame's for a pair to pass.
@@ -78,6 +78,19 @@ fn median(mut v: Vec<f32>) -> Option<f32> {
     (!v.is_empty()).then(|| if v.len() % 2 == 1 { v[v.len() / 2] } else { 0.5 * (v[v.len() / 2 - 1] + v[v.len() / 2]) })
 }
 
+/// The seed floor of measure `f` on `scene`: how far apart the final values
+/// of the two frame runs (two view orders) of its first style are; 0 without
+/// a seed run.
+fn seed_floor(rows: &[(&Row, &Record)], scene: &str, f: fn(&Measures) -> f32) -> f32 {
+    let seed = rows.iter().find(|(r, t)| r.label == FOCUS_SEED && t.scene_name() == scene);
+    let twin = seed.and_then(|(r, t)| {
+        let base =
+            rows.iter().find(|(r2, t2)| r2.label == FOCUS_FRAME && t2.scene_name() == scene && t2.style == t.style)?;
+        Some((f(&t.at(r.step)?.measures) - f(&base.1.at(base.0.step)?.measures)).abs())
+    });
+    twin.unwrap_or(0.0)
+}
+
 /// The focus study's table: per pair, each arm's decrease of SW and NN-cos on
 /// the object from the colour-matched state, their ratio (object / frame),
 /// the content distance and the long-baseline RMSE on the object's pixels of
@@ -130,17 +143,7 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
             count(&mut per_scene, false, false, false);
             continue;
         };
-        // The seed floor: the spread of the two frame runs' final measures on this scene.
-        let seed = rows.iter().find(|(r, t)| r.label == FOCUS_SEED && t.scene_name() == scene);
-        let floor = |f: fn(&Measures) -> f32| -> f32 {
-            let twin = seed.and_then(|(r, t)| {
-                let base = rows
-                    .iter()
-                    .find(|(r2, t2)| r2.label == FOCUS_FRAME && t2.scene_name() == scene && t2.style == t.style)?;
-                Some((f(&t.at(r.step)?.measures) - f(&base.1.at(base.0.step)?.measures)).abs())
-            });
-            twin.unwrap_or(0.0)
-        };
+        let floor = |f: fn(&Measures) -> f32| seed_floor(&rows, &scene, f);
         let (Some(sw_f), Some(sw_o), Some(nn_f), Some(nn_o)) = (
             decrease(frame, step, sw),
             decrease(object, step, sw),
@@ -196,7 +199,97 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         ));
     }
     out.push(String::new());
+    out.extend(halves_lines(&rows));
     out.extend(breakdown_lines(&rows));
+    out
+}
+
+/// Object focus's arms in the halves table: each half alone, then both.
+const HALVES: [&str; 3] = [FOCUS_FITTED_VIEWS, FOCUS_MASKED_LOSSES, FOCUS_OBJECT];
+
+/// The halves table (runs with `focus_halves`): per pair, the frame arm and
+/// each of [`HALVES`] with its decreases of SW and NN-cos, RMSE, covered
+/// luminance after / before, whether its colours collapsed, and whether it
+/// beats frame by the focus check's rule; then per scene and arm how many
+/// pairs it beats frame on and the median of its SW decrease over frame's.
+fn halves_lines(rows: &[(&Row, &Record)]) -> Vec<String> {
+    if !rows.iter().any(|(r, _)| r.label == FOCUS_FITTED_VIEWS || r.label == FOCUS_MASKED_LOSSES) {
+        return Vec::new();
+    }
+    let mut out = vec![
+        "### Which half buys what: fitted views and masked losses, each alone (same rule as above against frame)"
+            .to_string(),
+        String::new(),
+        "| scene | style | arm | ΔSW | ΔNN | RMSE | luminance after / before | colours collapsed | beats frame |"
+            .into(),
+        "|---|---|---|---|---|---|---|---|---|".into(),
+    ];
+    // Per scene and arm: pairs, pairs beating frame, SW-decrease ratios.
+    let mut tally: Vec<(String, &str, usize, usize, Vec<f32>)> = Vec::new();
+    for &(row, frame) in rows.iter().filter(|(r, _)| r.label == FOCUS_FRAME) {
+        let (scene, style, step) = (frame.scene_name(), frame.style.clone(), row.step);
+        let at = |r: &Record, f: fn(&Measures) -> f32| r.at(step).map_or(f32::NAN, |c| f(&c.measures));
+        let luminance = |r: &Record| {
+            let first = r.checkpoints.first().map_or(f32::NAN, |c| c.measures.colour.luminance);
+            at(r, |m| m.colour.luminance) / first.max(1e-6)
+        };
+        let cell = |v: Option<f32>| v.map_or("–".to_string(), |v| format!("{v:.4}"));
+        let (sw_f, nn_f, rmse_f) =
+            (decrease(frame, step, sw), decrease(frame, step, nn), at(frame, |m| m.consistency_long_object));
+        out.push(format!(
+            "| {scene} | {style} | {FOCUS_FRAME} | {} | {} | {rmse_f:.4} | {:.2} | {} | – |",
+            cell(sw_f),
+            cell(nn_f),
+            luminance(frame),
+            yes_no(collapsed(frame))
+        ));
+        for arm in HALVES {
+            let Some((_, r)) = rows.iter().find(|(r, t)| r.label == arm && t.scene_name() == scene && t.style == style)
+            else {
+                out.push(format!("| {scene} | {style} | {arm} | not in this run ||||| no |"));
+                continue;
+            };
+            let (sw_a, nn_a, rmse_a) =
+                (decrease(r, step, sw), decrease(r, step, nn), at(r, |m| m.consistency_long_object));
+            let beats = match (sw_f, sw_a, nn_f, nn_a) {
+                (Some(sw_f), Some(sw_a), Some(nn_f), Some(nn_a)) => {
+                    sw_a - sw_f > seed_floor(rows, &scene, sw)
+                        && nn_a - nn_f > seed_floor(rows, &scene, nn)
+                        && rmse_a <= RMSE_FACTOR * rmse_f
+                }
+                _ => false,
+            };
+            let i = match tally.iter().position(|t| t.0 == scene && t.1 == arm) {
+                Some(i) => i,
+                None => {
+                    tally.push((scene.clone(), arm, 0, 0, Vec::new()));
+                    tally.len() - 1
+                }
+            };
+            let t = &mut tally[i];
+            t.2 += 1;
+            t.3 += usize::from(beats);
+            if let (Some(a), Some(f)) = (sw_a, sw_f) {
+                t.4.push(a / f);
+            }
+            out.push(format!(
+                "| {scene} | {style} | {arm} | {} | {} | {rmse_a:.4} | {:.2} | {} | {} |",
+                cell(sw_a),
+                cell(nn_a),
+                luminance(r),
+                yes_no(collapsed(r)),
+                yes_no(beats)
+            ));
+        }
+    }
+    out.push(String::new());
+    for (scene, arm, pairs, beating, ratios) in tally {
+        let median = median(ratios).map_or("–".to_string(), |m| format!("{m:.2}"));
+        out.push(format!(
+            "{scene}, {arm}: beats frame on {beating} of {pairs} styles; median SW decrease over frame's {median}."
+        ));
+    }
+    out.push(String::new());
     out
 }
 
@@ -340,18 +433,74 @@ mod tests {
         }
     }
 
-    /// A focus run of one pair: the frame arm's trial "f", the object's "o".
-    fn two_arm_run(frame: Record, object: Record) -> RunSummary {
-        let row =
-            |label: &str, trial: &str| Row { study: Study::Focus, label: label.into(), trial: trial.into(), step: 200 };
+    /// A focus run of one pair with the arms `(label, record)`, each row at step 200.
+    fn focus_run(arms: Vec<(&str, Record)>) -> RunSummary {
+        let rows = arms
+            .iter()
+            .map(|(label, r)| Row { study: Study::Focus, label: label.to_string(), trial: r.id.clone(), step: 200 })
+            .collect();
         RunSummary {
             command: String::new(),
             threads: 2,
             sizes: Sizes::quick(),
             wall_s: 0.0,
-            rows: vec![row(FOCUS_FRAME, "f"), row(FOCUS_OBJECT, "o")],
-            trials: vec![frame, object],
+            rows,
+            trials: arms.into_iter().map(|(_, r)| r).collect(),
         }
+    }
+
+    /// A focus run of one pair: the frame arm's trial "f", the object's "o".
+    fn two_arm_run(frame: Record, object: Record) -> RunSummary {
+        focus_run(vec![(FOCUS_FRAME, frame), (FOCUS_OBJECT, object)])
+    }
+
+    #[test]
+    fn the_halves_table_judges_each_half_by_the_focus_rule() {
+        let before = || measures(5.0, 4.0, 0.23, 1.0, 0.40);
+        let with_rmse = |mut r: Record, rmse: f32| {
+            r.checkpoints[1].measures.consistency_long_object = rmse;
+            r
+        };
+        // Frame lowers SW by 1.0 and NN-cos by 0.01.
+        let frame = with_rmse(record("f", "galaxy", before(), measures(4.0, 3.0, 0.22, 0.8, 0.20)), 0.05);
+        // Fitted views alone: lowers both more, RMSE within 1.2x: beats frame.
+        let fitted = with_rmse(record("v", "galaxy", before(), measures(3.5, 3.0, 0.20, 0.8, 0.30)), 0.055);
+        // Masked losses alone: lowers both more, but RMSE 1.4x: does not.
+        let masked = with_rmse(record("m", "galaxy", before(), measures(3.5, 3.0, 0.20, 0.8, 0.36)), 0.07);
+        // Both: lowers NN-cos more, SW less: does not.
+        let object = with_rmse(record("o", "galaxy", before(), measures(4.5, 3.0, 0.20, 0.8, 0.38)), 0.05);
+        let run = focus_run(vec![
+            (FOCUS_FRAME, frame),
+            (FOCUS_FITTED_VIEWS, fitted),
+            (FOCUS_MASKED_LOSSES, masked),
+            (FOCUS_OBJECT, object),
+        ]);
+        let lines = focus_lines(&run);
+        let line = |arm: &str| {
+            lines
+                .iter()
+                .find(|l| l.starts_with(&format!("| guitar | galaxy | {arm} |")) && l.matches('|').count() == 10)
+                .unwrap_or_else(|| panic!("no halves line for {arm}: {lines:#?}"))
+                .clone()
+        };
+        assert_eq!(line(FOCUS_FRAME), "| guitar | galaxy | frame | 1.0000 | 0.0100 | 0.0500 | 0.50 | no | – |");
+        assert!(line(FOCUS_FITTED_VIEWS).ends_with("| 1.5000 | 0.0300 | 0.0550 | 0.75 | no | yes |"));
+        assert!(line(FOCUS_MASKED_LOSSES).ends_with("| 0.0700 | 0.90 | no | no |"), "{}", line(FOCUS_MASKED_LOSSES));
+        assert!(line(FOCUS_OBJECT).ends_with("| 0.5000 | 0.0300 | 0.0500 | 0.95 | no | no |"));
+        let tally = |arm: &str| lines.iter().find(|l| l.starts_with(&format!("guitar, {arm}:"))).cloned();
+        assert_eq!(
+            tally(FOCUS_FITTED_VIEWS).as_deref(),
+            Some(
+                "guitar, fitted views, frame losses: beats frame on 1 of 1 styles; median SW decrease over frame's 1.50."
+            )
+        );
+        assert!(tally(FOCUS_OBJECT).is_some_and(|t| t.contains("on 0 of 1") && t.ends_with("0.50.")));
+        // Without the halves the table is left out.
+        let plain = focus_lines(&two_arm_run(
+            record("f", "galaxy", before(), measures(4.0, 3.0, 0.22, 0.8, 0.2)),
+            record("o", "galaxy", before(), measures(4.5, 3.0, 0.2, 0.8, 0.38)),
+        ));
+        assert!(!plain.iter().any(|l| l.contains("Which half")));
     }
 
     #[test]
