@@ -143,11 +143,13 @@ pub fn maps_tiles(m: &StyleMaps) -> [Tile; 3] {
     [Tile::from_rgb(w, h, &m.rgb), Tile::from_gray(w, h, &m.depth), Tile::from_gray(w, h, &m.edge)]
 }
 
-/// The sheet's settings line: mode, steps, sizes, focus, colour settings and time.
+/// The sheet's settings line: mode, steps, sizes, focus, the learning rates
+/// the collapse study varies (colour, and the means' per unit of extent), the
+/// colour floor and the time.
 pub fn settings_line(config: &StyleConfig, steps: u32, seconds: f64, focus_on_object: bool, coverage: f32) -> String {
     let focus = if focus_on_object { "object" } else { "frame" };
     format!(
-        "{} {} steps ({} cycles x {}), {} px, texture {} px, focus {focus} (asked {:?}, coverage {:.0}%), lr colour {}, colour floor {}; {:.0} s ({:.2} s/step)",
+        "{} {} steps ({} cycles x {}), {} px, texture {} px, focus {focus} (asked {:?}, coverage {:.0}%), lr colour {}, means {:e} x extent, colour floor {}; {:.0} s ({:.2} s/step)",
         config.mode.name(),
         steps,
         config.cycles,
@@ -157,6 +159,7 @@ pub fn settings_line(config: &StyleConfig, steps: u32, seconds: f64, focus_on_ob
         config.focus,
         100.0 * coverage,
         config.lr.color,
+        config.lr.means_per_extent,
         if config.color_floor { "on" } else { "off" },
         seconds,
         seconds / f64::from(steps.max(1)),
@@ -259,6 +262,17 @@ fn draw_text(img: &mut RgbImage, labels: &[(f64, f64, f64, String)]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_settings_line_names_both_learning_rates_and_fits_the_sheet() {
+        let mut config = StyleConfig { cycles: 30, resolution: 576, ..StyleConfig::default() };
+        config.lr.means_per_extent = 1e-5;
+        let line = settings_line(&config, 3000, 1733.0, true, 0.2);
+        assert!(line.contains("lr colour 0.01, means 1e-5 x extent, colour floor off"), "{line}");
+        let width = shape_text(&line, 13.0, None);
+        let sheet = f64::from(COLUMNS * TILE + (COLUMNS + 1) * GAP);
+        assert!(width + f64::from(GAP) < sheet, "{width} px of {sheet}: {line}");
+    }
 
     #[test]
     fn the_sheet_has_every_tile_and_its_labels() {
