@@ -119,7 +119,9 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
     const COLUMNS: usize = 2;
     let legend_rows = SERIES.len().div_ceil(COLUMNS) as f32;
     let band = 4.0 + ROW * legend_rows + 2.0;
-    let (rect, _) = ui.allocate_exact_size(egui::vec2(ui.available_width(), 110.0 + band), egui::Sense::hover());
+    // The curves keep 84 px, so the legend band does not push the first weight sliders below a
+    // 1280×800 window's fold.
+    let (rect, _) = ui.allocate_exact_size(egui::vec2(ui.available_width(), 84.0 + band), egui::Sense::hover());
     let painter = ui.painter_at(rect);
     painter.rect_filled(rect, 4.0, ui.visuals().extreme_bg_color);
     if steps.len() < 2 {
