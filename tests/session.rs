@@ -511,3 +511,43 @@ fn gpu_reused_matches_give_the_cpu_losses() {
     }
     assert!(differ >= 3, "only {differ} of 6 revisits stepped differently from a new search");
 }
+
+/// `Backdrop::StyleMean`: the steps render over the style's mean colour on
+/// both devices (the same losses), which changes what the losses see; the
+/// session's backdrop follows a new configuration back to the background.
+#[test]
+fn a_style_backdrop_renders_the_steps_over_the_style_colour_on_both_devices() {
+    use gast_core::session::Session;
+    use gast_core::style::focus::mean_colour;
+    use gast_core::style::{Backdrop, Focus};
+    let config = StyleConfig {
+        cycles: 1,
+        steps_per_cycle: 4,
+        resolution: 64,
+        texture_scale: 64,
+        mode: Mode::ColorOnly,
+        focus: Focus::Object,
+        backdrop: Backdrop::StyleMean,
+        ..Default::default()
+    };
+    let Some([mut cpu, gpu]) = gpu_and_cpu_agree("style backdrop", config.clone()) else { return };
+    let want = mean_colour(&cpu.style().maps.rgb);
+    assert!(want.iter().any(|&v| v > 0.05), "mosaic is not black: {want:?}");
+    assert_eq!(cpu.backdrop(), want);
+    assert_eq!(gpu.backdrop(), want);
+    let first = |config: StyleConfig| {
+        let config = StyleConfig { conv: gast_core::vision::ConvAlgo::Im2col, ..config };
+        let mut s = Session::prepare(inputs(config).expect("inputs"), &mut |_| {}).expect("session");
+        s.step().expect("a step").losses
+    };
+    let (over, black) =
+        (first(config.clone()), first(StyleConfig { backdrop: Backdrop::Background, ..config.clone() }));
+    assert!(
+        (over.gcfm - black.gcfm).abs() > 1e-4 * black.gcfm.abs(),
+        "the backdrop changed nothing: GCFM {} over the style colour, {} over black",
+        over.gcfm,
+        black.gcfm
+    );
+    cpu.set_config(StyleConfig { backdrop: Backdrop::Background, ..cpu.config().clone() }).expect("config");
+    assert_eq!(cpu.backdrop(), [0.0; 3]);
+}
