@@ -154,10 +154,6 @@ pub struct Sizes {
     /// the masked losses (which half buys what).
     #[serde(default)]
     pub focus_halves: bool,
-    /// Also run object focus with its views rendered over the style's mean
-    /// colour ([`gast_core::style::Backdrop::StyleMean`]) on every pair.
-    #[serde(default)]
-    pub focus_backdrop: bool,
 }
 
 /// The collapse study's runs: the decoupled default on every pair; the others
@@ -199,7 +195,6 @@ impl Sizes {
             collapse_arms: all_collapse_arms(),
             collapse_object_on_every_pair: false,
             focus_halves: false,
-            focus_backdrop: false,
         }
     }
 
@@ -252,7 +247,6 @@ impl Sizes {
             collapse_arms: all_collapse_arms(),
             collapse_object_on_every_pair: false,
             focus_halves: false,
-            focus_backdrop: false,
         }
     }
 }

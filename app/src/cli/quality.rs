@@ -20,7 +20,7 @@ use clap::Args;
 use gast_core::Gaussians;
 use gast_core::eval::{EvalOptions, StabilityThresholds, TrialOutcome, run_trial};
 use gast_core::session::{PreparedStyle, SessionInputs, StyleDepthSource, StyleImage, prepare_style};
-use gast_core::style::{Backdrop, Focus, Mode, StyleConfig};
+use gast_core::style::{Focus, Mode, StyleConfig};
 
 use super::bench::shared_dir;
 use super::{Framing, ViewArgs, load_scene, views_for};
@@ -263,10 +263,6 @@ pub const FOCUS_SEED: &str = "frame, seed 1";
 pub const FOCUS_FITTED_VIEWS: &str = "fitted views, frame losses";
 /// See [`FOCUS_FITTED_VIEWS`]: object focus's masked losses alone, on the plain orbit.
 pub const FOCUS_MASKED_LOSSES: &str = "orbit, masked losses";
-/// See [`FOCUS_OBJECT`]: object focus with its views rendered over the
-/// style's mean colour instead of black (`focus_backdrop` of [`Sizes`];
-/// [`gast_core::style::Backdrop::StyleMean`]).
-pub const FOCUS_OBJECT_BACKDROP: &str = "object, style backdrop";
 
 /// The rows of the focus and collapse studies (see [`Study::Focus`], [`Study::Collapse`]).
 fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], base: &StyleConfig) {
@@ -293,10 +289,6 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
                         &[],
                         plain_on_object,
                     );
-                }
-                if sizes.focus_backdrop {
-                    let over = StyleConfig { backdrop: Backdrop::StyleMean, ..object.clone() };
-                    g.want_framed((Study::Focus, FOCUS_OBJECT_BACKDROP), scene, &style, over, 1.0, &[], fitted);
                 }
                 if k == 0 {
                     let seed = StyleConfig { seed: 1, ..frame.clone() };
@@ -635,20 +627,6 @@ mod tests {
         // Without the flag, neither half runs.
         let g = build_grid(&Sizes::full(), Path::new("/shared"), &[Study::Focus]);
         assert!(!g.rows.iter().any(|r| r.label == FOCUS_FITTED_VIEWS || r.label == FOCUS_MASKED_LOSSES));
-        assert!(!g.rows.iter().any(|r| r.label == FOCUS_OBJECT_BACKDROP));
-    }
-
-    #[test]
-    fn the_focus_backdrop_arm_is_object_focus_over_the_style_colour() {
-        let sizes = Sizes { focus_backdrop: true, ..Sizes::full() };
-        let g = build_grid(&sizes, Path::new("/shared"), &[Study::Focus]);
-        let rows: Vec<_> = g.rows.iter().filter(|r| r.label == FOCUS_OBJECT_BACKDROP).collect();
-        assert_eq!(rows.len(), sizes.scenes.len() * sizes.styles.len(), "on every pair");
-        let trial = |id: &str| g.trials.iter().find(|t| t.id == id).expect("trial").clone();
-        let over = trial(&rows[0].trial);
-        let object = trial(&g.rows.iter().find(|r| r.label == FOCUS_OBJECT).expect("object row").trial);
-        assert_eq!(over.config, StyleConfig { backdrop: Backdrop::StyleMean, ..object.config.clone() });
-        assert_eq!((over.framing, over.eval_on_object), (object.framing, object.eval_on_object));
     }
 
     #[test]

@@ -12,7 +12,7 @@ use std::path::Path;
 use gast_core::io::depth_to_gray;
 use gast_core::raster::{self, Render, RenderOptions};
 use gast_core::session::Session;
-use gast_core::style::{Backdrop, StyleConfig, StyleMaps};
+use gast_core::style::{StyleConfig, StyleMaps};
 use gast_core::{Camera, Gaussians};
 use image::{Rgb, RgbImage};
 use vello_cpu::color::AlphaColor;
@@ -145,12 +145,11 @@ pub fn maps_tiles(m: &StyleMaps) -> [Tile; 3] {
 
 /// The sheet's settings line: mode, steps, sizes, focus, the learning rates
 /// the collapse study varies (colour, and the means' per unit of extent), the
-/// colour floor, the style backdrop when on, and the time.
+/// colour floor and the time.
 pub fn settings_line(config: &StyleConfig, steps: u32, seconds: f64, focus_on_object: bool, coverage: f32) -> String {
     let focus = if focus_on_object { "object" } else { "frame" };
-    let backdrop = if config.backdrop == Backdrop::StyleMean { ", style backdrop" } else { "" };
     format!(
-        "{} {} steps ({} cycles x {}), {} px, texture {} px, focus {focus} (asked {:?}, coverage {:.0}%), lr colour {}, means {:e} x extent, colour floor {}{backdrop}; {:.0} s ({:.2} s/step)",
+        "{} {} steps ({} cycles x {}), {} px, texture {} px, focus {focus} (asked {:?}, coverage {:.0}%), lr colour {}, means {:e} x extent, colour floor {}; {:.0} s ({:.2} s/step)",
         config.mode.name(),
         steps,
         config.cycles,
@@ -266,11 +265,10 @@ mod tests {
 
     #[test]
     fn the_settings_line_names_both_learning_rates_and_fits_the_sheet() {
-        let mut config =
-            StyleConfig { cycles: 30, resolution: 576, backdrop: Backdrop::StyleMean, ..StyleConfig::default() };
+        let mut config = StyleConfig { cycles: 30, resolution: 576, ..StyleConfig::default() };
         config.lr.means_per_extent = 1e-5;
         let line = settings_line(&config, 3000, 1733.0, true, 0.2);
-        assert!(line.contains("lr colour 0.01, means 1e-5 x extent, colour floor off, style backdrop;"), "{line}");
+        assert!(line.contains("lr colour 0.01, means 1e-5 x extent, colour floor off"), "{line}");
         let width = shape_text(&line, 13.0, None);
         let sheet = f64::from(COLUMNS * TILE + (COLUMNS + 1) * GAP);
         assert!(width + f64::from(GAP) < sheet, "{width} px of {sheet}: {line}");

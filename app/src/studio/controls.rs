@@ -3,7 +3,7 @@
 
 use egui::{Color32, Ui};
 use gast_core::session::StepReport;
-use gast_core::style::{Backdrop, Focus, Mode, Phase, StyleConfig};
+use gast_core::style::{Focus, Mode, Phase, StyleConfig};
 
 /// Label of a focus in menus.
 pub fn focus_label(f: Focus) -> &'static str {
@@ -83,25 +83,10 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
             changed |= ui.selectable_value(&mut c.focus, f, focus_label(f)).changed();
         }
     });
-    ui.horizontal(|ui| {
-        changed |= ui
-            .checkbox(&mut c.color_floor, "colour floor")
-            .on_hover_text("keep every Gaussian's base colour out of the clamp at 0, where no gradient reaches it")
-            .changed();
-        let mut over_style = c.backdrop == Backdrop::StyleMean;
-        if ui
-            .checkbox(&mut over_style, "style backdrop")
-            .on_hover_text(
-                "render the optimisation views over the style's mean colour instead of the background, \
-                 so the object's silhouette against black is not what the features near it match; \
-                 the viewport and exports keep the background",
-            )
-            .changed()
-        {
-            c.backdrop = if over_style { Backdrop::StyleMean } else { Backdrop::Background };
-            changed = true;
-        }
-    });
+    changed |= ui
+        .checkbox(&mut c.color_floor, "colour floor")
+        .on_hover_text("keep every Gaussian's base colour out of the clamp at 0, where no gradient reaches it")
+        .changed();
 
     ui.separator();
     egui::CollapsingHeader::new("Learning rates").default_open(false).show(ui, |ui| {

@@ -14,7 +14,11 @@ use super::stability::{StabilityReport, StabilityThresholds, assess_stability};
 use crate::scene::Gaussians;
 use crate::session::{PreparedStyle, Session, SessionError, SessionInputs};
 
-pub use crate::style::focus::mean_colour;
+/// The mean of an RGB (HWC) image; black when it is empty.
+pub fn mean_colour(rgb: &[f32]) -> [f32; 3] {
+    let n = (rgb.len() / 3).max(1) as f64;
+    std::array::from_fn(|ch| (rgb.iter().skip(ch).step_by(3).map(|&v| f64::from(v)).sum::<f64>() / n) as f32)
+}
 
 /// The measures of a scene after `step` steps.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -117,9 +117,6 @@ pub struct Session {
     coverage: f32,
     /// The object's colour in the steps' renders against `G^c`'s.
     colour_watch: ColourWatch,
-    /// The colour the optimisation views are rendered over (the config's
-    /// [`crate::style::Backdrop`] resolved against the style).
-    backdrop: [f32; 3],
 }
 
 impl Session {
@@ -188,7 +185,6 @@ impl Session {
             on_event(Event::Stage { name: "matching index".into(), seconds: t.elapsed().as_secs_f64() });
         }
 
-        let backdrop = config.backdrop.colour(config.background, &style_maps_.maps.rgb);
         let n = keep.len();
         let opt = Optimisers {
             color: Adam::new(n * 3, config.adam),
@@ -202,8 +198,7 @@ impl Session {
         let engine = match gpu {
             Some(ctx) => {
                 let t = Instant::now();
-                let over_backdrop = StyleConfig { background: backdrop, ..config.clone() };
-                let e = GpuEngine::new(&ctx, &vgg, &g_ref, &style_maps_.targets.features, &work_cams, &over_backdrop)?;
+                let e = GpuEngine::new(&ctx, &vgg, &g_ref, &style_maps_.targets.features, &work_cams, &config)?;
                 on_event(Event::Stage {
                     name: format!(
                         "GPU upload on {} ({:.0} MiB)",
@@ -247,7 +242,6 @@ impl Session {
             live: None,
             failure: None,
             coverage,
-            backdrop,
             config,
         })
     }
@@ -290,11 +284,6 @@ impl Session {
     /// The colour-matched scene before optimisation (`G^c`, whole).
     pub fn colour_matched(&self) -> &Gaussians {
         &self.full
-    }
-
-    /// The colour the optimisation views are rendered over.
-    pub fn backdrop(&self) -> [f32; 3] {
-        self.backdrop
     }
 
     /// Mean share of the optimisation views' pixels the input scene covers.
@@ -402,14 +391,12 @@ impl Session {
                 e.forget_matches();
             }
         }
-        let backdrop = config.backdrop.colour(config.background, &self.style.maps.rgb);
-        if config.resolution != self.config.resolution || backdrop != self.backdrop {
+        if config.resolution != self.config.resolution || config.background != self.config.background {
             self.cameras = self.base_cameras.iter().map(|c| c.with_longer_side(config.resolution)).collect();
             self.targets.iter_mut().for_each(|t| *t = None);
             self.colour_watch.reset();
-            self.backdrop = backdrop;
             if let Some(e) = &mut self.engine {
-                e.reset_views(self.cameras.len(), backdrop);
+                e.reset_views(self.cameras.len(), config.background);
             }
             self.view_matches.iter_mut().for_each(|m| *m = None);
         }
@@ -439,7 +426,7 @@ impl Session {
         if self.targets[view].is_some() {
             return;
         }
-        let opts = RenderOptions { background: self.backdrop };
+        let opts = RenderOptions { background: self.config.background };
         let cam = &self.cameras[view];
         let (h, w) = (cam.height as usize, cam.width as usize);
         let r = raster::render(&self.g_ref, cam, &opts);

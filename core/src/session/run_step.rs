@@ -58,7 +58,7 @@ impl Session {
             }
             return Some(report);
         }
-        let opts = RenderOptions { background: self.backdrop };
+        let opts = RenderOptions { background: self.config.background };
         let cam = self.cameras[view].clone();
         let (h, w) = (cam.height as usize, cam.width as usize);
         let mut timings = StepTimings::default();

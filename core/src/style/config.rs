@@ -89,9 +89,6 @@ pub struct StyleConfig {
     pub resolution: u32,
     /// Background colour of the renders.
     pub background: [f32; 3],
-    /// What the optimisation views are rendered over: `background` (the
-    /// paper) or the style image's mean colour ([`super::Backdrop`]).
-    pub backdrop: super::Backdrop,
     /// Style depth polarity.
     pub depth_polarity: DepthPolarity,
     /// Where the style's depth comes from: `learned`, `image` or `heuristic`.
@@ -130,7 +127,6 @@ impl Default for StyleConfig {
             texture_scale: 256,
             resolution: 256,
             background: [0.0; 3],
-            backdrop: super::Backdrop::Background,
             depth_polarity: DepthPolarity::NearBright,
             depth_provider: DepthProvider::Learned,
             seed: 0,

@@ -26,58 +26,6 @@ pub enum Focus {
     Auto,
 }
 
-/// What the optimisation views are rendered over.
-///
-/// A relu3 feature position sees about 40 pixels of VGG's input (80 of the
-/// render, which is halved first), so on an object at the working resolution
-/// nearly every covered position also sees the background. Over black, every
-/// such feature carries the object's silhouette against black, and the
-/// matching can lower its loss by darkening the object toward the background
-/// instead of taking on the style's texture. Over the style image's mean
-/// colour the object's surroundings are a colour the style itself has.
-/// The viewer, the exports and the sheets keep the scene's background.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Backdrop {
-    /// The configured background colour (black unless the scene says
-    /// otherwise; the paper's behaviour).
-    #[default]
-    Background,
-    /// The mean colour of the style image at its texture scale.
-    StyleMean,
-}
-
-impl Backdrop {
-    /// All choices, for menus.
-    pub const ALL: [Backdrop; 2] = [Backdrop::Background, Backdrop::StyleMean];
-
-    /// The colour the optimisation renders over: `background`, or the mean of
-    /// the style's RGB (HWC, values in `[0, 1]`; black when it is empty).
-    pub fn colour(self, background: [f32; 3], style_rgb: &[f32]) -> [f32; 3] {
-        match self {
-            Backdrop::Background => background,
-            Backdrop::StyleMean => mean_colour(style_rgb),
-        }
-    }
-}
-
-impl std::str::FromStr for Backdrop {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "background" => Ok(Backdrop::Background),
-            "style-mean" => Ok(Backdrop::StyleMean),
-            _ => Err(format!("expected background or style-mean, found {s:?}")),
-        }
-    }
-}
-
-/// The mean of an RGB (HWC) image; black when it is empty.
-pub fn mean_colour(rgb: &[f32]) -> [f32; 3] {
-    let n = (rgb.len() / 3).max(1) as f64;
-    std::array::from_fn(|ch| (rgb.iter().skip(ch).step_by(3).map(|&v| f64::from(v)).sum::<f64>() / n) as f32)
-}
-
 /// Below this mean share of covered pixels, [`Focus::Auto`] means [`Focus::Object`].
 pub const AUTO_COVERAGE: f32 = 0.5;
 /// Alpha above which a pixel counts as covered by the scene.

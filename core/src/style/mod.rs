@@ -24,7 +24,7 @@ pub mod window;
 
 pub use color_transfer::ColorTransfer;
 pub use config::{DC_FLOOR, StyleConfig};
-pub use focus::{Backdrop, Focus};
+pub use focus::Focus;
 pub use gcfm::{GcfmOutput, Matches, StyleFeatures};
 pub use matching::{MatchIndex, MatchMethod, MatchingConfig};
 pub use schedule::{Mode, Phase, Schedule};

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use gast_core::gpu::DeviceChoice;
-use gast_core::style::{Backdrop, Focus, MatchMethod, Mode, StyleConfig};
+use gast_core::style::{Focus, MatchMethod, Mode, StyleConfig};
 use gast_core::vision::ConvAlgo;
 use gast_core::vision::style_depth::{DepthPolarity, DepthProvider};
 
@@ -140,13 +140,6 @@ pub struct StylizeArgs {
     /// than half of the views) [default: auto].
     #[arg(long)]
     pub focus: Option<Focus>,
-    /// What the optimisation views are rendered over: background (the
-    /// background colour, black; the paper) or style-mean (the style image's
-    /// mean colour, so the object's silhouette against black is not what
-    /// every feature near it matches; the outputs keep the background)
-    /// [default: background].
-    #[arg(long)]
-    pub backdrop: Option<Backdrop>,
     /// Keep colours out of the clamp's dead zone: after each colour step no
     /// channel of a Gaussian's base colour goes below 0 [default: off].
     #[arg(long)]
@@ -206,7 +199,6 @@ impl StylizeArgs {
         self.fast.apply(&mut c);
         set!(self.focus, c.focus);
         set!(self.color_floor, c.color_floor);
-        set!(self.backdrop, c.backdrop);
         let problems = c.problems();
         anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
         Ok(c)
