@@ -39,9 +39,10 @@ pub enum Study {
     Focus,
     /// The decoupled default at 1,000 steps on every pair, watched by the
     /// colour-collapse detector; on the first scene × block2 also object focus,
-    /// colour learning rates 1e-3 and 1e-4, the colour floor, and a tenth of
-    /// the means' learning rate (`collapse_arms` and
-    /// `collapse_object_on_every_pair` of [`Sizes`] choose). Runs only when named.
+    /// colour learning rates 1e-3 and 1e-4, the colour floor, a tenth of
+    /// the means' learning rate and a hundred times λ_cont (`collapse_arms`,
+    /// `collapse_object_on_every_pair` and `collapse_content_on_every_pair`
+    /// of [`Sizes`] choose). Runs only when named.
     Collapse,
 }
 
@@ -149,6 +150,9 @@ pub struct Sizes {
     /// on the first scene × block2.
     #[serde(default)]
     pub collapse_object_on_every_pair: bool,
+    /// Run the collapse study's [`COLLAPSE_CONTENT`] arm on every pair.
+    #[serde(default)]
+    pub collapse_content_on_every_pair: bool,
     /// Also run the focus study's two halves apart on every pair: the fitted
     /// views with the paper's whole-frame losses, and the plain orbit with
     /// the masked losses (which half buys what).
@@ -157,9 +161,22 @@ pub struct Sizes {
 }
 
 /// The collapse study's runs: the decoupled default on every pair; the others
-/// on the first scene × block2 (object focus on every pair when asked).
-pub const COLLAPSE_ARMS: [&str; 6] =
-    ["decoupled", "object focus", "colour floor", "lr colour 1e-3", "lr colour 1e-4", "lr means 1e-5"];
+/// on the first scene × block2 (object focus and λ_cont 0.1 on every pair when asked).
+pub const COLLAPSE_ARMS: [&str; 7] = [
+    "decoupled",
+    "object focus",
+    "colour floor",
+    "lr colour 1e-3",
+    "lr colour 1e-4",
+    "lr means 1e-5",
+    COLLAPSE_CONTENT,
+];
+
+/// The collapse study's arm with λ_cont = 0.1, a hundred times the
+/// reference's: the content loss (relu3 features of the colour-matched
+/// render) is the term that holds the object's appearance, and at 1e-3 it is
+/// too weak to stop the moving means from bringing dark Gaussians forward.
+pub const COLLAPSE_CONTENT: &str = "content 0.1";
 
 fn all_collapse_arms() -> Vec<String> {
     COLLAPSE_ARMS.iter().map(|s| s.to_string()).collect()
@@ -194,6 +211,7 @@ impl Sizes {
             eval_over_style_colour: false,
             collapse_arms: all_collapse_arms(),
             collapse_object_on_every_pair: false,
+            collapse_content_on_every_pair: false,
             focus_halves: false,
         }
     }
@@ -246,6 +264,7 @@ impl Sizes {
             eval_over_style_colour: false,
             collapse_arms: all_collapse_arms(),
             collapse_object_on_every_pair: false,
+            collapse_content_on_every_pair: false,
             focus_halves: false,
         }
     }

@@ -25,7 +25,9 @@ use gast_core::style::{Focus, Mode, StyleConfig};
 use super::bench::shared_dir;
 use super::{Framing, ViewArgs, load_scene, views_for};
 use crate::report::quality::{read_summary, rewrite_report, write_report};
-use crate::study::{Record, Row, RunSummary, SEED_LABEL, Sizes, Study, StyleSource, TrialSpec, mode_label};
+use crate::study::{
+    COLLAPSE_CONTENT, Record, Row, RunSummary, SEED_LABEL, Sizes, Study, StyleSource, TrialSpec, mode_label,
+};
 
 /// Arguments of `gast bench quality`.
 #[derive(Args, Debug)]
@@ -308,8 +310,11 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
         let total = default.schedule().total_steps();
         let quarters: Vec<u32> = [4u32, 2].iter().map(|d| total / d).filter(|s| *s > 0).collect();
         let wanted = |label: &str| sizes.collapse_arms.iter().any(|a| a == label);
-        let every_pair =
-            |label: &str| label == "decoupled" || (label == "object focus" && sizes.collapse_object_on_every_pair);
+        let every_pair = |label: &str| {
+            label == "decoupled"
+                || (label == "object focus" && sizes.collapse_object_on_every_pair)
+                || (label == COLLAPSE_CONTENT && sizes.collapse_content_on_every_pair)
+        };
         let block2 = sizes.styles.iter().find(|s| s.contains("block2")).or(sizes.styles.first()).cloned();
         if let Some(block2) = block2 {
             let mut arms = vec![
@@ -327,6 +332,9 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
             let mut c = default.clone();
             c.lr.means_per_extent = 1e-5;
             arms.push(("lr means 1e-5".to_string(), c, plain_on_object));
+            let mut c = default.clone();
+            c.weights.content = 0.1;
+            arms.push((COLLAPSE_CONTENT.to_string(), c, plain_on_object));
             arms.insert(0, ("decoupled".to_string(), default.clone(), plain_on_object));
             for (label, config, framing) in arms.into_iter().filter(|a| wanted(&a.0)) {
                 for scene in 0..sizes.scenes.len() {
@@ -593,6 +601,9 @@ mod tests {
             c.lr.means_per_extent = means;
             lrs.push((label, c));
         }
+        let mut content = default.clone();
+        content.weights.content = 0.1;
+        lrs.push((COLLAPSE_CONTENT, content));
         for (label, want) in arms.into_iter().chain(lrs) {
             let (n, config, style) = config_of(label);
             assert_eq!(n, 1, "{label}: one run");
@@ -606,6 +617,15 @@ mod tests {
         assert_eq!(g.rows.len(), sizes.scenes.len() * sizes.styles.len());
         assert!(g.rows.iter().all(|r| r.label == "object focus"), "{:?}", g.rows);
         assert!(g.trials.iter().all(|t| t.config.focus == Focus::Object));
+        // The default and λ_cont 0.1, both on every pair.
+        let both = Sizes {
+            collapse_arms: vec!["decoupled".into(), COLLAPSE_CONTENT.into()],
+            collapse_content_on_every_pair: true,
+            ..sizes.clone()
+        };
+        let g = build_grid(&both, Path::new("/shared"), &[Study::Collapse]);
+        let content_rows = g.rows.iter().filter(|r| r.label == COLLAPSE_CONTENT).count();
+        assert_eq!((g.rows.len(), content_rows), (2 * pairs, pairs));
     }
 
     #[test]
