@@ -512,8 +512,9 @@ fn colour_line(ui: &mut Ui, c: &gast_core::session::ColourReading, object: bool)
             ui.colored_label(
                 Color32::from_rgb(255, 130, 110),
                 format!(
-                    "Colour collapse: {:.0}% of the colour is lost. The geometry steps' moving means darken \
-                     captured objects: {focus}lower the learning rate 'means / extent' to 1e-5.",
+                    "Colour collapse: {:.0}% of the colour is lost. The geometry steps' moving means bring dark \
+                     Gaussians in front: {focus}raise λ_cont to 0.1 (it holds the colour-matched look), or lower \
+                     the learning rate 'means / extent' to 1e-5.",
                     d.value * 100.0
                 ),
             );

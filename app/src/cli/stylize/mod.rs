@@ -172,7 +172,8 @@ pub fn collapse_advice(steps: u32, loss: f32, object: bool) -> String {
     let focus = if object { "" } else { "--focus object, or " };
     format!(
         "after {steps} steps the object has lost {:.0}% of its colour-matched luminance or chroma (colour collapse); \
-         the geometry steps' moving means darken captured objects: try {focus}--lr-means 1e-5 (a tenth of the default)",
+         the geometry steps' moving means bring dark Gaussians in front: try {focus}--lambda-content 0.1 (a hundred \
+         times the default; the content loss holds the colour-matched look), or --lr-means 1e-5 (a tenth of the default)",
         loss * 100.0
     )
 }
@@ -568,7 +569,7 @@ mod tests {
         assert!(!collapse_advice(300, 0.52, true).contains("--focus"), "the focus is on the object already");
         let advice = collapse_advice(300, 0.52, false);
         assert!(advice.contains("300 steps") && advice.contains("52%"), "{advice}");
-        for (flag, value) in [("--focus", "object"), ("--lr-means", "1e-5")] {
+        for (flag, value) in [("--focus", "object"), ("--lambda-content", "0.1"), ("--lr-means", "1e-5")] {
             assert!(advice.contains(&format!("{flag} {value}")), "{advice}");
             let parsed = <Cli as clap::Parser>::try_parse_from(["stylize", "scene.ply", "style.png", flag, value]);
             assert!(parsed.is_ok(), "{flag} {value}: {:?}", parsed.err());
