@@ -172,8 +172,9 @@ pub fn collapse_advice(steps: u32, loss: f32, object: bool) -> String {
     let focus = if object { "" } else { "--focus object, or " };
     format!(
         "after {steps} steps the object has lost {:.0}% of its colour-matched luminance or chroma (colour collapse); \
-         the geometry steps' moving means bring dark Gaussians in front: try {focus}--lambda-content 0.1 (a hundred \
-         times the default; the content loss holds the colour-matched look), or --lr-means 1e-5 (a tenth of the default)",
+         the geometry steps' moving means bring dark Gaussians in front: try {focus}--lr-means 1e-5 (a tenth of the \
+         default), or --lambda-content 0.1 (a hundred times the default: it holds the colour-matched look, and the \
+         style's marks fade with the darkening)",
         loss * 100.0
     )
 }
