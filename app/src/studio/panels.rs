@@ -514,7 +514,7 @@ fn colour_line(ui: &mut Ui, c: &gast_core::session::ColourReading, object: bool)
                 format!(
                     "Colour collapse: {:.0}% of the colour is lost. The geometry steps' moving means bring dark \
                      Gaussians in front: {focus}lower the learning rate 'means / extent' to 1e-5, or raise \
-                     λ_cont to 0.1 (it holds the colour-matched look, and the style's marks fade with the darkening).",
+                     λ_cont to 0.1 (it holds the colour-matched look, but the style's marks fade too).",
                     d.value * 100.0
                 ),
             );

@@ -173,8 +173,8 @@ pub fn collapse_advice(steps: u32, loss: f32, object: bool) -> String {
     format!(
         "after {steps} steps the object has lost {:.0}% of its colour-matched luminance or chroma (colour collapse); \
          the geometry steps' moving means bring dark Gaussians in front: try {focus}--lr-means 1e-5 (a tenth of the \
-         default), or --lambda-content 0.1 (a hundred times the default: it holds the colour-matched look, and the \
-         style's marks fade with the darkening)",
+         default), or --lambda-content 0.1 (a hundred times the default: it holds the colour-matched look, but the \
+         style's marks fade too)",
         loss * 100.0
     )
 }
