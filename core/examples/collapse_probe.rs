@@ -6,10 +6,12 @@
 //!
 //! The collapse study found the object's covered luminance falling to a
 //! fraction of the colour-matched state's over long runs, with frozen means
-//! keeping it (frozen opacity, scales or rotations not). If the Gaussians
-//! that the views show after the run but not before are dark, and hiding them
-//! gives the brightness back, the darkening is geometry bringing forward
-//! Gaussians that were hidden, not colours being turned dark.
+//! keeping it (frozen opacity, scales or rotations not). The renders tell the
+//! possible causes apart: colours turned dark (putting the colours back gives
+//! the brightness back), Gaussians that were hidden brought forward (hiding
+//! the newly shown ones does), a porous object (alpha on its footprint falls),
+//! or the means reordering Gaussians that were shown all along (only putting
+//! the means back does; the case on guitar × block2, README).
 //!
 //! Usage: `cargo run --release -p gast-core --example collapse_probe -- SCENE STYLE STYLIZED [WEIGHTS]`
 //! (STYLIZED: `stylized.ply` of `gast stylize` on SCENE × STYLE; the weights
@@ -109,13 +111,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("|---|---|---|---|---|---|---|---|");
     let sigmoid = |x: f32| 1.0 / (1.0 + (-x).exp());
     for (name, idx) in &groups {
+        let moves: Vec<f32> = idx.iter().map(|&i| moved(i)).collect();
         println!(
             "| {name} | {} | {:.3} | {:.3} | {:.4} | {:.4} | {:.3} | {:.3} |",
             idx.len(),
             mean(idx.iter().map(|&i| dc_luminance(&before, i))),
             mean(idx.iter().map(|&i| dc_luminance(&after, i))),
-            quantile(idx.iter().map(|&i| moved(i)).collect(), 0.5),
-            quantile(idx.iter().map(|&i| moved(i)).collect(), 0.9),
+            quantile(moves.clone(), 0.5),
+            quantile(moves, 0.9),
             mean(idx.iter().map(|&i| sigmoid(before.opacity_logits[i]))),
             mean(idx.iter().map(|&i| sigmoid(after.opacity_logits[i]))),
         );
@@ -138,30 +141,32 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for (name, dark) in [("darker half", true), ("brighter half", false)] {
         let idx: Vec<usize> =
             shown_both.iter().copied().filter(|&i| (dc_luminance(&before, i) < median_lum) == dark).collect();
+        let out: Vec<f32> = idx.iter().map(|&i| outward(i)).collect();
         println!(
             "| {name} | {} | {:.3} | {:+.5} | {:+.5} |",
             idx.len(),
             mean(idx.iter().map(|&i| dc_luminance(&before, i))),
-            mean(idx.iter().map(|&i| outward(i))),
-            quantile(idx.iter().map(|&i| outward(i)).collect(), 0.5),
+            mean(out.iter().copied()),
+            quantile(out, 0.5),
         );
     }
 
     // Covered luminance of renders that undo one kind of change at a time,
     // and their mean alpha over the pixels the colour-matched render covers
     // (alpha ≥ 0.5): below 1 where the object turned porous.
-    let footprint: Vec<Vec<bool>> = cameras
-        .iter()
-        .map(|cam| raster::render(&before, cam, &opts).alpha.iter().map(|&a| a >= 0.5).collect())
-        .collect();
-    let measure = |g: &Gaussians| {
+    let reference: Vec<raster::Render> = cameras.iter().map(|cam| raster::render(&before, cam, &opts)).collect();
+    let footprint: Vec<Vec<bool>> = reference.iter().map(|r| r.alpha.iter().map(|&a| a >= 0.5).collect()).collect();
+    let measure_renders = |renders: &[raster::Render]| {
         let (mut l, mut a) = (Vec::new(), Vec::new());
-        for (cam, on) in cameras.iter().zip(&footprint) {
-            let r = raster::render(g, cam, &opts);
+        for (r, on) in renders.iter().zip(&footprint) {
             l.push(CoveredColour::of(&r.rgb, &r.alpha).luminance);
             a.push(mean(r.alpha.iter().zip(on).filter(|(_, on)| **on).map(|(&a, _)| a)));
         }
         (mean(l.into_iter()), mean(a.into_iter()))
+    };
+    let measure = |g: &Gaussians| {
+        let renders: Vec<raster::Render> = cameras.iter().map(|cam| raster::render(g, cam, &opts)).collect();
+        measure_renders(&renders)
     };
     let mut means_back = after.clone();
     means_back.means.clone_from(&before.means);
@@ -174,12 +179,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for &i in &groups[1].1 {
         surfaced_hidden.opacity_logits[i] = -30.0;
     }
-    let base = measure(&before).0;
+    let (base, base_alpha) = measure_renders(&reference);
     println!();
     println!("| render | covered luminance | / colour-matched | alpha on the colour-matched footprint |");
     println!("|---|---|---|---|");
+    println!("| colour-matched | {base:.4} | 1.000 | {base_alpha:.3} |");
     for (name, g) in [
-        ("colour-matched", &before),
         ("stylized", &after),
         ("stylized, means put back", &means_back),
         ("stylized, opacity, scales and rotations put back", &shape_back),
