@@ -158,6 +158,11 @@ pub struct Sizes {
     /// the masked losses (which half buys what).
     #[serde(default)]
     pub focus_halves: bool,
+    /// Working resolution of the focus study's object arm (0: `resolution`,
+    /// as the frame arm). What `gast stylize` does: the object's working
+    /// resolution follows the object, the frame's stays at today's size.
+    #[serde(default)]
+    pub focus_object_resolution: u32,
 }
 
 /// The collapse study's runs: the decoupled default on every pair; the others
@@ -213,6 +218,7 @@ impl Sizes {
             collapse_object_on_every_pair: false,
             collapse_content_on_every_pair: false,
             focus_halves: false,
+            focus_object_resolution: 0,
         }
     }
 
@@ -266,6 +272,7 @@ impl Sizes {
             collapse_object_on_every_pair: false,
             collapse_content_on_every_pair: false,
             focus_halves: false,
+            focus_object_resolution: 0,
         }
     }
 }

@@ -274,7 +274,11 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
     if studies.contains(&Study::Focus) {
         let cycles = sizes.focus_budget.div_ceil(sizes.steps_per_cycle).max(1);
         let frame = StyleConfig { cycles, ..base.clone() };
-        let object = StyleConfig { focus: Focus::Object, ..frame.clone() };
+        let object_resolution = match sizes.focus_object_resolution {
+            0 => frame.resolution,
+            r => r,
+        };
+        let object = StyleConfig { focus: Focus::Object, resolution: object_resolution, ..frame.clone() };
         for scene in 0..sizes.scenes.len() {
             for (k, style) in sizes.styles.iter().enumerate() {
                 let style = file(style);
@@ -647,6 +651,20 @@ mod tests {
         // Without the flag, neither half runs.
         let g = build_grid(&Sizes::full(), Path::new("/shared"), &[Study::Focus]);
         assert!(!g.rows.iter().any(|r| r.label == FOCUS_FITTED_VIEWS || r.label == FOCUS_MASKED_LOSSES));
+    }
+
+    #[test]
+    fn the_object_arm_takes_its_own_resolution_when_given() {
+        let trial = |sizes: &Sizes, label: &str| {
+            let g = build_grid(sizes, Path::new("/shared"), &[Study::Focus]);
+            let row = g.rows.iter().find(|r| r.label == label).expect("row").trial.clone();
+            g.trials.iter().find(|t| t.id == row).expect("trial").config.resolution
+        };
+        let same = Sizes::full();
+        assert_eq!((trial(&same, FOCUS_FRAME), trial(&same, FOCUS_OBJECT)), (same.resolution, same.resolution));
+        let apart = Sizes { resolution: 256, focus_object_resolution: 512, ..Sizes::full() };
+        assert_eq!((trial(&apart, FOCUS_FRAME), trial(&apart, FOCUS_OBJECT)), (256, 512));
+        assert_eq!(trial(&apart, FOCUS_SEED), 256);
     }
 
     #[test]

@@ -106,8 +106,12 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         rows.iter().find(|(r, t)| r.label == label && t.scene_name() == scene && t.style == style).copied()
     };
     let over = if run.sizes.eval_over_style_colour { " rendered over the style's mean colour" } else { "" };
+    let sizes = match run.sizes.focus_object_resolution {
+        0 => format!("both at {} px", run.sizes.resolution),
+        r => format!("frame at {} px, object at {r} px", run.sizes.resolution),
+    };
     let mut out = vec![
-        format!("## Focus: frame against object (SW, NN-cos and content on relu3, RMSE on the 37.5° pairs; all on the object's pixels of the fitted ring{over})"),
+        format!("## Focus: frame against object, {sizes} (SW, NN-cos and content on relu3, RMSE on the 37.5° pairs; all on the object's pixels of the fitted ring{over})"),
         String::new(),
         "| scene | style | steps | ΔSW frame | ΔSW object | ratio | ΔNN frame | ΔNN object | ratio | content frame | content object | RMSE frame | RMSE object | RMSE ratio | colours collapsed (frame, object) | optimising s (frame, object) | passes |"
             .into(),
