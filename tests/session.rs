@@ -133,6 +133,32 @@ fn a_bad_configuration_fails_with_a_message() {
     assert!(handle.stop_and_join().is_none());
 }
 
+#[test]
+fn the_feature_mean_term_runs_on_the_cpu_and_is_refused_on_the_gpu() {
+    use gast_core::gpu::DeviceChoice;
+    use gast_core::session::Session;
+    let config = StyleConfig {
+        cycles: 1,
+        steps_per_cycle: 2,
+        resolution: 48,
+        texture_scale: 64,
+        focus: gast_core::style::Focus::Object,
+        weights: gast_core::style::config::LossWeights { feature_mean: 100.0, ..Default::default() },
+        ..Default::default()
+    };
+    let Some(cpu_inputs) = inputs(config) else { return };
+    let mut cpu = Session::prepare(cpu_inputs.clone(), &mut |_| {}).expect("CPU session");
+    let step = cpu.step().expect("a CPU step");
+    assert!(step.losses.feature_mean > 0.0, "the term is measured: {:?}", step.losses);
+    let ctx = match DeviceChoice::Gpu.resolve() {
+        Ok(Some(c)) => c,
+        other => panic!("the GPU tests need a wgpu adapter (lavapipe: mesa-vulkan-drivers): {other:?}"),
+    };
+    let refused = Session::prepare(SessionInputs { gpu: Some(ctx), ..cpu_inputs }, &mut |_| {});
+    let msg = refused.err().map(|e| e.to_string()).expect("the GPU session is refused");
+    assert!(msg.contains("feature-mean") && msg.contains("--device cpu"), "{msg}");
+}
+
 /// The GPU engine (on lavapipe in CI) against the CPU engine: the same
 /// session, the same views, step by step. The first step starts from the same
 /// Gaussians, so its losses agree to float rounding; the second follows one

@@ -163,6 +163,10 @@ pub struct Sizes {
     /// resolution follows the object, the frame's stays at today's size.
     #[serde(default)]
     pub focus_object_resolution: u32,
+    /// λ_mean of the focus study's object arm (0: off, as the frame arm;
+    /// [`gast_core::style::feature_mean`]).
+    #[serde(default)]
+    pub focus_object_lambda_mean: f32,
 }
 
 /// The collapse study's runs: the decoupled default on every pair; the others
@@ -219,6 +223,7 @@ impl Sizes {
             collapse_content_on_every_pair: false,
             focus_halves: false,
             focus_object_resolution: 0,
+            focus_object_lambda_mean: 0.0,
         }
     }
 
@@ -273,6 +278,7 @@ impl Sizes {
             collapse_content_on_every_pair: false,
             focus_halves: false,
             focus_object_resolution: 0,
+            focus_object_lambda_mean: 0.0,
         }
     }
 }

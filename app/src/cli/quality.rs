@@ -20,6 +20,7 @@ use clap::Args;
 use gast_core::Gaussians;
 use gast_core::eval::{EvalOptions, StabilityThresholds, TrialOutcome, run_trial};
 use gast_core::session::{PreparedStyle, SessionInputs, StyleDepthSource, StyleImage, prepare_style};
+use gast_core::style::config::LossWeights;
 use gast_core::style::{Focus, Mode, StyleConfig};
 
 use super::bench::shared_dir;
@@ -278,7 +279,12 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
             0 => frame.resolution,
             r => r,
         };
-        let object = StyleConfig { focus: Focus::Object, resolution: object_resolution, ..frame.clone() };
+        let object = StyleConfig {
+            focus: Focus::Object,
+            resolution: object_resolution,
+            weights: LossWeights { feature_mean: sizes.focus_object_lambda_mean, ..frame.weights },
+            ..frame.clone()
+        };
         for scene in 0..sizes.scenes.len() {
             for (k, style) in sizes.styles.iter().enumerate() {
                 let style = file(style);
@@ -665,6 +671,14 @@ mod tests {
         let apart = Sizes { resolution: 256, focus_object_resolution: 512, ..Sizes::full() };
         assert_eq!((trial(&apart, FOCUS_FRAME), trial(&apart, FOCUS_OBJECT)), (256, 512));
         assert_eq!(trial(&apart, FOCUS_SEED), 256);
+        // λ_mean goes to the object arm only.
+        let mean = Sizes { focus_object_lambda_mean: 100.0, ..Sizes::full() };
+        let g = build_grid(&mean, Path::new("/shared"), &[Study::Focus]);
+        for (label, want) in [(FOCUS_FRAME, 0.0), (FOCUS_SEED, 0.0), (FOCUS_OBJECT, 100.0)] {
+            let row = g.rows.iter().find(|r| r.label == label).expect("row").trial.clone();
+            let t = g.trials.iter().find(|t| t.id == row).expect("trial");
+            assert_eq!(t.config.weights.feature_mean, want, "{label}");
+        }
     }
 
     #[test]

@@ -110,6 +110,10 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         0 => format!("both at {} px", run.sizes.resolution),
         r => format!("frame at {} px, object at {r} px", run.sizes.resolution),
     };
+    let sizes = match run.sizes.focus_object_lambda_mean {
+        l if l > 0.0 => format!("{sizes}, object with λ_mean {l}"),
+        _ => sizes,
+    };
     let mut out = vec![
         format!("## Focus: frame against object, {sizes} (SW, NN-cos and content on relu3, RMSE on the 37.5° pairs; all on the object's pixels of the fitted ring{over})"),
         String::new(),

@@ -380,6 +380,8 @@ pub fn step_loss_gpu(
         content: content_value,
         tv,
         depth: depth_value,
+        // No feature-mean term on the GPU yet: the session refuses λ_mean > 0 there.
+        feature_mean: 0.0,
         total: weights.gcfm * gcfm + weights.content * content_value + weights.tv * tv + weights.depth * depth_value,
         v_rgb: ctx.read(plan.v_rgb())?,
         v_inv_depth: ctx.read(plan.v_inv_depth())?,

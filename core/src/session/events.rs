@@ -40,6 +40,9 @@ pub struct LossTerms {
     pub reg_rotation: f32,
     /// mean|D − D^c| (geometry steps).
     pub depth: f32,
+    /// The feature-mean term (0 when λ_mean is 0).
+    #[serde(default)]
+    pub feature_mean: f32,
 }
 
 /// Time spent in each part of a step, in milliseconds.

@@ -133,6 +133,7 @@ impl Session {
             content: loss.content,
             tv: loss.tv,
             depth: loss.depth,
+            feature_mean: loss.feature_mean,
             total: loss.total,
             ..LossTerms::default()
         };

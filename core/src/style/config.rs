@@ -35,11 +35,25 @@ pub struct LossWeights {
     pub rotation: f32,
     /// λ_d, inverse-depth regulariser (geometry phase).
     pub depth: f32,
+    /// λ_mean, the feature-mean term ([`crate::style::feature_mean`]): the
+    /// mean of the rendered RGB relu3 features over the positions the losses
+    /// average over, pulled toward the style's. Not in the reference: 0 (off)
+    /// by default. CPU engine only so far.
+    pub feature_mean: f32,
 }
 
 impl Default for LossWeights {
     fn default() -> Self {
-        Self { gcfm: 2.0, content: 1e-3, tv: 0.02, opacity: 1.0, scale: 1.0, rotation: 1.0, depth: 10.0 }
+        Self {
+            gcfm: 2.0,
+            content: 1e-3,
+            tv: 0.02,
+            opacity: 1.0,
+            scale: 1.0,
+            rotation: 1.0,
+            depth: 10.0,
+            feature_mean: 0.0,
+        }
     }
 }
 
@@ -190,6 +204,7 @@ impl StyleConfig {
             ("weights.scale", w.scale),
             ("weights.rotation", w.rotation),
             ("weights.depth", w.depth),
+            ("weights.feature_mean", w.feature_mean),
             ("lr.color", lr.color),
             ("lr.means_per_extent", lr.means_per_extent),
             ("lr.scales", lr.scales),

@@ -43,6 +43,8 @@ pub struct StyleFeatures {
     joint_inv_norm: Vec<f32>,
     /// `1 / (‖F_m‖ + 1e-8)` per modality and position (loss).
     modal_inv_norm: [Vec<f64>; 3],
+    /// The RGB features' mean per channel (the feature-mean term's target).
+    rgb_mean: Vec<f32>,
 }
 
 impl StyleFeatures {
@@ -61,7 +63,8 @@ impl StyleFeatures {
             })
             .collect();
         let modal_inv_norm = std::array::from_fn(|k| modal_sq[k].iter().map(|&s| 1.0 / (s.sqrt() + EPS)).collect());
-        Self { channels, height, width, feats, joint_inv_norm, modal_inv_norm }
+        let rgb_mean = super::feature_mean::channel_means(&feats[0], channels);
+        Self { channels, height, width, feats, joint_inv_norm, modal_inv_norm, rgb_mean }
     }
 
     /// Number of style positions.
@@ -72,6 +75,11 @@ impl StyleFeatures {
     /// The features of one modality (0 RGB, 1 depth, 2 edge), CHW.
     pub fn modality(&self, m: usize) -> &[f32] {
         &self.feats[m]
+    }
+
+    /// The RGB features' mean per channel.
+    pub fn rgb_mean(&self) -> &[f32] {
+        &self.rgb_mean
     }
 
     /// The matching's style-side scale `1 / (sqrt(‖joint‖² + 1e-8) + 1e-8)`, per position.

@@ -12,6 +12,7 @@ pub mod color_transfer;
 pub mod config;
 pub mod content;
 pub mod distinct;
+pub mod feature_mean;
 pub mod focus;
 pub mod gcfm;
 pub mod matching;

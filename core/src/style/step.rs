@@ -12,6 +12,7 @@
 
 use super::config::LossWeights;
 use super::content::content_loss_masked;
+use super::feature_mean::feature_mean_loss;
 use super::focus::{feature_mask, gather_positions, scatter_positions};
 use super::gcfm::{GcfmOutput, Matches, StyleFeatures, gcfm_loss_with_matches, match_features};
 use super::regularizers::depth_l1;
@@ -161,6 +162,8 @@ pub struct StepLoss {
     pub tv: f32,
     /// Depth regulariser (unweighted; 0 without a reference depth).
     pub depth: f32,
+    /// Feature-mean term (unweighted; 0 when λ_mean is 0).
+    pub feature_mean: f32,
     /// `Σ weight · term`.
     pub total: f32,
     /// Gradient of `total` w.r.t. the rendered RGB (HWC).
@@ -371,6 +374,14 @@ pub fn step_loss_with<N: FeatureNet>(
             *a += weights.content * b;
         }
     }
+    let mut feature_mean_value = 0.0;
+    if weights.feature_mean > 0.0 {
+        let (l, g) = feature_mean_loss(&fwd[0].0.data, fwd[0].0.channels, style.features.rgb_mean(), fmask.as_deref());
+        feature_mean_value = l;
+        for (a, b) in v_feat_rgb.iter_mut().zip(g) {
+            *a += weights.feature_mean * b;
+        }
+    }
     let v_feat_depth: Vec<f32> = out.v_rendered[1].iter().map(|v| v * weights.gcfm).collect();
     timings.matching_ms = t.elapsed().as_secs_f32() * 1e3;
     let t = std::time::Instant::now();
@@ -409,14 +420,18 @@ pub fn step_loss_with<N: FeatureNet>(
             *a += weights.depth * b;
         }
     }
-    let total =
-        weights.gcfm * out.loss + weights.content * content_value + weights.tv * tv + weights.depth * depth_value;
+    let total = weights.gcfm * out.loss
+        + weights.content * content_value
+        + weights.tv * tv
+        + weights.depth * depth_value
+        + weights.feature_mean * feature_mean_value;
     StepLoss {
         timings,
         gcfm: out.loss,
         content: content_value,
         tv,
         depth: depth_value,
+        feature_mean: feature_mean_value,
         total,
         v_rgb,
         v_inv_depth,
