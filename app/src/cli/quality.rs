@@ -661,11 +661,12 @@ mod tests {
 
     #[test]
     fn the_object_arm_takes_its_own_resolution_when_given() {
-        let trial = |sizes: &Sizes, label: &str| {
+        let config = |sizes: &Sizes, label: &str| {
             let g = build_grid(sizes, Path::new("/shared"), &[Study::Focus]);
             let row = g.rows.iter().find(|r| r.label == label).expect("row").trial.clone();
-            g.trials.iter().find(|t| t.id == row).expect("trial").config.resolution
+            g.trials.iter().find(|t| t.id == row).expect("trial").config.clone()
         };
+        let trial = |sizes: &Sizes, label: &str| config(sizes, label).resolution;
         let same = Sizes::full();
         assert_eq!((trial(&same, FOCUS_FRAME), trial(&same, FOCUS_OBJECT)), (same.resolution, same.resolution));
         let apart = Sizes { resolution: 256, focus_object_resolution: 512, ..Sizes::full() };
@@ -673,11 +674,8 @@ mod tests {
         assert_eq!(trial(&apart, FOCUS_SEED), 256);
         // λ_mean goes to the object arm only.
         let mean = Sizes { focus_object_lambda_mean: 100.0, ..Sizes::full() };
-        let g = build_grid(&mean, Path::new("/shared"), &[Study::Focus]);
         for (label, want) in [(FOCUS_FRAME, 0.0), (FOCUS_SEED, 0.0), (FOCUS_OBJECT, 100.0)] {
-            let row = g.rows.iter().find(|r| r.label == label).expect("row").trial.clone();
-            let t = g.trials.iter().find(|t| t.id == row).expect("trial");
-            assert_eq!(t.config.weights.feature_mean, want, "{label}");
+            assert_eq!(config(&mean, label).weights.feature_mean, want, "{label}");
         }
     }
 
