@@ -348,9 +348,14 @@ impl GpuEngine {
             content: s[slot::CONTENT],
             tv: s[slot::TV],
             depth: if geometry { s[slot::DEPTH] } else { 0.0 },
+            feature_mean: if w.feature_mean > 0.0 { s[slot::FEATURE_MEAN] } else { 0.0 },
             ..LossTerms::default()
         };
-        terms.total = w.gcfm * terms.gcfm + w.content * terms.content + w.tv * terms.tv + w.depth * terms.depth;
+        terms.total = w.gcfm * terms.gcfm
+            + w.content * terms.content
+            + w.tv * terms.tv
+            + w.depth * terms.depth
+            + w.feature_mean * terms.feature_mean;
         if geometry {
             terms.reg_opacity = s[slot::REG_OPACITY];
             terms.reg_scale = s[slot::REG_SCALE];

@@ -61,6 +61,8 @@ pub struct GpuStyle {
     feats: Vec<wgpu::Buffer>,
     joint_inv_norm: wgpu::Buffer,
     modal_inv_norm: Vec<wgpu::Buffer>,
+    /// The RGB features' per-channel means (λ_mean's target), on the host.
+    rgb_mean: Vec<f32>,
 }
 
 impl GpuStyle {
@@ -77,7 +79,13 @@ impl GpuStyle {
                     ctx.upload("gcfm.modal_inv_norm", &v)
                 })
                 .collect(),
+            rgb_mean: style.rgb_mean().to_vec(),
         }
+    }
+
+    /// The RGB features' per-channel means ([`StyleFeatures::rgb_mean`]).
+    pub fn rgb_mean(&self) -> &[f32] {
+        &self.rgb_mean
     }
 
     /// Number of style positions.

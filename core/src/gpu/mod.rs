@@ -19,6 +19,7 @@ mod depth_dpt;
 mod depth_map;
 mod depth_net;
 mod engine;
+mod feature_mean;
 mod feature_net;
 mod focus;
 mod gaussians;
@@ -50,6 +51,7 @@ pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descripto
 pub use depth_map::{DepthMap, DepthMapKernels};
 pub use depth_net::GpuDepthNet;
 pub use engine::GpuEngine;
+pub use feature_mean::FeatureMeanLoss;
 pub use feature_net::{GpuFeatureNet, GpuFeatureState};
 pub use focus::{FocusKernels, GpuFocus};
 pub use gaussians::{GpuGaussians, GpuGrads};

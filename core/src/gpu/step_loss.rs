@@ -16,6 +16,7 @@
 use std::sync::Arc;
 
 use super::content::ContentLoss;
+use super::feature_mean::FeatureMeanLoss;
 use super::{
     CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, FocusKernels, GcfmSubset, GcfmWorkspace,
     GpuContext, GpuError, GpuFocus, GpuGcfm, GpuStyle, GpuVgg, GpuVggState, GpuVggWorkspace, LossKernels,
@@ -44,6 +45,8 @@ pub mod slot {
     pub const REG_ROTATION: usize = 9;
     /// (tile, splat) pairs the render needed (a `u32`).
     pub const PAIRS: usize = 10;
+    /// The feature-mean term (unweighted; written only when λ_mean > 0).
+    pub const FEATURE_MEAN: usize = 11;
     /// Words in all.
     pub const LEN: usize = 12;
 }
@@ -92,6 +95,9 @@ pub struct StepLossPlan {
     states: [GpuVggState; 3],
     gcfm_ws: GcfmWorkspace,
     content: ContentLoss,
+    feature_mean: FeatureMeanLoss,
+    /// Whether λ_mean is above 0 (the term is recorded only then).
+    feature_mean_on: bool,
     /// λ_GC baked into the GCFM workspace.
     gcfm_weight: f32,
     /// The whole frame (all-ones masks), the focus when none is given.
@@ -135,6 +141,15 @@ impl StepLossPlan {
             vgg_ws: k.vgg.workspace(ctx, sh, sw),
             gcfm_ws: k.gcfm.workspace(ctx, style, positions, slot::GCFM, weights.gcfm),
             content: ContentLoss::new(ctx, &k.reduce, feature_len, positions, weights.content, slot::CONTENT)?,
+            feature_mean: FeatureMeanLoss::new(
+                ctx,
+                &k.reduce,
+                style.rgb_mean(),
+                positions,
+                weights.feature_mean,
+                slot::FEATURE_MEAN,
+            )?,
+            feature_mean_on: weights.feature_mean > 0.0,
             gcfm_weight: weights.gcfm,
             frame: GpuFocus::frame(ctx, h, w, fh, fw),
             sizes: [(h, w), (fh, fw)],
@@ -162,11 +177,13 @@ impl StepLossPlan {
         self.gcfm_weight
     }
 
-    /// Changes λ_TV, λ_d and λ_cont (from the next submission on).
+    /// Changes λ_TV, λ_d, λ_cont and λ_mean (from the next submission on).
     pub fn set_weights(&mut self, ctx: &GpuContext, w: &LossWeights) {
         self.tv.set_weight(ctx, w.tv);
         self.depth_l1.set_weight(ctx, w.depth);
         self.content.set_weight(ctx, w.content);
+        self.feature_mean.set_weight(ctx, w.feature_mean);
+        self.feature_mean_on = w.feature_mean > 0.0;
     }
 
     /// After [`StepLossPlan::record`]: the gradient w.r.t. the raw render's
@@ -276,11 +293,15 @@ impl StepLossPlan {
             k.vgg.forward(ctx, enc, &self.vgg_ws, small, state);
         }
 
-        // Feature space: GCFM (gradients scaled by λ_GC), then content on the RGB features.
+        // Feature space: GCFM (gradients scaled by λ_GC), then content and
+        // the feature-mean term on the RGB features.
         let feats = [self.states[0].features(), self.states[1].features(), self.states[2].features()];
         k.gcfm.record(ctx, enc, &self.gcfm_ws, style, feats, focus, &self.v_feat[0], &self.v_feat[1], scalars, search);
         if let Some(target) = content {
             self.content.record(ctx, enc, feats[0], target, focus, &self.v_feat[0], scalars);
+        }
+        if self.feature_mean_on {
+            self.feature_mean.record(ctx, enc, feats[0], focus, &self.v_feat[0], scalars);
         }
 
         // Image space: RGB through VGG and the downscale, plus TV, then the clamp's mask.
@@ -374,15 +395,21 @@ pub fn step_loss_gpu(
     let content_value = if content.is_some() { s[slot::CONTENT] } else { 0.0 };
     let depth_value = if dref.is_some() { s[slot::DEPTH] } else { 0.0 };
     let tv = s[slot::TV];
+    let feature_mean = if weights.feature_mean > 0.0 { s[slot::FEATURE_MEAN] } else { 0.0 };
     Ok(StepLoss {
         timings: StepLossTimings::default(),
         gcfm,
         content: content_value,
         tv,
         depth: depth_value,
-        // No feature-mean term on the GPU yet: the session refuses λ_mean > 0 there.
-        feature_mean: 0.0,
-        total: weights.gcfm * gcfm + weights.content * content_value + weights.tv * tv + weights.depth * depth_value,
+        feature_mean,
+        // No background hold on the GPU yet: the session refuses λ_out > 0 there.
+        outside: 0.0,
+        total: weights.gcfm * gcfm
+            + weights.content * content_value
+            + weights.tv * tv
+            + weights.depth * depth_value
+            + weights.feature_mean * feature_mean,
         v_rgb: ctx.read(plan.v_rgb())?,
         v_inv_depth: ctx.read(plan.v_inv_depth())?,
         matches: Matches { best: m[..n].to_vec(), worst: m[n..2 * n].to_vec() },
