@@ -167,6 +167,10 @@ pub struct Sizes {
     /// [`gast_core::style::feature_mean`]).
     #[serde(default)]
     pub focus_object_lambda_mean: f32,
+    /// λ_out of the focus study's object arm (0: off, as the frame arm;
+    /// [`gast_core::style::outside`]).
+    #[serde(default)]
+    pub focus_object_lambda_outside: f32,
 }
 
 /// The collapse study's runs: the decoupled default on every pair; the others
@@ -224,6 +228,7 @@ impl Sizes {
             focus_halves: false,
             focus_object_resolution: 0,
             focus_object_lambda_mean: 0.0,
+            focus_object_lambda_outside: 0.0,
         }
     }
 
@@ -279,6 +284,7 @@ impl Sizes {
             focus_halves: false,
             focus_object_resolution: 0,
             focus_object_lambda_mean: 0.0,
+            focus_object_lambda_outside: 0.0,
         }
     }
 }

@@ -282,7 +282,11 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
         let object = StyleConfig {
             focus: Focus::Object,
             resolution: object_resolution,
-            weights: LossWeights { feature_mean: sizes.focus_object_lambda_mean, ..frame.weights },
+            weights: LossWeights {
+                feature_mean: sizes.focus_object_lambda_mean,
+                outside: sizes.focus_object_lambda_outside,
+                ..frame.weights
+            },
             ..frame.clone()
         };
         for scene in 0..sizes.scenes.len() {
@@ -672,10 +676,11 @@ mod tests {
         let apart = Sizes { resolution: 256, focus_object_resolution: 512, ..Sizes::full() };
         assert_eq!((trial(&apart, FOCUS_FRAME), trial(&apart, FOCUS_OBJECT)), (256, 512));
         assert_eq!(trial(&apart, FOCUS_SEED), 256);
-        // λ_mean goes to the object arm only.
-        let mean = Sizes { focus_object_lambda_mean: 100.0, ..Sizes::full() };
-        for (label, want) in [(FOCUS_FRAME, 0.0), (FOCUS_SEED, 0.0), (FOCUS_OBJECT, 100.0)] {
-            assert_eq!(config(&mean, label).weights.feature_mean, want, "{label}");
+        // λ_mean and λ_out go to the object arm only.
+        let mean = Sizes { focus_object_lambda_mean: 100.0, focus_object_lambda_outside: 30.0, ..Sizes::full() };
+        for (label, want) in [(FOCUS_FRAME, [0.0; 2]), (FOCUS_SEED, [0.0; 2]), (FOCUS_OBJECT, [100.0, 30.0])] {
+            let w = config(&mean, label).weights;
+            assert_eq!([w.feature_mean, w.outside], want, "{label}");
         }
     }
 

@@ -114,12 +114,16 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         l if l > 0.0 => format!("{sizes}, object with λ_mean {l}"),
         _ => sizes,
     };
+    let sizes = match run.sizes.focus_object_lambda_outside {
+        l if l > 0.0 => format!("{sizes}, object with λ_out {l}"),
+        _ => sizes,
+    };
     let mut out = vec![
         format!("## Focus: frame against object, {sizes} (SW, NN-cos and content on relu3, RMSE on the 37.5° pairs; all on the object's pixels of the fitted ring{over})"),
         String::new(),
-        "| scene | style | steps | ΔSW frame | ΔSW object | ratio | ΔNN frame | ΔNN object | ratio | content frame | content object | RMSE frame | RMSE object | RMSE ratio | colours collapsed (frame, object) | optimising s (frame, object) | passes |"
+        "| scene | style | steps | ΔSW frame | ΔSW object | ratio | ΔNN frame | ΔNN object | ratio | content frame | content object | RMSE frame | RMSE object | RMSE ratio | colours collapsed (frame, object) | haze (frame, object) | optimising s (frame, object) | passes |"
             .into(),
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|".into(),
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|".into(),
     ];
     let (mut ratios, mut nn_ratios, mut rmse_ratios, mut time_ratios) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
@@ -147,7 +151,7 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
             t.sw_more += usize::from(sw_more);
         };
         let Some(object) = object_arm else {
-            out.push(format!("| {scene} | {style} | {step} | no object arm in this run |||||||||||||| no |"));
+            out.push(format!("| {scene} | {style} | {step} | no object arm in this run ||||||||||||||| no |"));
             count(&mut per_scene, false, false, false);
             continue;
         };
@@ -159,7 +163,7 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
             decrease(object, step, nn),
         ) else {
             out.push(format!(
-                "| {scene} | {style} | {step} | failed: frame {} ({} steps), object {} ({} steps) |||||||||||||| no |",
+                "| {scene} | {style} | {step} | failed: frame {} ({} steps), object {} ({} steps) ||||||||||||||| no |",
                 frame.health(),
                 frame.steps,
                 object.health(),
@@ -171,6 +175,7 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         let at = |r: &Record, f: fn(&Measures) -> f32| r.at(step).map_or(f32::NAN, |c| f(&c.measures));
         let (rmse_f, rmse_o) = (at(frame, |m| m.consistency_long_object), at(object, |m| m.consistency_long_object));
         let (content_f, content_o) = (at(frame, |m| m.content_object), at(object, |m| m.content_object));
+        let (haze_f, haze_o) = (at(frame, |m| m.outside_change), at(object, |m| m.outside_change));
         let pass = sw_o - sw_f > floor(sw) && nn_o - nn_f > floor(nn) && rmse_o <= RMSE_FACTOR * rmse_f;
         let (ratio_sw, ratio_nn, ratio_rmse) = (sw_o / sw_f, nn_o / nn_f, rmse_o / rmse_f);
         let (time_f, time_o) = (optimising_s(frame, step), optimising_s(object, step));
@@ -180,7 +185,7 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         rmse_ratios.push(ratio_rmse);
         count(&mut per_scene, pass, nn_o > nn_f, sw_o > sw_f);
         out.push(format!(
-            "| {scene} | {style} | {step} | {sw_f:.4} | {sw_o:.4} | {ratio_sw:.2} | {nn_f:.4} | {nn_o:.4} | {ratio_nn:.2} | {content_f:.4} | {content_o:.4} | {rmse_f:.4} | {rmse_o:.4} | {ratio_rmse:.2} | {}, {} | {time_f:.0}, {time_o:.0} | {} |",
+            "| {scene} | {style} | {step} | {sw_f:.4} | {sw_o:.4} | {ratio_sw:.2} | {nn_f:.4} | {nn_o:.4} | {ratio_nn:.2} | {content_f:.4} | {content_o:.4} | {rmse_f:.4} | {rmse_o:.4} | {ratio_rmse:.2} | {}, {} | {haze_f:.4}, {haze_o:.4} | {time_f:.0}, {time_o:.0} | {} |",
             yes_no(frame_collapsed),
             yes_no(collapsed(object)),
             yes_no(pass)

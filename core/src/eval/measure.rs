@@ -28,6 +28,7 @@ use crate::raster::{self, Render, RenderOptions};
 use crate::scene::Gaussians;
 use crate::style::StyleFeatures;
 use crate::style::focus::{coverage_mask, feature_mask, gather_positions};
+use crate::style::outside::OUTSIDE_ALPHA;
 use crate::style::step::{FeatureMap, content_target, replicate3};
 use crate::vision::Vgg;
 use crate::vision::canny::render_edges;
@@ -148,6 +149,11 @@ pub struct Measures {
     /// Mean relu3 feature length on the object over the style's mean feature length.
     #[serde(default)]
     pub feature_norm_object: f32,
+    /// Haze: the mean absolute RGB change against the colour-matched render
+    /// over the pixels it leaves empty (alpha below
+    /// [`crate::style::outside::OUTSIDE_ALPHA`]) in the style views, RGB in `[0, 1]`.
+    #[serde(default)]
+    pub outside_change: f32,
 }
 
 /// The fixed views, the colour-matched renders and the style's features that
@@ -368,6 +374,7 @@ impl Evaluator {
             let colour = CoveredColour::of(&after.rgb, &after.alpha);
             m.colour.luminance += colour.luminance / n;
             m.colour.chroma += colour.chroma / n;
+            m.outside_change += outside_change(before, after) / n;
         }
         let pair_rmse = |pairs: &[(usize, usize)], on_object: bool| {
             pairs
@@ -394,9 +401,37 @@ impl Evaluator {
     }
 }
 
+/// The mean absolute RGB difference between `after` and `before` over the
+/// pixels `before` leaves empty (0 when it covers every pixel).
+fn outside_change(before: &Render, after: &Render) -> f32 {
+    let (mut sum, mut count) = (0f64, 0usize);
+    for (p, _) in before.alpha.iter().enumerate().filter(|(_, a)| **a < OUTSIDE_ALPHA) {
+        for c in 3 * p..3 * p + 3 {
+            let clamp = |v: f32| v.clamp(0.0, 1.0);
+            sum += f64::from((clamp(after.rgb[c]) - clamp(before.rgb[c])).abs());
+        }
+        count += 3;
+    }
+    if count == 0 { 0.0 } else { (sum / count as f64) as f32 }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_outside_change_reads_only_the_empty_pixels() {
+        let render =
+            |alpha: Vec<f32>, rgb: Vec<f32>| Render { rgb, alpha, inv_depth: vec![0.0; 4], width: 2, height: 2 };
+        let before = render(vec![1.0, 0.0, 0.0, 0.5], vec![0.5; 12]);
+        let mut rgb = vec![0.5; 12];
+        rgb[0..3].copy_from_slice(&[1.0; 3]); // covered: not counted
+        rgb[3..6].copy_from_slice(&[0.7; 3]); // empty: 0.2
+        rgb[6..9].copy_from_slice(&[2.0; 3]); // empty, clamped: 0.5
+        let after = render(vec![1.0; 4], rgb);
+        assert!((outside_change(&before, &after) - 0.35).abs() < 1e-6);
+        assert_eq!(outside_change(&after, &before), 0.0, "a render that covers everything has no outside");
+    }
 
     #[test]
     fn the_ring_indices_give_the_documented_baselines() {

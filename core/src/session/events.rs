@@ -43,6 +43,9 @@ pub struct LossTerms {
     /// The feature-mean term (0 when λ_mean is 0).
     #[serde(default)]
     pub feature_mean: f32,
+    /// The background hold (0 when λ_out is 0 or the focus is the frame).
+    #[serde(default)]
+    pub outside: f32,
 }
 
 /// Time spent in each part of a step, in milliseconds.

@@ -19,6 +19,7 @@ use crate::style::color_transfer::ColorTransfer;
 use crate::style::focus::coverage_mask;
 use crate::style::gcfm::{Matches, match_features};
 use crate::style::matching::{MatchIndex, MatchMethod, agreement, find_matches};
+use crate::style::outside::{Outside, outside_mask};
 use crate::style::regularizers::l2_distance;
 use crate::style::step::{FeatureMap, LossFocus, RenderedMaps, content_target, step_loss_with};
 use crate::vision::Vgg;
@@ -64,6 +65,9 @@ struct ViewTarget {
     inv_depth: Vec<f32>,
     /// Pixels `G^c` covers ([`coverage_mask`]): the focus of the losses with `Focus::Object`.
     coverage: Vec<bool>,
+    /// With λ_out above 0, the pixels `G^c` leaves empty and its render
+    /// ([`crate::style::outside`]); `None` otherwise, so no render is kept.
+    outside: Option<(Vec<bool>, Vec<f32>)>,
 }
 
 /// Optimiser state, one Adam per parameter group, per phase (kept across cycles).
@@ -148,10 +152,10 @@ impl Session {
         if cameras.is_empty() {
             return Err(SessionError::Input("no optimisation cameras".into()));
         }
-        if gpu.is_some() && config.weights.feature_mean > 0.0 {
+        if gpu.is_some() && config.weights.outside > 0.0 {
             return Err(SessionError::Config(vec![format!(
-                "the feature-mean term (λ_mean = {}) runs on the CPU engine only so far: use the CPU (--device cpu) or set it to 0",
-                config.weights.feature_mean
+                "the background hold (λ_out = {}) runs on the CPU engine only so far: use the CPU (--device cpu) or set it to 0",
+                config.weights.outside
             )]));
         }
         let opts = RenderOptions { background: config.background };
@@ -438,10 +442,12 @@ impl Session {
         let r = raster::render(&self.g_ref, cam, &opts);
         let rgb: Vec<f32> = r.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
         self.colour_watch.set_reference(view, CoveredColour::of(&rgb, &r.alpha));
+        let outside = (self.config.weights.outside > 0.0).then(|| (outside_mask(&r.alpha), rgb.clone()));
         self.targets[view] = Some(ViewTarget {
             content: content_target(&*self.vgg, &rgb, h, w),
             coverage: coverage_mask(&r.alpha, h, w),
             inv_depth: r.inv_depth,
+            outside,
         });
     }
 

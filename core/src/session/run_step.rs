@@ -105,6 +105,9 @@ impl Session {
             LossFocus {
                 mask: self.focus_on_object().then_some(target.coverage.as_slice()),
                 window: self.config.vgg_window,
+                outside: (target.outside.as_ref())
+                    .filter(|_| self.focus_on_object())
+                    .map(|(mask, rgb)| Outside { mask, rgb }),
             },
             &mut matcher,
         );
@@ -134,6 +137,7 @@ impl Session {
             tv: loss.tv,
             depth: loss.depth,
             feature_mean: loss.feature_mean,
+            outside: loss.outside,
             total: loss.total,
             ..LossTerms::default()
         };

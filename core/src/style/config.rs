@@ -38,8 +38,12 @@ pub struct LossWeights {
     /// λ_mean, the feature-mean term ([`crate::style::feature_mean`]): the
     /// mean of the rendered RGB relu3 features over the positions the losses
     /// average over, pulled toward the style's. Not in the reference: 0 (off)
-    /// by default. CPU engine only so far.
+    /// by default. Both engines.
     pub feature_mean: f32,
+    /// λ_out, the background hold ([`crate::style::outside`]): with object
+    /// focus, the pixels the colour-matched scene leaves empty keep its
+    /// render. Not in the reference: 0 (off) by default. CPU engine only so far.
+    pub outside: f32,
 }
 
 impl Default for LossWeights {
@@ -53,6 +57,7 @@ impl Default for LossWeights {
             rotation: 1.0,
             depth: 10.0,
             feature_mean: 0.0,
+            outside: 0.0,
         }
     }
 }
@@ -205,6 +210,7 @@ impl StyleConfig {
             ("weights.rotation", w.rotation),
             ("weights.depth", w.depth),
             ("weights.feature_mean", w.feature_mean),
+            ("weights.outside", w.outside),
             ("lr.color", lr.color),
             ("lr.means_per_extent", lr.means_per_extent),
             ("lr.scales", lr.scales),

@@ -16,6 +16,7 @@ pub mod feature_mean;
 pub mod focus;
 pub mod gcfm;
 pub mod matching;
+pub mod outside;
 pub mod regularizers;
 pub mod schedule;
 pub mod stage1;

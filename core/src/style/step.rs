@@ -15,6 +15,7 @@ use super::content::content_loss_masked;
 use super::feature_mean::feature_mean_loss;
 use super::focus::{feature_mask, gather_positions, scatter_positions};
 use super::gcfm::{GcfmOutput, Matches, StyleFeatures, gcfm_loss_with_matches, match_features};
+use super::outside::{Outside, outside_loss};
 use super::regularizers::depth_l1;
 use super::tv::tv_loss_masked;
 use super::window::{FeatureWindow, covered_box};
@@ -46,6 +47,9 @@ pub struct LossFocus<'a> {
     /// same losses and gradients up to rounding for less work. Exact for
     /// VGG's relu3 and any network whose receptive field is no larger.
     pub window: bool,
+    /// The pixels the background hold keeps ([`super::outside`]); used when
+    /// λ_out is above 0.
+    pub outside: Option<Outside<'a>>,
 }
 
 /// A frozen feature extractor with an input gradient (VGG relu3_1..3).
@@ -164,6 +168,8 @@ pub struct StepLoss {
     pub depth: f32,
     /// Feature-mean term (unweighted; 0 when λ_mean is 0).
     pub feature_mean: f32,
+    /// Background hold (unweighted; 0 when λ_out is 0 or nothing is held).
+    pub outside: f32,
     /// `Σ weight · term`.
     pub total: f32,
     /// Gradient of `total` w.r.t. the rendered RGB (HWC).
@@ -266,7 +272,17 @@ pub fn step_loss_masked<N: FeatureNet>(
     mask: Option<&[bool]>,
 ) -> StepLoss {
     let exact = &mut |rendered: [&[f32]; 3], n: usize| match_features(&style.features, rendered, n);
-    step_loss_with(net, style, maps, content, depth_ref, weights, depth_grad, LossFocus { mask, window: true }, exact)
+    step_loss_with(
+        net,
+        style,
+        maps,
+        content,
+        depth_ref,
+        weights,
+        depth_grad,
+        LossFocus { mask, window: true, outside: None },
+        exact,
+    )
 }
 
 /// [`step_loss`] with the focus on the pixels in `mask` (`h × w`, see
@@ -412,6 +428,14 @@ pub fn step_loss_with<N: FeatureNet>(
     for (a, b) in v_rgb.iter_mut().zip(v_tv) {
         *a += weights.tv * b;
     }
+    let mut outside_value = 0.0;
+    if let Some(held) = focus.outside.filter(|_| weights.outside > 0.0) {
+        let (l, g) = outside_loss(maps.rgb, held);
+        outside_value = l;
+        for (a, b) in v_rgb.iter_mut().zip(g) {
+            *a += weights.outside * b;
+        }
+    }
     let mut depth_value = 0.0;
     if let Some(dref) = depth_ref {
         let (l, g) = depth_l1(maps.inv_depth, dref);
@@ -424,7 +448,8 @@ pub fn step_loss_with<N: FeatureNet>(
         + weights.content * content_value
         + weights.tv * tv
         + weights.depth * depth_value
-        + weights.feature_mean * feature_mean_value;
+        + weights.feature_mean * feature_mean_value
+        + weights.outside * outside_value;
     StepLoss {
         timings,
         gcfm: out.loss,
@@ -432,6 +457,7 @@ pub fn step_loss_with<N: FeatureNet>(
         tv,
         depth: depth_value,
         feature_mean: feature_mean_value,
+        outside: outside_value,
         total,
         v_rgb,
         v_inv_depth,

@@ -280,7 +280,7 @@ fn vgg_on_the_covered_window_equals_the_whole_frame() {
         let run = |window: bool| {
             let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
             let exact = &mut |r: [&[f32]; 3], n: usize| match_features(&st.features, r, n);
-            let focus = LossFocus { mask: Some(&mask), window };
+            let focus = LossFocus { mask: Some(&mask), window, outside: None };
             step_loss_with(&net, &st, maps, Some(&content), Some(&dref), &weights, true, focus, exact)
         };
         let (whole, windowed) = (run(false), run(true));
@@ -325,5 +325,35 @@ fn the_feature_mean_term_adds_its_weighted_value_and_stays_inside_the_mask() {
     assert!(off.v_rgb.iter().zip(&on.v_rgb).any(|(a, b)| a != b), "the term moved no gradient");
     for k in (0..h * w).filter(|&k| !mask[k]) {
         assert!(on.v_rgb[3 * k..3 * k + 3].iter().all(|&v| v == 0.0), "pixel {k} outside the mask");
+    }
+}
+
+#[test]
+fn the_background_hold_adds_its_weighted_value_and_moves_only_the_held_pixels() {
+    let (h, w) = (16, 24);
+    let (net, st, rgb, inv_depth, content, _) = focus_inputs();
+    let edge = vec![0.0f32; h * w];
+    let mask: Vec<bool> = (0..h * w).map(|k| k % w < 16).collect();
+    let held: Vec<bool> = (0..h * w).map(|k| k % w >= 20).collect();
+    let target = vec![0.0f32; h * w * 3];
+    let eval = |lambda: f32| {
+        let weights = LossWeights { gcfm: 2.0, content: 0.5, tv: 0.02, outside: lambda, ..LossWeights::default() };
+        let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
+        let exact = &mut |r: [&[f32]; 3], n: usize| match_features(&st.features, r, n);
+        let focus = LossFocus { mask: Some(&mask), window: true, outside: Some(Outside { mask: &held, rgb: &target }) };
+        step_loss_with(&net, &st, maps, Some(&content), None, &weights, false, focus, exact)
+    };
+    let (off, on) = (eval(0.0), eval(3.0));
+    assert_eq!(off.outside, 0.0, "λ_out = 0 measures nothing");
+    let (want, grad) = outside_loss(&rgb, Outside { mask: &held, rgb: &target });
+    assert!(want > 0.0);
+    assert_eq!(on.outside, want);
+    assert!((on.total - off.total - 3.0 * want).abs() < 1e-5 * on.total.abs().max(1.0));
+    for k in 0..h * w * 3 {
+        let moved = on.v_rgb[k] - off.v_rgb[k];
+        assert!((moved - 3.0 * grad[k]).abs() <= 1e-6 * grad[k].abs().max(1e-3), "channel {k}: moved {moved}");
+        if !held[k / 3] {
+            assert_eq!(on.v_rgb[k], off.v_rgb[k], "channel {k} is not held");
+        }
     }
 }

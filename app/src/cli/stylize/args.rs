@@ -112,9 +112,14 @@ pub struct StylizeArgs {
     pub lambda_depth: Option<f32>,
     /// λ_mean, the feature-mean term: pulls the mean of the rendered relu3
     /// features (over the object's positions with object focus) toward the
-    /// style's; not in the reference, CPU only so far [default: 0, off].
+    /// style's; not in the reference [default: 0, off].
     #[arg(long)]
     pub lambda_mean: Option<f32>,
+    /// λ_out, the background hold: with object focus, the pixels the
+    /// colour-matched scene leaves empty keep its render, so no haze grows
+    /// around the object; not in the reference, CPU only so far [default: 0, off].
+    #[arg(long)]
+    pub lambda_outside: Option<f32>,
     /// Learning rate of the SH DC colour [default: 0.01].
     #[arg(long)]
     pub lr_color: Option<f32>,
@@ -191,6 +196,7 @@ impl StylizeArgs {
         set!(self.lambda_rotation, c.weights.rotation);
         set!(self.lambda_depth, c.weights.depth);
         set!(self.lambda_mean, c.weights.feature_mean);
+        set!(self.lambda_outside, c.weights.outside);
         set!(self.lr_color, c.lr.color);
         set!(self.lr_means, c.lr.means_per_extent);
         set!(self.lr_scales, c.lr.scales);
