@@ -1,6 +1,7 @@
 // The step's image and parameter losses with their gradients
 // (core/src/gpu/losses.rs; CPU twins: style/tv.rs tv_loss,
-// style/regularizers.rs depth_l1 and l2_distance). Each kernel adds its
+// style/regularizers.rs depth_l1 and l2_distance, style/outside.rs
+// outside_loss). Each kernel adds its
 // weighted gradient to `grad` and writes per-element terms to `scratch`,
 // which reduce.wgsl sums into the caller's scalars buffer (unweighted).
 
@@ -122,4 +123,21 @@ fn param_grad(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
     if norm > 0.0 {
         grad[i] = grad[i] + u.weight * ((x[i] - x_ref[i]) * (1.0 / norm));
     }
+}
+
+// The background hold = Σ over held channels of k·(I − I^c)², with x_ref a
+// per-pixel [r, g, b, k] of the colour-matched render and k = 1/(3·held
+// pixels) where the pixel is held, 0 elsewhere (core/src/gpu/engine.rs
+// builds it once per view). grad += λ·2k(I − I^c); scratch: k·(I − I^c)².
+@compute @workgroup_size(256)
+fn hold(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let e = flat_index(gid, nwg);
+    if e >= u.n {
+        return;
+    }
+    let p = e / 3u;
+    let k = x_ref[4u * p + 3u];
+    let d = x[e] - x_ref[4u * p + e % 3u];
+    grad[e] = grad[e] + u.weight * 2.0 * k * d;
+    scratch[e] = k * d * d;
 }

@@ -42,6 +42,23 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
     changed |= weight(ui, &mut w.scale, 10.0, "λ_s", "scale regulariser (geometry steps)");
     changed |= weight(ui, &mut w.rotation, 10.0, "λ_r", "rotation regulariser (geometry steps)");
     changed |= weight(ui, &mut w.depth, 100.0, "λ_d", "inverse-depth regulariser (geometry steps)");
+    changed |= weight(
+        ui,
+        &mut w.feature_mean,
+        1000.0,
+        "λ_mean",
+        "feature-mean term, not in the paper (0 = off): pulls the mean VGG feature of the object (of the frame \
+         with frame focus) toward the style's, so the style's colours and marks come through without darkening \
+         the object; 100 in the README's focus study",
+    );
+    changed |= weight(
+        ui,
+        &mut w.outside,
+        1e6,
+        "λ_out",
+        "background hold, not in the paper (0 = off): with object focus, the pixels around the object that the \
+         colour-matched scene leaves empty keep its render, so no haze or streaks grow there; 1e5 in the README",
+    );
 
     ui.separator();
     ui.label(egui::RichText::new("Schedule").strong());

@@ -31,6 +31,7 @@ use crate::session::{LossTerms, StepTimings};
 use crate::style::StyleConfig;
 use crate::style::config::LossWeights;
 use crate::style::gcfm::StyleFeatures;
+use crate::style::outside::outside_mask;
 use crate::style::schedule::Phase;
 use crate::vision::Vgg;
 
@@ -66,6 +67,9 @@ struct ViewTarget {
     /// The GCFM search of the covered feature positions only, when the
     /// focus covers at most [`SUBSET_SHARE`] of them.
     subset: Option<GcfmSubset>,
+    /// The background hold's reference ([`RefLoss::hold_reference`]), made
+    /// on the first step with λ_out > 0.
+    hold: Option<wgpu::Buffer>,
 }
 
 /// Above this share of covered feature positions, the object focus searches
@@ -266,6 +270,9 @@ impl GpuEngine {
         let depth_ref = geometry.then_some(&target.inv_depth);
         let content = Some(&target.content);
         let focus = if self.object_focus { target.focus.as_ref() } else { None };
+        // The hold acts with the object focus only, as on the CPU.
+        let hold = if self.object_focus { target.hold.as_ref() } else { None };
+        let holding = hold.is_some();
         // Matches kept from this view's last visits (copied in), or searched.
         let reuse = config.matching.reuse.max(1);
         let kept = target.kept.as_ref().filter(|(_, uses)| *uses < reuse);
@@ -288,6 +295,7 @@ impl GpuEngine {
             None,
             content,
             depth_ref,
+            hold,
             geometry,
             focus,
             &self.scalars,
@@ -349,13 +357,15 @@ impl GpuEngine {
             tv: s[slot::TV],
             depth: if geometry { s[slot::DEPTH] } else { 0.0 },
             feature_mean: if w.feature_mean > 0.0 { s[slot::FEATURE_MEAN] } else { 0.0 },
+            outside: if w.outside > 0.0 && holding { s[slot::OUTSIDE] } else { 0.0 },
             ..LossTerms::default()
         };
         terms.total = w.gcfm * terms.gcfm
             + w.content * terms.content
             + w.tv * terms.tv
             + w.depth * terms.depth
-            + w.feature_mean * terms.feature_mean;
+            + w.feature_mean * terms.feature_mean
+            + w.outside * terms.outside;
         if geometry {
             terms.reg_opacity = s[slot::REG_OPACITY];
             terms.reg_scale = s[slot::REG_SCALE];
@@ -416,7 +426,35 @@ impl GpuEngine {
             self.make_target(view, cam)?;
             self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
         }
+        if weights.outside > 0.0 && self.targets[view].as_ref().is_some_and(|t| t.hold.is_none()) {
+            let before = self.ctx.allocated_bytes();
+            let hold = self.make_hold(cam)?;
+            if let Some(t) = self.targets[view].as_mut() {
+                t.hold = Some(hold);
+            }
+            self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
+        }
         Ok(())
+    }
+
+    /// The background hold's reference of the view `cam`: `G^c`'s render
+    /// and the pixels it leaves empty ([`crate::style::outside`]), read
+    /// back once and uploaded as `[r, g, b, k]` per pixel.
+    fn make_hold(&self, cam: &Camera) -> Result<wgpu::Buffer, GpuError> {
+        let size = (cam.width, cam.height);
+        let Some(plan) = self.plans.get(&size) else {
+            return Err(GpuError::TooLarge(format!("no plan for {}×{}", size.0, size.1)));
+        };
+        let (ctx, k) = (&self.ctx, &self.k);
+        let opts = RenderOptions { background: self.background };
+        let mut enc = ctx.encoder("engine.hold");
+        plan.raster.forward(ctx, &k.raster, &mut enc, &self.g_ref, cam, &opts);
+        ctx.submit(enc);
+        let n = u64::from(cam.width) * u64::from(cam.height);
+        let rgb: Vec<f32> =
+            ctx.read_range::<f32>(&plan.raster.rgb, 0, n * 12)?.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+        let alpha: Vec<f32> = ctx.read_range(&plan.raster.alpha, 0, n * 4)?;
+        Ok(ctx.upload("engine.target.hold", &RefLoss::hold_reference(&rgb, &outside_mask(&alpha))))
     }
 
     fn make_target(&mut self, view: usize, cam: &Camera) -> Result<(), GpuError> {
@@ -455,7 +493,7 @@ impl GpuEngine {
         if view >= self.targets.len() {
             self.targets.resize_with(view + 1, || None);
         }
-        self.targets[view] = Some(ViewTarget { content, inv_depth, focus, colour, kept: None, subset });
+        self.targets[view] = Some(ViewTarget { content, inv_depth, focus, colour, kept: None, subset, hold: None });
         Ok(())
     }
 

@@ -41,6 +41,7 @@ pub struct LossKernels {
     depth_l1: Kernel,
     param_diff: Kernel,
     param_grad: Kernel,
+    hold: Kernel,
 }
 
 impl LossKernels {
@@ -54,6 +55,7 @@ impl LossKernels {
             depth_l1: k("depth_l1"),
             param_diff: k("param_diff"),
             param_grad: k("param_grad"),
+            hold: k("hold"),
         })
     }
 }
@@ -164,13 +166,15 @@ impl TvLoss {
 enum RefKind {
     DepthL1,
     ParamL2,
+    Hold,
 }
 
 /// A term comparing a buffer with its reference from the colour-matched scene
 /// `G^c`: the depth regulariser `mean|D − D^c|` over the inverse-depth map
 /// ([`crate::style::regularizers::depth_l1`]), or a parameter regulariser
 /// `‖x − x^c‖₂` over a flat array of opacity logits, log-scales or
-/// quaternions ([`crate::style::regularizers::l2_distance`]).
+/// quaternions ([`crate::style::regularizers::l2_distance`]), or the
+/// background hold over an RGB render ([`crate::style::outside`]).
 #[derive(Debug)]
 pub struct RefLoss {
     kind: RefKind,
@@ -208,6 +212,35 @@ impl RefLoss {
         Ok(Self { kind: RefKind::ParamL2, plan: LossPlan::new(ctx, kernels, reduce, params, len, spec)? })
     }
 
+    /// Plans the background hold of `pixels`-pixel RGB renders with weight
+    /// `weight`, its value going to `scalars[loss_offset]`; its reference is
+    /// [`RefLoss::hold_reference`].
+    pub fn hold(
+        ctx: &GpuContext,
+        kernels: &Arc<LossKernels>,
+        reduce: &Arc<ReduceKernels>,
+        pixels: usize,
+        weight: f32,
+        loss_offset: usize,
+    ) -> Result<Self, GpuError> {
+        let n = 3 * pixels;
+        let params = LossParams { h: 1, w: n as u32, c: 3, n: n as u32, weight, kh: 0.0, kv: 0.0, norm_index: 0 };
+        let spec = ReduceSpec::new(ReduceOp::Sum, n).to(loss_offset);
+        Ok(Self { kind: RefKind::Hold, plan: LossPlan::new(ctx, kernels, reduce, params, n, spec)? })
+    }
+
+    /// The hold's reference from the colour-matched render (`rgb` HWC,
+    /// clamped) and the pixels to hold: per pixel `[r, g, b, k]` with
+    /// `k = 1/(3·held)` where held, 0 elsewhere.
+    pub fn hold_reference(rgb: &[f32], held: &[bool]) -> Vec<f32> {
+        let count = held.iter().filter(|&&m| m).count();
+        let k = inverse(3 * count);
+        held.iter()
+            .enumerate()
+            .flat_map(|(p, &m)| [rgb[3 * p], rgb[3 * p + 1], rgb[3 * p + 2], if m { k } else { 0.0 }])
+            .collect()
+    }
+
     /// Changes λ (from the next submission on).
     pub fn set_weight(&mut self, ctx: &GpuContext, weight: f32) {
         self.plan.set_weight(ctx, weight);
@@ -216,7 +249,7 @@ impl RefLoss {
     /// Records the term of `x` against `x_ref` into `scalars[loss_offset]` and
     /// its weighted gradient into `v_x`: for the depth L1 `v_x += λ sign(x −
     /// x_ref)/n`; for a parameter norm `v_x += λ (x − x_ref)/‖x − x_ref‖`
-    /// (nothing where the norm is 0).
+    /// (nothing where the norm is 0); for the hold `v_x += λ·2k(x − x^c)`.
     pub fn record(
         &self,
         ctx: &GpuContext,
@@ -228,8 +261,9 @@ impl RefLoss {
     ) {
         let (p, k) = (&self.plan, &self.plan.kernels);
         match self.kind {
-            RefKind::DepthL1 => {
-                p.dispatch(ctx, encoder, &k.depth_l1, x, x_ref, v_x, scalars);
+            RefKind::DepthL1 | RefKind::Hold => {
+                let kernel = if self.kind == RefKind::Hold { &k.hold } else { &k.depth_l1 };
+                p.dispatch(ctx, encoder, kernel, x, x_ref, v_x, scalars);
                 p.reduction.record(ctx, encoder, &p.scratch, scalars);
             }
             RefKind::ParamL2 => {

@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::gpu::test_util::{ctx, noise};
+use crate::style::outside::{Outside, outside_loss};
 use crate::style::regularizers::{depth_l1, l2_distance};
 use crate::style::tv::tv_loss_masked;
 
@@ -139,4 +140,35 @@ fn parameter_regularisers_match_the_cpu_and_vanish_at_zero() {
         check(&what, got[*offset], want, &ctx.read::<f32>(grad).expect("read"), before, &g, *weight);
     }
     assert_eq!(got[2], 0.0, "an unmoved array has a zero norm");
+}
+
+#[test]
+fn the_background_hold_matches_the_cpu() {
+    let ctx = ctx();
+    let kernels = LossKernels::new(ctx);
+    let reduce = ReduceKernels::new(ctx);
+    for (s, (h, w, share)) in
+        [(1usize, 1usize, 1.0f32), (13, 17, 0.4), (64, 45, 0.9), (5, 7, -1.0)].into_iter().enumerate()
+    {
+        let seed = 400 + s as u64;
+        let n = h * w;
+        let held: Vec<bool> = noise(n, seed).iter().map(|&v| v < 2.0 * share - 1.0).collect();
+        let img: Vec<f32> = noise(3 * n, seed + 1).iter().map(|v| 0.5 + 0.5 * v).collect();
+        let target: Vec<f32> = noise(3 * n, seed + 2).iter().map(|v| 0.5 + 0.5 * v).collect();
+        let weight = 30.0;
+        let hold = RefLoss::hold(ctx, &kernels, &reduce, n, weight, 2).expect("plan");
+        scratch_noise(ctx, &hold.plan, 3 * n);
+        let before = noise(3 * n, seed + 3);
+        let grad = ctx.upload("grad", &before);
+        let scalars = ctx.upload("scalars", &noise(6, seed + 4));
+        let (img_buf, reference) =
+            (ctx.upload("img", &img), ctx.upload("ref", &RefLoss::hold_reference(&target, &held)));
+        let mut enc = ctx.encoder("hold test");
+        hold.record(ctx, &mut enc, &img_buf, &reference, &grad, &scalars);
+        ctx.submit(enc);
+        let (want, g) = outside_loss(&img, Outside { mask: &held, rgb: &target });
+        let value = ctx.read::<f32>(&scalars).expect("scalars")[2];
+        let got = ctx.read::<f32>(&grad).expect("grad");
+        check(&format!("hold {h}×{w}"), value, want, &got, &before, &g, weight);
+    }
 }

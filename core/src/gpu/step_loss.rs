@@ -47,8 +47,10 @@ pub mod slot {
     pub const PAIRS: usize = 10;
     /// The feature-mean term (unweighted; written only when λ_mean > 0).
     pub const FEATURE_MEAN: usize = 11;
+    /// The background hold (unweighted; written only when λ_out > 0 and a view holds pixels).
+    pub const OUTSIDE: usize = 12;
     /// Words in all.
-    pub const LEN: usize = 12;
+    pub const LEN: usize = 13;
 }
 
 /// The kernels of the loss, compiled once per context (with the network's weights).
@@ -89,6 +91,9 @@ pub struct StepLossPlan {
     edges: EdgeMap,
     tv: TvLoss,
     depth_l1: RefLoss,
+    hold: RefLoss,
+    /// Whether λ_out is above 0 (the hold is recorded only then).
+    hold_on: bool,
     vgg_ws: GpuVggWorkspace,
     /// VGG states of the RGB, depth and edge maps (the edge state doubles as
     /// the scratch of [`StepLossPlan::record_content_target`]).
@@ -138,6 +143,8 @@ impl StepLossPlan {
             edges: EdgeMap::new(ctx, &k.canny, &k.reduce, h, w)?,
             tv: TvLoss::new(ctx, &k.losses, &k.reduce, h, w, 3, weights.tv, slot::TV)?,
             depth_l1: RefLoss::depth_l1(ctx, &k.losses, &k.reduce, h * w, weights.depth, slot::DEPTH)?,
+            hold: RefLoss::hold(ctx, &k.losses, &k.reduce, h * w, weights.outside, slot::OUTSIDE)?,
+            hold_on: weights.outside > 0.0,
             vgg_ws: k.vgg.workspace(ctx, sh, sw),
             gcfm_ws: k.gcfm.workspace(ctx, style, positions, slot::GCFM, weights.gcfm),
             content: ContentLoss::new(ctx, &k.reduce, feature_len, positions, weights.content, slot::CONTENT)?,
@@ -177,10 +184,12 @@ impl StepLossPlan {
         self.gcfm_weight
     }
 
-    /// Changes λ_TV, λ_d, λ_cont and λ_mean (from the next submission on).
+    /// Changes λ_TV, λ_d, λ_cont, λ_mean and λ_out (from the next submission on).
     pub fn set_weights(&mut self, ctx: &GpuContext, w: &LossWeights) {
         self.tv.set_weight(ctx, w.tv);
         self.depth_l1.set_weight(ctx, w.depth);
+        self.hold.set_weight(ctx, w.outside);
+        self.hold_on = w.outside > 0.0;
         self.content.set_weight(ctx, w.content);
         self.feature_mean.set_weight(ctx, w.feature_mean);
         self.feature_mean_on = w.feature_mean > 0.0;
@@ -252,7 +261,8 @@ impl StepLossPlan {
     /// the clamp) and `inv_depth` (`h × w`); `edge` the render's edge map
     /// (`h × w`) when given, else computed from the clamped render; `content`
     /// a content target and `depth_ref` the inverse depth of `G^c`, when the
-    /// step uses them; the depth map's gradient only when `depth_grad`;
+    /// step uses them; `hold` the background hold's reference
+    /// ([`RefLoss::hold_reference`]), used when λ_out > 0; the depth map's gradient only when `depth_grad`;
     /// `focus` the object focus ([`StepLossPlan::record_focus`]), the whole
     /// frame without one; `search` where the GCFM matches come from (a
     /// search of every position or of a subset, or the ones
@@ -271,6 +281,7 @@ impl StepLossPlan {
         edge: Option<&wgpu::Buffer>,
         content: Option<&wgpu::Buffer>,
         depth_ref: Option<&wgpu::Buffer>,
+        hold: Option<&wgpu::Buffer>,
         depth_grad: bool,
         focus: Option<&GpuFocus>,
         scalars: &wgpu::Buffer,
@@ -308,6 +319,9 @@ impl StepLossPlan {
         k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[0], &self.v_feat[0], &self.v_small[0]);
         self.down.backward(ctx, enc, &self.v_small[0], &self.v_rgb, false);
         self.tv.record(ctx, enc, &self.rgb, focus, &self.v_rgb, scalars);
+        if let Some(reference) = hold.filter(|_| self.hold_on) {
+            self.hold.record(ctx, enc, &self.rgb, reference, &self.v_rgb, scalars);
+        }
         self.clamp.backward(ctx, enc, rgb_raw, &self.v_rgb);
         if depth_grad {
             k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[1], &self.v_feat[1], &self.v_small[1]);
@@ -375,6 +389,7 @@ pub fn step_loss_gpu(
         Some(&edge),
         content.as_ref(),
         dref.as_ref(),
+        None,
         depth_grad,
         focus.as_ref(),
         &scalars,
@@ -403,7 +418,7 @@ pub fn step_loss_gpu(
         tv,
         depth: depth_value,
         feature_mean,
-        // No background hold on the GPU yet: the session refuses λ_out > 0 there.
+        // This check helper holds no background (its CPU twin has no hold either).
         outside: 0.0,
         total: weights.gcfm * gcfm
             + weights.content * content_value

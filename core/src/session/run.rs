@@ -152,12 +152,6 @@ impl Session {
         if cameras.is_empty() {
             return Err(SessionError::Input("no optimisation cameras".into()));
         }
-        if gpu.is_some() && config.weights.outside > 0.0 {
-            return Err(SessionError::Config(vec![format!(
-                "the background hold (λ_out = {}) runs on the CPU engine only so far: use the CPU (--device cpu) or set it to 0",
-                config.weights.outside
-            )]));
-        }
         let opts = RenderOptions { background: config.background };
         let work_cams: Vec<Camera> = cameras.iter().map(|c| c.with_longer_side(config.resolution)).collect();
 

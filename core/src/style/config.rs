@@ -42,7 +42,7 @@ pub struct LossWeights {
     pub feature_mean: f32,
     /// λ_out, the background hold ([`crate::style::outside`]): with object
     /// focus, the pixels the colour-matched scene leaves empty keep its
-    /// render. Not in the reference: 0 (off) by default. CPU engine only so far.
+    /// render. Not in the reference: 0 (off) by default. Both engines.
     pub outside: f32,
 }
 

@@ -117,7 +117,7 @@ pub struct StylizeArgs {
     pub lambda_mean: Option<f32>,
     /// λ_out, the background hold: with object focus, the pixels the
     /// colour-matched scene leaves empty keep its render, so no haze grows
-    /// around the object; not in the reference, CPU only so far [default: 0, off].
+    /// around the object; not in the reference [default: 0, off].
     #[arg(long)]
     pub lambda_outside: Option<f32>,
     /// Learning rate of the SH DC colour [default: 0.01].
