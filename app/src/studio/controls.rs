@@ -122,19 +122,28 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
 /// scale (min to max of that term, printed beside its name in a legend band
 /// above the curves, so no curve runs under a label), over a strip that
 /// marks each step's phase (colour steps amber, geometry steps blue, joint
-/// steps violet).
+/// steps violet). The λ_mean and λ_out terms, off by default, get their
+/// lines only when a step measured them.
 pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
     type Series = (&'static str, Color32, fn(&StepReport) -> f32);
-    const SERIES: [Series; 5] = [
+    const SERIES: [Series; 7] = [
         ("total", Color32::from_rgb(250, 200, 60), |s| s.losses.total),
         ("GCFM", Color32::from_rgb(90, 170, 250), |s| s.losses.gcfm),
         ("content", Color32::from_rgb(120, 220, 120), |s| s.losses.content),
         ("TV", Color32::from_rgb(230, 110, 110), |s| s.losses.tv),
         ("depth", Color32::from_rgb(200, 200, 200), |s| s.losses.depth),
+        ("mean", Color32::from_rgb(220, 130, 230), |s| s.losses.feature_mean),
+        ("hold", Color32::from_rgb(120, 220, 220), |s| s.losses.outside),
     ];
     const ROW: f32 = 13.0;
     const COLUMNS: usize = 2;
-    let legend_rows = SERIES.len().div_ceil(COLUMNS) as f32;
+    let series: Vec<&Series> = SERIES
+        .iter()
+        .enumerate()
+        .filter(|(k, s)| *k < 5 || steps.iter().any(|r| (s.2)(r) > 0.0))
+        .map(|(_, s)| s)
+        .collect();
+    let legend_rows = series.len().div_ceil(COLUMNS) as f32;
     let band = 4.0 + ROW * legend_rows + 2.0;
     // The curves keep 84 px, so the legend band does not push the first weight sliders below a
     // 1280×800 window's fold.
@@ -171,7 +180,7 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
     let (top, bottom) = (rect.top() + band + 4.0, rect.bottom() - strip - 3.0);
     painter.hline(rect.x_range(), rect.top() + band, egui::Stroke::new(1.0, ui.visuals().faint_bg_color));
     let column = rect.width() / COLUMNS as f32;
-    for (k, (name, color, get)) in SERIES.iter().enumerate() {
+    for (k, (name, color, get)) in series.into_iter().enumerate() {
         let values: Vec<f32> = steps.iter().map(get).collect();
         let (lo, hi) = values
             .iter()
