@@ -262,8 +262,8 @@ impl StepLossPlan {
     /// (`h × w`) when given, else computed from the clamped render; `content`
     /// a content target and `depth_ref` the inverse depth of `G^c`, when the
     /// step uses them; `hold` the background hold's reference
-    /// ([`RefLoss::hold_reference`]), used when λ_out > 0; the depth map's gradient only when `depth_grad`;
-    /// `focus` the object focus ([`StepLossPlan::record_focus`]), the whole
+    /// ([`RefLoss::hold_reference`]), used when λ_out > 0; the depth map's
+    /// gradient only when `depth_grad`; `focus` the object focus ([`StepLossPlan::record_focus`]), the whole
     /// frame without one; `search` where the GCFM matches come from (a
     /// search of every position or of a subset, or the ones
     /// [`StepLossPlan::matches`] holds). The
