@@ -7,6 +7,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
 use gast_core::session::{Command, Event, SessionInputs, StyleDepthSource, StyleImage, spawn};
+use gast_core::style::config::LossWeights;
 use gast_core::style::{Mode, StyleConfig};
 use gast_core::vision::Vgg;
 use gast_tests::shared_file;
@@ -212,16 +213,21 @@ fn gpu_steps_give_the_cpu_losses() {
 #[test]
 fn gpu_object_focus_gives_the_cpu_losses() {
     for mode in [Mode::ColorOnly, Mode::GeometryOnly] {
-        let config = StyleConfig {
-            cycles: 1,
-            steps_per_cycle: 4,
-            resolution: 64,
-            texture_scale: 64,
-            mode,
-            focus: gast_core::style::Focus::Object,
-            ..Default::default()
-        };
-        gpu_and_cpu_agree(&format!("object {mode:?}"), config);
+        gpu_and_cpu_agree(&format!("object {mode:?}"), object_config(mode, LossWeights::default()));
+    }
+}
+
+/// Four steps at 64 px with the object focus, in `mode`, with `weights`.
+fn object_config(mode: Mode, weights: LossWeights) -> StyleConfig {
+    StyleConfig {
+        cycles: 1,
+        steps_per_cycle: 4,
+        resolution: 64,
+        texture_scale: 64,
+        mode,
+        focus: gast_core::style::Focus::Object,
+        weights,
+        ..Default::default()
     }
 }
 
@@ -230,16 +236,7 @@ fn gpu_object_focus_gives_the_cpu_losses() {
 #[test]
 fn gpu_feature_mean_gives_the_cpu_losses() {
     for mode in [Mode::ColorOnly, Mode::GeometryOnly] {
-        let config = StyleConfig {
-            cycles: 1,
-            steps_per_cycle: 4,
-            resolution: 64,
-            texture_scale: 64,
-            mode,
-            focus: gast_core::style::Focus::Object,
-            weights: gast_core::style::config::LossWeights { feature_mean: 100.0, ..Default::default() },
-            ..Default::default()
-        };
+        let config = object_config(mode, LossWeights { feature_mean: 100.0, ..Default::default() });
         let Some([mut cpu, _]) = gpu_and_cpu_agree(&format!("λ_mean {mode:?}"), config) else { return };
         let next = cpu.step().expect("a third CPU step");
         assert!(next.losses.feature_mean > 0.0, "the term the devices agreed on is not 0: {:?}", next.losses);
@@ -252,16 +249,7 @@ fn gpu_feature_mean_gives_the_cpu_losses() {
 #[test]
 fn gpu_background_hold_gives_the_cpu_losses() {
     for mode in [Mode::ColorOnly, Mode::GeometryOnly] {
-        let config = StyleConfig {
-            cycles: 1,
-            steps_per_cycle: 4,
-            resolution: 64,
-            texture_scale: 64,
-            mode,
-            focus: gast_core::style::Focus::Object,
-            weights: gast_core::style::config::LossWeights { outside: 1e5, ..Default::default() },
-            ..Default::default()
-        };
+        let config = object_config(mode, LossWeights { outside: 1e5, ..Default::default() });
         let label = format!("λ_out {mode:?}");
         let Some([mut cpu, mut gpu]) = gpu_and_cpu_agree(&label, config) else { return };
         let (a, b) = (cpu.step().expect("CPU step").losses.outside, gpu.step().expect("GPU step").losses.outside);

@@ -110,17 +110,8 @@ impl FeatureMeanLoss {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::test_util::{ctx, noise};
+    use crate::gpu::test_util::{cells_focus, ctx, noise};
     use crate::style::feature_mean::feature_mean_loss;
-
-    /// A mask's focus: its cells uploaded, the pixel mask unused (1 × 1).
-    fn focus_of(ctx: &GpuContext, cells: &[bool]) -> GpuFocus {
-        let f = GpuFocus::frame(ctx, 1, 1, cells.len(), 1);
-        let on: Vec<f32> = cells.iter().map(|&v| f32::from(u8::from(v))).collect();
-        ctx.write(f.cells(), &on);
-        ctx.write(f.counts(), &[on.iter().sum::<f32>(), 0.0, 0.0, 0.0]);
-        f
-    }
 
     #[test]
     fn matches_the_cpu_feature_mean_term_and_accumulates() {
@@ -135,7 +126,7 @@ mod tests {
             let cells: Vec<bool> = noise(positions, 4).iter().map(|&v| v.abs() < cover).collect();
             let loss = FeatureMeanLoss::new(ctx, &reduce, &style_mean, positions, 0.5, 3).expect("plan");
             let (fb, gb) = (ctx.upload("f", &f), ctx.upload("g", &g0));
-            let focus = focus_of(ctx, &cells);
+            let focus = cells_focus(ctx, &cells);
             let scalars = ctx.upload("scalars", &noise(8, 4));
             let mut enc = ctx.encoder("feature mean test");
             loss.record(ctx, &mut enc, &fb, &focus, &gb, &scalars);

@@ -146,8 +146,18 @@ impl std::fmt::Display for DeviceChoice {
 #[cfg(test)]
 pub(crate) mod test_util {
     //! A context for kernel tests: any adapter, lavapipe included (CI has no GPU).
-    use super::{AdapterPolicy, GpuContext};
+    use super::{AdapterPolicy, GpuContext, GpuFocus};
     use std::sync::OnceLock;
+
+    /// The focus of a feature-position mask for the feature-space terms: its
+    /// cells and their count uploaded, the pixel mask unused (1 × 1).
+    pub fn cells_focus(ctx: &GpuContext, cells: &[bool]) -> GpuFocus {
+        let f = GpuFocus::frame(ctx, 1, 1, cells.len(), 1);
+        let on: Vec<f32> = cells.iter().map(|&v| f32::from(u8::from(v))).collect();
+        ctx.write(f.cells(), &on);
+        ctx.write(f.counts(), &[on.iter().sum::<f32>(), 0.0, 0.0, 0.0]);
+        f
+    }
 
     /// The shared test context; panics with the reason when no adapter exists
     /// (CI installs Mesa's lavapipe, see `.ci/run`).
