@@ -177,15 +177,20 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         let (content_f, content_o) = (at(frame, |m| m.content_object), at(object, |m| m.content_object));
         let (haze_f, haze_o) = (at(frame, |m| m.outside_change), at(object, |m| m.outside_change));
         let pass = sw_o - sw_f > floor(sw) && nn_o - nn_f > floor(nn) && rmse_o <= RMSE_FACTOR * rmse_f;
-        let (ratio_sw, ratio_nn, ratio_rmse) = (sw_o / sw_f, nn_o / nn_f, rmse_o / rmse_f);
+        // A ratio of decreases reads as "how many times frame's" only when
+        // frame's decrease is positive; elsewhere it is left out ("–").
+        let of_decreases = |o: f32, f: f32| (f > 0.0).then_some(o / f);
+        let (ratio_sw, ratio_nn, ratio_rmse) = (of_decreases(sw_o, sw_f), of_decreases(nn_o, nn_f), rmse_o / rmse_f);
         let (time_f, time_o) = (optimising_s(frame, step), optimising_s(object, step));
         time_ratios.push((time_o / time_f) as f32);
-        ratios.push(ratio_sw);
-        nn_ratios.push(ratio_nn);
+        ratios.extend(ratio_sw);
+        nn_ratios.extend(ratio_nn);
         rmse_ratios.push(ratio_rmse);
+        let shown = |r: Option<f32>| r.map_or("–".to_string(), |r| format!("{r:.2}"));
+        let (ratio_sw, ratio_nn) = (shown(ratio_sw), shown(ratio_nn));
         count(&mut per_scene, pass, nn_o > nn_f, sw_o > sw_f);
         out.push(format!(
-            "| {scene} | {style} | {step} | {sw_f:.4} | {sw_o:.4} | {ratio_sw:.2} | {nn_f:.4} | {nn_o:.4} | {ratio_nn:.2} | {content_f:.4} | {content_o:.4} | {rmse_f:.4} | {rmse_o:.4} | {ratio_rmse:.2} | {}, {} | {haze_f:.4}, {haze_o:.4} | {time_f:.0}, {time_o:.0} | {} |",
+            "| {scene} | {style} | {step} | {sw_f:.4} | {sw_o:.4} | {ratio_sw} | {nn_f:.4} | {nn_o:.4} | {ratio_nn} | {content_f:.4} | {content_o:.4} | {rmse_f:.4} | {rmse_o:.4} | {ratio_rmse:.2} | {}, {} | {haze_f:.4}, {haze_o:.4} | {time_f:.0}, {time_o:.0} | {} |",
             yes_no(frame_collapsed),
             yes_no(collapsed(object)),
             yes_no(pass)
@@ -200,7 +205,9 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
     ] {
         let n = v.len();
         if let Some(m) = median(v) {
-            out.push(format!("Median ratio of the {name} (object / frame) over {n} measured pairs: {m:.2}."));
+            out.push(format!(
+                "Median ratio of the {name} (object / frame) over the {n} pairs where frame's is positive: {m:.2}."
+            ));
         }
     }
     for t in per_scene {
@@ -550,12 +557,29 @@ mod tests {
         let lines = focus_lines(&run);
         let pair = lines.iter().find(|l| l.starts_with("| guitar | block2 | 200 |")).expect("pair line");
         // Frame lowered SW more (by collapsing), so the pair fails, and the line says why.
-        assert!(pair.ends_with("| yes, no | 90, 30 | no |"), "{pair}");
+        assert!(pair.ends_with("| yes, no | 0.0000, 0.0000 | 90, 30 | no |"), "{pair}");
+        assert!(pair.contains("| 1.0000 | 0.2000 | 0.20 | 0.0100 | 0.0200 | 2.00 |"), "{pair}");
         assert!(lines.iter().any(|l| l.starts_with("Median ratio of the optimising times") && l.contains(": 0.33.")));
         let tally = lines.iter().find(|l| l.starts_with("guitar: object beats frame")).expect("tally");
         assert!(tally.contains("on 0 of 1 styles") && tally.contains("fired on the frame run of 1 of them"), "{tally}");
         assert!(tally.contains("on the object run of 0)"), "{tally}");
         // Object: SW 5.0 → 4.8 (0.2) against frame's 1.0, NN-cos 0.23 → 0.21 (0.02) against 0.01.
         assert!(tally.contains("lowers NN-cos more on 1 and SW more on 0"), "{tally}");
+    }
+
+    /// Where frame's decrease is not positive the ratio says nothing (object
+    /// rising more would read as "more than frame"): the cell shows "–" and
+    /// the median leaves the pair out.
+    #[test]
+    fn a_ratio_of_decreases_needs_frame_to_decrease() {
+        // Frame: SW 5.0 → 5.4 (−0.4), NN-cos 0.23 → 0.22; object: SW 5.0 → 5.6 (−0.6), NN-cos 0.23 → 0.21.
+        let frame = record("f", "fire", measures(5.0, 4.0, 0.23, 1.0, 0.4), measures(5.4, 4.0, 0.22, 1.0, 0.4));
+        let object = record("o", "fire", measures(5.0, 4.0, 0.23, 1.0, 0.4), measures(5.6, 4.0, 0.21, 1.0, 0.4));
+        let lines = focus_lines(&two_arm_run(frame, object));
+        let pair = lines.iter().find(|l| l.starts_with("| guitar | fire | 200 |")).expect("pair line");
+        assert!(pair.contains("| -0.4000 | -0.6000 | – | 0.0100 | 0.0200 | 2.00 |"), "{pair}");
+        assert!(!lines.iter().any(|l| l.starts_with("Median ratio of the SW decreases")), "{lines:?}");
+        let nn = lines.iter().find(|l| l.starts_with("Median ratio of the NN-cos decreases")).expect("NN median");
+        assert!(nn.contains("over the 1 pairs where frame's is positive: 2.00."), "{nn}");
     }
 }
