@@ -258,6 +258,30 @@ fn gpu_background_hold_gives_the_cpu_losses() {
     }
 }
 
+/// λ_out turned on after the views' targets exist (a studio slider): both
+/// engines build the hold's part of each target then, and measure it.
+#[test]
+fn the_background_hold_can_be_turned_on_mid_run() {
+    use gast_core::gpu::DeviceChoice;
+    use gast_core::session::Session;
+    let ctx = match DeviceChoice::Gpu.resolve() {
+        Ok(Some(c)) => c,
+        other => panic!("the GPU tests need a wgpu adapter (lavapipe: mesa-vulkan-drivers): {other:?}"),
+    };
+    let Some(cpu_inputs) = inputs(object_config(Mode::ColorOnly, LossWeights::default())) else { return };
+    let gpu_inputs = SessionInputs { gpu: Some(ctx), ..cpu_inputs.clone() };
+    for (device, inputs) in [("CPU", cpu_inputs), ("GPU", gpu_inputs)] {
+        let mut s = Session::prepare(inputs, &mut |_| {}).expect("session");
+        s.warm_view_targets().expect("targets");
+        let off = s.step().expect("a step").losses.outside;
+        let mut config = s.config().clone();
+        config.weights.outside = 1e5;
+        s.set_config(config).expect("λ_out on");
+        let on = s.step().expect("a step with the hold").losses.outside;
+        assert!(off == 0.0 && on > 0.0, "{device}: the hold before and after turning it on: {off}, {on}");
+    }
+}
+
 /// The colour floor on both devices, with a colour learning rate large
 /// enough that the first updates push DC colours below the floor: after two
 /// colour steps both devices hold the same DC coefficients, none below the

@@ -425,9 +425,12 @@ impl Session {
         Ok(t.elapsed().as_secs_f64())
     }
 
-    /// The CPU engine's targets of `view`, computed on its first visit.
+    /// The CPU engine's targets of `view`, computed on its first visit; the
+    /// hold's part on the first visit with λ_out > 0 (a slider may turn it on
+    /// after the other targets exist).
     fn make_target(&mut self, view: usize) {
-        if self.targets[view].is_some() {
+        let want_hold = self.config.weights.outside > 0.0;
+        if self.targets[view].as_ref().is_some_and(|t| t.outside.is_some() || !want_hold) {
             return;
         }
         let opts = RenderOptions { background: self.config.background };
@@ -435,8 +438,12 @@ impl Session {
         let (h, w) = (cam.height as usize, cam.width as usize);
         let r = raster::render(&self.g_ref, cam, &opts);
         let rgb: Vec<f32> = r.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+        if let Some(t) = self.targets[view].as_mut() {
+            t.outside = Some((outside_mask(&r.alpha), rgb));
+            return;
+        }
         self.colour_watch.set_reference(view, CoveredColour::of(&rgb, &r.alpha));
-        let outside = (self.config.weights.outside > 0.0).then(|| (outside_mask(&r.alpha), rgb.clone()));
+        let outside = want_hold.then(|| (outside_mask(&r.alpha), rgb.clone()));
         self.targets[view] = Some(ViewTarget {
             content: content_target(&*self.vgg, &rgb, h, w),
             coverage: coverage_mask(&r.alpha, h, w),
