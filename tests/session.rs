@@ -140,12 +140,8 @@ fn a_bad_configuration_fails_with_a_message() {
 /// Adam update, which the first step's gradients decide on both devices.
 /// Returns the CPU and GPU sessions after those two steps.
 fn gpu_and_cpu_agree(label: &str, config: StyleConfig) -> Option<[gast_core::session::Session; 2]> {
-    use gast_core::gpu::DeviceChoice;
     use gast_core::session::{LossTerms, Session};
-    let ctx = match DeviceChoice::Gpu.resolve() {
-        Ok(Some(c)) => c,
-        other => panic!("the GPU tests need a wgpu adapter (lavapipe: mesa-vulkan-drivers): {other:?}"),
-    };
+    let ctx = gpu_context();
     let terms = |l: &LossTerms| {
         [
             ("total", l.total),
@@ -217,6 +213,14 @@ fn gpu_object_focus_gives_the_cpu_losses() {
     }
 }
 
+/// The GPU the device tests run on (lavapipe in CI).
+fn gpu_context() -> gast_core::gpu::GpuContext {
+    match gast_core::gpu::DeviceChoice::Gpu.resolve() {
+        Ok(Some(c)) => c,
+        other => panic!("the GPU tests need a wgpu adapter (lavapipe: mesa-vulkan-drivers): {other:?}"),
+    }
+}
+
 /// Four steps at 64 px with the object focus, in `mode`, with `weights`.
 fn object_config(mode: Mode, weights: LossWeights) -> StyleConfig {
     StyleConfig {
@@ -262,12 +266,8 @@ fn gpu_background_hold_gives_the_cpu_losses() {
 /// engines build the hold's part of each target then, and measure it.
 #[test]
 fn the_background_hold_can_be_turned_on_mid_run() {
-    use gast_core::gpu::DeviceChoice;
     use gast_core::session::Session;
-    let ctx = match DeviceChoice::Gpu.resolve() {
-        Ok(Some(c)) => c,
-        other => panic!("the GPU tests need a wgpu adapter (lavapipe: mesa-vulkan-drivers): {other:?}"),
-    };
+    let ctx = gpu_context();
     let Some(cpu_inputs) = inputs(object_config(Mode::ColorOnly, LossWeights::default())) else { return };
     let gpu_inputs = SessionInputs { gpu: Some(ctx), ..cpu_inputs.clone() };
     for (device, inputs) in [("CPU", cpu_inputs), ("GPU", gpu_inputs)] {
@@ -380,11 +380,7 @@ fn fast_options_keep_the_exact_results() {
 /// they hold exactly the final result's optimised Gaussians.
 #[test]
 fn a_gpu_worker_shares_its_buffers_and_counts_its_steps() {
-    use gast_core::gpu::DeviceChoice;
-    let ctx = match DeviceChoice::Gpu.resolve() {
-        Ok(Some(c)) => c,
-        other => panic!("the GPU tests need a wgpu adapter (lavapipe: mesa-vulkan-drivers): {other:?}"),
-    };
+    let ctx = gpu_context();
     let config = StyleConfig {
         cycles: 1,
         steps_per_cycle: 3,
@@ -447,7 +443,6 @@ fn warmed_view_targets_give_the_same_steps() {
 /// large learning rate of the means the CPU's reading has moved.
 #[test]
 fn the_colour_watch_reads_the_renders_on_both_devices() {
-    use gast_core::gpu::DeviceChoice;
     use gast_core::session::Session;
     let config = StyleConfig {
         cycles: 1,
@@ -460,10 +455,7 @@ fn the_colour_watch_reads_the_renders_on_both_devices() {
         ..Default::default()
     };
     let Some(cpu_inputs) = inputs(config) else { return };
-    let ctx = match DeviceChoice::Gpu.resolve() {
-        Ok(Some(c)) => c,
-        other => panic!("the GPU tests need a wgpu adapter (lavapipe: mesa-vulkan-drivers): {other:?}"),
-    };
+    let ctx = gpu_context();
     let gpu_inputs = SessionInputs { gpu: Some(ctx), ..cpu_inputs.clone() };
     let mut cpu = Session::prepare(cpu_inputs, &mut |_| {}).expect("CPU session");
     let mut gpu = Session::prepare(gpu_inputs, &mut |_| {}).expect("GPU session");

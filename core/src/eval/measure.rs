@@ -28,7 +28,7 @@ use crate::raster::{self, Render, RenderOptions};
 use crate::scene::Gaussians;
 use crate::style::StyleFeatures;
 use crate::style::focus::{coverage_mask, feature_mask, gather_positions};
-use crate::style::outside::OUTSIDE_ALPHA;
+use crate::style::outside::outside_mask;
 use crate::style::step::{FeatureMap, content_target, replicate3};
 use crate::vision::Vgg;
 use crate::vision::canny::render_edges;
@@ -150,8 +150,8 @@ pub struct Measures {
     #[serde(default)]
     pub feature_norm_object: f32,
     /// Haze: the mean absolute RGB change against the colour-matched render
-    /// over the pixels it leaves empty (alpha below
-    /// [`crate::style::outside::OUTSIDE_ALPHA`]) in the style views, RGB in `[0, 1]`.
+    /// over the pixels it leaves empty ([`crate::style::outside::outside_mask`])
+    /// in the style views, RGB in `[0, 1]`.
     #[serde(default)]
     pub outside_change: f32,
 }
@@ -405,7 +405,7 @@ impl Evaluator {
 /// pixels `before` leaves empty (0 when it covers every pixel).
 fn outside_change(before: &Render, after: &Render) -> f32 {
     let (mut sum, mut count) = (0f64, 0usize);
-    for (p, _) in before.alpha.iter().enumerate().filter(|(_, a)| **a < OUTSIDE_ALPHA) {
+    for (p, _) in outside_mask(&before.alpha).into_iter().enumerate().filter(|(_, empty)| *empty) {
         for c in 3 * p..3 * p + 3 {
             let clamp = |v: f32| v.clamp(0.0, 1.0);
             sum += f64::from((clamp(after.rgb[c]) - clamp(before.rgb[c])).abs());

@@ -423,9 +423,10 @@ impl GpuEngine {
         }
         if self.targets.get(view).is_none_or(Option::is_none) {
             let before = self.ctx.allocated_bytes();
-            self.make_target(view, cam)?;
+            self.make_target(view, cam, weights.outside > 0.0)?;
             self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
         }
+        // λ_out turned on after the target was made (a slider): its hold now.
         if weights.outside > 0.0 && self.targets[view].as_ref().is_some_and(|t| t.hold.is_none()) {
             let before = self.ctx.allocated_bytes();
             let hold = self.make_hold(cam)?;
@@ -437,9 +438,8 @@ impl GpuEngine {
         Ok(())
     }
 
-    /// The background hold's reference of the view `cam`: `G^c`'s render
-    /// and the pixels it leaves empty ([`crate::style::outside`]), read
-    /// back once and uploaded as `[r, g, b, k]` per pixel.
+    /// The background hold's reference of the view `cam`, `G^c` rendered
+    /// again (the target's own render is gone by now).
     fn make_hold(&self, cam: &Camera) -> Result<wgpu::Buffer, GpuError> {
         let size = (cam.width, cam.height);
         let Some(plan) = self.plans.get(&size) else {
@@ -450,14 +450,20 @@ impl GpuEngine {
         let mut enc = ctx.encoder("engine.hold");
         plan.raster.forward(ctx, &k.raster, &mut enc, &self.g_ref, cam, &opts);
         ctx.submit(enc);
-        let n = u64::from(cam.width) * u64::from(cam.height);
-        let rgb: Vec<f32> =
-            ctx.read_range::<f32>(&plan.raster.rgb, 0, n * 12)?.iter().map(|v| v.clamp(0.0, 1.0)).collect();
-        let alpha: Vec<f32> = ctx.read_range(&plan.raster.alpha, 0, n * 4)?;
-        Ok(ctx.upload("engine.target.hold", &RefLoss::hold_reference(&rgb, &outside_mask(&alpha))))
+        let (rgb, alpha) = self.read_render(cam)?;
+        Ok(self.hold_of(&rgb, &alpha))
     }
 
-    fn make_target(&mut self, view: usize, cam: &Camera) -> Result<(), GpuError> {
+    /// The hold's reference from `G^c`'s render (`rgb` before the clamp):
+    /// its clamped colours and the pixels it leaves empty
+    /// ([`crate::style::outside`]), uploaded as `[r, g, b, k]` per pixel.
+    fn hold_of(&self, rgb: &[f32], alpha: &[f32]) -> wgpu::Buffer {
+        let clamped: Vec<f32> = rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+        self.ctx.upload("engine.target.hold", &RefLoss::hold_reference(&clamped, &outside_mask(alpha)))
+    }
+
+    /// The targets of `view` from `G^c`'s render, with the hold's when `hold`.
+    fn make_target(&mut self, view: usize, cam: &Camera, hold: bool) -> Result<(), GpuError> {
         let size = (cam.width, cam.height);
         let Some(plan) = self.plans.get(&size) else {
             return Err(GpuError::TooLarge(format!("no plan for {}×{}", size.0, size.1)));
@@ -489,17 +495,27 @@ impl GpuEngine {
         if need > self.subset_scratch.as_ref().map_or(0, |b| (b.size() / 4) as usize) {
             self.subset_scratch = Some(ctx.zeros("engine.subset_scratch", need));
         }
-        let colour = self.rendered_colour(cam)?;
+        // One read-back of G^c's render serves the colour watch and the hold.
+        let (rgb, alpha) = self.read_render(cam)?;
+        let colour = CoveredColour::of(&rgb, &alpha);
+        let hold = hold.then(|| self.hold_of(&rgb, &alpha));
         if view >= self.targets.len() {
             self.targets.resize_with(view + 1, || None);
         }
-        self.targets[view] = Some(ViewTarget { content, inv_depth, focus, colour, kept: None, subset, hold: None });
+        self.targets[view] = Some(ViewTarget { content, inv_depth, focus, colour, kept: None, subset, hold });
         Ok(())
     }
 
     /// The covered colour ([`CoveredColour::of`]) of the last render at
     /// `cam`'s size: the last step's, read back (`h·w·16` bytes).
     pub fn rendered_colour(&self, cam: &Camera) -> Result<CoveredColour, GpuError> {
+        let (rgb, alpha) = self.read_render(cam)?;
+        Ok(CoveredColour::of(&rgb, &alpha))
+    }
+
+    /// The last render at `cam`'s size, read back: its colour (before the
+    /// clamp) and alpha.
+    fn read_render(&self, cam: &Camera) -> Result<(Vec<f32>, Vec<f32>), GpuError> {
         let size = (cam.width, cam.height);
         let Some(plan) = self.plans.get(&size) else {
             return Err(GpuError::TooLarge(format!("no plan for {}×{}", size.0, size.1)));
@@ -507,7 +523,7 @@ impl GpuEngine {
         let n = u64::from(cam.width) * u64::from(cam.height);
         let rgb: Vec<f32> = self.ctx.read_range(&plan.raster.rgb, 0, n * 12)?;
         let alpha: Vec<f32> = self.ctx.read_range(&plan.raster.alpha, 0, n * 4)?;
-        Ok(CoveredColour::of(&rgb, &alpha))
+        Ok((rgb, alpha))
     }
 
     /// `G^c`'s covered colour from `view`, once its target exists.
