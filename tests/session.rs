@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use gast_core::session::{Command, Event, SessionInputs, StyleDepthSource, StyleImage, spawn};
 use gast_core::style::config::LossWeights;
-use gast_core::style::{Mode, StyleConfig};
+use gast_core::style::{MeanSteps, Mode, Phase, StyleConfig};
 use gast_core::vision::Vgg;
 use gast_tests::shared_file;
 
@@ -244,6 +244,37 @@ fn gpu_feature_mean_gives_the_cpu_losses() {
         let Some([mut cpu, _]) = gpu_and_cpu_agree(&format!("λ_mean {mode:?}"), config) else { return };
         let next = cpu.step().expect("a third CPU step");
         assert!(next.losses.feature_mean > 0.0, "the term the devices agreed on is not 0: {:?}", next.losses);
+    }
+}
+
+/// λ_mean acts on every step by default, on the colour steps only when
+/// asked, on both engines: two colour then two geometry steps.
+#[test]
+fn lambda_mean_acts_on_the_steps_asked_for() {
+    use gast_core::session::Session;
+    let ctx = gpu_context();
+    for steps in MeanSteps::ALL {
+        let config = StyleConfig {
+            mode: Mode::Decoupled,
+            ratio_geo: 0.5,
+            feature_mean_steps: steps,
+            ..object_config(Mode::Decoupled, LossWeights { feature_mean: 100.0, ..Default::default() })
+        };
+        let Some(cpu_inputs) = inputs(config) else { return };
+        let gpu_inputs = SessionInputs { gpu: Some(ctx.clone()), ..cpu_inputs.clone() };
+        for (device, inputs) in [("CPU", cpu_inputs), ("GPU", gpu_inputs)] {
+            let mut s = Session::prepare(inputs, &mut |_| {}).expect("session");
+            let phases: Vec<(Phase, f32)> =
+                (0..4).map(|_| s.step().expect("a step")).map(|r| (r.phase, r.losses.feature_mean)).collect();
+            assert_eq!(
+                phases.iter().map(|p| p.0).collect::<Vec<_>>(),
+                [Phase::Color, Phase::Color, Phase::Geometry, Phase::Geometry]
+            );
+            for (phase, value) in phases {
+                let acts = steps == MeanSteps::Every || phase == Phase::Color;
+                assert_eq!(value > 0.0, acts, "{device}, {steps:?}: λ_mean's term on a {phase:?} step is {value}");
+            }
+        }
     }
 }
 

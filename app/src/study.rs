@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use clap::ValueEnum;
 use gast_core::eval::{Checkpoint, Degeneration, TrialOutcome};
 use gast_core::session::StyleImage;
-use gast_core::style::{Mode, StyleConfig};
+use gast_core::style::{MeanSteps, Mode, StyleConfig};
 use serde::{Deserialize, Serialize};
 
 /// The studies of the grid.
@@ -171,6 +171,11 @@ pub struct Sizes {
     /// [`gast_core::style::outside`]).
     #[serde(default)]
     pub focus_object_lambda_outside: f32,
+    /// Which steps the object arm's λ_mean acts on; absent in runs from
+    /// before the choice existed, which ran it on every step. A run records
+    /// the choice it made (`gast stylize`'s default when not given).
+    #[serde(default)]
+    pub focus_object_mean_steps: Option<MeanSteps>,
 }
 
 /// The collapse study's runs: the decoupled default on every pair; the others
@@ -229,6 +234,7 @@ impl Sizes {
             focus_object_resolution: 0,
             focus_object_lambda_mean: 0.0,
             focus_object_lambda_outside: 0.0,
+            focus_object_mean_steps: None,
         }
     }
 
@@ -285,6 +291,7 @@ impl Sizes {
             focus_object_resolution: 0,
             focus_object_lambda_mean: 0.0,
             focus_object_lambda_outside: 0.0,
+            focus_object_mean_steps: None,
         }
     }
 }

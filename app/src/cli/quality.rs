@@ -287,6 +287,7 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
                 outside: sizes.focus_object_lambda_outside,
                 ..frame.weights
             },
+            feature_mean_steps: sizes.focus_object_mean_steps.unwrap_or_default(),
             ..frame.clone()
         };
         for scene in 0..sizes.scenes.len() {
@@ -414,11 +415,13 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let shared = shared_dir();
-    let sizes = match &args.sizes {
+    let mut sizes = match &args.sizes {
         Some(path) => Sizes::from_file(path)?,
         None if args.quick => Sizes::quick(),
         None => Sizes::full(),
     };
+    // The run records the choice it makes, so its report can say it.
+    sizes.focus_object_mean_steps.get_or_insert_default();
     let studies = if args.studies.is_empty() { Study::ALL.to_vec() } else { args.studies.clone() };
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("gast-quality-{}", utc_stamp())));
     std::fs::create_dir_all(&out).with_context(|| format!("could not create the output folder {}", out.display()))?;

@@ -9,6 +9,7 @@
 use std::path::Path;
 
 use gast_core::eval::{DegenerationKind, Measures};
+use gast_core::style::MeanSteps;
 
 use crate::cli::quality::{FOCUS_FITTED_VIEWS, FOCUS_FRAME, FOCUS_MASKED_LOSSES, FOCUS_OBJECT, FOCUS_SEED};
 use crate::study::{Record, Row, RunSummary, Study};
@@ -111,7 +112,14 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         r => format!("frame at {} px, object at {r} px", run.sizes.resolution),
     };
     let sizes = match run.sizes.focus_object_lambda_mean {
-        l if l > 0.0 => format!("{sizes}, object with λ_mean {l}"),
+        l if l > 0.0 => {
+            // Runs from before the choice existed ran λ_mean on every step.
+            let steps = match run.sizes.focus_object_mean_steps.unwrap_or(MeanSteps::Every) {
+                MeanSteps::Colour => "colour steps",
+                MeanSteps::Every => "every step",
+            };
+            format!("{sizes}, object with λ_mean {l} on {steps}")
+        }
         _ => sizes,
     };
     let sizes = match run.sizes.focus_object_lambda_outside {

@@ -3,7 +3,7 @@
 
 use egui::{Color32, Ui};
 use gast_core::session::StepReport;
-use gast_core::style::{Focus, Mode, Phase, StyleConfig};
+use gast_core::style::{Focus, MeanSteps, Mode, Phase, StyleConfig};
 
 /// Label of a focus in menus.
 pub fn focus_label(f: Focus) -> &'static str {
@@ -21,6 +21,14 @@ pub fn mode_label(m: Mode) -> &'static str {
         Mode::Joint => "joint",
         Mode::ColorOnly => "colour only",
         Mode::GeometryOnly => "geometry only",
+    }
+}
+
+/// Label of a choice of λ_mean's steps in menus.
+pub fn mean_steps_label(m: MeanSteps) -> &'static str {
+    match m {
+        MeanSteps::Colour => "colour steps",
+        MeanSteps::Every => "every step",
     }
 }
 
@@ -51,6 +59,21 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
          with frame focus) toward the style's, so the style's colours and marks come through without darkening \
          the object; 100 in the README's focus study",
     );
+    if w.feature_mean > 0.0 {
+        egui::ComboBox::from_label("λ_mean acts on")
+            .selected_text(mean_steps_label(c.feature_mean_steps))
+            .show_ui(ui, |ui| {
+                for m in MeanSteps::ALL {
+                    changed |= ui.selectable_value(&mut c.feature_mean_steps, m, mean_steps_label(m)).changed();
+                }
+            })
+            .response
+            .on_hover_text(
+                "colour steps only leave the geometry steps to GCFM alone: better nearest-neighbour matches, \
+                 less of the style's colour statistics (the README's focus study)",
+            );
+    }
+    let w = &mut c.weights;
     changed |= weight(
         ui,
         &mut w.outside,

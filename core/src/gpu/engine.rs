@@ -248,10 +248,12 @@ impl GpuEngine {
             // λ_GC is baked into the GCFM workspace's uniforms.
             self.plans.clear();
         }
+        // This step's weights (λ_mean may sit out the geometry steps).
+        let w = config.weights_for(phase);
         // The view's plan and targets (which do not depend on the weights).
-        self.warm_target(view, cam, &config.weights)?;
-        if config.weights != self.weights {
-            self.set_weights(&config.weights);
+        self.warm_target(view, cam, &w)?;
+        if w != self.weights {
+            self.set_weights(&w);
         }
         let Some(Some(target)) = self.targets.get(view) else {
             return Err(GpuError::TooLarge(format!("no target for view {view}")));
@@ -350,7 +352,6 @@ impl GpuEngine {
         if pairs > plan.raster.capacity() {
             self.grow_pairs(size, pairs);
         }
-        let w = &config.weights;
         let mut terms = LossTerms {
             gcfm: s[slot::GCFM + 3],
             content: s[slot::CONTENT],

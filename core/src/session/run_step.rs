@@ -100,7 +100,7 @@ impl Session {
             RenderedMaps { rgb: &rgb, inv_depth: &img.inv_depth, edge: &edge, height: h, width: w },
             Some(&target.content),
             geometry.then_some(target.inv_depth.as_slice()),
-            &self.config.weights,
+            &self.config.weights_for(phase),
             geometry,
             LossFocus {
                 mask: self.focus_on_object().then_some(target.coverage.as_slice()),

@@ -7,9 +7,10 @@
 use serde::{Deserialize, Serialize};
 
 use super::adam::AdamConfig;
+pub use super::feature_mean::MeanSteps;
 use super::focus::Focus;
 pub use super::matching::{MatchMethod, MatchingConfig};
-use super::schedule::{Mode, Schedule};
+use super::schedule::{Mode, Phase, Schedule};
 pub use crate::vision::ConvAlgo;
 pub use crate::vision::style_depth::{DepthPolarity, DepthProvider};
 
@@ -131,6 +132,8 @@ pub struct StyleConfig {
     /// `vision::vgg_cone`): the same losses up to rounding. On by default;
     /// off to measure what it buys.
     pub vgg_window: bool,
+    /// Which steps λ_mean acts on: every step (the default) or the colour steps.
+    pub feature_mean_steps: MeanSteps,
 }
 
 impl Default for StyleConfig {
@@ -154,6 +157,7 @@ impl Default for StyleConfig {
             focus: Focus::default(),
             color_floor: false,
             vgg_window: true,
+            feature_mean_steps: MeanSteps::default(),
         }
     }
 }
@@ -162,6 +166,16 @@ impl StyleConfig {
     /// The step plan this configuration implies.
     pub fn schedule(&self) -> Schedule {
         Schedule::from_ratio(self.cycles, self.steps_per_cycle, self.ratio_geo, self.mode)
+    }
+
+    /// The loss weights of a step in `phase`: λ_mean is 0 on the steps
+    /// [`StyleConfig::feature_mean_steps`] leaves out.
+    pub fn weights_for(&self, phase: Phase) -> LossWeights {
+        let mut w = self.weights;
+        if !self.feature_mean_steps.acts_in(phase) {
+            w.feature_mean = 0.0;
+        }
+        w
     }
 
     /// Reads a preset (JSON; missing fields take their defaults).
@@ -228,6 +242,25 @@ impl StyleConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lambda_mean_acts_on_the_steps_asked_for() {
+        let on = LossWeights { feature_mean: 7.0, ..LossWeights::default() };
+        let every = StyleConfig { weights: on, ..StyleConfig::default() };
+        assert_eq!(every.feature_mean_steps, MeanSteps::Every);
+        for phase in [Phase::Color, Phase::Geometry, Phase::Joint] {
+            assert_eq!(every.weights_for(phase), on);
+        }
+        let c = StyleConfig { feature_mean_steps: MeanSteps::Colour, ..every };
+        assert_eq!(c.weights_for(Phase::Color), on);
+        assert_eq!(c.weights_for(Phase::Joint), on);
+        assert_eq!(c.weights_for(Phase::Geometry), LossWeights { feature_mean: 0.0, ..on });
+        assert_eq!("every".parse::<MeanSteps>(), Ok(MeanSteps::Every));
+        assert_eq!("colour".parse::<MeanSteps>(), Ok(MeanSteps::Colour));
+        assert!("geometry".parse::<MeanSteps>().is_err_and(|e| e.contains("colour or every")));
+        let preset = StyleConfig::from_json(r#"{"feature_mean_steps": "colour"}"#).expect("a preset");
+        assert_eq!(preset.feature_mean_steps, MeanSteps::Colour);
+    }
 
     #[test]
     fn defaults_follow_the_algorithm() {

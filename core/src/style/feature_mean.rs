@@ -8,6 +8,52 @@
 //! style's by darkening the object. This term moves the mean directly,
 //! without the background (README, the focus study's λ_mean rows).
 
+use serde::{Deserialize, Serialize};
+
+use super::schedule::Phase;
+
+/// Which steps λ_mean acts on.
+///
+/// On the geometry steps the term competes with GCFM's nearest-neighbour
+/// pull; left to the colour steps it gives that pull back, but the colour
+/// steps (10 of 100, DC only) move the mean little: on biker × fire,
+/// particle and starry at 200 steps, `colour` kept NN-cos ahead of the frame
+/// arm on all three and lost SW on two, `every` the reverse (README, the
+/// focus study's row on λ_mean's steps).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MeanSteps {
+    /// The steps that update colour (the colour phase, and every `joint` step).
+    Colour,
+    /// Every step, colour and geometry.
+    #[default]
+    Every,
+}
+
+impl MeanSteps {
+    /// All choices, for menus.
+    pub const ALL: [MeanSteps; 2] = [MeanSteps::Colour, MeanSteps::Every];
+
+    /// Whether the term acts on a step of `phase`.
+    pub fn acts_in(self, phase: Phase) -> bool {
+        match self {
+            MeanSteps::Colour => phase.updates_color(),
+            MeanSteps::Every => true,
+        }
+    }
+}
+
+impl std::str::FromStr for MeanSteps {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "colour" | "color" => Ok(MeanSteps::Colour),
+            "every" => Ok(MeanSteps::Every),
+            _ => Err(format!("expected colour or every, found {s:?}")),
+        }
+    }
+}
+
 /// Per channel, the mean of a `channels × n` (CHW) feature map over its positions.
 pub fn channel_means(features: &[f32], channels: usize) -> Vec<f32> {
     let n = features.len() / channels.max(1);

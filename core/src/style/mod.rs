@@ -26,6 +26,7 @@ pub mod window;
 
 pub use color_transfer::ColorTransfer;
 pub use config::{DC_FLOOR, StyleConfig};
+pub use feature_mean::MeanSteps;
 pub use focus::Focus;
 pub use gcfm::{GcfmOutput, Matches, StyleFeatures};
 pub use matching::{MatchIndex, MatchMethod, MatchingConfig};

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use gast_core::gpu::DeviceChoice;
-use gast_core::style::{Focus, MatchMethod, Mode, StyleConfig};
+use gast_core::style::{Focus, MatchMethod, MeanSteps, Mode, StyleConfig};
 use gast_core::vision::ConvAlgo;
 use gast_core::vision::style_depth::{DepthPolarity, DepthProvider};
 
@@ -120,6 +120,10 @@ pub struct StylizeArgs {
     /// around the object; not in the reference [default: 0, off].
     #[arg(long)]
     pub lambda_outside: Option<f32>,
+    /// Which steps λ_mean acts on: every, or colour (the colour steps only;
+    /// the geometry steps follow GCFM alone) [default: every].
+    #[arg(long, value_name = "colour|every")]
+    pub mean_steps: Option<MeanSteps>,
     /// Learning rate of the SH DC colour [default: 0.01].
     #[arg(long)]
     pub lr_color: Option<f32>,
@@ -197,6 +201,7 @@ impl StylizeArgs {
         set!(self.lambda_depth, c.weights.depth);
         set!(self.lambda_mean, c.weights.feature_mean);
         set!(self.lambda_outside, c.weights.outside);
+        set!(self.mean_steps, c.feature_mean_steps);
         set!(self.lr_color, c.lr.color);
         set!(self.lr_means, c.lr.means_per_extent);
         set!(self.lr_scales, c.lr.scales);
