@@ -171,6 +171,10 @@ pub struct Sizes {
     /// [`gast_core::style::outside`]).
     #[serde(default)]
     pub focus_object_lambda_outside: f32,
+    /// λ_sw of the focus study's object arm (0: off, as the frame arm;
+    /// [`gast_core::style::sliced`]).
+    #[serde(default)]
+    pub focus_object_lambda_sliced: f32,
     /// Which steps the object arm's λ_mean acts on; absent in runs from
     /// before the choice existed, which ran it on every step. A run records
     /// the choice it made (`gast stylize`'s default when not given).
@@ -235,6 +239,7 @@ impl Sizes {
             focus_object_lambda_mean: 0.0,
             focus_object_lambda_outside: 0.0,
             focus_object_mean_steps: None,
+            focus_object_lambda_sliced: 0.0,
         }
     }
 
@@ -292,6 +297,7 @@ impl Sizes {
             focus_object_lambda_mean: 0.0,
             focus_object_lambda_outside: 0.0,
             focus_object_mean_steps: None,
+            focus_object_lambda_sliced: 0.0,
         }
     }
 }

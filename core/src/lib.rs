@@ -12,6 +12,7 @@ pub mod golden;
 pub mod gpu;
 pub mod io;
 pub mod raster;
+pub(crate) mod rng;
 pub mod scene;
 pub mod session;
 pub mod style;

@@ -285,6 +285,7 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
             weights: LossWeights {
                 feature_mean: sizes.focus_object_lambda_mean,
                 outside: sizes.focus_object_lambda_outside,
+                sliced: sizes.focus_object_lambda_sliced,
                 ..frame.weights
             },
             feature_mean_steps: sizes.focus_object_mean_steps.unwrap_or_default(),

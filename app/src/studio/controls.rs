@@ -82,6 +82,14 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
         "background hold, not in the paper (0 = off): with object focus, the pixels around the object that the \
          colour-matched scene leaves empty keep its render, so no haze or streaks grow there; 1e5 in the README",
     );
+    changed |= weight(
+        ui,
+        &mut w.sliced,
+        1000.0,
+        "λ_sw",
+        "sliced Wasserstein term, not in the paper (0 = off; CPU device only so far): pulls the distribution of \
+         the object's VGG features toward the style's, not only their mean (λ_mean); 100 in the README",
+    );
 
     ui.separator();
     ui.label(egui::RichText::new("Schedule").strong());
@@ -145,11 +153,11 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
 /// scale (min to max of that term, printed beside its name in a legend band
 /// above the curves, so no curve runs under a label), over a strip that
 /// marks each step's phase (colour steps amber, geometry steps blue, joint
-/// steps violet). The λ_mean and λ_out terms, off by default, get their
+/// steps violet). The λ_mean, λ_out and λ_sw terms, off by default, get their
 /// lines only when a step measured them.
 pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
     type Series = (&'static str, Color32, fn(&StepReport) -> f32);
-    const SERIES: [Series; 7] = [
+    const SERIES: [Series; 8] = [
         ("total", Color32::from_rgb(250, 200, 60), |s| s.losses.total),
         ("GCFM", Color32::from_rgb(90, 170, 250), |s| s.losses.gcfm),
         ("content", Color32::from_rgb(120, 220, 120), |s| s.losses.content),
@@ -157,6 +165,7 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
         ("depth", Color32::from_rgb(200, 200, 200), |s| s.losses.depth),
         ("mean", Color32::from_rgb(220, 130, 230), |s| s.losses.feature_mean),
         ("hold", Color32::from_rgb(120, 220, 220), |s| s.losses.outside),
+        ("sliced", Color32::from_rgb(240, 160, 90), |s| s.losses.sliced),
     ];
     const ROW: f32 = 13.0;
     const COLUMNS: usize = 2;

@@ -420,6 +420,8 @@ pub fn step_loss_gpu(
         feature_mean,
         // This check helper holds no background (its CPU twin has no hold either).
         outside: 0.0,
+        // The GPU engine has no sliced Wasserstein term yet (the session refuses λ_sw there).
+        sliced: 0.0,
         total: weights.gcfm * gcfm
             + weights.content * content_value
             + weights.tv * tv

@@ -46,6 +46,9 @@ pub struct LossTerms {
     /// The background hold (0 when λ_out is 0 or the focus is the frame).
     #[serde(default)]
     pub outside: f32,
+    /// The sliced Wasserstein term (0 when λ_sw is 0).
+    #[serde(default)]
+    pub sliced: f32,
 }
 
 /// Time spent in each part of a step, in milliseconds.

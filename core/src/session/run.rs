@@ -142,7 +142,7 @@ impl Session {
         let prepared = style;
         let SessionInputs { scene, cameras, style, style_depth, vgg, config, gpu } = inputs;
         let vgg = with_conv(vgg, config.conv);
-        let problems = config.problems();
+        let problems = engine_problems(&config, gpu.is_some());
         if !problems.is_empty() {
             return Err(SessionError::Config(problems));
         }
@@ -364,7 +364,7 @@ impl Session {
     /// resolution the cameras and per-view targets; any of these, or new
     /// matching settings, forgets the kept matches. Adam state is kept.
     pub fn set_config(&mut self, config: StyleConfig) -> Result<(), SessionError> {
-        let problems = config.problems();
+        let problems = engine_problems(&config, self.engine.is_some());
         if !problems.is_empty() {
             return Err(SessionError::Config(problems));
         }
@@ -542,6 +542,19 @@ impl ViewSampler {
         }
         self.order.pop().unwrap_or(0)
     }
+}
+
+/// The configuration's problems ([`StyleConfig::problems`]), and what the
+/// GPU engine does not compute yet when the steps run there.
+fn engine_problems(config: &StyleConfig, on_gpu: bool) -> Vec<String> {
+    let mut out = config.problems();
+    if on_gpu && config.weights.sliced > 0.0 {
+        out.push(format!(
+            "the sliced Wasserstein term (λ_sw = {}) runs on the CPU engine only so far: use the CPU (--device cpu) or set it to 0",
+            config.weights.sliced
+        ));
+    }
+    out
 }
 
 #[path = "run_step.rs"]

@@ -138,6 +138,7 @@ impl Session {
             depth: loss.depth,
             feature_mean: loss.feature_mean,
             outside: loss.outside,
+            sliced: loss.sliced,
             total: loss.total,
             ..LossTerms::default()
         };

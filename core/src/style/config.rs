@@ -45,6 +45,11 @@ pub struct LossWeights {
     /// focus, the pixels the colour-matched scene leaves empty keep its
     /// render. Not in the reference: 0 (off) by default. Both engines.
     pub outside: f32,
+    /// λ_sw, the sliced Wasserstein term ([`crate::style::sliced`]): the
+    /// distribution of the rendered RGB relu3 features over the positions the
+    /// losses average over, pulled toward the style's along fixed random
+    /// directions. Not in the reference: 0 (off) by default. CPU engine.
+    pub sliced: f32,
 }
 
 impl Default for LossWeights {
@@ -59,6 +64,7 @@ impl Default for LossWeights {
             depth: 10.0,
             feature_mean: 0.0,
             outside: 0.0,
+            sliced: 0.0,
         }
     }
 }
@@ -225,6 +231,7 @@ impl StyleConfig {
             ("weights.depth", w.depth),
             ("weights.feature_mean", w.feature_mean),
             ("weights.outside", w.outside),
+            ("weights.sliced", w.sliced),
             ("lr.color", lr.color),
             ("lr.means_per_extent", lr.means_per_extent),
             ("lr.scales", lr.scales),

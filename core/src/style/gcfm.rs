@@ -16,9 +16,12 @@
 //! Cosines use the reference's `v / (‖v‖ + 1e-8)`; the joint vectors for
 //! matching use `v / (sqrt(‖v‖² + 1e-8) + 1e-8)` as the reference does.
 
+use std::sync::OnceLock;
+
 use rayon::prelude::*;
 
 use super::distinct::search_distinct;
+use super::sliced::{SLICED_PROJECTIONS, SlicedTarget};
 
 /// The epsilon of the reference's normalisations.
 pub(super) const EPS: f64 = 1e-8;
@@ -45,6 +48,8 @@ pub struct StyleFeatures {
     modal_inv_norm: [Vec<f64>; 3],
     /// The RGB features' mean per channel (the feature-mean term's target).
     rgb_mean: Vec<f32>,
+    /// The sliced Wasserstein term's target, made on first use.
+    sliced: OnceLock<SlicedTarget>,
 }
 
 impl StyleFeatures {
@@ -64,7 +69,7 @@ impl StyleFeatures {
             .collect();
         let modal_inv_norm = std::array::from_fn(|k| modal_sq[k].iter().map(|&s| 1.0 / (s.sqrt() + EPS)).collect());
         let rgb_mean = super::feature_mean::channel_means(&feats[0], channels);
-        Self { channels, height, width, feats, joint_inv_norm, modal_inv_norm, rgb_mean }
+        Self { channels, height, width, feats, joint_inv_norm, modal_inv_norm, rgb_mean, sliced: OnceLock::new() }
     }
 
     /// Number of style positions.
@@ -80,6 +85,12 @@ impl StyleFeatures {
     /// The RGB features' mean per channel.
     pub fn rgb_mean(&self) -> &[f32] {
         &self.rgb_mean
+    }
+
+    /// The sliced Wasserstein term's target of the RGB features (projected
+    /// and sorted on the first call).
+    pub fn sliced(&self) -> &SlicedTarget {
+        self.sliced.get_or_init(|| SlicedTarget::new(&self.feats[0], self.channels, SLICED_PROJECTIONS))
     }
 
     /// The matching's style-side scale `1 / (sqrt(‖joint‖² + 1e-8) + 1e-8)`, per position.

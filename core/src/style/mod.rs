@@ -19,6 +19,7 @@ pub mod matching;
 pub mod outside;
 pub mod regularizers;
 pub mod schedule;
+pub mod sliced;
 pub mod stage1;
 pub mod step;
 pub mod tv;

@@ -17,6 +17,7 @@ use super::focus::{feature_mask, gather_positions, scatter_positions};
 use super::gcfm::{GcfmOutput, Matches, StyleFeatures, gcfm_loss_with_matches, match_features};
 use super::outside::{Outside, outside_loss};
 use super::regularizers::depth_l1;
+use super::sliced::sliced_loss;
 use super::tv::tv_loss_masked;
 use super::window::{FeatureWindow, covered_box};
 use crate::vision::resize::{downscale_half, downscale_half_backward};
@@ -170,6 +171,8 @@ pub struct StepLoss {
     pub feature_mean: f32,
     /// Background hold (unweighted; 0 when λ_out is 0 or nothing is held).
     pub outside: f32,
+    /// Sliced Wasserstein term (unweighted; 0 when λ_sw is 0).
+    pub sliced: f32,
     /// `Σ weight · term`.
     pub total: f32,
     /// Gradient of `total` w.r.t. the rendered RGB (HWC).
@@ -398,6 +401,14 @@ pub fn step_loss_with<N: FeatureNet>(
             *a += weights.feature_mean * b;
         }
     }
+    let mut sliced_value = 0.0;
+    if weights.sliced > 0.0 {
+        let (l, g) = sliced_loss(&fwd[0].0.data, fwd[0].0.channels, style.features.sliced(), fmask.as_deref());
+        sliced_value = l;
+        for (a, b) in v_feat_rgb.iter_mut().zip(g) {
+            *a += weights.sliced * b;
+        }
+    }
     let v_feat_depth: Vec<f32> = out.v_rendered[1].iter().map(|v| v * weights.gcfm).collect();
     timings.matching_ms = t.elapsed().as_secs_f32() * 1e3;
     let t = std::time::Instant::now();
@@ -449,7 +460,8 @@ pub fn step_loss_with<N: FeatureNet>(
         + weights.tv * tv
         + weights.depth * depth_value
         + weights.feature_mean * feature_mean_value
-        + weights.outside * outside_value;
+        + weights.outside * outside_value
+        + weights.sliced * sliced_value;
     StepLoss {
         timings,
         gcfm: out.loss,
@@ -458,6 +470,7 @@ pub fn step_loss_with<N: FeatureNet>(
         depth: depth_value,
         feature_mean: feature_mean_value,
         outside: outside_value,
+        sliced: sliced_value,
         total,
         v_rgb,
         v_inv_depth,

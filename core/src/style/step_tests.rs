@@ -307,24 +307,34 @@ fn vgg_on_the_covered_window_equals_the_whole_frame() {
     }
 }
 
+/// λ_mean and λ_sw: each adds exactly its weight times its term to the
+/// total, moves the gradient, and leaves the pixels outside the mask alone.
 #[test]
-fn the_feature_mean_term_adds_its_weighted_value_and_stays_inside_the_mask() {
+fn the_feature_statistics_terms_add_their_weighted_values_and_stay_inside_the_mask() {
     let (h, w) = (16, 24);
     let (net, st, rgb, inv_depth, content, _) = focus_inputs();
     let edge = vec![0.0f32; h * w];
     let mask: Vec<bool> = (0..h * w).map(|k| k % w < 16).collect();
-    let eval = |lambda: f32| {
-        let weights = LossWeights { gcfm: 2.0, content: 0.5, tv: 0.02, feature_mean: lambda, ..LossWeights::default() };
-        let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
-        step_loss_masked(&net, &st, maps, Some(&content), None, &weights, false, Some(&mask))
-    };
-    let (off, on) = (eval(0.0), eval(0.7));
-    assert_eq!(off.feature_mean, 0.0);
-    assert!(on.feature_mean > 0.0, "the rendered and style means differ: {}", on.feature_mean);
-    assert!((on.total - off.total - 0.7 * on.feature_mean).abs() < 1e-5 * on.total.abs().max(1.0));
-    assert!(off.v_rgb.iter().zip(&on.v_rgb).any(|(a, b)| a != b), "the term moved no gradient");
-    for k in (0..h * w).filter(|&k| !mask[k]) {
-        assert!(on.v_rgb[3 * k..3 * k + 3].iter().all(|&v| v == 0.0), "pixel {k} outside the mask");
+    type Term = (&'static str, fn(&mut LossWeights, f32), fn(&StepLoss) -> f32);
+    let terms: [Term; 2] = [
+        ("feature mean", |w, l| w.feature_mean = l, |s| s.feature_mean),
+        ("sliced", |w, l| w.sliced = l, |s| s.sliced),
+    ];
+    for (name, set, get) in terms {
+        let eval = |lambda: f32| {
+            let mut weights = LossWeights { gcfm: 2.0, content: 0.5, tv: 0.02, ..LossWeights::default() };
+            set(&mut weights, lambda);
+            let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
+            step_loss_masked(&net, &st, maps, Some(&content), None, &weights, false, Some(&mask))
+        };
+        let (off, on) = (eval(0.0), eval(0.7));
+        assert_eq!(get(&off), 0.0, "{name}");
+        assert!(get(&on) > 0.0, "{name}: the rendered and style features differ: {}", get(&on));
+        assert!((on.total - off.total - 0.7 * get(&on)).abs() < 1e-5 * on.total.abs().max(1.0), "{name}");
+        assert!(off.v_rgb.iter().zip(&on.v_rgb).any(|(a, b)| a != b), "{name}: the term moved no gradient");
+        for k in (0..h * w).filter(|&k| !mask[k]) {
+            assert!(on.v_rgb[3 * k..3 * k + 3].iter().all(|&v| v == 0.0), "{name}: pixel {k} outside the mask");
+        }
     }
 }
 

@@ -120,6 +120,13 @@ pub struct StylizeArgs {
     /// around the object; not in the reference [default: 0, off].
     #[arg(long)]
     pub lambda_outside: Option<f32>,
+    /// λ_sw, the sliced Wasserstein term: pulls the distribution of the
+    /// rendered relu3 features (over the object's positions with object
+    /// focus) toward the style's along 128 fixed random directions; λ_mean is
+    /// its first moment. Not in the reference; CPU engine only so far
+    /// [default: 0, off].
+    #[arg(long)]
+    pub lambda_sliced: Option<f32>,
     /// Which steps λ_mean acts on: every, or colour (the colour steps only;
     /// the geometry steps follow GCFM alone) [default: every].
     #[arg(long, value_name = "colour|every")]
@@ -201,6 +208,7 @@ impl StylizeArgs {
         set!(self.lambda_depth, c.weights.depth);
         set!(self.lambda_mean, c.weights.feature_mean);
         set!(self.lambda_outside, c.weights.outside);
+        set!(self.lambda_sliced, c.weights.sliced);
         set!(self.mean_steps, c.feature_mean_steps);
         set!(self.lr_color, c.lr.color);
         set!(self.lr_means, c.lr.means_per_extent);
