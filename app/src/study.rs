@@ -175,6 +175,10 @@ pub struct Sizes {
     /// [`gast_core::style::sliced`]).
     #[serde(default)]
     pub focus_object_lambda_sliced: f32,
+    /// The colour learning rate of the focus study's object arm (0: the frame
+    /// arm's, 0.01).
+    #[serde(default)]
+    pub focus_object_lr_color: f32,
     /// Which steps the object arm's λ_mean acts on; absent in runs from
     /// before the choice existed, which ran it on every step. A run records
     /// the choice it made (`gast stylize`'s default when not given).
@@ -240,6 +244,7 @@ impl Sizes {
             focus_object_lambda_outside: 0.0,
             focus_object_mean_steps: None,
             focus_object_lambda_sliced: 0.0,
+            focus_object_lr_color: 0.0,
         }
     }
 
@@ -298,6 +303,7 @@ impl Sizes {
             focus_object_lambda_outside: 0.0,
             focus_object_mean_steps: None,
             focus_object_lambda_sliced: 0.0,
+            focus_object_lr_color: 0.0,
         }
     }
 }

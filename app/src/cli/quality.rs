@@ -20,7 +20,7 @@ use clap::Args;
 use gast_core::Gaussians;
 use gast_core::eval::{EvalOptions, StabilityThresholds, TrialOutcome, run_trial};
 use gast_core::session::{PreparedStyle, SessionInputs, StyleDepthSource, StyleImage, prepare_style};
-use gast_core::style::config::LossWeights;
+use gast_core::style::config::{LearningRates, LossWeights};
 use gast_core::style::{Focus, Mode, StyleConfig};
 
 use super::bench::shared_dir;
@@ -289,6 +289,10 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
                 ..frame.weights
             },
             feature_mean_steps: sizes.focus_object_mean_steps.unwrap_or_default(),
+            lr: match sizes.focus_object_lr_color {
+                0.0 => frame.lr,
+                color => LearningRates { color, ..frame.lr },
+            },
             ..frame.clone()
         };
         for scene in 0..sizes.scenes.len() {
@@ -564,6 +568,7 @@ pub(super) fn utc_stamp() -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use gast_core::style::MeanSteps;
 
     #[test]
     fn rows_that_differ_only_in_budget_share_a_trial() {
@@ -680,11 +685,25 @@ mod tests {
         let apart = Sizes { resolution: 256, focus_object_resolution: 512, ..Sizes::full() };
         assert_eq!((trial(&apart, FOCUS_FRAME), trial(&apart, FOCUS_OBJECT)), (256, 512));
         assert_eq!(trial(&apart, FOCUS_SEED), 256);
-        // λ_mean and λ_out go to the object arm only.
-        let mean = Sizes { focus_object_lambda_mean: 100.0, focus_object_lambda_outside: 30.0, ..Sizes::full() };
-        for (label, want) in [(FOCUS_FRAME, [0.0; 2]), (FOCUS_SEED, [0.0; 2]), (FOCUS_OBJECT, [100.0, 30.0])] {
-            let w = config(&mean, label).weights;
-            assert_eq!([w.feature_mean, w.outside], want, "{label}");
+        // λ_mean, λ_out, λ_sw, λ_mean's steps and the colour learning rate go to the object arm only.
+        let mean = Sizes {
+            focus_object_lambda_mean: 100.0,
+            focus_object_lambda_outside: 30.0,
+            focus_object_lambda_sliced: 7.0,
+            focus_object_mean_steps: Some(MeanSteps::Colour),
+            focus_object_lr_color: 0.05,
+            ..Sizes::full()
+        };
+        let base = StyleConfig::default();
+        for (label, want) in [(FOCUS_FRAME, [0.0; 3]), (FOCUS_SEED, [0.0; 3]), (FOCUS_OBJECT, [100.0, 30.0, 7.0])] {
+            let c = config(&mean, label);
+            let w = c.weights;
+            assert_eq!([w.feature_mean, w.outside, w.sliced], want, "{label}");
+            let object = label == FOCUS_OBJECT;
+            let steps = if object { MeanSteps::Colour } else { base.feature_mean_steps };
+            assert_eq!(c.feature_mean_steps, steps, "{label}");
+            assert_eq!(c.lr.color, if object { 0.05 } else { base.lr.color }, "{label}");
+            assert_eq!(c.lr.opacity, base.lr.opacity, "{label}");
         }
     }
 
