@@ -12,6 +12,8 @@
 //! presses Start once the scene and style are open, pauses after N steps and
 //! saves the current Gaussians to `GAST_STUDIO_EXPORT` (the frame count of the
 //! exit switch then starts from there), as a user would with the Export menu.
+//! `GAST_STUDIO_WINDOW=WxH` opens the window at that size (1280×800 without),
+//! so a screenshot can show the whole side panel.
 
 pub mod assets;
 pub mod controls;
@@ -143,7 +145,7 @@ pub fn run_with(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Re
     let options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_title("GAST Studio")
-            .with_inner_size([1280.0, 800.0])
+            .with_inner_size(window_size(std::env::var("GAST_STUDIO_WINDOW").ok().as_deref()))
             .with_drag_and_drop(true)
             .with_icon(egui::IconData { width: icon.width(), height: icon.height(), rgba: icon.into_raw() }),
         wgpu_options: wgpu_options(),
@@ -212,6 +214,15 @@ impl eframe::App for StudioApp {
     fn ui(&mut self, ui: &mut Ui, _frame: &mut eframe::Frame) {
         self.show(ui);
     }
+}
+
+/// The window's size from `WxH` (1280×800 without one, or when it does not read as two sizes of 200 to 8192).
+fn window_size(switch: Option<&str>) -> [f32; 2] {
+    switch
+        .and_then(|s| s.split_once(['x', '×']))
+        .and_then(|(w, h)| Some([w.trim().parse::<f32>().ok()?, h.trim().parse::<f32>().ok()?]))
+        .filter(|s| s.iter().all(|v| (200.0..=8192.0).contains(v)))
+        .unwrap_or([1280.0, 800.0])
 }
 
 fn env_u64(name: &str) -> Option<u64> {

@@ -776,3 +776,13 @@ fn the_loss_legend_keeps_small_losses_readable() {
     assert_eq!(loss_label(1.234e-4), "1.23e-4");
     assert_eq!(loss_label(-0.00567), "-5.67e-3");
 }
+
+#[test]
+fn the_window_switch_reads_a_size_or_keeps_the_default() {
+    use super::window_size;
+    assert_eq!(window_size(Some("1280x1500")), [1280.0, 1500.0]);
+    assert_eq!(window_size(Some("900×700")), [900.0, 700.0]);
+    for bad in [None, Some(""), Some("1280"), Some("wide x tall"), Some("10x10"), Some("1280x99999")] {
+        assert_eq!(window_size(bad), [1280.0, 800.0], "{bad:?}");
+    }
+}
