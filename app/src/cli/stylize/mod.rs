@@ -255,7 +255,15 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     super::convert::check_output_name(&args.scene_name)?;
     let scene = load_scene(&args.scene)?;
     let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
-    let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
+    let gpu = match args.device {
+        // The sliced Wasserstein term runs on the CPU engine only so far:
+        // `auto` picks the CPU for it rather than failing (`gpu` still says why).
+        gast_core::gpu::DeviceChoice::Auto if config.weights.sliced > 0.0 => {
+            eprintln!("λ_sw > 0 runs on the CPU engine only so far: the steps run on the CPU");
+            None
+        }
+        device => device.resolve().with_context(|| format!("--device {device}"))?,
+    };
     // On a software rasterizer (lavapipe) the network's GEMMs run at about
     // 1 GFLOP/s, ~40× slower than the CPU kernels (`gast bench depth
     // --device gpu`): there the depth stays on the CPU.
