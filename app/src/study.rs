@@ -179,6 +179,10 @@ pub struct Sizes {
     /// arm's, 0.01).
     #[serde(default)]
     pub focus_object_lr_color: f32,
+    /// The geometry share of each cycle in the focus study's object arm (0:
+    /// the frame arm's, 0.9).
+    #[serde(default)]
+    pub focus_object_ratio_geo: f32,
     /// Which steps the object arm's λ_mean acts on; absent in runs from
     /// before the choice existed, which ran it on every step. A run records
     /// the choice it made (`gast stylize`'s default when not given).
@@ -245,6 +249,7 @@ impl Sizes {
             focus_object_mean_steps: None,
             focus_object_lambda_sliced: 0.0,
             focus_object_lr_color: 0.0,
+            focus_object_ratio_geo: 0.0,
         }
     }
 
@@ -304,6 +309,7 @@ impl Sizes {
             focus_object_mean_steps: None,
             focus_object_lambda_sliced: 0.0,
             focus_object_lr_color: 0.0,
+            focus_object_ratio_geo: 0.0,
         }
     }
 }

@@ -289,6 +289,10 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
                 ..frame.weights
             },
             feature_mean_steps: sizes.focus_object_mean_steps.unwrap_or_default(),
+            ratio_geo: match sizes.focus_object_ratio_geo {
+                0.0 => frame.ratio_geo,
+                r => r,
+            },
             lr: match sizes.focus_object_lr_color {
                 0.0 => frame.lr,
                 color => LearningRates { color, ..frame.lr },
@@ -692,6 +696,7 @@ mod tests {
             focus_object_lambda_sliced: 7.0,
             focus_object_mean_steps: Some(MeanSteps::Colour),
             focus_object_lr_color: 0.05,
+            focus_object_ratio_geo: 0.7,
             ..Sizes::full()
         };
         let base = StyleConfig::default();
@@ -704,6 +709,7 @@ mod tests {
             assert_eq!(c.feature_mean_steps, steps, "{label}");
             assert_eq!(c.lr.color, if object { 0.05 } else { base.lr.color }, "{label}");
             assert_eq!(c.lr.opacity, base.lr.opacity, "{label}");
+            assert_eq!(c.ratio_geo, if object { 0.7 } else { base.ratio_geo }, "{label}");
         }
     }
 

@@ -130,6 +130,10 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         l if l > 0.0 => format!("{sizes}, object with colour lr {l}"),
         _ => sizes,
     };
+    let sizes = match run.sizes.focus_object_ratio_geo {
+        r if r > 0.0 => format!("{sizes}, object with N_g / (N_c + N_g) {r}"),
+        _ => sizes,
+    };
     let sizes = match run.sizes.focus_object_lambda_outside {
         l if l > 0.0 => format!("{sizes}, object with λ_out {l}"),
         _ => sizes,
