@@ -278,30 +278,42 @@ fn lambda_mean_acts_on_the_steps_asked_for() {
     }
 }
 
-/// λ_sw (the sliced Wasserstein term) runs on the CPU engine: a GPU
-/// session refuses it with a sentence that names it and the way out, at the
-/// start and mid-run; a CPU session measures it from the step it is turned on.
+/// λ_sw (the sliced Wasserstein term) and λ_as (the assignment term) run on
+/// the CPU engine: a GPU session refuses each with a sentence that names it
+/// and the way out, at the start and mid-run; a CPU session measures it from
+/// the step it is turned on.
 #[test]
-fn the_sliced_term_runs_on_the_cpu_and_the_gpu_session_refuses_it() {
-    use gast_core::session::{Session, SessionError};
-    let on = LossWeights { sliced: 100.0, ..Default::default() };
+fn the_cpu_only_terms_run_on_the_cpu_and_the_gpu_session_refuses_them() {
+    use gast_core::session::{Session, SessionError, StepReport};
+    type Term = (&'static str, LossWeights, fn(&LossWeights) -> f32, fn(&StepReport) -> f32);
+    let terms: [Term; 2] = [
+        ("λ_sw = 100", LossWeights { sliced: 100.0, ..Default::default() }, |w| w.sliced, |r| r.losses.sliced),
+        (
+            "λ_as = 10",
+            LossWeights { assignment: 10.0, ..Default::default() },
+            |w| w.assignment,
+            |r| r.losses.assignment,
+        ),
+    ];
     let Some(cpu_inputs) = inputs(object_config(Mode::ColorOnly, LossWeights::default())) else { return };
     let gpu_inputs = SessionInputs { gpu: Some(gpu_context()), ..cpu_inputs.clone() };
-    let refused = |e: SessionError| {
-        let text = e.to_string();
-        assert!(text.contains("λ_sw = 100") && text.contains("--device cpu"), "{text}");
-    };
-    let started =
-        SessionInputs { config: StyleConfig { weights: on, ..cpu_inputs.config.clone() }, ..gpu_inputs.clone() };
-    refused(Session::prepare(started, &mut |_| {}).err().expect("the GPU session refuses λ_sw"));
-    let mut gpu = Session::prepare(gpu_inputs, &mut |_| {}).expect("GPU session");
-    refused(gpu.set_config(StyleConfig { weights: on, ..gpu.config().clone() }).expect_err("refused mid-run"));
-    assert_eq!(gpu.config().weights.sliced, 0.0, "a refused configuration is not taken");
-    let mut cpu = Session::prepare(cpu_inputs, &mut |_| {}).expect("CPU session");
-    let off = cpu.step().expect("a step").losses.sliced;
-    cpu.set_config(StyleConfig { weights: on, ..cpu.config().clone() }).expect("λ_sw on the CPU");
-    let measured = cpu.step().expect("a step with λ_sw").losses;
-    assert!(off == 0.0 && measured.sliced > 0.0, "before {off}, after {}", measured.sliced);
+    for (name, on, weight, measured) in terms {
+        let refused = |e: SessionError| {
+            let text = e.to_string();
+            assert!(text.contains(name) && text.contains("--device cpu"), "{text}");
+        };
+        let started =
+            SessionInputs { config: StyleConfig { weights: on, ..cpu_inputs.config.clone() }, ..gpu_inputs.clone() };
+        refused(Session::prepare(started, &mut |_| {}).err().expect("the GPU session refuses the term"));
+        let mut gpu = Session::prepare(gpu_inputs.clone(), &mut |_| {}).expect("GPU session");
+        refused(gpu.set_config(StyleConfig { weights: on, ..gpu.config().clone() }).expect_err("refused mid-run"));
+        assert_eq!(weight(&gpu.config().weights), 0.0, "{name}: a refused configuration is not taken");
+        let mut cpu = Session::prepare(cpu_inputs.clone(), &mut |_| {}).expect("CPU session");
+        let off = measured(&cpu.step().expect("a step"));
+        cpu.set_config(StyleConfig { weights: on, ..cpu.config().clone() }).expect("the term on the CPU");
+        let after = measured(&cpu.step().expect("a step with the term"));
+        assert!(off == 0.0 && after > 0.0, "{name}: before {off}, after {after}");
+    }
 }
 
 /// λ_out (the background hold) on both devices, in colour and in geometry

@@ -175,6 +175,10 @@ pub struct Sizes {
     /// [`gast_core::style::sliced`]).
     #[serde(default)]
     pub focus_object_lambda_sliced: f32,
+    /// λ_as of the focus study's object arm (0: off, as the frame arm;
+    /// [`gast_core::style::assignment`]).
+    #[serde(default)]
+    pub focus_object_lambda_assign: f32,
     /// The colour learning rate of the focus study's object arm (0: the frame
     /// arm's, 0.01).
     #[serde(default)]
@@ -248,6 +252,7 @@ impl Sizes {
             focus_object_lambda_outside: 0.0,
             focus_object_mean_steps: None,
             focus_object_lambda_sliced: 0.0,
+            focus_object_lambda_assign: 0.0,
             focus_object_lr_color: 0.0,
             focus_object_ratio_geo: 0.0,
         }
@@ -308,6 +313,7 @@ impl Sizes {
             focus_object_lambda_outside: 0.0,
             focus_object_mean_steps: None,
             focus_object_lambda_sliced: 0.0,
+            focus_object_lambda_assign: 0.0,
             focus_object_lr_color: 0.0,
             focus_object_ratio_geo: 0.0,
         }

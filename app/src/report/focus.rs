@@ -126,6 +126,10 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         l if l > 0.0 => format!("{sizes}, object with λ_sw {l}"),
         _ => sizes,
     };
+    let sizes = match run.sizes.focus_object_lambda_assign {
+        l if l > 0.0 => format!("{sizes}, object with λ_as {l}"),
+        _ => sizes,
+    };
     let sizes = match run.sizes.focus_object_lr_color {
         l if l > 0.0 => format!("{sizes}, object with colour lr {l}"),
         _ => sizes,

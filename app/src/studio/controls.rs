@@ -90,6 +90,15 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
         "sliced Wasserstein term, not in the paper (0 = off; CPU device only so far): pulls the distribution of \
          the object's VGG features toward the style's, not only their mean (λ_mean); 100 in the README",
     );
+    changed |= weight(
+        ui,
+        &mut w.assignment,
+        1000.0,
+        "λ_as",
+        "assignment term, not in the paper (0 = off; CPU device only so far): pairs each of the object's VGG \
+         features with a distinct style feature, drawn anew each step, and pulls it there, so the object's \
+         features land on actual style features spread as the style's are",
+    );
 
     ui.separator();
     ui.label(egui::RichText::new("Schedule").strong());
@@ -157,7 +166,7 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
 /// lines only when a step measured them.
 pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
     type Series = (&'static str, Color32, fn(&StepReport) -> f32);
-    const SERIES: [Series; 8] = [
+    const SERIES: [Series; 9] = [
         ("total", Color32::from_rgb(250, 200, 60), |s| s.losses.total),
         ("GCFM", Color32::from_rgb(90, 170, 250), |s| s.losses.gcfm),
         ("content", Color32::from_rgb(120, 220, 120), |s| s.losses.content),
@@ -166,6 +175,7 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
         ("mean", Color32::from_rgb(220, 130, 230), |s| s.losses.feature_mean),
         ("hold", Color32::from_rgb(120, 220, 220), |s| s.losses.outside),
         ("sliced", Color32::from_rgb(240, 160, 90), |s| s.losses.sliced),
+        ("assign", Color32::from_rgb(170, 140, 250), |s| s.losses.assignment),
     ];
     const ROW: f32 = 13.0;
     const COLUMNS: usize = 2;

@@ -49,6 +49,9 @@ pub struct LossTerms {
     /// The sliced Wasserstein term (0 when λ_sw is 0).
     #[serde(default)]
     pub sliced: f32,
+    /// The assignment term (0 when λ_as is 0).
+    #[serde(default)]
+    pub assignment: f32,
 }
 
 /// Time spent in each part of a step, in milliseconds.

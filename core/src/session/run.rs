@@ -554,6 +554,12 @@ fn engine_problems(config: &StyleConfig, on_gpu: bool) -> Vec<String> {
             config.weights.sliced
         ));
     }
+    if on_gpu && config.weights.assignment > 0.0 {
+        out.push(format!(
+            "the assignment term (λ_as = {}) runs on the CPU engine only so far: use the CPU (--device cpu) or set it to 0",
+            config.weights.assignment
+        ));
+    }
     out
 }
 

@@ -139,6 +139,7 @@ impl Session {
             feature_mean: loss.feature_mean,
             outside: loss.outside,
             sliced: loss.sliced,
+            assignment: loss.assignment,
             total: loss.total,
             ..LossTerms::default()
         };

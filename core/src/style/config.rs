@@ -50,6 +50,12 @@ pub struct LossWeights {
     /// losses average over, pulled toward the style's along fixed random
     /// directions. Not in the reference: 0 (off) by default. CPU engine.
     pub sliced: f32,
+    /// λ_as, the assignment term ([`crate::style::assignment`]): each
+    /// rendered RGB relu3 feature over the positions the losses average over
+    /// pulled to a distinct style feature, by a least-cost one-to-one
+    /// assignment to a fresh sample of the style's features each step. Not in
+    /// the reference: 0 (off) by default. CPU engine.
+    pub assignment: f32,
 }
 
 impl Default for LossWeights {
@@ -65,6 +71,7 @@ impl Default for LossWeights {
             feature_mean: 0.0,
             outside: 0.0,
             sliced: 0.0,
+            assignment: 0.0,
         }
     }
 }
@@ -232,6 +239,7 @@ impl StyleConfig {
             ("weights.feature_mean", w.feature_mean),
             ("weights.outside", w.outside),
             ("weights.sliced", w.sliced),
+            ("weights.assignment", w.assignment),
             ("lr.color", lr.color),
             ("lr.means_per_extent", lr.means_per_extent),
             ("lr.scales", lr.scales),

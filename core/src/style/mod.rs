@@ -8,6 +8,7 @@
 //! `golden/losses_seed1.safetensors` and `golden/color_seed1.safetensors` check them.
 
 pub mod adam;
+pub mod assignment;
 pub mod color_transfer;
 pub mod config;
 pub mod content;

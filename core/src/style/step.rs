@@ -10,6 +10,7 @@
 //! behind [`FeatureNet`] so the loss does not depend on how VGG is implemented
 //! (and tests can use a small stand-in).
 
+use super::assignment::assignment_loss;
 use super::config::LossWeights;
 use super::content::content_loss_masked;
 use super::feature_mean::feature_mean_loss;
@@ -173,6 +174,8 @@ pub struct StepLoss {
     pub outside: f32,
     /// Sliced Wasserstein term (unweighted; 0 when λ_sw is 0).
     pub sliced: f32,
+    /// Assignment term (unweighted; 0 when λ_as is 0).
+    pub assignment: f32,
     /// `Σ weight · term`.
     pub total: f32,
     /// Gradient of `total` w.r.t. the rendered RGB (HWC).
@@ -409,6 +412,14 @@ pub fn step_loss_with<N: FeatureNet>(
             *a += weights.sliced * b;
         }
     }
+    let mut assignment_value = 0.0;
+    if weights.assignment > 0.0 {
+        let (l, g) = assignment_loss(&fwd[0].0.data, fwd[0].0.channels, style.features.modality(0), fmask.as_deref());
+        assignment_value = l;
+        for (a, b) in v_feat_rgb.iter_mut().zip(g) {
+            *a += weights.assignment * b;
+        }
+    }
     let v_feat_depth: Vec<f32> = out.v_rendered[1].iter().map(|v| v * weights.gcfm).collect();
     timings.matching_ms = t.elapsed().as_secs_f32() * 1e3;
     let t = std::time::Instant::now();
@@ -461,7 +472,8 @@ pub fn step_loss_with<N: FeatureNet>(
         + weights.depth * depth_value
         + weights.feature_mean * feature_mean_value
         + weights.outside * outside_value
-        + weights.sliced * sliced_value;
+        + weights.sliced * sliced_value
+        + weights.assignment * assignment_value;
     StepLoss {
         timings,
         gcfm: out.loss,
@@ -471,6 +483,7 @@ pub fn step_loss_with<N: FeatureNet>(
         feature_mean: feature_mean_value,
         outside: outside_value,
         sliced: sliced_value,
+        assignment: assignment_value,
         total,
         v_rgb,
         v_inv_depth,

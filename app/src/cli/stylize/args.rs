@@ -127,6 +127,14 @@ pub struct StylizeArgs {
     /// [default: 0, off].
     #[arg(long)]
     pub lambda_sliced: Option<f32>,
+    /// λ_as, the assignment term: pairs each rendered relu3 feature (the
+    /// object's with object focus) with a distinct style feature drawn anew
+    /// each step, by the pairing of least total squared distance, and pulls
+    /// it there, so the features land on actual style features spread as the
+    /// style's are. Not in the reference; CPU engine only so far
+    /// [default: 0, off].
+    #[arg(long)]
+    pub lambda_assign: Option<f32>,
     /// Which steps λ_mean acts on: every, or colour (the colour steps only;
     /// the geometry steps follow GCFM alone) [default: every].
     #[arg(long, value_name = "colour|every")]
@@ -209,6 +217,7 @@ impl StylizeArgs {
         set!(self.lambda_mean, c.weights.feature_mean);
         set!(self.lambda_outside, c.weights.outside);
         set!(self.lambda_sliced, c.weights.sliced);
+        set!(self.lambda_assign, c.weights.assignment);
         set!(self.mean_steps, c.feature_mean_steps);
         set!(self.lr_color, c.lr.color);
         set!(self.lr_means, c.lr.means_per_extent);
