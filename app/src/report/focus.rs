@@ -4,13 +4,17 @@
 //! whole-frame losses do, and whether a long run's colours collapse.
 //!
 //! A separate page because both studies run only when named, and because the
-//! focus study's verdict is a per-pair comparison, not a chart.
+//! focus study's verdict is a per-pair comparison; its one chart
+//! (`charts/focus_margins`) shows each pair's lead in seed floors.
 
 use std::path::Path;
+
+use anyhow::Context as _;
 
 use gast_core::eval::{DegenerationKind, Measures};
 use gast_core::style::MeanSteps;
 
+use super::chart::{Chart, Series, palette};
 use crate::cli::quality::{FOCUS_FITTED_VIEWS, FOCUS_FRAME, FOCUS_MASKED_LOSSES, FOCUS_OBJECT, FOCUS_SEED};
 use crate::study::{Record, Row, RunSummary, Study};
 
@@ -92,17 +96,82 @@ fn seed_floor(rows: &[(&Row, &Record)], scene: &str, f: fn(&Measures) -> f32) ->
     twin.unwrap_or(0.0)
 }
 
+/// One pair's lead of the object arm over the frame arm, in seed floors: what
+/// the focus check asks to exceed 1 on both axes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Margin {
+    scene: String,
+    style: String,
+    /// `(ΔSW_object − ΔSW_frame) / floor` (the lead itself when the floor is 0).
+    sw: f32,
+    /// The same for NN-cos.
+    nn: f32,
+    /// Object's RMSE within [`RMSE_FACTOR`] of frame's.
+    rmse_ok: bool,
+}
+
+/// The leads of [`focus_table`] as a scatter chart: one point per pair,
+/// named in the legend (coloured by style; "RMSE over" when its RMSE fails),
+/// and dashed lines at one seed floor on each axis; a pair passes up and to
+/// the right of both.
+fn margins_chart(margins: &[Margin]) -> Chart {
+    let mut styles: Vec<&str> = Vec::new();
+    for m in margins {
+        if !styles.contains(&m.style.as_str()) {
+            styles.push(&m.style);
+        }
+    }
+    let mut series: Vec<Series> = margins
+        .iter()
+        .map(|m| Series {
+            name: format!("{} {}{}", m.scene, m.style, if m.rmse_ok { "" } else { " (RMSE over)" }),
+            points: vec![(m.sw.into(), m.nn.into())],
+            color: palette(styles.iter().position(|s| *s == m.style).unwrap_or(0)),
+            line: false,
+            dashed: false,
+        })
+        .collect();
+    let finite = |f: fn(&Margin) -> f32| margins.iter().map(f).filter(|v| v.is_finite());
+    let (x_lo, x_hi) = (finite(|m| m.sw).fold(0.0f32, f32::min), finite(|m| m.sw).fold(1.0f32, f32::max));
+    let (y_lo, y_hi) = (finite(|m| m.nn).fold(0.0f32, f32::min), finite(|m| m.nn).fold(1.0f32, f32::max));
+    let dashed = |name: &str, points: Vec<(f64, f64)>| Series {
+        name: name.into(),
+        points,
+        color: [90, 90, 90],
+        line: true,
+        dashed: true,
+    };
+    series.push(dashed("one seed floor (SW)", vec![(1.0, y_lo.into()), (1.0, y_hi.into())]));
+    series.push(dashed("one seed floor (NN-cos)", vec![(x_lo.into(), 1.0), (x_hi.into(), 1.0)]));
+    Chart {
+        title: "Focus study: object's lead over frame, per scene × style pair".into(),
+        x_label: "SW decrease, object minus frame (seed floors)".into(),
+        y_label: "NN-cos decrease, object minus frame (seed floors)".into(),
+        series,
+        note: Some("a pair passes above and right of both dashed lines, with RMSE in bounds".into()),
+        ..Chart::default()
+    }
+}
+
+/// [`focus_table`]'s lines.
+#[cfg(test)]
+fn focus_lines(run: &RunSummary) -> Vec<String> {
+    focus_table(run).0
+}
+
 /// The focus study's table: per pair, each arm's decrease of SW and NN-cos on
 /// the object from the colour-matched state, their ratio (object / frame),
 /// the content distance and the long-baseline RMSE on the object's pixels of
 /// both arms with the RMSE ratio, and the verdict against the seed floor. Every
 /// pair the grid asked for has a line: one whose arm is missing or measured
-/// nothing says so instead of being left out.
-fn focus_lines(run: &RunSummary) -> Vec<String> {
+/// nothing says so instead of being left out. Also each measured pair's
+/// [`Margin`].
+fn focus_table(run: &RunSummary) -> (Vec<String>, Vec<Margin>) {
     let rows = rows_of(run, Study::Focus);
     if rows.is_empty() {
-        return Vec::new();
+        return (Vec::new(), Vec::new());
     }
+    let mut margins = Vec::new();
     let find = |label: &str, scene: &str, style: &str| {
         rows.iter().find(|(r, t)| r.label == label && t.scene_name() == scene && t.style == style).copied()
     };
@@ -201,6 +270,14 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
         let (content_f, content_o) = (at(frame, |m| m.content_object), at(object, |m| m.content_object));
         let (haze_f, haze_o) = (at(frame, |m| m.outside_change), at(object, |m| m.outside_change));
         let pass = sw_o - sw_f > floor(sw) && nn_o - nn_f > floor(nn) && rmse_o <= RMSE_FACTOR * rmse_f;
+        let in_floors = |lead: f32, floor: f32| if floor > 0.0 { lead / floor } else { lead };
+        margins.push(Margin {
+            scene: scene.clone(),
+            style: style.clone(),
+            sw: in_floors(sw_o - sw_f, floor(sw)),
+            nn: in_floors(nn_o - nn_f, floor(nn)),
+            rmse_ok: rmse_o <= RMSE_FACTOR * rmse_f,
+        });
         // A ratio of decreases reads as "how many times frame's" only when
         // frame's decrease is positive; elsewhere it is left out ("–").
         let of_decreases = |o: f32, f: f32| (f > 0.0).then_some(o / f);
@@ -245,7 +322,7 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
     out.push(String::new());
     out.extend(halves_lines(&rows));
     out.extend(breakdown_lines(&rows));
-    out
+    (out, margins)
 }
 
 /// Object focus's arms in the halves table: each half alone, then both.
@@ -427,7 +504,18 @@ fn collapse_lines(run: &RunSummary) -> Vec<String> {
 /// Writes `focus.md` into `out` when the run has focus or collapse rows and
 /// returns its lines (empty when it has none).
 pub fn write_focus_report(out: &Path, run: &RunSummary) -> anyhow::Result<Vec<String>> {
-    let mut lines = focus_lines(run);
+    let (mut lines, margins) = focus_table(run);
+    if !margins.is_empty() {
+        let dir = out.join("charts");
+        std::fs::create_dir_all(&dir).with_context(|| format!("could not create {}", dir.display()))?;
+        margins_chart(&margins).write(&dir.join("focus_margins"))?;
+        lines.push(
+            "Chart `charts/focus_margins.png`: each pair's lead of object over frame in seed floors (SW across, \
+             NN-cos up); a pair passes above and right of both dashed lines."
+                .into(),
+        );
+        lines.push(String::new());
+    }
     lines.extend(collapse_lines(run));
     if !lines.is_empty() {
         gast_core::io::write_bytes(&out.join("focus.md"), (lines.join("\n") + "\n").as_bytes())?;
@@ -605,5 +693,31 @@ mod tests {
         assert!(!lines.iter().any(|l| l.starts_with("Median ratio of the SW decreases")), "{lines:?}");
         let nn = lines.iter().find(|l| l.starts_with("Median ratio of the NN-cos decreases")).expect("NN median");
         assert!(nn.contains("over the 1 pairs where frame's is positive: 2.00."), "{nn}");
+    }
+
+    #[test]
+    fn the_margins_are_leads_in_seed_floors_and_the_chart_is_written() {
+        let before = || measures(5.0, 4.0, 0.23, 1.0, 0.40);
+        let frame = record("f", "galaxy", before(), measures(4.0, 3.0, 0.22, 0.8, 0.20));
+        // The seed run ends 0.2 SW and 0.002 NN-cos away from frame: the floors.
+        let seed = record("s", "galaxy", before(), measures(4.2, 3.0, 0.222, 0.8, 0.20));
+        // Object lowers SW by 1.5 (0.5 more: 2.5 floors) and NN-cos by 0.004 (0.006 less: −3 floors).
+        let object = record("o", "galaxy", before(), measures(3.5, 3.0, 0.226, 0.8, 0.20));
+        let run = focus_run(vec![(FOCUS_FRAME, frame), (FOCUS_SEED, seed), (FOCUS_OBJECT, object)]);
+        let (lines, margins) = focus_table(&run);
+        assert_eq!(margins.len(), 1, "{lines:#?}");
+        let m = &margins[0];
+        assert_eq!((m.scene.as_str(), m.style.as_str(), m.rmse_ok), ("guitar", "galaxy", true));
+        assert!((m.sw - 2.5).abs() < 1e-2 && (m.nn + 3.0).abs() < 1e-2, "{m:?}");
+        let chart = margins_chart(&margins);
+        assert_eq!(chart.series[0].points, vec![(f64::from(m.sw), f64::from(m.nn))]);
+        assert_eq!(chart.series[0].name, "guitar galaxy");
+        assert!(chart.series.iter().any(|s| s.dashed && s.points.iter().all(|p| p.0 == 1.0)), "the SW floor line");
+        let dir = std::env::temp_dir().join(format!("gast-focus-margins-{}", std::process::id()));
+        let written = write_focus_report(&dir, &run).expect("the report");
+        assert!(written.iter().any(|l| l.contains("focus_margins.png")));
+        let png = image::open(dir.join("charts/focus_margins.png")).expect("the chart's PNG").to_rgb8();
+        assert!(png.pixels().any(|p| p.0 != png.get_pixel(0, 0).0), "the chart is not blank");
+        std::fs::remove_dir_all(&dir).ok();
     }
 }
