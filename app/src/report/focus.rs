@@ -191,26 +191,18 @@ fn focus_table(run: &RunSummary) -> (Vec<String>, Vec<Margin>) {
         }
         _ => sizes,
     };
-    let sizes = match run.sizes.focus_object_lambda_sliced {
-        l if l > 0.0 => format!("{sizes}, object with λ_sw {l}"),
-        _ => sizes,
-    };
-    let sizes = match run.sizes.focus_object_lambda_assign {
-        l if l > 0.0 => format!("{sizes}, object with λ_as {l}"),
-        _ => sizes,
-    };
-    let sizes = match run.sizes.focus_object_lr_color {
-        l if l > 0.0 => format!("{sizes}, object with colour lr {l}"),
-        _ => sizes,
-    };
-    let sizes = match run.sizes.focus_object_ratio_geo {
-        r if r > 0.0 => format!("{sizes}, object with N_g / (N_c + N_g) {r}"),
-        _ => sizes,
-    };
-    let sizes = match run.sizes.focus_object_lambda_outside {
-        l if l > 0.0 => format!("{sizes}, object with λ_out {l}"),
-        _ => sizes,
-    };
+    // The object arm's other settings, where set (0 leaves the frame arm's).
+    let s = &run.sizes;
+    let sizes = [
+        ("λ_sw", s.focus_object_lambda_sliced),
+        ("λ_as", s.focus_object_lambda_assign),
+        ("colour lr", s.focus_object_lr_color),
+        ("N_g / (N_c + N_g)", s.focus_object_ratio_geo),
+        ("λ_out", s.focus_object_lambda_outside),
+    ]
+    .into_iter()
+    .filter(|&(_, v)| v > 0.0)
+    .fold(sizes, |acc, (name, v)| format!("{acc}, object with {name} {v}"));
     let mut out = vec![
         format!("## Focus: frame against object, {sizes} (SW, NN-cos and content on relu3, RMSE on the 37.5° pairs; all on the object's pixels of the fitted ring{over})"),
         String::new(),
