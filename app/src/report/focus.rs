@@ -99,7 +99,7 @@ fn seed_floor(rows: &[(&Row, &Record)], scene: &str, f: fn(&Measures) -> f32) ->
 /// One pair's lead of the object arm over the frame arm, in seed floors: what
 /// the focus check asks to exceed 1 on both axes.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Margin {
+struct Margin {
     scene: String,
     style: String,
     /// `(ΔSW_object − ΔSW_frame) / floor` (the lead itself when the floor is 0).
