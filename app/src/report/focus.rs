@@ -261,14 +261,16 @@ fn focus_table(run: &RunSummary) -> (Vec<String>, Vec<Margin>) {
         let (rmse_f, rmse_o) = (at(frame, |m| m.consistency_long_object), at(object, |m| m.consistency_long_object));
         let (content_f, content_o) = (at(frame, |m| m.content_object), at(object, |m| m.content_object));
         let (haze_f, haze_o) = (at(frame, |m| m.outside_change), at(object, |m| m.outside_change));
-        let pass = sw_o - sw_f > floor(sw) && nn_o - nn_f > floor(nn) && rmse_o <= RMSE_FACTOR * rmse_f;
+        let (floor_sw, floor_nn) = (floor(sw), floor(nn));
+        let rmse_ok = rmse_o <= RMSE_FACTOR * rmse_f;
+        let pass = sw_o - sw_f > floor_sw && nn_o - nn_f > floor_nn && rmse_ok;
         let in_floors = |lead: f32, floor: f32| if floor > 0.0 { lead / floor } else { lead };
         margins.push(Margin {
             scene: scene.clone(),
             style: style.clone(),
-            sw: in_floors(sw_o - sw_f, floor(sw)),
-            nn: in_floors(nn_o - nn_f, floor(nn)),
-            rmse_ok: rmse_o <= RMSE_FACTOR * rmse_f,
+            sw: in_floors(sw_o - sw_f, floor_sw),
+            nn: in_floors(nn_o - nn_f, floor_nn),
+            rmse_ok,
         });
         // A ratio of decreases reads as "how many times frame's" only when
         // frame's decrease is positive; elsewhere it is left out ("–").

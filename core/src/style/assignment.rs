@@ -26,6 +26,8 @@
 //! positions take part in a step (a fresh random subset when more are
 //! covered): the assignment costs `O(r³)`.
 
+use super::focus::gather_positions;
+use super::gcfm::column_sq_norms;
 use crate::rng::Rng;
 use crate::vision::matmul;
 
@@ -127,11 +129,6 @@ fn draw(rng: &mut Rng, len: usize, count: usize) -> Vec<usize> {
     out
 }
 
-/// The columns `cols` of the CHW features `x` (`channels × n`), compact (`channels × cols.len()`).
-fn gather(x: &[f32], channels: usize, n: usize, cols: &[usize]) -> Vec<f32> {
-    (0..channels).flat_map(|c| cols.iter().map(move |&i| x[c * n + i])).collect()
-}
-
 /// The term and its gradient w.r.t. `rendered` (`channels × n`, CHW) against
 /// the style features `style` (`channels × m`, CHW), over the positions in
 /// `mask` (all without one). Positions outside the mask, or left out of this
@@ -155,21 +152,12 @@ pub fn assignment_loss(rendered: &[f32], channels: usize, style: &[f32], mask: O
     };
     let r = rows.len();
     let targets = draw(&mut rng, m, r);
-    let x = gather(rendered, channels, n, &rows);
-    let s = gather(style, channels, m, &targets);
+    let x = gather_positions(rendered, channels, n, &rows);
+    let s = gather_positions(style, channels, m, &targets);
     // Squared distances ‖x_i‖² + ‖s_j‖² − 2 x_i·s_j.
     let mut dot = vec![0.0f32; r * r];
     matmul(&mut dot, r, (&x, 1, r), (&s, r), (r, r, channels), false);
-    let sq = |f: &[f32]| -> Vec<f64> {
-        let mut out = vec![0.0f64; r];
-        for row in f.chunks_exact(r) {
-            for (o, &v) in out.iter_mut().zip(row) {
-                *o += f64::from(v) * f64::from(v);
-            }
-        }
-        out
-    };
-    let (xx, ss) = (sq(&x), sq(&s));
+    let (xx, ss) = (column_sq_norms(&x, channels, r), column_sq_norms(&s, channels, r));
     let cost: Vec<f64> = (0..r * r).map(|ij| xx[ij / r] + ss[ij % r] - 2.0 * f64::from(dot[ij])).collect();
     let sigma = assign_min_cost(&cost, r, r);
     // The loss and its gradient from the features themselves (not the
@@ -302,7 +290,7 @@ mod tests {
         let (c, n) = (5, 11);
         let style = features(c, n, 2);
         let order: Vec<usize> = (0..n).map(|i| (i * 4) % n).collect();
-        let rendered = gather(&style, c, n, &order);
+        let rendered = gather_positions(&style, c, n, &order);
         let (l, g) = assignment_loss(&rendered, c, &style, None);
         assert!(l < 1e-10 && g.iter().all(|v| v.abs() < 1e-6), "{l}");
     }

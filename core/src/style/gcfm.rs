@@ -105,7 +105,7 @@ impl StyleFeatures {
 }
 
 /// Squared norm of every column of a `c × n` row-major matrix, in f64.
-fn column_sq_norms(f: &[f32], c: usize, n: usize) -> Vec<f64> {
+pub(super) fn column_sq_norms(f: &[f32], c: usize, n: usize) -> Vec<f64> {
     let mut s = vec![0f64; n];
     for k in 0..c {
         for (acc, &v) in s.iter_mut().zip(&f[k * n..(k + 1) * n]) {

@@ -25,6 +25,7 @@
 
 use rayon::prelude::*;
 
+use super::focus::gather_positions;
 use crate::rng::Rng;
 use crate::vision::matmul;
 
@@ -107,7 +108,7 @@ pub fn sliced_loss(rendered: &[f32], channels: usize, target: &SlicedTarget, mas
         return (0.0, grad);
     }
     // The covered columns, compact (`channels × m`), and their projections.
-    let x: Vec<f32> = (0..channels).flat_map(|c| covered.iter().map(move |&i| rendered[c * n + i])).collect();
+    let x = gather_positions(rendered, channels, n, &covered);
     let r = project(&target.directions, projections, &x, channels, m);
     // Per direction: each position's residual against the style value of its rank.
     let scale = 2.0 / (m * projections) as f32;
