@@ -278,7 +278,7 @@ fn lambda_mean_acts_on_the_steps_asked_for() {
     }
 }
 
-/// λ_sw (the sliced Wasserstein term) and λ_as (the assignment term) run on
+/// λ_sw (the sliced Wasserstein term) and λ_as and λ_asc (the assignment terms) run on
 /// the CPU engine: a GPU session refuses each with a sentence that names it
 /// and the way out, at the start and mid-run; a CPU session measures it from
 /// the step it is turned on.
@@ -286,13 +286,19 @@ fn lambda_mean_acts_on_the_steps_asked_for() {
 fn the_cpu_only_terms_run_on_the_cpu_and_the_gpu_session_refuses_them() {
     use gast_core::session::{Session, SessionError, StepReport};
     type Term = (&'static str, LossWeights, fn(&LossWeights) -> f32, fn(&StepReport) -> f32);
-    let terms: [Term; 2] = [
+    let terms: [Term; 3] = [
         ("λ_sw = 100", LossWeights { sliced: 100.0, ..Default::default() }, |w| w.sliced, |r| r.losses.sliced),
         (
             "λ_as = 10",
             LossWeights { assignment: 10.0, ..Default::default() },
             |w| w.assignment,
             |r| r.losses.assignment,
+        ),
+        (
+            "λ_asc = 10",
+            LossWeights { assignment_cosine: 10.0, ..Default::default() },
+            |w| w.assignment_cosine,
+            |r| r.losses.assignment_cosine,
         ),
     ];
     let Some(cpu_inputs) = inputs(object_config(Mode::ColorOnly, LossWeights::default())) else { return };

@@ -179,6 +179,10 @@ pub struct Sizes {
     /// [`gast_core::style::assignment`]).
     #[serde(default)]
     pub focus_object_lambda_assign: f32,
+    /// λ_asc of the focus study's object arm (0: off, as the frame arm;
+    /// [`gast_core::style::assignment`]).
+    #[serde(default)]
+    pub focus_object_lambda_assign_cos: f32,
     /// The colour learning rate of the focus study's object arm (0: the frame
     /// arm's, 0.01).
     #[serde(default)]
@@ -253,6 +257,7 @@ impl Sizes {
             focus_object_mean_steps: None,
             focus_object_lambda_sliced: 0.0,
             focus_object_lambda_assign: 0.0,
+            focus_object_lambda_assign_cos: 0.0,
             focus_object_lr_color: 0.0,
             focus_object_ratio_geo: 0.0,
         }
@@ -314,6 +319,7 @@ impl Sizes {
             focus_object_mean_steps: None,
             focus_object_lambda_sliced: 0.0,
             focus_object_lambda_assign: 0.0,
+            focus_object_lambda_assign_cos: 0.0,
             focus_object_lr_color: 0.0,
             focus_object_ratio_geo: 0.0,
         }

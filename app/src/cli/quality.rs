@@ -287,6 +287,7 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
                 outside: sizes.focus_object_lambda_outside,
                 sliced: sizes.focus_object_lambda_sliced,
                 assignment: sizes.focus_object_lambda_assign,
+                assignment_cosine: sizes.focus_object_lambda_assign_cos,
                 ..frame.weights
             },
             feature_mean_steps: sizes.focus_object_mean_steps.unwrap_or_default(),
@@ -690,23 +691,25 @@ mod tests {
         let apart = Sizes { resolution: 256, focus_object_resolution: 512, ..Sizes::full() };
         assert_eq!((trial(&apart, FOCUS_FRAME), trial(&apart, FOCUS_OBJECT)), (256, 512));
         assert_eq!(trial(&apart, FOCUS_SEED), 256);
-        // λ_mean, λ_out, λ_sw, λ_as, λ_mean's steps and the colour learning rate go to the object arm only.
+        // λ_mean, λ_out, λ_sw, λ_as, λ_asc, λ_mean's steps and the colour learning rate go to the object arm only.
         let mean = Sizes {
             focus_object_lambda_mean: 100.0,
             focus_object_lambda_outside: 30.0,
             focus_object_lambda_sliced: 7.0,
             focus_object_lambda_assign: 3.0,
+            focus_object_lambda_assign_cos: 4.0,
             focus_object_mean_steps: Some(MeanSteps::Colour),
             focus_object_lr_color: 0.05,
             focus_object_ratio_geo: 0.7,
             ..Sizes::full()
         };
         let base = StyleConfig::default();
-        for (label, want) in [(FOCUS_FRAME, [0.0; 4]), (FOCUS_SEED, [0.0; 4]), (FOCUS_OBJECT, [100.0, 30.0, 7.0, 3.0])]
+        for (label, want) in
+            [(FOCUS_FRAME, [0.0; 5]), (FOCUS_SEED, [0.0; 5]), (FOCUS_OBJECT, [100.0, 30.0, 7.0, 3.0, 4.0])]
         {
             let c = config(&mean, label);
             let w = c.weights;
-            assert_eq!([w.feature_mean, w.outside, w.sliced, w.assignment], want, "{label}");
+            assert_eq!([w.feature_mean, w.outside, w.sliced, w.assignment, w.assignment_cosine], want, "{label}");
             let object = label == FOCUS_OBJECT;
             let steps = if object { MeanSteps::Colour } else { base.feature_mean_steps };
             assert_eq!(c.feature_mean_steps, steps, "{label}");

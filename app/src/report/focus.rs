@@ -196,6 +196,7 @@ fn focus_table(run: &RunSummary) -> (Vec<String>, Vec<Margin>) {
     let sizes = [
         ("λ_sw", s.focus_object_lambda_sliced),
         ("λ_as", s.focus_object_lambda_assign),
+        ("λ_asc", s.focus_object_lambda_assign_cos),
         ("colour lr", s.focus_object_lr_color),
         ("N_g / (N_c + N_g)", s.focus_object_ratio_geo),
         ("λ_out", s.focus_object_lambda_outside),

@@ -12,6 +12,7 @@ use std::path::Path;
 use gast_core::io::depth_to_gray;
 use gast_core::raster::{self, Render, RenderOptions};
 use gast_core::session::Session;
+use gast_core::style::config::LossWeights;
 use gast_core::style::{StyleConfig, StyleMaps};
 use gast_core::{Camera, Gaussians};
 use image::{Rgb, RgbImage};
@@ -145,11 +146,20 @@ pub fn maps_tiles(m: &StyleMaps) -> [Tile; 3] {
 
 /// The sheet's settings line: mode, steps, sizes, focus, the learning rates
 /// the collapse study varies (colour, and the means' per unit of extent), the
-/// colour floor and the time.
+/// colour floor, the loss weights that differ from the defaults and the time.
 pub fn settings_line(config: &StyleConfig, steps: u32, seconds: f64, focus_on_object: bool, coverage: f32) -> String {
     let focus = if focus_on_object { "object" } else { "frame" };
+    let defaults = LossWeights::default().named();
+    let weights: String = config
+        .weights
+        .named()
+        .iter()
+        .zip(defaults)
+        .filter(|(w, d)| w.2 != d.2)
+        .map(|(w, _)| format!(", {} {}", w.1, w.2))
+        .collect();
     format!(
-        "{} {} steps ({} cycles x {}), {} px, texture {} px, focus {focus} (asked {:?}, coverage {:.0}%), lr colour {}, means {:e} x extent, colour floor {}; {:.0} s ({:.2} s/step)",
+        "{} {} steps ({} cycles x {}), {} px, texture {} px, focus {focus} (asked {:?}, coverage {:.0}%), lr colour {}, means {:e} x extent, colour floor {}{weights}; {:.0} s ({:.2} s/step)",
         config.mode.name(),
         steps,
         config.cycles,
@@ -268,7 +278,13 @@ mod tests {
         let mut config = StyleConfig { cycles: 30, resolution: 576, ..StyleConfig::default() };
         config.lr.means_per_extent = 1e-5;
         let line = settings_line(&config, 3000, 1733.0, true, 0.2);
-        assert!(line.contains("lr colour 0.01, means 1e-5 x extent, colour floor off"), "{line}");
+        assert!(line.contains("lr colour 0.01, means 1e-5 x extent, colour floor off;"), "{line}");
+        // The weights that differ from the defaults follow, and still fit.
+        config.weights.assignment_cosine = 10.0;
+        config.weights.assignment = 0.003;
+        config.weights.outside = 100000.0;
+        let line = settings_line(&config, 3000, 1733.0, true, 0.2);
+        assert!(line.contains("colour floor off, λ_out 100000, λ_as 0.003, λ_asc 10;"), "{line}");
         let width = shape_text(&line, 13.0, None);
         let sheet = f64::from(COLUMNS * TILE + (COLUMNS + 1) * GAP);
         assert!(width + f64::from(GAP) < sheet, "{width} px of {sheet}: {line}");

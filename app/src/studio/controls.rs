@@ -97,7 +97,16 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
         "λ_as",
         "assignment term, not in the paper (0 = off; CPU device only so far): pairs each of the object's VGG \
          features with a distinct style feature, drawn anew each step, and pulls it there, so the object's \
-         features land on actual style features spread as the style's are; 10 in the README's focus study",
+         features land on actual style features spread as the style's are; with λ_asc on, along its pairing",
+    );
+    changed |= weight(
+        ui,
+        &mut w.assignment_cosine,
+        1000.0,
+        "λ_asc",
+        "cosine assignment term, not in the paper (0 = off; CPU device only so far): the same one-to-one pairing \
+         made by cosine distance, turning each feature's direction to its partner's; 10 with λ_as 0.003 in the \
+         README's focus study",
     );
 
     ui.separator();
@@ -166,7 +175,7 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
 /// lines only when a step measured them.
 pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
     type Series = (&'static str, Color32, fn(&StepReport) -> f32);
-    const SERIES: [Series; 9] = [
+    const SERIES: [Series; 10] = [
         ("total", Color32::from_rgb(250, 200, 60), |s| s.losses.total),
         ("GCFM", Color32::from_rgb(90, 170, 250), |s| s.losses.gcfm),
         ("content", Color32::from_rgb(120, 220, 120), |s| s.losses.content),
@@ -176,6 +185,7 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
         ("hold", Color32::from_rgb(120, 220, 220), |s| s.losses.outside),
         ("sliced", Color32::from_rgb(240, 160, 90), |s| s.losses.sliced),
         ("assign", Color32::from_rgb(170, 140, 250), |s| s.losses.assignment),
+        ("assign cos", Color32::from_rgb(250, 120, 180), |s| s.losses.assignment_cosine),
     ];
     const ROW: f32 = 13.0;
     const COLUMNS: usize = 2;

@@ -422,8 +422,9 @@ pub fn step_loss_gpu(
         outside: 0.0,
         // The GPU engine has no sliced Wasserstein term yet (the session refuses λ_sw there).
         sliced: 0.0,
-        // Nor an assignment term (the session refuses λ_as there too).
+        // Nor the assignment terms (the session refuses λ_as and λ_asc there too).
         assignment: 0.0,
+        assignment_cosine: 0.0,
         total: weights.gcfm * gcfm
             + weights.content * content_value
             + weights.tv * tv

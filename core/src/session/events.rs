@@ -49,9 +49,12 @@ pub struct LossTerms {
     /// The sliced Wasserstein term (0 when λ_sw is 0).
     #[serde(default)]
     pub sliced: f32,
-    /// The assignment term (0 when λ_as is 0).
+    /// The assignment term, squared distance (0 when λ_as and λ_asc are 0).
     #[serde(default)]
     pub assignment: f32,
+    /// The assignment term, cosine distance (0 when λ_as and λ_asc are 0).
+    #[serde(default)]
+    pub assignment_cosine: f32,
 }
 
 /// Time spent in each part of a step, in milliseconds.

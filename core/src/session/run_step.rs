@@ -140,6 +140,7 @@ impl Session {
             outside: loss.outside,
             sliced: loss.sliced,
             assignment: loss.assignment,
+            assignment_cosine: loss.assignment_cosine,
             total: loss.total,
             ..LossTerms::default()
         };

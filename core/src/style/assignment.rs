@@ -1,13 +1,16 @@
-//! The assignment term (λ_as; not in the reference, off by default): every
-//! covered rendered RGB relu3 feature is paired with a *distinct* style
-//! feature, drawn anew each step, by the one-to-one assignment of least total
-//! squared distance, and pulled to it:
+//! The assignment terms (λ_as and λ_asc; not in the reference, off by
+//! default): every covered rendered RGB relu3 feature is paired with a
+//! *distinct* style feature, drawn anew each step, by a one-to-one assignment
+//! of least total cost, and pulled to it. Two pulls share the pairing:
 //!
-//! `(1/(r·C)) Σ_i ‖F(x_i) − F^S(y_σ(i))‖²`
+//! - λ_as, the squared distance: `(1/(r·C)) Σ_i ‖F(x_i) − F^S(y_σ(i))‖²`;
+//! - λ_asc, the cosine distance GCFM and the NN-cos measure use:
+//!   `(1/r) Σ_i (1 − cos(F(x_i), F^S(y_σ(i))))`.
 //!
 //! over the `r` rendered positions `x_i` (the object's with object focus) and
 //! `r` style positions `y_j` drawn uniformly without repetition, `σ` the
-//! minimum-cost assignment (Hungarian algorithm, [`assign_min_cost`]).
+//! minimum-cost assignment (Hungarian algorithm, [`assign_min_cost`]) under
+//! the cosine distance when λ_asc is on, the squared distance otherwise.
 //!
 //! Why: GCFM pulls each rendered feature toward its *nearest* style feature,
 //! so many rendered positions can crowd onto a few popular style features
@@ -19,7 +22,11 @@
 //! to a sample of the style's features gives every rendered feature an actual
 //! style feature as its target, and, because the pairing is one-to-one, the
 //! targets are spread as the style's features are: over steps the rendered
-//! set is pulled toward a sample of the style's distribution.
+//! set is pulled toward a sample of the style's distribution. The squared
+//! pull alone also drags the features' lengths to their targets', which on
+//! fire's saturated features lost NN-cos; the cosine pull turns the
+//! directions only, and a small λ_as beside it (a thousandth of λ_asc) keeps
+//! the lengths from drifting (README, the focus study's rows).
 //!
 //! The draw is seeded by the rendered features' own bits, so a run is
 //! reproducible and each step draws anew. At most [`ASSIGN_MAX`] rendered
@@ -27,7 +34,7 @@
 //! covered): the assignment costs `O(r³)`.
 
 use super::focus::gather_positions;
-use super::gcfm::column_sq_norms;
+use super::gcfm::{EPS, column_sq_norms};
 use crate::rng::Rng;
 use crate::vision::matmul;
 
@@ -129,18 +136,39 @@ fn draw(rng: &mut Rng, len: usize, count: usize) -> Vec<usize> {
     out
 }
 
-/// The term and its gradient w.r.t. `rendered` (`channels × n`, CHW) against
-/// the style features `style` (`channels × m`, CHW), over the positions in
-/// `mask` (all without one). Positions outside the mask, or left out of this
-/// step's subset, get a zero gradient. An empty mask or style gives `(0, zeros)`.
-pub fn assignment_loss(rendered: &[f32], channels: usize, style: &[f32], mask: Option<&[bool]>) -> (f32, Vec<f32>) {
+/// The two assignment terms' values (unweighted) and the gradient of
+/// `cosine_weight · cosine + l2_weight · l2` w.r.t. the rendered features.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Assignment {
+    /// `(1/r) Σ (1 − cos)` over the pairs (λ_asc's term).
+    pub cosine: f32,
+    /// `(1/(r·C)) Σ ‖x − s‖²` over the pairs (λ_as's term).
+    pub l2: f32,
+    /// The weighted gradient, `channels × n` (CHW) like the rendered features.
+    pub grad: Vec<f32>,
+}
+
+/// The terms and their weighted gradient w.r.t. `rendered` (`channels × n`,
+/// CHW) against the style features `style` (`channels × m`, CHW), over the
+/// positions in `mask` (all without one). The pairing minimises the cosine
+/// distance when `cosine_weight > 0`, the squared distance otherwise.
+/// Positions outside the mask, or left out of this step's subset, get a zero
+/// gradient. An empty mask or style gives zeros.
+pub fn assignment_loss(
+    rendered: &[f32],
+    channels: usize,
+    style: &[f32],
+    mask: Option<&[bool]>,
+    cosine_weight: f32,
+    l2_weight: f32,
+) -> Assignment {
     let channels = channels.max(1);
     let n = rendered.len() / channels;
     let m = style.len() / channels;
     let mut grad = vec![0.0f32; rendered.len()];
     let covered: Vec<usize> = (0..n).filter(|&i| mask.is_none_or(|k| k[i])).collect();
     if covered.is_empty() || m == 0 {
-        return (0.0, grad);
+        return Assignment { cosine: 0.0, l2: 0.0, grad };
     }
     let mut rng = Rng::new(seed_of(rendered, n, &covered));
     let rows: Vec<usize> = if covered.len() > ASSIGN_MAX {
@@ -154,29 +182,53 @@ pub fn assignment_loss(rendered: &[f32], channels: usize, style: &[f32], mask: O
     let targets = draw(&mut rng, m, r);
     let x = gather_positions(rendered, channels, n, &rows);
     let s = gather_positions(style, channels, m, &targets);
-    // Squared distances ‖x_i‖² + ‖s_j‖² − 2 x_i·s_j.
     let mut dot = vec![0.0f32; r * r];
     matmul(&mut dot, r, (&x, 1, r), (&s, r), (r, r, channels), false);
     let (xx, ss) = (column_sq_norms(&x, channels, r), column_sq_norms(&s, channels, r));
-    let cost: Vec<f64> = (0..r * r).map(|ij| xx[ij / r] + ss[ij % r] - 2.0 * f64::from(dot[ij])).collect();
+    let (x_len, s_len): (Vec<f64>, Vec<f64>) =
+        (xx.iter().map(|v| v.sqrt() + EPS).collect(), ss.iter().map(|v| v.sqrt() + EPS).collect());
+    let cost: Vec<f64> = if cosine_weight > 0.0 {
+        (0..r * r).map(|ij| 1.0 - f64::from(dot[ij]) / (x_len[ij / r] * s_len[ij % r])).collect()
+    } else {
+        // Squared distances ‖x_i‖² + ‖s_j‖² − 2 x_i·s_j.
+        (0..r * r).map(|ij| xx[ij / r] + ss[ij % r] - 2.0 * f64::from(dot[ij])).collect()
+    };
     let sigma = assign_min_cost(&cost, r, r);
-    // The loss and its gradient from the features themselves (not the
+    // The terms and their gradients from the features themselves (not the
     // cancelling expansion above).
-    let scale = 1.0 / (r * channels) as f64;
-    let mut loss = 0.0f64;
-    for c in 0..channels {
-        for (i, &pos) in rows.iter().enumerate() {
-            let d = f64::from(x[c * r + i]) - f64::from(s[c * r + sigma[i]]);
-            loss += d * d;
-            grad[c * n + pos] = (2.0 * d * scale) as f32;
+    let l2_scale = 1.0 / (r * channels) as f64;
+    let cos_scale = 1.0 / r as f64;
+    let (mut l2, mut cosine) = (0.0f64, 0.0f64);
+    for (i, &pos) in rows.iter().enumerate() {
+        let j = sigma[i];
+        let mut xs = 0.0f64;
+        for c in 0..channels {
+            xs += f64::from(x[c * r + i]) * f64::from(s[c * r + j]);
+        }
+        let cos = xs / (x_len[i] * s_len[j]);
+        cosine += 1.0 - cos;
+        for c in 0..channels {
+            let (xv, sv) = (f64::from(x[c * r + i]), f64::from(s[c * r + j]));
+            let d = xv - sv;
+            l2 += d * d;
+            // ∂(1 − cos)/∂x = −(s/(|x||s|) − cos·x/|x|²).
+            let g_cos = -(sv / (x_len[i] * s_len[j]) - cos * xv / (x_len[i] * x_len[i]));
+            let g = f64::from(l2_weight) * 2.0 * d * l2_scale + f64::from(cosine_weight) * g_cos * cos_scale;
+            grad[c * n + pos] = g as f32;
         }
     }
-    ((loss * scale) as f32, grad)
+    Assignment { cosine: (cosine * cos_scale) as f32, l2: (l2 * l2_scale) as f32, grad }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// λ_as alone: its value and gradient.
+    fn l2_only(f: &[f32], c: usize, style: &[f32], mask: Option<&[bool]>) -> (f32, Vec<f32>) {
+        let a = assignment_loss(f, c, style, mask, 0.0, 1.0);
+        (a.l2, a.grad)
+    }
 
     fn features(c: usize, n: usize, phase: usize) -> Vec<f32> {
         (0..c * n).map(|i| (((i + phase) * 37 % 101) as f32 / 50.0 - 1.0).abs()).collect()
@@ -230,7 +282,7 @@ mod tests {
         let f = features(c, n, 0);
         let style = features(c, m, 5);
         let mask: Vec<bool> = (0..n).map(|x| x % 4 != 1).collect();
-        let (l, g) = assignment_loss(&f, c, &style, Some(&mask));
+        let (l, g) = l2_only(&f, c, &style, Some(&mask));
         assert!(l > 0.0);
         // Recover each covered position's target from the gradient: s = x − g·r·C/2.
         let r = mask.iter().filter(|&&b| b).count();
@@ -272,16 +324,27 @@ mod tests {
         let f = features(c, n, 1);
         let style = features(c, m, 3);
         let all = vec![true; n];
-        assert_eq!(assignment_loss(&f, c, &style, Some(&all)), assignment_loss(&f, c, &style, None));
+        for (cw, lw) in [(0.0, 1.0), (1.0, 0.0), (2.0, 0.5)] {
+            assert_eq!(
+                assignment_loss(&f, c, &style, Some(&all), cw, lw),
+                assignment_loss(&f, c, &style, None, cw, lw)
+            );
+        }
         let mask: Vec<bool> = (0..n).map(|x| x < 4).collect();
-        let (l, g) = assignment_loss(&f, c, &style, Some(&mask));
+        let (l, g) = l2_only(&f, c, &style, Some(&mask));
         assert!(l > 0.0);
         for ch in 0..c {
             assert!(g[ch * n + 4..(ch + 1) * n].iter().all(|&v| v == 0.0), "channel {ch}");
         }
         let none = vec![false; n];
-        assert_eq!(assignment_loss(&f, c, &style, Some(&none)), (0.0, vec![0.0; c * n]));
-        assert_eq!(assignment_loss(&f, c, &[], None), (0.0, vec![0.0; c * n]));
+        let zero = Assignment { cosine: 0.0, l2: 0.0, grad: vec![0.0; c * n] };
+        assert_eq!(assignment_loss(&f, c, &style, Some(&none), 1.0, 1.0), zero);
+        assert_eq!(assignment_loss(&f, c, &[], None, 1.0, 1.0), zero);
+        let a = assignment_loss(&f, c, &style, Some(&mask), 1.0, 0.0);
+        assert!(a.cosine > 0.0);
+        for ch in 0..c {
+            assert!(a.grad[ch * n + 4..(ch + 1) * n].iter().all(|&v| v == 0.0), "channel {ch}, cosine");
+        }
     }
 
     #[test]
@@ -291,8 +354,14 @@ mod tests {
         let style = features(c, n, 2);
         let order: Vec<usize> = (0..n).map(|i| (i * 4) % n).collect();
         let rendered = gather_positions(&style, c, n, &order);
-        let (l, g) = assignment_loss(&rendered, c, &style, None);
+        let (l, g) = l2_only(&rendered, c, &style, None);
         assert!(l < 1e-10 && g.iter().all(|v| v.abs() < 1e-6), "{l}");
+        // The cosine pull ignores lengths: thrice the permuted style costs it
+        // nothing while the squared pull still pulls.
+        let longer: Vec<f32> = rendered.iter().map(|v| 3.0 * v).collect();
+        let a = assignment_loss(&longer, c, &style, None, 1.0, 0.0);
+        assert!(a.cosine.abs() < 1e-6 && a.grad.iter().all(|v| v.abs() < 1e-5), "{}", a.cosine);
+        assert!(assignment_loss(&longer, c, &style, None, 1.0, 1.0).l2 > 1.0);
     }
 
     #[test]
@@ -301,11 +370,54 @@ mod tests {
         let n = ASSIGN_MAX + 40;
         let f = features(c, n, 0);
         let style = features(c, 30, 9);
-        let (l, g) = assignment_loss(&f, c, &style, None);
+        let (l, g) = l2_only(&f, c, &style, None);
         assert!(l.is_finite() && l > 0.0);
         let moved = (0..n).filter(|&p| (0..c).any(|ch| g[ch * n + p] != 0.0)).count();
         assert!(moved <= ASSIGN_MAX && moved > ASSIGN_MAX / 2, "{moved} positions pulled");
         // Deterministic: the draw is seeded by the features.
-        assert_eq!(assignment_loss(&f, c, &style, None), (l, g));
+        assert_eq!(l2_only(&f, c, &style, None), (l, g));
+    }
+
+    #[test]
+    fn both_pulls_match_finite_differences_when_the_whole_style_is_drawn() {
+        // With as many style features as covered positions every draw takes
+        // all of them, so the least-cost pairing, and the terms, are
+        // functions of the rendered features alone (away from ties).
+        let (c, n) = (4, 9);
+        let mask: Vec<bool> = (0..n).map(|x| x != 2 && x != 6).collect();
+        let m = mask.iter().filter(|&&b| b).count();
+        let f = features(c, n, 0);
+        let style: Vec<f32> = features(c, m, 5).iter().enumerate().map(|(i, v)| v + 0.1 * (i % 3) as f32).collect();
+        for (cw, lw) in [(1.0f32, 0.0f32), (0.0, 1.0), (10.0, 0.003)] {
+            let value = |x: &[f32]| {
+                let a = assignment_loss(x, c, &style, Some(&mask), cw, lw);
+                f64::from(cw) * f64::from(a.cosine) + f64::from(lw) * f64::from(a.l2)
+            };
+            let g = assignment_loss(&f, c, &style, Some(&mask), cw, lw).grad;
+            let h = 1e-3;
+            for i in 0..c * n {
+                let (mut up, mut down) = (f.clone(), f.clone());
+                up[i] += h;
+                down[i] -= h;
+                let fd = ((value(&up) - value(&down)) / (2.0 * f64::from(h))) as f32;
+                let tol = 2e-3 * (1.0 + g[i].abs());
+                assert!((fd - g[i]).abs() < tol, "λ_asc {cw}, λ_as {lw}, element {i}: {fd} against {}", g[i]);
+            }
+        }
+    }
+
+    #[test]
+    fn the_cosine_pairing_takes_the_closest_directions_not_the_closest_points() {
+        // Rendered (1, 0) at 0° and (3, 1) at 18.4°; style (1, 0.4) at 21.8°
+        // and (3, 0) at 0°. The squared distance pairs the near points (each
+        // 22° or 18° off in direction); the cosine distance pairs crosswise,
+        // 0° and 3.4° off, at eight times the squared distance.
+        let c = 2;
+        let rendered = [1.0, 3.0, /* y: */ 0.0, 1.0];
+        let style = [1.0, 3.0, /* y: */ 0.4, 0.0];
+        let by_cos = assignment_loss(&rendered, c, &style, None, 1.0, 0.0);
+        let by_l2 = assignment_loss(&rendered, c, &style, None, 0.0, 1.0);
+        assert!(by_cos.cosine < 0.002 && by_l2.cosine > 0.05, "{} {}", by_cos.cosine, by_l2.cosine);
+        assert!(by_l2.l2 < 0.3 && by_cos.l2 > 2.0, "{} {}", by_l2.l2, by_cos.l2);
     }
 }

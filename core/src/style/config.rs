@@ -56,6 +56,12 @@ pub struct LossWeights {
     /// assignment to a fresh sample of the style's features each step. Not in
     /// the reference: 0 (off) by default. CPU engine.
     pub assignment: f32,
+    /// λ_asc, the cosine assignment term ([`crate::style::assignment`]): the
+    /// same pairing, made by cosine distance, pulling each feature's
+    /// direction to its partner's (`1 − cos`). With it on, λ_as pulls along
+    /// the cosine pairing. Not in the reference: 0 (off) by default. CPU
+    /// engine.
+    pub assignment_cosine: f32,
 }
 
 impl Default for LossWeights {
@@ -72,7 +78,33 @@ impl Default for LossWeights {
             outside: 0.0,
             sliced: 0.0,
             assignment: 0.0,
+            assignment_cosine: 0.0,
         }
+    }
+}
+
+impl LossWeights {
+    /// Every weight with its preset key (`weights.<key>`) and its symbol.
+    pub fn named(&self) -> [(&'static str, &'static str, f32); 12] {
+        [
+            ("gcfm", "λ_GC", self.gcfm),
+            ("content", "λ_cont", self.content),
+            ("tv", "λ_TV", self.tv),
+            ("opacity", "λ_α", self.opacity),
+            ("scale", "λ_s", self.scale),
+            ("rotation", "λ_r", self.rotation),
+            ("depth", "λ_d", self.depth),
+            ("feature_mean", "λ_mean", self.feature_mean),
+            ("outside", "λ_out", self.outside),
+            ("sliced", "λ_sw", self.sliced),
+            ("assignment", "λ_as", self.assignment),
+            ("assignment_cosine", "λ_asc", self.assignment_cosine),
+        ]
+    }
+
+    /// Whether a term the GPU engine does not compute yet is on (λ_sw, λ_as, λ_asc).
+    pub fn needs_cpu(&self) -> bool {
+        self.sliced > 0.0 || self.assignment > 0.0 || self.assignment_cosine > 0.0
     }
 }
 
@@ -226,26 +258,15 @@ impl StyleConfig {
                 mc.dims, mc.candidates, mc.reuse
             ));
         }
-        let w = self.weights;
         let lr = self.lr;
-        for (name, v) in [
-            ("weights.gcfm", w.gcfm),
-            ("weights.content", w.content),
-            ("weights.tv", w.tv),
-            ("weights.opacity", w.opacity),
-            ("weights.scale", w.scale),
-            ("weights.rotation", w.rotation),
-            ("weights.depth", w.depth),
-            ("weights.feature_mean", w.feature_mean),
-            ("weights.outside", w.outside),
-            ("weights.sliced", w.sliced),
-            ("weights.assignment", w.assignment),
-            ("lr.color", lr.color),
-            ("lr.means_per_extent", lr.means_per_extent),
-            ("lr.scales", lr.scales),
-            ("lr.quats", lr.quats),
-            ("lr.opacity", lr.opacity),
-        ] {
+        let weights = self.weights.named().map(|(key, _, v)| (format!("weights.{key}"), v));
+        for (name, v) in weights.into_iter().chain([
+            ("lr.color".to_string(), lr.color),
+            ("lr.means_per_extent".to_string(), lr.means_per_extent),
+            ("lr.scales".to_string(), lr.scales),
+            ("lr.quats".to_string(), lr.quats),
+            ("lr.opacity".to_string(), lr.opacity),
+        ]) {
             if !(v.is_finite() && v >= 0.0) {
                 out.push(format!("{name} must be a finite non-negative number, found {v}"));
             }

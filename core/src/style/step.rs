@@ -174,8 +174,10 @@ pub struct StepLoss {
     pub outside: f32,
     /// Sliced Wasserstein term (unweighted; 0 when λ_sw is 0).
     pub sliced: f32,
-    /// Assignment term (unweighted; 0 when λ_as is 0).
+    /// Assignment term, squared distance (unweighted; 0 when λ_as and λ_asc are 0).
     pub assignment: f32,
+    /// Assignment term, cosine distance (unweighted; 0 when λ_as and λ_asc are 0).
+    pub assignment_cosine: f32,
     /// `Σ weight · term`.
     pub total: f32,
     /// Gradient of `total` w.r.t. the rendered RGB (HWC).
@@ -412,12 +414,19 @@ pub fn step_loss_with<N: FeatureNet>(
             *a += weights.sliced * b;
         }
     }
-    let mut assignment_value = 0.0;
-    if weights.assignment > 0.0 {
-        let (l, g) = assignment_loss(&fwd[0].0.data, fwd[0].0.channels, style.features.modality(0), fmask.as_deref());
-        assignment_value = l;
-        for (a, b) in v_feat_rgb.iter_mut().zip(g) {
-            *a += weights.assignment * b;
+    let (mut assignment_value, mut assignment_cosine_value) = (0.0, 0.0);
+    if weights.assignment > 0.0 || weights.assignment_cosine > 0.0 {
+        let a = assignment_loss(
+            &fwd[0].0.data,
+            fwd[0].0.channels,
+            style.features.modality(0),
+            fmask.as_deref(),
+            weights.assignment_cosine,
+            weights.assignment,
+        );
+        (assignment_value, assignment_cosine_value) = (a.l2, a.cosine);
+        for (v, g) in v_feat_rgb.iter_mut().zip(a.grad) {
+            *v += g;
         }
     }
     let v_feat_depth: Vec<f32> = out.v_rendered[1].iter().map(|v| v * weights.gcfm).collect();
@@ -473,7 +482,8 @@ pub fn step_loss_with<N: FeatureNet>(
         + weights.feature_mean * feature_mean_value
         + weights.outside * outside_value
         + weights.sliced * sliced_value
-        + weights.assignment * assignment_value;
+        + weights.assignment * assignment_value
+        + weights.assignment_cosine * assignment_cosine_value;
     StepLoss {
         timings,
         gcfm: out.loss,
@@ -484,6 +494,7 @@ pub fn step_loss_with<N: FeatureNet>(
         outside: outside_value,
         sliced: sliced_value,
         assignment: assignment_value,
+        assignment_cosine: assignment_cosine_value,
         total,
         v_rgb,
         v_inv_depth,

@@ -307,7 +307,7 @@ fn vgg_on_the_covered_window_equals_the_whole_frame() {
     }
 }
 
-/// λ_mean, λ_sw and λ_as: each adds exactly its weight times its term to the
+/// λ_mean, λ_sw, λ_as and λ_asc: each adds exactly its weight times its term to the
 /// total, moves the gradient, and leaves the pixels outside the mask alone.
 #[test]
 fn the_feature_statistics_terms_add_their_weighted_values_and_stay_inside_the_mask() {
@@ -316,10 +316,11 @@ fn the_feature_statistics_terms_add_their_weighted_values_and_stay_inside_the_ma
     let edge = vec![0.0f32; h * w];
     let mask: Vec<bool> = (0..h * w).map(|k| k % w < 16).collect();
     type Term = (&'static str, fn(&mut LossWeights, f32), fn(&StepLoss) -> f32);
-    let terms: [Term; 3] = [
+    let terms: [Term; 4] = [
         ("feature mean", |w, l| w.feature_mean = l, |s| s.feature_mean),
         ("sliced", |w, l| w.sliced = l, |s| s.sliced),
         ("assignment", |w, l| w.assignment = l, |s| s.assignment),
+        ("cosine assignment", |w, l| w.assignment_cosine = l, |s| s.assignment_cosine),
     ];
     for (name, set, get) in terms {
         let eval = |lambda: f32| {

@@ -135,6 +135,13 @@ pub struct StylizeArgs {
     /// [default: 0, off].
     #[arg(long)]
     pub lambda_assign: Option<f32>,
+    /// λ_asc, the cosine assignment term: the same one-to-one pairing, made
+    /// by cosine distance (GCFM's), pulling each feature's direction to its
+    /// partner's. A small λ_as beside it (a thousandth of λ_asc) keeps the
+    /// features' lengths; with λ_asc on, λ_as pulls along this pairing. Not
+    /// in the reference; CPU engine only so far [default: 0, off].
+    #[arg(long)]
+    pub lambda_assign_cos: Option<f32>,
     /// Which steps λ_mean acts on: every, or colour (the colour steps only;
     /// the geometry steps follow GCFM alone) [default: every].
     #[arg(long, value_name = "colour|every")]
@@ -218,6 +225,7 @@ impl StylizeArgs {
         set!(self.lambda_outside, c.weights.outside);
         set!(self.lambda_sliced, c.weights.sliced);
         set!(self.lambda_assign, c.weights.assignment);
+        set!(self.lambda_assign_cos, c.weights.assignment_cosine);
         set!(self.mean_steps, c.feature_mean_steps);
         set!(self.lr_color, c.lr.color);
         set!(self.lr_means, c.lr.means_per_extent);

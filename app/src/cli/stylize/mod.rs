@@ -259,8 +259,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         // The sliced Wasserstein and assignment terms run on the CPU engine
         // only so far: `auto` picks the CPU for them rather than failing
         // (`gpu` still says why).
-        gast_core::gpu::DeviceChoice::Auto if config.weights.sliced > 0.0 || config.weights.assignment > 0.0 => {
-            eprintln!("λ_sw or λ_as > 0 runs on the CPU engine only so far: the steps run on the CPU");
+        gast_core::gpu::DeviceChoice::Auto if config.weights.needs_cpu() => {
+            eprintln!("λ_sw, λ_as or λ_asc > 0 runs on the CPU engine only so far: the steps run on the CPU");
             None
         }
         device => device.resolve().with_context(|| format!("--device {device}"))?,
