@@ -144,7 +144,12 @@ fn margins_chart(margins: &[Margin]) -> Chart {
     series.push(dashed("one seed floor (SW)", vec![(1.0, y_lo.into()), (1.0, y_hi.into())]));
     series.push(dashed("one seed floor (NN-cos)", vec![(x_lo.into(), 1.0), (x_hi.into(), 1.0)]));
     Chart {
-        title: "Focus study: object's lead over frame, per scene × style pair".into(),
+        title: match margins.first() {
+            Some(m) if margins.iter().all(|o| o.scene == m.scene) => {
+                format!("Focus study on {}: object's lead over frame, per style", m.scene)
+            }
+            _ => "Focus study: object's lead over frame, per scene × style pair".into(),
+        },
         x_label: "SW decrease, object minus frame (seed floors)".into(),
         y_label: "NN-cos decrease, object minus frame (seed floors)".into(),
         series,
@@ -503,12 +508,27 @@ pub fn write_focus_report(out: &Path, run: &RunSummary) -> anyhow::Result<Vec<St
     if !margins.is_empty() {
         let dir = out.join("charts");
         std::fs::create_dir_all(&dir).with_context(|| format!("could not create {}", dir.display()))?;
-        margins_chart(&margins).write(&dir.join("focus_margins"))?;
-        lines.push(
-            "Chart `charts/focus_margins.png`: each pair's lead of object over frame in seed floors (SW across, \
-             NN-cos up); a pair passes above and right of both dashed lines."
-                .into(),
-        );
+        // One chart per scene when there are several: each has its own seed
+        // floors, and 27 pairs overflow one legend.
+        let mut scenes: Vec<&str> = Vec::new();
+        for m in &margins {
+            if !scenes.contains(&m.scene.as_str()) {
+                scenes.push(&m.scene);
+            }
+        }
+        let mut names = Vec::new();
+        for scene in &scenes {
+            let name = if scenes.len() == 1 { "focus_margins".to_string() } else { format!("focus_margins_{scene}") };
+            let of_scene: Vec<Margin> = margins.iter().filter(|m| m.scene == *scene).cloned().collect();
+            margins_chart(&of_scene).write(&dir.join(&name))?;
+            names.push(format!("`charts/{name}.png`"));
+        }
+        lines.push(format!(
+            "{} {}: each pair's lead of object over frame in seed floors (SW across, NN-cos up); a pair passes \
+             above and right of both dashed lines.",
+            if names.len() == 1 { "Chart" } else { "Charts" },
+            names.join(", ")
+        ));
         lines.push(String::new());
     }
     lines.extend(collapse_lines(run));
@@ -713,6 +733,25 @@ mod tests {
         assert!(written.iter().any(|l| l.contains("focus_margins.png")));
         let png = image::open(dir.join("charts/focus_margins.png")).expect("the chart's PNG").to_rgb8();
         assert!(png.pixels().any(|p| p.0 != png.get_pixel(0, 0).0), "the chart is not blank");
+        std::fs::remove_dir_all(&dir).ok();
+
+        // Two scenes: a chart each, named after its scene.
+        let arms: Vec<(&str, Record)> =
+            run.rows.iter().map(|r| r.label.as_str()).zip(run.trials.iter().cloned()).collect();
+        let biker = arms.iter().map(|(label, t)| {
+            (*label, Record { id: format!("b{}", t.id), scene: "data/scenes/biker.compressed.ply".into(), ..t.clone() })
+        });
+        let two = focus_run(arms.iter().cloned().chain(biker).collect());
+        let (_, margins) = focus_table(&two);
+        assert_eq!(margins.len(), 2);
+        assert!(margins_chart(&margins[..1]).title.contains("on guitar"));
+        let written = write_focus_report(&dir, &two).expect("the report");
+        let line = written.iter().find(|l| l.contains("focus_margins")).expect("the charts' line");
+        assert!(line.contains("focus_margins_guitar.png") && line.contains("focus_margins_biker.png"), "{line}");
+        for scene in ["guitar", "biker"] {
+            let path = dir.join(format!("charts/focus_margins_{scene}.png"));
+            assert!(image::open(&path).is_ok(), "{}", path.display());
+        }
         std::fs::remove_dir_all(&dir).ok();
     }
 }
