@@ -105,8 +105,8 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
         1000.0,
         "λ_asc",
         "cosine assignment term, not in the paper (0 = off; CPU device only so far): the same one-to-one pairing \
-         made by cosine distance, turning each feature's direction to its partner's; 10 with λ_as 0.003 in the \
-         README's focus study",
+         made by cosine distance, turning each feature's direction to its partner's; 10 with λ_as 0.003 to 0.01 \
+         in the README's focus study",
     );
 
     ui.separator();

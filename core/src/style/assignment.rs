@@ -25,8 +25,9 @@
 //! set is pulled toward a sample of the style's distribution. The squared
 //! pull alone also drags the features' lengths to their targets', which on
 //! fire's saturated features lost NN-cos; the cosine pull turns the
-//! directions only, and a small λ_as beside it (a thousandth of λ_asc) keeps
-//! the lengths from drifting (README, the focus study's rows).
+//! directions only (alone it lets the lengths grow), and a small λ_as beside
+//! it (0.003 to 0.01 with λ_asc 10) holds them (README, the focus study's
+//! rows).
 //!
 //! The draw is seeded by the rendered features' own bits, so a run is
 //! reproducible and each step draws anew. At most [`ASSIGN_MAX`] rendered
