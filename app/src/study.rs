@@ -191,6 +191,9 @@ pub struct Sizes {
     /// the frame arm's, 0.9).
     #[serde(default)]
     pub focus_object_ratio_geo: f32,
+    /// λ_TV of the focus study's object arm (0: the frame arm's, 0.02).
+    #[serde(default)]
+    pub focus_object_lambda_tv: f32,
     /// Which steps the object arm's λ_mean acts on; absent in runs from
     /// before the choice existed, which ran it on every step. A run records
     /// the choice it made (`gast stylize`'s default when not given).
@@ -260,6 +263,7 @@ impl Sizes {
             focus_object_lambda_assign_cos: 0.0,
             focus_object_lr_color: 0.0,
             focus_object_ratio_geo: 0.0,
+            focus_object_lambda_tv: 0.0,
         }
     }
 
@@ -322,6 +326,7 @@ impl Sizes {
             focus_object_lambda_assign_cos: 0.0,
             focus_object_lr_color: 0.0,
             focus_object_ratio_geo: 0.0,
+            focus_object_lambda_tv: 0.0,
         }
     }
 }

@@ -288,6 +288,10 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
                 sliced: sizes.focus_object_lambda_sliced,
                 assignment: sizes.focus_object_lambda_assign,
                 assignment_cosine: sizes.focus_object_lambda_assign_cos,
+                tv: match sizes.focus_object_lambda_tv {
+                    0.0 => frame.weights.tv,
+                    tv => tv,
+                },
                 ..frame.weights
             },
             feature_mean_steps: sizes.focus_object_mean_steps.unwrap_or_default(),
@@ -691,7 +695,7 @@ mod tests {
         let apart = Sizes { resolution: 256, focus_object_resolution: 512, ..Sizes::full() };
         assert_eq!((trial(&apart, FOCUS_FRAME), trial(&apart, FOCUS_OBJECT)), (256, 512));
         assert_eq!(trial(&apart, FOCUS_SEED), 256);
-        // λ_mean, λ_out, λ_sw, λ_as, λ_asc, λ_mean's steps and the colour learning rate go to the object arm only.
+        // λ_mean, λ_out, λ_sw, λ_as, λ_asc, λ_TV, λ_mean's steps and the colour learning rate go to the object arm only.
         let mean = Sizes {
             focus_object_lambda_mean: 100.0,
             focus_object_lambda_outside: 30.0,
@@ -701,6 +705,7 @@ mod tests {
             focus_object_mean_steps: Some(MeanSteps::Colour),
             focus_object_lr_color: 0.05,
             focus_object_ratio_geo: 0.7,
+            focus_object_lambda_tv: 0.5,
             ..Sizes::full()
         };
         let base = StyleConfig::default();
@@ -716,6 +721,7 @@ mod tests {
             assert_eq!(c.lr.color, if object { 0.05 } else { base.lr.color }, "{label}");
             assert_eq!(c.lr.opacity, base.lr.opacity, "{label}");
             assert_eq!(c.ratio_geo, if object { 0.7 } else { base.ratio_geo }, "{label}");
+            assert_eq!(c.weights.tv, if object { 0.5 } else { base.weights.tv }, "{label}");
         }
     }
 

@@ -204,6 +204,7 @@ fn focus_table(run: &RunSummary) -> (Vec<String>, Vec<Margin>) {
         ("λ_asc", s.focus_object_lambda_assign_cos),
         ("colour lr", s.focus_object_lr_color),
         ("N_g / (N_c + N_g)", s.focus_object_ratio_geo),
+        ("λ_TV", s.focus_object_lambda_tv),
         ("λ_out", s.focus_object_lambda_outside),
     ]
     .into_iter()
