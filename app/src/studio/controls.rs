@@ -95,7 +95,7 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
         &mut w.assignment,
         1000.0,
         "λ_as",
-        "assignment term, not in the paper (0 = off; CPU device only so far): pairs each of the object's VGG \
+        "assignment term, not in the paper (0 = off): pairs each of the object's VGG \
          features with a distinct style feature, drawn anew each step, and pulls it there, so the object's \
          features land on actual style features spread as the style's are; with λ_asc on, along its pairing",
     );
@@ -104,8 +104,8 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
         &mut w.assignment_cosine,
         1000.0,
         "λ_asc",
-        "cosine assignment term, not in the paper (0 = off; CPU device only so far): the same one-to-one pairing \
-         made by cosine distance, turning each feature's direction to its partner's; 10 with λ_as 0.003 to 0.01 \
+        "cosine assignment term, not in the paper (0 = off): the same one-to-one pairing \
+         made by cosine distance, turning each feature's direction to its partner's; 10 with λ_as 0.003 to 0.015 \
          in the README's focus study",
     );
 

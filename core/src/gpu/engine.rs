@@ -18,6 +18,7 @@
 use std::collections::HashMap;
 
 use super::adam::AdamKernel;
+use super::assignment::{GpuAssignment, covered_positions};
 use super::step_loss::{StepLossKernels, StepLossPlan, slot};
 use super::{
     GcfmSubset, GpuAdam, GpuContext, GpuError, GpuFocus, GpuGaussians, GpuGrads, GpuRaster, GpuStyle, RasterKernels,
@@ -72,6 +73,9 @@ struct ViewTarget {
     hold: Option<wgpu::Buffer>,
 }
 
+/// Mixed into the session's seed for the assignment terms' draws.
+const ASSIGN_SEED: u64 = 0xa551_9e00;
+
 /// Above this share of covered feature positions, the object focus searches
 /// every position (the gather would cost more than it saves).
 const SUBSET_SHARE: f64 = 0.75;
@@ -110,6 +114,8 @@ pub struct GpuEngine {
     warnings: Vec<String>,
     /// One modality's gathered columns for the subset searches (grown to the largest).
     subset_scratch: Option<wgpu::Buffer>,
+    /// The assignment terms' workspace, made at the first step with λ_as or λ_asc on.
+    assign: Option<GpuAssignment>,
 }
 
 impl GpuEngine {
@@ -169,6 +175,7 @@ impl GpuEngine {
             bytes: 0,
             warnings: Vec::new(),
             subset_scratch: None,
+            assign: None,
         };
         engine.bytes = ctx.allocated_bytes().saturating_sub(before);
         Ok(engine)
@@ -287,14 +294,32 @@ impl GpuEngine {
             (None, Some(subset), Some(scratch)) => Search::Subset { subset, scratch },
             _ => Search::Every,
         };
-        plan.loss.record(
+        plan.loss.record_features(ctx, &k.loss, &mut enc, rgb, inv_depth, None, focus);
+        // The assignment terms: the drawn columns gathered here, paired on the
+        // host between two submissions, their gradient added in the second.
+        let assigning = w.assignment > 0.0 || w.assignment_cosine > 0.0;
+        let mut pulled = None;
+        if assigning {
+            let n = plan.loss.positions();
+            let cells: Option<Vec<f32>> = match focus {
+                Some(f) => Some(ctx.read(f.cells())?),
+                None => None,
+            };
+            let covered = covered_positions(cells.as_deref(), n);
+            let style = &self.style;
+            let a = self.assign.get_or_insert_with(|| GpuAssignment::new(ctx, style.channels(), config.seed ^ ASSIGN_SEED));
+            a.record_gather(ctx, &mut enc, plan.loss.rgb_features(), n, covered, style.modality(0), style.positions());
+            ctx.submit(enc);
+            pulled = Some(a.pull(ctx, w.assignment_cosine, w.assignment)?);
+            enc = ctx.encoder("engine.step.losses");
+        }
+        plan.loss.record_losses(
             ctx,
             &k.loss,
             &mut enc,
             &self.style,
             rgb,
             inv_depth,
-            None,
             content,
             depth_ref,
             hold,
@@ -302,6 +327,7 @@ impl GpuEngine {
             focus,
             &self.scalars,
             search,
+            if assigning { self.assign.as_ref() } else { None },
         );
         let keep = if searched && reuse > 1 {
             // The buffer of an earlier search of this view, or a new one.
@@ -359,6 +385,8 @@ impl GpuEngine {
             depth: if geometry { s[slot::DEPTH] } else { 0.0 },
             feature_mean: if w.feature_mean > 0.0 { s[slot::FEATURE_MEAN] } else { 0.0 },
             outside: if w.outside > 0.0 && holding { s[slot::OUTSIDE] } else { 0.0 },
+            assignment: pulled.as_ref().map_or(0.0, |a| a.l2),
+            assignment_cosine: pulled.as_ref().map_or(0.0, |a| a.cosine),
             ..LossTerms::default()
         };
         terms.total = w.gcfm * terms.gcfm
@@ -366,7 +394,9 @@ impl GpuEngine {
             + w.tv * terms.tv
             + w.depth * terms.depth
             + w.feature_mean * terms.feature_mean
-            + w.outside * terms.outside;
+            + w.outside * terms.outside
+            + w.assignment * terms.assignment
+            + w.assignment_cosine * terms.assignment_cosine;
         if geometry {
             terms.reg_opacity = s[slot::REG_OPACITY];
             terms.reg_scale = s[slot::REG_SCALE];

@@ -92,6 +92,16 @@ impl GpuStyle {
     pub fn positions(&self) -> usize {
         self.positions
     }
+
+    /// Channels per modality.
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+
+    /// One modality's features (0 RGB, 1 depth, 2 edge), `channels × positions`.
+    pub fn modality(&self, k: usize) -> &wgpu::Buffer {
+        &self.feats[k]
+    }
 }
 
 /// One chunk of rendered rows: three accumulating GEMMs and the arg-extrema.

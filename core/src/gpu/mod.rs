@@ -12,6 +12,7 @@
 //! entry point with an explicit binding list.
 
 mod adam;
+mod assignment;
 mod canny;
 mod content;
 mod context;
@@ -45,6 +46,7 @@ mod step_loss;
 mod vgg;
 
 pub use adam::GpuAdam;
+pub use assignment::GpuAssignment;
 pub use canny::{CannyKernels, EdgeMap};
 pub use content::ContentLoss;
 pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};

@@ -15,6 +15,7 @@
 
 use std::sync::Arc;
 
+use super::assignment::GpuAssignment;
 use super::content::ContentLoss;
 use super::feature_mean::FeatureMeanLoss;
 use super::{
@@ -212,6 +213,12 @@ impl StepLossPlan {
         self.gcfm_ws.matches()
     }
 
+    /// After [`StepLossPlan::record_features`]: the RGB render's features,
+    /// `channels × positions` (channel-major).
+    pub fn rgb_features(&self) -> &wgpu::Buffer {
+        self.states[0].features()
+    }
+
     /// Feature positions of a render (relu3 height × width).
     pub fn positions(&self) -> usize {
         self.gcfm_ws.positions()
@@ -287,6 +294,23 @@ impl StepLossPlan {
         scalars: &wgpu::Buffer,
         search: Search<'_>,
     ) {
+        self.record_features(ctx, k, enc, rgb_raw, inv_depth, edge, focus);
+        self.record_losses(ctx, k, enc, style, rgb_raw, inv_depth, content, depth_ref, hold, depth_grad, focus, scalars, search, None);
+    }
+
+    /// The first half of [`StepLossPlan::record`]: the three maps VGG sees and
+    /// their features ([`StepLossPlan::rgb_features`] holds the RGB ones).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_features(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        enc: &mut wgpu::CommandEncoder,
+        rgb_raw: &wgpu::Buffer,
+        inv_depth: &wgpu::Buffer,
+        edge: Option<&wgpu::Buffer>,
+        focus: Option<&GpuFocus>,
+    ) {
         let focus = focus.unwrap_or(&self.frame);
         // The three maps VGG sees.
         self.clamp.forward(ctx, enc, rgb_raw, &self.rgb);
@@ -303,7 +327,32 @@ impl StepLossPlan {
         for (small, state) in self.small.iter().zip(&self.states) {
             k.vgg.forward(ctx, enc, &self.vgg_ws, small, state);
         }
+    }
 
+    /// The second half of [`StepLossPlan::record`], after
+    /// [`StepLossPlan::record_features`] (in this encoder or an earlier
+    /// submission): the losses and the gradients back to the render, with the
+    /// assignment terms' gradient added to the RGB features' when `assign` is
+    /// given ([`GpuAssignment::record_scatter`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_losses(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        enc: &mut wgpu::CommandEncoder,
+        style: &GpuStyle,
+        rgb_raw: &wgpu::Buffer,
+        inv_depth: &wgpu::Buffer,
+        content: Option<&wgpu::Buffer>,
+        depth_ref: Option<&wgpu::Buffer>,
+        hold: Option<&wgpu::Buffer>,
+        depth_grad: bool,
+        focus: Option<&GpuFocus>,
+        scalars: &wgpu::Buffer,
+        search: Search<'_>,
+        assign: Option<&GpuAssignment>,
+    ) {
+        let focus = focus.unwrap_or(&self.frame);
         // Feature space: GCFM (gradients scaled by λ_GC), then content and
         // the feature-mean term on the RGB features.
         let feats = [self.states[0].features(), self.states[1].features(), self.states[2].features()];
@@ -313,6 +362,9 @@ impl StepLossPlan {
         }
         if self.feature_mean_on {
             self.feature_mean.record(ctx, enc, feats[0], focus, &self.v_feat[0], scalars);
+        }
+        if let Some(a) = assign {
+            a.record_scatter(ctx, enc, &self.v_feat[0]);
         }
 
         // Image space: RGB through VGG and the downscale, plus TV, then the clamp's mask.

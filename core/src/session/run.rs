@@ -554,13 +554,6 @@ fn engine_problems(config: &StyleConfig, on_gpu: bool) -> Vec<String> {
             config.weights.sliced
         ));
     }
-    let w = config.weights;
-    if on_gpu && (w.assignment > 0.0 || w.assignment_cosine > 0.0) {
-        out.push(format!(
-            "the assignment terms (λ_as = {}, λ_asc = {}) run on the CPU engine only so far: use the CPU (--device cpu) or set them to 0",
-            w.assignment, w.assignment_cosine
-        ));
-    }
     out
 }
 

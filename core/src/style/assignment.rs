@@ -172,20 +172,50 @@ pub fn assignment_loss(
         return Assignment { cosine: 0.0, l2: 0.0, grad };
     }
     let mut rng = Rng::new(seed_of(rendered, n, &covered));
+    let (rows, targets) = draw_pairs(&mut rng, covered, m);
+    let x = gather_positions(rendered, channels, n, &rows);
+    let s = gather_positions(style, channels, m, &targets);
+    let pulled = pull_pairs(&x, &s, channels, cosine_weight, l2_weight);
+    let r = rows.len();
+    for (i, &pos) in rows.iter().enumerate() {
+        for c in 0..channels {
+            grad[c * n + pos] = pulled.grad[c * r + i];
+        }
+    }
+    Assignment { grad, ..pulled }
+}
+
+/// One step's draw from `rng`: the rendered positions that take part
+/// (`covered`, or a random [`ASSIGN_MAX`] of them in ascending order) and, for
+/// each, a style position among `m` (distinct while `m` suffices).
+pub(crate) fn draw_pairs(rng: &mut Rng, covered: Vec<usize>, m: usize) -> (Vec<usize>, Vec<usize>) {
     let rows: Vec<usize> = if covered.len() > ASSIGN_MAX {
-        let mut pick: Vec<usize> = draw(&mut rng, covered.len(), ASSIGN_MAX).into_iter().map(|t| covered[t]).collect();
+        let mut pick: Vec<usize> = draw(rng, covered.len(), ASSIGN_MAX).into_iter().map(|t| covered[t]).collect();
         pick.sort_unstable();
         pick
     } else {
         covered
     };
-    let r = rows.len();
-    let targets = draw(&mut rng, m, r);
-    let x = gather_positions(rendered, channels, n, &rows);
-    let s = gather_positions(style, channels, m, &targets);
+    let targets = draw(rng, m, rows.len());
+    (rows, targets)
+}
+
+/// The assignment of the gathered rendered features `x` to the gathered style
+/// features `s` (both `channels × r`, CHW, column `i` of `s` drawn for row
+/// `i` of `x`'s step) and the two pulls along it: the terms and the weighted
+/// gradient w.r.t. `x` (`channels × r`). The CPU step and the GPU engine's
+/// (which gathers on the device) share it.
+pub fn pull_pairs(x: &[f32], s: &[f32], channels: usize, cosine_weight: f32, l2_weight: f32) -> Assignment {
+    let channels = channels.max(1);
+    let r = x.len() / channels;
+    assert_eq!(s.len(), x.len(), "pull_pairs: one style column per rendered one");
+    let mut grad = vec![0.0f32; x.len()];
+    if r == 0 {
+        return Assignment { cosine: 0.0, l2: 0.0, grad };
+    }
     let mut dot = vec![0.0f32; r * r];
-    matmul(&mut dot, r, (&x, 1, r), (&s, r), (r, r, channels), false);
-    let (xx, ss) = (column_sq_norms(&x, channels, r), column_sq_norms(&s, channels, r));
+    matmul(&mut dot, r, (x, 1, r), (s, r), (r, r, channels), false);
+    let (xx, ss) = (column_sq_norms(x, channels, r), column_sq_norms(s, channels, r));
     let (x_len, s_len): (Vec<f64>, Vec<f64>) =
         (xx.iter().map(|v| v.sqrt() + EPS).collect(), ss.iter().map(|v| v.sqrt() + EPS).collect());
     let cost: Vec<f64> = if cosine_weight > 0.0 {
@@ -200,7 +230,7 @@ pub fn assignment_loss(
     let l2_scale = 1.0 / (r * channels) as f64;
     let cos_scale = 1.0 / r as f64;
     let (mut l2, mut cosine) = (0.0f64, 0.0f64);
-    for (i, &pos) in rows.iter().enumerate() {
+    for i in 0..r {
         let j = sigma[i];
         let mut xs = 0.0f64;
         for c in 0..channels {
@@ -215,7 +245,7 @@ pub fn assignment_loss(
             // ∂(1 − cos)/∂x = −(s/(|x||s|) − cos·x/|x|²).
             let g_cos = -(sv / (x_len[i] * s_len[j]) - cos * xv / (x_len[i] * x_len[i]));
             let g = f64::from(l2_weight) * 2.0 * d * l2_scale + f64::from(cosine_weight) * g_cos * cos_scale;
-            grad[c * n + pos] = g as f32;
+            grad[c * r + i] = g as f32;
         }
     }
     Assignment { cosine: (cosine * cos_scale) as f32, l2: (l2 * l2_scale) as f32, grad }

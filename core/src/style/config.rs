@@ -102,9 +102,9 @@ impl LossWeights {
         ]
     }
 
-    /// Whether a term the GPU engine does not compute yet is on (λ_sw, λ_as, λ_asc).
+    /// Whether a term the GPU engine does not compute yet is on (λ_sw).
     pub fn needs_cpu(&self) -> bool {
-        self.sliced > 0.0 || self.assignment > 0.0 || self.assignment_cosine > 0.0
+        self.sliced > 0.0
     }
 }
 

@@ -131,15 +131,15 @@ pub struct StylizeArgs {
     /// object's with object focus) with a distinct style feature drawn anew
     /// each step, by the pairing of least total squared distance, and pulls
     /// it there, so the features land on actual style features spread as the
-    /// style's are. Not in the reference; CPU engine only so far
-    /// [default: 0, off].
+    /// style's are. Not in the reference; on the GPU the device gathers the
+    /// paired features and the host pairs them [default: 0, off].
     #[arg(long)]
     pub lambda_assign: Option<f32>,
     /// λ_asc, the cosine assignment term: the same one-to-one pairing, made
     /// by cosine distance (GCFM's), pulling each feature's direction to its
-    /// partner's. A small λ_as beside it (0.003 to 0.01 with λ_asc 10) holds
+    /// partner's. A small λ_as beside it (0.003 to 0.015 with λ_asc 10) holds
     /// the features' lengths; with λ_asc on, λ_as pulls along this pairing. Not
-    /// in the reference; CPU engine only so far [default: 0, off].
+    /// in the reference [default: 0, off].
     #[arg(long)]
     pub lambda_assign_cos: Option<f32>,
     /// Which steps λ_mean acts on: every, or colour (the colour steps only;

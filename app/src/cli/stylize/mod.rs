@@ -256,11 +256,10 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let scene = load_scene(&args.scene)?;
     let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
     let gpu = match args.device {
-        // The sliced Wasserstein and assignment terms run on the CPU engine
-        // only so far: `auto` picks the CPU for them rather than failing
+        // The sliced Wasserstein term runs on the CPU engine only so far: `auto` picks the CPU for them rather than failing
         // (`gpu` still says why).
         gast_core::gpu::DeviceChoice::Auto if config.weights.needs_cpu() => {
-            eprintln!("λ_sw, λ_as or λ_asc > 0 runs on the CPU engine only so far: the steps run on the CPU");
+            eprintln!("λ_sw > 0 runs on the CPU engine only so far: the steps run on the CPU");
             None
         }
         device => device.resolve().with_context(|| format!("--device {device}"))?,

@@ -1,0 +1,256 @@
+//! The assignment terms on the GPU engine (`shaders/assignment.wgsl`): λ_as
+//! and λ_asc, the twin of [`crate::style::assignment::assignment_loss`].
+//!
+//! The pairing is a Hungarian assignment of at most
+//! [`crate::style::assignment::ASSIGN_MAX`] rendered positions, sequential
+//! work that stays on the host. The device gathers only the columns a step
+//! pairs (the drawn rendered positions of this step's RGB relu3 features and
+//! their drawn style positions, `channels × r` each), the host pairs them and
+//! computes both pulls with the CPU step's own
+//! [`crate::style::assignment::pull_pairs`], and the device adds the
+//! gradient back at those positions before VGG's backward pass. A step moves
+//! `2 · channels · r` floats down and `channels · r` up (3 MiB at r = 512),
+//! not the feature maps.
+//!
+//! The draw differs from the CPU step's in its seed only: the CPU seeds from
+//! the features' bits (which would need the whole maps here), the engine from
+//! a counter of its own, so a run is reproducible and each step draws anew.
+
+use super::{Bind, GpuContext, GpuError, Kernel};
+use crate::rng::Rng;
+use crate::style::assignment::{ASSIGN_MAX, Assignment, draw_pairs, pull_pairs};
+
+/// Threads per workgroup in `assignment.wgsl`.
+const WORKGROUP: u32 = 256;
+
+/// The uniform block of `assignment.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct AssignParams {
+    channels: u32,
+    positions: u32,
+    count: u32,
+    _pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<AssignParams>() == 16);
+
+/// The gathered columns, pairing and gradient of one step's assignment.
+#[derive(Debug)]
+pub struct GpuAssignment {
+    gather: Kernel,
+    scatter: Kernel,
+    channels: usize,
+    /// This step's rendered positions (`u32`, at most `ASSIGN_MAX`).
+    rows: wgpu::Buffer,
+    /// This step's style positions, one per row.
+    targets: wgpu::Buffer,
+    /// Gathered rendered features, style features and the gradient, `channels × r`.
+    x: wgpu::Buffer,
+    s: wgpu::Buffer,
+    g: wgpu::Buffer,
+    /// The uniforms of the two gathers and the scatter (one each: a uniform
+    /// is not rewritten between the dispatches of one encoder).
+    u_x: wgpu::Buffer,
+    u_s: wgpu::Buffer,
+    u_g: wgpu::Buffer,
+    rng: Rng,
+    /// Rows of the last draw (0: nothing to pull or add).
+    drawn: usize,
+}
+
+impl GpuAssignment {
+    /// The workspace for `channels`-channel features, its draws seeded by `seed`.
+    pub fn new(ctx: &GpuContext, channels: usize, seed: u64) -> Self {
+        let src = include_str!("../../../shaders/assignment.wgsl");
+        let binds = [Bind::Uniform, Bind::Read, Bind::Read, Bind::ReadWrite];
+        let k = |entry: &str| Kernel::new(ctx, &format!("assignment.{entry}"), src, entry, &binds);
+        let channels = channels.max(1);
+        let cols = channels * ASSIGN_MAX;
+        let zero = AssignParams { channels: 0, positions: 0, count: 0, _pad: 0 };
+        Self {
+            gather: k("gather"),
+            scatter: k("scatter_add"),
+            channels,
+            rows: ctx.zeros("assignment.rows", ASSIGN_MAX),
+            targets: ctx.zeros("assignment.targets", ASSIGN_MAX),
+            x: ctx.zeros("assignment.x", cols),
+            s: ctx.zeros("assignment.s", cols),
+            g: ctx.zeros("assignment.g", cols),
+            u_x: ctx.uniform("assignment.u_x", &zero),
+            u_s: ctx.uniform("assignment.u_s", &zero),
+            u_g: ctx.uniform("assignment.u_g", &zero),
+            rng: Rng::new(seed),
+            drawn: 0,
+        }
+    }
+
+    fn params(&self, positions: usize, count: usize) -> AssignParams {
+        AssignParams { channels: self.channels as u32, positions: positions as u32, count: count as u32, _pad: 0 }
+    }
+
+    /// Draws this step's pairs ([`draw_pairs`]) among the `covered` positions
+    /// of the `channels × n` rendered features and the `m` style positions,
+    /// and records the gathers of both sides' columns from `features` and
+    /// `style`. Returns the rows drawn (0 when nothing is covered or the style
+    /// is empty: then nothing is recorded and the step pulls nothing).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_gather(
+        &mut self,
+        ctx: &GpuContext,
+        enc: &mut wgpu::CommandEncoder,
+        features: &wgpu::Buffer,
+        n: usize,
+        covered: Vec<usize>,
+        style: &wgpu::Buffer,
+        m: usize,
+    ) -> usize {
+        self.drawn = 0;
+        if covered.is_empty() || m == 0 {
+            return 0;
+        }
+        let (rows, targets) = draw_pairs(&mut self.rng, covered, m);
+        self.record_gather_of(ctx, enc, features, n, &rows, style, m, &targets);
+        self.drawn
+    }
+
+    /// [`GpuAssignment::record_gather`] of given pairs (tests compare it with the CPU's).
+    #[allow(clippy::too_many_arguments)]
+    fn record_gather_of(
+        &mut self,
+        ctx: &GpuContext,
+        enc: &mut wgpu::CommandEncoder,
+        features: &wgpu::Buffer,
+        n: usize,
+        rows: &[usize],
+        style: &wgpu::Buffer,
+        m: usize,
+        targets: &[usize],
+    ) {
+        let r = rows.len().min(ASSIGN_MAX);
+        let to_u32 = |v: &[usize]| v.iter().take(r).map(|&i| i as u32).collect::<Vec<u32>>();
+        ctx.write(&self.rows, &to_u32(rows));
+        ctx.write(&self.targets, &to_u32(targets));
+        ctx.write(&self.u_x, std::slice::from_ref(&self.params(n, r)));
+        ctx.write(&self.u_s, std::slice::from_ref(&self.params(m, r)));
+        ctx.write(&self.u_g, std::slice::from_ref(&self.params(n, r)));
+        let groups = Kernel::groups_1d(self.channels * r, WORKGROUP);
+        self.gather.dispatch(ctx, enc, &[&self.u_x, &self.rows, features, &self.x], groups);
+        self.gather.dispatch(ctx, enc, &[&self.u_s, &self.targets, style, &self.s], groups);
+        self.drawn = r;
+    }
+
+    /// After the gathers' submission: reads the gathered columns back, pairs
+    /// them and computes both pulls on the host ([`pull_pairs`]), and uploads
+    /// the weighted gradient for [`GpuAssignment::record_scatter`]. Returns the
+    /// terms (the gradient stays on the device; `grad` is empty).
+    pub fn pull(&mut self, ctx: &GpuContext, cosine_weight: f32, l2_weight: f32) -> Result<Assignment, GpuError> {
+        if self.drawn == 0 {
+            return Ok(Assignment { cosine: 0.0, l2: 0.0, grad: Vec::new() });
+        }
+        let bytes = (self.channels * self.drawn * 4) as u64;
+        let x: Vec<f32> = ctx.read_range(&self.x, 0, bytes)?;
+        let s: Vec<f32> = ctx.read_range(&self.s, 0, bytes)?;
+        let pulled = pull_pairs(&x, &s, self.channels, cosine_weight, l2_weight);
+        ctx.write(&self.g, &pulled.grad);
+        Ok(Assignment { grad: Vec::new(), ..pulled })
+    }
+
+    /// Records `v_features += ` the last pull's gradient at the rows drawn
+    /// (nothing when none were).
+    pub fn record_scatter(&self, ctx: &GpuContext, enc: &mut wgpu::CommandEncoder, v_features: &wgpu::Buffer) {
+        if self.drawn == 0 {
+            return;
+        }
+        let groups = Kernel::groups_1d(self.channels * self.drawn, WORKGROUP);
+        self.scatter.dispatch(ctx, enc, &[&self.u_g, &self.rows, &self.g, v_features], groups);
+    }
+}
+
+/// The covered positions of a feature-position mask read from the device
+/// (`1.0` covered), every one of `n` without a mask.
+pub fn covered_positions(cells: Option<&[f32]>, n: usize) -> Vec<usize> {
+    match cells {
+        Some(c) => (0..n.min(c.len())).filter(|&i| c[i] > 0.5).collect(),
+        None => (0..n).collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::test_util::{ctx, noise};
+    use crate::style::focus::gather_positions;
+
+    /// The device's gather, the host's pull and the device's scatter give the
+    /// CPU step's terms and gradient for the same draw, the gradient added to
+    /// what was there and nothing added off the drawn rows.
+    #[test]
+    fn gather_pull_and_scatter_match_the_cpu_assignment() {
+        let ctx = ctx();
+        for (channels, n, m, cover, weights) in [
+            (3usize, 7usize, 9usize, 1.0f32, (10.0f32, 0.0f32)),
+            (5, 40, 30, 0.5, (10.0, 0.01)),
+            (16, 700, 650, 1.0, (0.0, 1.0)),
+            (8, 300, 20, 0.7, (1.0, 1.0)),
+        ] {
+            let label = format!("{channels} × {n} against {m}, cover {cover}, weights {weights:?}");
+            let f: Vec<f32> = noise(channels * n, 1).iter().map(|v| v.abs() + 0.1).collect();
+            let style: Vec<f32> = noise(channels * m, 2).iter().map(|v| v.abs()).collect();
+            let v0 = noise(channels * n, 3);
+            let covered: Vec<usize> =
+                noise(n, 4).iter().enumerate().filter(|(_, v)| v.abs() < cover).map(|(i, _)| i).collect();
+            let mut a = GpuAssignment::new(ctx, channels, 7);
+            let (rows, targets) = draw_pairs(&mut Rng::new(11), covered.clone(), m);
+            let (fb, sb, vb) = (ctx.upload("f", &f), ctx.upload("s", &style), ctx.upload("v", &v0));
+            let mut enc = ctx.encoder("assignment test gather");
+            a.record_gather_of(ctx, &mut enc, &fb, n, &rows, &sb, m, &targets);
+            ctx.submit(enc);
+            let got = a.pull(ctx, weights.0, weights.1).expect("pull");
+            let mut enc = ctx.encoder("assignment test scatter");
+            a.record_scatter(ctx, &mut enc, &vb);
+            ctx.submit(enc);
+            let v: Vec<f32> = ctx.read(&vb).expect("gradient");
+
+            // The CPU's pulls of the same columns, scattered by hand.
+            let x = gather_positions(&f, channels, n, &rows);
+            let s = gather_positions(&style, channels, m, &targets);
+            let want = pull_pairs(&x, &s, channels, weights.0, weights.1);
+            assert_eq!((got.cosine, got.l2), (want.cosine, want.l2), "{label}");
+            let r = rows.len();
+            let mut expect = v0.clone();
+            for (t, &pos) in rows.iter().enumerate() {
+                for c in 0..channels {
+                    expect[c * n + pos] += want.grad[c * r + t];
+                }
+            }
+            for (i, (g, e)) in v.iter().zip(&expect).enumerate() {
+                assert!((g - e).abs() <= 1e-6 * e.abs().max(1.0), "{label}: element {i}: {g} vs {e}");
+            }
+        }
+    }
+
+    #[test]
+    fn nothing_covered_draws_nothing_and_adds_nothing() {
+        let ctx = ctx();
+        let mut a = GpuAssignment::new(ctx, 4, 1);
+        let (fb, sb) = (ctx.upload("f", &noise(40, 1)), ctx.upload("s", &noise(40, 2)));
+        let v0 = noise(40, 3);
+        let vb = ctx.upload("v", &v0);
+        let mut enc = ctx.encoder("empty");
+        assert_eq!(a.record_gather(ctx, &mut enc, &fb, 10, Vec::new(), &sb, 10), 0);
+        assert_eq!(a.record_gather(ctx, &mut enc, &fb, 10, vec![1, 2], &sb, 0), 0);
+        ctx.submit(enc);
+        let t = a.pull(ctx, 10.0, 1.0).expect("pull");
+        assert_eq!((t.cosine, t.l2), (0.0, 0.0));
+        let mut enc = ctx.encoder("empty scatter");
+        a.record_scatter(ctx, &mut enc, &vb);
+        ctx.submit(enc);
+        assert_eq!(ctx.read::<f32>(&vb).expect("v"), v0);
+    }
+
+    #[test]
+    fn covered_positions_read_the_mask() {
+        assert_eq!(covered_positions(Some(&[1.0, 0.0, 1.0, 0.0]), 4), vec![0, 2]);
+        assert_eq!(covered_positions(None, 3), vec![0, 1, 2]);
+    }
+}
