@@ -1,5 +1,6 @@
 //! `gast bench step`: one optimisation step part by part on a device (or two,
-//! `--compare`), the focus's cost (`--compare-focus`), what re-used matches buy
+//! `--compare`), the focus's cost (`--compare-focus`), the assignment terms'
+//! (`--compare-assign`), what re-used matches buy
 //! on a GPU (`--matching-reuse N` alone with a GPU device), the whole
 //! schedule's time and memory.
 
@@ -63,6 +64,10 @@ pub struct StepArgs {
     /// frame and focused on the object, and print what the focus costs.
     #[arg(long, conflicts_with = "compare")]
     pub compare_focus: bool,
+    /// Run the same steps on --device twice in this process, without and with the assignment
+    /// terms (λ_asc 10, λ_as 0.015: the focus study's object recipe), and print what they cost.
+    #[arg(long, conflicts_with_all = ["compare", "compare_focus"])]
+    pub compare_assign: bool,
     /// Depth Anything V2 checkpoint for the style depth line (else $GAST_DEPTH_MODEL or the
     /// caches; never downloaded here).
     #[arg(long)]
@@ -143,7 +148,8 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         && f.matching_dims.is_none()
         && f.matching_candidates.is_none()
         && f.vgg_window.is_none();
-    if let (Some(reuse), true, false) = (f.matching_reuse, reuse_only, args.compare || args.compare_focus)
+    if let (Some(reuse), true, false) =
+        (f.matching_reuse, reuse_only, args.compare || args.compare_focus || args.compare_assign)
         && let Some(ctx) = args.device.resolve().with_context(|| format!("--device {}", args.device))?
     {
         return compare_reuse_gpu(&args, ctx, reuse);
@@ -167,6 +173,12 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     };
     if args.compare_focus {
         return compare_focus(&args, &inputs, &config, budget);
+    }
+    if args.compare_assign {
+        let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
+        let mut on = config.clone();
+        (on.weights.assignment_cosine, on.weights.assignment) = (10.0, 0.015);
+        return compare_arms(&inputs, [("without", config), ("λ_asc 10 + λ_as 0.015", on)], gpu, budget);
     }
     let devices: Vec<DeviceChoice> =
         if args.compare { vec![DeviceChoice::Cpu, DeviceChoice::Gpu] } else { vec![args.device] };
