@@ -26,7 +26,7 @@
 //! pull alone also drags the features' lengths to their targets', which on
 //! fire's saturated features lost NN-cos; the cosine pull turns the
 //! directions only (alone it lets the lengths grow), and a small λ_as beside
-//! it (0.003 to 0.01 with λ_asc 10) holds them (README, the focus study's
+//! it (0.003 to 0.015 with λ_asc 10) holds them (README, the focus study's
 //! rows).
 //!
 //! The draw is seeded by the rendered features' own bits, so a run is
