@@ -307,7 +307,8 @@ impl GpuEngine {
             };
             let covered = covered_positions(cells.as_deref(), n);
             let style = &self.style;
-            let a = self.assign.get_or_insert_with(|| GpuAssignment::new(ctx, style.channels(), config.seed ^ ASSIGN_SEED));
+            let a =
+                self.assign.get_or_insert_with(|| GpuAssignment::new(ctx, style.channels(), config.seed ^ ASSIGN_SEED));
             a.record_gather(ctx, &mut enc, plan.loss.rgb_features(), n, covered, style.modality(0), style.positions());
             ctx.submit(enc);
             pulled = Some(a.pull(ctx, w.assignment_cosine, w.assignment)?);

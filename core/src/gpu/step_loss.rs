@@ -295,7 +295,9 @@ impl StepLossPlan {
         search: Search<'_>,
     ) {
         self.record_features(ctx, k, enc, rgb_raw, inv_depth, edge, focus);
-        self.record_losses(ctx, k, enc, style, rgb_raw, inv_depth, content, depth_ref, hold, depth_grad, focus, scalars, search, None);
+        self.record_losses(
+            ctx, k, enc, style, rgb_raw, inv_depth, content, depth_ref, hold, depth_grad, focus, scalars, search, None,
+        );
     }
 
     /// The first half of [`StepLossPlan::record`]: the three maps VGG sees and
