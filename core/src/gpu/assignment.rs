@@ -166,15 +166,6 @@ impl GpuAssignment {
     }
 }
 
-/// The covered positions of a feature-position mask read from the device
-/// (`1.0` covered), every one of `n` without a mask.
-pub fn covered_positions(cells: Option<&[f32]>, n: usize) -> Vec<usize> {
-    match cells {
-        Some(c) => (0..n.min(c.len())).filter(|&i| c[i] > 0.5).collect(),
-        None => (0..n).collect(),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -246,11 +237,5 @@ mod tests {
         a.record_scatter(ctx, &mut enc, &vb);
         ctx.submit(enc);
         assert_eq!(ctx.read::<f32>(&vb).expect("v"), v0);
-    }
-
-    #[test]
-    fn covered_positions_read_the_mask() {
-        assert_eq!(covered_positions(Some(&[1.0, 0.0, 1.0, 0.0]), 4), vec![0, 2]);
-        assert_eq!(covered_positions(None, 3), vec![0, 1, 2]);
     }
 }

@@ -18,7 +18,7 @@
 use std::collections::HashMap;
 
 use super::adam::AdamKernel;
-use super::assignment::{GpuAssignment, covered_positions};
+use super::assignment::GpuAssignment;
 use super::step_loss::{StepLossKernels, StepLossPlan, slot};
 use super::{
     GcfmSubset, GpuAdam, GpuContext, GpuError, GpuFocus, GpuGaussians, GpuGrads, GpuRaster, GpuStyle, RasterKernels,
@@ -68,6 +68,8 @@ struct ViewTarget {
     /// The GCFM search of the covered feature positions only, when the
     /// focus covers at most [`SUBSET_SHARE`] of them.
     subset: Option<GcfmSubset>,
+    /// The covered feature positions (with `focus`).
+    covered_at: Option<Vec<u32>>,
     /// The background hold's reference ([`RefLoss::hold_reference`]), made
     /// on the first step with λ_out > 0.
     hold: Option<wgpu::Buffer>,
@@ -301,11 +303,10 @@ impl GpuEngine {
         let mut pulled = None;
         if assigning {
             let n = plan.loss.positions();
-            let cells: Option<Vec<f32>> = match focus {
-                Some(f) => Some(ctx.read(f.cells())?),
-                None => None,
+            let covered: Vec<usize> = match focus.and(target.covered_at.as_ref()) {
+                Some(at) => at.iter().map(|&i| i as usize).collect(),
+                None => (0..n).collect(),
             };
-            let covered = covered_positions(cells.as_deref(), n);
             let style = &self.style;
             let a =
                 self.assign.get_or_insert_with(|| GpuAssignment::new(ctx, style.channels(), config.seed ^ ASSIGN_SEED));
@@ -513,13 +514,19 @@ impl GpuEngine {
         // One scalar per view, once: a view the scene does not cover falls back to the frame.
         let covered = focus.covered_cells(ctx)?;
         let focus = (covered > 0).then_some(focus);
-        // With few covered positions, their list (read once) for a search of those only.
+        // The covered positions' list, read once: with few of them, the GCFM
+        // search looks at those only; the assignment terms draw from them.
         let positions = plan.loss.positions();
-        let subset = match &focus {
-            Some(f) if (covered as f64) <= SUBSET_SHARE * positions as f64 => {
+        let covered_at: Option<Vec<u32>> = match &focus {
+            Some(f) => {
                 let cells: Vec<f32> = ctx.read(f.cells())?;
-                let at: Vec<u32> = (0..positions as u32).filter(|&x| cells[x as usize] != 0.0).collect();
-                Some(plan.loss.gcfm_subset(ctx, &k.loss, &self.style, &at))
+                Some((0..positions as u32).filter(|&x| cells[x as usize] != 0.0).collect())
+            }
+            None => None,
+        };
+        let subset = match &covered_at {
+            Some(at) if (covered as f64) <= SUBSET_SHARE * positions as f64 => {
+                Some(plan.loss.gcfm_subset(ctx, &k.loss, &self.style, at))
             }
             _ => None,
         };
@@ -534,7 +541,8 @@ impl GpuEngine {
         if view >= self.targets.len() {
             self.targets.resize_with(view + 1, || None);
         }
-        self.targets[view] = Some(ViewTarget { content, inv_depth, focus, colour, kept: None, subset, hold });
+        self.targets[view] =
+            Some(ViewTarget { content, inv_depth, focus, colour, kept: None, subset, covered_at, hold });
         Ok(())
     }
 

@@ -34,7 +34,7 @@
 //! positions take part in a step (a fresh random subset when more are
 //! covered): the assignment costs `O(r³)`.
 
-use super::focus::gather_positions;
+use super::focus::{gather_positions, scatter_positions};
 use super::gcfm::{EPS, column_sq_norms};
 use crate::rng::Rng;
 use crate::vision::matmul;
@@ -166,23 +166,16 @@ pub fn assignment_loss(
     let channels = channels.max(1);
     let n = rendered.len() / channels;
     let m = style.len() / channels;
-    let mut grad = vec![0.0f32; rendered.len()];
     let covered: Vec<usize> = (0..n).filter(|&i| mask.is_none_or(|k| k[i])).collect();
     if covered.is_empty() || m == 0 {
-        return Assignment { cosine: 0.0, l2: 0.0, grad };
+        return Assignment { cosine: 0.0, l2: 0.0, grad: vec![0.0; rendered.len()] };
     }
     let mut rng = Rng::new(seed_of(rendered, n, &covered));
     let (rows, targets) = draw_pairs(&mut rng, covered, m);
     let x = gather_positions(rendered, channels, n, &rows);
     let s = gather_positions(style, channels, m, &targets);
     let pulled = pull_pairs(&x, &s, channels, cosine_weight, l2_weight);
-    let r = rows.len();
-    for (i, &pos) in rows.iter().enumerate() {
-        for c in 0..channels {
-            grad[c * n + pos] = pulled.grad[c * r + i];
-        }
-    }
-    Assignment { grad, ..pulled }
+    Assignment { grad: scatter_positions(&pulled.grad, channels, n, &rows), ..pulled }
 }
 
 /// One step's draw from `rng`: the rendered positions that take part

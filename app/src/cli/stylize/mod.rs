@@ -256,8 +256,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let scene = load_scene(&args.scene)?;
     let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
     let gpu = match args.device {
-        // The sliced Wasserstein term runs on the CPU engine only so far: `auto` picks the CPU for them rather than failing
-        // (`gpu` still says why).
+        // The sliced Wasserstein term runs on the CPU engine only so far:
+        // `auto` picks the CPU for it rather than failing (`gpu` still says why).
         gast_core::gpu::DeviceChoice::Auto if config.weights.needs_cpu() => {
             eprintln!("λ_sw > 0 runs on the CPU engine only so far: the steps run on the CPU");
             None
