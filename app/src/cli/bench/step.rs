@@ -78,6 +78,10 @@ pub struct StepArgs {
     /// engine's steps searching every visit, then keeping the matches.
     #[command(flatten)]
     pub fast: super::super::stylize::FastArgs,
+    /// Also write what was measured (each run's device, steps, wall time, per-phase step
+    /// medians and GPU memory) to this JSON file, for scripts such as `tools/gpu-check`.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
 }
 
 /// What one device's run of the step benchmark measured.
@@ -87,6 +91,43 @@ struct StepRun {
     wall_s: f64,
     per_phase: Vec<(gast_core::style::Phase, f64)>,
     first_losses: Option<gast_core::session::LossTerms>,
+    gpu_memory_mib: Option<f64>,
+    targets_s: f64,
+}
+
+impl StepRun {
+    /// The run as the `--json` file's record, under `label`.
+    fn to_json(&self, label: &str) -> serde_json::Value {
+        let phase = |p: gast_core::style::Phase| self.per_phase.iter().find(|x| x.0 == p).map(|x| x.1);
+        serde_json::json!({
+            "label": label,
+            "device": self.device,
+            "steps": self.steps,
+            "wall_s": self.wall_s,
+            "ms_per_step": self.wall_s * 1e3 / self.steps.max(1) as f64,
+            "colour_step_median_ms": phase(gast_core::style::Phase::Color),
+            "geometry_step_median_ms": phase(gast_core::style::Phase::Geometry),
+            "gpu_memory_mib": self.gpu_memory_mib,
+            "targets_s": self.targets_s,
+        })
+    }
+}
+
+/// Writes `--json`'s file: the benchmark's settings and every run, atomically.
+fn write_json(args: &StepArgs, runs: &[(&str, &StepRun)]) -> anyhow::Result<()> {
+    let Some(path) = &args.json else { return Ok(()) };
+    let (peak, _) = memory_mib();
+    let doc = serde_json::json!({
+        "scene": args.scene.as_ref().map(|p| p.display().to_string()),
+        "resolution": args.resolution,
+        "views": args.views,
+        "framing": format!("{:?}", args.framing).to_lowercase(),
+        "peak_resident_mib": peak,
+        "runs": runs.iter().map(|(l, r)| r.to_json(l)).collect::<Vec<_>>(),
+    });
+    let text = serde_json::to_string_pretty(&doc)?;
+    gast_core::io::write_bytes(path, text.as_bytes()).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
 }
 
 /// What both step benchmarks load: the scene, its orbit views, the style and the network.
@@ -178,7 +219,7 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
         let mut on = config.clone();
         (on.weights.assignment_cosine, on.weights.assignment) = (10.0, 0.015);
-        return compare_arms(&inputs, [("without", config), ("λ_asc 10 + λ_as 0.015", on)], gpu, budget);
+        return compare_arms(&args, &inputs, [("without", config), ("λ_asc 10 + λ_as 0.015", on)], gpu, budget);
     }
     let devices: Vec<DeviceChoice> =
         if args.compare { vec![DeviceChoice::Cpu, DeviceChoice::Gpu] } else { vec![args.device] };
@@ -275,6 +316,9 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     }
     let (peak, rss) = memory_mib();
     println!("memory: peak resident {peak:.0} MiB, now {rss:.0} MiB");
+    let labelled: Vec<(&str, &StepRun)> =
+        runs.iter().map(|r| (if r.device.starts_with("CPU") { "cpu" } else { "gpu" }, r)).collect();
+    write_json(&args, &labelled)?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -293,12 +337,13 @@ fn compare_focus(
         ("frame", StyleConfig { focus: Focus::Frame, ..config.clone() }),
         ("object", StyleConfig { focus: Focus::Object, ..config.clone() }),
     ];
-    compare_arms(inputs, arms, gpu, budget)
+    compare_arms(args, inputs, arms, gpu, budget)
 }
 
 /// The same steps on one device with two configurations (`arms`, the
 /// reference first), and the ratio of their per-phase medians.
 fn compare_arms(
+    args: &StepArgs,
     inputs: &StepInputs,
     arms: [(&str, gast_core::style::StyleConfig); 2],
     gpu: Option<gast_core::gpu::GpuContext>,
@@ -328,6 +373,7 @@ fn compare_arms(
         b.wall_s,
         b.wall_s / a.wall_s.max(1e-9)
     );
+    write_json(args, &[(la, a), (lb, b)])?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -341,7 +387,7 @@ fn compare_reuse_gpu(args: &StepArgs, ctx: gast_core::gpu::GpuContext, reuse: u3
     let budget = args.steps.unwrap_or(schedule.color_steps + args.geometry_steps);
     let kept = StyleConfig { matching: MatchingConfig { reuse, ..MatchingConfig::default() }, ..config.clone() };
     let label = format!("reuse {reuse}");
-    compare_arms(&inputs, [("reuse 1", config), (label.as_str(), kept)], Some(ctx), budget)
+    compare_arms(args, &inputs, [("reuse 1", config), (label.as_str(), kept)], Some(ctx), budget)
 }
 
 /// Runs `budget` steps of a fresh session on `gpu` (the CPU when `None`) and
@@ -372,8 +418,9 @@ fn time_steps(
     })?;
     let device = session.device();
     println!("\n{device}");
-    if let Some(bytes) = session.gpu_memory_bytes() {
-        println!("  GPU memory allocated by the engine: {:.1} MiB", bytes as f64 / f64::from(1u32 << 20));
+    let gpu_memory_mib = session.gpu_memory_bytes().map(|b| b as f64 / f64::from(1u32 << 20));
+    if let Some(mib) = gpu_memory_mib {
+        println!("  GPU memory allocated by the engine: {mib:.1} MiB");
     }
     let warm = session.warm_view_targets().map_err(|e| anyhow::anyhow!("{device}: {e}"))?;
     println!(
@@ -425,7 +472,15 @@ fn time_steps(
     if session.gpu_memory_bytes().is_some() {
         println!("(on the GPU the parts run back to back in one submission; their times are below)");
     }
-    Ok(StepRun { device, steps: reports.len(), wall_s, per_phase, first_losses: reports.first().map(|r| r.0.losses) })
+    Ok(StepRun {
+        device,
+        steps: reports.len(),
+        wall_s,
+        per_phase,
+        first_losses: reports.first().map(|r| r.0.losses),
+        gpu_memory_mib,
+        targets_s: warm,
+    })
 }
 
 /// Each GPU part of a step timed on its own at the benchmark's size.

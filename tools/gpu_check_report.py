@@ -1,0 +1,132 @@
+#!/usr/bin/env python3
+"""tools/gpu-check's report: the raw folder's logs and JSON files into one
+gpu-check.json and one markdown table (gpu-check.md), each figure beside the
+target it is judged against (issue 32). Standard library only: it runs on the
+bare GPU machine."""
+import json
+import os
+import re
+import sys
+
+raw, out, total_s = sys.argv[1], sys.argv[2], float(sys.argv[3])
+
+
+def load(name):
+    p = os.path.join(raw, name)
+    try:
+        with open(p) as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
+def log(name):
+    try:
+        with open(os.path.join(raw, name + ".log"), errors="replace") as f:
+            return f.read()
+    except OSError:
+        return ""
+
+
+meta = load("meta.json") or {}
+doc = {"meta": meta, "total_s": total_s, "steps": {}, "figures": []}
+for f in sorted(os.listdir(raw)):
+    if f.endswith(".rc.json"):
+        r = load(f)
+        doc["steps"][r["name"]] = r
+rows = []
+
+
+def figure(what, value, unit, target=None, ok=None, note=""):
+    doc["figures"].append({"what": what, "value": value, "unit": unit, "target": target, "ok": ok, "note": note})
+    v = "–" if value is None else (f"{value:.3g}" if isinstance(value, float) else str(value))
+    verdict = "" if ok is None else (" ✓" if ok else " ✗")
+    rows.append(f"| {what} | {v} {unit} | {target or ''}{verdict} | {note} |")
+
+
+def status(name):
+    s = doc["steps"].get(name)
+    if s is None:
+        return "not run"
+    return "timed out" if s["rc"] in (124, 137) else (f"failed (rc {s['rc']})" if s["rc"] else "")
+
+
+# Golden numerics on the GPU engine.
+m = re.findall(r"(\d+) passed, (\d+) failed", log("golden"))
+if m:
+    p, f = map(int, m[-1])
+    figure("golden files, GPU engine", f"{p} passed, {f} failed", "", "all within the CPU tolerances", f == 0)
+else:
+    figure("golden files, GPU engine", None, "", "all within the CPU tolerances", False, status("golden"))
+
+# One step on guitar and playbot; the CPU engine on this machine beside it where it ran.
+targets = {("guitar", 256): 10.0, ("guitar", 512): 30.0}
+for scene in ("guitar", "playbot"):
+    for name in sorted((n for n in doc["steps"] if n.startswith(scene + "_")), key=lambda n: int(n.split("_")[1])):
+        res = int(name.split("_")[1])
+        j = load(name + ".json")
+        if not j:
+            figure(f"{scene} step at {res} px", None, "ms", None, False, status(name))
+            continue
+        gpu = next((r for r in j["runs"] if r["label"] == "gpu"), None)
+        cpu = next((r for r in j["runs"] if r["label"] == "cpu"), None)
+        t = targets.get((scene, res))
+        if gpu:
+            med = lambda r, k: r.get(k) if r.get(k) is not None else None
+            fmt = lambda v: "–" if v is None else f"{v:.2f}"
+            col, geo = med(gpu, "colour_step_median_ms"), med(gpu, "geometry_step_median_ms")
+            # Judged on the geometry step's median (90% of the schedule), else the mean.
+            judged = geo if geo is not None else gpu["ms_per_step"]
+            note = f"{gpu['device']}; medians: colour {fmt(col)} ms, geometry {fmt(geo)} ms; mean {gpu['ms_per_step']:.2f} ms over {gpu['steps']} steps"
+            if cpu:
+                note += f"; CPU engine {cpu['ms_per_step']:.1f} ms a step on {meta.get('cores', '?')} cores (mean), CPU/GPU {cpu['ms_per_step'] / max(gpu['ms_per_step'], 1e-9):.3g}x"
+            figure(f"{scene} step at {res} px", judged, "ms", t and f"≤ {t:.0f} ms", t and judged <= t, note)
+            if scene == "playbot":
+                mib = gpu.get("gpu_memory_mib")
+                figure(f"playbot GPU memory at {res} px", mib, "MiB", "≤ 2048 MiB" if res == 512 else None,
+                       (mib is not None and mib <= 2048) if res == 512 else None,
+                       f"engine allocations; process peak resident {j['peak_resident_mib']:.0f} MiB")
+
+# The assignment terms' host round trip.
+j = load("compare_assign.json")
+if j and len(j["runs"]) == 2:
+    a, b = j["runs"]
+    figure("assignment terms (λ_asc 10 + λ_as 0.015), step time with / without", b["ms_per_step"] / max(a["ms_per_step"], 1e-9), "×",
+           None, None, f"{a['ms_per_step']:.2f} ms without, {b['ms_per_step']:.2f} ms with")
+else:
+    figure("assignment terms, with / without", None, "×", None, False, status("compare_assign"))
+
+# The full schedule, load to export.
+for name, what, target in (("full_guitar", "full schedule, guitar × block2", 60.0), ("full_fern", "full schedule, fern × block2", 180.0)):
+    s = doc["steps"].get(name)
+    if s is None:
+        if name == "full_fern":
+            figure(what, None, "s", f"≤ {target:.0f} s", None, "no fitted fern in .gpu-check (GAST_FERN_SCENE at prepare)")
+        continue
+    rep = load(os.path.join(name, "report.json"))
+    note = status(name)
+    if rep:
+        steps = rep.get("steps") or []
+        note = (note + "; " if note else "") + f"{len(steps)} steps at {rep.get('config', {}).get('resolution', '?')} px"
+    figure(what + " (load to export)", s["wall_s"] if s["rc"] == 0 else None, "s", f"≤ {target:.0f} s",
+           s["rc"] == 0 and s["wall_s"] <= target, note)
+
+# The depth network.
+d = log("depth_net")
+lines = [l.strip() for l in d.splitlines() if "GPU" in l or "gpu" in l]
+figure("Depth Anything V2 Small on the GPU engine", None if not lines else lines[-1][:160], "", None, None, status("depth_net"))
+
+# The studio.
+shot = os.path.join(out, "studio.png")
+figure("studio under Xvfb, GPU as the window's device", "screenshot" if os.path.exists(shot) else None, "", None,
+       None, status("studio") or ("no Xvfb" if "studio" not in doc["steps"] else ""))
+
+with open(os.path.join(out, "gpu-check.json"), "w") as f:
+    json.dump(doc, f, indent=2)
+md = [f"# gpu-check, {meta.get('date', '?')}", "",
+      f"Card: {meta.get('card') or 'no nvidia-smi (not an NVIDIA machine)'}; {meta.get('cores', '?')} CPU cores; "
+      f"dry run: {'yes (reduced sizes)' if meta.get('dry_run') else 'no'}; {total_s:.0f} s in all.", "",
+      "| what | measured | target | notes |", "|---|---|---|---|", *rows, ""]
+with open(os.path.join(out, "gpu-check.md"), "w") as f:
+    f.write("\n".join(md))
+print("\n".join(md))
