@@ -17,6 +17,8 @@ pub const DEMO_SCENE: &str = "demo_scene.ply";
 pub const DEMO_STYLES: [&str; 3] = ["style_waves.png", "style_blocks.png", "style_particles.png"];
 /// File name of the app icon inside `assets/`.
 pub const ICON: &str = "icon.png";
+/// Side of the known-depth relief styles (`relief_*.png` with `relief_*_depth.png`).
+pub const RELIEF_SIZE: usize = 256;
 
 /// The committed assets folder of this source tree.
 pub fn source_assets_dir() -> PathBuf {
@@ -262,6 +264,18 @@ pub fn generate(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
         .map(|(n, img)| Ok((n.to_string(), png_bytes(&img)?)))
         .collect::<anyhow::Result<_>>()?;
     images.push((ICON.to_string(), png_bytes(&icon())?));
+    // Styles whose depth is known (relief height fields), with that depth as a 16-bit PNG
+    // for `--style-depth`.
+    for kind in gast_core::vision::relief_styles::ReliefKind::ALL {
+        let r = gast_core::vision::relief_styles::relief_style(kind, RELIEF_SIZE);
+        let (w, h) = (r.width as u32, r.height as u32);
+        let rgb = RgbImage::from_raw(w, h, r.rgb).context("relief style size")?;
+        let depth: Vec<u16> = r.depth.iter().map(|&d| (d.clamp(0.0, 1.0) * 65535.0).round() as u16).collect();
+        let depth =
+            image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_raw(w, h, depth).context("relief depth size")?;
+        images.push((format!("{}.png", kind.name()), png_bytes(&rgb)?));
+        images.push((format!("{}_depth.png", kind.name()), png_bytes(&depth)?));
+    }
     for (name, bytes) in images {
         let path = dir.join(&name);
         gast_core::io::write_bytes(&path, &bytes).with_context(|| format!("writing {}", path.display()))?;

@@ -9,7 +9,8 @@ use crossbeam_channel::{Receiver, Sender};
 use gast_core::session::StyleDepthSource;
 use gast_core::session::StyleImage;
 use gast_core::style::stage1;
-use gast_core::vision::style_depth::{DepthPolarity, DepthProvider, HeuristicDepth};
+use gast_core::vision::relief_depth::ReliefDepth;
+use gast_core::vision::style_depth::{DepthPolarity, DepthProvider};
 use gast_core::{Camera, Gaussians};
 
 use super::viewport::SharedGaussians;
@@ -128,8 +129,8 @@ pub fn style_maps(style: &StyleImage, key: &StyleMapsKey) -> (Maps, Option<Strin
             stage1::style_maps(&style.rgb, style.height, style.width, *scale as usize, img, *polarity)
         }
         StyleDepthSource::Heuristic => {
-            let heuristic = HeuristicDepth::default();
-            stage1::style_maps(&style.rgb, style.height, style.width, *scale as usize, &heuristic, *polarity)
+            let relief = ReliefDepth::default();
+            stage1::style_maps(&style.rgb, style.height, style.width, *scale as usize, &relief, *polarity)
         }
     };
     let (w, h) = (m.width as u32, m.height as u32);

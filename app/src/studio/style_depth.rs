@@ -42,7 +42,9 @@ pub fn source_for(
         return hit.clone();
     }
     let resolved = match image.as_deref().map(DepthImage::from_file) {
-        Some(Err(e)) => (StyleDepthSource::Heuristic, Some(format!("{e}; using the built-in heuristic depth"))),
+        Some(Err(e)) => {
+            (StyleDepthSource::Heuristic, Some(format!("{e}; using the built-in relief estimate (luminance detail)")))
+        }
         read => {
             let cache = Stage1Cache::from_env();
             let r = StyleDepthSource::resolve_on(

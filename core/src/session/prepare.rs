@@ -14,7 +14,8 @@ use crate::style::stage1::{StyleMaps, style_maps};
 use crate::style::step::StyleTargets;
 use crate::vision::Vgg;
 use crate::vision::depth::{DepthAnything, DepthModelError, INPUT_SIZE, checkpoint_digest, resolve_depth_model};
-use crate::vision::style_depth::{DepthImage, DepthPolarity, DepthProvider, HeuristicDepth};
+use crate::vision::relief_depth::ReliefDepth;
+use crate::vision::style_depth::{DepthImage, DepthPolarity, DepthProvider};
 
 /// An 8-bit RGB image (the style), row-major HWC.
 #[derive(Clone, Debug, PartialEq)]
@@ -49,7 +50,8 @@ impl StyleImage {
 /// Where the style image's depth comes from.
 #[derive(Clone, Debug, Default)]
 pub enum StyleDepthSource {
-    /// The built-in estimate that needs no weights ([`HeuristicDepth`]).
+    /// The built-in estimate that needs no weights ([`ReliefDepth`]: the
+    /// style's luminance detail read as relief).
     #[default]
     Heuristic,
     /// A depth image the user supplied for this style.
@@ -109,7 +111,9 @@ impl StyleDepthSource {
                 Some(img) => plain(Self::Image(img), None),
                 None => plain(
                     Self::Heuristic,
-                    Some("no depth image was given for this style; using the built-in heuristic depth"),
+                    Some(
+                        "no depth image was given for this style; using the built-in relief estimate (luminance detail)",
+                    ),
                 ),
             },
             DepthProvider::Learned => {
@@ -125,7 +129,9 @@ impl StyleDepthSource {
                     },
                     Err(e) => plain(
                         Self::Heuristic,
-                        Some(&format!("learned style depth unavailable ({e}); using the built-in heuristic depth")),
+                        Some(&format!(
+                            "learned style depth unavailable ({e}); using the built-in relief estimate (luminance detail)"
+                        )),
                     ),
                 }
             }
@@ -196,7 +202,7 @@ pub fn prepare_style(
 ) -> PreparedStyle {
     let maps = match depth {
         StyleDepthSource::Heuristic => {
-            style_maps(&style.rgb, style.height, style.width, scale as usize, &HeuristicDepth::default(), polarity)
+            style_maps(&style.rgb, style.height, style.width, scale as usize, &ReliefDepth::default(), polarity)
         }
         StyleDepthSource::Image(img) => {
             style_maps(&style.rgb, style.height, style.width, scale as usize, img, polarity)

@@ -19,6 +19,8 @@ mod conv;
 pub mod depth;
 pub mod download;
 mod pth;
+pub mod relief_depth;
+pub mod relief_styles;
 pub mod resize;
 pub mod style_depth;
 pub mod vgg;

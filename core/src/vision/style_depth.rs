@@ -279,7 +279,7 @@ impl StyleDepthProvider for HeuristicDepth {
 }
 
 /// Separable box filter of radius `r` with clamped borders.
-fn box_blur(src: &[f32], h: usize, w: usize, r: usize) -> Vec<f32> {
+pub(crate) fn box_blur(src: &[f32], h: usize, w: usize, r: usize) -> Vec<f32> {
     let pass = |src: &[f32], len: usize, count: usize, at: &dyn Fn(usize, usize) -> usize| {
         let mut out = vec![0f32; src.len()];
         for line in 0..count {

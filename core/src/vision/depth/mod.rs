@@ -1,9 +1,9 @@
 //! Depth Anything V2, the monocular depth network GAST's reference uses for
 //! the style image's geometry cue, run on the project's own CPU kernels.
 //!
-//! Without it the studio falls back to [`HeuristicDepth`](super::style_depth::HeuristicDepth),
-//! whose smooth guess has almost no edges, so the depth and edge modalities
-//! of GCFM carry little of the style's structure. The network is read from
+//! Without it the studio falls back to [`ReliefDepth`](super::relief_depth::ReliefDepth),
+//! a relief read from the style's luminance detail: its outlines, not a
+//! network's understanding of the scene. The network is read from
 //! the published `transformers` checkpoints (`model.safetensors` and
 //! `config.json`, found or fetched by [`resolve`]) with every size taken from
 //! the config, so Small, Base and Large load through the same code.
