@@ -123,6 +123,34 @@ pub fn depth_to_gray(inv_depth: &[f32], alpha: &[f32]) -> Vec<u8> {
         .collect()
 }
 
+/// An inverse-depth map in the JET colour map, the way the reference draws its
+/// depth figures (z-score, then per-frame min-max, then JET: the z-score is
+/// affine, so this is min-max over the covered pixels, `alpha ≥ 0.5`);
+/// uncovered pixels black. A relief of a tenth of the range shows as a change
+/// of hue, where the grey of [`depth_to_gray`] barely changes. RGB, 8-bit.
+pub fn depth_to_jet(inv_depth: &[f32], alpha: &[f32]) -> Vec<u8> {
+    let covered: Vec<f32> = inv_depth.iter().zip(alpha).filter(|(_, a)| **a >= 0.5).map(|(d, _)| *d).collect();
+    let (lo, hi) = finite_range(&covered);
+    let scale = if hi > lo { 1.0 / (hi - lo) } else { 0.0 };
+    let lut = crate::vision::colormap::jet_lut();
+    inv_depth
+        .iter()
+        .zip(alpha)
+        .flat_map(|(&d, &a)| if a >= 0.5 && d.is_finite() { lut[to_u8((d - lo) * scale) as usize] } else { [0; 3] })
+        .collect()
+}
+
+/// Writes an inverse-depth map as a JET-coloured PNG ([`depth_to_jet`]).
+pub fn write_depth_jet_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    inv_depth: &[f32],
+    alpha: &[f32],
+) -> Result<(), OutputError> {
+    write_png(path, width, height, image::ColorType::Rgb8, &depth_to_jet(inv_depth, alpha))
+}
+
 fn write_png(path: &Path, width: u32, height: u32, color: image::ColorType, bytes: &[u8]) -> Result<(), OutputError> {
     let expected = width as usize * height as usize * color.channel_count() as usize;
     if bytes.len() != expected {

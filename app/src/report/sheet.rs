@@ -1,6 +1,7 @@
 //! The contact sheet of a stylization run: one image a person reads at a
 //! glance. The style with its depth and edge maps, then four views, each
-//! before / colour-matched / after in RGB and in inverse depth, labelled, with
+//! before / colour-matched / after in RGB, in inverse depth (grey) and in
+//! inverse depth as the reference draws it (min-max, JET), labelled, with
 //! the run's settings and time. `gast stylize` writes it as `sheet.png`; the
 //! studio exports the same sheet for its current run.
 //!
@@ -9,7 +10,7 @@
 
 use std::path::Path;
 
-use gast_core::io::depth_to_gray;
+use gast_core::io::{depth_to_gray, depth_to_jet};
 use gast_core::raster::{self, Render, RenderOptions};
 use gast_core::session::Session;
 use gast_core::style::config::LossWeights;
@@ -27,8 +28,8 @@ const TILE: u32 = 200;
 const GAP: u32 = 6;
 /// Height of a label line above a row of tiles.
 const LABEL: u32 = 22;
-/// Columns of the grid: RGB and depth of before / colour-matched / after.
-const COLUMNS: u32 = 6;
+/// Columns of the grid: RGB, grey depth and JET depth of before / colour-matched / after.
+const COLUMNS: u32 = 9;
 const BACKGROUND: Rgb<u8> = Rgb([28, 28, 32]);
 const LETTERBOX: Rgb<u8> = Rgb([48, 48, 54]);
 
@@ -68,6 +69,11 @@ impl Tile {
     pub fn render_depth(r: &Render) -> Self {
         let g = depth_to_gray(&r.inv_depth, &r.alpha);
         Self { width: r.width, height: r.height, rgb: g.iter().flat_map(|&v| [v; 3]).collect() }
+    }
+
+    /// The inverse depth of a render in JET, as the reference draws its depth figures.
+    pub fn render_depth_jet(r: &Render) -> Self {
+        Self { width: r.width, height: r.height, rgb: depth_to_jet(&r.inv_depth, &r.alpha) }
     }
 }
 
@@ -197,11 +203,13 @@ pub fn contact_sheet(content: &SheetContent) -> RgbImage {
     let names = ["before", "colour-matched", "after"];
     for (v, renders) in content.views.iter().enumerate() {
         for (k, r) in renders.iter().enumerate() {
-            let (rgb_col, depth_col) = (k as u32, 3 + k as u32);
+            let (rgb_col, depth_col, jet_col) = (k as u32, 3 + k as u32, 6 + k as u32);
             labels.push((f64::from(col_x(rgb_col)), f64::from(y + 16), 13.0, format!("view {} {}", v + 1, names[k])));
             labels.push((f64::from(col_x(depth_col)), f64::from(y + 16), 13.0, format!("{} depth", names[k])));
+            labels.push((f64::from(col_x(jet_col)), f64::from(y + 16), 13.0, format!("{} depth, JET", names[k])));
             blit(&mut img, &Tile::render_rgb(r), col_x(rgb_col), y + LABEL);
             blit(&mut img, &Tile::render_depth(r), col_x(depth_col), y + LABEL);
+            blit(&mut img, &Tile::render_depth_jet(r), col_x(jet_col), y + LABEL);
         }
         y += row;
     }

@@ -16,6 +16,7 @@
 
 pub mod consistency;
 pub mod content;
+pub mod depth_structure;
 pub mod geometry;
 pub mod measure;
 pub mod sliced;

@@ -9,11 +9,14 @@ use std::time::Instant;
 use anyhow::Context;
 use gast_core::Camera;
 use gast_core::camera::{framing_subject, subject_span};
+use gast_core::eval::depth_structure::{self, DepthStyleDistance};
 use gast_core::eval::{
     CoveredColour, Degeneration, StabilityThresholds, inverse_depth_change, mean_std_distance, nn_cosine_distance,
 };
 use gast_core::gpu::GpuContext;
-use gast_core::io::{write_bytes, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb};
+use gast_core::io::{
+    write_bytes, write_depth_jet_png, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb,
+};
 use gast_core::raster::{self, RenderOptions};
 use gast_core::session::{Event, Session, SessionInputs, Stage1Cache, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::StyleConfig;
@@ -69,6 +72,10 @@ pub fn resolve_style_depth(
     } else if config.depth_provider == DepthProvider::Learned && matches!(resolved.source, StyleDepthSource::Image(_)) {
         let on = gpu.map_or_else(|| "CPU".to_string(), GpuContext::describe);
         eprintln!("  style depth (Depth Anything V2 on {on}): {:.2} s", t.elapsed().as_secs_f64());
+    } else if matches!(resolved.source, StyleDepthSource::Heuristic) {
+        eprintln!("  style depth: the built-in relief estimate (the style's luminance detail read as relief)");
+    } else if config.depth_provider == DepthProvider::Image {
+        eprintln!("  style depth: the depth image given with --style-depth");
     }
     let source = resolved.source;
     Ok(source)
@@ -229,6 +236,12 @@ struct PreviewMetrics {
     nn_distance_before: f32,
     nn_distance_after: f32,
     inverse_depth_change: f32,
+    /// The depth style distance (`gast_core::eval::depth_structure`) of the
+    /// colour-matched and after renders' inverse depth to the style's depth.
+    depth_style_matched: DepthStyleDistance,
+    depth_style_after: DepthStyleDistance,
+    /// RMS of the inverse-depth change at the style's pattern scale, in units of the depth range.
+    relief_energy: f32,
     /// Mean colour of the covered pixels (alpha ≥ 0.5) of the colour-matched and after renders.
     colour_matched: CoveredColour,
     colour_after: CoveredColour,
@@ -241,6 +254,9 @@ struct Summary {
     nn_distance_before: f32,
     nn_distance_after: f32,
     inverse_depth_change: f32,
+    depth_style_matched: DepthStyleDistance,
+    depth_style_after: DepthStyleDistance,
+    relief_energy: f32,
     /// The colour-collapse detector on the preview views: covered luminance
     /// and chroma, colour-matched and after, and what fired (null: nothing).
     colour_matched: CoveredColour,
@@ -419,6 +435,11 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         summary.nn_distance_before += p.nn_distance_before / n;
         summary.nn_distance_after += p.nn_distance_after / n;
         summary.inverse_depth_change += p.inverse_depth_change / n;
+        summary.depth_style_matched.nn_cos += p.depth_style_matched.nn_cos / n;
+        summary.depth_style_matched.sw += p.depth_style_matched.sw / n;
+        summary.depth_style_after.nn_cos += p.depth_style_after.nn_cos / n;
+        summary.depth_style_after.sw += p.depth_style_after.sw / n;
+        summary.relief_energy += p.relief_energy / n;
         summary.colour_matched.luminance += p.colour_matched.luminance / n;
         summary.colour_matched.chroma += p.colour_matched.chroma / n;
         summary.colour_after.luminance += p.colour_after.luminance / n;
@@ -447,6 +468,14 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         summary.nn_distance_before,
         summary.nn_distance_after,
         100.0 * summary.inverse_depth_change
+    );
+    eprintln!(
+        "  depth against the style's depth: nearest-neighbour {:.4} -> {:.4}, sliced Wasserstein {:.3} -> {:.3} (colour-matched -> after); relief energy {:.4} of the depth range",
+        summary.depth_style_matched.nn_cos,
+        summary.depth_style_after.nn_cos,
+        summary.depth_style_matched.sw,
+        summary.depth_style_after.sw,
+        summary.relief_energy
     );
     let report = Report {
         scene: args.scene.display().to_string(),
@@ -482,6 +511,8 @@ fn write_previews(
     let opts = RenderOptions { background: session.config().background };
     let style = &session.style().maps;
     let style_feats = vgg.features(&style.rgb, style.height, style.width);
+    let depth_ref = depth_structure::style_depth_reference(vgg, &style.depth, style.height, style.width)
+        .context("the style's depth map has no features")?;
     let mut metrics = Vec::new();
     write_png_rgb(&out.join("style.png"), style.width as u32, style.height as u32, &style.rgb)?;
     write_png_gray_normalized(&out.join("style_depth.png"), style.width as u32, style.height as u32, &style.depth)?;
@@ -495,6 +526,7 @@ fn write_previews(
             write_png_rgb(&out.join(format!("view{k}_{tag}.png")), w, h, &img.rgb)?;
             write_depth_png(&out.join(format!("view{k}_{tag}_depth.png")), w, h, &img.inv_depth, &img.alpha)?;
             write_exr_depth(&out.join(format!("view{k}_{tag}_depth.exr")), w, h, &img.inv_depth)?;
+            write_depth_jet_png(&out.join(format!("view{k}_{tag}_depth_jet.png")), w, h, &img.inv_depth, &img.alpha)?;
         }
         let feats = |img: &raster::Render| {
             let rgb: Vec<f32> = img.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
@@ -513,6 +545,9 @@ fn write_previews(
                 &matched.alpha,
                 &after.alpha,
             ),
+            depth_style_matched: depth_structure::depth_style_distance(vgg, &matched, &depth_ref),
+            depth_style_after: depth_structure::depth_style_distance(vgg, &after, &depth_ref),
+            relief_energy: depth_structure::relief_energy(&matched, &after),
             // As the detector of `gast bench quality` reads them: each render's own covered pixels.
             colour_matched: CoveredColour::of(&matched.rgb, &matched.alpha),
             colour_after: CoveredColour::of(&after.rgb, &after.alpha),
