@@ -3,6 +3,7 @@
 
 mod colmap;
 mod json;
+mod llff;
 mod orbit;
 
 use std::path::{Path, PathBuf};
