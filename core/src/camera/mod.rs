@@ -1,7 +1,8 @@
 //! Pinhole cameras with the conventions of the golden files, and the camera
 //! files users bring (COLMAP, INRIA `cameras.json`, NeRF `transforms.json`,
 //! LLFF `poses_bounds.npy`), or cameras generated around a scene that came
-//! without any.
+//! without any. COLMAP's SfM points (`points3D`) are read here too, since they
+//! share the cameras' files and world frame.
 //!
 //! Every reader converts to one convention so the rasterizer and the losses
 //! never need to know where a camera came from: world-to-camera
@@ -12,6 +13,7 @@
 
 mod colmap;
 mod colmap_bin;
+mod colmap_points;
 mod colmap_write;
 mod error;
 mod framing;
@@ -28,6 +30,7 @@ use std::path::{Path, PathBuf};
 use glam::{Mat3, Vec2, Vec3};
 
 pub use colmap::load_colmap;
+pub use colmap_points::{ColmapPoints, find_colmap_points, load_colmap_points};
 pub use colmap_write::{write_colmap_binary, write_colmap_text};
 pub use error::CameraError;
 pub use framing::{crop_view, fit_view, framed_orbit, framing_subject, subject_span};
