@@ -89,7 +89,7 @@ fn read_points3d_txt(path: &Path) -> Result<ColmapPoints, CameraError> {
         }
         let rec = format!("line {}", n + 1);
         let toks: Vec<&str> = line.split_whitespace().collect();
-        if toks.len() < 8 || toks.len() % 2 != 0 {
+        if toks.len() < 8 || !toks.len().is_multiple_of(2) {
             return Err(CameraError::format(
                 path,
                 &rec,

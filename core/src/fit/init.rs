@@ -113,8 +113,8 @@ pub(crate) fn sfm_gaussians(points: &ColmapPoints, sh_degree: u32, opacity: f32)
         g.opacity_logits.push(logit);
         let start = g.sh.len();
         g.sh.resize(start + k, 0.0);
-        for c in 0..3 {
-            g.sh[start + c] = (f32::from(rgb[c]) / 255.0 - 0.5) / SH_C0;
+        for (c, v) in rgb.iter().enumerate() {
+            g.sh[start + c] = (f32::from(*v) / 255.0 - 0.5) / SH_C0;
         }
     }
     g
@@ -253,8 +253,8 @@ mod tests {
         assert_eq!(g.len(), 4);
         assert!(g.check_consistent().is_ok());
         let want = (4.0f32 / 3.0).sqrt().ln();
-        for i in 0..4 {
-            assert_eq!(g.means[i], positions[i].to_array());
+        for (i, p) in positions.iter().enumerate() {
+            assert_eq!(g.means[i], p.to_array());
             assert!(g.log_scales[i].iter().all(|s| (s - want).abs() < 1e-5), "{:?} vs {want}", g.log_scales[i]);
             assert_eq!(g.quats[i], [1.0, 0.0, 0.0, 0.0]);
             assert!((1.0 / (1.0 + (-g.opacity_logits[i]).exp()) - 0.1).abs() < 1e-6);

@@ -23,11 +23,14 @@ fn expected() -> ColmapPoints {
     }
 }
 
+/// One binary record: id, position, colour, track as (image id, point index) pairs.
+type Record = (u64, [f64; 3], [u8; 3], &'static [i32]);
+
 /// The same three points in the binary encoding.
 fn points_bin() -> Vec<u8> {
     let mut b = Vec::new();
     b.extend_from_slice(&3u64.to_le_bytes());
-    let recs: [(u64, [f64; 3], [u8; 3], &[i32]); 3] = [
+    let recs: [Record; 3] = [
         (1, [0.5, -1.25, 3.0], [255, 0, 10], &[1, 4, 2, 9]),
         (7, [-2.0, 0.0, 1e-3], [12, 34, 56], &[3, 1]),
         (8, [10.0, 20.0, 30.0], [0, 0, 0], &[1, 2, 3, 4, 5, 6]),
