@@ -9,7 +9,7 @@ use gast_tests::shared_file;
 fn fit_lego_improves_on_the_initialisation() {
     let Some(dataset) = shared_file("data/datasets/lego/transforms_train.json") else { return };
     let cfg = FitConfig { iterations: 300, resolution: 64, initial_gaussians: 10_000, ..FitConfig::default() };
-    let data = load_posed_images(&dataset, cfg.resolution, 20, cfg.background).expect("lego loads");
+    let data = load_posed_images(&dataset, None, cfg.resolution, 20, cfg.background).expect("lego loads");
     assert_eq!(data.views.len(), 20);
     assert_eq!((data.views[0].0.width, data.views[0].0.height), (64, 64));
     let cameras: Vec<_> = data.views.iter().map(|v| v.0.clone()).collect();

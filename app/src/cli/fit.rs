@@ -1,6 +1,7 @@
 //! `gast fit`: a 3DGS scene fitted to a posed-image dataset (NeRF
-//! transforms.json, COLMAP, cameras.json), so that datasets without a Gaussian
-//! scene can be stylized.
+//! transforms.json, COLMAP, LLFF poses_bounds.npy, cameras.json), so that
+//! datasets without a Gaussian scene can be stylized. It starts from the
+//! dataset's COLMAP SfM points when there are any, else from random Gaussians.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -8,6 +9,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clap::Args;
+use gast_core::camera::{find_colmap_points, load_colmap_points};
 use gast_core::fit::{self, FitConfig, load_posed_images, mean_psnr, psnr};
 use gast_core::io::write_png_rgb;
 use gast_core::raster::{self, RenderOptions};
@@ -17,9 +19,19 @@ use crate::progress;
 /// Arguments of `gast fit`.
 #[derive(Args, Debug)]
 pub struct FitArgs {
-    /// The dataset: a folder with transforms*.json, COLMAP sparse/0 + images/, or
+    /// The dataset: a folder with transforms*.json, COLMAP sparse/0 + images/,
+    /// LLFF poses_bounds.npy + images_8/ (or images_4/, images/), or
     /// cameras.json + images/ (or the camera file itself).
     pub dataset: PathBuf,
+    /// The images folder, relative to the dataset folder (e.g. `images_4`):
+    /// looked in first for every camera's image. For LLFF it also picks the
+    /// images the poses pair with (default: images_8, else images_4, else images).
+    #[arg(long)]
+    pub images: Option<String>,
+    /// Start from random Gaussians even when the dataset has COLMAP SfM points
+    /// (sparse/0/points3D.bin or .txt).
+    #[arg(long)]
+    pub random_init: bool,
     /// The fitted scene (INRIA .ply, written atomically).
     #[arg(long)]
     pub out: PathBuf,
@@ -94,7 +106,7 @@ impl FitArgs {
 pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     let cfg = args.config()?;
     let t0 = Instant::now();
-    let data = load_posed_images(&args.dataset, cfg.resolution, args.views, cfg.background)
+    let data = load_posed_images(&args.dataset, args.images.as_deref(), cfg.resolution, args.views, cfg.background)
         .with_context(|| format!("could not load the posed images of {}", args.dataset.display()))?;
     for w in &data.warnings {
         eprintln!("warning: {w}");
@@ -104,6 +116,7 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     let (held, views): (Vec<_>, Vec<_>) =
         (held.into_iter().map(|v| v.1).collect(), views.into_iter().map(|v| v.1).collect());
     let Some((first, _)) = views.first() else { anyhow::bail!("{}: no views to fit", args.dataset.display()) };
+    let initial = initial_scene(&args, &views, &cfg)?;
     eprintln!(
         "loaded {} views ({} held out) of {} at {}×{} in {:.1} s; fitting {} iterations from {} Gaussians",
         views.len(),
@@ -113,13 +126,13 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         first.height,
         t0.elapsed().as_secs_f64(),
         cfg.iterations,
-        cfg.initial_gaussians
+        initial.len()
     );
 
     let t_fit = Instant::now();
     let pb = progress::bar(u64::from(cfg.iterations), "fit");
     let mut smoothed = None::<f32>;
-    let scene = fit::fit(&views, &cfg, &mut |p| {
+    let scene = fit::fit_from(&views, initial, &cfg, &mut |p| {
         let l = smoothed.map_or(p.loss, |s| 0.98 * s + 0.02 * p.loss);
         smoothed = Some(l);
         if p.iteration % 10 == 0 || p.iteration == p.iterations {
@@ -155,6 +168,29 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         write_previews(dir, &scene, if held.is_empty() { &views } else { &held }, cfg.background)?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The dataset's SfM points as Gaussians when it has `points3D` (and
+/// `--random-init` is not given), else random ones; says which on stderr.
+fn initial_scene(
+    args: &FitArgs,
+    views: &[(gast_core::Camera, Vec<f32>)],
+    cfg: &FitConfig,
+) -> anyhow::Result<gast_core::Gaussians> {
+    let found = if args.random_init { None } else { find_colmap_points(&args.dataset) };
+    if let Some(path) = found {
+        let points = load_colmap_points(&path)
+            .with_context(|| format!("could not read the SfM points of {}", args.dataset.display()))?;
+        if !points.is_empty() {
+            eprintln!("initialisation: {} SfM points from {}", points.len(), path.display());
+            return Ok(fit::initial_scene_from_points(&points, cfg));
+        }
+        eprintln!("warning: {} holds no points; starting from random Gaussians", path.display());
+    }
+    let why = if args.random_init { "--random-init" } else { "no COLMAP points3D.bin/.txt in the dataset" };
+    eprintln!("initialisation: {} random Gaussians in the cameras' common view ({why})", cfg.initial_gaussians.max(1));
+    let cameras: Vec<_> = views.iter().map(|(c, _)| c.clone()).collect();
+    Ok(fit::initial_scene(&cameras, cfg))
 }
 
 /// Renders four views spread over the dataset, writes each render and its

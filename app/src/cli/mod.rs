@@ -64,7 +64,7 @@ pub enum Command {
     /// Convert a scene between INRIA .ply, PlayCanvas .compressed.ply, Niantic .spz
     /// and SOG (folder or .sog); the output's name picks the format.
     Convert(convert::ConvertArgs),
-    /// Fit a 3DGS scene to posed images (transforms.json, COLMAP, cameras.json)
+    /// Fit a 3DGS scene to posed images (transforms.json, COLMAP, LLFF poses_bounds.npy, cameras.json)
     /// with the CPU rasterizer; writes the .ply and optional preview renders.
     Fit(fit::FitArgs),
     /// Compare the project's numerics with reference files.
@@ -137,7 +137,7 @@ pub enum BenchCommand {
 /// Where the views come from: a camera file, or an orbit generated around the scene.
 #[derive(Args, Debug, Clone)]
 pub struct ViewArgs {
-    /// Camera file or folder (COLMAP sparse/0, cameras.json, transforms.json).
+    /// Camera file or folder (COLMAP sparse/0, poses_bounds.npy, cameras.json, transforms.json).
     /// Without it, views are generated on an orbit around the scene.
     #[arg(long)]
     pub cameras: Option<PathBuf>,

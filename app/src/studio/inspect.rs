@@ -34,7 +34,8 @@ pub struct Maps {
 pub struct SceneFile {
     /// The Gaussians.
     pub gaussians: Gaussians,
-    /// Cameras from the scene's folder (COLMAP, `cameras.json`, `transforms.json`) and that folder.
+    /// Cameras from the scene's folder (COLMAP, LLFF `poses_bounds.npy`, `cameras.json`,
+    /// `transforms.json`) and that folder.
     pub cameras: Option<(gast_core::camera::CameraSet, PathBuf)>,
     /// What the reader had to repair (e.g. infinite opacities), one line per kind.
     pub warnings: Vec<String>,

@@ -108,7 +108,8 @@ impl StudioApp {
         }
     }
 
-    /// Loads optimisation cameras (COLMAP, `cameras.json`, `transforms.json`) for the snap list.
+    /// Loads optimisation cameras (COLMAP, LLFF `poses_bounds.npy`, `cameras.json`,
+    /// `transforms.json`) for the snap list.
     pub fn open_cameras(&mut self, path: &Path) {
         match gast_core::camera::load(path) {
             Ok(set) if set.cameras.is_empty() => {
@@ -127,7 +128,7 @@ impl StudioApp {
         let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
         match ext.as_str() {
             "png" | "jpg" | "jpeg" | "webp" => self.open_style(path),
-            "bin" | "txt" => self.open_cameras(path),
+            "bin" | "txt" | "npy" => self.open_cameras(path),
             "json" => {
                 // cameras.json is a list, transforms.json has frames, SOG's meta.json has means; the rest are presets.
                 let text = std::fs::read_to_string(path).unwrap_or_default();

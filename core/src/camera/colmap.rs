@@ -168,7 +168,7 @@ fn assemble(
             translation: Vec3::new(im.tvec[0] as f32, im.tvec[1] as f32, im.tvec[2] as f32),
         });
     }
-    Ok(CameraSet { cameras, warnings })
+    Ok(CameraSet { cameras, warnings, depth_bounds: Vec::new() })
 }
 
 /// Checks a camera record's values, shared by the text and binary readers.

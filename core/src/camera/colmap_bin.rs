@@ -1,4 +1,5 @@
-//! The binary encoding of COLMAP models (`cameras.bin`, `images.bin`).
+//! The binary encoding of COLMAP models (`cameras.bin`, `images.bin`,
+//! `points3D.bin`).
 //!
 //! Counts come from the file, so every count is checked against the bytes
 //! left before anything is allocated or looped over: a corrupt count fails at
@@ -12,6 +13,7 @@ use std::path::{Path, PathBuf};
 
 use super::CameraError;
 use super::colmap::{ColmapCamera, ColmapImage, MODELS, check_image, insert_camera, known_models};
+use super::colmap_points::{ColmapPoints, check_point};
 
 /// A little-endian reader that knows the file length, so every read and
 /// every count is checked against the bytes that are really there.
@@ -171,6 +173,32 @@ pub(crate) fn read_images_bin(path: &Path) -> Result<Vec<ColmapImage>, CameraErr
     }
     trailing(&r)?;
     Ok(images)
+}
+
+pub(crate) fn read_points3d_bin(path: &Path) -> Result<ColmapPoints, CameraError> {
+    let mut r = BinReader::open(path)?;
+    // point3D_id u64, xyz 3 f64, rgb 3 u8, error f64, track_length u64.
+    const MIN_POINT: u64 = 8 + 3 * 8 + 3 + 8 + 8;
+    let n = r.count("num_points3D", MIN_POINT)?;
+    let mut points = ColmapPoints::with_capacity(n as usize);
+    for k in 0..n {
+        let id = r.u64(&format!("point record {k}"))?;
+        let rec = format!("point {id}");
+        let mut xyz = [0.0; 3];
+        for v in &mut xyz {
+            *v = r.f64(&format!("{rec}.xyz"))?;
+        }
+        let rgb = r.bytes::<3>(&format!("{rec}.rgb"))?;
+        r.f64(&format!("{rec}.error"))?;
+        // image_id i32, point2D_idx i32 per track element.
+        let track = r.count(&format!("{rec}.track_length"), 8)?;
+        r.skip(track * 8, &format!("{rec}.track"))?;
+        let p = check_point(path, &rec, xyz)?;
+        points.positions.push(p);
+        points.colors.push(rgb);
+    }
+    trailing(&r)?;
+    Ok(points)
 }
 
 fn trailing(r: &BinReader) -> Result<(), CameraError> {

@@ -88,5 +88,5 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
         ));
     }
     let warnings = orthonormal_warning(path, corrected, worst).into_iter().collect();
-    Ok(CameraSet { cameras, warnings })
+    Ok(CameraSet { cameras, warnings, depth_bounds: Vec::new() })
 }

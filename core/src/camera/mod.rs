@@ -1,6 +1,8 @@
 //! Pinhole cameras with the conventions of the golden files, and the camera
-//! files users bring (COLMAP, INRIA `cameras.json`, NeRF `transforms.json`),
-//! or cameras generated around a scene that came without any.
+//! files users bring (COLMAP, INRIA `cameras.json`, NeRF `transforms.json`,
+//! LLFF `poses_bounds.npy`), or cameras generated around a scene that came
+//! without any. COLMAP's SfM points (`points3D`) are read here too, since they
+//! share the cameras' files and world frame.
 //!
 //! Every reader converts to one convention so the rasterizer and the losses
 //! never need to know where a camera came from: world-to-camera
@@ -11,10 +13,13 @@
 
 mod colmap;
 mod colmap_bin;
+mod colmap_points;
 mod colmap_write;
 mod error;
 mod framing;
 mod inria;
+mod llff;
+mod npy;
 mod orbit;
 #[cfg(test)]
 mod tests;
@@ -25,10 +30,12 @@ use std::path::{Path, PathBuf};
 use glam::{Mat3, Vec2, Vec3};
 
 pub use colmap::load_colmap;
+pub use colmap_points::{ColmapPoints, find_colmap_points, load_colmap_points};
 pub use colmap_write::{write_colmap_binary, write_colmap_text};
 pub use error::CameraError;
 pub use framing::{crop_view, fit_view, framed_orbit, framing_subject, subject_span};
 pub use inria::load_inria;
+pub use llff::{LLFF_IMAGE_FOLDERS, POSES_BOUNDS, load_llff};
 pub use orbit::{OrbitLayout, OrbitOptions, RobustBounds, orbit_cameras, robust_bounds};
 pub use transforms::load_transforms;
 
@@ -171,6 +178,9 @@ pub struct CameraSet {
     /// Things the user should know (ignored distortion, re-orthonormalised
     /// poses, …), one line each, naming the file.
     pub warnings: Vec<String>,
+    /// Near and far scene depth per camera where the file gives them (LLFF),
+    /// else empty.
+    pub depth_bounds: Vec<[f32; 2]>,
 }
 
 /// The scene extent used to scale the geometry learning rate (ALGORITHM.md,
@@ -190,17 +200,29 @@ pub fn scene_extent(cameras: &[Camera]) -> f32 {
 
 /// Reads cameras from any supported source, detecting the format from the path:
 /// - a folder holding `sparse/0/` (or `sparse/`) with COLMAP files, or the
-///   COLMAP folder itself (`cameras.{bin,txt}` and `images.{bin,txt}`);
+///   COLMAP folder itself (`cameras.{bin,txt}` and `images.{bin,txt}`; a
+///   model without `images` is not one, e.g. LLFF's `sparse/0` with only
+///   `cameras.bin` and `points3D.bin`);
+/// - a folder holding `poses_bounds.npy` (LLFF, images from `images_8`,
+///   `images_4` or `images`, the first that exists: see [`load_llff`]);
 /// - a folder holding `cameras.json` (INRIA 3DGS trainer output);
 /// - a folder holding `transforms.json` or, failing that, `transforms_train.json`
 ///   or another `transforms*.json` (NeRF / nerfstudio);
 /// - a `.json` file, told apart by content (a list is `cameras.json`, an object
 ///   with `frames` is `transforms.json`);
-/// - a COLMAP `cameras`/`images` `.bin` or `.txt` file (its sibling is read too).
+/// - a COLMAP `cameras`/`images` `.bin` or `.txt` file (its sibling is read too);
+/// - an LLFF `.npy` file.
 pub fn load(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
+    load_with_images(path, None)
+}
+
+/// As [`load`], naming the images folder of an LLFF dataset (`images_4`, …,
+/// relative to the dataset folder), which decides the cameras' image names
+/// and sizes. The other formats name their images themselves and ignore it.
+pub fn load_with_images(path: impl AsRef<Path>, images: Option<&str>) -> Result<CameraSet, CameraError> {
     let path = path.as_ref();
     if path.is_dir() {
-        return load_dir(path);
+        return load_dir(path, images);
     }
     if !path.exists() {
         return Err(CameraError::NotFound { path: path.to_path_buf(), expected: EXPECTED.into() });
@@ -208,22 +230,26 @@ pub fn load(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
     match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
         Some("json") => load_json(path),
         Some("bin" | "txt") => load_colmap(path),
+        Some("npy") => load_llff(path, images),
         other => Err(CameraError::format(
             path,
             "file name",
-            "a .json, .bin or .txt camera file",
+            "a .json, .bin, .txt or .npy camera file",
             other.map_or("no extension".to_string(), |e| format!("a .{e} file")),
         )),
     }
 }
 
-const EXPECTED: &str = "sparse/0/{cameras,images}.{bin,txt}, cameras.json or transforms*.json";
+const EXPECTED: &str = "sparse/0/{cameras,images}.{bin,txt}, poses_bounds.npy, cameras.json or transforms*.json";
 
-fn load_dir(dir: &Path) -> Result<CameraSet, CameraError> {
+fn load_dir(dir: &Path, images: Option<&str>) -> Result<CameraSet, CameraError> {
     for d in [dir.join("sparse/0"), dir.join("sparse"), dir.to_path_buf()] {
         if colmap::has_colmap_files(&d) {
             return load_colmap(&d);
         }
+    }
+    if dir.join(POSES_BOUNDS).is_file() {
+        return load_llff(dir, images);
     }
     let inria = dir.join("cameras.json");
     if inria.is_file() {

@@ -137,8 +137,7 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
         }
 
         let (c2w_gl, center) = pose(path, &record, &frame.transform_matrix)?;
-        // OpenGL camera axes (x right, y up, looking down −z) → ours (y down, +z forward).
-        let c2w = DMat3::from_cols(c2w_gl.x_axis, -c2w_gl.y_axis, -c2w_gl.z_axis);
+        let c2w = from_opengl(c2w_gl);
         let (c2w, dev) = rotation_from(path, &format!("{record}.transform_matrix"), c2w)?;
         if dev > ORTHONORMAL_TOLERANCE {
             corrected += 1;
@@ -163,7 +162,14 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
             path.display()
         ));
     }
-    Ok(CameraSet { cameras, warnings })
+    Ok(CameraSet { cameras, warnings, depth_bounds: Vec::new() })
+}
+
+/// A camera-to-world rotation with OpenGL camera axes as columns (x right,
+/// y up, looking down −z) in ours (x right, y down, +z forward): the y and z
+/// columns are negated.
+pub(crate) fn from_opengl(c2w_gl: DMat3) -> DMat3 {
+    DMat3::from_cols(c2w_gl.x_axis, -c2w_gl.y_axis, -c2w_gl.z_axis)
 }
 
 /// The 3x3 rotation block and translation of a 4x4 (or 3x4) row-major matrix.

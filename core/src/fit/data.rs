@@ -47,13 +47,16 @@ pub struct PosedImages {
 /// Extensions tried when a camera's name has none (NeRF-synthetic `./train/r_0`).
 const EXTENSIONS: [&str; 7] = ["png", "jpg", "jpeg", "PNG", "JPG", "JPEG", "webp"];
 
-/// Where the image of the camera named `name` can be: beside the camera file
-/// (transforms.json `file_path`), in `images/` (COLMAP, the INRIA layout), with
-/// or without an added extension. The first existing candidate wins.
-pub fn image_candidates(dataset: &Path, name: &str) -> Vec<PathBuf> {
+/// Where the image of the camera named `name` can be: in the `images` folder
+/// when one is named (relative to the dataset folder, e.g. `images_4`), beside
+/// the camera file (transforms.json `file_path`, LLFF's `images_8/…`), in
+/// `images/` (COLMAP, the INRIA layout), with or without an added extension.
+/// The first existing candidate wins.
+pub fn image_candidates(dataset: &Path, images: Option<&str>, name: &str) -> Vec<PathBuf> {
     let root =
         if dataset.is_dir() { dataset.to_path_buf() } else { dataset.parent().unwrap_or(Path::new(".")).to_path_buf() };
-    let mut bases = vec![root.clone(), root.join("images")];
+    let mut bases: Vec<PathBuf> = images.map(|d| root.join(d)).into_iter().collect();
+    bases.extend([root.clone(), root.join("images")]);
     // A COLMAP folder given directly (`…/sparse/0`): its images are two levels up.
     for up in root.ancestors().skip(1).take(2) {
         bases.push(up.join("images"));
@@ -86,17 +89,20 @@ pub fn read_rgb(path: &Path, background: [f32; 3]) -> Result<(u32, u32, Vec<f32>
 }
 
 /// Loads the cameras of `dataset` (any source [`camera::load`] reads) and
-/// their images, keeping `max_views` of them evenly spread (all when 0),
+/// their images, looked for first in the folder `images` when it is named
+/// (which also picks an LLFF dataset's images folder, see
+/// [`camera::load_with_images`]), keeping `max_views` of them evenly spread (all when 0),
 /// composited on `background` and area-resized so the longer side is at most
 /// `resolution` pixels. A camera whose image has another size than the camera
 /// file says is rescaled to the image first.
 pub fn load_posed_images(
     dataset: &Path,
+    images: Option<&str>,
     resolution: u32,
     max_views: usize,
     background: [f32; 3],
 ) -> Result<PosedImages, FitDataError> {
-    let set = camera::load(dataset)?;
+    let set = camera::load_with_images(dataset, images)?;
     let n = set.cameras.len();
     let keep: Vec<usize> = if max_views == 0 || max_views >= n {
         (0..n).collect()
@@ -107,7 +113,7 @@ pub fn load_posed_images(
         .par_iter()
         .map(|&i| {
             let cam = &set.cameras[i];
-            let candidates = image_candidates(dataset, &cam.name);
+            let candidates = image_candidates(dataset, images, &cam.name);
             let Some(path) = candidates.iter().find(|p| p.is_file()) else {
                 return Err(FitDataError::MissingImage {
                     dataset: dataset.to_path_buf(),

@@ -1,5 +1,11 @@
-//! The starting scene when there are no SfM points: random Gaussians in the
-//! region every camera looks at.
+//! The starting scene: one Gaussian per SfM point when the dataset has
+//! COLMAP's `points3D` (as the 3DGS trainer starts), else random Gaussians in
+//! the region every camera looks at.
+//!
+//! From SfM points, each Gaussian takes its point's colour (as the SH band-0
+//! coefficient) and an isotropic scale from the root mean square distance to
+//! its three nearest neighbours (the trainer's `distCUDA2`), with identity
+//! rotation and the configured opacity.
 //!
 //! The region is derived from the cameras alone: the point closest (least
 //! squares) to all optical axes is the centre, and the half-width of the view
@@ -11,7 +17,7 @@
 
 use glam::{DMat3, DVec3, Vec3};
 
-use crate::camera::Camera;
+use crate::camera::{Camera, ColmapPoints};
 use crate::scene::{Gaussians, SH_C0};
 
 pub(crate) use crate::rng::Rng;
@@ -74,7 +80,7 @@ pub(crate) fn random_gaussians(cameras: &[Camera], n: usize, sh_degree: u32, opa
             means.push(p);
         }
     }
-    let dists = mean_knn_distance(&means, 3);
+    let dists = mean_knn_distance(&means, 3, KnnMean::Arithmetic);
     let mut g = Gaussians::with_capacity(n, sh_degree);
     let k = g.sh_coeffs() * 3;
     let logit = (opacity / (1.0 - opacity)).ln();
@@ -92,11 +98,43 @@ pub(crate) fn random_gaussians(cameras: &[Camera], n: usize, sh_degree: u32, opa
     g
 }
 
-/// Per point, the mean distance to its `k` nearest other points (`k ≤ 8`), on
-/// a uniform grid with about two points per cell. Only the 27 cells around a
-/// point are searched, so distances are exact up to one cell side and capped
-/// there. One point alone gets 1e-3.
-pub(crate) fn mean_knn_distance(points: &[Vec3], k: usize) -> Vec<f32> {
+/// One Gaussian per SfM point: the point's colour, isotropic scale from the
+/// root mean square distance to its three nearest neighbours, identity
+/// rotation and opacity `opacity`.
+pub(crate) fn sfm_gaussians(points: &ColmapPoints, sh_degree: u32, opacity: f32) -> Gaussians {
+    let dists = mean_knn_distance(&points.positions, 3, KnnMean::Quadratic);
+    let mut g = Gaussians::with_capacity(points.len(), sh_degree);
+    let k = g.sh_coeffs() * 3;
+    let logit = (opacity / (1.0 - opacity)).ln();
+    for ((p, rgb), d) in points.positions.iter().zip(&points.colors).zip(dists) {
+        g.means.push(p.to_array());
+        g.log_scales.push([d.max(1e-7).ln(); 3]);
+        g.quats.push([1.0, 0.0, 0.0, 0.0]);
+        g.opacity_logits.push(logit);
+        let start = g.sh.len();
+        g.sh.resize(start + k, 0.0);
+        for (c, v) in rgb.iter().enumerate() {
+            g.sh[start + c] = (f32::from(*v) / 255.0 - 0.5) / SH_C0;
+        }
+    }
+    g
+}
+
+/// How [`mean_knn_distance`] averages the neighbour distances.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum KnnMean {
+    /// The mean distance.
+    Arithmetic,
+    /// The root of the mean squared distance (the 3DGS trainer's SfM scales).
+    Quadratic,
+}
+
+/// Per point, the mean distance to its `k` nearest other points (`k ≤ 8`; with
+/// fewer other points, all of them), on a uniform grid with about two points
+/// per cell. The search grows shell by shell of cells around a point until no
+/// unsearched cell can hold a nearer point, so the result is exact; for dense
+/// points only the 27 cells around each are read. One point alone gets 1e-3.
+pub(crate) fn mean_knn_distance(points: &[Vec3], k: usize, mean: KnnMean) -> Vec<f32> {
     let n = points.len();
     if n < 2 {
         return vec![1e-3; n];
@@ -131,33 +169,55 @@ pub(crate) fn mean_knn_distance(points: &[Vec3], k: usize) -> Vec<f32> {
             let c = index(p).as_ivec3();
             let mut best = [f32::INFINITY; 8];
             let k = k.clamp(1, 8);
-            for dz in -1..=1 {
-                for dy in -1..=1 {
-                    for dx in -1..=1 {
-                        let q = c + glam::IVec3::new(dx, dy, dz);
-                        if q.min_element() < 0 || q.x >= dims.x as i32 || q.y >= dims.y as i32 || q.z >= dims.z as i32 {
-                            continue;
+            let visit = |q: glam::IVec3, best: &mut [f32; 8]| {
+                let f = flat(q.as_uvec3());
+                for &j in &order[starts[f] as usize..starts[f + 1] as usize] {
+                    if j as usize == i {
+                        continue;
+                    }
+                    let d2 = p.distance_squared(points[j as usize]);
+                    if d2 < best[k - 1] {
+                        let mut s = k - 1;
+                        while s > 0 && best[s - 1] > d2 {
+                            best[s] = best[s - 1];
+                            s -= 1;
                         }
-                        let f = flat(q.as_uvec3());
-                        for &j in &order[starts[f] as usize..starts[f + 1] as usize] {
-                            if j as usize == i {
-                                continue;
-                            }
-                            let d2 = p.distance_squared(points[j as usize]);
-                            if d2 < best[k - 1] {
-                                let mut s = k - 1;
-                                while s > 0 && best[s - 1] > d2 {
-                                    best[s] = best[s - 1];
-                                    s -= 1;
+                        best[s] = d2;
+                    }
+                }
+            };
+            let hi = dims.as_ivec3() - 1;
+            let mut r = 0i32;
+            loop {
+                // The shell of cells at Chebyshev distance r, clipped to the grid.
+                let (lo_q, hi_q) = ((c - r).max(glam::IVec3::ZERO), (c + r).min(hi));
+                for z in lo_q.z..=hi_q.z {
+                    for y in lo_q.y..=hi_q.y {
+                        if (z - c.z).abs() == r || (y - c.y).abs() == r {
+                            (lo_q.x..=hi_q.x).for_each(|x| visit(glam::IVec3::new(x, y, z), &mut best));
+                        } else {
+                            // Inside the shell's faces (r > 0 here): only its two x walls.
+                            for x in [c.x - r, c.x + r] {
+                                if x >= 0 && x <= hi.x {
+                                    visit(glam::IVec3::new(x, y, z), &mut best);
                                 }
-                                best[s] = d2;
                             }
                         }
                     }
                 }
+                // Points outside the searched cube are at least r cells away.
+                let reach = r as f32 * cell;
+                if best[k - 1] <= reach * reach || r >= hi.max_element() {
+                    break;
+                }
+                r += 1;
             }
-            // A neighbour beyond the searched cells is at least one cell away.
-            best[..k].iter().map(|d| if d.is_finite() { d.sqrt().min(cell) } else { cell }).sum::<f32>() / k as f32
+            let found = best[..k].iter().filter(|d| d.is_finite()).count().max(1);
+            let d = best[..k].iter().filter(|d| d.is_finite()).map(|d| d.sqrt());
+            match mean {
+                KnnMean::Arithmetic => d.sum::<f32>() / found as f32,
+                KnnMean::Quadratic => (d.map(|d| d * d).sum::<f32>() / found as f32).sqrt(),
+            }
         })
         .collect()
 }
@@ -170,15 +230,40 @@ mod tests {
     fn knn_matches_brute_force() {
         let mut rng = Rng::new(3);
         let pts: Vec<Vec3> = (0..500).map(|_| Vec3::new(rng.uniform(), rng.uniform(), 2.0 * rng.uniform())).collect();
-        let fast = mean_knn_distance(&pts, 3);
+        let fast = mean_knn_distance(&pts, 3, KnnMean::Arithmetic);
+        let rms = mean_knn_distance(&pts, 3, KnnMean::Quadratic);
         for (i, p) in pts.iter().enumerate() {
             let mut d: Vec<f32> =
                 pts.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, q)| p.distance(*q)).collect();
             d.sort_by(f32::total_cmp);
             let want = (d[0] + d[1] + d[2]) / 3.0;
-            // Exact unless a neighbour lies beyond one cell side, where it is capped.
-            assert!(fast[i] <= want + 1e-6 && fast[i] >= 0.6 * want, "point {i}: {} vs {want}", fast[i]);
+            assert!((fast[i] - want).abs() <= 1e-5 * want, "point {i}: {} vs {want}", fast[i]);
+            let want = ((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / 3.0).sqrt();
+            assert!((rms[i] - want).abs() <= 1e-5 * want, "point {i}: rms {} vs {want}", rms[i]);
         }
+    }
+
+    #[test]
+    fn sfm_points_keep_their_colour_and_neighbour_scale() {
+        // Four corners of a unit square: the three nearest of each are at 1, 1 and √2.
+        let positions: Vec<Vec3> =
+            [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]].map(Vec3::from).to_vec();
+        let colors = vec![[255, 0, 0], [0, 255, 0], [0, 0, 255], [128, 128, 128]];
+        let g = sfm_gaussians(&ColmapPoints { positions: positions.clone(), colors }, 1, 0.1);
+        assert_eq!(g.len(), 4);
+        assert!(g.check_consistent().is_ok());
+        let want = (4.0f32 / 3.0).sqrt().ln();
+        for (i, p) in positions.iter().enumerate() {
+            assert_eq!(g.means[i], p.to_array());
+            assert!(g.log_scales[i].iter().all(|s| (s - want).abs() < 1e-5), "{:?} vs {want}", g.log_scales[i]);
+            assert_eq!(g.quats[i], [1.0, 0.0, 0.0, 0.0]);
+            assert!((1.0 / (1.0 + (-g.opacity_logits[i]).exp()) - 0.1).abs() < 1e-6);
+        }
+        // Band 0 decodes to the point's colour; the higher band starts at zero.
+        let k = g.sh_coeffs() * 3;
+        assert!((g.sh[0] * SH_C0 + 0.5 - 1.0).abs() < 1e-6 && (g.sh[1] * SH_C0 + 0.5).abs() < 1e-6);
+        assert!((g.sh[3 * k + 2] * SH_C0 + 0.5 - 128.0 / 255.0).abs() < 1e-6);
+        assert!(g.sh[3..k].iter().all(|v| *v == 0.0));
     }
 
     #[test]

@@ -3,8 +3,9 @@
 //!
 //! Why it exists: datasets such as NeRF-synthetic come with images and poses
 //! but no Gaussian scene, and stylization needs one. This is plain 3DGS
-//! training kept small: random initialisation in the region the cameras look
-//! at (there are no SfM points), an L1 photometric loss on one view per
+//! training kept small: the dataset's SfM points as the initial Gaussians when
+//! it has COLMAP's `points3D` (else random ones in the region the cameras look
+//! at, e.g. for NeRF-synthetic), an L1 photometric loss on one view per
 //! iteration, Adam with the original trainer's learning rates (the means' rate
 //! decays exponentially and scales with the scene extent), and the trainer's
 //! clone/split/prune densification driven by the view-space gradient of the
@@ -28,7 +29,7 @@ use std::time::Instant;
 use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
-use crate::camera::{Camera, scene_extent};
+use crate::camera::{Camera, ColmapPoints, scene_extent};
 use crate::raster::{self, Grads, RenderOptions};
 use crate::scene::Gaussians;
 use crate::session::subset;
@@ -36,7 +37,7 @@ use crate::style::adam::{Adam, AdamConfig};
 
 pub use data::{FitDataError, PosedImages, image_candidates, load_posed_images, read_rgb};
 pub use init::look_at_region;
-use init::{Rng, random_gaussians};
+use init::{Rng, random_gaussians, sfm_gaussians};
 
 /// Everything that shapes a fit. Learning rates are the 3DGS trainer's.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -165,13 +166,36 @@ pub fn initial_scene(cameras: &[Camera], cfg: &FitConfig) -> Gaussians {
     random_gaussians(cameras, cfg.initial_gaussians.max(1), cfg.sh_degree.min(3), cfg.initial_opacity, &mut rng)
 }
 
-/// Fits a scene to posed images: `views` holds each camera with its RGB image
+/// An initial scene from SfM points, for [`fit_from`]: one Gaussian per point
+/// with its colour, the RMS distance to its three nearest neighbours as its
+/// (isotropic) scale, identity rotation and `cfg.initial_opacity`, as the 3DGS
+/// trainer starts. `cfg.initial_gaussians` does not apply.
+pub fn initial_scene_from_points(points: &ColmapPoints, cfg: &FitConfig) -> Gaussians {
+    sfm_gaussians(points, cfg.sh_degree.min(3), cfg.initial_opacity)
+}
+
+/// Fits a scene to posed images from random initial Gaussians
+/// ([`initial_scene`]): `views` holds each camera with its RGB image
 /// (`height × width × 3` in `[0, 1]`, already composited on
 /// `cfg.background`). `progress` is called after every iteration.
 ///
 /// # Panics
 /// When an image's size does not match its camera (a caller bug).
 pub fn fit(views: &[(Camera, Vec<f32>)], cfg: &FitConfig, progress: &mut dyn FnMut(FitProgress)) -> Gaussians {
+    let cameras: Vec<Camera> = views.iter().map(|(c, _)| c.clone()).collect();
+    fit_from(views, initial_scene(&cameras, cfg), cfg, progress)
+}
+
+/// As [`fit`], starting from `initial` (e.g. [`initial_scene_from_points`]).
+///
+/// # Panics
+/// When an image's size does not match its camera (a caller bug).
+pub fn fit_from(
+    views: &[(Camera, Vec<f32>)],
+    initial: Gaussians,
+    cfg: &FitConfig,
+    progress: &mut dyn FnMut(FitProgress),
+) -> Gaussians {
     for (cam, img) in views {
         assert_eq!(
             img.len(),
@@ -181,7 +205,7 @@ pub fn fit(views: &[(Camera, Vec<f32>)], cfg: &FitConfig, progress: &mut dyn FnM
         );
     }
     let cameras: Vec<Camera> = views.iter().map(|(c, _)| c.clone()).collect();
-    let mut g = initial_scene(&cameras, cfg);
+    let mut g = initial;
     if views.is_empty() {
         return g;
     }

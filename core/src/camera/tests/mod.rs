@@ -3,7 +3,9 @@
 
 mod colmap;
 mod json;
+mod llff;
 mod orbit;
+mod points;
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
