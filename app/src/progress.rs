@@ -26,3 +26,22 @@ pub fn bytes_bar(what: &str) -> ProgressBar {
     pb.set_prefix(what.to_string());
     pb
 }
+
+/// Advances `pb` by one; when the bar is hidden (stderr is not a terminal: a
+/// log, a CI job, a remote machine) it prints a line at every tenth of the
+/// way instead, so a run cut short still tells how far it got and how fast.
+pub fn tick(pb: &ProgressBar) {
+    pb.inc(1);
+    let (pos, len) = (pb.position(), pb.length().unwrap_or(0));
+    if !pb.is_hidden() || len < 10 || pos % len.div_ceil(10) != 0 && pos != len {
+        return;
+    }
+    let elapsed = pb.elapsed().as_secs_f64();
+    eprintln!(
+        "{}: {pos}/{len} ({:.0}%), {elapsed:.1} s, {:.3} s each, about {:.0} s left",
+        pb.prefix().trim(),
+        100.0 * pos as f64 / len as f64,
+        elapsed / pos.max(1) as f64,
+        elapsed / pos.max(1) as f64 * (len - pos) as f64
+    );
+}

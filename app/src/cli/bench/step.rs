@@ -435,7 +435,7 @@ fn time_steps(
         let t = Instant::now();
         let Some(r) = session.step() else { break };
         reports.push((r, t.elapsed().as_secs_f64() * 1e3));
-        pb.inc(1);
+        crate::progress::tick(&pb);
     }
     let wall_s = t_all.elapsed().as_secs_f64();
     pb.finish_and_clear();

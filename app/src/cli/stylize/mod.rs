@@ -373,7 +373,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             r.phase,
             r.losses.total
         ));
-        pb.inc(1);
+        crate::progress::tick(&pb);
         if let Some(d) = r.colour.and_then(|c| c.collapse()).filter(|_| !warned_collapse) {
             warned_collapse = true;
             // Not `pb.println`: a hidden bar (output not a terminal) drops its lines.
