@@ -16,11 +16,12 @@ use crate::scene::Gaussians;
 use crate::style::StyleConfig;
 use crate::style::adam::Adam;
 use crate::style::color_transfer::ColorTransfer;
+use crate::style::config::ParamRegulariser;
 use crate::style::focus::coverage_mask;
 use crate::style::gcfm::{Matches, match_features};
 use crate::style::matching::{MatchIndex, MatchMethod, agreement, find_matches};
 use crate::style::outside::{Outside, outside_mask};
-use crate::style::regularizers::l2_distance;
+use crate::style::regularizers::{l2_distance, mean_square_distance};
 use crate::style::step::{FeatureMap, LossFocus, RenderedMaps, content_target, step_loss_with};
 use crate::vision::Vgg;
 use crate::vision::canny::render_edges;
@@ -553,6 +554,12 @@ fn engine_problems(config: &StyleConfig, on_gpu: bool) -> Vec<String> {
             "the sliced Wasserstein term (λ_sw = {}) runs on the CPU engine only so far: use the CPU (--device cpu) or set it to 0",
             config.weights.sliced
         ));
+    }
+    if on_gpu && config.param_regulariser != crate::style::config::ParamRegulariser::Norm {
+        out.push(
+            "the mean-square parameter regulariser runs on the CPU engine only so far: use the CPU (--device cpu) or the norm"
+                .into(),
+        );
     }
     out
 }

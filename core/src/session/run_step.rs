@@ -163,9 +163,13 @@ impl Session {
             }
         }
         if geometry {
-            let (l_o, mut v_o) = l2_distance(&self.g.opacity_logits, &self.g_ref.opacity_logits);
-            let (l_s, mut v_s) = l2_distance(flat(&self.g.log_scales), flat(&self.g_ref.log_scales));
-            let (l_q, mut v_q) = l2_distance(flat(&self.g.quats), flat(&self.g_ref.quats));
+            let reg = |x: &[f32], r: &[f32], components: usize| match self.config.param_regulariser {
+                ParamRegulariser::Norm => l2_distance(x, r),
+                ParamRegulariser::MeanSquare => mean_square_distance(x, r, components),
+            };
+            let (l_o, mut v_o) = reg(&self.g.opacity_logits, &self.g_ref.opacity_logits, 1);
+            let (l_s, mut v_s) = reg(flat(&self.g.log_scales), flat(&self.g_ref.log_scales), 3);
+            let (l_q, mut v_q) = reg(flat(&self.g.quats), flat(&self.g_ref.quats), 4);
             terms.reg_opacity = l_o;
             terms.reg_scale = l_s;
             terms.reg_rotation = l_q;

@@ -179,6 +179,38 @@ pub struct StyleConfig {
     pub vgg_window: bool,
     /// Which steps λ_mean acts on: every step (the default) or the colour steps.
     pub feature_mean_steps: MeanSteps,
+    /// The form of the parameter regularisers λ_α, λ_s, λ_r: the paper's norm
+    /// over all Gaussians (the default) or a per-Gaussian mean square.
+    pub param_regulariser: ParamRegulariser,
+}
+
+/// The form of the geometry phase's parameter regularisers
+/// ([`crate::style::regularizers`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ParamRegulariser {
+    /// `λ‖x − x^c‖₂` over all Gaussians (the paper and the reference). Its
+    /// gradient has length λ whatever the deviation, so no parameter moves
+    /// unless the loss's gradient over all Gaussians is longer than λ (a group
+    /// lasso): on fern it holds opacity, scale and rotation at the
+    /// colour-matched values.
+    #[default]
+    Norm,
+    /// `λ·mean_i ‖x_i − x_i^c‖²` (per Gaussian, squared): a tether whose pull
+    /// grows with each Gaussian's own deviation, so small changes cost little
+    /// and runaway ones a lot, at any number of Gaussians. CPU engine only.
+    MeanSquare,
+}
+
+impl std::str::FromStr for ParamRegulariser {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "norm" => Ok(Self::Norm),
+            "mean-square" => Ok(Self::MeanSquare),
+            _ => Err(format!("expected norm or mean-square, found {s:?}")),
+        }
+    }
 }
 
 impl Default for StyleConfig {
@@ -203,6 +235,7 @@ impl Default for StyleConfig {
             color_floor: false,
             vgg_window: true,
             feature_mean_steps: MeanSteps::default(),
+            param_regulariser: ParamRegulariser::default(),
         }
     }
 }

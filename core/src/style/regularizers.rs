@@ -4,6 +4,8 @@
 //! - Parameter terms: the plain L2 norm `‖x − x^c‖₂` over all Gaussians (not
 //!   squared), gradient `(x − x^c)/‖x − x^c‖`, taken as 0 where the norm is 0
 //!   (the first steps, when nothing has moved yet).
+//!   [`ParamRegulariser::MeanSquare`](super::config::ParamRegulariser) uses
+//!   `mean_i ‖x_i − x_i^c‖²` instead, gradient `2(x − x^c)/n` (not in the paper).
 //! - Depth term: `mean|D − D^c|` over the inverse-depth maps, subgradient
 //!   `sign(D − D^c)/n` (0 where they are equal).
 
@@ -17,6 +19,17 @@ pub fn l2_distance(x: &[f32], x_ref: &[f32]) -> (f32, Vec<f32>) {
     }
     let inv = (1.0 / norm) as f32;
     (norm as f32, x.iter().zip(x_ref).map(|(&a, &b)| (a - b) * inv).collect())
+}
+
+/// `(1/n)·Σ_i ‖x_i − x_ref,i‖²` over `n` Gaussians of `components` values each
+/// (the mean over Gaussians of the squared deviation) and its gradient
+/// `2(x − x_ref)/n`.
+pub fn mean_square_distance(x: &[f32], x_ref: &[f32], components: usize) -> (f32, Vec<f32>) {
+    assert_eq!(x.len(), x_ref.len(), "mean_square_distance: sizes differ");
+    let n = (x.len() / components.max(1)).max(1) as f64;
+    let sq: f64 = x.iter().zip(x_ref).map(|(&a, &b)| f64::from(a - b) * f64::from(a - b)).sum();
+    let k = (2.0 / n) as f32;
+    ((sq / n) as f32, x.iter().zip(x_ref).map(|(&a, &b)| k * (a - b)).collect())
 }
 
 /// `mean|d − d_ref|` and its subgradient w.r.t. `d`.
@@ -53,6 +66,14 @@ mod tests {
         let (l0, g0) = l2_distance(&[1.0, 2.0], &[1.0, 2.0]);
         assert_eq!(l0, 0.0);
         assert!(g0.iter().all(|&v| v == 0.0));
+    }
+
+    #[test]
+    fn mean_square_value_and_gradient() {
+        // Two Gaussians of two components: deviations (3, 4) and (0, 0).
+        let (l, g) = mean_square_distance(&[3.0, 4.0, 1.0, 1.0], &[0.0, 0.0, 1.0, 1.0], 2);
+        assert!((l - 12.5).abs() < 1e-6);
+        assert_eq!(g, vec![3.0, 4.0, 0.0, 0.0]);
     }
 
     #[test]

@@ -180,6 +180,13 @@ pub struct StylizeArgs {
     /// channel of a Gaussian's base colour goes below 0 [default: off].
     #[arg(long)]
     pub color_floor: Option<bool>,
+    /// The parameter regularisers' form: norm (the paper's λ‖x − x^c‖ over all
+    /// Gaussians, which holds opacity, scale and rotation unless the loss's pull
+    /// over all Gaussians exceeds λ) or mean-square (λ·mean over Gaussians of
+    /// ‖x_i − x_i^c‖², a tether that grows with each Gaussian's own change; CPU
+    /// engine only) [default: norm].
+    #[arg(long)]
+    pub param_regulariser: Option<gast_core::style::config::ParamRegulariser>,
     /// Views rendered before/after into the output folder.
     #[arg(long, default_value_t = 4)]
     pub preview_views: usize,
@@ -241,6 +248,7 @@ impl StylizeArgs {
         self.fast.apply(&mut c);
         set!(self.focus, c.focus);
         set!(self.color_floor, c.color_floor);
+        set!(self.param_regulariser, c.param_regulariser);
         let problems = c.problems();
         anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
         Ok(c)
