@@ -15,20 +15,23 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
     }
     let out = std::env::temp_dir().join(format!("gast-gpu-check-{}", std::process::id()));
     std::fs::create_dir_all(&out).expect("temp dir");
-    let status = Command::new("bash")
+    let run = Command::new("bash")
         .arg(root.join("tools/gpu-check"))
         .args(["run", "--dry-run", "--bin", env!("CARGO_BIN_EXE_gast"), "--data"])
         .arg(&shared)
         .env("OUT", &out)
         .env("GPU_CHECK_DEADLINE", "600")
-        .status()
+        .output()
         .expect("bash runs tools/gpu-check");
-    assert!(status.success(), "tools/gpu-check run --dry-run failed: {status}");
+    let log = String::from_utf8_lossy(&run.stdout);
+    let tail: String = log.lines().rev().take(40).collect::<Vec<_>>().into_iter().rev().collect::<Vec<_>>().join("\n");
+    assert!(run.status.success(), "tools/gpu-check run --dry-run failed: {}\n{tail}", run.status);
+    println!("{tail}");
     let doc: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("gpu-check.json")).expect("gpu-check.json written"))
             .expect("gpu-check.json parses");
     for step in ["golden", "guitar_32", "guitar_48", "full_guitar", "guitar_64", "compare_assign", "playbot_32"] {
-        assert_eq!(doc["steps"][step]["rc"], 0, "step {step}: {}", doc["steps"][step]);
+        assert_eq!(doc["steps"][step]["rc"], 0, "step {step}: {}\n{tail}", doc["steps"][step]);
     }
     let figures = doc["figures"].as_array().expect("figures");
     let golden = figures.iter().find(|f| f["what"] == "golden files, GPU engine").expect("golden figure");

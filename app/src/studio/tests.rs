@@ -706,8 +706,9 @@ fn the_contact_sheet_of_a_run_is_exported() {
     assert!(app.errors.is_empty(), "{:?}", app.errors);
     assert!(app.notice.contains(&path.display().to_string()), "the notice does not name the sheet: {}", app.notice);
     let img = image::open(&path).unwrap_or_else(|e| panic!("{}: not an image ({e})", path.display())).to_rgb8();
-    // Six columns of 200 px tiles; a header, the style row and four view rows.
-    assert_eq!(img.width(), 6 * 200 + 7 * 6);
+    // Nine columns of 200 px tiles (RGB, grey depth, JET depth of before / colour-matched /
+    // after); a header, the style row and four view rows.
+    assert_eq!(img.width(), 9 * 200 + 10 * 6);
     assert_eq!(img.height(), 2 * 22 + 6 + 5 * (22 + 200 + 6) + 6);
     let mut colours: Vec<[u8; 3]> = img.pixels().map(|p| p.0).collect();
     colours.sort_unstable();
