@@ -125,6 +125,17 @@ fn param_grad(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgr
     }
 }
 
+// Parameter mean square's gradient: grad += λ·kh·(x − x^c), kh = 2/(number of
+// Gaussians); its value, kh/2·Σ(x − x^c)², is param_diff's reduction of squares.
+@compute @workgroup_size(256)
+fn param_sq_grad(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = flat_index(gid, nwg);
+    if i >= u.n {
+        return;
+    }
+    grad[i] = grad[i] + u.weight * (u.kh * (x[i] - x_ref[i]));
+}
+
 // The background hold = Σ over held channels of k·(I − I^c)², with x_ref a
 // per-pixel [r, g, b, k] of the colour-matched render and k = 1/(3·held
 // pixels) where the pixel is held, 0 elsewhere (core/src/gpu/engine.rs

@@ -15,6 +15,7 @@
 //! and Adam. It then reads back the scalars buffer: the loss terms and the
 //! number of (tile, splat) pairs the render needed.
 
+use crate::style::config::ParamRegulariser;
 use std::collections::HashMap;
 
 use super::adam::AdamKernel;
@@ -143,10 +144,16 @@ impl GpuEngine {
         let grads = GpuGrads::new(ctx, &g);
         let n = g_ref.len();
         let w = &config.weights;
+        let reg = |per: usize, weight: f32, offset: usize| match config.param_regulariser {
+            ParamRegulariser::Norm => RefLoss::param_l2(ctx, &k.loss.losses, &k.loss.reduce, per * n, weight, offset),
+            ParamRegulariser::MeanSquare => {
+                RefLoss::param_mean_square(ctx, &k.loss.losses, &k.loss.reduce, per * n, n, weight, offset)
+            }
+        };
         let regs = [
-            RefLoss::param_l2(ctx, &k.loss.losses, &k.loss.reduce, n, w.opacity, slot::REG_OPACITY)?,
-            RefLoss::param_l2(ctx, &k.loss.losses, &k.loss.reduce, 3 * n, w.scale, slot::REG_SCALE)?,
-            RefLoss::param_l2(ctx, &k.loss.losses, &k.loss.reduce, 4 * n, w.rotation, slot::REG_ROTATION)?,
+            reg(1, w.opacity, slot::REG_OPACITY)?,
+            reg(3, w.scale, slot::REG_SCALE)?,
+            reg(4, w.rotation, slot::REG_ROTATION)?,
         ];
         let sh_stride = (g_ref.sh_coeffs() * 3) as u32;
         let opt = Optimisers {

@@ -41,6 +41,7 @@ pub struct LossKernels {
     depth_l1: Kernel,
     param_diff: Kernel,
     param_grad: Kernel,
+    param_sq_grad: Kernel,
     hold: Kernel,
 }
 
@@ -55,6 +56,7 @@ impl LossKernels {
             depth_l1: k("depth_l1"),
             param_diff: k("param_diff"),
             param_grad: k("param_grad"),
+            param_sq_grad: k("param_sq_grad"),
             hold: k("hold"),
         })
     }
@@ -166,6 +168,7 @@ impl TvLoss {
 enum RefKind {
     DepthL1,
     ParamL2,
+    ParamMeanSquare,
     Hold,
 }
 
@@ -210,6 +213,26 @@ impl RefLoss {
         let params = LossParams { h: 1, w: n, c: 1, n, weight, kh: 0.0, kv: 0.0, norm_index: loss_offset as u32 };
         let spec = ReduceSpec::new(ReduceOp::SumSquares, len).to(loss_offset).sqrt();
         Ok(Self { kind: RefKind::ParamL2, plan: LossPlan::new(ctx, kernels, reduce, params, len, spec)? })
+    }
+
+    /// Plans the per-Gaussian mean square of `len`-float arrays holding
+    /// `gaussians` Gaussians, `(1/gaussians)·Σ(x − x^c)²`
+    /// ([`crate::style::regularizers::mean_square_distance`]), with weight
+    /// `weight`, its value going to `scalars[loss_offset]`.
+    pub fn param_mean_square(
+        ctx: &GpuContext,
+        kernels: &Arc<LossKernels>,
+        reduce: &Arc<ReduceKernels>,
+        len: usize,
+        gaussians: usize,
+        weight: f32,
+        loss_offset: usize,
+    ) -> Result<Self, GpuError> {
+        let n = len as u32;
+        let k = inverse(gaussians);
+        let params = LossParams { h: 1, w: n, c: 1, n, weight, kh: 2.0 * k, kv: 0.0, norm_index: loss_offset as u32 };
+        let spec = ReduceSpec::new(ReduceOp::SumSquares, len).to(loss_offset).scaled(k);
+        Ok(Self { kind: RefKind::ParamMeanSquare, plan: LossPlan::new(ctx, kernels, reduce, params, len, spec)? })
     }
 
     /// Plans the background hold of `pixels`-pixel RGB renders with weight
@@ -270,6 +293,11 @@ impl RefLoss {
                 p.dispatch(ctx, encoder, &k.param_diff, x, x_ref, v_x, scalars);
                 p.reduction.record(ctx, encoder, &p.scratch, scalars);
                 p.dispatch(ctx, encoder, &k.param_grad, x, x_ref, v_x, scalars);
+            }
+            RefKind::ParamMeanSquare => {
+                p.dispatch(ctx, encoder, &k.param_diff, x, x_ref, v_x, scalars);
+                p.reduction.record(ctx, encoder, &p.scratch, scalars);
+                p.dispatch(ctx, encoder, &k.param_sq_grad, x, x_ref, v_x, scalars);
             }
         }
     }

@@ -4,7 +4,7 @@
 use super::*;
 use crate::gpu::test_util::{ctx, noise};
 use crate::style::outside::{Outside, outside_loss};
-use crate::style::regularizers::{depth_l1, l2_distance};
+use crate::style::regularizers::{depth_l1, l2_distance, mean_square_distance};
 use crate::style::tv::tv_loss_masked;
 
 /// Checks a term's value (relative 1e-4) and its accumulated gradient
@@ -140,6 +140,37 @@ fn parameter_regularisers_match_the_cpu_and_vanish_at_zero() {
         check(&what, got[*offset], want, &ctx.read::<f32>(grad).expect("read"), before, &g, *weight);
     }
     assert_eq!(got[2], 0.0, "an unmoved array has a zero norm");
+}
+
+#[test]
+fn the_parameter_mean_square_matches_the_cpu() {
+    let ctx = ctx();
+    let kernels = LossKernels::new(ctx);
+    let reduce = ReduceKernels::new(ctx);
+    let gaussians = 1000;
+    let scalars = ctx.upload("scalars", &[0.0f32; 4]);
+    let mut enc = ctx.encoder("param mean square");
+    let mut cases = Vec::new();
+    for (k, (per, offset)) in [(1usize, 0usize), (3, 1), (4, 3)].into_iter().enumerate() {
+        let len = gaussians * per;
+        let x_ref = noise(len, 700 + k as u64);
+        let x: Vec<f32> = x_ref.iter().zip(noise(len, 800 + k as u64)).map(|(a, b)| a + 0.1 * b).collect();
+        let weight = 1.0 + k as f32;
+        let plan = RefLoss::param_mean_square(ctx, &kernels, &reduce, len, gaussians, weight, offset).expect("plan");
+        scratch_noise(ctx, &plan.plan, len);
+        let before = noise(len, 900 + k as u64);
+        let grad = ctx.upload("grad", &before);
+        let (xb, rb) = (ctx.upload("x", &x), ctx.upload("x_ref", &x_ref));
+        plan.record(ctx, &mut enc, &xb, &rb, &grad, &scalars);
+        cases.push((plan, x, x_ref, before, grad, offset, weight, per, xb, rb));
+    }
+    ctx.submit(enc);
+    let got: Vec<f32> = ctx.read(&scalars).expect("read");
+    for (_, x, x_ref, before, grad, offset, weight, per, _, _) in &cases {
+        let (want, g) = mean_square_distance(x, x_ref, *per);
+        let what = format!("parameter mean square of {} floats at offset {offset}", x.len());
+        check(&what, got[*offset], want, &ctx.read::<f32>(grad).expect("read"), before, &g, *weight);
+    }
 }
 
 #[test]

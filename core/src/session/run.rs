@@ -555,12 +555,6 @@ fn engine_problems(config: &StyleConfig, on_gpu: bool) -> Vec<String> {
             config.weights.sliced
         ));
     }
-    if on_gpu && config.param_regulariser != crate::style::config::ParamRegulariser::Norm {
-        out.push(
-            "the mean-square parameter regulariser runs on the CPU engine only so far: use the CPU (--device cpu) or the norm"
-                .into(),
-        );
-    }
     out
 }
 

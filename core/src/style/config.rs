@@ -198,7 +198,7 @@ pub enum ParamRegulariser {
     Norm,
     /// `λ·mean_i ‖x_i − x_i^c‖²` (per Gaussian, squared): a tether whose pull
     /// grows with each Gaussian's own deviation, so small changes cost little
-    /// and runaway ones a lot, at any number of Gaussians. CPU engine only.
+    /// and runaway ones a lot, at any number of Gaussians. Both engines.
     MeanSquare,
 }
 

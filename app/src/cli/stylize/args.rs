@@ -183,8 +183,8 @@ pub struct StylizeArgs {
     /// The parameter regularisers' form: norm (the paper's λ‖x − x^c‖ over all
     /// Gaussians, which holds opacity, scale and rotation unless the loss's pull
     /// over all Gaussians exceeds λ) or mean-square (λ·mean over Gaussians of
-    /// ‖x_i − x_i^c‖², a tether that grows with each Gaussian's own change; CPU
-    /// engine only) [default: norm].
+    /// ‖x_i − x_i^c‖², a tether that grows with each Gaussian's own change)
+    /// [default: norm].
     #[arg(long)]
     pub param_regulariser: Option<gast_core::style::config::ParamRegulariser>,
     /// Views rendered before/after into the output folder.

@@ -278,14 +278,6 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             eprintln!("λ_sw > 0 runs on the CPU engine only so far: the steps run on the CPU");
             None
         }
-        gast_core::gpu::DeviceChoice::Auto
-            if config.param_regulariser != gast_core::style::config::ParamRegulariser::Norm =>
-        {
-            eprintln!(
-                "the mean-square parameter regulariser runs on the CPU engine only so far: the steps run on the CPU"
-            );
-            None
-        }
         device => device.resolve().with_context(|| format!("--device {device}"))?,
     };
     // On a software rasterizer (lavapipe) the network's GEMMs run at about
