@@ -27,21 +27,28 @@ pub fn bytes_bar(what: &str) -> ProgressBar {
     pb
 }
 
-/// Advances `pb` by one; when the bar is hidden (stderr is not a terminal: a
-/// log, a CI job, a remote machine) it prints a line at every tenth of the
-/// way instead, so a run cut short still tells how far it got and how fast.
+/// Advances `pb` by one; see [`advance_to`].
 pub fn tick(pb: &ProgressBar) {
-    pb.inc(1);
-    let (pos, len) = (pb.position(), pb.length().unwrap_or(0));
-    if !pb.is_hidden() || len < 10 || pos % len.div_ceil(10) != 0 && pos != len {
+    advance_to(pb, pb.position() + 1);
+}
+
+/// Moves `pb` to `pos`; when the bar is hidden (stderr is not a terminal: a
+/// log, a CI job, a remote machine) it prints a line each time a tenth of the
+/// way is passed instead, so a run cut short still tells how far it got and
+/// how fast.
+pub fn advance_to(pb: &ProgressBar, pos: u64) {
+    let before = pb.position();
+    pb.set_position(pos);
+    let len = pb.length().unwrap_or(0);
+    if !pb.is_hidden() || len == 0 || before * 10 / len >= pos * 10 / len {
         return;
     }
     let elapsed = pb.elapsed().as_secs_f64();
+    let each = elapsed / pos.max(1) as f64;
     eprintln!(
-        "{}: {pos}/{len} ({:.0}%), {elapsed:.1} s, {:.3} s each, about {:.0} s left",
+        "{}: {pos}/{len} ({:.0}%), {elapsed:.1} s, {each:.3} s each, about {:.0} s left",
         pb.prefix().trim(),
         100.0 * pos as f64 / len as f64,
-        elapsed / pos.max(1) as f64,
-        elapsed / pos.max(1) as f64 * (len - pos) as f64
+        each * len.saturating_sub(pos) as f64
     );
 }

@@ -136,7 +136,7 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         let l = smoothed.map_or(p.loss, |s| 0.98 * s + 0.02 * p.loss);
         smoothed = Some(l);
         if p.iteration % 10 == 0 || p.iteration == p.iterations {
-            pb.set_position(u64::from(p.iteration));
+            progress::advance_to(&pb, u64::from(p.iteration));
             pb.set_message(format!("L1 {l:.4}, {} Gaussians", p.gaussians));
         }
     });

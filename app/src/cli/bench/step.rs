@@ -79,7 +79,8 @@ pub struct StepArgs {
     #[command(flatten)]
     pub fast: super::super::stylize::FastArgs,
     /// Also write what was measured (each run's device, steps, wall time, per-phase step
-    /// medians and GPU memory) to this JSON file, for scripts such as `tools/gpu-check`.
+    /// medians and GPU memory) to this JSON file, for scripts such as `tools/gpu-check`
+    /// (the device runs and the `--compare*` arms; not the fast-settings comparison).
     #[arg(long)]
     pub json: Option<PathBuf>,
 }
