@@ -54,13 +54,13 @@ pub struct LossWeights {
     /// rendered RGB relu3 feature over the positions the losses average over
     /// pulled to a distinct style feature, by a least-cost one-to-one
     /// assignment to a fresh sample of the style's features each step. Not in
-    /// the reference: 0 (off) by default. CPU engine.
+    /// the reference: 0 (off) by default. Both engines.
     pub assignment: f32,
     /// λ_asc, the cosine assignment term ([`crate::style::assignment`]): the
     /// same pairing, made by cosine distance, pulling each feature's
     /// direction to its partner's (`1 − cos`). With it on, λ_as pulls along
-    /// the cosine pairing. Not in the reference: 0 (off) by default. CPU
-    /// engine.
+    /// the cosine pairing. Not in the reference: 0 (off) by default. Both
+    /// engines.
     pub assignment_cosine: f32,
 }
 
