@@ -113,14 +113,7 @@ pub fn write_depth_png(
 /// An inverse-depth map as 8-bit grey, as [`write_depth_png`] draws it:
 /// min-max over the covered pixels (`alpha ≥ 0.5`), near bright, uncovered black.
 pub fn depth_to_gray(inv_depth: &[f32], alpha: &[f32]) -> Vec<u8> {
-    let covered: Vec<f32> = inv_depth.iter().zip(alpha).filter(|(_, a)| **a >= 0.5).map(|(d, _)| *d).collect();
-    let (lo, hi) = finite_range(&covered);
-    let scale = if hi > lo { 1.0 / (hi - lo) } else { 0.0 };
-    inv_depth
-        .iter()
-        .zip(alpha)
-        .map(|(&d, &a)| if a >= 0.5 && d.is_finite() { to_u8(0.1 + 0.9 * (d - lo) * scale) } else { 0 })
-        .collect()
+    covered_unit_depth(inv_depth, alpha).map(|t| t.map_or(0, |t| to_u8(0.1 + 0.9 * t))).collect()
 }
 
 /// An inverse-depth map in the JET colour map, the way the reference draws its
@@ -129,15 +122,17 @@ pub fn depth_to_gray(inv_depth: &[f32], alpha: &[f32]) -> Vec<u8> {
 /// uncovered pixels black. A relief of a tenth of the range shows as a change
 /// of hue, where the grey of [`depth_to_gray`] barely changes. RGB, 8-bit.
 pub fn depth_to_jet(inv_depth: &[f32], alpha: &[f32]) -> Vec<u8> {
+    let lut = crate::vision::colormap::jet_lut();
+    covered_unit_depth(inv_depth, alpha).flat_map(|t| t.map_or([0; 3], |t| lut[to_u8(t) as usize])).collect()
+}
+
+/// Each pixel's inverse depth min-max normalised over the covered pixels
+/// (`alpha ≥ 0.5`) to [0, 1], `None` where it is uncovered or not finite.
+fn covered_unit_depth<'a>(inv_depth: &'a [f32], alpha: &'a [f32]) -> impl Iterator<Item = Option<f32>> + 'a {
     let covered: Vec<f32> = inv_depth.iter().zip(alpha).filter(|(_, a)| **a >= 0.5).map(|(d, _)| *d).collect();
     let (lo, hi) = finite_range(&covered);
     let scale = if hi > lo { 1.0 / (hi - lo) } else { 0.0 };
-    let lut = crate::vision::colormap::jet_lut();
-    inv_depth
-        .iter()
-        .zip(alpha)
-        .flat_map(|(&d, &a)| if a >= 0.5 && d.is_finite() { lut[to_u8((d - lo) * scale) as usize] } else { [0; 3] })
-        .collect()
+    inv_depth.iter().zip(alpha).map(move |(&d, &a)| (a >= 0.5 && d.is_finite()).then_some((d - lo) * scale))
 }
 
 /// Writes an inverse-depth map as a JET-coloured PNG ([`depth_to_jet`]).
