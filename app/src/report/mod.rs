@@ -6,6 +6,7 @@ mod axis;
 pub mod chart;
 mod fast;
 pub mod focus;
+pub mod geometry;
 mod glyphs;
 pub mod quality;
 pub mod sheet;

@@ -7,6 +7,8 @@
 
 use std::path::PathBuf;
 
+pub mod geometry;
+
 use clap::ValueEnum;
 use gast_core::eval::{Checkpoint, Degeneration, TrialOutcome};
 use gast_core::session::StyleImage;
@@ -44,6 +46,11 @@ pub enum Study {
     /// `collapse_object_on_every_pair` and `collapse_content_on_every_pair`
     /// of [`Sizes`] choose). Runs only when named.
     Collapse,
+    /// Does the shape take the style's structure? A fit of fern × the nine
+    /// styles, decoupled against colour-only, geometry-only and the
+    /// mean-square tether, the depth measures after every cycle
+    /// ([`geometry`]). Runs only when named.
+    Geometry,
 }
 
 impl Study {

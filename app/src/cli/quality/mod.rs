@@ -23,9 +23,12 @@ use gast_core::session::{PreparedStyle, SessionInputs, StyleDepthSource, StyleIm
 use gast_core::style::config::{LearningRates, LossWeights};
 use gast_core::style::{Focus, Mode, StyleConfig};
 
+mod geometry;
+
 use super::bench::shared_dir;
 use super::{Framing, ViewArgs, load_scene, views_for};
 use crate::report::quality::{read_summary, rewrite_report, write_report};
+use crate::study::geometry::GeometrySizes;
 use crate::study::{
     COLLAPSE_CONTENT, Record, Row, RunSummary, SEED_LABEL, Sizes, Study, StyleSource, TrialSpec, mode_label,
 };
@@ -55,6 +58,11 @@ pub struct QualityArgs {
     /// results.json, without running anything.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["quick", "studies", "out", "sizes"])]
     pub report: Option<PathBuf>,
+    /// The geometry study's scene: a fit of the fern (`gast fit
+    /// ../shared/data/datasets/fern --holdout-every 8 --resolution 504 --out fern.ply`).
+    /// Default: fit one into the output folder first (a few minutes).
+    #[arg(long, value_name = "PLY")]
+    pub scene: Option<PathBuf>,
 }
 
 /// The whole grid: trials and the rows that read them.
@@ -421,6 +429,15 @@ fn fast_options(base: &StyleConfig) -> Vec<(&'static str, StyleConfig)> {
 /// Runs the grid and writes the report.
 pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
     if let Some(dir) = &args.report {
+        let geometry_dir = dir.join("geometry");
+        if geometry_dir.join("results.json").exists() {
+            let run = crate::report::geometry::read(&geometry_dir)?;
+            let (path, verdict) = crate::report::geometry::write(&geometry_dir, &run)?;
+            println!("geometry study: {verdict}\nreport: {}", path.display());
+            if !dir.join("results.json").exists() {
+                return Ok(ExitCode::SUCCESS);
+            }
+        }
         let run = read_summary(dir)?;
         let index = rewrite_report(dir, &run)?;
         for line in crate::report::focus::write_focus_report(dir, &run)? {
@@ -445,6 +462,18 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
         p.exists().then_some(p)
     });
     let vgg = Arc::new(super::stylize::load_vgg(weights.as_deref())?);
+    if studies.contains(&Study::Geometry) {
+        let mut g = if args.quick { GeometrySizes::quick() } else { GeometrySizes::full() };
+        g.scene = args.scene.clone();
+        let dir = out.join("geometry");
+        let run = geometry::run(&g, &shared, &vgg, &dir)?;
+        let (path, verdict) = crate::report::geometry::write(&dir, &run)?;
+        println!("geometry study in {:.1} min: {verdict}\nreport: {}", run.wall_s / 60.0, path.display());
+    }
+    let studies: Vec<Study> = studies.into_iter().filter(|&s| s != Study::Geometry).collect();
+    if studies.is_empty() {
+        return Ok(ExitCode::SUCCESS);
+    }
     let grid = build_grid(&sizes, &shared, &studies);
     let total_steps: u64 = grid.trials.iter().map(|t| u64::from(t.config.schedule().total_steps())).sum();
     println!(
