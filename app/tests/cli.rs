@@ -132,6 +132,45 @@ fn stylize_writes_a_scene_renders_and_a_report() {
     for f in ["view0_before.png", "view0_after.png", "view0_after_depth.exr", "style_depth.png", "style_edge.png"] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
+
+    // Strength after the run: the colour-matched scene is written beside the
+    // result, and `convert --blend` reproduces either end exactly.
+    let matched = gast_core::scene::load(out.join("colour_matched.ply")).expect("colour_matched.ply loads");
+    assert_eq!(matched.len(), result.len());
+    let (stylized, toward) = (out.join("stylized.ply"), out.join("colour_matched.ply"));
+    for (flags, expected) in [
+        (&["--strength", "0"][..], &matched),
+        (&["--strength", "100%"][..], &result),
+        (&["--strength", "100", "--shape-strength", "0"][..], &matched),
+    ] {
+        let path = out.join("blended.ply");
+        let mut args = vec!["convert", s(&stylized), s(&path), "--blend", s(&toward)];
+        args.extend_from_slice(flags);
+        let o = gast(&args);
+        assert!(o.status.success(), "{flags:?}: {}", stderr(&o));
+        let b = gast_core::scene::load(&path).expect("blended scene loads");
+        if flags.len() == 2 {
+            assert!(b == *expected, "{flags:?} does not reproduce its end");
+        } else {
+            assert_eq!((&b.means, &b.opacity_logits, &b.sh), (&matched.means, &matched.opacity_logits, &result.sh));
+        }
+    }
+    let other = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/demo_scene.ply");
+    let half = gast(&["convert", s(&stylized), s(&out.join("half.ply")), "--blend", s(&toward), "--strength", "50"]);
+    assert!(half.status.success(), "{}", stderr(&half));
+    for (bad, says) in [
+        (vec!["--blend", s(&toward), "--strength", "150"], "from 0 to 100"),
+        (vec!["--strength", "50"], "--blend"),
+        (vec!["--blend", s(&toward)], "--strength"),
+        (vec!["--blend", s(&other), "--strength", "50"], "same number of Gaussians"),
+    ] {
+        let bad_out = out.join("bad.ply");
+        let mut args = vec!["convert", s(&stylized), s(&bad_out)];
+        args.extend(bad.iter().copied());
+        let o = gast(&args);
+        assert!(!o.status.success() && stderr(&o).contains(says), "{bad:?}: {}", stderr(&o));
+        assert!(!out.join("bad.ply").exists(), "{bad:?} wrote a file");
+    }
     std::fs::remove_dir_all(&out).ok();
 }
 

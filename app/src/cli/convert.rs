@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Args;
 use gast_core::Gaussians;
-use gast_core::scene::{SaveOptions, SceneFormat};
+use gast_core::scene::{SaveOptions, SceneFormat, Strength};
 
 use super::load_scene;
 use crate::progress;
@@ -23,6 +23,12 @@ pub struct SaveArgs {
     /// Largest palette of a SOG output's higher SH bands (k-means beyond it), 1 to 65536.
     #[arg(long, default_value_t = 65_536)]
     pub sog_palette: usize,
+}
+
+impl Default for SaveArgs {
+    fn default() -> Self {
+        Self { spz_version: 4, sog_palette: 65_536 }
+    }
 }
 
 impl SaveArgs {
@@ -42,6 +48,57 @@ pub struct ConvertArgs {
     pub output: PathBuf,
     #[command(flatten)]
     pub save: SaveArgs,
+    /// Blend the input (a stylized scene) back toward this one before writing:
+    /// the `colour_matched.ply` that `gast stylize` writes beside its result
+    /// (or the scene it started from). Needs --strength, or --colour-strength
+    /// and --shape-strength.
+    #[arg(long, value_name = "SCENE")]
+    pub blend: Option<PathBuf>,
+    #[command(flatten)]
+    pub strength: StrengthArgs,
+}
+
+/// How much of a stylization to keep (`gast stylize`, `gast convert --blend`).
+#[derive(Args, Debug, Clone, Default)]
+pub struct StrengthArgs {
+    /// Share of the stylization kept, in percent, colour and shape alike:
+    /// 0 is the colour-matched scene, 100 the stylized one (exact at both ends).
+    #[arg(long, value_name = "PERCENT", value_parser = percent)]
+    pub strength: Option<f32>,
+    /// Share of the colour change kept (SH coefficients), percent; overrides --strength.
+    #[arg(long, value_name = "PERCENT", value_parser = percent)]
+    pub colour_strength: Option<f32>,
+    /// Share of the shape change kept (means, scales, rotations, opacities), percent; overrides --strength.
+    #[arg(long, value_name = "PERCENT", value_parser = percent)]
+    pub shape_strength: Option<f32>,
+}
+
+impl StrengthArgs {
+    /// The strengths as fractions; `None` when no flag was given.
+    pub fn strength(&self) -> Option<Strength> {
+        let both = self.strength;
+        if both.is_none() && self.colour_strength.is_none() && self.shape_strength.is_none() {
+            return None;
+        }
+        let pick = |one: Option<f32>| one.or(both).unwrap_or(100.0) / 100.0;
+        Some(Strength { colour: pick(self.colour_strength), shape: pick(self.shape_strength) })
+    }
+}
+
+/// A percentage from 0 to 100 (a trailing `%` is allowed).
+fn percent(s: &str) -> Result<f32, String> {
+    let v: f32 = s
+        .trim()
+        .trim_end_matches('%')
+        .parse()
+        .map_err(|_| format!("expected a percentage from 0 to 100, found {s:?}"))?;
+    if (0.0..=100.0).contains(&v) { Ok(v) } else { Err(format!("expected a percentage from 0 to 100, found {v}")) }
+}
+
+/// `stylized` blended toward `matched` by `strength`, with the files named in the error.
+pub fn blended(matched: &Gaussians, stylized: &Gaussians, strength: Strength, matched_path: &Path) -> anyhow::Result<Gaussians> {
+    gast_core::scene::blend(matched, stylized, strength)
+        .with_context(|| format!("cannot blend toward {}", matched_path.display()))
 }
 
 /// Checks that `path` names a format [`save_scene`] writes, before any long work.
@@ -64,7 +121,22 @@ pub fn save_scene(path: &Path, scene: &Gaussians, save: &SaveArgs) -> anyhow::Re
 pub fn run(args: ConvertArgs) -> anyhow::Result<ExitCode> {
     check_output_name(&args.output)?;
     let start = Instant::now();
-    let scene = load_scene(&args.input)?;
+    let mut scene = load_scene(&args.input)?;
+    match (&args.blend, args.strength.strength()) {
+        (Some(path), Some(strength)) => {
+            let matched = load_scene(path)?;
+            scene = blended(&matched, &scene, strength, path)?;
+            eprintln!(
+                "blended toward {}: colour {:.0}%, shape {:.0}%",
+                path.display(),
+                strength.colour * 100.0,
+                strength.shape * 100.0
+            );
+        }
+        (Some(_), None) => anyhow::bail!("--blend needs --strength (or --colour-strength and --shape-strength)"),
+        (None, Some(_)) => anyhow::bail!("--strength needs --blend SCENE: the scene to blend toward"),
+        (None, None) => {}
+    }
     let read_s = start.elapsed().as_secs_f64();
     let start = Instant::now();
     save_scene(&args.output, &scene, &args.save)?;

@@ -16,6 +16,7 @@
 //! writes [`load`] reads back. [`save`] writes any of these formats, chosen
 //! by the output's name (`save.rs`).
 
+pub mod blend;
 mod compressed_ply;
 mod error;
 mod kmeans;
@@ -35,6 +36,7 @@ mod tests_write;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+pub use blend::{BlendError, Strength, blend};
 pub use error::SceneError;
 pub use ply::{LOG_SCALE_INF, LOG_SCALE_NEG_INF, OPACITY_LOGIT_INF, OPACITY_LOGIT_NEG_INF};
 pub use save::{OUTPUT_NAMES, SaveOptions, SceneFormat, save, save_with_progress};

@@ -28,6 +28,10 @@ pub struct StylizeArgs {
     pub scene_name: PathBuf,
     #[command(flatten)]
     pub save: super::super::convert::SaveArgs,
+    /// How much of the stylization the written scene keeps (the colour-matched
+    /// scene, written beside it as colour_matched.ply, is 0%).
+    #[command(flatten)]
+    pub strength: super::super::convert::StrengthArgs,
     /// Optimisation cameras (COLMAP sparse/0, cameras.json, transforms.json);
     /// without it, `--views` orbit views are generated around the scene.
     #[arg(long)]

@@ -399,7 +399,21 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
 
     let result = session.result();
     std::fs::create_dir_all(&args.out).with_context(|| format!("could not create {}", args.out.display()))?;
-    super::convert::save_scene(&args.out.join(&args.scene_name), &result, &args.save)?;
+    // The colour-matched scene, for `gast convert --blend` to set a strength later.
+    let matched_path = args.out.join("colour_matched.ply");
+    super::convert::save_scene(&matched_path, session.colour_matched(), &super::convert::SaveArgs::default())?;
+    match args.strength.strength().filter(|s| !s.is_full()) {
+        Some(strength) => {
+            let blended = super::convert::blended(session.colour_matched(), &result, strength, &matched_path)?;
+            super::convert::save_scene(&args.out.join(&args.scene_name), &blended, &args.save)?;
+            eprintln!(
+                "  wrote the scene at colour strength {:.0}%, shape strength {:.0}% (the renders below show 100%)",
+                strength.colour * 100.0,
+                strength.shape * 100.0
+            );
+        }
+        None => super::convert::save_scene(&args.out.join(&args.scene_name), &result, &args.save)?,
+    }
     let preview = write_previews(
         &args.out,
         &scene,
