@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 
 use super::chart::{Chart, Series, palette};
-use crate::study::geometry::{Arm, GeometryMeasures, GeometryRecord, GeometryRun, seed_noise, verdicts};
+use crate::study::geometry::{Arm, MELTED_LAYOUT, GeometryMeasures, GeometryRecord, GeometryRun, seed_noise, verdicts};
 
 /// The styles that must pass the check (of nine), as the issue asks.
 const MUST_PASS_OF_NINE: usize = 7;
@@ -116,8 +116,8 @@ fn markdown(run: &GeometryRun, charts: &[(String, String)]) -> (String, String) 
     let passed = v.iter().filter(|p| p.passes).count();
     let need = (MUST_PASS_OF_NINE * v.len()).div_ceil(9);
     let verdict = format!(
-        "decoupled lowers the depth NN-cos below colour-only by more than twice the seed noise ({:.5}) on {passed} of \
-         {} styles (the issue asks {need}): {}",
+        "decoupled lowers the depth NN-cos below colour-only by more than twice the seed noise ({:.5}), its layout \
+         kept, on {passed} of {} styles (the issue asks {need}): {}",
         noise,
         v.len(),
         if passed >= need { "passes" } else { "FAILS" }
@@ -142,14 +142,15 @@ fn markdown(run: &GeometryRun, charts: &[(String, String)]) -> (String, String) 
     let _ = writeln!(
         s,
         "Δ is after − colour-matched; lower depth NN-cos and SW are closer to the style's depth. Relief: RMS of the \
-         inverse-depth change at the pattern scale, share of the depth range. Arms: {}.\n",
+         inverse-depth change at the pattern scale, share of the depth range. Layout kept: correlation of the \
+         inverse depth with the colour-matched one (below {MELTED_LAYOUT}: melted). Arms: {}.\n",
         Arm::ALL.iter().map(|a| a.label()).collect::<Vec<_>>().join(", ")
     );
     let _ = writeln!(
         s,
-        "| style | arm | depth NN-cos matched | Δ depth NN-cos | Δ depth SW | relief | depth changed | RGB NN-cos after | s | collapse |"
+        "| style | arm | depth NN-cos matched | Δ depth NN-cos | Δ depth SW | relief | depth changed | layout kept | RGB NN-cos after | s | collapse |"
     );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|");
     for r in &run.records {
         let d = r.delta();
         let first = r.checkpoints.first().map(|c| c.measures).unwrap_or_default();
@@ -157,7 +158,7 @@ fn markdown(run: &GeometryRun, charts: &[(String, String)]) -> (String, String) 
         let seed = if Some(&r.seed) == run.sizes.noise_seeds.first() { String::new() } else { format!(", seed {}", r.seed) };
         let _ = writeln!(
             s,
-            "| {} | {}{seed} | {:.4} | {:+.4} | {:+.3} | {:.4} | {:.1}% | {:.4} | {:.0} | {} |",
+            "| {} | {}{seed} | {:.4} | {:+.4} | {:+.3} | {:.4} | {:.1}% | {:.3}{} | {:.4} | {:.0} | {} |",
             r.style,
             r.arm.label(),
             first.depth_nn_cos,
@@ -165,16 +166,19 @@ fn markdown(run: &GeometryRun, charts: &[(String, String)]) -> (String, String) 
             d.depth_sw,
             d.relief_energy,
             100.0 * d.depth_change,
+            d.layout,
+            if d.layout < MELTED_LAYOUT { " (melted)" } else { "" },
             last.rgb_nn_cos,
             r.seconds(),
             r.collapse.as_deref().unwrap_or("no")
         );
     }
     let _ = writeln!(s, "\n## The check, per style\n");
-    let _ = writeln!(s, "| style | Δ colour-only | Δ decoupled | passes |");
-    let _ = writeln!(s, "|---|---|---|---|");
+    let _ = writeln!(s, "| style | Δ colour-only | Δ decoupled | decoupled's layout kept | passes |");
+    let _ = writeln!(s, "|---|---|---|---|---|");
     for p in &v {
-        let _ = writeln!(s, "| {} | {:+.4} | {:+.4} | {} |", p.style, p.floor, p.decoupled, if p.passes { "yes" } else { "no" });
+        let pass = if p.passes { "yes" } else { "no" };
+        let _ = writeln!(s, "| {} | {:+.4} | {:+.4} | {:.3} | {pass} |", p.style, p.floor, p.decoupled, p.layout);
     }
     let tether = arm_records(run, Arm::DecoupledTether);
     let paper = arm_records(run, Arm::Decoupled);
@@ -211,7 +215,12 @@ mod tests {
                 .map(|(step, v)| GeometryCheckpoint {
                     step,
                     seconds: f64::from(step) / 10.0 + 1.0,
-                    measures: GeometryMeasures { depth_nn_cos: v, relief_energy: 0.3 - v, ..Default::default() },
+                    measures: GeometryMeasures {
+                        depth_nn_cos: v,
+                        relief_energy: 0.3 - v,
+                        layout: 0.95,
+                        ..Default::default()
+                    },
                 })
                 .to_vec(),
             collapse: None,

@@ -69,6 +69,9 @@ impl Arm {
     }
 }
 
+/// Below this layout correlation a run has melted (`docs/geometry.md`).
+pub const MELTED_LAYOUT: f32 = 0.5;
+
 /// λ_α = λ_s = λ_r of the tether arm (`docs/geometry.md`: 3 moves the depth
 /// most, 10 keeps the fern's fronds and planter intact on the sheets).
 pub const TETHER_LAMBDA: f32 = 10.0;
@@ -154,6 +157,10 @@ pub struct GeometryMeasures {
     pub relief_energy: f32,
     /// Mean relative change of the inverse depth from the colour-matched state.
     pub depth_change: f32,
+    /// Correlation of the inverse depth with the colour-matched one (1: the
+    /// layout kept; low: the scene melted).
+    #[serde(default)]
+    pub layout: f32,
     /// RGB style distance, NN-cos of relu3.
     pub rgb_nn_cos: f32,
     /// RGB style distance, mean–std of relu3.
@@ -196,6 +203,7 @@ impl GeometryRecord {
             depth_sw: b.depth_sw - a.depth_sw,
             relief_energy: b.relief_energy,
             depth_change: b.depth_change,
+            layout: b.layout,
             rgb_nn_cos: b.rgb_nn_cos - a.rgb_nn_cos,
             rgb_mean_std: b.rgb_mean_std - a.rgb_mean_std,
             luminance: b.luminance - a.luminance,
@@ -227,7 +235,10 @@ pub struct PairVerdict {
     /// Δ depth NN-cos of colour-only (0 by construction) and of decoupled.
     pub floor: f32,
     pub decoupled: f32,
-    /// Whether decoupled is below the floor by more than the seed noise.
+    /// Decoupled's layout kept (correlation of the inverse depth with the colour-matched one).
+    pub layout: f32,
+    /// Whether decoupled is below the floor by more than twice the seed noise,
+    /// with its layout kept (a melted scene lowers the distance for the wrong reason).
     pub passes: bool,
 }
 
@@ -251,7 +262,7 @@ pub fn seed_noise(records: &[GeometryRecord]) -> f32 {
 }
 
 /// The check per style: decoupled (first seed) lowers the depth
-/// NN-cos below colour-only's by more than twice the seed noise.
+/// NN-cos below colour-only's by more than twice the seed noise, its layout kept.
 pub fn verdicts(records: &[GeometryRecord]) -> Vec<PairVerdict> {
     let noise = seed_noise(records);
     let mut styles: Vec<&str> = Vec::new();
@@ -263,9 +274,11 @@ pub fn verdicts(records: &[GeometryRecord]) -> Vec<PairVerdict> {
     styles
         .into_iter()
         .filter_map(|s| {
-            let arm = |a: Arm| records.iter().find(|r| r.style == s && r.arm == a).map(|r| r.delta().depth_nn_cos);
+            let arm = |a: Arm| records.iter().find(|r| r.style == s && r.arm == a).map(GeometryRecord::delta);
             let (floor, decoupled) = (arm(Arm::ColourOnly)?, arm(Arm::Decoupled)?);
-            Some(PairVerdict { style: s.into(), floor, decoupled, passes: floor - decoupled > 2.0 * noise })
+            let (floor, layout, decoupled) = (floor.depth_nn_cos, decoupled.layout, decoupled.depth_nn_cos);
+            let passes = floor - decoupled > 2.0 * noise && layout >= MELTED_LAYOUT;
+            Some(PairVerdict { style: s.into(), floor, decoupled, layout, passes })
         })
         .collect()
 }
@@ -278,7 +291,7 @@ mod tests {
         let at = |step, v| GeometryCheckpoint {
             step,
             seconds: f64::from(step),
-            measures: GeometryMeasures { depth_nn_cos: v, ..Default::default() },
+            measures: GeometryMeasures { depth_nn_cos: v, layout: 0.9, ..Default::default() },
         };
         GeometryRecord {
             style: style.into(),

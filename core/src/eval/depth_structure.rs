@@ -20,6 +20,11 @@
 //!   of radius `r` = a sixteenth of the render's longer side, and its RMS.
 //!   A uniform shift or a change of layout scores 0; bumps, tiles and ridges of
 //!   the pattern's size score their height.
+//! - **Layout kept**: the Pearson correlation of `D_after` with `D_before`
+//!   over the pixels covered in both. Near 1 when the scene keeps its shape
+//!   and gains relief on it; it falls when the scene melts (Gaussians drift
+//!   toward the cameras, a front layer hides what was behind), which lowers
+//!   the depth style distance too, for the wrong reason.
 
 use crate::raster::Render;
 use crate::vision::Vgg;
@@ -100,6 +105,30 @@ pub fn relief_energy(before: &Render, after: &Render) -> f32 {
     if count == 0 { 0.0 } else { (sum / count as f64).sqrt() as f32 }
 }
 
+/// The layout kept from `before` to `after` (see the module docs): the
+/// correlation of their inverse depths over the pixels covered in both; 1 when
+/// fewer than two such pixels or no variance.
+pub fn layout_correlation(before: &Render, after: &Render) -> f32 {
+    let n = before.inv_depth.len().min(after.inv_depth.len());
+    let pairs: Vec<(f64, f64)> = (0..n)
+        .filter(|&i| before.alpha[i] >= COVERED_ALPHA && after.alpha[i] >= COVERED_ALPHA)
+        .map(|i| (f64::from(before.inv_depth[i]), f64::from(after.inv_depth[i])))
+        .filter(|(a, b)| a.is_finite() && b.is_finite())
+        .collect();
+    if pairs.len() < 2 {
+        return 1.0;
+    }
+    let m = pairs.len() as f64;
+    let (ma, mb) = (pairs.iter().map(|p| p.0).sum::<f64>() / m, pairs.iter().map(|p| p.1).sum::<f64>() / m);
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (a, b) in &pairs {
+        sab += (a - ma) * (b - mb);
+        saa += (a - ma).powi(2);
+        sbb += (b - mb).powi(2);
+    }
+    if saa <= 0.0 || sbb <= 0.0 { 1.0 } else { (sab / (saa * sbb).sqrt()) as f32 }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -126,6 +155,17 @@ mod tests {
         let e = relief_energy(&before, &tiled);
         // Tiles of 0.1 of the range: the high-passed change has an RMS near half of it.
         assert!(e > 0.03 && e < 0.07, "{e}");
+    }
+
+    #[test]
+    fn the_layout_survives_relief_and_not_a_scramble() {
+        let before = plane(64, 64, 0.0);
+        assert!((layout_correlation(&before, &before) - 1.0).abs() < 1e-6);
+        assert!(layout_correlation(&before, &plane(64, 64, 0.03)) > 0.9);
+        let mut melted = before.clone();
+        melted.inv_depth.reverse();
+        melted.inv_depth.iter_mut().enumerate().for_each(|(k, d)| *d = if k % 7 == 0 { 3.0 } else { 0.4 });
+        assert!(layout_correlation(&before, &melted).abs() < 0.2, "{}", layout_correlation(&before, &melted));
     }
 
     #[test]

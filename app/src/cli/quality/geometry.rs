@@ -138,7 +138,7 @@ pub fn run(sizes: &GeometrySizes, shared: &Path, vgg: &Arc<Vgg>, out: &Path) -> 
         bar.suspend(|| {
             println!(
                 "{style:<10} {:<30} seed {seed}  {:>6.1} s  depth NN-cos {:.4} {:+.4}  SW {:+.3}  relief {:.4}  \
-                 depth changed {:.1}%  RGB NN-cos {:+.4}{}",
+                 depth changed {:.1}%  layout {:.3}  RGB NN-cos {:+.4}{}",
                 arm.label(),
                 record.seconds(),
                 first.depth_nn_cos,
@@ -146,6 +146,7 @@ pub fn run(sizes: &GeometrySizes, shared: &Path, vgg: &Arc<Vgg>, out: &Path) -> 
                 d.depth_sw,
                 d.relief_energy,
                 100.0 * d.depth_change,
+                d.layout,
                 d.rgb_nn_cos,
                 record.collapse.as_deref().map_or(String::new(), |c| format!("  COLLAPSE {c}"))
             )
@@ -213,6 +214,7 @@ fn measure(vgg: &Vgg, matched: &[Render], now: &[Render], refs: &StyleRefs) -> G
         m.depth_nn_cos += depth.nn_cos / n;
         m.depth_sw += depth.sw / n;
         m.relief_energy += depth_structure::relief_energy(before, after) / n;
+        m.layout += depth_structure::layout_correlation(before, after) / n;
         m.depth_change += inverse_depth_change(&before.inv_depth, &after.inv_depth, &before.alpha, &after.alpha) / n;
         m.rgb_nn_cos += nn_cosine_distance(&f.data, &refs.rgb.data, f.c) / n;
         m.rgb_mean_std += mean_std_distance(&f.data, &refs.rgb.data, f.c) / n;
