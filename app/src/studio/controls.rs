@@ -3,6 +3,7 @@
 
 use egui::{Color32, Ui};
 use gast_core::session::StepReport;
+use gast_core::style::config::ParamRegulariser;
 use gast_core::style::{Focus, MeanSteps, Mode, Phase, StyleConfig};
 
 /// Label of a focus in menus.
@@ -21,6 +22,14 @@ pub fn mode_label(m: Mode) -> &'static str {
         Mode::Joint => "joint",
         Mode::ColorOnly => "colour only",
         Mode::GeometryOnly => "geometry only",
+    }
+}
+
+/// Label of a parameter regulariser's form in menus.
+pub fn regulariser_label(r: ParamRegulariser) -> &'static str {
+    match r {
+        ParamRegulariser::Norm => "norm over all Gaussians (paper)",
+        ParamRegulariser::MeanSquare => "per-Gaussian mean square (tether)",
     }
 }
 
@@ -49,6 +58,18 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
     changed |= weight(ui, &mut w.opacity, 10.0, "λ_α", "opacity regulariser (geometry steps)");
     changed |= weight(ui, &mut w.scale, 10.0, "λ_s", "scale regulariser (geometry steps)");
     changed |= weight(ui, &mut w.rotation, 10.0, "λ_r", "rotation regulariser (geometry steps)");
+    changed |= egui::ComboBox::from_label("λ_α, λ_s, λ_r form")
+        .selected_text(regulariser_label(c.param_regulariser))
+        .show_ui(ui, |ui| {
+            let mut any = false;
+            for r in [ParamRegulariser::Norm, ParamRegulariser::MeanSquare] {
+                any |= ui.selectable_value(&mut c.param_regulariser, r, regulariser_label(r)).changed();
+            }
+            any
+        })
+        .inner
+        .unwrap_or(false);
+    let w = &mut c.weights;
     changed |= weight(ui, &mut w.depth, 100.0, "λ_d", "inverse-depth regulariser (geometry steps)");
     changed |= weight(
         ui,

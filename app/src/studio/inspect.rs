@@ -25,6 +25,9 @@ pub struct Maps {
     pub rgb: egui::ColorImage,
     /// Inverse depth, min-max normalised (near = bright).
     pub depth: egui::ColorImage,
+    /// The same in the JET colour map, as the reference draws its depth
+    /// figures: a relief of a tenth of the range shows as a change of hue.
+    pub depth_jet: egui::ColorImage,
     /// Edges: Canny (25, 200) per channel of the render, averaged, as the
     /// optimisation computes them (for the style: Canny of its JET-coloured depth).
     pub edges: egui::ColorImage,
@@ -75,6 +78,11 @@ pub struct Jobs {
 
 /// A grey image of `v`, min-max normalised over the pixels where `mask` is set
 /// (the rest black), so that empty background does not flatten the contrast.
+/// An 8-bit RGB buffer as an image.
+fn jet_image(w: u32, h: u32, rgb: &[u8]) -> egui::ColorImage {
+    egui::ColorImage::from_rgb([w as usize, h as usize], rgb)
+}
+
 fn gray_image(w: u32, h: u32, v: &[f32], mask: impl Fn(usize) -> bool) -> egui::ColorImage {
     let inside: Vec<f32> = v.iter().enumerate().filter(|(i, _)| mask(*i)).map(|(_, &x)| x).collect();
     let (lo, hi) = gast_core::io::finite_range(&inside);
@@ -111,6 +119,7 @@ pub fn maps(g: &Gaussians, cam: &Camera, background: [f32; 3]) -> Maps {
     Maps {
         rgb: rgb_image(r.width, r.height, &r.rgb),
         depth: gray_image(r.width, r.height, &depth, |i| r.alpha[i] > 0.05),
+        depth_jet: jet_image(r.width, r.height, &gast_core::io::depth_to_jet(&r.inv_depth, &r.alpha)),
         edges: gray_image(r.width, r.height, &edges, |_| true),
     }
 }
@@ -138,6 +147,7 @@ pub fn style_maps(style: &StyleImage, key: &StyleMapsKey) -> (Maps, Option<Strin
     let maps = Maps {
         rgb: rgb_image(w, h, &m.rgb),
         depth: gray_image(w, h, &m.depth, |_| true),
+        depth_jet: jet_image(w, h, &gast_core::io::depth_to_jet(&m.depth, &vec![1.0; m.depth.len()])),
         edges: gray_image(w, h, &m.edge, |_| true),
     };
     (maps, warning)

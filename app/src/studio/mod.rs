@@ -107,9 +107,9 @@ pub struct StudioApp {
     stats: Arc<Mutex<FrameStats>>,
     viewport_notes: Arc<Mutex<ViewportNotes>>,
     jobs: inspect::Jobs,
-    maps: Option<[egui::TextureHandle; 3]>,
+    maps: Option<[egui::TextureHandle; 4]>,
     /// The selected style's maps at texture scale, and what they were made for.
-    style_maps: Option<(inspect::StyleMapsKey, [egui::TextureHandle; 3])>,
+    style_maps: Option<(inspect::StyleMapsKey, [egui::TextureHandle; 4])>,
     style_maps_requested: Option<inspect::StyleMapsKey>,
     /// A depth image per style (by style path), for the `image` depth provider.
     style_depth_images: std::collections::HashMap<PathBuf, PathBuf>,
@@ -356,6 +356,7 @@ impl StudioApp {
                     self.maps = Some([
                         self.ctx.load_texture("inspect rgb", m.rgb, opts),
                         self.ctx.load_texture("inspect depth", m.depth, opts),
+                        self.ctx.load_texture("inspect depth jet", m.depth_jet, opts),
                         self.ctx.load_texture("inspect edges", m.edges, opts),
                     ]);
                 }
@@ -367,6 +368,7 @@ impl StudioApp {
                         [
                             self.ctx.load_texture("style rgb", m.rgb, opts),
                             self.ctx.load_texture("style depth", m.depth, opts),
+                            self.ctx.load_texture("style depth jet", m.depth_jet, opts),
                             self.ctx.load_texture("style edges", m.edges, opts),
                         ],
                     ));

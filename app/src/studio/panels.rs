@@ -431,17 +431,17 @@ impl StudioApp {
                 self.inspected_view = None;
                 self.request_inspection(true);
             }
-            ui.weak("RGB · inverse depth · edges: the current view (CPU rasterizer) | the style at texture scale");
+            ui.weak("RGB · inverse depth, grey and JET · edges: the current view (CPU rasterizer) | the style at texture scale");
         });
-        // One height for all six maps, so that they fit the strip side by side.
-        let aspect = |maps: &[egui::TextureHandle; 3]| {
+        // One height for all eight maps, so that they fit the strip side by side.
+        let aspect = |maps: &[egui::TextureHandle; 4]| {
             maps.iter().map(|t| t.size()[0] as f32 / t.size()[1].max(1) as f32).sum::<f32>()
         };
         let total = self.maps.as_ref().map_or(0.0, aspect) + self.style_maps.as_ref().map_or(0.0, |(_, m)| aspect(m));
-        let room = ui.available_width() - 7.0 * ui.spacing().item_spacing.x - 8.0;
+        let room = ui.available_width() - 9.0 * ui.spacing().item_spacing.x - 8.0;
         let h = if total > 0.0 { (room / total).clamp(40.0, 150.0) } else { 150.0 };
-        let show = |ui: &mut Ui, maps: &[egui::TextureHandle; 3], what: &str| {
-            for (t, name) in maps.iter().zip(["RGB", "inverse depth", "edges"]) {
+        let show = |ui: &mut Ui, maps: &[egui::TextureHandle; 4], what: &str| {
+            for (t, name) in maps.iter().zip(["RGB", "inverse depth", "inverse depth (JET)", "edges"]) {
                 let [w, th] = t.size();
                 let size = egui::vec2(h * w as f32 / th.max(1) as f32, h);
                 ui.add(egui::Image::new(t).fit_to_exact_size(size)).on_hover_text(format!("{what}: {name}"));
