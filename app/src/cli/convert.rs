@@ -96,7 +96,12 @@ fn percent(s: &str) -> Result<f32, String> {
 }
 
 /// `stylized` blended toward `matched` by `strength`, with the files named in the error.
-pub fn blended(matched: &Gaussians, stylized: &Gaussians, strength: Strength, matched_path: &Path) -> anyhow::Result<Gaussians> {
+pub fn blended(
+    matched: &Gaussians,
+    stylized: &Gaussians,
+    strength: Strength,
+    matched_path: &Path,
+) -> anyhow::Result<Gaussians> {
     gast_core::scene::blend(matched, stylized, strength)
         .with_context(|| format!("cannot blend toward {}", matched_path.display()))
 }

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 
 use super::chart::{Chart, Series, palette};
-use crate::study::geometry::{Arm, MELTED_LAYOUT, GeometryMeasures, GeometryRecord, GeometryRun, seed_noise, verdicts};
+use crate::study::geometry::{Arm, GeometryMeasures, GeometryRecord, GeometryRun, MELTED_LAYOUT, seed_noise, verdicts};
 
 /// The styles that must pass the check (of nine), as the issue asks.
 const MUST_PASS_OF_NINE: usize = 7;
@@ -48,7 +48,10 @@ fn mean_curve(records: &[&GeometryRecord], f: impl Fn(&GeometryMeasures, &Geomet
         .map(|k| {
             let m = records.len() as f64;
             let t = records.iter().map(|r| r.checkpoints[k].seconds).sum::<f64>() / m;
-            let v = records.iter().map(|r| f64::from(f(&r.checkpoints[0].measures, &r.checkpoints[k].measures))).sum::<f64>()
+            let v = records
+                .iter()
+                .map(|r| f64::from(f(&r.checkpoints[0].measures, &r.checkpoints[k].measures)))
+                .sum::<f64>()
                 / m;
             (t, v)
         })
@@ -155,7 +158,8 @@ fn markdown(run: &GeometryRun, charts: &[(String, String)]) -> (String, String) 
         let d = r.delta();
         let first = r.checkpoints.first().map(|c| c.measures).unwrap_or_default();
         let last = r.checkpoints.last().map(|c| c.measures).unwrap_or_default();
-        let seed = if Some(&r.seed) == run.sizes.noise_seeds.first() { String::new() } else { format!(", seed {}", r.seed) };
+        let seed =
+            if Some(&r.seed) == run.sizes.noise_seeds.first() { String::new() } else { format!(", seed {}", r.seed) };
         let _ = writeln!(
             s,
             "| {} | {}{seed} | {:.4} | {:+.4} | {:+.3} | {:.4} | {:.1}% | {:.3}{} | {:.4} | {:.0} | {} |",
@@ -234,7 +238,14 @@ mod tests {
         }
         records.push(rec("block2", Arm::Decoupled, 2, 0.2801));
         let sizes = GeometrySizes { styles: vec!["a".into(), "b".into()], ..GeometrySizes::quick() };
-        let run = GeometryRun { command: "gast".into(), scene: "fern.ply".into(), gaussians: 3, sizes, wall_s: 60.0, records };
+        let run = GeometryRun {
+            command: "gast".into(),
+            scene: "fern.ply".into(),
+            gaussians: 3,
+            sizes,
+            wall_s: 60.0,
+            records,
+        };
         let dir = std::env::temp_dir().join(format!("gast-geometry-report-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let (path, verdict) = write(&dir, &run).unwrap();

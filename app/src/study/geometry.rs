@@ -309,7 +309,10 @@ mod tests {
         let colour = Arm::ColourOnly.apply(&base);
         assert_eq!(colour.schedule().total_steps(), 300);
         assert_eq!(StyleConfig { mode: Mode::Decoupled, ..colour.clone() }, Arm::Decoupled.apply(&base));
-        assert_eq!(StyleConfig { mode: Mode::Decoupled, ..Arm::GeometryOnly.apply(&base) }, Arm::Decoupled.apply(&base));
+        assert_eq!(
+            StyleConfig { mode: Mode::Decoupled, ..Arm::GeometryOnly.apply(&base) },
+            Arm::Decoupled.apply(&base)
+        );
         let tether = Arm::DecoupledTether.apply(&base);
         assert_eq!(tether.param_regulariser, ParamRegulariser::MeanSquare);
         assert_eq!((tether.weights.opacity, tether.weights.scale, tether.weights.rotation), (10.0, 10.0, 10.0));

@@ -104,7 +104,12 @@ pub fn blend(matched: &Gaussians, stylized: &Gaussians, strength: Strength) -> R
         means: v3(&matched.means, &stylized.means),
         log_scales: v3(&matched.log_scales, &stylized.log_scales),
         quats,
-        opacity_logits: matched.opacity_logits.iter().zip(&stylized.opacity_logits).map(|(&a, &b)| lerp(a, b, g)).collect(),
+        opacity_logits: matched
+            .opacity_logits
+            .iter()
+            .zip(&stylized.opacity_logits)
+            .map(|(&a, &b)| lerp(a, b, g))
+            .collect(),
         sh_degree: stylized.sh_degree,
         sh: matched.sh.iter().zip(&stylized.sh).map(|(&a, &b)| lerp(a, b, c)).collect(),
     })

@@ -7,6 +7,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::Context;
+use gast_core::Camera;
 use gast_core::eval::depth_structure;
 use gast_core::eval::{
     CoveredColour, StabilityThresholds, StyleReference, inverse_depth_change, mean_std_distance, nn_cosine_distance,
@@ -14,13 +15,10 @@ use gast_core::eval::{
 use gast_core::raster::{self, Render, RenderOptions};
 use gast_core::session::{Session, SessionInputs, StyleDepthSource, StyleImage, prepare_style};
 use gast_core::vision::Vgg;
-use gast_core::Camera;
 
 use super::super::{Framing, ViewArgs, load_scene, views_for};
 use crate::report::sheet;
-use crate::study::geometry::{
-    Arm, GeometryCheckpoint, GeometryMeasures, GeometryRecord, GeometryRun, GeometrySizes,
-};
+use crate::study::geometry::{Arm, GeometryCheckpoint, GeometryMeasures, GeometryRecord, GeometryRun, GeometrySizes};
 
 /// The style's targets for the measures: its relu3 features and its depth map's.
 struct StyleRefs {
@@ -58,8 +56,10 @@ pub fn run(sizes: &GeometrySizes, shared: &Path, vgg: &Arc<Vgg>, out: &Path) -> 
             }
         }
     }
-    let total_steps: u64 =
-        plan.iter().map(|&(_, arm, seed)| u64::from(arm.apply(&sizes.base_config(seed)).schedule().total_steps())).sum();
+    let total_steps: u64 = plan
+        .iter()
+        .map(|&(_, arm, seed)| u64::from(arm.apply(&sizes.base_config(seed)).schedule().total_steps()))
+        .sum();
     println!(
         "geometry study: {} ({} Gaussians, {} cameras) × {} styles, {} runs of {} cycles at {} px, texture scale {}",
         scene_path.display(),
@@ -192,7 +192,8 @@ fn fit_scene(sizes: &GeometrySizes, dataset: &Path, out: &Path) -> anyhow::Resul
         holdout_every: 8,
         preview: None,
     };
-    super::super::fit::run(args).with_context(|| format!("fitting the geometry study's scene from {}", dataset.display()))?;
+    super::super::fit::run(args)
+        .with_context(|| format!("fitting the geometry study's scene from {}", dataset.display()))?;
     Ok(path)
 }
 

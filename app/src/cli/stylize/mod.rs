@@ -232,8 +232,11 @@ struct Report {
 struct PreviewMetrics {
     view: usize,
     mean_std_before: f32,
+    /// The colour-matched render's, the state the optimisation starts from.
+    mean_std_matched: f32,
     mean_std_after: f32,
     nn_distance_before: f32,
+    nn_distance_matched: f32,
     nn_distance_after: f32,
     inverse_depth_change: f32,
     /// The depth style distance (`gast_core::eval::depth_structure`) of the
@@ -250,8 +253,10 @@ struct PreviewMetrics {
 #[derive(Serialize, Default)]
 struct Summary {
     mean_std_before: f32,
+    mean_std_matched: f32,
     mean_std_after: f32,
     nn_distance_before: f32,
+    nn_distance_matched: f32,
     nn_distance_after: f32,
     inverse_depth_change: f32,
     depth_style_matched: DepthStyleDistance,
@@ -445,7 +450,9 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let n = preview.len().max(1) as f32;
     for p in &preview {
         summary.mean_std_before += p.mean_std_before / n;
+        summary.mean_std_matched += p.mean_std_matched / n;
         summary.mean_std_after += p.mean_std_after / n;
+        summary.nn_distance_matched += p.nn_distance_matched / n;
         summary.nn_distance_before += p.nn_distance_before / n;
         summary.nn_distance_after += p.nn_distance_after / n;
         summary.inverse_depth_change += p.inverse_depth_change / n;
@@ -476,10 +483,13 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             .map_or("no".to_string(), |d| format!("yes ({:.2} > {:.2})", d.value, d.threshold))
     );
     eprintln!(
-        "  style distance (mean-std of VGG relu3) {:.4} -> {:.4}; nearest-neighbour {:.4} -> {:.4}; inverse depth changed by {:.1}%",
+        "  style distance (mean-std of VGG relu3) {:.4} -> {:.4} -> {:.4}; nearest-neighbour {:.4} -> {:.4} -> {:.4} \
+         (input -> colour-matched -> after); inverse depth changed by {:.1}%",
         summary.mean_std_before,
+        summary.mean_std_matched,
         summary.mean_std_after,
         summary.nn_distance_before,
+        summary.nn_distance_matched,
         summary.nn_distance_after,
         100.0 * summary.inverse_depth_change
     );
@@ -546,11 +556,13 @@ fn write_previews(
             let rgb: Vec<f32> = img.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
             vgg.features(&rgb, h as usize, w as usize)
         };
-        let (fb, fa) = (feats(&before), feats(&after));
+        let (fb, fm, fa) = (feats(&before), feats(&matched), feats(&after));
         metrics.push(PreviewMetrics {
             view: k,
             mean_std_before: mean_std_distance(&fb.data, &style_feats.data, fb.c),
+            mean_std_matched: mean_std_distance(&fm.data, &style_feats.data, fm.c),
             mean_std_after: mean_std_distance(&fa.data, &style_feats.data, fa.c),
+            nn_distance_matched: nn_cosine_distance(&fm.data, &style_feats.data, fm.c),
             nn_distance_before: nn_cosine_distance(&fb.data, &style_feats.data, fb.c),
             nn_distance_after: nn_cosine_distance(&fa.data, &style_feats.data, fa.c),
             inverse_depth_change: inverse_depth_change(
