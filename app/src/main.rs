@@ -10,6 +10,7 @@ mod report;
 mod studio;
 mod study;
 mod turntable;
+mod views;
 
 use clap::Parser;
 

@@ -11,8 +11,8 @@ use clap::Args;
 use gast_core::Gaussians;
 use gast_core::scene::{SaveOptions, SceneFormat, Strength};
 
-use super::load_scene;
 use crate::progress;
+use crate::views::load_scene;
 
 /// Options of the lossy writers, shared by `convert` and `stylize`.
 #[derive(Args, Debug, Clone)]

@@ -88,7 +88,7 @@ pub fn run() -> anyhow::Result<ExitCode> {
 /// `gast-demo-<UTC time>` in the current folder, else in the temporary folder
 /// when the current one is not writable (an absolute path either way).
 fn output_folder() -> anyhow::Result<PathBuf> {
-    let name = format!("gast-demo-{}", super::quality::utc_stamp());
+    let name = format!("gast-demo-{}", crate::report::utc_stamp());
     let here = std::env::current_dir().map(|d| d.join(&name));
     if let Ok(dir) = &here
         && std::fs::create_dir_all(dir).is_ok()

@@ -9,17 +9,13 @@ pub mod quality;
 mod render;
 mod stylize;
 
-pub use stylize::step_time_hint;
-
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::Context;
-use clap::{Args, Parser, Subcommand};
-use gast_core::camera::{OrbitOptions, crop_view, framed_orbit, framing_subject, orbit_cameras};
-use gast_core::{Camera, Gaussians};
+use clap::{Parser, Subcommand};
 
 use crate::studio;
+use crate::views::load_scene;
 
 /// GAST Studio: geometry-aware style transfer for 3D Gaussian Splatting scenes.
 ///
@@ -134,43 +130,6 @@ pub enum BenchCommand {
     },
 }
 
-/// Where the views come from: a camera file, or an orbit generated around the scene.
-#[derive(Args, Debug, Clone)]
-pub struct ViewArgs {
-    /// Camera file or folder (COLMAP sparse/0, poses_bounds.npy, cameras.json, transforms.json).
-    /// Without it, views are generated on an orbit around the scene.
-    #[arg(long)]
-    pub cameras: Option<PathBuf>,
-    /// Number of generated orbit views (ignored with --cameras).
-    #[arg(long, default_value_t = 8)]
-    pub views: usize,
-    /// Longer side of the rendered images in pixels (camera intrinsics are rescaled).
-    #[arg(long, default_value_t = 512)]
-    pub size: u32,
-    /// Vertical field of view of generated views, in degrees.
-    #[arg(long, default_value_t = 50.0)]
-    pub fov: f32,
-    /// How generated views frame the scene: `full` is the plain orbit that
-    /// fits the object's bounding sphere (square images); `object` fits each
-    /// view's intrinsics and aspect ratio to the object so it spans 90% of the
-    /// longer side (`gast stylize` defaults to `object`).
-    #[arg(long, value_enum, default_value_t = Framing::Full)]
-    pub framing: Framing,
-    /// With --cameras: crop each view to the region the scene's object covers.
-    #[arg(long)]
-    pub crop: bool,
-}
-
-/// How generated views frame the scene (see [`ViewArgs::framing`]).
-#[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Framing {
-    /// Each view fitted to the object, which spans 90% of its longer side (`camera::framed_orbit`).
-    #[default]
-    Object,
-    /// The plain orbit around the scene's bounding sphere, square images (`camera::orbit_cameras`).
-    Full,
-}
-
 /// Runs the parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     let Some(command) = cli.command else {
@@ -215,45 +174,4 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Convert(args) => return convert::run(args),
     }
     Ok(ExitCode::SUCCESS)
-}
-
-/// Loads a scene with its path in the error, printing the readers' warnings.
-pub fn load_scene(path: &Path) -> anyhow::Result<Gaussians> {
-    let (scene, warnings) = gast_core::scene::load_with_warnings(path)
-        .with_context(|| format!("could not load the scene {}", path.display()))?;
-    for w in &warnings {
-        eprintln!("warning: {w}");
-    }
-    Ok(scene)
-}
-
-/// The views of `args` for `scene`: the camera file (cropped to the object with
-/// `--crop`) rescaled to `--size`, or an orbit framed as `--framing` says.
-pub fn views_for(scene: &Gaussians, args: &ViewArgs) -> anyhow::Result<Vec<Camera>> {
-    let size = args.size.max(1);
-    if let Some(path) = &args.cameras {
-        let set =
-            gast_core::camera::load(path).with_context(|| format!("could not load the cameras {}", path.display()))?;
-        for w in &set.warnings {
-            eprintln!("warning: {w}");
-        }
-        let subject = if args.crop { framing_subject(scene) } else { Vec::new() };
-        Ok(set
-            .cameras
-            .iter()
-            .map(|c| if args.crop { crop_view(c, &subject) } else { c.clone() }.with_longer_side(size))
-            .collect())
-    } else {
-        let opts = OrbitOptions {
-            count: args.views.max(1),
-            width: size,
-            height: size,
-            fov_y_degrees: args.fov,
-            ..OrbitOptions::default()
-        };
-        Ok(match args.framing {
-            Framing::Object => framed_orbit(scene, &opts),
-            Framing::Full => orbit_cameras(&scene.means, &opts),
-        })
-    }
 }

@@ -11,9 +11,9 @@ use gast_core::Gaussians;
 use gast_core::io::{write_depth_png, write_exr_depth, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
 
-use super::{ViewArgs, load_scene, views_for};
 use crate::progress;
 use crate::turntable::{self, TurntableOptions};
+use crate::views::{ViewArgs, load_scene, views_for};
 
 /// Arguments of `gast render`.
 #[derive(Args, Debug)]

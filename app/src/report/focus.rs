@@ -15,8 +15,9 @@ use gast_core::eval::{DegenerationKind, Measures};
 use gast_core::style::MeanSteps;
 
 use super::chart::{Chart, Series, palette};
-use crate::cli::quality::{FOCUS_FITTED_VIEWS, FOCUS_FRAME, FOCUS_MASKED_LOSSES, FOCUS_OBJECT, FOCUS_SEED};
-use crate::study::{Record, Row, RunSummary, Study};
+use crate::study::{
+    FOCUS_FITTED_VIEWS, FOCUS_FRAME, FOCUS_MASKED_LOSSES, FOCUS_OBJECT, FOCUS_SEED, Record, Row, RunSummary, Study,
+};
 
 /// Object's RMSE may be at most this factor of frame's for a pair to pass.
 const RMSE_FACTOR: f32 = 1.2;

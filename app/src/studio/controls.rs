@@ -164,7 +164,7 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
     });
     changed |= ui.add(egui::Slider::new(&mut c.texture_scale, 16..=1024).text("style height (px)")).changed();
     changed |= ui.add(egui::Slider::new(&mut c.resolution, 64..=1024).text("working resolution")).changed();
-    ui.weak(crate::cli::step_time_hint(c.resolution, c.focus != Focus::Frame));
+    ui.weak(gast_core::session::plan::step_time_hint(c.resolution, c.focus != Focus::Frame));
     egui::ComboBox::from_label("focus").selected_text(focus_label(c.focus)).show_ui(ui, |ui| {
         for f in Focus::ALL {
             changed |= ui.selectable_value(&mut c.focus, f, focus_label(f)).changed();

@@ -15,6 +15,18 @@ use gast_core::session::StyleImage;
 use gast_core::style::{MeanSteps, Mode, StyleConfig};
 use serde::{Deserialize, Serialize};
 
+/// Labels of the focus study's arms and of its noise-floor run.
+pub const FOCUS_FRAME: &str = "frame";
+/// See [`FOCUS_FRAME`].
+pub const FOCUS_OBJECT: &str = "object";
+/// See [`FOCUS_FRAME`]: the frame arm with another view order.
+pub const FOCUS_SEED: &str = "frame, seed 1";
+/// See [`FOCUS_FRAME`]: object focus's fitted views alone (the paper's
+/// whole-frame losses on them; `focus_halves` of [`Sizes`]).
+pub const FOCUS_FITTED_VIEWS: &str = "fitted views, frame losses";
+/// See [`FOCUS_FITTED_VIEWS`]: object focus's masked losses alone, on the plain orbit.
+pub const FOCUS_MASKED_LOSSES: &str = "orbit, masked losses";
+
 /// The studies of the grid.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, ValueEnum, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -358,7 +370,7 @@ pub struct TrialSpec {
     /// Steps to measure at (0 is the colour-matched input).
     pub checkpoints: Vec<u32>,
     /// How the optimisation views frame the scene.
-    pub framing: crate::cli::Framing,
+    pub framing: crate::views::Framing,
     /// Whether the evaluation ring is fitted to the object ([`gast_core::eval::EvalOptions::fit_to_object`]).
     pub eval_on_object: bool,
 }

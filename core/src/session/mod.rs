@@ -7,6 +7,7 @@
 
 mod colour_watch;
 mod events;
+pub mod plan;
 mod prepare;
 mod run;
 mod slot;

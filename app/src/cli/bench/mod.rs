@@ -10,14 +10,14 @@ use clap::Args;
 use gast_core::camera::Camera;
 use gast_core::raster::{self, RenderOptions};
 
-use super::{Framing, ViewArgs, load_scene, views_for};
+use crate::views::{Framing, ViewArgs, load_scene, views_for};
 
 mod depth;
 mod step;
 mod step_fast;
 
 pub use depth::{DepthArgs, run_depth};
-pub use step::{StepArgs, run_step};
+pub use step::StepArgs;
 
 /// Arguments of `gast bench raster`.
 #[derive(Args, Debug)]
@@ -36,6 +36,18 @@ pub struct RasterArgs {
 /// The shared data folder: `$GAST_SHARED`, else `../shared`.
 pub(super) fn shared_dir() -> PathBuf {
     std::env::var_os("GAST_SHARED").map(PathBuf::from).unwrap_or_else(|| PathBuf::from("../shared"))
+}
+
+/// `gast bench step`: issue 10's options beside the reference (`step_fast`),
+/// re-used matches on a GPU, or the default settings' breakdown (`step`).
+pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
+    if let Some(code) = step::reuse_on_gpu(&args)? {
+        return Ok(code);
+    }
+    if step::asks_fast(&args) {
+        return step_fast::run_fast_step(args);
+    }
+    step::run_step(args)
 }
 
 /// Peak and current resident memory of this process in MiB (0 where unknown).

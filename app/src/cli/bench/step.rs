@@ -14,8 +14,8 @@ use gast_core::camera::Camera;
 use anyhow::Context as _;
 
 use super::depth::time_style_depth;
-use super::step_fast::run_fast_step;
-use super::{Framing, ViewArgs, load_scene, median, memory_mib, reset_peak_memory, shared_dir, views_for};
+use super::{median, memory_mib, reset_peak_memory, shared_dir};
+use crate::views::{Framing, ViewArgs, load_scene, views_for};
 
 /// Arguments of `gast bench step`.
 #[derive(Args, Debug)]
@@ -178,13 +178,10 @@ pub(super) fn step_inputs(args: &StepArgs) -> anyhow::Result<StepInputs> {
     Ok(StepInputs { scene, views, style, vgg })
 }
 
-/// Per-step breakdown of the optimisation, the whole schedule's time, and memory.
-pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
-    use gast_core::gpu::DeviceChoice;
-    use gast_core::style::{Phase, StyleConfig};
-
+/// With `--matching-reuse` alone and a GPU: the engine with and without
+/// re-used matches ([`compare_reuse_gpu`]); `None` otherwise.
+pub(super) fn reuse_on_gpu(args: &StepArgs) -> anyhow::Result<Option<ExitCode>> {
     let f = &args.fast;
-    // Re-used matches alone on a GPU: the engine with and without them.
     let reuse_only = f.conv.is_none()
         && f.matching.is_none()
         && f.matching_dims.is_none()
@@ -194,17 +191,28 @@ pub fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         (f.matching_reuse, reuse_only, args.compare || args.compare_focus || args.compare_assign)
         && let Some(ctx) = args.device.resolve().with_context(|| format!("--device {}", args.device))?
     {
-        return compare_reuse_gpu(&args, ctx, reuse);
+        return compare_reuse_gpu(args, ctx, reuse).map(Some);
     }
-    if f.conv.is_some()
+    Ok(None)
+}
+
+/// Whether any of issue 10's options is given (`step_fast` times them beside the reference).
+pub(super) fn asks_fast(args: &StepArgs) -> bool {
+    let f = &args.fast;
+    f.conv.is_some()
         || f.matching.is_some()
         || f.matching_dims.is_some()
         || f.matching_candidates.is_some()
         || f.matching_reuse.is_some()
         || f.vgg_window.is_some()
-    {
-        return run_fast_step(args);
-    }
+}
+
+/// Per-step breakdown of the optimisation, the whole schedule's time, and
+/// memory, with the default settings (`bench::run_step` dispatches).
+pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
+    use gast_core::gpu::DeviceChoice;
+    use gast_core::style::{Phase, StyleConfig};
+
     let inputs = step_inputs(&args)?;
     let config = StyleConfig { resolution: args.resolution, focus: args.focus, ..StyleConfig::default() };
     let schedule = config.schedule();

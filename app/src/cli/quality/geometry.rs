@@ -16,9 +16,9 @@ use gast_core::raster::{self, Render, RenderOptions};
 use gast_core::session::{Session, SessionInputs, StyleDepthSource, StyleImage, prepare_style};
 use gast_core::vision::Vgg;
 
-use super::super::{Framing, ViewArgs, load_scene, views_for};
 use crate::report::sheet;
 use crate::study::geometry::{Arm, GeometryCheckpoint, GeometryMeasures, GeometryRecord, GeometryRun, GeometrySizes};
+use crate::views::{Framing, ViewArgs, load_scene, views_for};
 
 /// The style's targets for the measures: its relu3 features and its depth map's.
 struct StyleRefs {

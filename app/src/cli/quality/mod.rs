@@ -26,12 +26,13 @@ use gast_core::style::{Focus, Mode, StyleConfig};
 mod geometry;
 
 use super::bench::shared_dir;
-use super::{Framing, ViewArgs, load_scene, views_for};
 use crate::report::quality::{read_summary, rewrite_report, write_report};
 use crate::study::geometry::GeometrySizes;
 use crate::study::{
-    COLLAPSE_CONTENT, Record, Row, RunSummary, SEED_LABEL, Sizes, Study, StyleSource, TrialSpec, mode_label,
+    COLLAPSE_CONTENT, FOCUS_FITTED_VIEWS, FOCUS_FRAME, FOCUS_MASKED_LOSSES, FOCUS_OBJECT, FOCUS_SEED, Record, Row,
+    RunSummary, SEED_LABEL, Sizes, Study, StyleSource, TrialSpec, mode_label,
 };
+use crate::views::{Framing, ViewArgs, load_scene, views_for};
 
 /// Arguments of `gast bench quality`.
 #[derive(Args, Debug)]
@@ -263,18 +264,6 @@ pub fn build_grid(sizes: &Sizes, shared: &Path, studies: &[Study]) -> Grid {
     g
 }
 
-/// Labels of the focus study's arms and of its noise-floor run.
-pub const FOCUS_FRAME: &str = "frame";
-/// See [`FOCUS_FRAME`].
-pub const FOCUS_OBJECT: &str = "object";
-/// See [`FOCUS_FRAME`]: the frame arm with another view order.
-pub const FOCUS_SEED: &str = "frame, seed 1";
-/// See [`FOCUS_FRAME`]: object focus's fitted views alone (the paper's
-/// whole-frame losses on them; `focus_halves` of [`Sizes`]).
-pub const FOCUS_FITTED_VIEWS: &str = "fitted views, frame losses";
-/// See [`FOCUS_FITTED_VIEWS`]: object focus's masked losses alone, on the plain orbit.
-pub const FOCUS_MASKED_LOSSES: &str = "orbit, masked losses";
-
 /// The rows of the focus and collapse studies (see [`Study::Focus`], [`Study::Collapse`]).
 fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], base: &StyleConfig) {
     let file = |rel: &String| StyleSource::File(shared.join(rel));
@@ -455,7 +444,7 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
     // The run records the choice it makes, so its report can say it.
     sizes.focus_object_mean_steps.get_or_insert_default();
     let studies = if args.studies.is_empty() { Study::ALL.to_vec() } else { args.studies.clone() };
-    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("gast-quality-{}", utc_stamp())));
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("gast-quality-{}", crate::report::utc_stamp())));
     std::fs::create_dir_all(&out).with_context(|| format!("could not create the output folder {}", out.display()))?;
     let weights = args.weights.clone().or_else(|| {
         let p = shared.join("data/weights/vgg19-conv3.safetensors");
@@ -585,23 +574,6 @@ fn summary_line(spec: &TrialSpec, o: &TrialOutcome) -> String {
         last.nn_cosine,
         last.consistency_long
     )
-}
-
-/// `YYYYmmdd-HHMMSS` in UTC, from the system clock.
-pub(super) fn utc_stamp() -> String {
-    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
-    let (days, rem) = (secs / 86_400, secs % 86_400);
-    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
-    let z = days as i64 + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    format!("{y:04}{m:02}{d:02}-{:02}{:02}{:02}", rem / 3600, rem % 3600 / 60, rem % 60)
 }
 
 #[cfg(test)]
@@ -752,13 +724,5 @@ mod tests {
             assert_eq!(c.ratio_geo, if object { 0.7 } else { base.ratio_geo }, "{label}");
             assert_eq!(c.weights.tv, if object { 0.5 } else { base.weights.tv }, "{label}");
         }
-    }
-
-    #[test]
-    fn utc_stamps_have_the_documented_shape() {
-        let s = utc_stamp();
-        assert_eq!(s.len(), 15);
-        assert_eq!(&s[8..9], "-");
-        assert!(s.starts_with("20"));
     }
 }

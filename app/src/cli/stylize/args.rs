@@ -10,7 +10,7 @@ use gast_core::style::{Focus, MatchMethod, MeanSteps, Mode, StyleConfig};
 use gast_core::vision::ConvAlgo;
 use gast_core::vision::style_depth::{DepthPolarity, DepthProvider};
 
-use super::super::Framing;
+use crate::views::Framing;
 
 /// Arguments of `gast stylize`.
 #[derive(Args, Debug)]

@@ -1,0 +1,124 @@
+//! Planning a run before it starts: the automatic working resolution and
+//! the time model behind it (how long one CPU step takes at a resolution,
+//! with the losses on the object or the whole frame), and the views'
+//! coverage that `focus auto` decides on. `gast stylize`, the studio and the
+//! studies call the same functions.
+
+use crate::Camera;
+use crate::Gaussians;
+use crate::raster::{self, RenderOptions};
+
+/// Render pixels per VGG relu3 feature position: the 0.5× downscale, then VGG's two poolings.
+pub const PIXELS_PER_FEATURE: f32 = 8.0;
+/// relu3 positions the object should span across its longer side.
+pub const OBJECT_FEATURES: f32 = 64.0;
+/// How long one CPU optimisation step takes on a 2-core machine: `at_256`
+/// seconds at 256 px, growing as the resolution to the power `exponent`.
+#[derive(Clone, Copy, Debug)]
+pub struct StepModel {
+    at_256: f64,
+    exponent: f64,
+}
+
+/// Object focus, views fitted to the object (`stylize`'s defaults): `gast
+/// bench step --device cpu --framing object --views 12 --resolution R`,
+/// guitar × wave, idle, median geometry step 181 ms at 256 px and 576 ms at
+/// 512 px (VGG runs on the object's cone and the search on its positions, so
+/// the time grows more slowly than the pixel count).
+const STEP_OBJECT: StepModel = StepModel { at_256: 0.18, exponent: 1.7 };
+/// Whole-frame losses (the paper's): every position is searched, 566 ms at
+/// 256 px (`gast bench step --device cpu --focus frame`), growing with the
+/// pixel count.
+const STEP_FRAME: StepModel = StepModel { at_256: 0.57, exponent: 2.0 };
+/// The longest step the automatic working resolution accepts, seconds.
+pub const AUTO_STEP_BUDGET_S: f64 = 1.0;
+
+impl StepModel {
+    /// The model for losses focused on the object (`true`) or on the whole frame.
+    pub fn for_focus(object: bool) -> Self {
+        if object { STEP_OBJECT } else { STEP_FRAME }
+    }
+
+    /// Seconds of one step at `resolution` (longer side, px).
+    pub fn seconds(self, resolution: u32) -> f64 {
+        self.at_256 * (f64::from(resolution) / 256.0).powf(self.exponent)
+    }
+
+    /// The largest multiple of 32 whose step fits in `budget` seconds.
+    pub fn largest_within(self, budget: f64) -> u32 {
+        let side = 256.0 * (budget / self.at_256).powf(1.0 / self.exponent);
+        (side / 32.0).floor() as u32 * 32
+    }
+}
+
+/// The estimated time of one CPU step at `resolution` with losses focused on
+/// the object or on the whole frame (views fitted to an elongated object
+/// have fewer pixels and are faster).
+pub fn step_time_hint(resolution: u32, object: bool) -> String {
+    let s = StepModel::for_focus(object).seconds(resolution);
+    let focus = if object { "the object focus" } else { "whole-frame losses" };
+    format!("about {s:.2} s per step at {resolution} px on a 2-core CPU with {focus}")
+}
+
+/// The working resolution for an object that spans `span` of the longer
+/// image side: the smallest multiple of 32 at which it spans
+/// [`OBJECT_FEATURES`] relu3 positions, bounded by [`AUTO_STEP_BUDGET_S`] per
+/// step of `model` (and 128 px below). Returns `(chosen, wanted)`.
+pub fn auto_resolution(span: f32, model: StepModel) -> (u32, u32) {
+    resolution_for(span, model.largest_within(AUTO_STEP_BUDGET_S))
+}
+
+/// The mean share of the pixels of `cameras` that `scene` covers (alpha of
+/// at least 0.5), rendered at 64 px: what `focus auto` decides on.
+pub fn mean_coverage(scene: &Gaussians, cameras: &[Camera], opts: &RenderOptions) -> f32 {
+    use rayon::prelude::*;
+    let shares: Vec<f32> = cameras
+        .par_iter()
+        .map(|c| {
+            let r = raster::render(scene, &c.with_longer_side(64), opts);
+            r.alpha.iter().filter(|&&a| a >= 0.5).count() as f32 / r.alpha.len().max(1) as f32
+        })
+        .collect();
+    shares.iter().sum::<f32>() / shares.len().max(1) as f32
+}
+
+/// [`auto_resolution`] when a GPU runs the steps: bounded by the reference's
+/// scale (its photos' ~1,000 px) instead of the CPU's step time.
+pub fn auto_resolution_gpu(span: f32) -> (u32, u32) {
+    resolution_for(span, GPU_MAX_RESOLUTION)
+}
+
+/// The longest side the automatic working resolution takes on a GPU.
+pub const GPU_MAX_RESOLUTION: u32 = 1024;
+
+/// The smallest multiple of 32 at which an object spanning `span` of the
+/// longer side covers [`OBJECT_FEATURES`] relu3 positions, within [128, cap].
+pub fn resolution_for(span: f32, cap: u32) -> (u32, u32) {
+    let wanted = if span > 1e-3 { OBJECT_FEATURES * PIXELS_PER_FEATURE / span } else { 4096.0 };
+    let wanted = ((wanted / 32.0).ceil() * 32.0).min(4096.0) as u32;
+    (wanted.clamp(128, cap.max(128)), wanted)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_automatic_resolution_follows_the_object_within_the_step_budget() {
+        let (object, frame) = (StepModel::for_focus(true), StepModel::for_focus(false));
+        // A fitted view (the object spans 90 %) wants 576 px for 64 relu3
+        // positions; with the object focus a 1 s step allows it (672 px at
+        // 0.18 s per 256 px step), with whole-frame losses only 320 px.
+        assert_eq!(auto_resolution(0.9, object), (576, 576));
+        assert_eq!(auto_resolution(0.9, frame), (320, 576));
+        assert!(object.seconds(672) <= 1.0 && object.seconds(704) > 1.0);
+        // A small object wants more, gets the cap; nothing goes below 128 px.
+        assert_eq!(auto_resolution(0.3, object).0, 672);
+        assert!(auto_resolution(0.3, object).1 > 1600);
+        assert_eq!(auto_resolution(0.0, frame).1, 4096);
+        // The measured steps the models rest on.
+        assert!((object.seconds(512) - 0.58).abs() < 0.02, "{}", object.seconds(512));
+        assert!(step_time_hint(512, false).contains("2.28 s"), "{}", step_time_hint(512, false));
+        assert!(step_time_hint(256, true).contains("0.18 s") && step_time_hint(256, true).contains("object focus"));
+    }
+}
