@@ -39,11 +39,52 @@ pub enum OutputError {
     },
 }
 
-/// The temporary sibling a file is written to before the rename.
-fn temp_path(path: &Path) -> PathBuf {
-    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
-    name.push(format!(".{}.tmp", std::process::id()));
-    path.with_file_name(name)
+/// The temporary sibling a file is written to before the rename:
+/// `.<name>.tmp-<pid>`, the one scheme of every writer here (scenes and SOG
+/// folders too), so that [`remove_stale_temps`] can find what a killed
+/// process left.
+pub fn temp_path(path: &Path) -> PathBuf {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    path.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+}
+
+/// Removes the temporary files and folders ([`temp_path`]) in `dir` that a
+/// process which no longer runs left behind (a write killed midway), so they
+/// do not pile up beside their targets; returns how many. Others' live writes
+/// and this process's own are left alone. Linux only (it asks `/proc` whether
+/// a process runs); elsewhere it removes nothing.
+pub fn remove_stale_temps(dir: &Path) -> usize {
+    if !cfg!(target_os = "linux") || !Path::new("/proc/self").exists() {
+        return 0;
+    }
+    let Ok(entries) = std::fs::read_dir(dir) else { return 0 };
+    let own = std::process::id();
+    let mut removed = 0;
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let Some(pid) = stale_pid(&name) else { continue };
+        if pid == own || Path::new(&format!("/proc/{pid}")).exists() {
+            continue;
+        }
+        let path = e.path();
+        let gone = if e.file_type().is_ok_and(|t| t.is_dir()) {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+        removed += usize::from(gone.is_ok());
+    }
+    removed
+}
+
+/// The process id in a [`temp_path`] name (`.<name>.tmp-<pid>`), if it is one.
+fn stale_pid(name: &str) -> Option<u32> {
+    let rest = name.strip_prefix('.')?;
+    let (stem, pid) = rest.rsplit_once(".tmp-")?;
+    if stem.is_empty() || pid.is_empty() || !pid.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    pid.parse().ok()
 }
 
 /// Writes a file atomically: `write` fills a buffered temporary sibling, which is
@@ -56,6 +97,9 @@ where
     let io_err = |source| OutputError::Io { path: path.to_path_buf(), source };
     if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).map_err(io_err)?;
+        remove_stale_temps(parent);
+    } else {
+        remove_stale_temps(Path::new("."));
     }
     let tmp = temp_path(path);
     let result = (|| {
@@ -204,6 +248,31 @@ pub fn finite_range(values: &[f32]) -> (f32, f32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn stale_temporaries_of_dead_processes_are_removed_and_live_ones_kept() {
+        let dir = std::env::temp_dir().join(format!("gast-io-stale-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        // Beyond Linux's largest pid (2^22): no such process can run.
+        let dead_file = dir.join(".scene.ply.tmp-99999999");
+        let dead_dir = dir.join(".out-sog.tmp-99999998");
+        let live = dir.join(".scene.ply.tmp-1"); // pid 1 always runs
+        let own = temp_path(&dir.join("mine.ply"));
+        let user = dir.join("notes.tmp-99999999"); // not hidden: not ours
+        for f in [&dead_file, &live, &own, &user] {
+            std::fs::write(f, b"x").unwrap();
+        }
+        std::fs::create_dir(&dead_dir).unwrap();
+        std::fs::write(dead_dir.join("meta.json"), b"{}").unwrap();
+        write_bytes(&dir.join("target.bin"), b"new").unwrap();
+        assert!(!dead_file.exists() && !dead_dir.exists(), "stale temporaries remain");
+        assert!(live.exists() && own.exists() && user.exists(), "a live, own or foreign file was removed");
+        assert_eq!(std::fs::read(dir.join("target.bin")).unwrap(), b"new");
+        assert_eq!(stale_pid(".a.ply.tmp-12"), Some(12));
+        assert_eq!((stale_pid(".a.ply.tmp-"), stale_pid("a.ply.tmp-12"), stale_pid(".tmp-12")), (None, None, None));
+        std::fs::remove_dir_all(&dir).ok();
+    }
 
     #[test]
     fn atomic_write_keeps_old_file_on_error() {
