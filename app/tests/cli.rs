@@ -126,6 +126,9 @@ fn stylize_writes_a_scene_renders_and_a_report() {
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report")).expect("json");
     let steps = report["steps"].as_array().expect("steps");
     assert_eq!(steps.len(), 6);
+    // The guitar covers less than half of its views: the object recipe is on, and said.
+    assert_eq!(report["config"]["weights"]["assignment_cosine"].as_f64(), Some(10.0));
+    assert!(stderr(&o).contains("object recipe"), "{}", stderr(&o));
     assert_eq!(steps.iter().filter(|s| s["phase"] == "color").count(), 2);
     assert!(steps.iter().all(|s| s["losses"]["total"].as_f64().is_some_and(f64::is_finite)));
     assert!(report["gaussians_optimised"].as_u64().expect("count") <= input.len() as u64);

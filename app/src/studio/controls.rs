@@ -3,7 +3,7 @@
 
 use egui::{Color32, Ui};
 use gast_core::session::StepReport;
-use gast_core::style::config::ParamRegulariser;
+use gast_core::style::config::{OBJECT_RECIPE_ASSIGN, OBJECT_RECIPE_ASSIGN_COS, ParamRegulariser};
 use gast_core::style::{Focus, MeanSteps, Mode, Phase, StyleConfig};
 
 /// Label of a focus in menus.
@@ -129,6 +129,13 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
          made by cosine distance, turning each feature's direction to its partner's; 10 with λ_as 0.003 to 0.015 \
          in the README's focus study",
     );
+    changed |= ui
+        .checkbox(&mut c.object_recipe, "object recipe")
+        .on_hover_text(format!(
+            "with the losses on the object and λ_as = λ_asc = 0, the run uses λ_asc {OBJECT_RECIPE_ASSIGN_COS} and \
+             λ_as {OBJECT_RECIPE_ASSIGN} (the focus study's winner on guitar, biker and playbot); off in the paper"
+        ))
+        .changed();
 
     ui.separator();
     ui.label(egui::RichText::new("Schedule").strong());

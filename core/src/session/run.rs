@@ -160,6 +160,7 @@ impl Session {
         let survey = survey_views(&scene, &work_cams, &opts);
         let pixels: usize = work_cams.iter().map(|c| c.width as usize * c.height as usize).sum();
         let coverage = survey.covered_rgb.len() as f32 / 3.0 / pixels.max(1) as f32;
+        let config = config.resolved(coverage);
         let ct = ColorTransfer::fit(&survey.covered_rgb, &style.to_f32());
         let mut full = scene;
         ct.apply_to_gaussians(&mut full);
@@ -365,6 +366,7 @@ impl Session {
     /// resolution the cameras and per-view targets; any of these, or new
     /// matching settings, forgets the kept matches. Adam state is kept.
     pub fn set_config(&mut self, config: StyleConfig) -> Result<(), SessionError> {
+        let config = config.resolved(self.coverage);
         let problems = engine_problems(&config, self.engine.is_some());
         if !problems.is_empty() {
             return Err(SessionError::Config(problems));

@@ -182,7 +182,19 @@ pub struct StyleConfig {
     /// The form of the parameter regularisers λ_α, λ_s, λ_r: the paper's norm
     /// over all Gaussians (the default) or a per-Gaussian mean square.
     pub param_regulariser: ParamRegulariser,
+    /// Where the losses focus on the object (`focus object`, or `auto` on an
+    /// object), switch on the assignment terms at the weights that won the
+    /// focus study ([`OBJECT_RECIPE_ASSIGN_COS`], [`OBJECT_RECIPE_ASSIGN`];
+    /// `docs/studies/focus.md`: the object beat the frame on 9, 8 and 9 of the
+    /// nine styles on guitar, biker and playbot) when both are 0. On by
+    /// default; off in the `paper` preset. See [`StyleConfig::resolved`].
+    pub object_recipe: bool,
 }
+
+/// λ_asc of the object recipe ([`StyleConfig::object_recipe`]).
+pub const OBJECT_RECIPE_ASSIGN_COS: f32 = 10.0;
+/// λ_as of the object recipe ([`StyleConfig::object_recipe`]).
+pub const OBJECT_RECIPE_ASSIGN: f32 = 0.015;
 
 /// The form of the geometry phase's parameter regularisers
 /// ([`crate::style::regularizers`]).
@@ -236,11 +248,38 @@ impl Default for StyleConfig {
             vgg_window: true,
             feature_mean_steps: MeanSteps::default(),
             param_regulariser: ParamRegulariser::default(),
+            object_recipe: true,
         }
     }
 }
 
 impl StyleConfig {
+    /// The reference's behaviour (`--preset paper`): whole-frame losses, the
+    /// style depth near dark as the reference inverts it, the norm
+    /// regularisers, no object recipe; every other value is the default.
+    pub fn paper() -> Self {
+        Self {
+            focus: super::focus::Focus::Frame,
+            depth_polarity: DepthPolarity::NearDark,
+            param_regulariser: ParamRegulariser::Norm,
+            object_recipe: false,
+            ..Self::default()
+        }
+    }
+
+    /// The configuration a run with views of mean coverage `coverage` uses:
+    /// with [`StyleConfig::object_recipe`] on, losses on the object and both
+    /// assignment weights 0, those weights take the recipe's values.
+    pub fn resolved(&self, coverage: f32) -> Self {
+        let mut c = self.clone();
+        let w = &mut c.weights;
+        if c.object_recipe && c.focus.is_object(coverage) && w.assignment == 0.0 && w.assignment_cosine == 0.0 {
+            w.assignment = OBJECT_RECIPE_ASSIGN;
+            w.assignment_cosine = OBJECT_RECIPE_ASSIGN_COS;
+        }
+        c
+    }
+
     /// The step plan this configuration implies.
     pub fn schedule(&self) -> Schedule {
         Schedule::from_ratio(self.cycles, self.steps_per_cycle, self.ratio_geo, self.mode)
@@ -329,6 +368,31 @@ mod tests {
         assert!("geometry".parse::<MeanSteps>().is_err_and(|e| e.contains("colour or every")));
         let preset = StyleConfig::from_json(r#"{"feature_mean_steps": "colour"}"#).expect("a preset");
         assert_eq!(preset.feature_mean_steps, MeanSteps::Colour);
+    }
+
+    #[test]
+    fn the_object_recipe_applies_only_on_objects_and_only_where_the_terms_are_off() {
+        use crate::style::focus::Focus;
+        let c = StyleConfig::default();
+        let on_object = c.resolved(0.2);
+        assert_eq!((on_object.weights.assignment, on_object.weights.assignment_cosine), (0.015, 10.0));
+        assert_eq!(c.resolved(0.9), c, "a full frame keeps the paper's terms alone");
+        let frame = StyleConfig { focus: Focus::Frame, ..c.clone() };
+        assert_eq!(frame.resolved(0.2), frame);
+        let off = StyleConfig { object_recipe: false, ..c.clone() };
+        assert_eq!(off.resolved(0.2), off);
+        let mut chosen = c.clone();
+        chosen.weights.assignment = 0.5;
+        assert_eq!(chosen.resolved(0.2), chosen, "a weight the user set is kept");
+        let paper = StyleConfig::paper();
+        assert_eq!(paper.resolved(0.2), paper);
+        assert_eq!(
+            (paper.focus, paper.depth_polarity, paper.object_recipe),
+            (Focus::Frame, DepthPolarity::NearDark, false)
+        );
+        // Old presets (no key) get the recipe; the key round-trips.
+        assert!(StyleConfig::from_json("{}").unwrap().object_recipe);
+        assert!(!StyleConfig::from_json(&paper.to_json()).unwrap().object_recipe);
     }
 
     #[test]

@@ -49,9 +49,16 @@ pub struct StylizeArgs {
     /// With --cameras: crop each view to the region the object covers.
     #[arg(long)]
     pub crop: bool,
-    /// A preset file (JSON StyleConfig); flags below override it.
+    /// A preset file (JSON StyleConfig), or `paper` for the reference's
+    /// behaviour (whole-frame losses, style depth near dark, no object
+    /// recipe); flags below override it.
     #[arg(long)]
     pub preset: Option<PathBuf>,
+    /// Keep the assignment terms off on objects (by default, with the losses
+    /// on the object and λ_as = λ_asc = 0, the run uses λ_asc 10 and λ_as
+    /// 0.015, the focus study's winner).
+    #[arg(long)]
+    pub no_object_recipe: bool,
     /// Write the effective configuration to this preset file and continue.
     #[arg(long)]
     pub save_preset: Option<PathBuf>,
@@ -204,6 +211,7 @@ impl StylizeArgs {
     /// The preset (if any) with the flags applied.
     pub fn config(&self) -> anyhow::Result<StyleConfig> {
         let mut c = match &self.preset {
+            Some(p) if p.as_os_str() == "paper" && !p.exists() => StyleConfig::paper(),
             Some(p) => {
                 let text =
                     std::fs::read_to_string(p).with_context(|| format!("could not read the preset {}", p.display()))?;
@@ -218,6 +226,9 @@ impl StylizeArgs {
                     $field = v;
                 }
             };
+        }
+        if self.no_object_recipe {
+            c.object_recipe = false;
         }
         set!(self.cycles, c.cycles);
         set!(self.steps_per_cycle, c.steps_per_cycle);

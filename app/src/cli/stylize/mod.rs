@@ -277,6 +277,15 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         _ => {}
     })?;
 
+    let used = session.config().weights;
+    if used.assignment_cosine != config.weights.assignment_cosine || used.assignment != config.weights.assignment {
+        eprintln!(
+            "  object recipe: the losses are on the object, so λ_asc {} and λ_as {} (--no-object-recipe or \
+             --preset paper for the paper's terms alone)",
+            used.assignment_cosine, used.assignment
+        );
+    }
+    let config = session.config().clone();
     let total = session.total_steps();
     let pb = progress::bar(total as u64, "stylize");
     let mut steps = Vec::with_capacity(total as usize);
@@ -519,6 +528,26 @@ mod tests {
         let cli =
             <Cli as clap::Parser>::try_parse_from(["stylize", "s.ply", "t.jpg", "--weights", "w.pth"]).expect("parses");
         assert_eq!(cli.args.weights.as_deref(), Some(Path::new("w.pth")));
+    }
+
+    /// `--preset paper` is the reference's configuration, flags still override
+    /// it, and `--no-object-recipe` turns the recipe off.
+    #[test]
+    fn the_paper_preset_and_the_recipe_switch() {
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            args: StylizeArgs,
+        }
+        let parse = |extra: &[&str]| {
+            let mut argv = vec!["stylize", "s.ply", "t.png"];
+            argv.extend_from_slice(extra);
+            <Cli as clap::Parser>::try_parse_from(argv).expect("parses").args.config().expect("config")
+        };
+        assert_eq!(parse(&["--preset", "paper"]), StyleConfig::paper());
+        assert_eq!(parse(&["--preset", "paper", "--cycles", "3"]).cycles, 3);
+        assert!(parse(&[]).object_recipe);
+        assert!(!parse(&["--no-object-recipe"]).object_recipe);
     }
 
     /// The collapse warning's advice names flags `stylize` takes, with values it accepts.
