@@ -3,7 +3,7 @@
 //! Needs `xvfb-run` and a Vulkan driver (lavapipe); without them the test skips
 //! loudly, or fails when `CI=true`.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn in_ci() -> bool {
@@ -77,26 +77,25 @@ fn studio_opens_a_scene_in_a_real_window() {
     std::fs::remove_dir_all(&xdg).ok();
 }
 
-/// The end-to-end run in a real window: open the guitar and a style,
-/// press Start (the scripted switch), let the worker run some steps, export the
-/// stylized scene, take a screenshot; the export must load and differ from
-/// the input, and the viewport must show something.
-#[test]
-fn studio_runs_steps_and_exports_in_a_real_window() {
+/// A scripted studio run on the guitar: Start, 12 steps, pause, export, a
+/// screenshot; with `strength` the strength sliders' switch. Returns the
+/// guitar, the export and the screenshot (`None` where the machine cannot run
+/// it).
+fn scripted_studio_run(name: &str, strength: Option<&str>) -> Option<(PathBuf, PathBuf, PathBuf, PathBuf)> {
     if !have("xvfb-run") {
-        return skip_or_fail("xvfb-run is not installed (apt-get install xvfb xauth)");
+        skip_or_fail("xvfb-run is not installed (apt-get install xvfb xauth)");
+        return None;
     }
     if !Path::new("/usr/share/vulkan/icd.d").exists() {
-        return skip_or_fail("no Vulkan driver (apt-get install mesa-vulkan-drivers libvulkan1)");
+        skip_or_fail("no Vulkan driver (apt-get install mesa-vulkan-drivers libvulkan1)");
+        return None;
     }
-    let (Some(guitar), Some(style), Some(weights)) = (
-        gast_tests::shared_file("data/scenes/guitar.compressed.ply"),
-        gast_tests::shared_file("data/styles/starry.jpg"),
-        gast_tests::shared_file("data/weights/vgg19-conv3.safetensors"),
-    ) else {
-        return;
-    };
-    let dir = std::env::temp_dir().join(format!("gast-studio-run-{}", std::process::id()));
+    let (guitar, style, weights) = (
+        gast_tests::shared_file("data/scenes/guitar.compressed.ply")?,
+        gast_tests::shared_file("data/styles/starry.jpg")?,
+        gast_tests::shared_file("data/weights/vgg19-conv3.safetensors")?,
+    );
+    let dir = std::env::temp_dir().join(format!("gast-studio-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let (shot, export, preset) = (dir.join("shot.png"), dir.join("stylized.ply"), dir.join("preset.json"));
     let config = gast_core::style::StyleConfig {
@@ -116,6 +115,7 @@ fn studio_runs_steps_and_exports_in_a_real_window() {
         .env("GAST_WEIGHTS", &weights)
         // The learned style depth, end to end, from the golden file's small random network.
         .envs(gast_tests::shared_file("golden/depth/depth_seed1.safetensors").map(|p| ("GAST_DEPTH_MODEL", p)))
+        .envs(strength.map(|s| ("GAST_STUDIO_STRENGTH", s)))
         .env("GAST_STUDIO_PRESET", &preset)
         .env("GAST_STUDIO_RUN_STEPS", "12")
         .env("GAST_STUDIO_EXPORT", &export)
@@ -128,6 +128,16 @@ fn studio_runs_steps_and_exports_in_a_real_window() {
     println!("studio ran {:.1} s, exit {:?}\n{log}", started.elapsed().as_secs_f64(), out.status.code());
     assert!(out.status.success(), "the studio exited with {:?}", out.status);
     assert!(log.contains("scripted run paused after"), "the run never reached its steps:\n{log}");
+    Some((guitar, export, shot, dir))
+}
+
+/// The end-to-end run in a real window: open the guitar and a style,
+/// press Start (the scripted switch), let the worker run some steps, export the
+/// stylized scene, take a screenshot; the export must load and differ from
+/// the input, and the viewport must show something.
+#[test]
+fn studio_runs_steps_and_exports_in_a_real_window() {
+    let Some((guitar, export, shot, dir)) = scripted_studio_run("run", None) else { return };
     let input = gast_core::scene::load(&guitar).expect("input");
     let result = gast_core::scene::load(&export).unwrap_or_else(|e| panic!("the export does not load: {e}"));
     assert_eq!(result.len(), input.len());
@@ -144,4 +154,23 @@ fn studio_runs_steps_and_exports_in_a_real_window() {
     if std::env::var_os("GAST_KEEP_SCREENSHOTS").is_none() {
         std::fs::remove_dir_all(&dir).ok();
     }
+}
+
+/// The strength sliders export what they show: colour at 100% and shape at
+/// 0% give the stylized colours on the colour-matched geometry, which is the
+/// input's to the bit (colour matching moves no Gaussian).
+#[test]
+fn the_strength_sliders_export_what_they_show() {
+    let Some((guitar, export, _, dir)) = scripted_studio_run("strength", Some("100,0")) else { return };
+    let input = gast_core::scene::load(&guitar).expect("input");
+    let result = gast_core::scene::load(&export).unwrap_or_else(|e| panic!("the export does not load: {e}"));
+    assert_eq!(result.len(), input.len());
+    assert!(
+        result.means == input.means && result.log_scales == input.log_scales,
+        "shape strength 0 moved the geometry"
+    );
+    assert!(result.opacity_logits == input.opacity_logits && result.quats == input.quats);
+    let recoloured = input.sh.iter().zip(&result.sh).filter(|(a, b)| a != b).count();
+    assert!(recoloured > input.len(), "colour strength 100% exported no new colours ({recoloured})");
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -130,7 +130,10 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
          in the README's focus study",
     );
     changed |= ui
-        .checkbox(&mut c.object_recipe, "object recipe")
+        .checkbox(
+            &mut c.object_recipe,
+            format!("object recipe: λ_asc {OBJECT_RECIPE_ASSIGN_COS}, λ_as {OBJECT_RECIPE_ASSIGN} on objects"),
+        )
         .on_hover_text(format!(
             "with the losses on the object and λ_as = λ_asc = 0, the run uses λ_asc {OBJECT_RECIPE_ASSIGN_COS} and \
              λ_as {OBJECT_RECIPE_ASSIGN} (the focus study's winner on guitar, biker and playbot); off in the paper"

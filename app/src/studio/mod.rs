@@ -12,6 +12,7 @@
 //! presses Start once the scene and style are open, pauses after N steps and
 //! saves the current Gaussians to `GAST_STUDIO_EXPORT` (the frame count of the
 //! exit switch then starts from there), as a user would with the Export menu.
+//! `GAST_STUDIO_STRENGTH=C[,S]` sets the strength sliders (percent);
 //! `GAST_STUDIO_WINDOW=WxH` opens the window at that size (1280×800 without),
 //! so a screenshot can show the whole side panel.
 
@@ -83,6 +84,12 @@ struct ScreenshotState {
 pub struct StudioApp {
     scene: Option<LoadedScene>,
     snapshot: Option<SceneRef>,
+    /// How much of the stylization is shown and exported (colour, shape; 1 = all).
+    strength: [f32; 2],
+    /// The snapshot blended toward the run's colour-matched scene by
+    /// `strength` ([`gast_core::scene::blend`]), with the snapshot version and
+    /// strength it was made for; the snapshot itself at full strength.
+    shown: Option<(u64, [f32; 2], SceneRef)>,
     /// The running optimisation's GPU buffers, drawn instead of the snapshot when the viewport can.
     live: Option<LiveRef>,
     next_version: u64,
@@ -225,6 +232,19 @@ fn window_size(switch: Option<&str>) -> [f32; 2] {
         .unwrap_or([1280.0, 800.0])
 }
 
+/// The `GAST_STUDIO_STRENGTH=C[,S]` test switch: the colour and shape
+/// strengths in percent (one value for both); full strength without it.
+fn env_strength() -> [f32; 2] {
+    let Ok(text) = std::env::var("GAST_STUDIO_STRENGTH") else { return [1.0, 1.0] };
+    let v: Vec<f32> =
+        text.split(',').filter_map(|t| t.trim().parse::<f32>().ok()).map(|p| (p / 100.0).clamp(0.0, 1.0)).collect();
+    match v.as_slice() {
+        [c] => [*c, *c],
+        [c, s] => [*c, *s],
+        _ => [1.0, 1.0],
+    }
+}
+
 fn env_u64(name: &str) -> Option<u64> {
     std::env::var(name).ok().and_then(|v| v.trim().parse().ok())
 }
@@ -237,6 +257,8 @@ impl StudioApp {
         let mut app = Self {
             scene: None,
             snapshot: None,
+            strength: env_strength(),
+            shown: None,
             live: None,
             next_version: 1,
             styles: Vec::new(),
@@ -316,9 +338,45 @@ impl StudioApp {
         }
     }
 
-    /// The Gaussians shown as "current": the newest snapshot, else the scene.
+    /// The Gaussians shown as "current": the newest snapshot at the chosen
+    /// strength, else the scene.
     fn current(&self) -> Option<SharedGaussians> {
-        self.snapshot.as_ref().or(self.scene.as_ref().map(|s| &s.scene)).map(|s| s.gaussians.clone())
+        self.after().or(self.scene.as_ref().map(|s| &s.scene)).map(|s| s.gaussians.clone())
+    }
+
+    /// The stylized side as shown and exported: the newest snapshot, blended
+    /// toward the colour-matched scene when a strength is below 100%.
+    fn after(&self) -> Option<&SceneRef> {
+        match &self.shown {
+            Some((_, _, blended)) if self.strength != [1.0, 1.0] => Some(blended),
+            _ => self.snapshot.as_ref(),
+        }
+    }
+
+    /// Makes [`StudioApp::after`] follow a new snapshot or strength (a blend
+    /// of every Gaussian, milliseconds for a million on the UI thread).
+    fn refresh_strength(&mut self) {
+        let (Some(snap), Some(start)) = (&self.snapshot, self.run.start()) else {
+            self.shown = None;
+            return;
+        };
+        if self.strength == [1.0, 1.0]
+            || self.shown.as_ref().is_some_and(|(v, s, _)| *v == snap.version && *s == self.strength)
+        {
+            return;
+        }
+        let strength = gast_core::scene::Strength { colour: self.strength[0], shape: self.strength[1] };
+        match gast_core::scene::blend(&start.colour_matched, &snap.gaussians, strength) {
+            Ok(g) => {
+                let blended = SceneRef { version: self.next_version, gaussians: SharedGaussians::Owned(Arc::new(g)) };
+                self.next_version += 1;
+                self.shown = Some((snap.version, self.strength, blended));
+            }
+            Err(e) => {
+                self.strength = [1.0, 1.0];
+                self.errors.push(format!("strength: {e}"));
+            }
+        }
     }
 
     fn viewport_camera(&self) -> Camera {
@@ -406,6 +464,7 @@ impl StudioApp {
         }
         self.frames += 1;
         self.poll_workers();
+        self.refresh_strength();
         self.handle_drops(ui);
         egui::Panel::top("menu").show(ui, |ui| self.menu_bar(ui));
         egui::Panel::bottom("status").resizable(true).default_size(90.0).show(ui, |ui| self.status_panel(ui));
@@ -460,8 +519,9 @@ impl StudioApp {
         let callback = ViewportCallback {
             camera,
             before: self.scene.as_ref().map(|s| s.scene.clone()),
-            after: self.snapshot.clone(),
-            live: self.live.clone(),
+            after: self.after().cloned(),
+            // The engine's buffers hold the run at full strength.
+            live: self.live.clone().filter(|_| self.strength == [1.0, 1.0]),
             split: self.split,
             background: self.background,
             stats: self.stats.clone(),

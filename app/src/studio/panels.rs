@@ -97,7 +97,7 @@ impl StudioApp {
     pub(super) fn export_turntable(&mut self, dir: std::path::PathBuf, opts: TurntableOptions) {
         let Some(scene) = &self.scene else { return };
         let before = scene.scene.gaussians.clone();
-        let after = self.snapshot.as_ref().map(|s| s.gaussians.clone());
+        let after = self.after().map(|s| s.gaussians.clone());
         let opts = TurntableOptions { up: self.view.up.vector().to_array(), background: self.background, ..opts };
         self.notice = format!("writing a turntable into {}…", dir.display());
         self.jobs.export_turntable(before, after, opts, dir);
@@ -396,6 +396,15 @@ impl StudioApp {
         }
         ui.add(egui::Slider::new(&mut self.split, 0.0..=1.0).text("before | after"))
             .on_hover_text("left of the line: the scene as loaded");
+        let strength_hover = "how much of the stylization the after side shows and exports: 0% is the run's \
+                              colour-matched scene, 100% the stylized one; no new optimisation";
+        for (k, what) in [(0, "colour strength"), (1, "shape strength")] {
+            let mut pct = self.strength[k] * 100.0;
+            let slider = egui::Slider::new(&mut pct, 0.0..=100.0).suffix("%").text(what);
+            if ui.add_enabled(self.run.start().is_some(), slider).on_hover_text(strength_hover).changed() {
+                self.strength[k] = (pct / 100.0).clamp(0.0, 1.0);
+            }
+        }
         let mut bg = self.background;
         ui.horizontal(|ui| {
             ui.label("background");
@@ -466,7 +475,7 @@ impl StudioApp {
     pub(super) fn request_inspection(&mut self, force: bool) {
         let Some(g) = self.current() else { return };
         let scene_v = self.scene.as_ref().map(|s| s.scene.version).unwrap_or(0);
-        let snap_v = self.snapshot.as_ref().map(|s| s.version).unwrap_or(0);
+        let snap_v = self.after().map(|s| s.version).unwrap_or(0);
         let key = (self.view.clone(), self.viewport_px, scene_v, snap_v);
         if !force && self.inspected_view.as_ref() == Some(&key) {
             return;
