@@ -68,6 +68,38 @@ pub fn auto_resolution(span: f32, model: StepModel) -> (u32, u32) {
     resolution_for(span, model.largest_within(AUTO_STEP_BUDGET_S))
 }
 
+/// The whole run the automatic plan aims at on a CPU: ten minutes.
+pub const AUTO_RUN_BUDGET_S: f64 = 600.0;
+/// The smallest working resolution the run budget may bring the plan down to.
+pub const AUTO_MIN_RESOLUTION: u32 = 256;
+
+/// A CPU run planned to fit a time budget ([`auto_plan`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AutoPlan {
+    /// Working resolution (longer side, px).
+    pub resolution: u32,
+    /// The resolution at which the object would span [`OBJECT_FEATURES`] relu3 positions.
+    pub wanted: u32,
+    /// Cycles: the default, or fewer where its steps would not fit the budget.
+    pub cycles: u32,
+    /// The model's estimate of the whole run, seconds.
+    pub seconds: f64,
+}
+
+/// The working resolution and cycles of a CPU run that fits `budget_s`: the
+/// resolution [`auto_resolution`] would pick, brought down until the default
+/// schedule (`cycles` × `steps_per_cycle`) fits the budget but not below
+/// [`AUTO_MIN_RESOLUTION`]; then, where even that does not fit, fewer cycles
+/// (at least one).
+pub fn auto_plan(span: f32, model: StepModel, cycles: u32, steps_per_cycle: u32, budget_s: f64) -> AutoPlan {
+    let steps = f64::from(cycles.max(1) * steps_per_cycle.max(1));
+    let fits = model.largest_within(budget_s / steps).max(AUTO_MIN_RESOLUTION);
+    let (resolution, wanted) = resolution_for(span, fits.min(model.largest_within(AUTO_STEP_BUDGET_S)));
+    let per_cycle = model.seconds(resolution) * f64::from(steps_per_cycle.max(1));
+    let cycles = cycles.min((budget_s / per_cycle).floor().max(1.0) as u32).max(1);
+    AutoPlan { resolution, wanted, cycles, seconds: per_cycle * f64::from(cycles) }
+}
+
 /// The mean share of the pixels of `cameras` that `scene` covers (alpha of
 /// at least 0.5), rendered at 64 px: what `focus auto` decides on.
 pub fn mean_coverage(scene: &Gaussians, cameras: &[Camera], opts: &RenderOptions) -> f32 {
@@ -120,5 +152,22 @@ mod tests {
         assert!((object.seconds(512) - 0.58).abs() < 0.02, "{}", object.seconds(512));
         assert!(step_time_hint(512, false).contains("2.28 s"), "{}", step_time_hint(512, false));
         assert!(step_time_hint(256, true).contains("0.18 s") && step_time_hint(256, true).contains("object focus"));
+    }
+
+    #[test]
+    fn the_automatic_plan_fits_the_default_run_in_ten_minutes() {
+        let (object, frame) = (StepModel::for_focus(true), StepModel::for_focus(false));
+        // guitar (fitted views, the object spans 90 %): 256 px keeps all 30 cycles, 9 min.
+        let g = auto_plan(0.9, object, 30, 100, AUTO_RUN_BUDGET_S);
+        assert_eq!((g.resolution, g.wanted, g.cycles), (256, 576, 30));
+        assert!(g.seconds <= AUTO_RUN_BUDGET_S && g.seconds > 500.0, "{}", g.seconds);
+        // A full frame (fern): 256 px, and 10 cycles fit.
+        let f = auto_plan(1.0, frame, 30, 100, AUTO_RUN_BUDGET_S);
+        assert_eq!((f.resolution, f.cycles), (256, 10));
+        assert!(f.seconds <= AUTO_RUN_BUDGET_S);
+        // A longer budget gives the object its wanted resolution back, within the 1 s step cap.
+        assert_eq!(auto_plan(0.9, object, 30, 100, 36_000.0).resolution, 576);
+        // Never below one cycle.
+        assert_eq!(auto_plan(1.0, frame, 30, 100, 1.0).cycles, 1);
     }
 }

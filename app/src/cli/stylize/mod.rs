@@ -19,7 +19,7 @@ use gast_core::io::{
 };
 use gast_core::raster::{self, RenderOptions};
 use gast_core::session::plan::{
-    PIXELS_PER_FEATURE, StepModel, auto_resolution, auto_resolution_gpu, mean_coverage, step_time_hint,
+    AUTO_RUN_BUDGET_S, PIXELS_PER_FEATURE, StepModel, auto_plan, auto_resolution_gpu, mean_coverage, step_time_hint,
 };
 use gast_core::session::{Event, Session, SessionInputs, Stage1Cache, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::StyleConfig;
@@ -226,11 +226,28 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
                 Focus::Auto.is_object(mean_coverage(&scene, &cameras, &RenderOptions { background: config.background }))
             }
         };
-        let (chosen, wanted) =
-            if gpu.is_some() { auto_resolution_gpu(span) } else { auto_resolution(span, StepModel::for_focus(object)) };
-        let hint = match &gpu {
-            Some(g) => format!("steps run on {}", g.describe()),
-            None => step_time_hint(chosen, object),
+        let (chosen, wanted, hint) = match &gpu {
+            Some(g) => {
+                let (chosen, wanted) = auto_resolution_gpu(span);
+                (chosen, wanted, format!("steps run on {}", g.describe()))
+            }
+            None => {
+                let model = StepModel::for_focus(object);
+                let plan = auto_plan(span, model, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
+                let fewer = if args.cycles.is_none() && plan.cycles < config.cycles {
+                    config.cycles = plan.cycles;
+                    format!(", {} cycles to fit", plan.cycles)
+                } else {
+                    String::new()
+                };
+                let total = model.seconds(plan.resolution) * f64::from(config.schedule().total_steps());
+                let hint = format!(
+                    "{}{fewer}: about {:.0} min on this CPU (--resolution and --cycles override)",
+                    step_time_hint(plan.resolution, object),
+                    total / 60.0
+                );
+                (plan.resolution, plan.wanted, hint)
+            }
         };
         eprintln!(
             "working resolution {chosen} px: the object spans {:.0} relu3 positions across its longer side \
