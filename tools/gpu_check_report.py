@@ -111,6 +111,19 @@ for name, what, target in (("full_guitar", "full schedule, guitar × block2", 60
     figure(what + " (load to export)", s["wall_s"] if s["rc"] == 0 else None, "s", f"≤ {target:.0f} s",
            s["rc"] == 0 and s["wall_s"] <= target, note)
 
+# fern's schedule extrapolated from its first five cycles (the step time is flat).
+rep = load(os.path.join("fern_500", "report.json"))
+if rep and rep.get("steps"):
+    n = len(rep["steps"])
+    prep = sum(t for _, t in rep.get("stages_s", []))
+    per = rep["optimisation_s"] / n
+    full = prep + per * 3000
+    figure("full schedule, fern × block2, from 500 steps (prepare + 3,000 × step)", full, "s", "≤ 180 s", full <= 180,
+           f"{per * 1000:.1f} ms a step over {n} steps at {rep.get('config', {}).get('resolution', '?')} px, "
+           f"prepare {prep:.1f} s")
+elif "fern_500" in doc["steps"]:
+    figure("full schedule, fern × block2, from 500 steps", None, "s", "≤ 180 s", False, status("fern_500"))
+
 # The depth network.
 d = log("depth_net")
 lines = [l.strip() for l in d.splitlines() if "GPU" in l or "gpu" in l]
