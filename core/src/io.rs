@@ -253,7 +253,7 @@ mod tests {
     fn stale_temporaries_of_dead_processes_are_removed_and_live_ones_kept() {
         let dir = std::env::temp_dir().join(format!("gast-io-stale-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::create_dir_all(&dir).expect("a temporary file");
         // Beyond Linux's largest pid (2^22): no such process can run.
         let dead_file = dir.join(".scene.ply.tmp-99999999");
         let dead_dir = dir.join(".out-sog.tmp-99999998");
@@ -261,14 +261,14 @@ mod tests {
         let own = temp_path(&dir.join("mine.ply"));
         let user = dir.join("notes.tmp-99999999"); // not hidden: not ours
         for f in [&dead_file, &live, &own, &user] {
-            std::fs::write(f, b"x").unwrap();
+            std::fs::write(f, b"x").expect("a temporary file");
         }
-        std::fs::create_dir(&dead_dir).unwrap();
-        std::fs::write(dead_dir.join("meta.json"), b"{}").unwrap();
-        write_bytes(&dir.join("target.bin"), b"new").unwrap();
+        std::fs::create_dir(&dead_dir).expect("a temporary file");
+        std::fs::write(dead_dir.join("meta.json"), b"{}").expect("a temporary file");
+        write_bytes(&dir.join("target.bin"), b"new").expect("a temporary file");
         assert!(!dead_file.exists() && !dead_dir.exists(), "stale temporaries remain");
         assert!(live.exists() && own.exists() && user.exists(), "a live, own or foreign file was removed");
-        assert_eq!(std::fs::read(dir.join("target.bin")).unwrap(), b"new");
+        assert_eq!(std::fs::read(dir.join("target.bin")).expect("a temporary file"), b"new");
         assert_eq!(stale_pid(".a.ply.tmp-12"), Some(12));
         assert_eq!((stale_pid(".a.ply.tmp-"), stale_pid("a.ply.tmp-12"), stale_pid(".tmp-12")), (None, None, None));
         std::fs::remove_dir_all(&dir).ok();

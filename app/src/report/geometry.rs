@@ -247,16 +247,16 @@ mod tests {
             records,
         };
         let dir = std::env::temp_dir().join(format!("gast-geometry-report-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let (path, verdict) = write(&dir, &run).unwrap();
+        std::fs::create_dir_all(&dir).expect("the report");
+        let (path, verdict) = write(&dir, &run).expect("the report");
         // wave's 0.0001 is within twice the seed noise (0.0001): 1 of 2, and 2 are needed (7 of 9).
         assert!(verdict.contains("on 1 of 2 styles") && verdict.contains("FAILS"), "{verdict}");
-        let text = std::fs::read_to_string(&path).unwrap();
+        let text = std::fs::read_to_string(&path).expect("the report");
         assert!(text.contains("further than the paper's norm on 2 of 2 styles"), "{text}");
         for stem in ["geometry_depth_time", "geometry_relief_time", "geometry_rgb_time"] {
             assert!(dir.join("charts").join(format!("{stem}.png")).exists(), "{stem}");
         }
-        let back = read(&dir).unwrap();
+        let back = read(&dir).expect("the report");
         assert_eq!(back.records.len(), 9);
         std::fs::remove_dir_all(&dir).ok();
     }

@@ -135,10 +135,10 @@ mod tests {
     #[test]
     fn the_ends_reproduce_their_scenes_to_the_bit() {
         let (a, b) = (scene(1), scene(2));
-        assert_eq!(blend(&a, &b, Strength::both(0.0)).unwrap(), a);
-        assert_eq!(blend(&a, &b, Strength::FULL).unwrap(), b);
+        assert_eq!(blend(&a, &b, Strength::both(0.0)).expect("a blend"), a);
+        assert_eq!(blend(&a, &b, Strength::FULL).expect("a blend"), b);
         // Colour and shape apart: colour from b, shape from a.
-        let mixed = blend(&a, &b, Strength { colour: 1.0, shape: 0.0 }).unwrap();
+        let mixed = blend(&a, &b, Strength { colour: 1.0, shape: 0.0 }).expect("a blend");
         assert_eq!((mixed.sh.clone(), mixed.means.clone()), (b.sh.clone(), a.means.clone()));
         assert_eq!((mixed.quats, mixed.opacity_logits), (a.quats, a.opacity_logits));
     }
@@ -150,7 +150,7 @@ mod tests {
         b.means[0][0] += 2.0;
         b.sh[3] -= 1.0;
         b.quats[0] = a.quats[0].map(|v| -v); // the same rotation, the other sign
-        let h = blend(&a, &b, Strength::both(0.5)).unwrap();
+        let h = blend(&a, &b, Strength::both(0.5)).expect("a blend");
         assert!((h.means[0][0] - (a.means[0][0] + 1.0)).abs() < 1e-6);
         assert!((h.sh[3] - (a.sh[3] - 0.5)).abs() < 1e-6);
         assert_eq!(h.quats[0], a.quats[0], "q and −q are one rotation: no shrink through zero");

@@ -391,8 +391,8 @@ mod tests {
             (Focus::Frame, DepthPolarity::NearDark, false)
         );
         // Old presets (no key) get the recipe; the key round-trips.
-        assert!(StyleConfig::from_json("{}").unwrap().object_recipe);
-        assert!(!StyleConfig::from_json(&paper.to_json()).unwrap().object_recipe);
+        assert!(StyleConfig::from_json("{}").expect("a preset").object_recipe);
+        assert!(!StyleConfig::from_json(&paper.to_json()).expect("a preset").object_recipe);
     }
 
     #[test]
