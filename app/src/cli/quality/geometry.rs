@@ -121,7 +121,8 @@ pub fn run(sizes: &GeometrySizes, shared: &Path, vgg: &Arc<Vgg>, out: &Path) -> 
                 break;
             }
             if done % per_cycle == 0 || session.is_done() {
-                let now: Vec<Render> = eval.iter().map(|c| raster::render(&session.result(), c, &opts)).collect();
+                let g = session.result();
+                let now: Vec<Render> = eval.iter().map(|c| raster::render(&g, c, &opts)).collect();
                 let measures = measure(vgg, &matched, &now, refs);
                 checkpoints.push(GeometryCheckpoint { step: done, seconds: prepare_s + session.elapsed_s(), measures });
             }
