@@ -200,6 +200,103 @@ fn bad_inputs_fail_with_the_file_named_and_keep_existing_outputs() {
     std::fs::remove_dir_all(&out).ok();
 }
 
+#[test]
+fn a_bad_camera_file_fails_before_the_depth_model_is_looked_for() {
+    let (Some(scene), Some(style)) =
+        (shared_file("data/scenes/guitar.compressed.ply"), shared_file("data/styles/block2.jpg"))
+    else {
+        return;
+    };
+    let out = temp("badcams");
+    std::fs::create_dir_all(&out).expect("dir");
+    let cams = out.join("cams.json");
+    std::fs::write(&cams, b"{ not json").expect("write");
+    let missing_model = out.join("no-such-model.safetensors");
+    let o = gast(&[
+        "stylize",
+        s(&scene),
+        s(&style),
+        "--cameras",
+        s(&cams),
+        "--depth-provider",
+        "learned",
+        "--depth-model",
+        s(&missing_model),
+        "--out",
+        s(&out.join("run")),
+    ]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(err.contains("cams.json"), "{err}");
+    assert!(!err.contains("no-such-model") && !err.contains("depth model"), "the depth model came first:\n{err}");
+    std::fs::remove_dir_all(&out).ok();
+}
+
+/// Ctrl-C during `stylize`: the run stops after its step and still writes the
+/// scene, the renders and a report that says where it stopped.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_stops_a_run_and_keeps_what_it_has() {
+    use std::io::{BufRead, BufReader};
+    let (Some(scene), Some(style), Some(weights)) = (
+        shared_file("data/scenes/guitar.compressed.ply"),
+        shared_file("data/styles/block2.jpg"),
+        shared_file("data/weights/vgg19-conv3.safetensors"),
+    ) else {
+        return;
+    };
+    let out = temp("ctrlc");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gast"))
+        .args([
+            "stylize",
+            s(&scene),
+            s(&style),
+            "--weights",
+            s(&weights),
+            "--out",
+            s(&out),
+            "--cycles",
+            "100",
+            "--resolution",
+            "48",
+            "--views",
+            "2",
+            "--preview-views",
+            "1",
+            "--depth-provider",
+            "heuristic",
+        ])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("spawn gast");
+    let mut lines = BufReader::new(child.stderr.take().expect("stderr")).lines();
+    let mut seen = Vec::new();
+    // The last line before the steps start.
+    for line in lines.by_ref() {
+        let line = line.expect("stderr line");
+        seen.push(line.clone());
+        if line.contains("object recipe") {
+            break;
+        }
+    }
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let kill = Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill");
+    assert!(kill.success());
+    seen.extend(lines.map_while(Result::ok));
+    let status = child.wait().expect("wait");
+    let text = seen.join("\n");
+    assert!(status.success(), "{text}");
+    assert!(text.contains("stopped at step"), "{text}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report")).expect("json");
+    let at = report["stopped_at"].as_u64().expect("stopped_at");
+    assert!((1..10_000).contains(&at), "stopped at {at}");
+    assert_eq!(report["steps"].as_array().expect("steps").len() as u64, at);
+    let result = gast_core::scene::load(out.join("stylized.ply")).expect("the stopped run's scene");
+    assert!(!result.is_empty());
+    std::fs::remove_dir_all(&out).ok();
+}
+
 /// Decodes an animated GIF: its frames' sizes.
 fn gif_frames(path: &Path) -> Vec<(u32, u32)> {
     let file = std::io::BufReader::new(std::fs::File::open(path).expect("the GIF"));

@@ -230,7 +230,7 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
     let band = 4.0 + ROW * legend_rows + 2.0;
     // The curves keep 84 px, so the legend band does not push the first weight sliders below a
     // 1280×800 window's fold.
-    let (rect, _) = ui.allocate_exact_size(egui::vec2(ui.available_width(), 84.0 + band), egui::Sense::hover());
+    let (rect, response) = ui.allocate_exact_size(egui::vec2(ui.available_width(), 84.0 + band), egui::Sense::hover());
     let painter = ui.painter_at(rect);
     painter.rect_filled(rect, 4.0, ui.visuals().extreme_bg_color);
     if steps.len() < 2 {
@@ -263,28 +263,69 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
     let (top, bottom) = (rect.top() + band + 4.0, rect.bottom() - strip - 3.0);
     painter.hline(rect.x_range(), rect.top() + band, egui::Stroke::new(1.0, ui.visuals().faint_bg_color));
     let column = rect.width() / COLUMNS as f32;
+    // The curves are clipped to the plot: a raw spike past the smoothed range runs off it.
+    let plot = painter.with_clip_rect(egui::Rect::from_x_y_ranges(rect.x_range(), top..=bottom));
+    let mut ranges = vec![format!(
+        "each curve: its own scale, smoothed over {} steps (raw values faint behind); its range:",
+        smoothing_window(steps.len())
+    )];
     for (k, (name, color, get)) in series.into_iter().enumerate() {
         let values: Vec<f32> = steps.iter().map(get).collect();
-        let (lo, hi) = values
-            .iter()
-            .filter(|v| v.is_finite())
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        let smooth = smoothed(&values, smoothing_window(values.len()));
         let at = rect.left_top() + egui::vec2(6.0 + column * (k % COLUMNS) as f32, 4.0 + ROW * (k / COLUMNS) as f32);
         let font = egui::FontId::proportional(10.5);
-        if lo > hi {
+        let Some((lo, hi)) = robust_range(&smooth) else {
             painter.text(at, egui::Align2::LEFT_TOP, format!("{name} –"), font, *color);
             continue;
-        }
-        let span = (hi - lo).max(1e-12);
-        let pts: Vec<egui::Pos2> = values
-            .iter()
-            .enumerate()
-            .filter(|(_, v)| v.is_finite())
-            .map(|(i, v)| egui::pos2(x(i), bottom - (bottom - top) * (v - lo) / span))
-            .collect();
-        painter.add(egui::Shape::line(pts, egui::Stroke::new(1.3, *color)));
-        painter.text(at, egui::Align2::LEFT_TOP, format!("{name} {}–{}", loss_label(lo), loss_label(hi)), font, *color);
+        };
+        let span = (hi - lo).max(hi.abs() * 1e-3).max(1e-12);
+        let y = |v: f32| bottom - (bottom - top) * (v - lo) / span;
+        let line = |vals: &[f32]| -> Vec<egui::Pos2> {
+            vals.iter().enumerate().filter(|(_, v)| v.is_finite()).map(|(i, &v)| egui::pos2(x(i), y(v))).collect()
+        };
+        // The raw values faint behind, the smoothed curve on top.
+        plot.add(egui::Shape::line(line(&values), egui::Stroke::new(1.0, color.gamma_multiply(0.25))));
+        plot.add(egui::Shape::line(line(&smooth), egui::Stroke::new(1.6, *color)));
+        let now = smooth.iter().rev().find(|v| v.is_finite()).copied().unwrap_or(f32::NAN);
+        painter.text(at, egui::Align2::LEFT_TOP, format!("{name} {}", loss_label(now)), font, *color);
+        ranges.push(format!("{name}: {} – {}, now {}", loss_label(lo), loss_label(hi), loss_label(now)));
     }
+    response.on_hover_text(ranges.join("\n"));
+}
+
+/// The moving-average window of a chart of `n` steps: about a fiftieth of
+/// the run, at least one step.
+pub(super) fn smoothing_window(n: usize) -> usize {
+    (n / 50).max(1)
+}
+
+/// An exponential moving average of `values` over about `window` steps
+/// (non-finite values are skipped, their place keeps the running mean).
+pub(super) fn smoothed(values: &[f32], window: usize) -> Vec<f32> {
+    let a = 2.0 / (window as f32 + 1.0);
+    let mut mean = f32::NAN;
+    values
+        .iter()
+        .map(|&v| {
+            if v.is_finite() {
+                mean = if mean.is_finite() { mean + a * (v - mean) } else { v };
+            }
+            mean
+        })
+        .collect()
+}
+
+/// The chart's vertical range of a smoothed series: its 2nd to 98th
+/// percentile, so that the first steps' spike does not flatten the rest;
+/// `None` when it has no finite value.
+pub(super) fn robust_range(values: &[f32]) -> Option<(f32, f32)> {
+    let mut v: Vec<f32> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f32::total_cmp);
+    let at = |q: f32| v[((v.len() - 1) as f32 * q).round() as usize];
+    Some((at(0.02), at(0.98)))
 }
 
 /// A loss value for the chart's legend: three decimals, or three significant

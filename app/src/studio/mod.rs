@@ -100,7 +100,12 @@ pub struct StudioApp {
     view: ViewState,
     cameras: Vec<Camera>,
     camera_source: String,
+    /// Where the before | after line sits (0: all after, 1: all before).
     split: f32,
+    /// Whether the viewport compares before | after (off: the after side alone).
+    compare: bool,
+    /// The split line is being dragged (a primary drag that started on it).
+    dragging_split: bool,
     background: [f32; 3],
     /// Messages shown in the bottom panel, newest last.
     pub errors: Vec<String>,
@@ -126,6 +131,8 @@ pub struct StudioApp {
     inspected_view: Option<InspectKey>,
     inspect_pending: Option<(InspectKey, std::time::Instant)>,
     viewport_px: [u32; 2],
+    /// Where the viewport was laid out last frame (in points).
+    viewport_rect: egui::Rect,
     /// Scene files load on a worker thread (off while the command line's files open).
     load_in_background: bool,
     ctx: egui::Context,
@@ -268,6 +275,8 @@ impl StudioApp {
             cameras: Vec::new(),
             camera_source: String::new(),
             split: 0.5,
+            compare: true,
+            dragging_split: false,
             background: [0.0; 3],
             errors: Vec::new(),
             notice: String::new(),
@@ -287,6 +296,7 @@ impl StudioApp {
             inspected_view: None,
             inspect_pending: None,
             viewport_px: [640, 480],
+            viewport_rect: egui::Rect::NOTHING,
             load_in_background: false,
             ctx,
             frames: 0,
@@ -507,6 +517,7 @@ impl StudioApp {
         let size = ui.available_size();
         let (rect, response) = ui.allocate_exact_size(size, egui::Sense::click_and_drag());
         let ppp = ui.ctx().pixels_per_point();
+        self.viewport_rect = rect;
         self.viewport_px =
             [(rect.width() * ppp).round().max(1.0) as u32, (rect.height() * ppp).round().max(1.0) as u32];
         let interacting = self.handle_view_input(ui, &response, rect);
@@ -523,14 +534,23 @@ impl StudioApp {
             after: self.after().cloned(),
             // The engine's buffers hold the run at full strength.
             live: self.live.clone().filter(|_| self.strength == [1.0, 1.0]),
-            split: self.split,
+            split: self.shown_split(),
             background: self.background,
             stats: self.stats.clone(),
             notes: self.viewport_notes.clone(),
         };
         ui.painter().add(egui_wgpu::Callback::new_paint_callback(rect, callback));
-        if self.snapshot.is_some() && self.split > 0.0 && self.split < 1.0 {
+        if self.snapshot.is_some() && self.compare && self.split > 0.0 && self.split < 1.0 {
             let x = rect.left() + rect.width() * self.split;
+            // The handle: drag it to move the line (B hides the comparison).
+            let handle = egui::pos2(x, rect.center().y);
+            let hot = self.dragging_split || response.hover_pos().is_some_and(|p| (p.x - x).abs() <= SPLIT_GRAB_PX);
+            ui.painter().circle(
+                handle,
+                if hot { 9.0 } else { 7.0 },
+                Color32::from_rgb(250, 210, 60),
+                egui::Stroke::new(1.5, Color32::BLACK),
+            );
             ui.painter().text(
                 egui::pos2(x - 6.0, rect.top() + 6.0),
                 egui::Align2::RIGHT_TOP,
@@ -557,8 +577,45 @@ impl StudioApp {
         }
     }
 
+    /// The split the viewport draws: the slider's, or 0 (after alone) with the comparison hidden.
+    fn shown_split(&self) -> f32 {
+        if self.compare { self.split } else { 0.0 }
+    }
+
+    /// A primary drag that starts on the before | after line moves the line
+    /// instead of orbiting; true while it does.
+    fn drag_split(&mut self, ui: &Ui, response: &egui::Response, rect: egui::Rect) -> bool {
+        let on_line = |x: f32| (x - (rect.left() + rect.width() * self.split)).abs() <= SPLIT_GRAB_PX;
+        let comparing = self.snapshot.is_some() && self.compare;
+        if comparing
+            && response.drag_started_by(egui::PointerButton::Primary)
+            && ui.input(|i| i.pointer.press_origin()).is_some_and(|p| on_line(p.x))
+        {
+            self.dragging_split = true;
+        }
+        if !self.dragging_split {
+            return false;
+        }
+        if response.dragged_by(egui::PointerButton::Primary)
+            && let Some(p) = response.interact_pointer_pos()
+        {
+            // Never all the way to an edge: the handle stays where it can be grabbed.
+            self.split = ((p.x - rect.left()) / rect.width().max(1.0)).clamp(0.02, 0.98);
+        }
+        if !response.dragged() {
+            self.dragging_split = false;
+        }
+        true
+    }
+
     /// Applies the mouse and keyboard to the view; true while the view is being moved.
     fn handle_view_input(&mut self, ui: &Ui, response: &egui::Response, rect: egui::Rect) -> bool {
+        if response.hovered() && ui.input(|i| i.key_pressed(egui::Key::B)) {
+            self.compare = !self.compare;
+        }
+        if self.drag_split(ui, response, rect) {
+            return false;
+        }
         let delta = response.drag_delta();
         if response.dragged_by(egui::PointerButton::Primary) {
             self.view.orbit(delta.x * 0.006, -delta.y * 0.006);
@@ -598,6 +655,9 @@ impl StudioApp {
         response.dragged() || flying
     }
 }
+
+/// How near the before | after line (in points) a drag grabs it.
+const SPLIT_GRAB_PX: f32 = 10.0;
 
 #[cfg(test)]
 mod tests;

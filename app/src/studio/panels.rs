@@ -338,7 +338,7 @@ impl StudioApp {
             ui.weak(format!("depth image: {}", p.display()));
         }
         if let Some(w) = &self.style_depth_warning {
-            ui.colored_label(ui.visuals().warn_fg_color, format!("warning: {w}"));
+            short_warning(ui, "style depth warning", w);
         }
     }
 
@@ -394,8 +394,12 @@ impl StudioApp {
         if ui.add(egui::Slider::new(&mut fov, 10.0..=120.0).text("vertical fov°")).changed() {
             self.view.fov_y = fov.to_radians();
         }
-        ui.add(egui::Slider::new(&mut self.split, 0.0..=1.0).text("before | after"))
-            .on_hover_text("left of the line: the scene as loaded");
+        ui.horizontal(|ui| {
+            ui.checkbox(&mut self.compare, "")
+                .on_hover_text("compare before | after in the viewport (B); off: the after side alone");
+            ui.add_enabled(self.compare, egui::Slider::new(&mut self.split, 0.0..=1.0).text("before | after"))
+                .on_hover_text("left of the line: the scene as loaded; or drag the line's handle in the viewport");
+        });
         let strength_hover = "how much of the stylization the after side shows and exports: 0% is the run's \
                               colour-matched scene, 100% the stylized one; no new optimisation";
         for (k, what) in [(0, "colour strength"), (1, "shape strength")] {
@@ -498,6 +502,38 @@ impl StudioApp {
         let cam = self.viewport_camera().with_longer_side(240);
         self.jobs.inspect(g, cam, self.background);
     }
+}
+
+/// A warning as one line (its first sentence) with the whole text behind a
+/// click, so that a long one does not push the panel's controls down.
+pub(super) fn short_warning(ui: &mut Ui, id: &str, text: &str) {
+    let color = ui.visuals().warn_fg_color;
+    let (head, rest) = first_sentence(text, 72);
+    if rest.is_empty() {
+        ui.colored_label(color, format!("warning: {head}"));
+        return;
+    }
+    egui::CollapsingHeader::new(RichText::new(format!("warning: {head}…")).color(color)).id_salt(id).show(ui, |ui| {
+        ui.label(RichText::new(text).color(color).small());
+    });
+}
+
+/// The first sentence of `text`, cut at a word to at most `max` characters,
+/// and whether anything is left after it.
+pub(super) fn first_sentence(text: &str, max: usize) -> (String, &str) {
+    let end = [text.find(". "), text.find(": ")].into_iter().flatten().min().map_or(text.len(), |i| i + 1);
+    let head: &str = &text[..end];
+    let head = if head.chars().count() <= max {
+        head.trim_end_matches(['.', ':']).to_string()
+    } else {
+        let cut: String = head.chars().take(max).collect();
+        match cut.rfind(' ') {
+            Some(i) if i > max / 2 => cut[..i].to_string(),
+            _ => cut,
+        }
+    };
+    let shown = head.len();
+    (head, if shown >= text.trim_end_matches('.').len() { "" } else { &text[shown..] })
 }
 
 /// The colour watch's reading under the progress bar: the object's luminance

@@ -787,3 +787,83 @@ fn the_window_switch_reads_a_size_or_keeps_the_default() {
         assert_eq!(window_size(bad), [1280.0, 800.0], "{bad:?}");
     }
 }
+
+#[test]
+fn the_loss_chart_smooths_and_scales_past_the_first_spike() {
+    use super::controls::{robust_range, smoothed, smoothing_window};
+    // A first-step spike, then a noisy plateau around 1.
+    let mut raw: Vec<f32> = (0..200).map(|i| 1.0 + if i % 2 == 0 { 0.2 } else { -0.2 }).collect();
+    raw[0] = 50.0;
+    raw[7] = f32::NAN;
+    let s = smoothed(&raw, smoothing_window(raw.len()));
+    assert_eq!(s.len(), raw.len());
+    assert!(s.iter().all(|v| v.is_finite()), "a NaN step keeps the running mean");
+    let tail = &s[100..];
+    let spread = tail.iter().fold(0.0f32, |m, v| m.max((v - 1.0).abs()));
+    assert!(spread < 0.1, "smoothed noise {spread}");
+    let (lo, hi) = robust_range(&s).expect("finite");
+    assert!(hi < 10.0 && lo > 0.5, "range {lo}–{hi}: the spike sets the scale");
+    assert_eq!(robust_range(&[f32::NAN]), None);
+    assert_eq!(smoothed(&[3.0], 1), vec![3.0]);
+}
+
+#[test]
+fn a_long_warning_shows_its_first_sentence() {
+    use super::panels::first_sentence;
+    let long = "the learned depth could not be had: the download of Depth Anything V2 failed (no network). \
+                Using the built-in relief estimate instead; put the checkpoint in the cache to use it.";
+    let (head, rest) = first_sentence(long, 72);
+    assert_eq!(head, "the learned depth could not be had");
+    assert!(!rest.is_empty());
+    let (head, rest) = first_sentence("short and whole.", 72);
+    assert_eq!(head, "short and whole");
+    assert!(rest.is_empty(), "{rest:?}");
+    let (head, _) = first_sentence(&"word ".repeat(40), 72);
+    assert!(head.chars().count() <= 72 && !head.ends_with(' '));
+}
+
+#[test]
+fn the_split_line_drags_and_hides() {
+    let (app, _crx, _etx) = app_with_a_run(5);
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    settle(&mut harness);
+    let rect = harness.state().viewport_rect;
+    assert!(rect.width() > 100.0, "viewport {rect:?}");
+    let drag = |harness: &mut egui_kittest::Harness<'_, StudioApp>, from: egui::Pos2, to: egui::Pos2| {
+        harness.hover_at(from);
+        harness.step();
+        harness.drag_at(from);
+        harness.step();
+        for k in 1..=4 {
+            harness.hover_at(from + (to - from) * (k as f32 / 4.0));
+            harness.step();
+        }
+        harness.drop_at(to);
+        harness.run_steps(2);
+    };
+    // A drag that starts on the line moves it, and the view stays.
+    let y = rect.center().y;
+    let line = egui::pos2(rect.left() + rect.width() * 0.5, y);
+    let yaw = harness.state().view.cam_to_world;
+    drag(&mut harness, line, egui::pos2(rect.left() + rect.width() * 0.25, y));
+    let split = harness.state().split;
+    assert!((split - 0.25).abs() < 0.02, "split {split}");
+    assert_eq!(harness.state().view.cam_to_world, yaw, "dragging the line orbited the view");
+    // A drag elsewhere orbits and leaves the line.
+    drag(
+        &mut harness,
+        egui::pos2(rect.left() + rect.width() * 0.7, y),
+        egui::pos2(rect.left() + rect.width() * 0.8, y),
+    );
+    assert_eq!(harness.state().split, split);
+    assert_ne!(harness.state().view.cam_to_world, yaw, "a drag off the line did not orbit");
+    // B hides the comparison: the viewport draws the after side alone.
+    assert!((harness.state().shown_split() - split).abs() < 1e-6);
+    harness.hover_at(rect.center());
+    harness.key_press(egui::Key::B);
+    harness.run_steps(2);
+    assert!(!harness.state().compare);
+    assert_eq!(harness.state().shown_split(), 0.0);
+}

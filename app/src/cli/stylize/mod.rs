@@ -4,6 +4,7 @@
 use std::path::Path;
 use std::process::ExitCode;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use anyhow::Context;
@@ -84,6 +85,26 @@ pub fn resolve_style_depth(
     Ok(source)
 }
 
+/// Set by the first Ctrl-C, so that the run stops after its current step and
+/// still writes its scene, renders and report; a second Ctrl-C quits at once.
+/// Installed once per process (a second `stylize` in one process, as the
+/// tests do, shares the flag).
+fn interrupt_flag() -> Arc<AtomicBool> {
+    static FLAG: std::sync::OnceLock<Arc<AtomicBool>> = std::sync::OnceLock::new();
+    FLAG.get_or_init(|| {
+        let flag = Arc::new(AtomicBool::new(false));
+        let seen = flag.clone();
+        // No handler (another one is installed): Ctrl-C quits as before.
+        let _ = ctrlc::set_handler(move || {
+            if seen.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+        });
+        flag
+    })
+    .clone()
+}
+
 /// What a user reads when the colour watch sees the object's colours
 /// collapse after `steps` steps (`loss`: the share of luminance or chroma
 /// lost; `object`: whether the losses already focus on the object).
@@ -135,6 +156,8 @@ struct Report {
     views: usize,
     stages_s: Vec<(String, f64)>,
     optimisation_s: f64,
+    /// The step a Ctrl-C stopped the run at; `None`: the whole schedule ran.
+    stopped_at: Option<u32>,
     steps: Vec<StepReport>,
     preview: Vec<PreviewMetrics>,
     summary: Summary,
@@ -184,6 +207,7 @@ struct Summary {
 /// Runs the stylization and writes the outputs.
 pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let t_all = Instant::now();
+    let interrupted = interrupt_flag();
     let config = args.config()?;
     super::convert::check_output_name(&args.scene_name)?;
     let scene = load_scene(&args.scene)?;
@@ -201,8 +225,9 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     // 1 GFLOP/s, ~40× slower than the CPU kernels (`gast bench depth
     // --device gpu`): there the depth stays on the CPU.
     let depth_gpu = gpu.as_ref().filter(|g| !g.is_software());
-    let style_depth =
-        resolve_style_depth(&config, &style, args.style_depth.as_deref(), args.depth_model.as_deref(), depth_gpu)?;
+    // Everything that can fail fast is checked before the slow work (the depth
+    // model's download, the run): the output folder, the cameras, the weights.
+    std::fs::create_dir_all(&args.out).with_context(|| format!("could not create {}", args.out.display()))?;
     let cameras = views_for(
         &scene,
         &ViewArgs {
@@ -260,6 +285,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         write_bytes(p, config.to_json().as_bytes())?;
     }
     let vgg = Arc::new(load_vgg(args.weights.as_deref())?);
+    let style_depth =
+        resolve_style_depth(&config, &style, args.style_depth.as_deref(), args.depth_model.as_deref(), depth_gpu)?;
     eprintln!(
         "{}: {} Gaussians (SH degree {}), {} views; style {} ({}x{})",
         args.scene.display(),
@@ -307,6 +334,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let pb = progress::bar(total as u64, "stylize");
     let mut steps = Vec::with_capacity(total as usize);
     let mut warned_collapse = false;
+    let mut stopped_at = None;
     while let Some(r) = session.step() {
         let lum = r.colour.map_or(String::new(), |c| format!(" luminance {:.2}x", c.luminance_ratio()));
         pb.set_message(format!(
@@ -328,20 +356,27 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             anyhow::bail!("step {}: the loss became {}; stopping (try lower learning rates)", r.iter, r.losses.total);
         }
         steps.push(r);
+        if interrupted.load(Ordering::SeqCst) && !session.is_done() {
+            stopped_at = Some(session.steps_done());
+            break;
+        }
     }
     pb.finish_and_clear();
+    if let Some(n) = stopped_at {
+        eprintln!("stopped at step {n} of {total} (Ctrl-C): writing what the run has; Ctrl-C again quits at once");
+    }
     if let Some(why) = session.failure() {
         anyhow::bail!("the optimisation stopped at {why}");
     }
     let optimisation_s = session.elapsed_s();
+    let done = session.steps_done();
     eprintln!(
-        "  optimisation on {}: {total} steps in {optimisation_s:.1} s ({:.3} s/step)",
+        "  optimisation on {}: {done} steps in {optimisation_s:.1} s ({:.3} s/step)",
         session.device(),
-        optimisation_s / total.max(1) as f64
+        optimisation_s / done.max(1) as f64
     );
 
     let result = session.result();
-    std::fs::create_dir_all(&args.out).with_context(|| format!("could not create {}", args.out.display()))?;
     // The colour-matched scene, for `gast convert --blend` to set a strength later.
     let matched_path = args.out.join("colour_matched.ply");
     super::convert::save_scene(&matched_path, session.colour_matched(), &super::convert::SaveArgs::default())?;
@@ -368,7 +403,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         args.preview_views,
     )?;
     let sheet_path = args.out.join("sheet.png");
-    let settings = sheet::settings_line(&config, total, optimisation_s, session.focus_on_object(), session.coverage());
+    let settings = sheet::settings_line(&config, done, optimisation_s, session.focus_on_object(), session.coverage());
     let title = format!(
         "{} x {}",
         args.scene.file_name().unwrap_or_default().to_string_lossy(),
@@ -448,6 +483,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         views: cameras.len(),
         stages_s: stages,
         optimisation_s,
+        stopped_at,
         steps,
         preview,
         summary,
