@@ -16,7 +16,33 @@ use gast_core::style::MeanSteps;
 
 use super::chart::{Chart, Series, palette};
 use crate::study::{
-    FOCUS_FITTED_VIEWS, FOCUS_FRAME, FOCUS_MASKED_LOSSES, FOCUS_OBJECT, FOCUS_SEED, Record, Row, RunSummary, Study,
+    DEFAULTS_CYCLE, DEFAULTS_NEW, DEFAULTS_PAPER, DEFAULTS_SEED, FOCUS_FITTED_VIEWS, FOCUS_FRAME, FOCUS_MASKED_LOSSES,
+    FOCUS_OBJECT, FOCUS_SEED, Record, Row, RunSummary, Study,
+};
+
+/// A two-arm study read pair by pair: does `candidate` move the object's
+/// style measures further than `base`, beyond the seed floor (`seed`: the
+/// base arm with another view order), with its consistency in bounds?
+struct Comparison {
+    study: Study,
+    base: &'static str,
+    candidate: &'static str,
+    seed: &'static str,
+    /// Stem of the chart files and of the page.
+    name: &'static str,
+}
+
+/// The focus study: object focus against the paper's whole-frame losses.
+const FOCUS: Comparison =
+    Comparison { study: Study::Focus, base: FOCUS_FRAME, candidate: FOCUS_OBJECT, seed: FOCUS_SEED, name: "focus" };
+
+/// The defaults study: the shipped defaults against `--preset paper`.
+const DEFAULTS: Comparison = Comparison {
+    study: Study::Defaults,
+    base: DEFAULTS_PAPER,
+    candidate: DEFAULTS_NEW,
+    seed: DEFAULTS_SEED,
+    name: "defaults",
 };
 
 /// Object's RMSE may be at most this factor of frame's for a pair to pass.
@@ -85,13 +111,13 @@ fn median(mut v: Vec<f32>) -> Option<f32> {
 }
 
 /// The seed floor of measure `f` on `scene`: how far apart the final values
-/// of the two frame runs (two view orders) of its first style are; 0 without
+/// of the two base runs (two view orders) of its first style are; 0 without
 /// a seed run.
-fn seed_floor(rows: &[(&Row, &Record)], scene: &str, f: fn(&Measures) -> f32) -> f32 {
-    let seed = rows.iter().find(|(r, t)| r.label == FOCUS_SEED && t.scene_name() == scene);
+fn seed_floor(rows: &[(&Row, &Record)], c: &Comparison, scene: &str, f: fn(&Measures) -> f32) -> f32 {
+    let seed = rows.iter().find(|(r, t)| r.label == c.seed && t.scene_name() == scene);
     let twin = seed.and_then(|(r, t)| {
         let base =
-            rows.iter().find(|(r2, t2)| r2.label == FOCUS_FRAME && t2.scene_name() == scene && t2.style == t.style)?;
+            rows.iter().find(|(r2, t2)| r2.label == c.base && t2.scene_name() == scene && t2.style == t.style)?;
         Some((f(&t.at(r.step)?.measures) - f(&base.1.at(base.0.step)?.measures)).abs())
     });
     twin.unwrap_or(0.0)
@@ -115,7 +141,7 @@ struct Margin {
 /// named in the legend (coloured by style; "RMSE over" when its RMSE fails),
 /// and dashed lines at one seed floor on each axis; a pair passes up and to
 /// the right of both.
-fn margins_chart(margins: &[Margin]) -> Chart {
+fn margins_chart(margins: &[Margin], c: &Comparison) -> Chart {
     let mut styles: Vec<&str> = Vec::new();
     for m in margins {
         if !styles.contains(&m.style.as_str()) {
@@ -144,15 +170,20 @@ fn margins_chart(margins: &[Margin]) -> Chart {
     };
     series.push(dashed("one seed floor (SW)", vec![(1.0, y_lo.into()), (1.0, y_hi.into())]));
     series.push(dashed("one seed floor (NN-cos)", vec![(x_lo.into(), 1.0), (x_hi.into(), 1.0)]));
+    let (base, candidate) = (c.base, c.candidate);
+    let study = match c.study {
+        Study::Defaults => "Defaults",
+        _ => "Focus",
+    };
     Chart {
         title: match margins.first() {
             Some(m) if margins.iter().all(|o| o.scene == m.scene) => {
-                format!("Focus study on {}: object's lead over frame, per style", m.scene)
+                format!("{study} study on {}: {candidate}'s lead over {base}, per style", m.scene)
             }
-            _ => "Focus study: object's lead over frame, per scene × style pair".into(),
+            _ => format!("{study} study: {candidate}'s lead over {base}, per scene × style pair"),
         },
-        x_label: "SW decrease, object minus frame (seed floors)".into(),
-        y_label: "NN-cos decrease, object minus frame (seed floors)".into(),
+        x_label: format!("SW decrease, {candidate} minus {base} (seed floors)"),
+        y_label: format!("NN-cos decrease, {candidate} minus {base} (seed floors)"),
         series,
         note: Some("a pair passes above and right of both dashed lines, with RMSE in bounds".into()),
         ..Chart::default()
@@ -162,7 +193,7 @@ fn margins_chart(margins: &[Margin]) -> Chart {
 /// [`focus_table`]'s lines.
 #[cfg(test)]
 fn focus_lines(run: &RunSummary) -> Vec<String> {
-    focus_table(run).0
+    focus_table(run, &FOCUS).0
 }
 
 /// The focus study's table: per pair, each arm's decrease of SW and NN-cos on
@@ -172,8 +203,8 @@ fn focus_lines(run: &RunSummary) -> Vec<String> {
 /// pair the grid asked for has a line: one whose arm is missing or measured
 /// nothing says so instead of being left out. Also each measured pair's
 /// [`Margin`].
-fn focus_table(run: &RunSummary) -> (Vec<String>, Vec<Margin>) {
-    let rows = rows_of(run, Study::Focus);
+fn focus_table(run: &RunSummary, c: &Comparison) -> (Vec<String>, Vec<Margin>) {
+    let rows = rows_of(run, c.study);
     if rows.is_empty() {
         return (Vec::new(), Vec::new());
     }
@@ -211,21 +242,33 @@ fn focus_table(run: &RunSummary) -> (Vec<String>, Vec<Margin>) {
     .into_iter()
     .filter(|&(_, v)| v > 0.0)
     .fold(sizes, |acc, (name, v)| format!("{acc}, object with {name} {v}"));
+    let (b, o) = (c.base, c.candidate);
+    let heading = if c.study == Study::Defaults {
+        format!(
+            "## Defaults: `--preset paper` against the shipped defaults, both at {} px, {} steps ({} per cycle)",
+            run.sizes.defaults_resolution, run.sizes.defaults_budget, DEFAULTS_CYCLE
+        )
+    } else {
+        format!("## Focus: frame against object, {sizes}")
+    };
     let mut out = vec![
-        format!("## Focus: frame against object, {sizes} (SW, NN-cos and content on relu3, RMSE on the 37.5° pairs; all on the object's pixels of the fitted ring{over})"),
+        format!(
+            "{heading} (SW, NN-cos and content on relu3, RMSE on the 37.5° pairs; all on the object's pixels of the fitted ring{over})"
+        ),
         String::new(),
-        "| scene | style | steps | ΔSW frame | ΔSW object | ratio | ΔNN frame | ΔNN object | ratio | content frame | content object | RMSE frame | RMSE object | RMSE ratio | colours collapsed (frame, object) | haze (frame, object) | optimising s (frame, object) | passes |"
-            .into(),
+        format!(
+            "| scene | style | steps | ΔSW {b} | ΔSW {o} | ratio | ΔNN {b} | ΔNN {o} | ratio | content {b} | content {o} | RMSE {b} | RMSE {o} | RMSE ratio | colours collapsed ({b}, {o}) | haze ({b}, {o}) | optimising s ({b}, {o}) | passes |"
+        ),
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|".into(),
     ];
     let (mut ratios, mut nn_ratios, mut rmse_ratios, mut time_ratios) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut per_scene: Vec<SceneTally> = Vec::new();
-    for &(row, frame) in rows.iter().filter(|(r, _)| r.label == FOCUS_FRAME) {
+    for &(row, frame) in rows.iter().filter(|(r, _)| r.label == c.base) {
         let (scene, style) = (frame.scene_name(), frame.style.clone());
         let step = row.step;
         let frame_collapsed = collapsed(frame);
-        let object_arm = find(FOCUS_OBJECT, &scene, &style).map(|(_, t)| t);
+        let object_arm = find(c.candidate, &scene, &style).map(|(_, t)| t);
         let object_collapsed = object_arm.is_some_and(collapsed);
         let count = |per_scene: &mut Vec<SceneTally>, pass: bool, nn_more: bool, sw_more: bool| {
             let i = match per_scene.iter().position(|t| t.scene == scene) {
@@ -244,11 +287,11 @@ fn focus_table(run: &RunSummary) -> (Vec<String>, Vec<Margin>) {
             t.sw_more += usize::from(sw_more);
         };
         let Some(object) = object_arm else {
-            out.push(format!("| {scene} | {style} | {step} | no object arm in this run ||||||||||||||| no |"));
+            out.push(format!("| {scene} | {style} | {step} | no {o} arm in this run ||||||||||||||| no |"));
             count(&mut per_scene, false, false, false);
             continue;
         };
-        let floor = |f: fn(&Measures) -> f32| seed_floor(&rows, &scene, f);
+        let floor = |f: fn(&Measures) -> f32| seed_floor(&rows, c, &scene, f);
         let (Some(sw_f), Some(sw_o), Some(nn_f), Some(nn_o)) = (
             decrease(frame, step, sw),
             decrease(object, step, sw),
@@ -256,7 +299,7 @@ fn focus_table(run: &RunSummary) -> (Vec<String>, Vec<Margin>) {
             decrease(object, step, nn),
         ) else {
             out.push(format!(
-                "| {scene} | {style} | {step} | failed: frame {} ({} steps), object {} ({} steps) ||||||||||||||| no |",
+                "| {scene} | {style} | {step} | failed: {b} {} ({} steps), {o} {} ({} steps) ||||||||||||||| no |",
                 frame.health(),
                 frame.steps,
                 object.health(),
@@ -303,27 +346,29 @@ fn focus_table(run: &RunSummary) -> (Vec<String>, Vec<Margin>) {
     for (name, v) in [
         ("SW decreases", ratios),
         ("NN-cos decreases", nn_ratios),
-        ("object RMSEs", rmse_ratios),
+        (if c.study == Study::Focus { "object RMSEs" } else { "RMSEs" }, rmse_ratios),
         ("optimising times (the same steps; both arms interleaved in one process)", time_ratios),
     ] {
         let n = v.len();
         if let Some(m) = median(v) {
             out.push(format!(
-                "Median ratio of the {name} (object / frame) over the {n} pairs where frame's is positive: {m:.2}."
+                "Median ratio of the {name} ({o} / {b}) over the {n} pairs where {b}'s is positive: {m:.2}."
             ));
         }
     }
     for t in per_scene {
         let SceneTally { scene, pairs, passing, frame_collapsed, object_collapsed, nn_more, sw_more } = t;
         out.push(format!(
-            "{scene}: object beats frame beyond the seed floor, with RMSE within {RMSE_FACTOR}x, on {passing} of {pairs} styles \
-             (the colour-collapse detector fired on the frame run of {frame_collapsed} of them and on the object run of \
-             {object_collapsed}); object lowers NN-cos more on {nn_more} and SW more on {sw_more}, seed floor aside."
+            "{scene}: {o} beats {b} beyond the seed floor, with RMSE within {RMSE_FACTOR}x, on {passing} of {pairs} styles \
+             (the colour-collapse detector fired on the {b} run of {frame_collapsed} of them and on the {o} run of \
+             {object_collapsed}); {o} lowers NN-cos more on {nn_more} and SW more on {sw_more}, seed floor aside."
         ));
     }
     out.push(String::new());
-    out.extend(halves_lines(&rows));
-    out.extend(breakdown_lines(&rows));
+    if c.study == Study::Focus {
+        out.extend(halves_lines(&rows));
+    }
+    out.extend(breakdown_lines(&rows, c));
     (out, margins)
 }
 
@@ -376,8 +421,8 @@ fn halves_lines(rows: &[(&Row, &Record)]) -> Vec<String> {
                 (decrease(r, step, sw), decrease(r, step, nn), at(r, |m| m.consistency_long_object));
             let beats = match (sw_f, sw_a, nn_f, nn_a) {
                 (Some(sw_f), Some(sw_a), Some(nn_f), Some(nn_a)) => {
-                    sw_a - sw_f > seed_floor(rows, &scene, sw)
-                        && nn_a - nn_f > seed_floor(rows, &scene, nn)
+                    sw_a - sw_f > seed_floor(rows, &FOCUS, &scene, sw)
+                        && nn_a - nn_f > seed_floor(rows, &FOCUS, &scene, nn)
                         && rmse_a <= RMSE_FACTOR * rmse_f
                 }
                 _ => false,
@@ -422,9 +467,9 @@ fn halves_lines(rows: &[(&Row, &Record)]) -> Vec<String> {
 /// length over the style's, and the covered luminance before and after (a
 /// darker object has shorter relu3 features). Runs recorded before the SW
 /// parts existed show "–" in those columns.
-fn breakdown_lines(rows: &[(&Row, &Record)]) -> Vec<String> {
+fn breakdown_lines(rows: &[(&Row, &Record)], c: &Comparison) -> Vec<String> {
     let arms: Vec<(&Row, &Record)> =
-        rows.iter().copied().filter(|(r, _)| r.label == FOCUS_FRAME || r.label == FOCUS_OBJECT).collect();
+        rows.iter().copied().filter(|(r, _)| r.label == c.base || r.label == c.candidate).collect();
     if arms.is_empty() {
         return Vec::new();
     }
@@ -506,7 +551,23 @@ fn collapse_lines(run: &RunSummary) -> Vec<String> {
 /// Writes `focus.md` into `out` when the run has focus or collapse rows and
 /// returns its lines (empty when it has none).
 pub fn write_focus_report(out: &Path, run: &RunSummary) -> anyhow::Result<Vec<String>> {
-    let (mut lines, margins) = focus_table(run);
+    let mut lines = comparison_page(out, run, &FOCUS)?;
+    lines.extend(collapse_lines(run));
+    if !lines.is_empty() {
+        gast_core::io::write_bytes(&out.join("focus.md"), (lines.join("\n") + "\n").as_bytes())?;
+    }
+    let defaults = comparison_page(out, run, &DEFAULTS)?;
+    if !defaults.is_empty() {
+        gast_core::io::write_bytes(&out.join("defaults.md"), (defaults.join("\n") + "\n").as_bytes())?;
+    }
+    lines.extend(defaults);
+    Ok(lines)
+}
+
+/// The table of comparison `c` and its margin charts (written under `charts/`).
+fn comparison_page(out: &Path, run: &RunSummary, c: &Comparison) -> anyhow::Result<Vec<String>> {
+    let (mut lines, margins) = focus_table(run, c);
+    let (b, o) = (c.base, c.candidate);
     if !margins.is_empty() {
         let dir = out.join("charts");
         std::fs::create_dir_all(&dir).with_context(|| format!("could not create {}", dir.display()))?;
@@ -520,22 +581,19 @@ pub fn write_focus_report(out: &Path, run: &RunSummary) -> anyhow::Result<Vec<St
         }
         let mut names = Vec::new();
         for scene in &scenes {
-            let name = if scenes.len() == 1 { "focus_margins".to_string() } else { format!("focus_margins_{scene}") };
+            let stem = c.name;
+            let name = if scenes.len() == 1 { format!("{stem}_margins") } else { format!("{stem}_margins_{scene}") };
             let of_scene: Vec<Margin> = margins.iter().filter(|m| m.scene == *scene).cloned().collect();
-            margins_chart(&of_scene).write(&dir.join(&name))?;
+            margins_chart(&of_scene, c).write(&dir.join(&name))?;
             names.push(format!("`charts/{name}.png`"));
         }
         lines.push(format!(
-            "{} {}: each pair's lead of object over frame in seed floors (SW across, NN-cos up); a pair passes \
+            "{} {}: each pair's lead of {o} over {b} in seed floors (SW across, NN-cos up); a pair passes \
              above and right of both dashed lines.",
             if names.len() == 1 { "Chart" } else { "Charts" },
             names.join(", ")
         ));
         lines.push(String::new());
-    }
-    lines.extend(collapse_lines(run));
-    if !lines.is_empty() {
-        gast_core::io::write_bytes(&out.join("focus.md"), (lines.join("\n") + "\n").as_bytes())?;
     }
     Ok(lines)
 }
@@ -580,6 +638,28 @@ mod tests {
             colour: CoveredColour { luminance, chroma: 0.2 },
             ..Measures::default()
         }
+    }
+
+    #[test]
+    fn the_defaults_page_reads_the_defaults_arms_with_their_names() {
+        let paper = record("p", "wave", measures(2.0, 1.0, 0.4, 1.0, 0.5), measures(1.9, 1.0, 0.39, 1.0, 0.5));
+        let seed = record("s", "wave", measures(2.0, 1.0, 0.4, 1.0, 0.5), measures(1.89, 1.0, 0.389, 1.0, 0.5));
+        let new = record("d", "wave", measures(2.0, 1.0, 0.4, 1.0, 0.5), measures(1.5, 1.0, 0.3, 1.0, 0.5));
+        let mut run = focus_run(vec![(DEFAULTS_PAPER, paper), (DEFAULTS_SEED, seed), (DEFAULTS_NEW, new)]);
+        for r in &mut run.rows {
+            r.study = Study::Defaults;
+        }
+        assert!(focus_lines(&run).is_empty(), "the focus table reads only the focus study");
+        let (lines, margins) = focus_table(&run, &DEFAULTS);
+        assert!(lines[0].starts_with("## Defaults: `--preset paper` against the shipped defaults"), "{}", lines[0]);
+        assert!(lines[2].contains("ΔSW paper | ΔSW defaults"), "{}", lines[2]);
+        assert!(lines.iter().any(|l| l.starts_with("guitar: defaults beats paper beyond the seed floor") && l.contains("on 1 of 1")));
+        assert_eq!(margins.len(), 1);
+        let dir = std::env::temp_dir().join(format!("gast-defaults-page-{}", std::process::id()));
+        let written = write_focus_report(&dir, &run).expect("pages");
+        assert!(!written.is_empty() && dir.join("defaults.md").is_file() && !dir.join("focus.md").exists());
+        assert!(dir.join("charts/defaults_margins.png").is_file());
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     /// A focus run of one pair with the arms `(label, record)`, each row at step 200.
@@ -721,12 +801,12 @@ mod tests {
         // Object lowers SW by 1.5 (0.5 more: 2.5 floors) and NN-cos by 0.004 (0.006 less: −3 floors).
         let object = record("o", "galaxy", before(), measures(3.5, 3.0, 0.226, 0.8, 0.20));
         let run = focus_run(vec![(FOCUS_FRAME, frame), (FOCUS_SEED, seed), (FOCUS_OBJECT, object)]);
-        let (lines, margins) = focus_table(&run);
+        let (lines, margins) = focus_table(&run, &FOCUS);
         assert_eq!(margins.len(), 1, "{lines:#?}");
         let m = &margins[0];
         assert_eq!((m.scene.as_str(), m.style.as_str(), m.rmse_ok), ("guitar", "galaxy", true));
         assert!((m.sw - 2.5).abs() < 1e-2 && (m.nn + 3.0).abs() < 1e-2, "{m:?}");
-        let chart = margins_chart(&margins);
+        let chart = margins_chart(&margins, &FOCUS);
         assert_eq!(chart.series[0].points, vec![(f64::from(m.sw), f64::from(m.nn))]);
         assert_eq!(chart.series[0].name, "guitar galaxy");
         assert!(chart.series.iter().any(|s| s.dashed && s.points.iter().all(|p| p.0 == 1.0)), "the SW floor line");
@@ -744,9 +824,9 @@ mod tests {
             (*label, Record { id: format!("b{}", t.id), scene: "data/scenes/biker.compressed.ply".into(), ..t.clone() })
         });
         let two = focus_run(arms.iter().cloned().chain(biker).collect());
-        let (_, margins) = focus_table(&two);
+        let (_, margins) = focus_table(&two, &FOCUS);
         assert_eq!(margins.len(), 2);
-        assert!(margins_chart(&margins[..1]).title.contains("on guitar"));
+        assert!(margins_chart(&margins[..1], &FOCUS).title.contains("on guitar"));
         let written = write_focus_report(&dir, &two).expect("the report");
         let line = written.iter().find(|l| l.contains("focus_margins")).expect("the charts' line");
         assert!(line.contains("focus_margins_guitar.png") && line.contains("focus_margins_biker.png"), "{line}");

@@ -27,6 +27,16 @@ pub const FOCUS_FITTED_VIEWS: &str = "fitted views, frame losses";
 /// See [`FOCUS_FITTED_VIEWS`]: object focus's masked losses alone, on the plain orbit.
 pub const FOCUS_MASKED_LOSSES: &str = "orbit, masked losses";
 
+/// Labels of the defaults study's arms: `--preset paper` (the base), the
+/// shipped defaults, and the paper's arm with another view order (the seed floor).
+pub const DEFAULTS_PAPER: &str = "paper";
+/// See [`DEFAULTS_PAPER`].
+pub const DEFAULTS_NEW: &str = "defaults";
+/// See [`DEFAULTS_PAPER`].
+pub const DEFAULTS_SEED: &str = "paper, seed 1";
+/// Steps per cycle of the defaults study: the paper's (and `gast stylize`'s) 100.
+pub const DEFAULTS_CYCLE: u32 = 100;
+
 /// The studies of the grid.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, ValueEnum, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -63,6 +73,13 @@ pub enum Study {
     /// mean-square tether, the depth measures after every cycle
     /// ([`geometry`]). Runs only when named.
     Geometry,
+    /// The shipped defaults (`StyleConfig::default()`: focus auto, the object
+    /// recipe, the relief depth, views framed as `gast stylize` frames them)
+    /// against `--preset paper` (the plain orbit, whole-frame losses) on every
+    /// scene × style pair, measured on the object's pixels of the fitted
+    /// ring; the paper's arm twice on the first style (the seed floor).
+    /// Runs only when named.
+    Defaults,
 }
 
 impl Study {
@@ -218,6 +235,21 @@ pub struct Sizes {
     /// the choice it made (`gast stylize`'s default when not given).
     #[serde(default)]
     pub focus_object_mean_steps: Option<MeanSteps>,
+    /// Steps of each arm of the defaults study (cycles of [`DEFAULTS_CYCLE`]).
+    #[serde(default = "defaults_budget")]
+    pub defaults_budget: u32,
+    /// Working resolution of both arms of the defaults study.
+    #[serde(default = "defaults_resolution")]
+    pub defaults_resolution: u32,
+}
+
+fn defaults_budget() -> u32 {
+    200
+}
+
+/// 96 px keeps the 57 trials of the full study near an hour on two cores.
+fn defaults_resolution() -> u32 {
+    96
 }
 
 /// The collapse study's runs: the decoupled default on every pair; the others
@@ -283,6 +315,8 @@ impl Sizes {
             focus_object_lr_color: 0.0,
             focus_object_ratio_geo: 0.0,
             focus_object_lambda_tv: 0.0,
+            defaults_budget: defaults_budget(),
+            defaults_resolution: defaults_resolution(),
         }
     }
 
@@ -346,6 +380,8 @@ impl Sizes {
             focus_object_lr_color: 0.0,
             focus_object_ratio_geo: 0.0,
             focus_object_lambda_tv: 0.0,
+            defaults_budget: 100,
+            defaults_resolution: 64,
         }
     }
 }

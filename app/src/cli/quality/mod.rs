@@ -29,8 +29,9 @@ use super::bench::shared_dir;
 use crate::report::quality::{read_summary, rewrite_report, write_report};
 use crate::study::geometry::GeometrySizes;
 use crate::study::{
-    COLLAPSE_CONTENT, FOCUS_FITTED_VIEWS, FOCUS_FRAME, FOCUS_MASKED_LOSSES, FOCUS_OBJECT, FOCUS_SEED, Record, Row,
-    RunSummary, SEED_LABEL, Sizes, Study, StyleSource, TrialSpec, mode_label,
+    COLLAPSE_CONTENT, DEFAULTS_CYCLE, DEFAULTS_NEW, DEFAULTS_PAPER, DEFAULTS_SEED, FOCUS_FITTED_VIEWS, FOCUS_FRAME,
+    FOCUS_MASKED_LOSSES, FOCUS_OBJECT, FOCUS_SEED, Record, Row, RunSummary, SEED_LABEL, Sizes, Study, StyleSource,
+    TrialSpec, mode_label,
 };
 use crate::views::{Framing, ViewArgs, load_scene, views_for};
 
@@ -322,6 +323,37 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
                 if k == 0 {
                     let seed = StyleConfig { seed: 1, ..frame.clone() };
                     g.want_framed((Study::Focus, FOCUS_SEED), scene, &style, seed, 1.0, &[], plain_on_object);
+                }
+            }
+        }
+    }
+    if studies.contains(&Study::Defaults) {
+        // Both arms as a user gets them: `--preset paper` on the plain orbit,
+        // the shipped defaults on the views `gast stylize` frames; the
+        // budget and resolution are the study's, the rest is each preset's.
+        let sized = |c: StyleConfig| StyleConfig {
+            resolution: sizes.defaults_resolution,
+            steps_per_cycle: DEFAULTS_CYCLE,
+            cycles: sizes.defaults_budget.div_ceil(DEFAULTS_CYCLE).max(1),
+            ..c
+        };
+        let (paper, defaults) = (sized(StyleConfig::paper()), sized(StyleConfig::default()));
+        for scene in 0..sizes.scenes.len() {
+            for (k, style) in sizes.styles.iter().enumerate() {
+                let style = file(style);
+                g.want_framed(
+                    (Study::Defaults, DEFAULTS_PAPER),
+                    scene,
+                    &style,
+                    paper.clone(),
+                    1.0,
+                    &[],
+                    plain_on_object,
+                );
+                g.want_framed((Study::Defaults, DEFAULTS_NEW), scene, &style, defaults.clone(), 1.0, &[], fitted);
+                if k == 0 {
+                    let seed = StyleConfig { seed: 1, ..paper.clone() };
+                    g.want_framed((Study::Defaults, DEFAULTS_SEED), scene, &style, seed, 1.0, &[], plain_on_object);
                 }
             }
         }
@@ -660,6 +692,36 @@ mod tests {
         let g = build_grid(&both, Path::new("/shared"), &[Study::Collapse]);
         let content_rows = g.rows.iter().filter(|r| r.label == COLLAPSE_CONTENT).count();
         assert_eq!((g.rows.len(), content_rows), (2 * pairs, pairs));
+    }
+
+    #[test]
+    fn the_defaults_study_compares_the_shipped_defaults_with_the_paper_preset() {
+        let sizes = Sizes::full();
+        let g = build_grid(&sizes, Path::new("/shared"), &[Study::Defaults]);
+        let pairs = sizes.scenes.len() * sizes.styles.len();
+        let trials_of = |label: &str| -> Vec<TrialSpec> {
+            g.rows
+                .iter()
+                .filter(|r| r.study == Study::Defaults && r.label == label)
+                .map(|r| g.trials.iter().find(|t| t.id == r.trial).expect("trial").clone())
+                .collect()
+        };
+        let (paper, defaults, seed) = (trials_of(DEFAULTS_PAPER), trials_of(DEFAULTS_NEW), trials_of(DEFAULTS_SEED));
+        assert_eq!((paper.len(), defaults.len(), seed.len()), (pairs, pairs, sizes.scenes.len()));
+        // Each arm is its preset with only the study's budget and resolution set.
+        let sized = |c: StyleConfig| StyleConfig {
+            resolution: sizes.defaults_resolution,
+            steps_per_cycle: DEFAULTS_CYCLE,
+            cycles: sizes.defaults_budget / DEFAULTS_CYCLE,
+            ..c
+        };
+        assert!(paper.iter().all(|t| t.config == sized(StyleConfig::paper()) && t.framing == Framing::Full));
+        assert!(defaults.iter().all(|t| t.config == sized(StyleConfig::default()) && t.framing == Framing::Object));
+        assert!(paper.iter().chain(&defaults).chain(&seed).all(|t| t.eval_on_object));
+        assert_eq!(seed[0].config.seed, 1);
+        // It runs only when named.
+        let g = build_grid(&sizes, Path::new("/shared"), &Study::ALL);
+        assert!(!g.rows.iter().any(|r| r.study == Study::Defaults));
     }
 
     #[test]
