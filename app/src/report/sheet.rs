@@ -155,14 +155,12 @@ pub fn maps_tiles(m: &StyleMaps) -> [Tile; 3] {
 /// colour floor, the loss weights that differ from the defaults and the time.
 pub fn settings_line(config: &StyleConfig, steps: u32, seconds: f64, focus_on_object: bool, coverage: f32) -> String {
     let focus = if focus_on_object { "object" } else { "frame" };
-    let defaults = LossWeights::default().named();
+    let defaults = LossWeights::default();
     let weights: String = config
         .weights
-        .named()
-        .iter()
-        .zip(defaults)
-        .filter(|(w, d)| w.2 != d.2)
-        .map(|(w, _)| format!(", {} {}", w.1, w.2))
+        .terms()
+        .filter(|(t, v)| *v != t.get(&defaults))
+        .map(|(t, v)| format!(", {} {v}", t.symbol))
         .collect();
     format!(
         "{} {} steps ({} cycles x {}), {} px, texture {} px, focus {focus} (asked {:?}, coverage {:.0}%), lr colour {}, means {:e} x extent, colour floor {}{weights}; {:.0} s ({:.2} s/step)",

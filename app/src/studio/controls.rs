@@ -2,8 +2,9 @@
 //! preset files and CLI flags), the run buttons and the loss chart.
 
 use egui::{Color32, Ui};
-use gast_core::session::StepReport;
+use gast_core::session::{LossTerms, StepReport};
 use gast_core::style::config::{OBJECT_RECIPE_ASSIGN, OBJECT_RECIPE_ASSIGN_COS, ParamRegulariser};
+use gast_core::style::terms::TERMS;
 use gast_core::style::{Focus, MeanSteps, Mode, Phase, StyleConfig};
 
 /// Label of a focus in menus.
@@ -51,84 +52,38 @@ fn weight(ui: &mut Ui, value: &mut f32, max: f32, label: &str, hover: &str) -> b
 pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
     let mut changed = false;
     ui.label(egui::RichText::new("Loss weights").strong());
-    let w = &mut c.weights;
-    changed |= weight(ui, &mut w.gcfm, 20.0, "λ_GC", "geometry-aware contrastive feature matching");
-    changed |= weight(ui, &mut w.content, 1.0, "λ_cont", "content feature loss");
-    changed |= weight(ui, &mut w.tv, 1.0, "λ_TV", "total variation of the render");
-    changed |= weight(ui, &mut w.opacity, 10.0, "λ_α", "opacity regulariser (geometry steps)");
-    changed |= weight(ui, &mut w.scale, 10.0, "λ_s", "scale regulariser (geometry steps)");
-    changed |= weight(ui, &mut w.rotation, 10.0, "λ_r", "rotation regulariser (geometry steps)");
-    changed |= egui::ComboBox::from_label("λ_α, λ_s, λ_r form")
-        .selected_text(regulariser_label(c.param_regulariser))
-        .show_ui(ui, |ui| {
-            let mut any = false;
-            for r in [ParamRegulariser::Norm, ParamRegulariser::MeanSquare] {
-                any |= ui.selectable_value(&mut c.param_regulariser, r, regulariser_label(r)).changed();
-            }
-            any
-        })
-        .inner
-        .unwrap_or(false);
-    let w = &mut c.weights;
-    changed |= weight(ui, &mut w.depth, 100.0, "λ_d", "inverse-depth regulariser (geometry steps)");
-    changed |= weight(
-        ui,
-        &mut w.feature_mean,
-        1000.0,
-        "λ_mean",
-        "feature-mean term, not in the paper (0 = off): pulls the mean VGG feature of the object (of the frame \
-         with frame focus) toward the style's, so the style's colours and marks come through without darkening \
-         the object; 100 in the README's focus study",
-    );
-    if w.feature_mean > 0.0 {
-        egui::ComboBox::from_label("λ_mean acts on")
-            .selected_text(mean_steps_label(c.feature_mean_steps))
-            .show_ui(ui, |ui| {
-                for m in MeanSteps::ALL {
-                    changed |= ui.selectable_value(&mut c.feature_mean_steps, m, mean_steps_label(m)).changed();
-                }
-            })
-            .response
-            .on_hover_text(
-                "colour steps only leave the geometry steps to GCFM alone: better nearest-neighbour matches, \
-                 less of the style's colour statistics (the README's focus study)",
-            );
+    // One slider per loss term (`gast_core::style::terms`), with the choices that belong to a term after it.
+    for t in &TERMS {
+        let hover = if t.gpu { t.help.to_string() } else { format!("{} (CPU device only so far)", t.help) };
+        changed |= weight(ui, (t.weight)(&mut c.weights), t.max, t.symbol, &hover);
+        if t.key == "rotation" {
+            changed |= egui::ComboBox::from_label("λ_α, λ_s, λ_r form")
+                .selected_text(regulariser_label(c.param_regulariser))
+                .show_ui(ui, |ui| {
+                    let mut any = false;
+                    for r in [ParamRegulariser::Norm, ParamRegulariser::MeanSquare] {
+                        any |= ui.selectable_value(&mut c.param_regulariser, r, regulariser_label(r)).changed();
+                    }
+                    any
+                })
+                .inner
+                .unwrap_or(false);
+        }
+        if t.key == "feature_mean" && c.weights.feature_mean > 0.0 {
+            egui::ComboBox::from_label("λ_mean acts on")
+                .selected_text(mean_steps_label(c.feature_mean_steps))
+                .show_ui(ui, |ui| {
+                    for m in MeanSteps::ALL {
+                        changed |= ui.selectable_value(&mut c.feature_mean_steps, m, mean_steps_label(m)).changed();
+                    }
+                })
+                .response
+                .on_hover_text(
+                    "colour steps only leave the geometry steps to GCFM alone: better nearest-neighbour matches, \
+                     less of the style's colour statistics (the focus study)",
+                );
+        }
     }
-    let w = &mut c.weights;
-    changed |= weight(
-        ui,
-        &mut w.outside,
-        1e6,
-        "λ_out",
-        "background hold, not in the paper (0 = off): with object focus, the pixels around the object that the \
-         colour-matched scene leaves empty keep its render, so no haze or streaks grow there; 1e5 in the README",
-    );
-    changed |= weight(
-        ui,
-        &mut w.sliced,
-        1000.0,
-        "λ_sw",
-        "sliced Wasserstein term, not in the paper (0 = off; CPU device only so far): pulls the distribution of \
-         the object's VGG features toward the style's, not only their mean (λ_mean); 100 in the README",
-    );
-    changed |= weight(
-        ui,
-        &mut w.assignment,
-        1000.0,
-        "λ_as",
-        "assignment term, not in the paper (0 = off): pairs each of the object's VGG \
-         features with a distinct style feature, drawn anew each step, and pulls it there, so the object's \
-         features land on actual style features spread as the style's are; with λ_asc on, along its pairing",
-    );
-    changed |= weight(
-        ui,
-        &mut w.assignment_cosine,
-        1000.0,
-        "λ_asc",
-        "cosine assignment term, not in the paper (0 = off): the same one-to-one pairing \
-         made by cosine distance, turning each feature's direction to its partner's; 10 with λ_as 0.003 to 0.015 \
-         in the README's focus study",
-    );
     changed |= ui
         .checkbox(
             &mut c.object_recipe,
@@ -205,25 +160,16 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
 /// steps violet). The λ_mean, λ_out and λ_sw terms, off by default, get their
 /// lines only when a step measured them.
 pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
-    type Series = (&'static str, Color32, fn(&StepReport) -> f32);
-    const SERIES: [Series; 10] = [
-        ("total", Color32::from_rgb(250, 200, 60), |s| s.losses.total),
-        ("GCFM", Color32::from_rgb(90, 170, 250), |s| s.losses.gcfm),
-        ("content", Color32::from_rgb(120, 220, 120), |s| s.losses.content),
-        ("TV", Color32::from_rgb(230, 110, 110), |s| s.losses.tv),
-        ("depth", Color32::from_rgb(200, 200, 200), |s| s.losses.depth),
-        ("mean", Color32::from_rgb(220, 130, 230), |s| s.losses.feature_mean),
-        ("hold", Color32::from_rgb(120, 220, 220), |s| s.losses.outside),
-        ("sliced", Color32::from_rgb(240, 160, 90), |s| s.losses.sliced),
-        ("assign", Color32::from_rgb(170, 140, 250), |s| s.losses.assignment),
-        ("assign cos", Color32::from_rgb(250, 120, 180), |s| s.losses.assignment_cosine),
-    ];
     const ROW: f32 = 13.0;
-    const COLUMNS: usize = 2;
-    let series: Vec<&Series> = SERIES
-        .iter()
+    const COLUMNS: usize = 3;
+    // The total, then one line per loss term (`gast_core::style::terms`): GCFM, content and TV always,
+    // the others once they are on.
+    let total: fn(&LossTerms) -> f32 = |l| l.total;
+    type Series = (&'static str, Color32, fn(&LossTerms) -> f32);
+    let series: Vec<Series> = std::iter::once(("total", TOTAL_COLOUR, total))
+        .chain(TERMS.iter().enumerate().map(|(k, t)| (t.chart, term_colour(k), t.value)))
         .enumerate()
-        .filter(|(k, s)| *k < 5 || steps.iter().any(|r| (s.2)(r) > 0.0))
+        .filter(|(k, s)| *k < 4 || steps.iter().any(|r| (s.2)(&r.losses) > 0.0))
         .map(|(_, s)| s)
         .collect();
     let legend_rows = series.len().div_ceil(COLUMNS) as f32;
@@ -270,12 +216,12 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
         smoothing_window(steps.len())
     )];
     for (k, (name, color, get)) in series.into_iter().enumerate() {
-        let values: Vec<f32> = steps.iter().map(get).collect();
+        let values: Vec<f32> = steps.iter().map(|s| get(&s.losses)).collect();
         let smooth = smoothed(&values, smoothing_window(values.len()));
         let at = rect.left_top() + egui::vec2(6.0 + column * (k % COLUMNS) as f32, 4.0 + ROW * (k / COLUMNS) as f32);
         let font = egui::FontId::proportional(10.5);
         let Some((lo, hi)) = robust_range(&smooth) else {
-            painter.text(at, egui::Align2::LEFT_TOP, format!("{name} –"), font, *color);
+            painter.text(at, egui::Align2::LEFT_TOP, format!("{name} –"), font, color);
             continue;
         };
         let span = (hi - lo).max(hi.abs() * 1e-3).max(1e-12);
@@ -285,12 +231,34 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
         };
         // The raw values faint behind, the smoothed curve on top.
         plot.add(egui::Shape::line(line(&values), egui::Stroke::new(1.0, color.gamma_multiply(0.25))));
-        plot.add(egui::Shape::line(line(&smooth), egui::Stroke::new(1.6, *color)));
+        plot.add(egui::Shape::line(line(&smooth), egui::Stroke::new(1.6, color)));
         let now = smooth.iter().rev().find(|v| v.is_finite()).copied().unwrap_or(f32::NAN);
-        painter.text(at, egui::Align2::LEFT_TOP, format!("{name} {}", loss_label(now)), font, *color);
+        painter.text(at, egui::Align2::LEFT_TOP, format!("{name} {}", loss_label(now)), font, color);
         ranges.push(format!("{name}: {} – {}, now {}", loss_label(lo), loss_label(hi), loss_label(now)));
     }
     response.on_hover_text(ranges.join("\n"));
+}
+
+/// The chart's colour of the total.
+const TOTAL_COLOUR: Color32 = Color32::from_rgb(250, 200, 60);
+
+/// The chart's colour of the `k`-th term of [`TERMS`].
+fn term_colour(k: usize) -> Color32 {
+    const COLOURS: [Color32; 12] = [
+        Color32::from_rgb(90, 170, 250),
+        Color32::from_rgb(120, 220, 120),
+        Color32::from_rgb(230, 110, 110),
+        Color32::from_rgb(160, 160, 120),
+        Color32::from_rgb(140, 160, 200),
+        Color32::from_rgb(200, 150, 150),
+        Color32::from_rgb(200, 200, 200),
+        Color32::from_rgb(220, 130, 230),
+        Color32::from_rgb(120, 220, 220),
+        Color32::from_rgb(240, 160, 90),
+        Color32::from_rgb(170, 140, 250),
+        Color32::from_rgb(250, 120, 180),
+    ];
+    COLOURS[k % COLOURS.len()]
 }
 
 /// The moving-average window of a chart of `n` steps: about a fiftieth of

@@ -6,6 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::style::terms::LossTerms;
 use crate::style::{Phase, StyleConfig};
 
 /// What a front end asks of a running session; applied between steps.
@@ -19,42 +20,6 @@ pub enum Command {
     Stop,
     /// Use new parameters from the next step on (weights, rates, ratio, cycles, mode).
     SetConfig(Box<StyleConfig>),
-}
-
-/// Each loss term of a step, unweighted, and the weighted total.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct LossTerms {
-    /// Weighted sum of all terms of the step.
-    pub total: f32,
-    /// GCFM (contrastive feature matching).
-    pub gcfm: f32,
-    /// Content feature loss.
-    pub content: f32,
-    /// Total variation.
-    pub tv: f32,
-    /// ‖o − o^c‖₂ (geometry steps).
-    pub reg_opacity: f32,
-    /// ‖s − s^c‖₂ (geometry steps).
-    pub reg_scale: f32,
-    /// ‖q − q^c‖₂ (geometry steps).
-    pub reg_rotation: f32,
-    /// mean|D − D^c| (geometry steps).
-    pub depth: f32,
-    /// The feature-mean term (0 when λ_mean is 0).
-    #[serde(default)]
-    pub feature_mean: f32,
-    /// The background hold (0 when λ_out is 0 or the focus is the frame).
-    #[serde(default)]
-    pub outside: f32,
-    /// The sliced Wasserstein term (0 when λ_sw is 0).
-    #[serde(default)]
-    pub sliced: f32,
-    /// The assignment term, squared distance (0 when λ_as and λ_asc are 0).
-    #[serde(default)]
-    pub assignment: f32,
-    /// The assignment term, cosine distance (0 when λ_as and λ_asc are 0).
-    #[serde(default)]
-    pub assignment_cosine: f32,
 }
 
 /// Time spent in each part of a step, in milliseconds.

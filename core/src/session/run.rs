@@ -551,11 +551,14 @@ impl ViewSampler {
 /// GPU engine does not compute yet when the steps run there.
 fn engine_problems(config: &StyleConfig, on_gpu: bool) -> Vec<String> {
     let mut out = config.problems();
-    if on_gpu && config.weights.sliced > 0.0 {
-        out.push(format!(
-            "the sliced Wasserstein term (λ_sw = {}) runs on the CPU engine only so far: use the CPU (--device cpu) or set it to 0",
-            config.weights.sliced
-        ));
+    if on_gpu {
+        for (t, v) in config.weights.cpu_only() {
+            out.push(format!(
+                "{} = {v} ({}) runs on the CPU engine only so far: use the CPU (--device cpu) or set it to 0",
+                t.symbol,
+                t.help.split(':').next().unwrap_or(t.key)
+            ));
+        }
     }
     out
 }

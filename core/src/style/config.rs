@@ -83,31 +83,6 @@ impl Default for LossWeights {
     }
 }
 
-impl LossWeights {
-    /// Every weight with its preset key (`weights.<key>`) and its symbol.
-    pub fn named(&self) -> [(&'static str, &'static str, f32); 12] {
-        [
-            ("gcfm", "λ_GC", self.gcfm),
-            ("content", "λ_cont", self.content),
-            ("tv", "λ_TV", self.tv),
-            ("opacity", "λ_α", self.opacity),
-            ("scale", "λ_s", self.scale),
-            ("rotation", "λ_r", self.rotation),
-            ("depth", "λ_d", self.depth),
-            ("feature_mean", "λ_mean", self.feature_mean),
-            ("outside", "λ_out", self.outside),
-            ("sliced", "λ_sw", self.sliced),
-            ("assignment", "λ_as", self.assignment),
-            ("assignment_cosine", "λ_asc", self.assignment_cosine),
-        ]
-    }
-
-    /// Whether a term the GPU engine does not compute yet is on (λ_sw).
-    pub fn needs_cpu(&self) -> bool {
-        self.sliced > 0.0
-    }
-}
-
 /// Learning rates per parameter group.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -331,7 +306,7 @@ impl StyleConfig {
             ));
         }
         let lr = self.lr;
-        let weights = self.weights.named().map(|(key, _, v)| (format!("weights.{key}"), v));
+        let weights = self.weights.terms().map(|(t, v)| (format!("weights.{}", t.key), v));
         for (name, v) in weights.into_iter().chain([
             ("lr.color".to_string(), lr.color),
             ("lr.means_per_extent".to_string(), lr.means_per_extent),

@@ -23,6 +23,7 @@ pub mod schedule;
 pub mod sliced;
 pub mod stage1;
 pub mod step;
+pub mod terms;
 pub mod tv;
 pub mod window;
 

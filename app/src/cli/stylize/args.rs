@@ -6,6 +6,8 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use gast_core::gpu::DeviceChoice;
+use gast_core::style::config::LossWeights;
+use gast_core::style::terms::{TERMS, Term};
 use gast_core::style::{Focus, MatchMethod, MeanSteps, Mode, StyleConfig};
 use gast_core::vision::ConvAlgo;
 use gast_core::vision::style_depth::{DepthPolarity, DepthProvider};
@@ -100,59 +102,9 @@ pub struct StylizeArgs {
     /// 512 px].
     #[arg(long)]
     pub resolution: Option<u32>,
-    /// λ_GC, contrastive feature matching [default: 2].
-    #[arg(long)]
-    pub lambda_gc: Option<f32>,
-    /// λ_cont, content [default: 0.001].
-    #[arg(long)]
-    pub lambda_content: Option<f32>,
-    /// λ_TV, total variation [default: 0.02].
-    #[arg(long)]
-    pub lambda_tv: Option<f32>,
-    /// λ_α, opacity regulariser [default: 1].
-    #[arg(long)]
-    pub lambda_opacity: Option<f32>,
-    /// λ_s, scale regulariser [default: 1].
-    #[arg(long)]
-    pub lambda_scale: Option<f32>,
-    /// λ_r, rotation regulariser [default: 1].
-    #[arg(long)]
-    pub lambda_rotation: Option<f32>,
-    /// λ_d, depth regulariser [default: 10].
-    #[arg(long)]
-    pub lambda_depth: Option<f32>,
-    /// λ_mean, the feature-mean term: pulls the mean of the rendered relu3
-    /// features (over the object's positions with object focus) toward the
-    /// style's; not in the reference [default: 0, off].
-    #[arg(long)]
-    pub lambda_mean: Option<f32>,
-    /// λ_out, the background hold: with object focus, the pixels the
-    /// colour-matched scene leaves empty keep its render, so no haze grows
-    /// around the object; not in the reference [default: 0, off].
-    #[arg(long)]
-    pub lambda_outside: Option<f32>,
-    /// λ_sw, the sliced Wasserstein term: pulls the distribution of the
-    /// rendered relu3 features (over the object's positions with object
-    /// focus) toward the style's along 128 fixed random directions; λ_mean is
-    /// its first moment. Not in the reference; CPU engine only so far
-    /// [default: 0, off].
-    #[arg(long)]
-    pub lambda_sliced: Option<f32>,
-    /// λ_as, the assignment term: pairs each rendered relu3 feature (the
-    /// object's with object focus) with a distinct style feature drawn anew
-    /// each step, by the pairing of least total squared distance, and pulls
-    /// it there, so the features land on actual style features spread as the
-    /// style's are. Not in the reference; on the GPU the device gathers the
-    /// paired features and the host pairs them [default: 0, off].
-    #[arg(long)]
-    pub lambda_assign: Option<f32>,
-    /// λ_asc, the cosine assignment term: the same one-to-one pairing, made
-    /// by cosine distance (GCFM's), pulling each feature's direction to its
-    /// partner's. A small λ_as beside it (0.003 to 0.015 with λ_asc 10) holds
-    /// the features' lengths; with λ_asc on, λ_as pulls along this pairing. Not
-    /// in the reference [default: 0, off].
-    #[arg(long)]
-    pub lambda_assign_cos: Option<f32>,
+    /// One flag per loss weight (`--lambda-gc`, …), from `gast_core::style::terms`.
+    #[command(flatten)]
+    pub loss_weights: WeightFlags,
     /// Which steps λ_mean acts on: every, or colour (the colour steps only;
     /// the geometry steps follow GCFM alone) [default: every].
     #[arg(long, value_name = "colour|every")]
@@ -236,18 +188,7 @@ impl StylizeArgs {
         set!(self.mode, c.mode);
         set!(self.texture_scale, c.texture_scale);
         set!(self.resolution, c.resolution);
-        set!(self.lambda_gc, c.weights.gcfm);
-        set!(self.lambda_content, c.weights.content);
-        set!(self.lambda_tv, c.weights.tv);
-        set!(self.lambda_opacity, c.weights.opacity);
-        set!(self.lambda_scale, c.weights.scale);
-        set!(self.lambda_rotation, c.weights.rotation);
-        set!(self.lambda_depth, c.weights.depth);
-        set!(self.lambda_mean, c.weights.feature_mean);
-        set!(self.lambda_outside, c.weights.outside);
-        set!(self.lambda_sliced, c.weights.sliced);
-        set!(self.lambda_assign, c.weights.assignment);
-        set!(self.lambda_assign_cos, c.weights.assignment_cosine);
+        self.loss_weights.apply(&mut c.weights);
         set!(self.mean_steps, c.feature_mean_steps);
         set!(self.lr_color, c.lr.color);
         set!(self.lr_means, c.lr.means_per_extent);
@@ -319,5 +260,61 @@ fn parse_polarity(s: &str) -> Result<DepthPolarity, String> {
         "near-bright" => Ok(DepthPolarity::NearBright),
         "near-dark" | "reference" => Ok(DepthPolarity::NearDark),
         _ => Err(format!("expected near-bright or near-dark, found {s:?}")),
+    }
+}
+
+/// The loss weights given on the command line: one flag per term of
+/// [`TERMS`] (its `flag`, `symbol` and `help`), so a new term gets its flag
+/// from its row in the table.
+#[derive(Clone, Debug, Default)]
+pub struct WeightFlags(pub Vec<(&'static Term, f32)>);
+
+impl WeightFlags {
+    /// Sets the given weights in `w`.
+    pub fn apply(&self, w: &mut LossWeights) {
+        for (t, v) in &self.0 {
+            *(t.weight)(w) = *v;
+        }
+    }
+}
+
+impl clap::FromArgMatches for WeightFlags {
+    fn from_arg_matches(m: &clap::ArgMatches) -> Result<Self, clap::Error> {
+        let mut flags = Self::default();
+        flags.update_from_arg_matches(m)?;
+        Ok(flags)
+    }
+
+    fn update_from_arg_matches(&mut self, m: &clap::ArgMatches) -> Result<(), clap::Error> {
+        for t in &TERMS {
+            if let Some(&v) = m.get_one::<f32>(t.flag) {
+                self.0.retain(|(x, _)| x.key != t.key);
+                self.0.push((t, v));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl clap::Args for WeightFlags {
+    fn augment_args(cmd: clap::Command) -> clap::Command {
+        let defaults = LossWeights::default();
+        TERMS.iter().fold(cmd, |cmd, t| {
+            let default = match t.get(&defaults) {
+                0.0 => "0, off".to_string(),
+                v => format!("{v}"),
+            };
+            cmd.arg(
+                clap::Arg::new(t.flag)
+                    .long(t.flag)
+                    .value_name("WEIGHT")
+                    .value_parser(clap::value_parser!(f32))
+                    .help(format!("{}, {} [default: {default}]", t.symbol, t.help)),
+            )
+        })
+    }
+
+    fn augment_args_for_update(cmd: clap::Command) -> clap::Command {
+        Self::augment_args(cmd)
     }
 }

@@ -213,10 +213,11 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let scene = load_scene(&args.scene)?;
     let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
     let gpu = match args.device {
-        // The sliced Wasserstein term runs on the CPU engine only so far:
+        // A term the GPU engine does not compute (`gast_core::style::terms`):
         // `auto` picks the CPU for it rather than failing (`gpu` still says why).
         gast_core::gpu::DeviceChoice::Auto if config.weights.needs_cpu() => {
-            eprintln!("λ_sw > 0 runs on the CPU engine only so far: the steps run on the CPU");
+            let on: Vec<&str> = config.weights.cpu_only().map(|(t, _)| t.symbol).collect();
+            eprintln!("{} > 0 runs on the CPU engine only so far: the steps run on the CPU", on.join(", "));
             None
         }
         device => device.resolve().with_context(|| format!("--device {device}"))?,
