@@ -12,7 +12,6 @@ use std::path::Path;
 use anyhow::Context as _;
 
 use gast_core::eval::{DegenerationKind, Measures};
-use gast_core::style::MeanSteps;
 
 use super::chart::{Chart, Series, palette};
 use crate::study::{
@@ -213,35 +212,12 @@ fn focus_table(run: &RunSummary, c: &Comparison) -> (Vec<String>, Vec<Margin>) {
         rows.iter().find(|(r, t)| r.label == label && t.scene_name() == scene && t.style == style).copied()
     };
     let over = if run.sizes.eval_over_style_colour { " rendered over the style's mean colour" } else { "" };
-    let sizes = match run.sizes.focus_object_resolution {
-        0 => format!("both at {} px", run.sizes.resolution),
-        r => format!("frame at {} px, object at {r} px", run.sizes.resolution),
-    };
-    let sizes = match run.sizes.focus_object_lambda_mean {
-        l if l > 0.0 => {
-            // Runs from before the choice existed ran λ_mean on every step.
-            let steps = match run.sizes.focus_object_mean_steps.unwrap_or(MeanSteps::Every) {
-                MeanSteps::Colour => "colour steps",
-                MeanSteps::Every => "every step",
-            };
-            format!("{sizes}, object with λ_mean {l} on {steps}")
+    let sizes = match &run.sizes.focus_object {
+        serde_json::Value::Object(m) if !m.is_empty() => {
+            format!("both at {} px, object with {}", run.sizes.resolution, run.sizes.focus_object)
         }
-        _ => sizes,
+        _ => format!("both at {} px", run.sizes.resolution),
     };
-    // The object arm's other settings, where set (0 leaves the frame arm's).
-    let s = &run.sizes;
-    let sizes = [
-        ("λ_sw", s.focus_object_lambda_sliced),
-        ("λ_as", s.focus_object_lambda_assign),
-        ("λ_asc", s.focus_object_lambda_assign_cos),
-        ("colour lr", s.focus_object_lr_color),
-        ("N_g / (N_c + N_g)", s.focus_object_ratio_geo),
-        ("λ_TV", s.focus_object_lambda_tv),
-        ("λ_out", s.focus_object_lambda_outside),
-    ]
-    .into_iter()
-    .filter(|&(_, v)| v > 0.0)
-    .fold(sizes, |acc, (name, v)| format!("{acc}, object with {name} {v}"));
     let (b, o) = (c.base, c.candidate);
     let heading = if c.study == Study::Defaults {
         format!(

@@ -12,7 +12,7 @@ pub mod geometry;
 use clap::ValueEnum;
 use gast_core::eval::{Checkpoint, Degeneration, TrialOutcome};
 use gast_core::session::StyleImage;
-use gast_core::style::{MeanSteps, Mode, StyleConfig};
+use gast_core::style::{Mode, StyleConfig};
 use serde::{Deserialize, Serialize};
 
 /// Labels of the focus study's arms and of its noise-floor run.
@@ -194,47 +194,14 @@ pub struct Sizes {
     /// the masked losses (which half buys what).
     #[serde(default)]
     pub focus_halves: bool,
-    /// Working resolution of the focus study's object arm (0: `resolution`,
-    /// as the frame arm). What `gast stylize` does: the object's working
-    /// resolution follows the object, the frame's stays at today's size.
+    /// The focus study's object arm as a patch of the frame arm's settings
+    /// (a JSON object of preset keys, [`StyleConfig::patched`]), over object
+    /// focus on fitted views; e.g. `{"resolution": 512, "weights":
+    /// {"feature_mean": 100}, "lr": {"color": 0.05}}`. Empty: object focus
+    /// with the frame arm's settings (the object recipe follows from the
+    /// defaults).
     #[serde(default)]
-    pub focus_object_resolution: u32,
-    /// λ_mean of the focus study's object arm (0: off, as the frame arm;
-    /// [`gast_core::style::feature_mean`]).
-    #[serde(default)]
-    pub focus_object_lambda_mean: f32,
-    /// λ_out of the focus study's object arm (0: off, as the frame arm;
-    /// [`gast_core::style::outside`]).
-    #[serde(default)]
-    pub focus_object_lambda_outside: f32,
-    /// λ_sw of the focus study's object arm (0: off, as the frame arm;
-    /// [`gast_core::style::sliced`]).
-    #[serde(default)]
-    pub focus_object_lambda_sliced: f32,
-    /// λ_as of the focus study's object arm (0: off, as the frame arm;
-    /// [`gast_core::style::assignment`]).
-    #[serde(default)]
-    pub focus_object_lambda_assign: f32,
-    /// λ_asc of the focus study's object arm (0: off, as the frame arm;
-    /// [`gast_core::style::assignment`]).
-    #[serde(default)]
-    pub focus_object_lambda_assign_cos: f32,
-    /// The colour learning rate of the focus study's object arm (0: the frame
-    /// arm's, 0.01).
-    #[serde(default)]
-    pub focus_object_lr_color: f32,
-    /// The geometry share of each cycle in the focus study's object arm (0:
-    /// the frame arm's, 0.9).
-    #[serde(default)]
-    pub focus_object_ratio_geo: f32,
-    /// λ_TV of the focus study's object arm (0: the frame arm's, 0.02).
-    #[serde(default)]
-    pub focus_object_lambda_tv: f32,
-    /// Which steps the object arm's λ_mean acts on; absent in runs from
-    /// before the choice existed, which ran it on every step. A run records
-    /// the choice it made (`gast stylize`'s default when not given).
-    #[serde(default)]
-    pub focus_object_mean_steps: Option<MeanSteps>,
+    pub focus_object: serde_json::Value,
     /// Steps of each arm of the defaults study (cycles of [`DEFAULTS_CYCLE`]).
     #[serde(default = "defaults_budget")]
     pub defaults_budget: u32,
@@ -305,16 +272,7 @@ impl Sizes {
             collapse_object_on_every_pair: false,
             collapse_content_on_every_pair: false,
             focus_halves: false,
-            focus_object_resolution: 0,
-            focus_object_lambda_mean: 0.0,
-            focus_object_lambda_outside: 0.0,
-            focus_object_mean_steps: None,
-            focus_object_lambda_sliced: 0.0,
-            focus_object_lambda_assign: 0.0,
-            focus_object_lambda_assign_cos: 0.0,
-            focus_object_lr_color: 0.0,
-            focus_object_ratio_geo: 0.0,
-            focus_object_lambda_tv: 0.0,
+            focus_object: serde_json::Value::Null,
             defaults_budget: defaults_budget(),
             defaults_resolution: defaults_resolution(),
         }
@@ -341,6 +299,9 @@ impl Sizes {
         }
         let sizes: Self =
             serde_json::from_value(value).with_context(|| format!("{}: not valid grid sizes", path.display()))?;
+        if let Err(e) = StyleConfig::default().patched(&sizes.focus_object) {
+            anyhow::bail!("{}: focus_object: {e}", path.display());
+        }
         if let Some(bad) = sizes.collapse_arms.iter().find(|a| !COLLAPSE_ARMS.contains(&a.as_str())) {
             anyhow::bail!("{}: unknown collapse arm {bad:?} (known: {})", path.display(), COLLAPSE_ARMS.join(", "));
         }
@@ -370,16 +331,7 @@ impl Sizes {
             collapse_object_on_every_pair: false,
             collapse_content_on_every_pair: false,
             focus_halves: false,
-            focus_object_resolution: 0,
-            focus_object_lambda_mean: 0.0,
-            focus_object_lambda_outside: 0.0,
-            focus_object_mean_steps: None,
-            focus_object_lambda_sliced: 0.0,
-            focus_object_lambda_assign: 0.0,
-            focus_object_lambda_assign_cos: 0.0,
-            focus_object_lr_color: 0.0,
-            focus_object_ratio_geo: 0.0,
-            focus_object_lambda_tv: 0.0,
+            focus_object: serde_json::Value::Null,
             defaults_budget: 100,
             defaults_resolution: 64,
         }
@@ -536,6 +488,21 @@ pub struct RunSummary {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_committed_settings_file_is_valid_sizes() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/studies");
+        let files: Vec<_> = std::fs::read_dir(&dir)
+            .expect("docs/studies")
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "json"))
+            .collect();
+        assert!(!files.is_empty(), "no settings file under {}", dir.display());
+        for f in files {
+            let sizes = Sizes::from_file(&f).unwrap_or_else(|e| panic!("{e:#}"));
+            assert!(!sizes.scenes.is_empty() && !sizes.styles.is_empty(), "{}", f.display());
+        }
+    }
 
     #[test]
     fn sizes_from_a_file_override_the_full_grid_and_refuse_unknown_fields() {

@@ -275,6 +275,37 @@ impl StyleConfig {
         serde_json::from_str(text)
     }
 
+    /// This configuration with a partial one merged over it: `patch` is a
+    /// JSON object of the preset's keys (nested objects merge key by key,
+    /// e.g. `{"focus": "object", "weights": {"assignment_cosine": 10}}`).
+    /// A key the preset does not have is refused, naming it.
+    pub fn patched(&self, patch: &serde_json::Value) -> Result<Self, String> {
+        fn merge(base: &mut serde_json::Value, patch: &serde_json::Value, at: &str) -> Result<(), String> {
+            match (base, patch) {
+                (serde_json::Value::Object(b), serde_json::Value::Object(p)) => {
+                    for (k, v) in p {
+                        let path = if at.is_empty() { k.clone() } else { format!("{at}.{k}") };
+                        let slot = b.get_mut(k).ok_or_else(|| format!("unknown setting {path:?}"))?;
+                        merge(slot, v, &path)?;
+                    }
+                    Ok(())
+                }
+                (b, p) => {
+                    *b = p.clone();
+                    Ok(())
+                }
+            }
+        }
+        if !patch.is_object() && !patch.is_null() {
+            return Err(format!("a settings patch is a JSON object, found {patch}"));
+        }
+        let mut value = serde_json::to_value(self).map_err(|e| e.to_string())?;
+        if patch.is_object() {
+            merge(&mut value, patch, "")?;
+        }
+        serde_json::from_value(value).map_err(|e| format!("not valid settings: {e}"))
+    }
+
     /// The preset as pretty JSON.
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).unwrap_or_default()
@@ -325,6 +356,23 @@ impl StyleConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_patch_sets_only_what_it_names_and_refuses_unknown_keys() {
+        let base = StyleConfig::default();
+        let patch =
+            serde_json::json!({"resolution": 512, "weights": {"assignment_cosine": 4.0}, "lr": {"color": 0.05}});
+        let c = base.patched(&patch).expect("patch");
+        assert_eq!((c.resolution, c.weights.assignment_cosine, c.lr.color), (512, 4.0, 0.05));
+        assert_eq!(StyleConfig { resolution: base.resolution, ..c.clone() }.weights.gcfm, base.weights.gcfm);
+        assert_eq!(c.lr.opacity, base.lr.opacity);
+        assert_eq!(base.patched(&serde_json::json!({})).expect("empty"), base);
+        assert_eq!(base.patched(&serde_json::Value::Null).expect("none"), base);
+        let e = base.patched(&serde_json::json!({"weights": {"nope": 1}})).expect_err("unknown");
+        assert!(e.contains("weights.nope"), "{e}");
+        assert!(base.patched(&serde_json::json!({"resolution": "big"})).is_err());
+        assert!(base.patched(&serde_json::json!([1])).is_err());
+    }
 
     #[test]
     fn lambda_mean_acts_on_the_steps_asked_for() {

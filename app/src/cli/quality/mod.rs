@@ -20,7 +20,6 @@ use clap::Args;
 use gast_core::Gaussians;
 use gast_core::eval::{EvalOptions, StabilityThresholds, TrialOutcome, run_trial};
 use gast_core::session::{PreparedStyle, SessionInputs, StyleDepthSource, StyleImage, prepare_style};
-use gast_core::style::config::{LearningRates, LossWeights};
 use gast_core::style::{Focus, Mode, StyleConfig};
 
 mod geometry;
@@ -273,36 +272,10 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
     if studies.contains(&Study::Focus) {
         let cycles = sizes.focus_budget.div_ceil(sizes.steps_per_cycle).max(1);
         let frame = StyleConfig { cycles, ..base.clone() };
-        let object_resolution = match sizes.focus_object_resolution {
-            0 => frame.resolution,
-            r => r,
-        };
-        let object = StyleConfig {
-            focus: Focus::Object,
-            resolution: object_resolution,
-            weights: LossWeights {
-                feature_mean: sizes.focus_object_lambda_mean,
-                outside: sizes.focus_object_lambda_outside,
-                sliced: sizes.focus_object_lambda_sliced,
-                assignment: sizes.focus_object_lambda_assign,
-                assignment_cosine: sizes.focus_object_lambda_assign_cos,
-                tv: match sizes.focus_object_lambda_tv {
-                    0.0 => frame.weights.tv,
-                    tv => tv,
-                },
-                ..frame.weights
-            },
-            feature_mean_steps: sizes.focus_object_mean_steps.unwrap_or_default(),
-            ratio_geo: match sizes.focus_object_ratio_geo {
-                0.0 => frame.ratio_geo,
-                r => r,
-            },
-            lr: match sizes.focus_object_lr_color {
-                0.0 => frame.lr,
-                color => LearningRates { color, ..frame.lr },
-            },
-            ..frame.clone()
-        };
+        // A bad patch is refused with the sizes file (`Sizes::from_file`); here it was checked.
+        let object = StyleConfig { focus: Focus::Object, ..frame.clone() }
+            .patched(&sizes.focus_object)
+            .unwrap_or_else(|_| StyleConfig { focus: Focus::Object, ..frame.clone() });
         for scene in 0..sizes.scenes.len() {
             for (k, style) in sizes.styles.iter().enumerate() {
                 let style = file(style);
@@ -468,13 +441,11 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let shared = shared_dir();
-    let mut sizes = match &args.sizes {
+    let sizes = match &args.sizes {
         Some(path) => Sizes::from_file(path)?,
         None if args.quick => Sizes::quick(),
         None => Sizes::full(),
     };
-    // The run records the choice it makes, so its report can say it.
-    sizes.focus_object_mean_steps.get_or_insert_default();
     let studies = if args.studies.is_empty() { Study::ALL.to_vec() } else { args.studies.clone() };
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("gast-quality-{}", crate::report::utc_stamp())));
     std::fs::create_dir_all(&out).with_context(|| format!("could not create the output folder {}", out.display()))?;
@@ -755,20 +726,16 @@ mod tests {
         let trial = |sizes: &Sizes, label: &str| config(sizes, label).resolution;
         let same = Sizes::full();
         assert_eq!((trial(&same, FOCUS_FRAME), trial(&same, FOCUS_OBJECT)), (same.resolution, same.resolution));
-        let apart = Sizes { resolution: 256, focus_object_resolution: 512, ..Sizes::full() };
+        let apart = Sizes { resolution: 256, focus_object: serde_json::json!({"resolution": 512}), ..Sizes::full() };
         assert_eq!((trial(&apart, FOCUS_FRAME), trial(&apart, FOCUS_OBJECT)), (256, 512));
         assert_eq!(trial(&apart, FOCUS_SEED), 256);
-        // λ_mean, λ_out, λ_sw, λ_as, λ_asc, λ_TV, λ_mean's steps and the colour learning rate go to the object arm only.
+        // The patch reaches the object arm only.
         let mean = Sizes {
-            focus_object_lambda_mean: 100.0,
-            focus_object_lambda_outside: 30.0,
-            focus_object_lambda_sliced: 7.0,
-            focus_object_lambda_assign: 3.0,
-            focus_object_lambda_assign_cos: 4.0,
-            focus_object_mean_steps: Some(MeanSteps::Colour),
-            focus_object_lr_color: 0.05,
-            focus_object_ratio_geo: 0.7,
-            focus_object_lambda_tv: 0.5,
+            focus_object: serde_json::json!({
+                "weights": {"feature_mean": 100.0, "outside": 30.0, "sliced": 7.0, "assignment": 3.0,
+                            "assignment_cosine": 4.0, "tv": 0.5},
+                "feature_mean_steps": "colour", "lr": {"color": 0.05}, "ratio_geo": 0.7
+            }),
             ..Sizes::full()
         };
         let base = StyleConfig::default();
