@@ -13,30 +13,7 @@
 // raster_backward.rs swaps in a subgroup sum first, so one atomic add per
 // subgroup (not per pixel) reaches memory.
 
-struct Cam {
-    r0: vec4<f32>,
-    r1: vec4<f32>,
-    r2: vec4<f32>,
-    trans: vec4<f32>,
-    center: vec4<f32>,
-    bg: vec4<f32>,
-    fx: f32,
-    fy: f32,
-    cx: f32,
-    cy: f32,
-    lim_x: f32,
-    lim_y: f32,
-    width: u32,
-    height: u32,
-    tiles_x: u32,
-    tiles_y: u32,
-    n: u32,
-    sh_coeffs: u32,
-    capacity: u32,
-    sh_degree: u32,
-    _p0: u32,
-    _p1: u32,
-}
+// `struct Cam` (the uniform block): shaders/raster_camera.wgsl, prepended by the Rust side.
 
 @group(0) @binding(0) var<uniform> cam: Cam;
 @group(0) @binding(1) var<storage, read> tile_splats: array<u32>;

@@ -14,7 +14,15 @@ const FOV_CLAMP: f32 = 1.3;
 /// Threads per workgroup of the 1-D raster kernels.
 pub(crate) const WORKGROUP: u32 = 256;
 
-/// The uniform block every raster shader declares as `Cam`.
+/// `struct Cam`, the raster shaders' uniform block, declared once.
+pub(crate) const RASTER_CAMERA_WGSL: &str = include_str!("../../../shaders/raster_camera.wgsl");
+
+/// A raster shader's source with the camera block it uses in front.
+pub(crate) fn with_camera(src: &str) -> String {
+    format!("{RASTER_CAMERA_WGSL}\n{src}")
+}
+
+/// The uniform block every raster shader declares as `Cam` (`shaders/raster_camera.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub(crate) struct RasterUniform {
@@ -88,7 +96,7 @@ pub(crate) struct ProjectKernels {
 
 impl ProjectKernels {
     pub fn new(ctx: &GpuContext) -> Self {
-        let src = include_str!("../../../shaders/raster_project.wgsl");
+        let src = &with_camera(include_str!("../../../shaders/raster_project.wgsl"));
         use Bind::{Read, ReadWrite, Uniform};
         Self {
             project: Kernel::new(
