@@ -5,6 +5,10 @@
 //! left before anything is allocated or looped over: a corrupt count fails at
 //! once instead of exhausting memory, and a short file fails with the record
 //! and byte offset where it ends.
+//!
+//! It imports the record types and checks of `colmap.rs` (text) and
+//! `colmap_points.rs`, which call back into it for the `.bin` files: one
+//! format's two encodings, one record type, split by size.
 
 use std::collections::BTreeMap;
 use std::fs::File;

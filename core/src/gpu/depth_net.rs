@@ -16,6 +16,10 @@
 //! Buffers are made for one forward and dropped after it: the pass runs once
 //! per style and its scratch (≈300 MB at 518 px for the Small model) should
 //! not stay on the device.
+//!
+//! [`super::depth_dpt`] (the neck and head) takes this file's linear layers
+//! and recorder, and this file runs it after the backbone: one network split
+//! in two files by size.
 
 use super::depth_dpt::GpuDpt;
 use super::gemm::{Gemm, GemmSpec, Strided};

@@ -4,6 +4,10 @@
 //! then the per-Gaussian chain to the parameter gradients. The CPU twin is
 //! `raster/backward.rs`; float atomics make the sum order vary, so the two
 //! agree to rounding, not bit for bit.
+//!
+//! `raster_forward.rs` holds every raster kernel (this file's
+//! `tile_backward` among them, compiled for the device's accumulation) and
+//! this file runs them through its types: one rasterizer, split by direction.
 
 use super::raster_forward::{GpuRaster, RasterKernels};
 use super::raster_project::WORKGROUP;

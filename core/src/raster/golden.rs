@@ -1,6 +1,10 @@
 //! The inputs of a golden rasterizer file (`golden/raster_*.safetensors` of the
 //! shared data) as the studio's types. [`crate::golden`] reads the file, runs
 //! the rasterizer on this case and compares every output.
+//!
+//! The two import each other on purpose: the file's reader and error type
+//! live with every other golden file in [`crate::golden`], this case's fields
+//! live with the rasterizer they feed.
 
 use glam::{Mat3, Vec3};
 

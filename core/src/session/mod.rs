@@ -12,6 +12,7 @@ mod prepare;
 mod run;
 mod slot;
 mod stage1_cache;
+mod style_image;
 mod worker;
 
 pub use colour_watch::{ColourReading, ColourWatch};

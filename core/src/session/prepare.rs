@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 
 use super::stage1_cache::{CacheOutcome, Stage1Cache, depth_key};
+pub use super::style_image::StyleImage;
 use crate::camera::Camera;
 use crate::gpu::{GpuContext, GpuDepthNet};
 use crate::raster::{self, RenderOptions};
@@ -16,36 +17,6 @@ use crate::vision::Vgg;
 use crate::vision::depth::{DepthAnything, DepthModelError, INPUT_SIZE, checkpoint_digest, resolve_depth_model};
 use crate::vision::relief_depth::ReliefDepth;
 use crate::vision::style_depth::{DepthImage, DepthPolarity, DepthProvider};
-
-/// An 8-bit RGB image (the style), row-major HWC.
-#[derive(Clone, Debug, PartialEq)]
-pub struct StyleImage {
-    /// Width in pixels.
-    pub width: usize,
-    /// Height in pixels.
-    pub height: usize,
-    /// `width · height · 3` bytes.
-    pub rgb: Vec<u8>,
-}
-
-impl StyleImage {
-    /// Reads any image the `image` crate decodes (PNG, JPEG, WebP) as RGB.
-    pub fn open(path: &Path) -> Result<Self, String> {
-        let img = image::open(path)
-            .map_err(|e| format!("{}: expected an RGB image (PNG, JPEG or WebP), found: {e}", path.display()))?;
-        let rgb = img.to_rgb8();
-        let (w, h) = rgb.dimensions();
-        if w < 4 || h < 4 {
-            return Err(format!("{}: expected an image of at least 4x4 pixels, found {w}x{h}", path.display()));
-        }
-        Ok(Self { width: w as usize, height: h as usize, rgb: rgb.into_raw() })
-    }
-
-    /// The pixels as floats in [0, 1].
-    pub fn to_f32(&self) -> Vec<f32> {
-        self.rgb.iter().map(|&v| f32::from(v) / 255.0).collect()
-    }
-}
 
 /// Where the style image's depth comes from.
 #[derive(Clone, Debug, Default)]

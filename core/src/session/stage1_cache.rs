@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 use sha2::{Digest, Sha256};
 
-use super::prepare::StyleImage;
+use super::style_image::StyleImage;
 use crate::vision::style_depth::DepthImage;
 
 /// The first bytes of a cached depth file (format version 1).

@@ -17,6 +17,9 @@
 //! leaves 940–977 distinct, and the search then runs on every position (the
 //! hashing reads each feature twice: two passes over the `3c × n` values
 //! against the search's `3c × n × m` multiply-adds).
+//!
+//! It fills GCFM's [`Matches`] and GCFM calls it: a part of the search,
+//! in its own file.
 
 use super::gcfm::Matches;
 
