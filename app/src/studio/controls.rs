@@ -262,9 +262,9 @@ fn term_colour(k: usize) -> Color32 {
 }
 
 /// The moving-average window of a chart of `n` steps: about a fiftieth of
-/// the run, at least one step.
+/// the run, at least three steps.
 pub(super) fn smoothing_window(n: usize) -> usize {
-    (n / 50).max(1)
+    (n / 50).max(3)
 }
 
 /// An exponential moving average of `values` over about `window` steps

@@ -106,6 +106,8 @@ pub struct StudioApp {
     compare: bool,
     /// The split line is being dragged (a primary drag that started on it).
     dragging_split: bool,
+    /// Runs on the CPU fit about ten minutes ([`session_link::StartRequest::fit_budget`]).
+    fit_budget: bool,
     background: [f32; 3],
     /// Messages shown in the bottom panel, newest last.
     pub errors: Vec<String>,
@@ -277,6 +279,7 @@ impl StudioApp {
             split: 0.5,
             compare: true,
             dragging_split: false,
+            fit_budget: true,
             background: [0.0; 3],
             errors: Vec::new(),
             notice: String::new(),

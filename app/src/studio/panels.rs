@@ -281,6 +281,11 @@ impl StudioApp {
             }
         });
         self.device_selector(ui, live);
+        ui.add_enabled(!live, egui::Checkbox::new(&mut self.fit_budget, "fit the run to about 10 min on the CPU"))
+            .on_hover_text(
+                "on the CPU, lower the working resolution and the cycles so that the whole run takes about ten \
+                 minutes, as `gast stylize` does; off: the resolution and cycles set below",
+            );
         let status = match &self.run.status {
             RunStatus::Idle => "idle".to_string(),
             RunStatus::Running => "running".into(),
@@ -363,6 +368,7 @@ impl StudioApp {
             cameras: self.cameras.clone(),
             waker: Arc::new(move || ctx.request_repaint()),
             gpu: self.device.pick(self.gpu.as_ref()),
+            fit_budget: self.fit_budget,
         };
         match starter(request) {
             Ok(link) => self.run.attach(link),

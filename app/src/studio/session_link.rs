@@ -55,6 +55,9 @@ pub struct StartRequest {
     /// The GPU the steps run on (the studio's own device, shared with the
     /// viewport); `None` runs them on the CPU.
     pub gpu: Option<gast_core::gpu::GpuContext>,
+    /// On the CPU, fit the working resolution and the cycles to about ten
+    /// minutes (`gast_core::session::plan::auto_plan`), as `gast stylize` does.
+    pub fit_budget: bool,
 }
 
 /// Starts a session worker (provided by whoever links the session runner in).

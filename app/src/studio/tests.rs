@@ -871,3 +871,24 @@ fn the_split_line_drags_and_hides() {
     assert!(!harness.state().compare);
     assert_eq!(harness.state().shown_split(), 0.0);
 }
+
+#[test]
+fn a_cpu_run_is_planned_to_about_ten_minutes() {
+    use gast_core::camera::{OrbitOptions, framed_orbit};
+    use gast_core::session::plan::{AUTO_RUN_BUDGET_S, StepModel};
+    let scene = assets::demo_scene();
+    let cameras = framed_orbit(&scene, &OrbitOptions { count: 12, width: 256, height: 256, ..OrbitOptions::default() });
+    let mut config = StyleConfig::default();
+    let asked = config.schedule().total_steps();
+    let said = super::worker::plan_for_cpu(&scene, &cameras, &mut config);
+    assert!(said.starts_with("planned for about") && said.contains(&format!("{} px", config.resolution)), "{said}");
+    // A small preset stays as small as it was.
+    let mut small = StyleConfig { resolution: 64, cycles: 2, ..StyleConfig::default() };
+    let said_small = super::worker::plan_for_cpu(&scene, &cameras, &mut small);
+    assert_eq!((small.resolution, small.cycles), (64, 2), "{said_small}");
+    assert!(said_small.contains("as set"), "{said_small}");
+    let model = StepModel::for_focus(config.focus.is_object(0.2));
+    let seconds = model.seconds(config.resolution) * f64::from(config.schedule().total_steps());
+    assert!(seconds <= AUTO_RUN_BUDGET_S * 1.05, "{seconds:.0} s planned: {said}");
+    assert!(config.schedule().total_steps() <= asked && config.resolution >= 256, "{said}");
+}

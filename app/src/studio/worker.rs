@@ -8,6 +8,7 @@ use std::sync::Arc;
 
 use gast_core::camera::{OrbitOptions, framed_orbit};
 use gast_core::session::{Event, SessionInputs, spawn_with};
+use gast_core::style::StyleConfig;
 use gast_core::vision::Vgg;
 
 use super::session_link::{SessionLink, SessionStarter, StartRequest};
@@ -15,10 +16,45 @@ use super::session_link::{SessionLink, SessionStarter, StartRequest};
 /// Orbit views used when the scene came without training cameras.
 const ORBIT_VIEWS: usize = 36;
 
+/// Fits `config`'s run to about ten minutes on this CPU, as `gast stylize`
+/// does without `--resolution`: never above the resolution and cycles set
+/// (a small preset stays small), lower where the budget needs it. Says what
+/// it chose.
+pub(super) fn plan_for_cpu(
+    scene: &gast_core::Gaussians,
+    cameras: &[gast_core::Camera],
+    config: &mut StyleConfig,
+) -> String {
+    use gast_core::camera::{framing_subject, subject_span};
+    use gast_core::raster::RenderOptions;
+    use gast_core::session::plan::{AUTO_RUN_BUDGET_S, StepModel, auto_plan, mean_coverage};
+    let subject = framing_subject(scene);
+    let span = cameras.iter().map(|c| subject_span(c, &subject)).sum::<f32>() / cameras.len().max(1) as f32;
+    let object =
+        config.focus.is_object(mean_coverage(scene, cameras, &RenderOptions { background: config.background }));
+    let model = StepModel::for_focus(object);
+    let plan = auto_plan(span, model, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
+    let asked = (config.resolution, config.cycles);
+    config.resolution = plan.resolution.min(config.resolution);
+    let per_cycle = model.seconds(config.resolution) * f64::from(config.steps_per_cycle.max(1));
+    config.cycles = config.cycles.min((AUTO_RUN_BUDGET_S / per_cycle).floor().max(1.0) as u32);
+    let minutes = per_cycle * f64::from(config.cycles) / 60.0;
+    if (config.resolution, config.cycles) == asked {
+        format!("about {minutes:.0} min on this CPU as set: {} px, {} cycles", asked.0, asked.1)
+    } else {
+        format!(
+            "planned for about {minutes:.0} min on this CPU: {} px, {} cycles (asked {} px, {} cycles; untick \"fit \
+             the run\" to keep them)",
+            config.resolution, config.cycles, asked.0, asked.1
+        )
+    }
+}
+
 /// The studio's session starter.
 pub fn starter() -> SessionStarter {
     Box::new(|req: StartRequest| {
-        let StartRequest { scene, style, style_path, style_depth_image, config, cameras, waker, gpu } = req;
+        let StartRequest { scene, style, style_path, style_depth_image, mut config, cameras, waker, gpu, fit_budget } =
+            req;
         let handle = spawn_with(
             move |emit: &mut dyn FnMut(Event)| {
                 let t = std::time::Instant::now();
@@ -47,6 +83,11 @@ pub fn starter() -> SessionStarter {
                     cameras
                 };
                 emit(Event::Stage { name: "weights and cameras".into(), seconds: t.elapsed().as_secs_f64() });
+                if fit_budget && gpu.is_none() {
+                    let t = std::time::Instant::now();
+                    let plan = plan_for_cpu(&scene, &cameras, &mut config);
+                    emit(Event::Stage { name: plan, seconds: t.elapsed().as_secs_f64() });
+                }
                 let t = std::time::Instant::now();
                 // On a software rasterizer the CPU's kernels are ~40× faster.
                 let (style_depth, warning) = super::style_depth::source_for(
