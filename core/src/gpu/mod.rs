@@ -3,7 +3,11 @@
 //! Every kernel here has a CPU twin in the rest of `core` (the reference the
 //! tests compare against). Kernels are hand-written WGSL in the workspace's
 //! `shaders/` folder, one file per launching module, named after it
-//! (`gpu/adam.rs` launches `shaders/adam.wgsl`).
+//! (`gpu/ops/adam.rs` launches `shaders/adam.wgsl`). The files are grouped by
+//! what they are: `device/` (the context, kernels, buffers), `ops/` (general
+//! kernels), `raster/`, `networks/` (VGG, the depth network) and `losses/`;
+//! `engine.rs` ties them into a step. The modules keep flat names
+//! (`gpu::gcfm`, not `gpu::losses::gcfm`).
 //!
 //! The [`GpuContext`] wraps one `wgpu::Device` and its queue: a headless one
 //! (CLI, benchmarks, tests on lavapipe) or the studio's own, which eframe
@@ -11,40 +15,80 @@
 //! there. Buffers hold flat `f32`/`u32` arrays; a [`Kernel`] is one compute
 //! entry point with an explicit binding list.
 
-mod adam;
-mod assignment;
-mod canny;
-mod content;
+// The device and its buffers (`device/`).
+#[path = "device/context.rs"]
 mod context;
-mod depth_dpt;
-mod depth_map;
-mod depth_net;
-mod engine;
-mod feature_mean;
-mod feature_net;
-mod focus;
+#[path = "device/gaussians.rs"]
 mod gaussians;
-mod gcfm;
-mod gemm;
+#[path = "device/kernel.rs"]
 mod kernel;
+#[path = "device/live.rs"]
 mod live;
-mod losses;
+
+// General kernels: Adam, reductions, scans, sorting, GEMM, resizing (`ops/`).
+#[path = "ops/adam.rs"]
+mod adam;
+#[path = "ops/gemm.rs"]
+mod gemm;
+#[path = "ops/ops_bench.rs"]
 mod ops_bench;
 #[cfg(test)]
+#[path = "ops/ops_chain_tests.rs"]
 mod ops_chain_tests;
+#[path = "ops/reduce.rs"]
+mod reduce;
+#[path = "ops/resize.rs"]
+mod resize;
+#[path = "ops/scan.rs"]
+mod scan;
+#[path = "ops/sort.rs"]
+mod sort;
+
+// The rasterizer, forward and backward (`raster/`).
+#[path = "raster/raster_backward.rs"]
 mod raster_backward;
+#[path = "raster/raster_forward.rs"]
 mod raster_forward;
+#[path = "raster/raster_project.rs"]
 mod raster_project;
+#[path = "raster/raster_run.rs"]
 mod raster_run;
 #[cfg(test)]
+#[path = "raster/raster_tests.rs"]
 mod raster_tests;
-mod reduce;
-mod resize;
-mod scan;
-mod sort;
-mod step_loss;
+
+// The networks: VGG and the depth network (`networks/`).
+#[path = "networks/depth_dpt.rs"]
+mod depth_dpt;
+#[path = "networks/depth_net.rs"]
+mod depth_net;
+#[path = "networks/feature_net.rs"]
+mod feature_net;
+#[path = "networks/vgg.rs"]
 mod vgg;
 
+// The loss terms, their maps and the step that ties them (`losses/`).
+#[path = "losses/assignment.rs"]
+mod assignment;
+#[path = "losses/canny.rs"]
+mod canny;
+#[path = "losses/content.rs"]
+mod content;
+#[path = "losses/depth_map.rs"]
+mod depth_map;
+#[path = "losses/feature_mean.rs"]
+mod feature_mean;
+#[path = "losses/focus.rs"]
+mod focus;
+#[path = "losses/gcfm.rs"]
+mod gcfm;
+#[path = "losses/losses.rs"]
+mod losses;
+#[path = "losses/step_loss.rs"]
+mod step_loss;
+
+// The engine: one optimisation step on the device.
+mod engine;
 pub use adam::GpuAdam;
 pub use assignment::GpuAssignment;
 pub use canny::{CannyKernels, EdgeMap};

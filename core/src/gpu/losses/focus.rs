@@ -57,7 +57,7 @@ pub struct FocusKernels {
 impl FocusKernels {
     /// Compiles `focus.wgsl`.
     pub fn new(ctx: &GpuContext) -> Arc<Self> {
-        let src = include_str!("../../../shaders/focus.wgsl");
+        let src = include_str!("../../../../shaders/focus.wgsl");
         let binds = [Bind::Uniform, Bind::Read, Bind::ReadWrite];
         let k = |entry: &str| Kernel::new(ctx, &format!("focus.{entry}"), src, entry, &binds);
         Arc::new(Self { coverage: k("coverage"), cells: k("cells"), pairs: k("pairs") })

@@ -70,7 +70,7 @@ pub struct ReduceKernels {
 impl ReduceKernels {
     /// Compiles `reduce.wgsl`.
     pub fn new(ctx: &GpuContext) -> Arc<Self> {
-        let src = include_str!("../../../shaders/reduce.wgsl");
+        let src = include_str!("../../../../shaders/reduce.wgsl");
         let binds = [Bind::Uniform, Bind::Read, Bind::ReadWrite, Bind::ReadWrite];
         Arc::new(Self {
             partial: Kernel::new(ctx, "reduce.partial", src, "partial", &binds),

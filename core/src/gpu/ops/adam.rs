@@ -53,7 +53,7 @@ impl AdamKernel {
         Self(Kernel::new(
             ctx,
             "adam",
-            include_str!("../../../shaders/adam.wgsl"),
+            include_str!("../../../../shaders/adam.wgsl"),
             "step",
             &[Bind::Uniform, Bind::ReadWrite, Bind::Read, Bind::ReadWrite, Bind::ReadWrite],
         ))

@@ -149,7 +149,7 @@ fn u32_of(v: usize) -> u32 {
 impl GpuVgg {
     /// Uploads the convolutions of `vgg` and compiles the kernels.
     pub fn new(ctx: &GpuContext, vgg: &Vgg) -> Self {
-        let src = include_str!("../../../shaders/vgg.wgsl");
+        let src = include_str!("../../../../shaders/vgg.wgsl");
         use Bind::{Read, ReadWrite, Uniform};
         let binds = [Uniform, Read, Read, ReadWrite, Read];
         let kernel = |entry: &str| Kernel::new(ctx, &format!("vgg.{entry}"), src, entry, &binds);

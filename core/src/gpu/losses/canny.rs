@@ -47,7 +47,7 @@ pub struct CannyKernels {
 impl CannyKernels {
     /// Compiles `canny.wgsl`.
     pub fn new(ctx: &GpuContext) -> Arc<Self> {
-        let src = include_str!("../../../shaders/canny.wgsl");
+        let src = include_str!("../../../../shaders/canny.wgsl");
         let binds = [Bind::Uniform, Bind::Read, Bind::Read, Bind::ReadWrite, Bind::ReadWrite, Bind::ReadWrite];
         let k = |entry: &str| Kernel::new(ctx, &format!("canny.{entry}"), src, entry, &binds);
         Arc::new(Self { nms: k("nms"), hysteresis: k("hysteresis"), finish: k("finish") })

@@ -200,7 +200,7 @@ fn u32_of(v: usize) -> u32 {
 impl GpuDepthNet {
     /// Uploads `net`'s weights once and compiles the kernels.
     pub fn new(ctx: &GpuContext, net: DepthAnything) -> Self {
-        let src = include_str!("../../../shaders/depth_net.wgsl");
+        let src = include_str!("../../../../shaders/depth_net.wgsl");
         let binds = [Bind::Uniform, Bind::Read, Bind::Read, Bind::ReadWrite];
         let kernel = |entry: &str| Kernel::new(ctx, &format!("depth_net.{entry}"), src, entry, &binds);
         let (vit, dpt) = net.parts();

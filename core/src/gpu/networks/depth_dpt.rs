@@ -141,7 +141,7 @@ struct Map {
 impl GpuDpt {
     /// Uploads the neck and head of `dpt` and compiles `depth_dpt.wgsl`.
     pub fn new(ctx: &GpuContext, dpt: &Dpt) -> Self {
-        let src = include_str!("../../../shaders/depth_dpt.wgsl");
+        let src = include_str!("../../../../shaders/depth_dpt.wgsl");
         let binds = [Bind::Uniform, Bind::Read, Bind::Read, Bind::ReadWrite];
         let kernel = |entry: &str| Kernel::new(ctx, &format!("depth_dpt.{entry}"), src, entry, &binds);
         let up = |u: &ConvUp| GpuConvUp {

@@ -212,7 +212,7 @@ fn u32_of(v: usize) -> u32 {
 impl GpuGcfm {
     /// Compiles `gcfm.wgsl` and the GEMM.
     pub fn new(ctx: &GpuContext) -> Self {
-        let src = include_str!("../../../shaders/gcfm.wgsl");
+        let src = include_str!("../../../../shaders/gcfm.wgsl");
         use Bind::{Read, ReadWrite, Uniform};
         let all = [Uniform, Read, Read, ReadWrite, Read, ReadWrite, Read, Read];
         Self {

@@ -42,7 +42,7 @@ pub struct DepthMapKernels {
 impl DepthMapKernels {
     /// Compiles `depth_map.wgsl`.
     pub fn new(ctx: &GpuContext) -> Arc<Self> {
-        let src = include_str!("../../../shaders/depth_map.wgsl");
+        let src = include_str!("../../../../shaders/depth_map.wgsl");
         let binds = [Bind::Uniform, Bind::Read, Bind::Read, Bind::ReadWrite, Bind::Read, Bind::Read];
         Arc::new(Self {
             bounds: Kernel::new(ctx, "depth_map.bounds", src, "bounds", &binds),

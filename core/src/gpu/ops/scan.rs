@@ -35,7 +35,7 @@ pub struct ScanKernels {
 impl ScanKernels {
     /// Compiles `scan.wgsl`.
     pub fn new(ctx: &GpuContext) -> Self {
-        let src = include_str!("../../../shaders/scan.wgsl");
+        let src = include_str!("../../../../shaders/scan.wgsl");
         let binds = [Bind::Uniform, Bind::ReadWrite, Bind::ReadWrite];
         Self {
             reduce: Kernel::new(ctx, "scan.reduce", src, "reduce", &binds),

@@ -40,7 +40,7 @@ pub struct ResizeKernels {
 impl ResizeKernels {
     /// Compiles `resize.wgsl`.
     pub fn new(ctx: &GpuContext) -> Arc<Self> {
-        let src = include_str!("../../../shaders/resize.wgsl");
+        let src = include_str!("../../../../shaders/resize.wgsl");
         let binds = [Bind::Uniform, Bind::Read, Bind::ReadWrite];
         let k = |entry: &str| Kernel::new(ctx, &format!("resize.{entry}"), src, entry, &binds);
         Arc::new(Self {

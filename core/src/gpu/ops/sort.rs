@@ -44,7 +44,7 @@ pub struct SortKernels {
 impl SortKernels {
     /// Compiles `sort.wgsl` (and `scan.wgsl`, which it uses).
     pub fn new(ctx: &GpuContext) -> Self {
-        let src = include_str!("../../../shaders/sort.wgsl");
+        let src = include_str!("../../../../shaders/sort.wgsl");
         let binds =
             [Bind::Uniform, Bind::Read, Bind::Read, Bind::Read, Bind::ReadWrite, Bind::ReadWrite, Bind::ReadWrite];
         Self {

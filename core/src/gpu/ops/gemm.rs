@@ -148,7 +148,7 @@ impl Gemm {
             kernel: Kernel::new(
                 ctx,
                 "gemm",
-                include_str!("../../../shaders/gemm.wgsl"),
+                include_str!("../../../../shaders/gemm.wgsl"),
                 "gemm",
                 &[Bind::Uniform, Bind::Read, Bind::Read, Bind::Read, Bind::ReadWrite],
             ),

@@ -53,7 +53,7 @@ impl FeatureMeanLoss {
     ) -> Result<Self, GpuError> {
         let channels = style_mean.len().max(1);
         let positions = positions.max(1);
-        let src = include_str!("../../../shaders/feature_mean.wgsl");
+        let src = include_str!("../../../../shaders/feature_mean.wgsl");
         let binds = [
             Bind::Uniform,
             Bind::Read,

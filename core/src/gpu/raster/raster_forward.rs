@@ -47,7 +47,7 @@ impl RasterKernels {
     /// As [`RasterKernels::new`] with a chosen accumulation (each feature it
     /// asks for must be on the device; tests force the fallbacks with it).
     pub fn with_accumulation(ctx: &GpuContext, acc: Accumulation) -> Self {
-        let src = &super::raster_project::with_camera(include_str!("../../../shaders/raster_forward.wgsl"));
+        let src = &super::raster_project::with_camera(include_str!("../../../../shaders/raster_forward.wgsl"));
         use super::Bind::{Read, ReadWrite, Uniform};
         let bin = [Uniform, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite];
         Self {

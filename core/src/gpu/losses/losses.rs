@@ -48,7 +48,7 @@ pub struct LossKernels {
 impl LossKernels {
     /// Compiles `losses.wgsl`.
     pub fn new(ctx: &GpuContext) -> Arc<Self> {
-        let src = include_str!("../../../shaders/losses.wgsl");
+        let src = include_str!("../../../../shaders/losses.wgsl");
         let binds = [Bind::Uniform, Bind::Read, Bind::Read, Bind::ReadWrite, Bind::ReadWrite, Bind::Read];
         let k = |entry: &str| Kernel::new(ctx, &format!("losses.{entry}"), src, entry, &binds);
         Arc::new(Self {

@@ -15,7 +15,7 @@ const FOV_CLAMP: f32 = 1.3;
 pub(crate) const WORKGROUP: u32 = 256;
 
 /// `struct Cam`, the raster shaders' uniform block, declared once.
-pub(crate) const RASTER_CAMERA_WGSL: &str = include_str!("../../../shaders/raster_camera.wgsl");
+pub(crate) const RASTER_CAMERA_WGSL: &str = include_str!("../../../../shaders/raster_camera.wgsl");
 
 /// A raster shader's source with the camera block it uses in front.
 pub(crate) fn with_camera(src: &str) -> String {
@@ -96,7 +96,7 @@ pub(crate) struct ProjectKernels {
 
 impl ProjectKernels {
     pub fn new(ctx: &GpuContext) -> Self {
-        let src = &with_camera(include_str!("../../../shaders/raster_project.wgsl"));
+        let src = &with_camera(include_str!("../../../../shaders/raster_project.wgsl"));
         use Bind::{Read, ReadWrite, Uniform};
         Self {
             project: Kernel::new(

@@ -61,7 +61,7 @@ pub struct GpuAssignment {
 impl GpuAssignment {
     /// The workspace for `channels`-channel features, its draws seeded by `seed`.
     pub fn new(ctx: &GpuContext, channels: usize, seed: u64) -> Self {
-        let src = include_str!("../../../shaders/assignment.wgsl");
+        let src = include_str!("../../../../shaders/assignment.wgsl");
         let binds = [Bind::Uniform, Bind::Read, Bind::Read, Bind::ReadWrite];
         let k = |entry: &str| Kernel::new(ctx, &format!("assignment.{entry}"), src, entry, &binds);
         let channels = channels.max(1);

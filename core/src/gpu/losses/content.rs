@@ -49,7 +49,7 @@ impl ContentLoss {
         let kernel = Kernel::new(
             ctx,
             "content",
-            include_str!("../../../shaders/content.wgsl"),
+            include_str!("../../../../shaders/content.wgsl"),
             "content",
             &[Bind::Uniform, Bind::Read, Bind::Read, Bind::ReadWrite, Bind::ReadWrite, Bind::Read, Bind::Read],
         );
