@@ -3,6 +3,7 @@
 //! as one submission of the GPU engine.
 
 use super::*;
+use crate::style::Phase;
 
 /// Every how many GPU steps the colour watch reads the step's render back
 /// (besides each view's first visit).
@@ -10,7 +11,9 @@ const GPU_COLOUR_EVERY: u32 = 10;
 
 impl Session {
     /// Runs the next scheduled step; `None` when the schedule is complete or
-    /// the GPU engine failed ([`Session::failure`] then says why).
+    /// the GPU engine failed ([`Session::failure`] then says why). The step
+    /// runs on the session's engine (the GPU engine when it has one, else
+    /// the CPU step below); the report is built here for both.
     pub fn step(&mut self) -> Option<StepReport> {
         if self.failure.is_some() {
             return None;
@@ -19,45 +22,60 @@ impl Session {
         let (cycle, phase) = schedule.at(self.step)?;
         let started = Instant::now();
         let view = self.sampler.next();
-        let object = self.focus_on_object();
-        if let Some(engine) = &mut self.engine {
-            engine.set_object_focus(object);
-            let cam = &self.cameras[view];
-            let (losses, timings) = match engine.step(view, cam, phase, &self.config, self.extent) {
-                Ok(r) => r,
+        // Seconds spent off the clock (the matching audit).
+        let (losses, timings, off_clock_s) = if self.engine.is_some() {
+            match self.gpu_step(view, phase) {
+                Ok((losses, timings)) => (losses, timings, 0.0),
                 Err(e) => {
                     self.failure = Some(format!("step {}: {e}", self.step));
                     return None;
                 }
-            };
-            // The colour watch: each view's first visit, then every few steps
-            // (a read-back of the render).
-            if self.step.is_multiple_of(GPU_COLOUR_EVERY) || !self.colour_watch.has_reference(view) {
-                if let Some(r) = engine.reference_colour(view) {
-                    self.colour_watch.set_reference(view, r);
-                }
-                if let Ok(c) = engine.rendered_colour(cam) {
-                    self.colour_watch.observe(view, c);
-                }
             }
-            self.elapsed_s += started.elapsed().as_secs_f64();
-            let report = StepReport {
-                iter: self.step,
-                total: schedule.total_steps(),
-                cycle,
-                phase,
-                view: view as u32,
-                losses,
-                timings,
-                elapsed_s: self.elapsed_s,
-                colour: self.colour_watch.reading(),
-            };
-            self.step += 1;
-            if let Some(live) = &self.live {
-                live.publish(u64::from(self.step));
-            }
-            return Some(report);
+        } else {
+            self.cpu_step(view, phase)?
+        };
+        self.elapsed_s += started.elapsed().as_secs_f64() - off_clock_s;
+        let report = StepReport {
+            iter: self.step,
+            total: schedule.total_steps(),
+            cycle,
+            phase,
+            view: view as u32,
+            losses,
+            timings,
+            elapsed_s: self.elapsed_s,
+            colour: self.colour_watch.reading(),
+        };
+        self.step += 1;
+        if let Some(live) = &self.live {
+            live.publish(u64::from(self.step));
         }
+        Some(report)
+    }
+
+    /// One step as one submission of the GPU engine, with the colour watch's
+    /// read-back on each view's first visit and every few steps.
+    fn gpu_step(&mut self, view: usize, phase: Phase) -> Result<(LossTerms, StepTimings), String> {
+        let object = self.focus_on_object();
+        let Some(engine) = &mut self.engine else { return Err("no GPU engine".into()) };
+        engine.set_object_focus(object);
+        let cam = &self.cameras[view];
+        let (losses, timings) = engine.step(view, cam, phase, &self.config, self.extent).map_err(|e| e.to_string())?;
+        if self.step.is_multiple_of(GPU_COLOUR_EVERY) || !self.colour_watch.has_reference(view) {
+            if let Some(r) = engine.reference_colour(view) {
+                self.colour_watch.set_reference(view, r);
+            }
+            if let Ok(c) = engine.rendered_colour(cam) {
+                self.colour_watch.observe(view, c);
+            }
+        }
+        Ok((losses, timings))
+    }
+
+    /// One step on the CPU: render, the losses through VGG, the rasterizer's
+    /// backward and the phase's Adam update; also the seconds its matching
+    /// audit took (off the clock). `None` when the view has no target.
+    fn cpu_step(&mut self, view: usize, phase: Phase) -> Option<(LossTerms, StepTimings, f64)> {
         let opts = RenderOptions { background: self.config.background };
         let cam = self.cameras[view].clone();
         let (h, w) = (cam.height as usize, cam.width as usize);
@@ -183,21 +201,7 @@ impl Session {
             self.opt.opacity.step(&mut self.g.opacity_logits, &v_o, lr.opacity);
         }
         timings.update_ms = ms(t);
-
-        self.elapsed_s += started.elapsed().as_secs_f64() - audit_s;
-        let report = StepReport {
-            iter: self.step,
-            total: schedule.total_steps(),
-            cycle,
-            phase,
-            view: view as u32,
-            losses: terms,
-            timings,
-            elapsed_s: self.elapsed_s,
-            colour: self.colour_watch.reading(),
-        };
-        self.step += 1;
-        Some(report)
+        Some((terms, timings, audit_s))
     }
 }
 
