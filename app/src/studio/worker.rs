@@ -25,13 +25,8 @@ pub(super) fn plan_for_cpu(
     cameras: &[gast_core::Camera],
     config: &mut StyleConfig,
 ) -> String {
-    use gast_core::camera::{framing_subject, subject_span};
-    use gast_core::raster::RenderOptions;
-    use gast_core::session::plan::{AUTO_RUN_BUDGET_S, StepModel, auto_plan, mean_coverage};
-    let subject = framing_subject(scene);
-    let span = cameras.iter().map(|c| subject_span(c, &subject)).sum::<f32>() / cameras.len().max(1) as f32;
-    let object =
-        config.focus.is_object(mean_coverage(scene, cameras, &RenderOptions { background: config.background }));
+    use gast_core::session::plan::{AUTO_RUN_BUDGET_S, StepModel, ViewsSurvey, auto_plan, survey};
+    let ViewsSurvey { span, object } = survey(scene, cameras, config.focus, config.background);
     let model = StepModel::for_focus(object);
     let plan = auto_plan(span, model, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
     let asked = (config.resolution, config.cycles);

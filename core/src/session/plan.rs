@@ -7,6 +7,7 @@
 use crate::Camera;
 use crate::Gaussians;
 use crate::raster::{self, RenderOptions};
+use crate::style::Focus;
 
 /// Render pixels per VGG relu3 feature position: the 0.5× downscale, then VGG's two poolings.
 pub const PIXELS_PER_FEATURE: f32 = 8.0;
@@ -112,6 +113,31 @@ pub fn mean_coverage(scene: &Gaussians, cameras: &[Camera], opts: &RenderOptions
         })
         .collect();
     shares.iter().sum::<f32>() / shares.len().max(1) as f32
+}
+
+/// What a plan needs to know of a scene seen from its views.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewsSurvey {
+    /// The subject's mean span across the views' longer side (0–1).
+    pub span: f32,
+    /// Whether the losses go on the object: the focus asked for, `auto`
+    /// deciding on the views' mean coverage.
+    pub object: bool,
+}
+
+/// Surveys `scene` from `cameras` for a run with `focus` over `background`:
+/// the subject's span ([`crate::camera::subject_span`]) and whether the
+/// losses go on the object (coverage is rendered only when `focus` is auto).
+pub fn survey(scene: &Gaussians, cameras: &[Camera], focus: Focus, background: [f32; 3]) -> ViewsSurvey {
+    use crate::camera::{framing_subject, subject_span};
+    let subject = framing_subject(scene);
+    let span = cameras.iter().map(|c| subject_span(c, &subject)).sum::<f32>() / cameras.len().max(1) as f32;
+    let object = match focus {
+        Focus::Frame => false,
+        Focus::Object => true,
+        Focus::Auto => Focus::Auto.is_object(mean_coverage(scene, cameras, &RenderOptions { background })),
+    };
+    ViewsSurvey { span, object }
 }
 
 /// [`auto_resolution`] when a GPU runs the steps: bounded by the reference's

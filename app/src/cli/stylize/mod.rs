@@ -9,7 +9,6 @@ use std::time::Instant;
 
 use anyhow::Context;
 use gast_core::Camera;
-use gast_core::camera::{framing_subject, subject_span};
 use gast_core::eval::depth_structure::{self, DepthStyleDistance};
 use gast_core::eval::{
     CoveredColour, Degeneration, StabilityThresholds, inverse_depth_change, mean_std_distance, nn_cosine_distance,
@@ -20,11 +19,11 @@ use gast_core::io::{
 };
 use gast_core::raster::{self, RenderOptions};
 use gast_core::session::plan::{
-    AUTO_RUN_BUDGET_S, PIXELS_PER_FEATURE, StepModel, auto_plan, auto_resolution_gpu, mean_coverage, step_time_hint,
+    AUTO_RUN_BUDGET_S, PIXELS_PER_FEATURE, StepModel, ViewsSurvey, auto_plan, auto_resolution_gpu, step_time_hint,
+    survey,
 };
 use gast_core::session::{Event, Session, SessionInputs, Stage1Cache, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::StyleConfig;
-use gast_core::style::focus::Focus;
 use gast_core::vision::Vgg;
 use gast_core::vision::style_depth::{DepthImage, DepthProvider};
 use serde::Serialize;
@@ -242,16 +241,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     )?;
     let mut config = config;
     if args.resolution.is_none() && args.preset.is_none() {
-        let subject = framing_subject(&scene);
-        let span = cameras.iter().map(|c| subject_span(c, &subject)).sum::<f32>() / cameras.len().max(1) as f32;
-        // `auto` decides on the views' coverage, which only it needs rendering.
-        let object = match config.focus {
-            Focus::Frame => false,
-            Focus::Object => true,
-            Focus::Auto => {
-                Focus::Auto.is_object(mean_coverage(&scene, &cameras, &RenderOptions { background: config.background }))
-            }
-        };
+        let ViewsSurvey { span, object } = survey(&scene, &cameras, config.focus, config.background);
         let (chosen, wanted, hint) = match &gpu {
             Some(g) => {
                 let (chosen, wanted) = auto_resolution_gpu(span);
