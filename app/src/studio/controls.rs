@@ -217,10 +217,11 @@ pub fn loss_chart(ui: &mut Ui, steps: &[StepReport]) {
     )];
     for (k, (name, color, get)) in series.into_iter().enumerate() {
         let values: Vec<f32> = steps.iter().map(|s| get(&s.losses)).collect();
-        let smooth = smoothed(&values, smoothing_window(values.len()));
+        let window = smoothing_window(values.len());
+        let smooth = smoothed(&values, window);
         let at = rect.left_top() + egui::vec2(6.0 + column * (k % COLUMNS) as f32, 4.0 + ROW * (k / COLUMNS) as f32);
         let font = egui::FontId::proportional(10.5);
-        let Some((lo, hi)) = robust_range(&smooth) else {
+        let Some((lo, hi)) = chart_range(&smooth, window) else {
             painter.text(at, egui::Align2::LEFT_TOP, format!("{name} –"), font, color);
             continue;
         };
@@ -261,10 +262,11 @@ fn term_colour(k: usize) -> Color32 {
     COLOURS[k % COLOURS.len()]
 }
 
-/// The moving-average window of a chart of `n` steps: about a fiftieth of
-/// the run, at least three steps.
+/// The moving-average window of a chart of `n` steps: about a thirtieth of
+/// the run, at least five steps (colour and geometry steps alternate, and
+/// their terms differ).
 pub(super) fn smoothing_window(n: usize) -> usize {
-    (n / 50).max(3)
+    (n / 30).max(5)
 }
 
 /// An exponential moving average of `values` over about `window` steps
@@ -281,6 +283,14 @@ pub(super) fn smoothed(values: &[f32], window: usize) -> Vec<f32> {
             mean
         })
         .collect()
+}
+
+/// The chart's vertical range of a series smoothed over `window` steps: its
+/// [`robust_range`] past the first `window` steps (the average's warm-up,
+/// still near the first raw values) once the run is twice that long.
+pub(super) fn chart_range(smooth: &[f32], window: usize) -> Option<(f32, f32)> {
+    let skip = if smooth.len() > 2 * window { window } else { 0 };
+    robust_range(&smooth[skip..])
 }
 
 /// The chart's vertical range of a smoothed series: its 2nd to 98th

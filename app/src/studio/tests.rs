@@ -794,18 +794,19 @@ fn the_window_switch_reads_a_size_or_keeps_the_default() {
 
 #[test]
 fn the_loss_chart_smooths_and_scales_past_the_first_spike() {
-    use super::controls::{robust_range, smoothed, smoothing_window};
+    use super::controls::{chart_range, robust_range, smoothed, smoothing_window};
     // A first-step spike, then a noisy plateau around 1.
     let mut raw: Vec<f32> = (0..200).map(|i| 1.0 + if i % 2 == 0 { 0.2 } else { -0.2 }).collect();
     raw[0] = 50.0;
     raw[7] = f32::NAN;
-    let s = smoothed(&raw, smoothing_window(raw.len()));
+    let window = smoothing_window(raw.len());
+    let s = smoothed(&raw, window);
     assert_eq!(s.len(), raw.len());
     assert!(s.iter().all(|v| v.is_finite()), "a NaN step keeps the running mean");
     let tail = &s[100..];
     let spread = tail.iter().fold(0.0f32, |m, v| m.max((v - 1.0).abs()));
     assert!(spread < 0.1, "smoothed noise {spread}");
-    let (lo, hi) = robust_range(&s).expect("finite");
+    let (lo, hi) = chart_range(&s, window).expect("finite");
     assert!(hi < 10.0 && lo > 0.5, "range {lo}–{hi}: the spike sets the scale");
     assert_eq!(robust_range(&[f32::NAN]), None);
     assert_eq!(smoothed(&[3.0], 1), vec![3.0]);
