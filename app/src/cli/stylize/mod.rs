@@ -84,24 +84,31 @@ pub fn resolve_style_depth(
     Ok(source)
 }
 
-/// Set by the first Ctrl-C, so that the run stops after its current step and
-/// still writes its scene, renders and report; a second Ctrl-C quits at once.
-/// Installed once per process (a second `stylize` in one process, as the
-/// tests do, shares the flag).
-fn interrupt_flag() -> Arc<AtomicBool> {
-    static FLAG: std::sync::OnceLock<Arc<AtomicBool>> = std::sync::OnceLock::new();
-    FLAG.get_or_init(|| {
-        let flag = Arc::new(AtomicBool::new(false));
-        let seen = flag.clone();
+/// Ctrl-C during the steps: the first stops the run after its current step
+/// (the run still writes its scene, renders and report), a second quits at
+/// once. Before the steps start (loading, a download) Ctrl-C quits at once,
+/// as everywhere else. Installed once per process (a second `stylize` in one
+/// process, as the tests do, shares it).
+struct Interrupt {
+    /// The steps are running: Ctrl-C asks them to stop.
+    stepping: Arc<AtomicBool>,
+    /// Ctrl-C was pressed while stepping.
+    asked: Arc<AtomicBool>,
+}
+
+fn interrupt() -> &'static Interrupt {
+    static FLAGS: std::sync::OnceLock<Interrupt> = std::sync::OnceLock::new();
+    FLAGS.get_or_init(|| {
+        let (stepping, asked) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
+        let (s, a) = (stepping.clone(), asked.clone());
         // No handler (another one is installed): Ctrl-C quits as before.
         let _ = ctrlc::set_handler(move || {
-            if seen.swap(true, Ordering::SeqCst) {
+            if !s.load(Ordering::SeqCst) || a.swap(true, Ordering::SeqCst) {
                 std::process::exit(130);
             }
         });
-        flag
+        Interrupt { stepping, asked }
     })
-    .clone()
 }
 
 /// What a user reads when the colour watch sees the object's colours
@@ -206,7 +213,7 @@ struct Summary {
 /// Runs the stylization and writes the outputs.
 pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let t_all = Instant::now();
-    let interrupted = interrupt_flag();
+    let interrupt = interrupt();
     let config = args.config()?;
     super::convert::check_output_name(&args.scene_name)?;
     let scene = load_scene(&args.scene)?;
@@ -326,6 +333,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let mut steps = Vec::with_capacity(total as usize);
     let mut warned_collapse = false;
     let mut stopped_at = None;
+    interrupt.asked.store(false, Ordering::SeqCst);
+    interrupt.stepping.store(true, Ordering::SeqCst);
     while let Some(r) = session.step() {
         let lum = r.colour.map_or(String::new(), |c| format!(" luminance {:.2}x", c.luminance_ratio()));
         pb.set_message(format!(
@@ -347,11 +356,12 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             anyhow::bail!("step {}: the loss became {}; stopping (try lower learning rates)", r.iter, r.losses.total);
         }
         steps.push(r);
-        if interrupted.load(Ordering::SeqCst) && !session.is_done() {
+        if interrupt.asked.load(Ordering::SeqCst) && !session.is_done() {
             stopped_at = Some(session.steps_done());
             break;
         }
     }
+    interrupt.stepping.store(false, Ordering::SeqCst);
     pb.finish_and_clear();
     if let Some(n) = stopped_at {
         eprintln!("stopped at step {n} of {total} (Ctrl-C): writing what the run has; Ctrl-C again quits at once");
