@@ -177,9 +177,9 @@ fn margins_chart(margins: &[Margin], c: &Comparison) -> Chart {
     Chart {
         title: match margins.first() {
             Some(m) if margins.iter().all(|o| o.scene == m.scene) => {
-                format!("{study} study on {}: {candidate}'s lead over {base}, per style", m.scene)
+                format!("{study} study on {}: the lead of {candidate} over {base}, per style", m.scene)
             }
-            _ => format!("{study} study: {candidate}'s lead over {base}, per scene × style pair"),
+            _ => format!("{study} study: the lead of {candidate} over {base}, per scene × style pair"),
         },
         x_label: format!("SW decrease, {candidate} minus {base} (seed floors)"),
         y_label: format!("NN-cos decrease, {candidate} minus {base} (seed floors)"),
