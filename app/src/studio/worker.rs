@@ -25,15 +25,16 @@ pub(super) fn plan_for_cpu(
     cameras: &[gast_core::Camera],
     config: &mut StyleConfig,
 ) -> String {
-    use gast_core::session::plan::{AUTO_RUN_BUDGET_S, StepModel, ViewsSurvey, auto_plan, survey};
+    use gast_core::session::plan::{AUTO_RUN_BUDGET_S, StepModel, ViewsSurvey, auto_plan, fit_cycles, survey};
     let ViewsSurvey { span, object } = survey(scene, cameras, config.focus, config.background);
     let model = StepModel::for_focus(object);
     let plan = auto_plan(span, model, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
     let asked = (config.resolution, config.cycles);
     config.resolution = plan.resolution.min(config.resolution);
-    let per_cycle = model.seconds(config.resolution) * f64::from(config.steps_per_cycle.max(1));
-    config.cycles = config.cycles.min((AUTO_RUN_BUDGET_S / per_cycle).floor().max(1.0) as u32);
-    let minutes = per_cycle * f64::from(config.cycles) / 60.0;
+    let (cycles, seconds) =
+        fit_cycles(model, config.resolution, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
+    config.cycles = cycles;
+    let minutes = seconds / 60.0;
     if (config.resolution, config.cycles) == asked {
         format!("about {minutes:.0} min on this CPU as set: {} px, {} cycles", asked.0, asked.1)
     } else {

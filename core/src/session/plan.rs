@@ -96,9 +96,16 @@ pub fn auto_plan(span: f32, model: StepModel, cycles: u32, steps_per_cycle: u32,
     let steps = f64::from(cycles.max(1) * steps_per_cycle.max(1));
     let fits = model.largest_within(budget_s / steps).max(AUTO_MIN_RESOLUTION);
     let (resolution, wanted) = resolution_for(span, fits.min(model.largest_within(AUTO_STEP_BUDGET_S)));
+    let (cycles, seconds) = fit_cycles(model, resolution, cycles, steps_per_cycle, budget_s);
+    AutoPlan { resolution, wanted, cycles, seconds }
+}
+
+/// At most `cycles` cycles of `steps_per_cycle` steps at `resolution` that
+/// fit `budget_s` by `model` (at least one), and their seconds.
+pub fn fit_cycles(model: StepModel, resolution: u32, cycles: u32, steps_per_cycle: u32, budget_s: f64) -> (u32, f64) {
     let per_cycle = model.seconds(resolution) * f64::from(steps_per_cycle.max(1));
     let cycles = cycles.min((budget_s / per_cycle).floor().max(1.0) as u32).max(1);
-    AutoPlan { resolution, wanted, cycles, seconds: per_cycle * f64::from(cycles) }
+    (cycles, per_cycle * f64::from(cycles))
 }
 
 /// The mean share of the pixels of `cameras` that `scene` covers (alpha of
