@@ -151,7 +151,7 @@ fn label_id(study: Study, label: &str, style: &StyleSource) -> String {
 }
 
 /// The grid of `sizes` restricted to `studies`.
-pub fn build_grid(sizes: &Sizes, shared: &Path, studies: &[Study]) -> Grid {
+pub fn build_grid(sizes: &Sizes, shared: &Path, studies: &[Study]) -> anyhow::Result<Grid> {
     // Every study but focus keeps the paper's whole-frame losses, so its
     // figures stay comparable with earlier runs.
     let base = StyleConfig {
@@ -260,22 +260,28 @@ pub fn build_grid(sizes: &Sizes, shared: &Path, studies: &[Study]) -> Grid {
             }
         }
     }
-    focus_studies(&mut g, sizes, shared, studies, &base);
-    g
+    focus_studies(&mut g, sizes, shared, studies, &base)?;
+    Ok(g)
 }
 
 /// The rows of the focus and collapse studies (see [`Study::Focus`], [`Study::Collapse`]).
-fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], base: &StyleConfig) {
+fn focus_studies(
+    g: &mut Grid,
+    sizes: &Sizes,
+    shared: &Path,
+    studies: &[Study],
+    base: &StyleConfig,
+) -> anyhow::Result<()> {
     let file = |rel: &String| StyleSource::File(shared.join(rel));
     let fitted = (Framing::Object, true);
     let plain_on_object = (Framing::Full, true);
     if studies.contains(&Study::Focus) {
         let cycles = sizes.focus_budget.div_ceil(sizes.steps_per_cycle).max(1);
         let frame = StyleConfig { cycles, ..base.clone() };
-        // A bad patch is refused with the sizes file (`Sizes::from_file`); here it was checked.
+        // `Sizes::from_file` refuses a bad patch with its file; sizes built in code meet it here.
         let object = StyleConfig { focus: Focus::Object, ..frame.clone() }
             .patched(&sizes.focus_object)
-            .unwrap_or_else(|_| StyleConfig { focus: Focus::Object, ..frame.clone() });
+            .map_err(|e| anyhow::anyhow!("the focus study's object arm: focus_object: {e}"))?;
         for scene in 0..sizes.scenes.len() {
             for (k, style) in sizes.styles.iter().enumerate() {
                 let style = file(style);
@@ -387,6 +393,7 @@ fn focus_studies(g: &mut Grid, sizes: &Sizes, shared: &Path, studies: &[Study], 
             }
         }
     }
+    Ok(())
 }
 
 fn scaled_lr(scale: f32) -> gast_core::style::config::LearningRates {
@@ -466,7 +473,7 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
     if studies.is_empty() {
         return Ok(ExitCode::SUCCESS);
     }
-    let grid = build_grid(&sizes, &shared, &studies);
+    let grid = build_grid(&sizes, &shared, &studies)?;
     let total_steps: u64 = grid.trials.iter().map(|t| u64::from(t.config.schedule().total_steps())).sum();
     println!(
         "quality benchmark: {} trials ({} rows, {total_steps} steps) over {} scenes, {} threads; writing {}",
@@ -586,7 +593,7 @@ mod tests {
 
     #[test]
     fn rows_that_differ_only_in_budget_share_a_trial() {
-        let g = build_grid(&Sizes::full(), Path::new("/shared"), &Study::ALL);
+        let g = build_grid(&Sizes::full(), Path::new("/shared"), &Study::ALL).expect("grid");
         // The decoupled wave run of the mode curves also answers ratio 90, λ_GC 2,
         // 128 px, the stress baseline and the guitar × wave pair.
         let decoupled = g
@@ -615,7 +622,7 @@ mod tests {
     #[test]
     fn the_collapse_study_has_its_arms_each_changing_one_setting() {
         let sizes = Sizes::full();
-        let g = build_grid(&sizes, Path::new("/shared"), &[Study::Collapse]);
+        let g = build_grid(&sizes, Path::new("/shared"), &[Study::Collapse]).expect("grid");
         let config_of = |label: &str| {
             let rows: Vec<_> = g.rows.iter().filter(|r| r.study == Study::Collapse && r.label == label).collect();
             let t = g.trials.iter().find(|t| t.id == rows[0].trial).expect("trial");
@@ -650,7 +657,7 @@ mod tests {
         // Only object focus, on every pair.
         let only =
             Sizes { collapse_arms: vec!["object focus".into()], collapse_object_on_every_pair: true, ..sizes.clone() };
-        let g = build_grid(&only, Path::new("/shared"), &[Study::Collapse]);
+        let g = build_grid(&only, Path::new("/shared"), &[Study::Collapse]).expect("grid");
         assert_eq!(g.rows.len(), sizes.scenes.len() * sizes.styles.len());
         assert!(g.rows.iter().all(|r| r.label == "object focus"), "{:?}", g.rows);
         assert!(g.trials.iter().all(|t| t.config.focus == Focus::Object));
@@ -660,7 +667,7 @@ mod tests {
             collapse_content_on_every_pair: true,
             ..sizes.clone()
         };
-        let g = build_grid(&both, Path::new("/shared"), &[Study::Collapse]);
+        let g = build_grid(&both, Path::new("/shared"), &[Study::Collapse]).expect("grid");
         let content_rows = g.rows.iter().filter(|r| r.label == COLLAPSE_CONTENT).count();
         assert_eq!((g.rows.len(), content_rows), (2 * pairs, pairs));
     }
@@ -668,7 +675,7 @@ mod tests {
     #[test]
     fn the_defaults_study_compares_the_shipped_defaults_with_the_paper_preset() {
         let sizes = Sizes::full();
-        let g = build_grid(&sizes, Path::new("/shared"), &[Study::Defaults]);
+        let g = build_grid(&sizes, Path::new("/shared"), &[Study::Defaults]).expect("grid");
         let pairs = sizes.scenes.len() * sizes.styles.len();
         let trials_of = |label: &str| -> Vec<TrialSpec> {
             g.rows
@@ -691,14 +698,14 @@ mod tests {
         assert!(paper.iter().chain(&defaults).chain(&seed).all(|t| t.eval_on_object));
         assert_eq!(seed[0].config.seed, 1);
         // It runs only when named.
-        let g = build_grid(&sizes, Path::new("/shared"), &Study::ALL);
+        let g = build_grid(&sizes, Path::new("/shared"), &Study::ALL).expect("grid");
         assert!(!g.rows.iter().any(|r| r.study == Study::Defaults));
     }
 
     #[test]
     fn the_focus_halves_each_take_one_half_of_object_focus() {
         let sizes = Sizes { focus_halves: true, ..Sizes::full() };
-        let g = build_grid(&sizes, Path::new("/shared"), &[Study::Focus]);
+        let g = build_grid(&sizes, Path::new("/shared"), &[Study::Focus]).expect("grid");
         let trial_of = |label: &str| {
             let rows: Vec<_> = g.rows.iter().filter(|r| r.study == Study::Focus && r.label == label).collect();
             assert_eq!(rows.len(), sizes.scenes.len() * sizes.styles.len(), "{label} on every pair");
@@ -712,14 +719,14 @@ mod tests {
         assert_ne!(frame.framing, object.framing);
         assert!([&frame, &object, &fitted, &masked].iter().all(|t| t.eval_on_object));
         // Without the flag, neither half runs.
-        let g = build_grid(&Sizes::full(), Path::new("/shared"), &[Study::Focus]);
+        let g = build_grid(&Sizes::full(), Path::new("/shared"), &[Study::Focus]).expect("grid");
         assert!(!g.rows.iter().any(|r| r.label == FOCUS_FITTED_VIEWS || r.label == FOCUS_MASKED_LOSSES));
     }
 
     #[test]
     fn the_object_arm_takes_its_own_resolution_when_given() {
         let config = |sizes: &Sizes, label: &str| {
-            let g = build_grid(sizes, Path::new("/shared"), &[Study::Focus]);
+            let g = build_grid(sizes, Path::new("/shared"), &[Study::Focus]).expect("grid");
             let row = g.rows.iter().find(|r| r.label == label).expect("row").trial.clone();
             g.trials.iter().find(|t| t.id == row).expect("trial").config.clone()
         };
@@ -753,5 +760,15 @@ mod tests {
             assert_eq!(c.ratio_geo, if object { 0.7 } else { base.ratio_geo }, "{label}");
             assert_eq!(c.weights.tv, if object { 0.5 } else { base.weights.tv }, "{label}");
         }
+    }
+
+    #[test]
+    fn a_patch_that_does_not_apply_is_refused_not_dropped() {
+        let bad = Sizes { focus_object: serde_json::json!({"weights": {"nope": 1.0}}), ..Sizes::full() };
+        let err = build_grid(&bad, Path::new("/shared"), &[Study::Focus]).err().expect("a bad patch is refused");
+        let text = format!("{err:#}");
+        assert!(text.contains("focus_object") && text.contains("weights.nope"), "{text}");
+        // Studies without an object arm never read the patch.
+        assert!(build_grid(&bad, Path::new("/shared"), &[Study::Collapse]).is_ok());
     }
 }
