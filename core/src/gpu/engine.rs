@@ -29,12 +29,12 @@ use crate::camera::Camera;
 use crate::eval::stability::CoveredColour;
 use crate::raster::RenderOptions;
 use crate::scene::Gaussians;
-use crate::session::{LossTerms, StepTimings};
 use crate::style::StyleConfig;
 use crate::style::config::LossWeights;
 use crate::style::gcfm::StyleFeatures;
 use crate::style::outside::outside_mask;
 use crate::style::schedule::Phase;
+use crate::style::terms::LossTerms;
 use crate::vision::Vgg;
 
 /// Headroom over the pairs the colour-matched scene needs in its busiest view.
@@ -250,7 +250,9 @@ impl GpuEngine {
         self.object_focus = on;
     }
 
-    /// One optimisation step from view `view` seen by `cam` in `phase`.
+    /// One optimisation step from view `view` seen by `cam` in `phase`; the
+    /// parts run back to back on the device, so no stage timings come back
+    /// (`gast bench step --device gpu` times them separately).
     pub fn step(
         &mut self,
         view: usize,
@@ -258,7 +260,7 @@ impl GpuEngine {
         phase: Phase,
         config: &StyleConfig,
         extent: f32,
-    ) -> Result<(LossTerms, StepTimings), GpuError> {
+    ) -> Result<LossTerms, GpuError> {
         let size = (cam.width, cam.height);
         if self.plans.get(&size).is_some_and(|p| p.loss.gcfm_weight() != config.weights.gcfm) {
             // λ_GC is baked into the GCFM workspace's uniforms.
@@ -412,9 +414,7 @@ impl GpuEngine {
             terms.reg_rotation = s[slot::REG_ROTATION];
             terms.total += w.opacity * terms.reg_opacity + w.scale * terms.reg_scale + w.rotation * terms.reg_rotation;
         }
-        // The parts run back to back on the device: `gast bench step --device gpu`
-        // times them separately; the session measures the whole step.
-        Ok((terms, StepTimings::default()))
+        Ok(terms)
     }
 
     /// A render needed more (tile, splat) pairs than its workspace holds: the

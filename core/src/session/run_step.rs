@@ -60,7 +60,7 @@ impl Session {
         let Some(engine) = &mut self.engine else { return Err("no GPU engine".into()) };
         engine.set_object_focus(object);
         let cam = &self.cameras[view];
-        let (losses, timings) = engine.step(view, cam, phase, &self.config, self.extent).map_err(|e| e.to_string())?;
+        let losses = engine.step(view, cam, phase, &self.config, self.extent).map_err(|e| e.to_string())?;
         if self.step.is_multiple_of(GPU_COLOUR_EVERY) || !self.colour_watch.has_reference(view) {
             if let Some(r) = engine.reference_colour(view) {
                 self.colour_watch.set_reference(view, r);
@@ -69,7 +69,8 @@ impl Session {
                 self.colour_watch.observe(view, c);
             }
         }
-        Ok((losses, timings))
+        // The session measures the whole step; its stages are not timed apart.
+        Ok((losses, StepTimings::default()))
     }
 
     /// One step on the CPU: render, the losses through VGG, the rasterizer's
