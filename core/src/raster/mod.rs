@@ -29,13 +29,12 @@
 //!
 //! `f32` and `f64` can only disagree where a pixel sits within rounding of a
 //! cut-off (α at 1/255, T at 1e-4); the tests count such ties separately.
-//! [`golden`] loads the independent reference cases and compares against them
+//! [`crate::golden`] loads the independent reference cases and compares against them
 //! (the integration test and `gast check golden` share it).
 
 mod backward;
 pub mod dense;
 mod forward;
-pub mod golden;
 mod project;
 mod splat;
 mod state;

@@ -239,7 +239,7 @@ fn matches_the_golden_rasterizer_files() {
     for name in ["raster_deg0_seed1", "raster_deg3_seed1"] {
         let Some(path) = shared(&format!("golden/{name}.safetensors")) else { return };
         let file = GoldenFile::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        let case = crate::raster::golden::case_from(&file).expect("raster case");
+        let case = crate::golden::raster_case(&file).expect("raster case");
         let (img, grads) =
             gpu_run(&k, &case.gaussians, &case.camera, &case.options, &case.cotangent_rgb, &case.cotangent_inv_depth);
         const IMAGE: Tolerance = Tolerance::Abs(1e-5);

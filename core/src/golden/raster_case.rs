@@ -1,16 +1,12 @@
 //! The inputs of a golden rasterizer file (`golden/raster_*.safetensors` of the
-//! shared data) as the studio's types. [`crate::golden`] reads the file, runs
-//! the rasterizer on this case and compares every output.
-//!
-//! The two import each other on purpose: the file's reader and error type
-//! live with every other golden file in [`crate::golden`], this case's fields
-//! live with the rasterizer they feed.
+//! shared data) as the studio's types. [`crate::golden`] runs the rasterizer
+//! on this case and compares every output.
 
 use glam::{Mat3, Vec3};
 
-use super::RenderOptions;
+use super::file::{GoldenError, GoldenFile};
 use crate::camera::Camera;
-use crate::golden::{GoldenError, GoldenFile};
+use crate::raster::RenderOptions;
 use crate::scene::Gaussians;
 
 /// One golden rasterizer case: the scene, camera, background and the
@@ -30,7 +26,7 @@ pub struct GoldenRasterCase {
 }
 
 /// Converts the inputs of a raster golden file, checking every shape.
-pub fn case_from(file: &GoldenFile) -> Result<GoldenRasterCase, GoldenError> {
+pub fn raster_case(file: &GoldenFile) -> Result<GoldenRasterCase, GoldenError> {
     let format = |what: &str, expected: String, found: String| GoldenError::Format {
         path: file.path.clone(),
         what: what.into(),
