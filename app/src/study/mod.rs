@@ -492,16 +492,41 @@ mod tests {
     #[test]
     fn every_committed_settings_file_is_valid_sizes() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/studies");
-        let files: Vec<_> = std::fs::read_dir(&dir)
-            .expect("docs/studies")
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "json"))
-            .collect();
+        let json_in = |dir: &std::path::Path| -> Vec<std::path::PathBuf> {
+            std::fs::read_dir(dir)
+                .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect::<Vec<_>>())
+                .unwrap_or_default()
+                .into_iter()
+                .filter(|p| p.extension().is_some_and(|x| x == "json"))
+                .collect()
+        };
+        let mut files = json_in(&dir);
+        files.extend(json_in(&dir.join("settings")));
         assert!(!files.is_empty(), "no settings file under {}", dir.display());
         for f in files {
             let sizes = Sizes::from_file(&f).unwrap_or_else(|e| panic!("{e:#}"));
             assert!(!sizes.scenes.is_empty() && !sizes.styles.is_empty(), "{}", f.display());
         }
+    }
+
+    #[test]
+    fn every_study_row_names_a_committed_settings_file() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let pages = std::fs::read_dir(root.join("docs/studies")).expect("docs/studies");
+        let mut named = 0;
+        for page in pages.filter_map(|e| e.ok().map(|e| e.path())) {
+            let is_page = page.extension().is_some_and(|x| x == "md");
+            if !is_page || page.file_name().is_some_and(|n| n == "README.md") {
+                continue;
+            }
+            let text = std::fs::read_to_string(&page).expect("page");
+            for (at, _) in text.match_indices("--sizes ") {
+                let file: String = text[at + 8..].chars().take_while(|c| !c.is_whitespace() && *c != '`').collect();
+                assert!(root.join(&file).is_file(), "{}: `--sizes {file}` names no committed file", page.display());
+                named += 1;
+            }
+        }
+        assert!(named > 0, "no study row names a settings file");
     }
 
     #[test]
