@@ -112,11 +112,6 @@ fn run_turntable(
 /// A file stem from a camera name (image names may hold folders and extensions).
 fn sanitize(name: &str) -> String {
     let base = std::path::Path::new(name).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    let s = file_safe(&base);
+    let s = crate::report::file_safe(&base);
     if s.is_empty() { "view".into() } else { s }
-}
-
-/// `name` with every character but ASCII letters, digits, `-` and `_` replaced by `_`.
-pub(super) fn file_safe(name: &str) -> String {
-    name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect()
 }

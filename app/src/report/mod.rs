@@ -1,15 +1,17 @@
-//! The report of a benchmark run: what `gast bench quality` writes next to its
-//! numbers so that a run can be judged at a glance: charts (SVG and PNG) and
-//! the quality benchmark's folder of tables, renders and index.
+//! Drawing what a run made, so it can be judged at a glance: charts (SVG and
+//! PNG, with their axes and glyphs) and the contact sheets of renders and
+//! depth maps. The studies' pages that use them are [`crate::study::pages`].
 
 mod axis;
 pub mod chart;
-mod fast;
-pub mod focus;
-pub mod geometry;
 mod glyphs;
-pub mod quality;
 pub mod sheet;
+
+/// `name` with every character but ASCII letters, digits, `-` and `_` made `_`:
+/// safe as a file name everywhere.
+pub fn file_safe(name: &str) -> String {
+    name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect()
+}
 
 /// `YYYYmmdd-HHMMSS` in UTC, from the system clock.
 pub fn utc_stamp() -> String {

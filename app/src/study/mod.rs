@@ -1,13 +1,17 @@
-//! The quality study's definitions, shared by the command that runs it
-//! (`cli::quality`, which builds the grid and runs the trials) and the report
-//! that presents it (`report::quality`, which writes tables, charts and the
-//! index): the studies, the grid's sizes, one trial's specification, the rows
-//! that read trials, and what a run records. Both sides import them from here
-//! so neither reaches into the other.
+//! The studies of `gast bench quality`, in one place: their definitions here
+//! (the studies, the grid's sizes, one trial's specification, the rows that
+//! read trials, what a run records), the grid of trials each study asks for
+//! ([`grid`]), the trial runner ([`run`]), the geometry study
+//! ([`geometry`], [`geometry_run`]) and the pages a run writes ([`pages`]).
+//! The command (`cli::quality`) parses its arguments and calls in here.
 
 use std::path::PathBuf;
 
 pub mod geometry;
+pub mod geometry_run;
+pub mod grid;
+pub mod pages;
+pub mod run;
 
 use clap::ValueEnum;
 use gast_core::eval::{Checkpoint, Degeneration, TrialOutcome};

@@ -12,7 +12,7 @@ use gast_core::io::{write_bytes, write_png_rgb};
 use gast_core::session::StyleImage;
 use gast_core::style::Mode;
 
-use super::chart::{Chart, Series, palette};
+use crate::report::chart::{Chart, Series, palette};
 use crate::study::{Record, Row, RunSummary, SEED_LABEL, Study, mode_label};
 
 impl Record {

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 
-use super::chart::{Chart, Series, palette};
+use crate::report::chart::{Chart, Series, palette};
 use crate::study::geometry::{Arm, GeometryMeasures, GeometryRecord, GeometryRun, MELTED_LAYOUT, seed_noise, verdicts};
 
 /// The styles that must pass the check (of nine), as the issue asks.

@@ -13,7 +13,7 @@ use anyhow::Context as _;
 
 use gast_core::eval::{DegenerationKind, Measures};
 
-use super::chart::{Chart, Series, palette};
+use crate::report::chart::{Chart, Series, palette};
 use crate::study::{
     DEFAULTS_CYCLE, DEFAULTS_NEW, DEFAULTS_PAPER, DEFAULTS_SEED, FOCUS_FITTED_VIEWS, FOCUS_FRAME, FOCUS_MASKED_LOSSES,
     FOCUS_OBJECT, FOCUS_SEED, Record, Row, RunSummary, Study,

@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use super::chart::{Chart, Series, palette};
+use crate::report::chart::{Chart, Series, palette};
 use crate::study::{Record, Row, Study};
 
 /// One chart per style of the `fast` study (none when it did not run); returns

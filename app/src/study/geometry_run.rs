@@ -27,12 +27,21 @@ struct StyleRefs {
 }
 
 /// Runs the study into `out` and returns what `results.json` keeps.
-pub fn run(sizes: &GeometrySizes, shared: &Path, vgg: &Arc<Vgg>, out: &Path) -> anyhow::Result<GeometryRun> {
+/// `fit` fits a scene from a photo set (dataset folder, output `.ply`,
+/// iterations at 504 px with every 8th photo held out): the command's `gast
+/// fit`, passed in so the study does not reach into the command line.
+pub fn run(
+    sizes: &GeometrySizes,
+    shared: &Path,
+    vgg: &Arc<Vgg>,
+    out: &Path,
+    fit: &dyn Fn(&Path, &Path, u32) -> anyhow::Result<()>,
+) -> anyhow::Result<GeometryRun> {
     std::fs::create_dir_all(out).with_context(|| format!("could not create {}", out.display()))?;
     let cameras_path = shared.join(&sizes.cameras);
     let scene_path = match &sizes.scene {
         Some(p) => p.clone(),
-        None => fit_scene(sizes, &cameras_path, out)?,
+        None => fit_scene(sizes, &cameras_path, out, fit)?,
     };
     let scene = load_scene(&scene_path)?;
     let cameras = views_for(
@@ -166,7 +175,12 @@ pub fn run(sizes: &GeometrySizes, shared: &Path, vgg: &Arc<Vgg>, out: &Path) -> 
 }
 
 /// Fits the study's scene from the dataset's photos (the fern), into `out/fern.ply`.
-fn fit_scene(sizes: &GeometrySizes, dataset: &Path, out: &Path) -> anyhow::Result<PathBuf> {
+fn fit_scene(
+    sizes: &GeometrySizes,
+    dataset: &Path,
+    out: &Path,
+    fit: &dyn Fn(&Path, &Path, u32) -> anyhow::Result<()>,
+) -> anyhow::Result<PathBuf> {
     let path = out.join("fern.ply");
     if path.exists() {
         println!("geometry study: using the scene fitted earlier, {}", path.display());
@@ -177,23 +191,7 @@ fn fit_scene(sizes: &GeometrySizes, dataset: &Path, out: &Path) -> anyhow::Resul
         dataset.display(),
         sizes.fit_iterations
     );
-    let args = super::super::fit::FitArgs {
-        dataset: dataset.to_path_buf(),
-        images: None,
-        random_init: false,
-        out: path.clone(),
-        iterations: Some(sizes.fit_iterations),
-        resolution: Some(504),
-        gaussians: None,
-        sh_degree: None,
-        views: 0,
-        no_densify: false,
-        seed: None,
-        preset: None,
-        holdout_every: 8,
-        preview: None,
-    };
-    super::super::fit::run(args)
+    fit(dataset, &path, sizes.fit_iterations)
         .with_context(|| format!("fitting the geometry study's scene from {}", dataset.display()))?;
     Ok(path)
 }

@@ -1,70 +1,18 @@
-//! `gast bench quality`: speed against quality over a grid of settings, the
-//! stability study and the paper's ablations, on the shared scenes and styles.
-//!
-//! The grid is a list of *studies*, each a list of rows; every row names a
-//! trial (one [`run_trial`]) and the step at which to read it. Rows that differ
-//! only in their budget share one trial: with a constant learning rate and a
-//! schedule that repeats every cycle, the first `B` steps of a longer run are
-//! exactly a run of budget `B`, so one run measured at `B` answers both. The
-//! trials run grouped by scene and style, each scene loaded and each style's
-//! features computed once.
+//! The grid of `gast bench quality`: the trials each study asks for and the
+//! rows that read them. Rows that differ only in their budget share one
+//! trial: with a constant learning rate and a schedule that repeats every
+//! cycle, the first `B` steps of a longer run are exactly a run of budget
+//! `B`, so one run measured at `B` answers both.
 
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::process::ExitCode;
-use std::sync::Arc;
-use std::time::Instant;
+use std::path::Path;
 
-use anyhow::Context;
-use clap::Args;
-use gast_core::Gaussians;
-use gast_core::eval::{EvalOptions, StabilityThresholds, TrialOutcome, run_trial};
-use gast_core::session::{PreparedStyle, SessionInputs, StyleDepthSource, StyleImage, prepare_style};
 use gast_core::style::{Focus, Mode, StyleConfig};
 
-mod geometry;
-
-use super::bench::shared_dir;
-use crate::report::quality::{read_summary, rewrite_report, write_report};
-use crate::study::geometry::GeometrySizes;
-use crate::study::{
+use super::{
     COLLAPSE_CONTENT, DEFAULTS_CYCLE, DEFAULTS_NEW, DEFAULTS_PAPER, DEFAULTS_SEED, FOCUS_FITTED_VIEWS, FOCUS_FRAME,
-    FOCUS_MASKED_LOSSES, FOCUS_OBJECT, FOCUS_SEED, Record, Row, RunSummary, SEED_LABEL, Sizes, Study, StyleSource,
-    TrialSpec, mode_label,
+    FOCUS_MASKED_LOSSES, FOCUS_OBJECT, FOCUS_SEED, Row, SEED_LABEL, Sizes, Study, StyleSource, TrialSpec, mode_label,
 };
-use crate::views::{Framing, ViewArgs, load_scene, views_for};
-
-/// Arguments of `gast bench quality`.
-#[derive(Args, Debug)]
-pub struct QualityArgs {
-    /// Output folder (default: `gast-quality-<UTC date and time>` in the current folder).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// A small subset (the guitar, two styles, short budgets, small images) that
-    /// runs in a few minutes; for checking the pipeline, not for conclusions.
-    #[arg(long)]
-    pub quick: bool,
-    /// Only these studies (default: all).
-    #[arg(long, value_delimiter = ',')]
-    pub studies: Vec<Study>,
-    /// VGG weights (default: the shared vgg19-conv3.safetensors, else the usual resolution).
-    #[arg(long)]
-    pub weights: Option<PathBuf>,
-    /// The grid's sizes from a JSON file (the fields of `sizes` in results.json;
-    /// missing ones take the full grid's): scenes, styles, budgets and
-    /// resolutions, e.g. to run a study on a subset.
-    #[arg(long, value_name = "FILE", conflicts_with = "quick")]
-    pub sizes: Option<PathBuf>,
-    /// Redraw the tables, charts and index of an earlier run's folder from its
-    /// results.json, without running anything.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["quick", "studies", "out", "sizes"])]
-    pub report: Option<PathBuf>,
-    /// The geometry study's scene: a fit of the fern (`gast fit
-    /// ../shared/data/datasets/fern --holdout-every 8 --resolution 504 --out fern.ply`).
-    /// Default: fit one into the output folder first (a few minutes).
-    #[arg(long, value_name = "PLY")]
-    pub scene: Option<PathBuf>,
-}
+use crate::views::Framing;
 
 /// The whole grid: trials and the rows that read them.
 #[derive(Default)]
@@ -147,7 +95,7 @@ impl Grid {
 }
 
 fn label_id(study: Study, label: &str, style: &StyleSource) -> String {
-    super::render::file_safe(&format!("{study:?}-{label}-{}", style.name()).to_lowercase())
+    crate::report::file_safe(&format!("{study:?}-{label}-{}", style.name()).to_lowercase())
 }
 
 /// The grid of `sizes` restricted to `studies`.
@@ -425,165 +373,6 @@ fn fast_options(base: &StyleConfig) -> Vec<(&'static str, StyleConfig)> {
         ("reuse 3", StyleConfig { matching: reuse, ..base.clone() }),
         ("winograd + pca + reuse 3", StyleConfig { conv: ConvAlgo::Winograd, matching: all, ..base.clone() }),
     ]
-}
-
-/// Runs the grid and writes the report.
-pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
-    if let Some(dir) = &args.report {
-        let geometry_dir = dir.join("geometry");
-        if geometry_dir.join("results.json").exists() {
-            let run = crate::report::geometry::read(&geometry_dir)?;
-            let (path, verdict) = crate::report::geometry::write(&geometry_dir, &run)?;
-            println!("geometry study: {verdict}\nreport: {}", path.display());
-            if !dir.join("results.json").exists() {
-                return Ok(ExitCode::SUCCESS);
-            }
-        }
-        let run = read_summary(dir)?;
-        let index = rewrite_report(dir, &run)?;
-        for line in crate::report::focus::write_focus_report(dir, &run)? {
-            println!("{line}");
-        }
-        println!("report: {}", index.display());
-        return Ok(ExitCode::SUCCESS);
-    }
-    let shared = shared_dir();
-    let sizes = match &args.sizes {
-        Some(path) => Sizes::from_file(path)?,
-        None if args.quick => Sizes::quick(),
-        None => Sizes::full(),
-    };
-    let studies = if args.studies.is_empty() { Study::ALL.to_vec() } else { args.studies.clone() };
-    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("gast-quality-{}", crate::report::utc_stamp())));
-    std::fs::create_dir_all(&out).with_context(|| format!("could not create the output folder {}", out.display()))?;
-    let weights = args.weights.clone().or_else(|| {
-        let p = shared.join("data/weights/vgg19-conv3.safetensors");
-        p.exists().then_some(p)
-    });
-    let vgg = Arc::new(super::stylize::load_vgg(weights.as_deref())?);
-    if studies.contains(&Study::Geometry) {
-        let mut g = if args.quick { GeometrySizes::quick() } else { GeometrySizes::full() };
-        g.scene = args.scene.clone();
-        let dir = out.join("geometry");
-        let run = geometry::run(&g, &shared, &vgg, &dir)?;
-        let (path, verdict) = crate::report::geometry::write(&dir, &run)?;
-        println!("geometry study in {:.1} min: {verdict}\nreport: {}", run.wall_s / 60.0, path.display());
-    }
-    let studies: Vec<Study> = studies.into_iter().filter(|&s| s != Study::Geometry).collect();
-    if studies.is_empty() {
-        return Ok(ExitCode::SUCCESS);
-    }
-    let grid = build_grid(&sizes, &shared, &studies)?;
-    let total_steps: u64 = grid.trials.iter().map(|t| u64::from(t.config.schedule().total_steps())).sum();
-    println!(
-        "quality benchmark: {} trials ({} rows, {total_steps} steps) over {} scenes, {} threads; writing {}",
-        grid.trials.len(),
-        grid.rows.len(),
-        grid.trials.iter().map(|t| t.scene).collect::<std::collections::BTreeSet<_>>().len(),
-        rayon::current_num_threads(),
-        out.display()
-    );
-
-    let started = Instant::now();
-    let bar = crate::progress::bar(total_steps, "steps");
-    let mut order: Vec<usize> = (0..grid.trials.len()).collect();
-    order.sort_by(|&a, &b| {
-        let (ta, tb) = (&grid.trials[a], &grid.trials[b]);
-        (ta.scene, &ta.style).cmp(&(tb.scene, &tb.style))
-    });
-    let mut scenes: BTreeMap<usize, Gaussians> = BTreeMap::new();
-    let mut styles: BTreeMap<StyleSource, (StyleImage, PreparedStyle)> = BTreeMap::new();
-    let mut records = Vec::new();
-    let eval = EvalOptions { resolution: sizes.eval_resolution, ..EvalOptions::default() };
-    for &i in &order {
-        let spec = &grid.trials[i];
-        if !scenes.contains_key(&spec.scene) {
-            scenes.clear(); // trials are grouped by scene: keep one in memory
-            let path = shared.join(&sizes.scenes[spec.scene]);
-            scenes.insert(spec.scene, load_scene(&path)?);
-        }
-        let Some(scene) = scenes.get(&spec.scene) else { continue };
-        if !styles.contains_key(&spec.style) {
-            let image = spec.style.image().with_context(|| format!("style {}", spec.style.name()))?;
-            let c = &spec.config;
-            let prepared = prepare_style(&vgg, &image, c.texture_scale, &StyleDepthSource::Heuristic, c.depth_polarity);
-            styles.insert(spec.style.clone(), (image, prepared));
-        }
-        let Some((image, prepared)) = styles.get(&spec.style) else { continue };
-        let views = views_for(
-            scene,
-            &ViewArgs {
-                cameras: None,
-                views: sizes.views,
-                size: spec.config.resolution,
-                fov: 50.0,
-                framing: spec.framing,
-                crop: false,
-            },
-        )?;
-        let inputs = SessionInputs {
-            scene: scene.clone(),
-            cameras: views,
-            style: image.clone(),
-            style_depth: StyleDepthSource::Heuristic,
-            vgg: Arc::clone(&vgg),
-            config: spec.config.clone(),
-            gpu: None,
-        };
-        bar.set_message(spec.id.clone());
-        let base = bar.position();
-        let outcome = run_trial(
-            inputs,
-            Some(prepared.clone()),
-            &spec.checkpoints,
-            &EvalOptions {
-                fit_to_object: spec.eval_on_object,
-                over_style_colour: sizes.eval_over_style_colour,
-                ..eval
-            },
-            &StabilityThresholds::default(),
-            &mut |done, _| bar.set_position(base + u64::from(done)),
-        )
-        .with_context(|| format!("trial {}", spec.id))?;
-        bar.set_position(base + u64::from(spec.config.schedule().total_steps()));
-        bar.suspend(|| println!("{}", summary_line(spec, &outcome)));
-        records.push(Record::new(spec, &sizes.scenes[spec.scene], scene.len(), outcome));
-    }
-    bar.finish_and_clear();
-    let wall = started.elapsed().as_secs_f64();
-    let styles_used: Vec<(String, StyleImage)> = styles.into_iter().map(|(s, (image, _))| (s.name(), image)).collect();
-    let run = RunSummary {
-        command: std::env::args().collect::<Vec<_>>().join(" "),
-        threads: rayon::current_num_threads(),
-        sizes,
-        wall_s: wall,
-        rows: grid.rows,
-        trials: records,
-    };
-    let index = write_report(&out, &run, &styles_used)?;
-    for line in crate::report::focus::write_focus_report(&out, &run)? {
-        println!("{line}");
-    }
-    println!("{} trials in {:.1} min; report: {}", run.trials.len(), wall / 60.0, index.display());
-    Ok(ExitCode::SUCCESS)
-}
-
-fn summary_line(spec: &TrialSpec, o: &TrialOutcome) -> String {
-    let last = o.checkpoints.last().map(|c| c.measures).unwrap_or_default();
-    let health = if o.stability.is_healthy() {
-        "stable".to_string()
-    } else {
-        o.stability.issues.iter().map(|d| format!("{:?}", d.kind)).collect::<Vec<_>>().join("+")
-    };
-    format!(
-        "{:<44} {:>4} steps {:>6.1} s  SW {:>7.4}  NN {:.4}  long RMSE {:.4}  {health}",
-        spec.id,
-        o.steps,
-        o.checkpoints.last().map_or(0.0, |c| c.seconds),
-        last.sliced_wasserstein,
-        last.nn_cosine,
-        last.consistency_long
-    )
 }
 
 #[cfg(test)]
