@@ -218,9 +218,12 @@ fn defaults_budget() -> u32 {
     200
 }
 
-/// 96 px keeps the 57 trials of the full study near an hour on two cores.
+/// 192 px, the object arm's resolution in the focus study that chose the
+/// recipe. At 96 px (the first run, `docs/studies/defaults.md`) the object
+/// spans too few relu3 positions and defaults beat paper on 4 of 9 styles on
+/// guitar; at 192 px on 8 of 9. The 57 trials take about 90 min on two cores.
 fn defaults_resolution() -> u32 {
-    96
+    192
 }
 
 /// The collapse study's runs: the decoupled default on every pair; the others
