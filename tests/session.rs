@@ -666,3 +666,73 @@ fn gpu_reused_matches_give_the_cpu_losses() {
     }
     assert!(differ >= 3, "only {differ} of 6 revisits stepped differently from a new search");
 }
+
+/// The reference's gradient leak between phases (`phase_leak`): the first
+/// cycle's colour steps are those of a run without it (no geometry step has
+/// run yet), the cycle's first geometry step moves the geometry otherwise (it
+/// adds the colour steps' geometry gradients), and a GPU session refuses it
+/// with the way out.
+#[test]
+fn the_phase_leak_reaches_the_first_geometry_step_and_runs_on_the_cpu() {
+    use gast_core::session::Session;
+    let base = StyleConfig {
+        cycles: 2,
+        steps_per_cycle: 4,
+        ratio_geo: 0.5,
+        resolution: 48,
+        texture_scale: 48,
+        ..Default::default()
+    };
+    let Some(plain) = inputs(base.clone()) else { return };
+    let leaky = SessionInputs { config: StyleConfig { phase_leak: true, ..base }, ..plain.clone() };
+    let mut a = Session::prepare(plain, &mut |_| {}).expect("session");
+    let mut b = Session::prepare(leaky.clone(), &mut |_| {}).expect("leaking session");
+    for step in 0..3 {
+        let (ra, rb) = (a.step().expect("a step"), b.step().expect("a leaking step"));
+        assert_eq!(ra.phase, rb.phase);
+        let (ga, gb) = (a.result(), b.result());
+        if step < 2 {
+            assert_eq!(ra.phase, Phase::Color);
+            assert_eq!(ga, gb, "colour step {step}: nothing has leaked yet");
+        } else {
+            assert_eq!(ra.phase, Phase::Geometry);
+            assert_eq!(ga.sh, gb.sh, "a geometry step leaves the colours");
+            assert_ne!(ga.opacity_logits, gb.opacity_logits, "the leaked gradients move the opacities");
+            assert_ne!(ga.means, gb.means, "the leaked gradients move the means");
+        }
+    }
+    let on_gpu = SessionInputs { gpu: Some(gpu_context()), ..leaky };
+    let text = Session::prepare(on_gpu, &mut |_| {}).err().expect("the GPU session refuses the leak").to_string();
+    assert!(text.contains("phase leak") && text.contains("--device cpu"), "{text}");
+}
+
+/// `split_px`: the run splits the Gaussians that are large on screen before
+/// it starts (said in a stage event with the counts), within the cap, and the
+/// result holds the split scene.
+#[test]
+fn a_split_run_optimises_and_exports_the_split_scene() {
+    use gast_core::session::Session;
+    let config = StyleConfig {
+        cycles: 1,
+        steps_per_cycle: 2,
+        resolution: 48,
+        texture_scale: 48,
+        split_px: 1.0,
+        ..Default::default()
+    };
+    let Some(inputs) = inputs(config) else { return };
+    let n = inputs.scene.len();
+    let mut stages = Vec::new();
+    let mut s = Session::prepare(inputs, &mut |e| {
+        if let Event::Stage { name, .. } = e {
+            stages.push(name)
+        }
+    })
+    .expect("session");
+    let split = stages.iter().find(|s| s.starts_with("splitting to 1 px")).expect("a splitting stage");
+    assert!(split.contains(&format!("{n} → ")), "{split}");
+    s.step().expect("a step");
+    let after = s.result().len();
+    assert!(after > n && after <= 8 * n, "{n} → {after}");
+    assert!(split.contains(&format!("→ {after} Gaussians")), "{split}");
+}

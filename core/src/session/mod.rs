@@ -11,6 +11,7 @@ pub mod plan;
 mod prepare;
 mod run;
 mod slot;
+pub mod split;
 mod stage1_cache;
 mod style_image;
 mod worker;

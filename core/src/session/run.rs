@@ -80,6 +80,36 @@ struct Optimisers {
     opacity: Adam,
 }
 
+/// Gradients one phase's steps leave on the other phase's parameters
+/// ([`StyleConfig::phase_leak`]), summed until that phase's next step adds
+/// them to its own. Empty when the leak is off.
+#[derive(Default)]
+struct Leak {
+    color: Vec<f32>,
+    means: Vec<f32>,
+    scales: Vec<f32>,
+    quats: Vec<f32>,
+    opacity: Vec<f32>,
+}
+
+impl Leak {
+    /// The empty sums for `n` Gaussians when `config` asks for the leak (in
+    /// decoupled mode: the ablations have no phases to leak between), else none.
+    fn for_config(config: &StyleConfig, n: usize) -> Self {
+        if config.phase_leak && config.mode == crate::style::Mode::Decoupled { Self::new(n) } else { Self::default() }
+    }
+
+    fn new(n: usize) -> Self {
+        Self {
+            color: vec![0.0; 3 * n],
+            means: vec![0.0; 3 * n],
+            scales: vec![0.0; 3 * n],
+            quats: vec![0.0; 4 * n],
+            opacity: vec![0.0; n],
+        }
+    }
+}
+
 /// One stylization run, stepped by its caller (the CLI or the studio's worker).
 pub struct Session {
     config: StyleConfig,
@@ -100,6 +130,8 @@ pub struct Session {
     style: PreparedStyle,
     targets: Vec<Option<ViewTarget>>,
     opt: Optimisers,
+    /// The reference's gradient leak between phases (empty when off).
+    leak: Leak,
     sampler: ViewSampler,
     step: u32,
     elapsed_s: f64,
@@ -156,6 +188,22 @@ impl Session {
         let opts = RenderOptions { background: config.background };
         let work_cams: Vec<Camera> = cameras.iter().map(|c| c.with_longer_side(config.resolution)).collect();
 
+        let scene = if config.split_px > 0.0 {
+            let t = Instant::now();
+            let cap = scene.len().saturating_mul(crate::style::config::SPLIT_MAX_FACTOR);
+            let (split, r) = super::split::split_large(&scene, &work_cams, config.split_px, cap);
+            let capped = if r.capped { ", stopped at the cap" } else { "" };
+            on_event(Event::Stage {
+                name: format!(
+                    "splitting to {} px: {} → {} Gaussians in {} passes{capped}",
+                    config.split_px, r.before, r.after, r.passes
+                ),
+                seconds: t.elapsed().as_secs_f64(),
+            });
+            split
+        } else {
+            scene
+        };
         let t = Instant::now();
         let survey = survey_views(&scene, &work_cams, &opts);
         let pixels: usize = work_cams.iter().map(|c| c.width as usize * c.height as usize).sum();
@@ -241,6 +289,7 @@ impl Session {
             style_depth,
             vgg,
             opt,
+            leak: Leak::for_config(&config, n),
             sampler,
             step: 0,
             elapsed_s: 0.0,
@@ -364,7 +413,9 @@ impl Session {
     /// Takes new parameters from the next step on. A new texture scale or depth
     /// polarity recomputes the style features (and the matching index); a new
     /// resolution the cameras and per-view targets; any of these, or new
-    /// matching settings, forgets the kept matches. Adam state is kept.
+    /// matching settings, forgets the kept matches. Adam state is kept. The
+    /// split ([`StyleConfig::split_px`]) is made when a run is prepared; a new
+    /// value takes effect on the next run.
     pub fn set_config(&mut self, config: StyleConfig) -> Result<(), SessionError> {
         let config = config.resolved(self.coverage);
         let problems = engine_problems(&config, self.engine.is_some());
@@ -406,6 +457,10 @@ impl Session {
                 e.reset_views(self.cameras.len(), config.background);
             }
             self.view_matches.iter_mut().for_each(|m| *m = None);
+        }
+        let leaking = config.phase_leak && config.mode == crate::style::Mode::Decoupled;
+        if leaking == self.leak.means.is_empty() {
+            self.leak = Leak::for_config(&config, self.g.len());
         }
         self.config = config;
         Ok(())
@@ -552,6 +607,9 @@ impl ViewSampler {
 fn engine_problems(config: &StyleConfig, on_gpu: bool) -> Vec<String> {
     let mut out = config.problems();
     if on_gpu {
+        if config.phase_leak {
+            out.push("the phase leak (phase_leak) runs on the CPU engine only so far: use the CPU (--device cpu) or turn it off".into());
+        }
         for (t, v) in config.weights.cpu_only() {
             out.push(format!(
                 "{} = {v} ({}) runs on the CPU engine only so far: use the CPU (--device cpu) or set it to 0",

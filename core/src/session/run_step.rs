@@ -92,6 +92,10 @@ impl Session {
         let edge = render_edges(&rgb, h, w);
         let target = self.targets[view].as_ref()?;
         let geometry = phase.updates_geometry();
+        // With the leak, a colour step also takes the depth map's gradient:
+        // it reaches the geometry, whose next step applies it.
+        let leaking = !self.leak.means.is_empty();
+        let depth_grad = geometry || (leaking && phase == Phase::Color);
         // Matches: kept from this view's last visits, or searched (and, when
         // auditing, compared with the exact search off the clock).
         let mc = self.config.matching;
@@ -120,7 +124,7 @@ impl Session {
             Some(&target.content),
             geometry.then_some(target.inv_depth.as_slice()),
             &self.config.weights_for(phase),
-            geometry,
+            depth_grad,
             LossFocus {
                 mask: self.focus_on_object().then_some(target.coverage.as_slice()),
                 window: self.config.vgg_window,
@@ -170,9 +174,10 @@ impl Session {
             let mut dc: Vec<f32> = (0..self.g.len())
                 .flat_map(|i| [self.g.sh[i * k], self.g.sh[i * k + 1], self.g.sh[i * k + 2]])
                 .collect();
-            let v_dc: Vec<f32> = (0..self.g.len())
+            let mut v_dc: Vec<f32> = (0..self.g.len())
                 .flat_map(|i| [grads.v_sh[i * k], grads.v_sh[i * k + 1], grads.v_sh[i * k + 2]])
                 .collect();
+            take_leak(&mut v_dc, &mut self.leak.color);
             self.opt.color.step(&mut dc, &v_dc, lr.color);
             if self.config.color_floor {
                 floor_dc(&mut dc);
@@ -196,10 +201,33 @@ impl Session {
             add_scaled(&mut v_o, &grads.v_opacity_logits, wts.opacity);
             add_scaled(&mut v_s, flat(&grads.v_log_scales), wts.scale);
             add_scaled(&mut v_q, flat(&grads.v_quats), wts.rotation);
-            self.opt.means.step(flat_mut(&mut self.g.means), flat(&grads.v_means), lr.means_per_extent * self.extent);
+            let mut v_m = grads.v_means.as_flattened().to_vec();
+            take_leak(&mut v_m, &mut self.leak.means);
+            take_leak(&mut v_s, &mut self.leak.scales);
+            take_leak(&mut v_q, &mut self.leak.quats);
+            take_leak(&mut v_o, &mut self.leak.opacity);
+            self.opt.means.step(flat_mut(&mut self.g.means), &v_m, lr.means_per_extent * self.extent);
             self.opt.scales.step(flat_mut(&mut self.g.log_scales), &v_s, lr.scales);
             self.opt.quats.step(flat_mut(&mut self.g.quats), &v_q, lr.quats);
             self.opt.opacity.step(&mut self.g.opacity_logits, &v_o, lr.opacity);
+        }
+        if leaking {
+            // What this step's backward left on the other phase's parameters.
+            match phase {
+                Phase::Color => {
+                    add_into(&mut self.leak.means, flat(&grads.v_means));
+                    add_into(&mut self.leak.scales, flat(&grads.v_log_scales));
+                    add_into(&mut self.leak.quats, flat(&grads.v_quats));
+                    add_into(&mut self.leak.opacity, &grads.v_opacity_logits);
+                }
+                Phase::Geometry => {
+                    let k = self.g.sh_coeffs() * 3;
+                    for (i, acc) in self.leak.color.chunks_exact_mut(3).enumerate() {
+                        add_into(acc, &grads.v_sh[i * k..i * k + 3]);
+                    }
+                }
+                Phase::Joint => {}
+            }
         }
         timings.update_ms = ms(t);
         Some((terms, timings, audit_s))
@@ -210,6 +238,21 @@ impl Session {
 /// channel's base colour `0.5 + C0·f_dc` is raised to at least 0.
 fn floor_dc(dc: &mut [f32]) {
     dc.iter_mut().for_each(|v| *v = v.max(crate::style::DC_FLOOR));
+}
+
+/// Adds the gradients leaked into `acc` (empty when the leak is off) to
+/// `grad` and clears them: the phase's first step after the other phase.
+fn take_leak(grad: &mut [f32], acc: &mut [f32]) {
+    for (g, a) in grad.iter_mut().zip(acc.iter_mut()) {
+        *g += *a;
+        *a = 0.0;
+    }
+}
+
+fn add_into(acc: &mut [f32], grad: &[f32]) {
+    for (a, &g) in acc.iter_mut().zip(grad) {
+        *a += g;
+    }
 }
 
 /// `(x − x^c)/‖x − x^c‖` scaled by λ, plus the loss gradient: `reg ← λ·reg + loss`.

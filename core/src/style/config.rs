@@ -164,7 +164,24 @@ pub struct StyleConfig {
     /// nine styles on guitar, biker and playbot) when both are 0. On by
     /// default; off in the `paper` preset. See [`StyleConfig::resolved`].
     pub object_recipe: bool,
+    /// Carry each phase's gradients on the other phase's parameters over to
+    /// that phase's next step, as the reference does: its colour steps'
+    /// `backward()` also fills the geometry's gradients (of GCFM on RGB and
+    /// depth, content and TV, with no depth or parameter regulariser), which
+    /// sum over the `N_c` colour steps and are applied on the cycle's first
+    /// geometry step; the geometry steps' colour gradients likewise on the
+    /// next colour step. Off by default; `docs/geometry.md` measures it.
+    pub phase_leak: bool,
+    /// Before optimising, split every Gaussian whose standard deviation spans
+    /// more than this many pixels in some view at the working resolution
+    /// (`session::split`), at most up to [`SPLIT_MAX_FACTOR`] times the
+    /// scene's count: room for the style's relief on large smooth surfaces.
+    /// 0 (the default) keeps the scene as it is.
+    pub split_px: f32,
 }
+
+/// The most Gaussians [`StyleConfig::split_px`] may make, as a multiple of the scene's.
+pub const SPLIT_MAX_FACTOR: usize = 8;
 
 /// λ_asc of the object recipe ([`StyleConfig::object_recipe`]).
 pub const OBJECT_RECIPE_ASSIGN_COS: f32 = 10.0;
@@ -224,6 +241,8 @@ impl Default for StyleConfig {
             feature_mean_steps: MeanSteps::default(),
             param_regulariser: ParamRegulariser::default(),
             object_recipe: true,
+            phase_leak: false,
+            split_px: 0.0,
         }
     }
 }
@@ -335,6 +354,9 @@ impl StyleConfig {
                 "matching dims, candidates and reuse must be positive (found {}, {} and {})",
                 mc.dims, mc.candidates, mc.reuse
             ));
+        }
+        if !(self.split_px == 0.0 || (1.0..=4096.0).contains(&self.split_px)) {
+            out.push(format!("split_px must be 0 (off) or lie in 1..=4096 pixels, found {}", self.split_px));
         }
         let lr = self.lr;
         let weights = self.weights.terms().map(|(t, v)| (format!("weights.{}", t.key), v));

@@ -150,6 +150,18 @@ pub struct StylizeArgs {
     /// [default: norm].
     #[arg(long)]
     pub param_regulariser: Option<gast_core::style::config::ParamRegulariser>,
+    /// Carry the colour steps' geometry gradients (and the geometry steps'
+    /// colour gradients) over to the other phase's next step, as the
+    /// reference's code does: their sum over a cycle's colour steps is
+    /// applied on its first geometry step [default: off].
+    #[arg(long)]
+    pub phase_leak: Option<bool>,
+    /// Split every Gaussian whose standard deviation spans more than this
+    /// many pixels in some view (at the working resolution) in two, repeatedly,
+    /// before optimising: room for the style's relief on large smooth
+    /// surfaces, at up to 8× the Gaussians. 0 keeps the scene [default: 0].
+    #[arg(long)]
+    pub split_px: Option<f32>,
     /// Views rendered before/after into the output folder.
     #[arg(long, default_value_t = 4)]
     pub preview_views: usize,
@@ -205,6 +217,8 @@ impl StylizeArgs {
         set!(self.focus, c.focus);
         set!(self.color_floor, c.color_floor);
         set!(self.param_regulariser, c.param_regulariser);
+        set!(self.phase_leak, c.phase_leak);
+        set!(self.split_px, c.split_px);
         let problems = c.problems();
         anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
         Ok(c)
