@@ -162,6 +162,7 @@ impl Session {
             feature_mean: loss.feature_mean,
             outside: loss.outside,
             sliced: loss.sliced,
+            sliced_depth: loss.sliced_depth,
             assignment: loss.assignment,
             assignment_cosine: loss.assignment_cosine,
             total: loss.total,

@@ -50,6 +50,14 @@ pub struct LossWeights {
     /// losses average over, pulled toward the style's along fixed random
     /// directions. Not in the reference: 0 (off) by default. CPU engine.
     pub sliced: f32,
+    /// λ_swd, the same sliced Wasserstein term on the depth map's relu3
+    /// features against the style depth's, on the steps that take the
+    /// depth's gradient (geometry steps): GCFM's nearest neighbours are
+    /// content with any fine depth texture, this asks for the style depth's
+    /// whole distribution of features (its plateaus and its edges in their
+    /// proportions). Not in the reference: 0 (off) by default. CPU engine.
+    #[serde(default)]
+    pub sliced_depth: f32,
     /// λ_as, the assignment term ([`crate::style::assignment`]): each
     /// rendered RGB relu3 feature over the positions the losses average over
     /// pulled to a distinct style feature, by a least-cost one-to-one
@@ -77,6 +85,7 @@ impl Default for LossWeights {
             feature_mean: 0.0,
             outside: 0.0,
             sliced: 0.0,
+            sliced_depth: 0.0,
             assignment: 0.0,
             assignment_cosine: 0.0,
         }

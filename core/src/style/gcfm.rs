@@ -50,6 +50,8 @@ pub struct StyleFeatures {
     rgb_mean: Vec<f32>,
     /// The sliced Wasserstein term's target, made on first use.
     sliced: OnceLock<SlicedTarget>,
+    /// The depth features' sliced Wasserstein target, made on first use.
+    sliced_depth: OnceLock<SlicedTarget>,
 }
 
 impl StyleFeatures {
@@ -69,7 +71,7 @@ impl StyleFeatures {
             .collect();
         let modal_inv_norm = std::array::from_fn(|k| modal_sq[k].iter().map(|&s| 1.0 / (s.sqrt() + EPS)).collect());
         let rgb_mean = super::feature_mean::channel_means(&feats[0], channels);
-        Self { channels, height, width, feats, joint_inv_norm, modal_inv_norm, rgb_mean, sliced: OnceLock::new() }
+        Self { channels, height, width, feats, joint_inv_norm, modal_inv_norm, rgb_mean, sliced: OnceLock::new(), sliced_depth: OnceLock::new() }
     }
 
     /// Number of style positions.
@@ -91,6 +93,11 @@ impl StyleFeatures {
     /// and sorted on the first call).
     pub fn sliced(&self) -> &SlicedTarget {
         self.sliced.get_or_init(|| SlicedTarget::new(&self.feats[0], self.channels, SLICED_PROJECTIONS))
+    }
+
+    /// The same for the depth map's features (λ_swd).
+    pub fn sliced_depth(&self) -> &SlicedTarget {
+        self.sliced_depth.get_or_init(|| SlicedTarget::new(&self.feats[1], self.channels, SLICED_PROJECTIONS))
     }
 
     /// The matching's style-side scale `1 / (sqrt(‖joint‖² + 1e-8) + 1e-8)`, per position.

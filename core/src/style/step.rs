@@ -174,6 +174,9 @@ pub struct StepLoss {
     pub outside: f32,
     /// Sliced Wasserstein term (unweighted; 0 when λ_sw is 0).
     pub sliced: f32,
+    /// Sliced Wasserstein term on the depth features (unweighted; 0 when
+    /// λ_swd is 0 or the depth's gradient is not taken).
+    pub sliced_depth: f32,
     /// Assignment term, squared distance (unweighted; 0 when λ_as and λ_asc are 0).
     pub assignment: f32,
     /// Assignment term, cosine distance (unweighted; 0 when λ_as and λ_asc are 0).
@@ -429,7 +432,16 @@ pub fn step_loss_with<N: FeatureNet>(
             *v += g;
         }
     }
-    let v_feat_depth: Vec<f32> = out.v_rendered[1].iter().map(|v| v * weights.gcfm).collect();
+    let mut v_feat_depth: Vec<f32> = out.v_rendered[1].iter().map(|v| v * weights.gcfm).collect();
+    let mut sliced_depth_value = 0.0;
+    if weights.sliced_depth > 0.0 && depth_grad {
+        let target = style.features.sliced_depth();
+        let (l, g) = sliced_loss(&fwd[1].0.data, fwd[1].0.channels, target, fmask.as_deref());
+        sliced_depth_value = l;
+        for (a, b) in v_feat_depth.iter_mut().zip(g) {
+            *a += weights.sliced_depth * b;
+        }
+    }
     timings.matching_ms = t.elapsed().as_secs_f32() * 1e3;
     let t = std::time::Instant::now();
     // Through VGG, on the window when the forward ran on it.
@@ -482,6 +494,7 @@ pub fn step_loss_with<N: FeatureNet>(
         + weights.feature_mean * feature_mean_value
         + weights.outside * outside_value
         + weights.sliced * sliced_value
+        + weights.sliced_depth * sliced_depth_value
         + weights.assignment * assignment_value
         + weights.assignment_cosine * assignment_cosine_value;
     StepLoss {
@@ -493,6 +506,7 @@ pub fn step_loss_with<N: FeatureNet>(
         feature_mean: feature_mean_value,
         outside: outside_value,
         sliced: sliced_value,
+        sliced_depth: sliced_depth_value,
         assignment: assignment_value,
         assignment_cosine: assignment_cosine_value,
         total,

@@ -340,6 +340,34 @@ fn the_feature_statistics_terms_add_their_weighted_values_and_stay_inside_the_ma
     }
 }
 
+/// λ_swd, the sliced Wasserstein term on the depth features: on a step that
+/// takes the depth's gradient it adds exactly its weight times its value and
+/// moves the inverse depth's gradient (inside the mask only), never the
+/// colours'; on a step that does not (a colour step) it is 0.
+#[test]
+fn the_depth_sliced_term_moves_the_depth_gradient_inside_the_mask() {
+    let (h, w) = (16, 24);
+    let (net, st, rgb, inv_depth, content, _) = focus_inputs();
+    let edge = vec![0.0f32; h * w];
+    let mask: Vec<bool> = (0..h * w).map(|k| k % w < 16).collect();
+    let eval = |lambda: f32, depth_grad: bool| {
+        let weights = LossWeights { gcfm: 2.0, content: 0.5, tv: 0.02, sliced_depth: lambda, ..LossWeights::default() };
+        let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
+        step_loss_masked(&net, &st, maps, Some(&content), None, &weights, depth_grad, Some(&mask))
+    };
+    let (off, on) = (eval(0.0, true), eval(0.7, true));
+    assert_eq!(off.sliced_depth, 0.0);
+    assert!(on.sliced_depth > 0.0, "the rendered and style depth features differ: {}", on.sliced_depth);
+    assert!((on.total - off.total - 0.7 * on.sliced_depth).abs() < 1e-5 * on.total.abs().max(1.0));
+    assert_eq!(off.v_rgb, on.v_rgb, "the depth term leaves the colours' gradient");
+    assert!(off.v_inv_depth.iter().zip(&on.v_inv_depth).any(|(a, b)| a != b), "the term moved no depth gradient");
+    for k in (0..h * w).filter(|&k| !mask[k]) {
+        assert_eq!(on.v_inv_depth[k], 0.0, "pixel {k} outside the mask");
+    }
+    let colour_step = eval(0.7, false);
+    assert_eq!((colour_step.sliced_depth, colour_step.total), (0.0, eval(0.0, false).total));
+}
+
 #[test]
 fn the_background_hold_adds_its_weighted_value_and_moves_only_the_held_pixels() {
     let (h, w) = (16, 24);

@@ -38,6 +38,9 @@ pub struct LossTerms {
     /// The sliced Wasserstein term (0 when λ_sw is 0).
     #[serde(default)]
     pub sliced: f32,
+    /// The sliced Wasserstein term on the depth features (0 when λ_swd is 0 or on colour steps).
+    #[serde(default)]
+    pub sliced_depth: f32,
     /// The assignment term, squared distance (0 when λ_as and λ_asc are 0).
     #[serde(default)]
     pub assignment: f32,
@@ -85,7 +88,7 @@ impl Term {
 }
 
 /// Every loss term, in the order of the sliders and the chart.
-pub static TERMS: [Term; 12] = [
+pub static TERMS: [Term; 13] = [
     Term {
         key: "gcfm",
         flag: "lambda-gc",
@@ -210,6 +213,19 @@ pub static TERMS: [Term; 12] = [
         value: |l| l.sliced,
     },
     Term {
+        key: "sliced_depth",
+        flag: "lambda-sliced-depth",
+        symbol: "λ_swd",
+        chart: "sliced depth",
+        help: "sliced Wasserstein on depth, not in the paper: pulls the distribution of the rendered depth map's \
+               relu3 features toward the style depth's, on geometry steps",
+        max: 1000.0,
+        gpu: false,
+        paper: false,
+        weight: |w| &mut w.sliced_depth,
+        value: |l| l.sliced_depth,
+    },
+    Term {
         key: "assignment",
         flag: "lambda-assign",
         symbol: "λ_as",
@@ -286,11 +302,11 @@ mod tests {
         let v: serde_json::Value = serde_json::json!({
             "total": 0.5, "gcfm": 1.0, "content": 2.0, "tv": 3.0, "reg_opacity": 4.0, "reg_scale": 5.0,
             "reg_rotation": 6.0, "depth": 7.0, "feature_mean": 8.0, "outside": 9.0, "sliced": 10.0,
-            "assignment": 11.0, "assignment_cosine": 12.0
+            "sliced_depth": 11.0, "assignment": 12.0, "assignment_cosine": 13.0
         });
         let l: LossTerms = serde_json::from_value(v).expect("terms");
         let values: Vec<f32> = TERMS.iter().map(|t| (t.value)(&l)).collect();
-        assert_eq!(values, (1..=12).map(|k| k as f32).collect::<Vec<_>>());
+        assert_eq!(values, (1..=13).map(|k| k as f32).collect::<Vec<_>>());
     }
 
     #[test]

@@ -476,6 +476,7 @@ pub fn step_loss_gpu(
         outside: 0.0,
         // The GPU engine has no sliced Wasserstein term yet (the session refuses λ_sw there).
         sliced: 0.0,
+        sliced_depth: 0.0,
         // Nor the assignment terms (the session refuses λ_as and λ_asc there too).
         assignment: 0.0,
         assignment_cosine: 0.0,
