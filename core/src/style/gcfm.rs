@@ -71,7 +71,17 @@ impl StyleFeatures {
             .collect();
         let modal_inv_norm = std::array::from_fn(|k| modal_sq[k].iter().map(|&s| 1.0 / (s.sqrt() + EPS)).collect());
         let rgb_mean = super::feature_mean::channel_means(&feats[0], channels);
-        Self { channels, height, width, feats, joint_inv_norm, modal_inv_norm, rgb_mean, sliced: OnceLock::new(), sliced_depth: OnceLock::new() }
+        Self {
+            channels,
+            height,
+            width,
+            feats,
+            joint_inv_norm,
+            modal_inv_norm,
+            rgb_mean,
+            sliced: OnceLock::new(),
+            sliced_depth: OnceLock::new(),
+        }
     }
 
     /// Number of style positions.
