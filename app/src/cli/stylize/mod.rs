@@ -221,9 +221,12 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let gpu = match args.device {
         // A term the GPU engine does not compute (`gast_core::style::terms`):
         // `auto` picks the CPU for it rather than failing (`gpu` still says why).
-        gast_core::gpu::DeviceChoice::Auto if config.weights.needs_cpu() => {
-            let on: Vec<&str> = config.weights.cpu_only().map(|(t, _)| t.symbol).collect();
-            eprintln!("{} > 0 runs on the CPU engine only so far: the steps run on the CPU", on.join(", "));
+        gast_core::gpu::DeviceChoice::Auto if config.weights.needs_cpu() || config.phase_leak => {
+            let mut on: Vec<&str> = config.weights.cpu_only().map(|(t, _)| t.symbol).collect();
+            if config.phase_leak {
+                on.push("the phase leak");
+            }
+            eprintln!("{} runs on the CPU engine only so far: the steps run on the CPU", on.join(", "));
             None
         }
         device => device.resolve().with_context(|| format!("--device {device}"))?,
