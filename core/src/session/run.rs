@@ -96,7 +96,16 @@ impl Leak {
     /// The empty sums for `n` Gaussians when `config` asks for the leak (in
     /// decoupled mode: the ablations have no phases to leak between), else none.
     fn for_config(config: &StyleConfig, n: usize) -> Self {
-        if config.phase_leak && config.mode == crate::style::Mode::Decoupled { Self::new(n) } else { Self::default() }
+        if Self::wanted(config) { Self::new(n) } else { Self::default() }
+    }
+
+    fn wanted(config: &StyleConfig) -> bool {
+        config.phase_leak && config.mode == crate::style::Mode::Decoupled
+    }
+
+    /// Whether the sums are kept (the leak is on).
+    fn is_on(&self) -> bool {
+        !self.means.is_empty()
     }
 
     fn new(n: usize) -> Self {
@@ -458,8 +467,7 @@ impl Session {
             }
             self.view_matches.iter_mut().for_each(|m| *m = None);
         }
-        let leaking = config.phase_leak && config.mode == crate::style::Mode::Decoupled;
-        if leaking == self.leak.means.is_empty() {
+        if Leak::wanted(&config) != self.leak.is_on() {
             self.leak = Leak::for_config(&config, self.g.len());
         }
         self.config = config;

@@ -94,7 +94,7 @@ impl Session {
         let geometry = phase.updates_geometry();
         // With the leak, a colour step also takes the depth map's gradient:
         // it reaches the geometry, whose next step applies it.
-        let leaking = !self.leak.means.is_empty();
+        let leaking = self.leak.is_on();
         let depth_grad = geometry || (leaking && phase == Phase::Color);
         // Matches: kept from this view's last visits, or searched (and, when
         // auditing, compared with the exact search off the clock).
@@ -150,7 +150,7 @@ impl Session {
             }
         }
         let t = Instant::now();
-        let grads = raster::backward(&self.g, &cam, &opts, &state, &v_rgb, &loss.v_inv_depth);
+        let mut grads = raster::backward(&self.g, &cam, &opts, &state, &v_rgb, &loss.v_inv_depth);
         timings.raster_backward_ms = ms(t);
 
         let t = Instant::now();
@@ -202,12 +202,11 @@ impl Session {
             add_scaled(&mut v_o, &grads.v_opacity_logits, wts.opacity);
             add_scaled(&mut v_s, flat(&grads.v_log_scales), wts.scale);
             add_scaled(&mut v_q, flat(&grads.v_quats), wts.rotation);
-            let mut v_m = grads.v_means.as_flattened().to_vec();
-            take_leak(&mut v_m, &mut self.leak.means);
+            take_leak(flat_mut(&mut grads.v_means), &mut self.leak.means);
             take_leak(&mut v_s, &mut self.leak.scales);
             take_leak(&mut v_q, &mut self.leak.quats);
             take_leak(&mut v_o, &mut self.leak.opacity);
-            self.opt.means.step(flat_mut(&mut self.g.means), &v_m, lr.means_per_extent * self.extent);
+            self.opt.means.step(flat_mut(&mut self.g.means), flat(&grads.v_means), lr.means_per_extent * self.extent);
             self.opt.scales.step(flat_mut(&mut self.g.log_scales), &v_s, lr.scales);
             self.opt.quats.step(flat_mut(&mut self.g.quats), &v_q, lr.quats);
             self.opt.opacity.step(&mut self.g.opacity_logits, &v_o, lr.opacity);
