@@ -35,7 +35,8 @@ pub struct QualityArgs {
     pub weights: Option<PathBuf>,
     /// The grid's sizes from a JSON file (the fields of `sizes` in results.json;
     /// missing ones take the full grid's): scenes, styles, budgets and
-    /// resolutions, e.g. to run a study on a subset.
+    /// resolutions, e.g. to run a study on a subset. With `--studies geometry`
+    /// alone, the geometry study's sizes (its `arms`, `styles`, `resolution`, …).
     #[arg(long, value_name = "FILE", conflicts_with = "quick")]
     pub sizes: Option<PathBuf>,
     /// Redraw the tables, charts and index of an earlier run's folder from its
@@ -70,12 +71,14 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let shared = shared_dir();
-    let sizes = match &args.sizes {
-        Some(path) => Sizes::from_file(path)?,
-        None if args.quick => Sizes::quick(),
-        None => Sizes::full(),
-    };
     let studies = if args.studies.is_empty() { Study::ALL.to_vec() } else { args.studies.clone() };
+    // A sizes file is the geometry study's when it runs alone, else the grid's.
+    let geometry_only = studies == [Study::Geometry];
+    let sizes = match &args.sizes {
+        Some(path) if !geometry_only => Sizes::from_file(path)?,
+        _ if args.quick => Sizes::quick(),
+        _ => Sizes::full(),
+    };
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("gast-quality-{}", crate::report::utc_stamp())));
     std::fs::create_dir_all(&out).with_context(|| format!("could not create the output folder {}", out.display()))?;
     let weights = args.weights.clone().or_else(|| {
@@ -84,8 +87,14 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
     });
     let vgg = Arc::new(super::stylize::load_vgg(weights.as_deref())?);
     if studies.contains(&Study::Geometry) {
-        let mut g = if args.quick { GeometrySizes::quick() } else { GeometrySizes::full() };
-        g.scene = args.scene.clone();
+        let mut g = match &args.sizes {
+            Some(path) if geometry_only => GeometrySizes::from_file(path)?,
+            _ if args.quick => GeometrySizes::quick(),
+            _ => GeometrySizes::full(),
+        };
+        if args.scene.is_some() {
+            g.scene = args.scene.clone();
+        }
         let dir = out.join("geometry");
         let run = crate::study::geometry_run::run(&g, &shared, &vgg, &dir, &fit_photos)?;
         let (path, verdict) = crate::study::pages::geometry::write(&dir, &run)?;

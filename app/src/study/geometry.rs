@@ -30,11 +30,15 @@ pub enum Arm {
     Decoupled,
     /// Decoupled with the per-Gaussian mean-square tether (λ_α = λ_s = λ_r = 10).
     DecoupledTether,
+    /// Decoupled, the paper's regularisers, plus the depth's sliced
+    /// Wasserstein term λ_swd ([`SLICED_DEPTH_LAMBDA`]).
+    DecoupledSlicedDepth,
 }
 
 impl Arm {
     /// Every arm, in report order.
-    pub const ALL: [Arm; 4] = [Arm::ColourOnly, Arm::GeometryOnly, Arm::Decoupled, Arm::DecoupledTether];
+    pub const ALL: [Arm; 5] =
+        [Arm::ColourOnly, Arm::GeometryOnly, Arm::Decoupled, Arm::DecoupledTether, Arm::DecoupledSlicedDepth];
 
     /// The name in tables and legends.
     pub fn label(self) -> &'static str {
@@ -43,6 +47,7 @@ impl Arm {
             Arm::GeometryOnly => "geometry-only",
             Arm::Decoupled => "decoupled (paper)",
             Arm::DecoupledTether => "decoupled, mean-square tether",
+            Arm::DecoupledSlicedDepth => "decoupled, λ_swd 1",
         }
     }
 
@@ -53,6 +58,7 @@ impl Arm {
         c.weights.opacity = 1.0;
         c.weights.scale = 1.0;
         c.weights.rotation = 1.0;
+        c.weights.sliced_depth = 0.0;
         match self {
             Arm::ColourOnly => c.mode = Mode::ColorOnly,
             Arm::GeometryOnly => c.mode = Mode::GeometryOnly,
@@ -63,6 +69,10 @@ impl Arm {
                 c.weights.opacity = TETHER_LAMBDA;
                 c.weights.scale = TETHER_LAMBDA;
                 c.weights.rotation = TETHER_LAMBDA;
+            }
+            Arm::DecoupledSlicedDepth => {
+                c.mode = Mode::Decoupled;
+                c.weights.sliced_depth = SLICED_DEPTH_LAMBDA;
             }
         }
         c
@@ -78,6 +88,10 @@ pub const MELTED_LAYOUT: f32 = 0.8;
 /// λ_α = λ_s = λ_r of the tether arm (`docs/geometry.md`: 3 moves the depth
 /// most, 10 keeps the fern's fronds and planter intact on the sheets).
 pub const TETHER_LAMBDA: f32 = 10.0;
+
+/// λ_swd of the sliced-depth arm (`docs/geometry.md`: on fern × block2 at
+/// 504 px, 1 tiles the whole frame's depth with blocks, 0.01 moves it a quarter as far).
+pub const SLICED_DEPTH_LAMBDA: f32 = 1.0;
 
 /// The sizes of the study.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -100,6 +114,13 @@ pub struct GeometrySizes {
     pub noise_seeds: Vec<u64>,
     /// Iterations of the fern fit when no scene is given.
     pub fit_iterations: u32,
+    /// The arms run, in report order (every arm when the settings file names none).
+    #[serde(default = "all_arms")]
+    pub arms: Vec<Arm>,
+}
+
+fn all_arms() -> Vec<Arm> {
+    Arm::ALL.to_vec()
 }
 
 impl GeometrySizes {
@@ -118,6 +139,7 @@ impl GeometrySizes {
             eval_views: 3,
             noise_seeds: vec![1, 2],
             fit_iterations: 1000,
+            arms: all_arms(),
         }
     }
 
@@ -132,6 +154,16 @@ impl GeometrySizes {
             fit_iterations: 300,
             ..Self::full()
         }
+    }
+
+    /// A settings file's sizes laid over [`GeometrySizes::full`] (`gast bench
+    /// quality --studies geometry --sizes FILE`), e.g. a subset of the arms.
+    pub fn from_file(path: &std::path::Path) -> anyhow::Result<Self> {
+        let sizes: Self = super::merged_from_file(path, &Self::full(), "geometry study's sizes")?;
+        if sizes.arms.is_empty() || sizes.styles.is_empty() {
+            anyhow::bail!("{}: the geometry study needs at least one arm and one style", path.display());
+        }
+        Ok(sizes)
     }
 
     /// The base config every arm patches: the defaults at the study's sizes,
@@ -322,6 +354,10 @@ mod tests {
         let paper = Arm::Decoupled.apply(&base);
         assert_eq!(paper.param_regulariser, ParamRegulariser::Norm);
         assert_eq!((paper.weights.opacity, paper.weights.scale, paper.weights.rotation), (1.0, 1.0, 1.0));
+        let sliced = Arm::DecoupledSlicedDepth.apply(&base);
+        assert_eq!(StyleConfig { weights: paper.weights, ..sliced.clone() }, paper);
+        assert_eq!(sliced.weights.sliced_depth, SLICED_DEPTH_LAMBDA);
+        assert_eq!(paper.weights.sliced_depth, 0.0);
         // Only the regulariser differs between the two decoupled arms.
         let mut same = tether.clone();
         same.param_regulariser = ParamRegulariser::Norm;

@@ -58,7 +58,7 @@ pub fn run(
     let eval: Vec<Camera> = sheet::spread(&cameras, sizes.eval_views).cloned().collect();
     let mut plan: Vec<(usize, Arm, u64)> = Vec::new();
     for s in 0..sizes.styles.len() {
-        for arm in Arm::ALL {
+        for &arm in &sizes.arms {
             plan.push((s, arm, sizes.noise_seeds.first().copied().unwrap_or(1)));
             if s == 0 && arm == Arm::Decoupled {
                 plan.extend(sizes.noise_seeds.iter().skip(1).map(|&seed| (s, arm, seed)));

@@ -248,6 +248,30 @@ fn all_collapse_arms() -> Vec<String> {
     COLLAPSE_ARMS.iter().map(|s| s.to_string()).collect()
 }
 
+/// A settings file's JSON object laid over `full`: its keys replace full's,
+/// a key full does not have is an error naming the known ones.
+pub fn merged_from_file<T: Serialize + serde::de::DeserializeOwned>(
+    path: &std::path::Path,
+    full: &T,
+    what: &str,
+) -> anyhow::Result<T> {
+    use anyhow::Context as _;
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the {what}", path.display()))?;
+    let mut value = serde_json::to_value(full).with_context(|| format!("the full {what} as JSON"))?;
+    let given: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{}: expected a JSON object of {what}", path.display()))?;
+    let (Some(base), Some(given)) = (value.as_object_mut(), given.as_object()) else {
+        anyhow::bail!("{}: expected a JSON object of {what}, found {given}", path.display());
+    };
+    for (k, v) in given {
+        if !base.contains_key(k) {
+            anyhow::bail!("{}: unknown key {k:?} of the {what} (known: {})", path.display(), known_keys(base));
+        }
+        base.insert(k.clone(), v.clone());
+    }
+    serde_json::from_value(value).with_context(|| format!("{}: not valid {what}", path.display()))
+}
+
 const ALL_STYLES: [&str; 9] =
     ["block2", "fire", "galaxy", "hydrangea", "mosaic", "particle", "starry", "stone", "wave"];
 
@@ -289,23 +313,7 @@ impl Sizes {
     /// records them under `sizes`), e.g. one scene and three styles to run a
     /// study on a subset; missing fields take the full grid's values.
     pub fn from_file(path: &std::path::Path) -> anyhow::Result<Self> {
-        use anyhow::Context as _;
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the sizes", path.display()))?;
-        let mut value = serde_json::to_value(Self::full()).context("the full sizes as JSON")?;
-        let given: serde_json::Value = serde_json::from_str(&text)
-            .with_context(|| format!("{}: expected a JSON object of grid sizes", path.display()))?;
-        let (Some(base), Some(given)) = (value.as_object_mut(), given.as_object()) else {
-            anyhow::bail!("{}: expected a JSON object of grid sizes, found {given}", path.display());
-        };
-        for (k, v) in given {
-            if !base.contains_key(k) {
-                anyhow::bail!("{}: unknown size {k:?} (known: {})", path.display(), known_keys(base));
-            }
-            base.insert(k.clone(), v.clone());
-        }
-        let sizes: Self =
-            serde_json::from_value(value).with_context(|| format!("{}: not valid grid sizes", path.display()))?;
+        let sizes: Self = merged_from_file(path, &Self::full(), "grid sizes")?;
         if let Err(e) = StyleConfig::default().patched(&sizes.focus_object) {
             anyhow::bail!("{}: focus_object: {e}", path.display());
         }
@@ -511,6 +519,12 @@ mod tests {
         files.extend(json_in(&dir.join("settings")));
         assert!(!files.is_empty(), "no settings file under {}", dir.display());
         for f in files {
+            // The geometry study's own (`--studies geometry --sizes`) are named after it.
+            if f.file_name().is_some_and(|n| n.to_string_lossy().starts_with("geometry_")) {
+                let sizes = geometry::GeometrySizes::from_file(&f).unwrap_or_else(|e| panic!("{e:#}"));
+                assert!(!sizes.arms.is_empty() && !sizes.styles.is_empty(), "{}", f.display());
+                continue;
+            }
             let sizes = Sizes::from_file(&f).unwrap_or_else(|e| panic!("{e:#}"));
             assert!(!sizes.scenes.is_empty() && !sizes.styles.is_empty(), "{}", f.display());
         }

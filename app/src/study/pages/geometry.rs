@@ -61,12 +61,18 @@ fn mean_curve(records: &[&GeometryRecord], f: impl Fn(&GeometryMeasures, &Geomet
 fn write_charts(dir: &Path, run: &GeometryRun) -> anyhow::Result<Vec<(String, String)>> {
     let mut made = Vec::new();
     type Pick = fn(&GeometryMeasures, &GeometryMeasures) -> f32;
-    let charts: [(&str, &str, &str, Pick); 3] = [
+    let charts: [(&str, &str, &str, Pick); 4] = [
         (
             "geometry_depth_time",
             "Depth style distance against wall time (mean over the styles)",
             "change of the depth NN-cos to the style's depth",
             |a, b| b.depth_nn_cos - a.depth_nn_cos,
+        ),
+        (
+            "geometry_depth_sw_time",
+            "Depth distribution distance against wall time (mean over the styles)",
+            "change of the depth SW to the style's depth",
+            |a, b| b.depth_sw - a.depth_sw,
         ),
         (
             "geometry_relief_time",
@@ -147,7 +153,7 @@ fn markdown(run: &GeometryRun, charts: &[(String, String)]) -> (String, String) 
         "Δ is after − colour-matched; lower depth NN-cos and SW are closer to the style's depth. Relief: RMS of the \
          inverse-depth change at the pattern scale, share of the depth range. Layout kept: correlation of the \
          inverse depth with the colour-matched one (below {MELTED_LAYOUT}: melted). Arms: {}.\n",
-        Arm::ALL.iter().map(|a| a.label()).collect::<Vec<_>>().join(", ")
+        run.sizes.arms.iter().map(|a| a.label()).collect::<Vec<_>>().join(", ")
     );
     let _ = writeln!(
         s,
@@ -190,11 +196,28 @@ fn markdown(run: &GeometryRun, charts: &[(String, String)]) -> (String, String) 
         .iter()
         .filter(|t| paper.iter().any(|p| p.style == t.style && t.delta().depth_nn_cos < p.delta().depth_nn_cos))
         .count();
-    let _ = writeln!(
-        s,
-        "\nThe mean-square tether lowers the depth NN-cos further than the paper's norm on {further} of {} styles.",
-        tether.len()
-    );
+    if !tether.is_empty() {
+        let _ = writeln!(
+            s,
+            "\nThe mean-square tether lowers the depth NN-cos further than the paper's norm on {further} of {} styles.",
+            tether.len()
+        );
+    }
+    let sliced = arm_records(run, Arm::DecoupledSlicedDepth);
+    if !sliced.is_empty() {
+        let beats = |f: fn(&GeometryMeasures) -> f32| {
+            sliced.iter().filter(|t| paper.iter().any(|p| p.style == t.style && f(&t.delta()) < f(&p.delta()))).count()
+        };
+        let kept = sliced.iter().filter(|t| t.delta().layout >= MELTED_LAYOUT).count();
+        let _ = writeln!(
+            s,
+            "\nλ_swd 1 against the paper's decoupled: the depth NN-cos lower on {} of {n} styles, the depth SW on {} \
+             of {n}; its layout kept on {kept} of {n}.",
+            beats(|d| d.depth_nn_cos),
+            beats(|d| d.depth_sw),
+            n = sliced.len()
+        );
+    }
     let _ = writeln!(s, "\n## Charts\n");
     for (stem, title) in charts {
         let _ = writeln!(s, "- {title}: ![{stem}](charts/{stem}.png)");
@@ -235,6 +258,7 @@ mod tests {
             records.push(rec(style, Arm::GeometryOnly, 1, dec));
             records.push(rec(style, Arm::Decoupled, 1, dec));
             records.push(rec(style, Arm::DecoupledTether, 1, dec - 0.01));
+            records.push(rec(style, Arm::DecoupledSlicedDepth, 1, dec - 0.02));
         }
         records.push(rec("block2", Arm::Decoupled, 2, 0.2801));
         let sizes = GeometrySizes { styles: vec!["a".into(), "b".into()], ..GeometrySizes::quick() };
@@ -253,11 +277,12 @@ mod tests {
         assert!(verdict.contains("on 1 of 2 styles") && verdict.contains("FAILS"), "{verdict}");
         let text = std::fs::read_to_string(&path).expect("the report");
         assert!(text.contains("further than the paper's norm on 2 of 2 styles"), "{text}");
-        for stem in ["geometry_depth_time", "geometry_relief_time", "geometry_rgb_time"] {
+        assert!(text.contains("the depth NN-cos lower on 2 of 2 styles, the depth SW on 0 of 2"), "{text}");
+        for stem in ["geometry_depth_time", "geometry_depth_sw_time", "geometry_relief_time", "geometry_rgb_time"] {
             assert!(dir.join("charts").join(format!("{stem}.png")).exists(), "{stem}");
         }
         let back = read(&dir).expect("the report");
-        assert_eq!(back.records.len(), 9);
+        assert_eq!(back.records.len(), 11);
         std::fs::remove_dir_all(&dir).ok();
     }
 }
