@@ -227,7 +227,7 @@ fn check_losses(file: &GoldenFile, ctx: &CheckContext) -> Result<Vec<OutputCheck
     };
 
     let g = run(false, LossWeights { gcfm: 1.0, ..none }, true)?;
-    checks.push(compare("gcfm_loss", &[f64::from(g.gcfm)], file.get("gcfm_loss")?, LOSS_TOL));
+    checks.push(compare("gcfm_loss", &[f64::from(g.terms.gcfm)], file.get("gcfm_loss")?, LOSS_TOL));
     checks.push(compare("grad_gcfm_rgb", &widen(&g.v_rgb), file.get("grad_gcfm_rgb")?, GRAD_TOL));
     checks.push(compare("grad_gcfm_inv_depth", &widen(&g.v_inv_depth), file.get("grad_gcfm_inv_depth")?, GRAD_TOL));
     let as_f64 = |v: &[u32]| v.iter().map(|&i| f64::from(i)).collect::<Vec<_>>();
@@ -235,11 +235,11 @@ fn check_losses(file: &GoldenFile, ctx: &CheckContext) -> Result<Vec<OutputCheck
     checks.push(compare("match_worst", &as_f64(&g.matches.worst), file.get("match_worst")?, Tolerance::Exact));
 
     let c = run(true, LossWeights { content: 1.0, ..none }, false)?;
-    checks.push(compare("content_loss", &[f64::from(c.content)], file.get("content_loss")?, LOSS_TOL));
+    checks.push(compare("content_loss", &[f64::from(c.terms.content)], file.get("content_loss")?, LOSS_TOL));
     checks.push(compare("grad_content_rgb", &widen(&c.v_rgb), file.get("grad_content_rgb")?, GRAD_TOL));
 
     let t = run(false, LossWeights { tv: 1.0, ..none }, false)?;
-    checks.push(compare("tv_loss", &[f64::from(t.tv)], file.get("tv_loss")?, LOSS_TOL));
+    checks.push(compare("tv_loss", &[f64::from(t.terms.tv)], file.get("tv_loss")?, LOSS_TOL));
     // With every other weight zero, `v_rgb` is exactly ∂TV/∂rgb.
     checks.push(compare("grad_tv_rgb", &widen(&t.v_rgb), file.get("grad_tv_rgb")?, GRAD_TOL));
     Ok(checks)

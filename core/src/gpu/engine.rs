@@ -262,8 +262,9 @@ impl GpuEngine {
         extent: f32,
     ) -> Result<LossTerms, GpuError> {
         let size = (cam.width, cam.height);
-        if self.plans.get(&size).is_some_and(|p| p.loss.gcfm_weight() != config.weights.gcfm) {
-            // λ_GC is baked into the GCFM workspace's uniforms.
+        if self.plans.get(&size).is_some_and(|p| !p.loss.fits(&config.weights)) {
+            // λ_GC is baked into the GCFM workspace's uniforms; a sliced term
+            // turned on needs its workspace.
             self.plans.clear();
         }
         // This step's weights (λ_mean may sit out the geometry steps).
@@ -396,24 +397,18 @@ impl GpuEngine {
             depth: if geometry { s[slot::DEPTH] } else { 0.0 },
             feature_mean: if w.feature_mean > 0.0 { s[slot::FEATURE_MEAN] } else { 0.0 },
             outside: if w.outside > 0.0 && holding { s[slot::OUTSIDE] } else { 0.0 },
+            sliced: if w.sliced > 0.0 { s[slot::SLICED] } else { 0.0 },
+            sliced_depth: if w.sliced_depth > 0.0 && geometry { s[slot::SLICED_DEPTH] } else { 0.0 },
             assignment: pulled.as_ref().map_or(0.0, |a| a.l2),
             assignment_cosine: pulled.as_ref().map_or(0.0, |a| a.cosine),
             ..LossTerms::default()
         };
-        terms.total = w.gcfm * terms.gcfm
-            + w.content * terms.content
-            + w.tv * terms.tv
-            + w.depth * terms.depth
-            + w.feature_mean * terms.feature_mean
-            + w.outside * terms.outside
-            + w.assignment * terms.assignment
-            + w.assignment_cosine * terms.assignment_cosine;
         if geometry {
             terms.reg_opacity = s[slot::REG_OPACITY];
             terms.reg_scale = s[slot::REG_SCALE];
             terms.reg_rotation = s[slot::REG_ROTATION];
-            terms.total += w.opacity * terms.reg_opacity + w.scale * terms.reg_scale + w.rotation * terms.reg_rotation;
         }
+        terms.total = terms.weighted(&w);
         Ok(terms)
     }
 

@@ -84,6 +84,8 @@ mod focus;
 mod gcfm;
 #[path = "losses/losses.rs"]
 mod losses;
+#[path = "losses/sliced.rs"]
+mod sliced;
 #[path = "losses/step_loss.rs"]
 mod step_loss;
 
@@ -113,6 +115,7 @@ pub use raster_run::{bench_raster, render_and_backward_gpu, render_gpu};
 pub use reduce::{ReduceKernels, ReduceOp, ReduceSpec, Reduction};
 pub use resize::{Clamp01, Downscale, ResizeKernels};
 pub use scan::{GpuScan, ScanKernels};
+pub use sliced::{GpuSlicedTarget, SlicedKernels, SlicedLoss};
 pub use sort::{GpuSort, SortKernels, bits_for};
 pub use step_loss::{StepLossKernels, StepLossPlan, step_loss_gpu};
 pub use vgg::{GpuVgg, GpuVggState, GpuVggWorkspace, bench_vgg};

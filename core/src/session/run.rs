@@ -615,14 +615,10 @@ impl ViewSampler {
 fn engine_problems(config: &StyleConfig, on_gpu: bool) -> Vec<String> {
     let mut out = config.problems();
     if on_gpu {
-        if config.phase_leak {
-            out.push("the phase leak (phase_leak) runs on the CPU engine only so far: use the CPU (--device cpu) or turn it off".into());
-        }
-        for (t, v) in config.weights.cpu_only() {
+        for c in config.cpu_only() {
             out.push(format!(
-                "{} = {v} ({}) runs on the CPU engine only so far: use the CPU (--device cpu) or set it to 0",
-                t.symbol,
-                t.help.split(':').next().unwrap_or(t.key)
+                "{} runs on the CPU engine only so far: use the CPU (--device cpu) or {}",
+                c.detail, c.off
             ));
         }
     }

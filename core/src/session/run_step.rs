@@ -154,20 +154,7 @@ impl Session {
         timings.raster_backward_ms = ms(t);
 
         let t = Instant::now();
-        let mut terms = LossTerms {
-            gcfm: loss.gcfm,
-            content: loss.content,
-            tv: loss.tv,
-            depth: loss.depth,
-            feature_mean: loss.feature_mean,
-            outside: loss.outside,
-            sliced: loss.sliced,
-            sliced_depth: loss.sliced_depth,
-            assignment: loss.assignment,
-            assignment_cosine: loss.assignment_cosine,
-            total: loss.total,
-            ..LossTerms::default()
-        };
+        let mut terms = loss.terms;
         let lr = self.config.lr;
         let wts = self.config.weights;
         if phase.updates_color() {

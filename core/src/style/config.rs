@@ -189,6 +189,17 @@ pub struct StyleConfig {
     pub split_px: f32,
 }
 
+/// A setting the GPU engine does not compute yet ([`StyleConfig::cpu_only`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CpuOnly {
+    /// Its short name (`λ_sw`, `the phase leak`).
+    pub name: String,
+    /// Its name with its value and what it is, for an error.
+    pub detail: String,
+    /// How to turn it off.
+    pub off: &'static str,
+}
+
 /// The most Gaussians [`StyleConfig::split_px`] may make, as a multiple of the scene's.
 pub const SPLIT_MAX_FACTOR: usize = 8;
 
@@ -281,6 +292,29 @@ impl StyleConfig {
             w.assignment_cosine = OBJECT_RECIPE_ASSIGN_COS;
         }
         c
+    }
+
+    /// What this configuration asks that the GPU engine does not compute yet
+    /// (a term whose row says `gpu: false`, the phase leak): the session's
+    /// GPU refusal and `gast stylize --device auto`'s choice of the CPU read it.
+    pub fn cpu_only(&self) -> Vec<CpuOnly> {
+        let mut out: Vec<CpuOnly> = self
+            .weights
+            .cpu_only()
+            .map(|(t, v)| CpuOnly {
+                name: t.symbol.into(),
+                detail: format!("{} = {v} ({})", t.symbol, t.help.split(':').next().unwrap_or(t.key)),
+                off: "set it to 0",
+            })
+            .collect();
+        if self.phase_leak {
+            out.push(CpuOnly {
+                name: "the phase leak".into(),
+                detail: "the phase leak (phase_leak)".into(),
+                off: "turn it off",
+            });
+        }
+        out
     }
 
     /// The step plan this configuration implies.
@@ -422,6 +456,16 @@ mod tests {
         assert!("geometry".parse::<MeanSteps>().is_err_and(|e| e.contains("colour or every")));
         let preset = StyleConfig::from_json(r#"{"feature_mean_steps": "colour"}"#).expect("a preset");
         assert_eq!(preset.feature_mean_steps, MeanSteps::Colour);
+    }
+
+    #[test]
+    fn cpu_only_names_each_setting_the_gpu_engine_lacks() {
+        assert!(StyleConfig::default().cpu_only().is_empty());
+        let mut c = StyleConfig { phase_leak: true, ..StyleConfig::default() };
+        c.weights.sliced = 2.0;
+        let names: Vec<String> = c.cpu_only().into_iter().map(|x| x.name).collect();
+        assert_eq!(names, ["the phase leak"], "λ_sw runs on both engines");
+        assert_eq!(c.cpu_only()[0].off, "turn it off");
     }
 
     #[test]

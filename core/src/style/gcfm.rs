@@ -48,10 +48,9 @@ pub struct StyleFeatures {
     modal_inv_norm: [Vec<f64>; 3],
     /// The RGB features' mean per channel (the feature-mean term's target).
     rgb_mean: Vec<f32>,
-    /// The sliced Wasserstein term's target, made on first use.
-    sliced: OnceLock<SlicedTarget>,
-    /// The depth features' sliced Wasserstein target, made on first use.
-    sliced_depth: OnceLock<SlicedTarget>,
+    /// The sliced Wasserstein targets per modality (λ_sw on RGB, λ_swd on
+    /// depth), each made on first use.
+    sliced: [OnceLock<SlicedTarget>; 3],
 }
 
 impl StyleFeatures {
@@ -71,17 +70,7 @@ impl StyleFeatures {
             .collect();
         let modal_inv_norm = std::array::from_fn(|k| modal_sq[k].iter().map(|&s| 1.0 / (s.sqrt() + EPS)).collect());
         let rgb_mean = super::feature_mean::channel_means(&feats[0], channels);
-        Self {
-            channels,
-            height,
-            width,
-            feats,
-            joint_inv_norm,
-            modal_inv_norm,
-            rgb_mean,
-            sliced: OnceLock::new(),
-            sliced_depth: OnceLock::new(),
-        }
+        Self { channels, height, width, feats, joint_inv_norm, modal_inv_norm, rgb_mean, sliced: Default::default() }
     }
 
     /// Number of style positions.
@@ -99,15 +88,10 @@ impl StyleFeatures {
         &self.rgb_mean
     }
 
-    /// The sliced Wasserstein term's target of the RGB features (projected
-    /// and sorted on the first call).
-    pub fn sliced(&self) -> &SlicedTarget {
-        self.sliced.get_or_init(|| SlicedTarget::new(&self.feats[0], self.channels, SLICED_PROJECTIONS))
-    }
-
-    /// The same for the depth map's features (λ_swd).
-    pub fn sliced_depth(&self) -> &SlicedTarget {
-        self.sliced_depth.get_or_init(|| SlicedTarget::new(&self.feats[1], self.channels, SLICED_PROJECTIONS))
+    /// The sliced Wasserstein target of one modality's features (0 RGB for
+    /// λ_sw, 1 depth for λ_swd): projected and sorted on the first call.
+    pub fn sliced(&self, m: usize) -> &SlicedTarget {
+        self.sliced[m].get_or_init(|| SlicedTarget::new(&self.feats[m], self.channels, SLICED_PROJECTIONS))
     }
 
     /// The matching's style-side scale `1 / (sqrt(‖joint‖² + 1e-8) + 1e-8)`, per position.

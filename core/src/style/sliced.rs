@@ -75,6 +75,26 @@ impl SlicedTarget {
     pub fn projections(&self) -> usize {
         self.sorted.len()
     }
+
+    /// Channels of the features it compares.
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+
+    /// The `P × C` unit directions, row-major.
+    pub fn directions(&self) -> &[f32] {
+        &self.directions
+    }
+
+    /// The style's projections on direction `p`, in increasing order.
+    pub fn sorted(&self, p: usize) -> &[f32] {
+        &self.sorted[p]
+    }
+
+    /// Style positions (the length of each direction's sorted projections).
+    pub fn style_positions(&self) -> usize {
+        self.sorted.first().map_or(0, Vec::len)
+    }
 }
 
 /// `P × n` projections `Θ X` of the CHW features `x` (`channels × n`).

@@ -19,6 +19,7 @@ use super::gcfm::{GcfmOutput, Matches, StyleFeatures, gcfm_loss_with_matches, ma
 use super::outside::{Outside, outside_loss};
 use super::regularizers::depth_l1;
 use super::sliced::sliced_loss;
+use super::terms::LossTerms;
 use super::tv::tv_loss_masked;
 use super::window::{FeatureWindow, covered_box};
 use crate::vision::resize::{downscale_half, downscale_half_backward};
@@ -160,29 +161,9 @@ pub struct RenderedMaps<'a> {
 pub struct StepLoss {
     /// Where the time went.
     pub timings: StepLossTimings,
-    /// GCFM (unweighted).
-    pub gcfm: f32,
-    /// Content (unweighted; 0 without a content target).
-    pub content: f32,
-    /// TV (unweighted).
-    pub tv: f32,
-    /// Depth regulariser (unweighted; 0 without a reference depth).
-    pub depth: f32,
-    /// Feature-mean term (unweighted; 0 when λ_mean is 0).
-    pub feature_mean: f32,
-    /// Background hold (unweighted; 0 when λ_out is 0 or nothing is held).
-    pub outside: f32,
-    /// Sliced Wasserstein term (unweighted; 0 when λ_sw is 0).
-    pub sliced: f32,
-    /// Sliced Wasserstein term on the depth features (unweighted; 0 when
-    /// λ_swd is 0 or the depth's gradient is not taken).
-    pub sliced_depth: f32,
-    /// Assignment term, squared distance (unweighted; 0 when λ_as and λ_asc are 0).
-    pub assignment: f32,
-    /// Assignment term, cosine distance (unweighted; 0 when λ_as and λ_asc are 0).
-    pub assignment_cosine: f32,
-    /// `Σ weight · term`.
-    pub total: f32,
+    /// Each term unweighted (0 where a term is off or its input missing) and
+    /// the weighted `total`; the parameter regularisers are the session's, 0 here.
+    pub terms: LossTerms,
     /// Gradient of `total` w.r.t. the rendered RGB (HWC).
     pub v_rgb: Vec<f32>,
     /// Gradient of `total` w.r.t. the rendered inverse depth (`h × w`).
@@ -411,7 +392,7 @@ pub fn step_loss_with<N: FeatureNet>(
     }
     let mut sliced_value = 0.0;
     if weights.sliced > 0.0 {
-        let (l, g) = sliced_loss(&fwd[0].0.data, fwd[0].0.channels, style.features.sliced(), fmask.as_deref());
+        let (l, g) = sliced_loss(&fwd[0].0.data, fwd[0].0.channels, style.features.sliced(0), fmask.as_deref());
         sliced_value = l;
         for (a, b) in v_feat_rgb.iter_mut().zip(g) {
             *a += weights.sliced * b;
@@ -435,7 +416,7 @@ pub fn step_loss_with<N: FeatureNet>(
     let mut v_feat_depth: Vec<f32> = out.v_rendered[1].iter().map(|v| v * weights.gcfm).collect();
     let mut sliced_depth_value = 0.0;
     if weights.sliced_depth > 0.0 && depth_grad {
-        let target = style.features.sliced_depth();
+        let target = style.features.sliced(1);
         let (l, g) = sliced_loss(&fwd[1].0.data, fwd[1].0.channels, target, fmask.as_deref());
         sliced_depth_value = l;
         for (a, b) in v_feat_depth.iter_mut().zip(g) {
@@ -487,18 +468,7 @@ pub fn step_loss_with<N: FeatureNet>(
             *a += weights.depth * b;
         }
     }
-    let total = weights.gcfm * out.loss
-        + weights.content * content_value
-        + weights.tv * tv
-        + weights.depth * depth_value
-        + weights.feature_mean * feature_mean_value
-        + weights.outside * outside_value
-        + weights.sliced * sliced_value
-        + weights.sliced_depth * sliced_depth_value
-        + weights.assignment * assignment_value
-        + weights.assignment_cosine * assignment_cosine_value;
-    StepLoss {
-        timings,
+    let mut terms = LossTerms {
         gcfm: out.loss,
         content: content_value,
         tv,
@@ -509,11 +479,10 @@ pub fn step_loss_with<N: FeatureNet>(
         sliced_depth: sliced_depth_value,
         assignment: assignment_value,
         assignment_cosine: assignment_cosine_value,
-        total,
-        v_rgb,
-        v_inv_depth,
-        matches: out.matches,
-    }
+        ..LossTerms::default()
+    };
+    terms.total = terms.weighted(weights);
+    StepLoss { timings, terms, v_rgb, v_inv_depth, matches: out.matches }
 }
 
 /// GCFM over the feature positions in `fmask` only: the rendered features of

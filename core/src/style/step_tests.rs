@@ -136,7 +136,7 @@ fn step_loss_gradients_match_finite_differences() {
         if lp.matches != base.matches || lm.matches != base.matches {
             continue;
         }
-        let fd = (lp.total - lm.total) / (2.0 * eps);
+        let fd = (lp.terms.total - lm.terms.total) / (2.0 * eps);
         if (fd - base.v_rgb[i]).abs() > 2e-3 + 2e-2 * fd.abs() {
             bad.push(format!("rgb {i}: fd {fd} analytic {}", base.v_rgb[i]));
         }
@@ -150,7 +150,7 @@ fn step_loss_gradients_match_finite_differences() {
         if lp.matches != base.matches || lm.matches != base.matches || (inv_depth[i] - dref[i]).abs() < 2.0 * eps {
             continue;
         }
-        let fd = (lp.total - lm.total) / (2.0 * eps);
+        let fd = (lp.terms.total - lm.terms.total) / (2.0 * eps);
         if (fd - base.v_inv_depth[i]).abs() > 2e-3 + 2e-2 * fd.abs() {
             bad.push(format!("inv_depth {i}: fd {fd} analytic {}", base.v_inv_depth[i]));
         }
@@ -187,12 +187,15 @@ fn an_all_ones_mask_equals_the_unmasked_loss() {
     let a = step_loss(&net, &st, maps, Some(&content), Some(&dref), &weights, true);
     let b = step_loss_masked(&net, &st, maps, Some(&content), Some(&dref), &weights, true, Some(&ones));
     let close = |x: f32, y: f32| (x - y).abs() <= 1e-6 * (1.0 + x.abs());
-    for (name, x, y) in
-        [("gcfm", a.gcfm, b.gcfm), ("content", a.content, b.content), ("tv", a.tv, b.tv), ("total", a.total, b.total)]
-    {
+    for (name, x, y) in [
+        ("gcfm", a.terms.gcfm, b.terms.gcfm),
+        ("content", a.terms.content, b.terms.content),
+        ("tv", a.terms.tv, b.terms.tv),
+        ("total", a.terms.total, b.terms.total),
+    ] {
         assert!(close(x, y), "{name}: unmasked {x}, all-ones mask {y}");
     }
-    assert!(a.content > 0.0 && a.tv > 0.0);
+    assert!(a.terms.content > 0.0 && a.terms.tv > 0.0);
     assert_eq!(a.matches, b.matches);
     for (name, u, v) in [("v_rgb", &a.v_rgb, &b.v_rgb), ("v_inv_depth", &a.v_inv_depth, &b.v_inv_depth)] {
         let worst = u.iter().zip(v.iter()).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
@@ -222,7 +225,7 @@ fn a_mask_ignores_uncovered_positions_with_exactly_zero_gradient() {
         &weights,
         true,
     );
-    assert!((base.total - full.total).abs() > 1e-4, "the mask changed nothing: {}", base.total);
+    assert!((base.terms.total - full.terms.total).abs() > 1e-4, "the mask changed nothing: {}", base.terms.total);
     let mut bad = Vec::new();
     for k in (0..h * w).filter(|&k| !mask[k]) {
         if base.v_inv_depth[k] != 0.0 {
@@ -243,7 +246,10 @@ fn a_mask_ignores_uncovered_positions_with_exactly_zero_gradient() {
         d2[k] *= 3.0;
     }
     let moved = eval(&rgb2, &d2);
-    assert_eq!((moved.gcfm, moved.content, moved.tv, moved.total), (base.gcfm, base.content, base.tv, base.total));
+    assert_eq!(
+        (moved.terms.gcfm, moved.terms.content, moved.terms.tv, moved.terms.total),
+        (base.terms.gcfm, base.terms.content, base.terms.tv, base.terms.total)
+    );
     assert!(base.matches.best[2] == u32::MAX && base.matches.best[0] != u32::MAX);
 }
 
@@ -290,10 +296,10 @@ fn vgg_on_the_covered_window_equals_the_whole_frame() {
         assert!(win.share() < 0.8);
         assert_eq!(whole.matches, windowed.matches, "{conv}: matches");
         for (name, a, b) in [
-            ("gcfm", whole.gcfm, windowed.gcfm),
-            ("content", whole.content, windowed.content),
-            ("tv", whole.tv, windowed.tv),
-            ("total", whole.total, windowed.total),
+            ("gcfm", whole.terms.gcfm, windowed.terms.gcfm),
+            ("content", whole.terms.content, windowed.terms.content),
+            ("tv", whole.terms.tv, windowed.terms.tv),
+            ("total", whole.terms.total, windowed.terms.total),
         ] {
             assert!((a - b).abs() <= 1e-5 * a.abs().max(1e-3), "{conv} {name}: whole frame {a}, window {b}");
         }
@@ -317,10 +323,10 @@ fn the_feature_statistics_terms_add_their_weighted_values_and_stay_inside_the_ma
     let mask: Vec<bool> = (0..h * w).map(|k| k % w < 16).collect();
     type Term = (&'static str, fn(&mut LossWeights, f32), fn(&StepLoss) -> f32);
     let terms: [Term; 4] = [
-        ("feature mean", |w, l| w.feature_mean = l, |s| s.feature_mean),
-        ("sliced", |w, l| w.sliced = l, |s| s.sliced),
-        ("assignment", |w, l| w.assignment = l, |s| s.assignment),
-        ("cosine assignment", |w, l| w.assignment_cosine = l, |s| s.assignment_cosine),
+        ("feature mean", |w, l| w.feature_mean = l, |s| s.terms.feature_mean),
+        ("sliced", |w, l| w.sliced = l, |s| s.terms.sliced),
+        ("assignment", |w, l| w.assignment = l, |s| s.terms.assignment),
+        ("cosine assignment", |w, l| w.assignment_cosine = l, |s| s.terms.assignment_cosine),
     ];
     for (name, set, get) in terms {
         let eval = |lambda: f32| {
@@ -332,7 +338,10 @@ fn the_feature_statistics_terms_add_their_weighted_values_and_stay_inside_the_ma
         let (off, on) = (eval(0.0), eval(0.7));
         assert_eq!(get(&off), 0.0, "{name}");
         assert!(get(&on) > 0.0, "{name}: the rendered and style features differ: {}", get(&on));
-        assert!((on.total - off.total - 0.7 * get(&on)).abs() < 1e-5 * on.total.abs().max(1.0), "{name}");
+        assert!(
+            (on.terms.total - off.terms.total - 0.7 * get(&on)).abs() < 1e-5 * on.terms.total.abs().max(1.0),
+            "{name}"
+        );
         assert!(off.v_rgb.iter().zip(&on.v_rgb).any(|(a, b)| a != b), "{name}: the term moved no gradient");
         for k in (0..h * w).filter(|&k| !mask[k]) {
             assert!(on.v_rgb[3 * k..3 * k + 3].iter().all(|&v| v == 0.0), "{name}: pixel {k} outside the mask");
@@ -356,16 +365,18 @@ fn the_depth_sliced_term_moves_the_depth_gradient_inside_the_mask() {
         step_loss_masked(&net, &st, maps, Some(&content), None, &weights, depth_grad, Some(&mask))
     };
     let (off, on) = (eval(0.0, true), eval(0.7, true));
-    assert_eq!(off.sliced_depth, 0.0);
-    assert!(on.sliced_depth > 0.0, "the rendered and style depth features differ: {}", on.sliced_depth);
-    assert!((on.total - off.total - 0.7 * on.sliced_depth).abs() < 1e-5 * on.total.abs().max(1.0));
+    assert_eq!(off.terms.sliced_depth, 0.0);
+    assert!(on.terms.sliced_depth > 0.0, "the rendered and style depth features differ: {}", on.terms.sliced_depth);
+    assert!(
+        (on.terms.total - off.terms.total - 0.7 * on.terms.sliced_depth).abs() < 1e-5 * on.terms.total.abs().max(1.0)
+    );
     assert_eq!(off.v_rgb, on.v_rgb, "the depth term leaves the colours' gradient");
     assert!(off.v_inv_depth.iter().zip(&on.v_inv_depth).any(|(a, b)| a != b), "the term moved no depth gradient");
     for k in (0..h * w).filter(|&k| !mask[k]) {
         assert_eq!(on.v_inv_depth[k], 0.0, "pixel {k} outside the mask");
     }
     let colour_step = eval(0.7, false);
-    assert_eq!((colour_step.sliced_depth, colour_step.total), (0.0, eval(0.0, false).total));
+    assert_eq!((colour_step.terms.sliced_depth, colour_step.terms.total), (0.0, eval(0.0, false).terms.total));
 }
 
 #[test]
@@ -384,11 +395,11 @@ fn the_background_hold_adds_its_weighted_value_and_moves_only_the_held_pixels() 
         step_loss_with(&net, &st, maps, Some(&content), None, &weights, false, focus, exact)
     };
     let (off, on) = (eval(0.0), eval(3.0));
-    assert_eq!(off.outside, 0.0, "λ_out = 0 measures nothing");
+    assert_eq!(off.terms.outside, 0.0, "λ_out = 0 measures nothing");
     let (want, grad) = outside_loss(&rgb, Outside { mask: &held, rgb: &target });
     assert!(want > 0.0);
-    assert_eq!(on.outside, want);
-    assert!((on.total - off.total - 3.0 * want).abs() < 1e-5 * on.total.abs().max(1.0));
+    assert_eq!(on.terms.outside, want);
+    assert!((on.terms.total - off.terms.total - 3.0 * want).abs() < 1e-5 * on.terms.total.abs().max(1.0));
     for k in 0..h * w * 3 {
         let moved = on.v_rgb[k] - off.v_rgb[k];
         assert!((moved - 3.0 * grad[k]).abs() <= 1e-6 * grad[k].abs().max(1e-3), "channel {k}: moved {moved}");

@@ -207,7 +207,7 @@ pub static TERMS: [Term; 13] = [
         help: "sliced Wasserstein, not in the paper: pulls the distribution of the render's relu3 features toward \
                the style's along 128 fixed random directions (λ_mean is its first moment)",
         max: 1000.0,
-        gpu: false,
+        gpu: true,
         paper: false,
         weight: |w| &mut w.sliced,
         value: |l| l.sliced,
@@ -220,7 +220,7 @@ pub static TERMS: [Term; 13] = [
         help: "sliced Wasserstein on depth, not in the paper: pulls the distribution of the rendered depth map's \
                relu3 features toward the style depth's, on geometry steps",
         max: 1000.0,
-        gpu: false,
+        gpu: true,
         paper: false,
         weight: |w| &mut w.sliced_depth,
         value: |l| l.sliced_depth,
@@ -254,6 +254,14 @@ pub static TERMS: [Term; 13] = [
     },
 ];
 
+impl LossTerms {
+    /// `Σ weight · term` over every term of [`TERMS`] (the regularisers
+    /// included: 0 on steps that do not take them).
+    pub fn weighted(&self, w: &LossWeights) -> f32 {
+        w.terms().map(|(t, weight)| weight * (t.value)(self)).sum()
+    }
+}
+
 impl LossWeights {
     /// Every weight with its term, in [`TERMS`] order.
     pub fn terms(&self) -> impl Iterator<Item = (&'static Term, f32)> + '_ {
@@ -263,11 +271,6 @@ impl LossWeights {
     /// The terms that are on (weight > 0) and that the GPU engine does not compute.
     pub fn cpu_only(&self) -> impl Iterator<Item = (&'static Term, f32)> + '_ {
         self.terms().filter(|(t, v)| !t.gpu && *v > 0.0)
-    }
-
-    /// Whether a term the GPU engine does not compute yet is on.
-    pub fn needs_cpu(&self) -> bool {
-        self.cpu_only().next().is_some()
     }
 }
 
@@ -315,9 +318,10 @@ mod tests {
         for (t, v) in d.terms() {
             assert_eq!(t.paper, v > 0.0, "{}", t.key);
         }
-        assert!(!d.needs_cpu());
-        let w = LossWeights { sliced: 1.0, ..d };
-        assert_eq!(w.cpu_only().map(|(t, _)| t.symbol).collect::<Vec<_>>(), vec!["λ_sw"]);
+        assert_eq!(d.cpu_only().count(), 0);
+        // λ_sw and λ_swd, the last CPU-only terms, run on the GPU too.
+        let w = LossWeights { sliced: 1.0, sliced_depth: 1.0, ..d };
+        assert_eq!(w.cpu_only().count(), 0);
         assert_eq!(Term::find("lambda-assign-cos").map(|t| t.key), Some("assignment_cosine"));
         assert_eq!(Term::find("tv").map(|t| t.flag), Some("lambda-tv"));
     }

@@ -219,13 +219,10 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let scene = load_scene(&args.scene)?;
     let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
     let gpu = match args.device {
-        // A term the GPU engine does not compute (`gast_core::style::terms`):
+        // A setting the GPU engine does not compute (`StyleConfig::cpu_only`):
         // `auto` picks the CPU for it rather than failing (`gpu` still says why).
-        gast_core::gpu::DeviceChoice::Auto if config.weights.needs_cpu() || config.phase_leak => {
-            let mut on: Vec<&str> = config.weights.cpu_only().map(|(t, _)| t.symbol).collect();
-            if config.phase_leak {
-                on.push("the phase leak");
-            }
+        gast_core::gpu::DeviceChoice::Auto if !config.cpu_only().is_empty() => {
+            let on: Vec<String> = config.cpu_only().into_iter().map(|c| c.name).collect();
             eprintln!("{} runs on the CPU engine only so far: the steps run on the CPU", on.join(", "));
             None
         }

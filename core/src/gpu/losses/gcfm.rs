@@ -26,7 +26,7 @@
 
 use super::gemm::{Gemm, GemmPlan, GemmSpec, Strided};
 use super::kernel::Launch;
-use super::{Bind, GpuContext, GpuFocus, Kernel};
+use super::{Bind, GpuContext, GpuFocus, GpuSlicedTarget, Kernel};
 use crate::style::gcfm::StyleFeatures;
 
 /// Threads per workgroup of the `gcfm.wgsl` kernels.
@@ -63,6 +63,8 @@ pub struct GpuStyle {
     modal_inv_norm: Vec<wgpu::Buffer>,
     /// The RGB features' per-channel means (λ_mean's target), on the host.
     rgb_mean: Vec<f32>,
+    /// The sliced Wasserstein targets of the RGB and depth features (λ_sw, λ_swd).
+    sliced: [GpuSlicedTarget; 2],
 }
 
 impl GpuStyle {
@@ -80,7 +82,13 @@ impl GpuStyle {
                 })
                 .collect(),
             rgb_mean: style.rgb_mean().to_vec(),
+            sliced: [0, 1].map(|m| GpuSlicedTarget::new(ctx, style.sliced(m))),
         }
+    }
+
+    /// The sliced Wasserstein target of modality `m` (0 RGB, 1 depth).
+    pub fn sliced(&self, m: usize) -> &GpuSlicedTarget {
+        &self.sliced[m]
     }
 
     /// The RGB features' per-channel means ([`StyleFeatures::rgb_mean`]).

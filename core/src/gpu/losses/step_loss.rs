@@ -21,11 +21,12 @@ use super::feature_mean::FeatureMeanLoss;
 use super::{
     CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, FocusKernels, GcfmSubset, GcfmWorkspace,
     GpuContext, GpuError, GpuFocus, GpuGcfm, GpuStyle, GpuVgg, GpuVggState, GpuVggWorkspace, LossKernels,
-    ReduceKernels, RefLoss, ResizeKernels, Search, TvLoss,
+    ReduceKernels, RefLoss, ResizeKernels, Search, SlicedKernels, SlicedLoss, TvLoss,
 };
 use crate::style::config::LossWeights;
 use crate::style::gcfm::Matches;
 use crate::style::step::{RenderedMaps, StepLoss, StepLossTimings, StyleTargets, replicate3};
+use crate::style::terms::LossTerms;
 use crate::vision::Vgg;
 
 /// Where each loss value lives in a scalars buffer (in 4-byte words).
@@ -50,8 +51,12 @@ pub mod slot {
     pub const FEATURE_MEAN: usize = 11;
     /// The background hold (unweighted; written only when λ_out > 0 and a view holds pixels).
     pub const OUTSIDE: usize = 12;
+    /// The sliced Wasserstein term on the RGB features (unweighted; written only when λ_sw > 0).
+    pub const SLICED: usize = 13;
+    /// The same on the depth features (unweighted; written only when λ_swd > 0 on steps taking the depth's gradient).
+    pub const SLICED_DEPTH: usize = 14;
     /// Words in all.
-    pub const LEN: usize = 13;
+    pub const LEN: usize = 15;
 }
 
 /// The kernels of the loss, compiled once per context (with the network's weights).
@@ -65,6 +70,7 @@ pub struct StepLossKernels {
     pub(crate) focus: Arc<FocusKernels>,
     pub(crate) vgg: GpuVgg,
     pub(crate) gcfm: GpuGcfm,
+    pub(crate) sliced: Arc<SlicedKernels>,
 }
 
 impl StepLossKernels {
@@ -79,6 +85,7 @@ impl StepLossKernels {
             focus: FocusKernels::new(ctx),
             vgg: GpuVgg::new(ctx, vgg),
             gcfm: GpuGcfm::new(ctx),
+            sliced: SlicedKernels::new(ctx),
         }
     }
 }
@@ -104,6 +111,11 @@ pub struct StepLossPlan {
     feature_mean: FeatureMeanLoss,
     /// Whether λ_mean is above 0 (the term is recorded only then).
     feature_mean_on: bool,
+    /// λ_sw's and λ_swd's terms (RGB, depth), planned only when the weight
+    /// was above 0 (a plan without one is remade when it turns on,
+    /// [`StepLossPlan::fits`]), recorded only while it is.
+    sliced: [Option<SlicedLoss>; 2],
+    sliced_on: [bool; 2],
     /// λ_GC baked into the GCFM workspace.
     gcfm_weight: f32,
     /// The whole frame (all-ones masks), the focus when none is given.
@@ -158,6 +170,11 @@ impl StepLossPlan {
                 slot::FEATURE_MEAN,
             )?,
             feature_mean_on: weights.feature_mean > 0.0,
+            sliced: [
+                sliced_term(ctx, k, style, 0, weights.sliced, positions, slot::SLICED)?,
+                sliced_term(ctx, k, style, 1, weights.sliced_depth, positions, slot::SLICED_DEPTH)?,
+            ],
+            sliced_on: [weights.sliced > 0.0, weights.sliced_depth > 0.0],
             gcfm_weight: weights.gcfm,
             frame: GpuFocus::frame(ctx, h, w, fh, fw),
             sizes: [(h, w), (fh, fw)],
@@ -180,9 +197,12 @@ impl StepLossPlan {
         self.feature_len
     }
 
-    /// The λ_GC this plan was made with (a new one needs a new plan).
-    pub fn gcfm_weight(&self) -> f32 {
-        self.gcfm_weight
+    /// Whether this plan serves `w`: the λ_GC it was made with (baked into
+    /// the GCFM workspace), and the sliced terms planned where their weight is on.
+    pub fn fits(&self, w: &LossWeights) -> bool {
+        self.gcfm_weight == w.gcfm
+            && (w.sliced == 0.0 || self.sliced[0].is_some())
+            && (w.sliced_depth == 0.0 || self.sliced[1].is_some())
     }
 
     /// Changes λ_TV, λ_d, λ_cont, λ_mean and λ_out (from the next submission on).
@@ -194,6 +214,12 @@ impl StepLossPlan {
         self.content.set_weight(ctx, w.content);
         self.feature_mean.set_weight(ctx, w.feature_mean);
         self.feature_mean_on = w.feature_mean > 0.0;
+        for (m, weight) in [w.sliced, w.sliced_depth].into_iter().enumerate() {
+            if let Some(term) = &self.sliced[m] {
+                term.set_weight(ctx, weight);
+            }
+            self.sliced_on[m] = weight > 0.0 && self.sliced[m].is_some();
+        }
     }
 
     /// After [`StepLossPlan::record`]: the gradient w.r.t. the raw render's
@@ -368,6 +394,12 @@ impl StepLossPlan {
         if let Some(a) = assign {
             a.record_scatter(ctx, enc, &self.v_feat[0]);
         }
+        // λ_sw on the RGB features on every step, λ_swd on the depth's where its gradient is taken.
+        for (m, wanted) in [(0, true), (1, depth_grad)] {
+            if let Some(term) = self.sliced[m].as_ref().filter(|_| wanted && self.sliced_on[m]) {
+                term.record(ctx, enc, style.sliced(m), feats[m], focus, &self.v_feat[m], scalars);
+            }
+        }
 
         // Image space: RGB through VGG and the downscale, plus TV, then the clamp's mask.
         k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[0], &self.v_feat[0], &self.v_small[0]);
@@ -388,6 +420,22 @@ impl StepLossPlan {
             self.depth_l1.record(ctx, enc, inv_depth, d, &self.v_inv_depth, scalars);
         }
     }
+}
+
+/// The sliced term of modality `m` (0 RGB, 1 depth) when its weight is on.
+fn sliced_term(
+    ctx: &GpuContext,
+    k: &StepLossKernels,
+    style: &GpuStyle,
+    m: usize,
+    weight: f32,
+    positions: usize,
+    at: usize,
+) -> Result<Option<SlicedLoss>, GpuError> {
+    if weight <= 0.0 {
+        return Ok(None);
+    }
+    SlicedLoss::new(ctx, &k.sliced, &k.reduce, style.sliced(m), positions, weight, at).map(Some)
 }
 
 /// The whole per-step loss of uploaded maps on the GPU, read back: the twin
@@ -465,26 +513,22 @@ pub fn step_loss_gpu(
     let depth_value = if dref.is_some() { s[slot::DEPTH] } else { 0.0 };
     let tv = s[slot::TV];
     let feature_mean = if weights.feature_mean > 0.0 { s[slot::FEATURE_MEAN] } else { 0.0 };
-    Ok(StepLoss {
-        timings: StepLossTimings::default(),
+    let mut terms = LossTerms {
         gcfm,
         content: content_value,
         tv,
         depth: depth_value,
         feature_mean,
-        // This check helper holds no background (its CPU twin has no hold either).
-        outside: 0.0,
-        // The GPU engine has no sliced Wasserstein term yet (the session refuses λ_sw there).
-        sliced: 0.0,
-        sliced_depth: 0.0,
-        // Nor the assignment terms (the session refuses λ_as and λ_asc there too).
-        assignment: 0.0,
-        assignment_cosine: 0.0,
-        total: weights.gcfm * gcfm
-            + weights.content * content_value
-            + weights.tv * tv
-            + weights.depth * depth_value
-            + weights.feature_mean * feature_mean,
+        sliced: if weights.sliced > 0.0 { s[slot::SLICED] } else { 0.0 },
+        sliced_depth: if weights.sliced_depth > 0.0 && depth_grad { s[slot::SLICED_DEPTH] } else { 0.0 },
+        ..LossTerms::default()
+    };
+    terms.total = terms.weighted(weights);
+    Ok(StepLoss {
+        timings: StepLossTimings::default(),
+        // No background hold in this check helper (nor in its CPU twin), nor
+        // the assignment terms (the engine's own, `GpuAssignment`).
+        terms,
         v_rgb: ctx.read(plan.v_rgb())?,
         v_inv_depth: ctx.read(plan.v_inv_depth())?,
         matches: Matches { best: m[..n].to_vec(), worst: m[n..2 * n].to_vec() },

@@ -58,11 +58,13 @@ fn inputs() -> Inputs {
 fn differences(what: &str, a: &StepLoss, b: &StepLoss, tol: f32) -> Vec<String> {
     let mut off = Vec::new();
     for (name, x, y) in [
-        ("gcfm", a.gcfm, b.gcfm),
-        ("content", a.content, b.content),
-        ("tv", a.tv, b.tv),
-        ("depth", a.depth, b.depth),
-        ("total", a.total, b.total),
+        ("gcfm", a.terms.gcfm, b.terms.gcfm),
+        ("content", a.terms.content, b.terms.content),
+        ("tv", a.terms.tv, b.terms.tv),
+        ("depth", a.terms.depth, b.terms.depth),
+        ("sliced", a.terms.sliced, b.terms.sliced),
+        ("sliced depth", a.terms.sliced_depth, b.terms.sliced_depth),
+        ("total", a.terms.total, b.terms.total),
     ] {
         if (x - y).abs() > tol * x.abs().max(1e-6) {
             off.push(format!("{what} {name}: {x} vs {y}"));
@@ -88,7 +90,8 @@ fn the_object_focus_gives_the_cpu_masked_loss_and_all_ones_the_frame() {
     let k = StepLossKernels::new(ctx, &t.vgg);
     let (h, w) = (t.h, t.w);
     let maps = RenderedMaps { rgb: &t.rgb, inv_depth: &t.inv_depth, edge: &t.edge, height: h, width: w };
-    let weights = LossWeights::default();
+    // The paper's terms and both sliced terms (λ_swd where the depth's gradient is taken).
+    let weights = LossWeights { sliced: 10.0, sliced_depth: 10.0, ..Default::default() };
     let target = content_target(&t.vgg, &t.content, h, w);
     let mask = coverage_mask(&t.alpha, h, w);
     let on = mask.iter().filter(|&&v| v).count();
@@ -99,6 +102,7 @@ fn the_object_focus_gives_the_cpu_masked_loss_and_all_ones_the_frame() {
         let cpu = step_loss_masked(&t.vgg, &t.style, maps, Some(&target), dref, &weights, depth_grad, Some(&mask));
         let gpu = step_loss_gpu(ctx, &k, &t.style, maps, Some(&t.content), dref, &weights, depth_grad, Some(&t.alpha))
             .expect("GPU loss");
+        assert!(cpu.terms.sliced > 0.0 && (cpu.terms.sliced_depth > 0.0) == depth_grad, "{:?}", cpu.terms);
         failures.extend(differences(&format!("object focus, depth grad {depth_grad}:"), &cpu, &gpu, 1e-3));
         // Every position matched on the GPU lies in the focus, as on the CPU.
         assert!(gpu.matches.best.contains(&u32::MAX) && gpu.matches.best.iter().any(|&m| m != u32::MAX));
@@ -113,7 +117,10 @@ fn the_object_focus_gives_the_cpu_masked_loss_and_all_ones_the_frame() {
         let cpu_frame = step_loss_masked(&t.vgg, &t.style, maps, Some(&target), dref, &weights, depth_grad, None);
         failures.extend(differences(&format!("frame CPU vs GPU, depth grad {depth_grad}:"), &cpu_frame, &frame, 1e-3));
         // The focus changes the loss (the test would pass vacuously otherwise).
-        assert!((cpu_frame.gcfm - cpu.gcfm).abs() > 1e-3 * cpu.gcfm.abs(), "focus and frame give the same GCFM");
+        assert!(
+            (cpu_frame.terms.gcfm - cpu.terms.gcfm).abs() > 1e-3 * cpu.terms.gcfm.abs(),
+            "focus and frame give the same GCFM"
+        );
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
