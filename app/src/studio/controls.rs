@@ -3,7 +3,9 @@
 
 use egui::{Color32, Ui};
 use gast_core::session::{LossTerms, StepReport};
-use gast_core::style::config::{OBJECT_RECIPE_ASSIGN, OBJECT_RECIPE_ASSIGN_COS, ParamRegulariser};
+use gast_core::style::config::{
+    FRAME_RECIPE_SLICED_DEPTH, OBJECT_RECIPE_ASSIGN, OBJECT_RECIPE_ASSIGN_COS, ParamRegulariser,
+};
 use gast_core::style::terms::TERMS;
 use gast_core::style::{Focus, MeanSteps, Mode, Phase, StyleConfig};
 
@@ -92,6 +94,14 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
         .on_hover_text(format!(
             "with the losses on the object and λ_as = λ_asc = 0, the run uses λ_asc {OBJECT_RECIPE_ASSIGN_COS} and \
              λ_as {OBJECT_RECIPE_ASSIGN} (the focus study's winner on guitar, biker and playbot); off in the paper"
+        ))
+        .changed();
+    changed |= ui
+        .checkbox(&mut c.frame_recipe, format!("frame recipe: λ_swd {FRAME_RECIPE_SLICED_DEPTH} on full frames"))
+        .on_hover_text(format!(
+            "with the losses on the whole frame and λ_swd = 0, the run uses λ_swd {FRAME_RECIPE_SLICED_DEPTH}: the \
+             depth's feature distribution pulled toward the style depth's, so the style's relief forms in the \
+             geometry (docs/geometry.md); off in the paper"
         ))
         .changed();
 

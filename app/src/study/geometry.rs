@@ -58,6 +58,8 @@ impl Arm {
         c.weights.opacity = 1.0;
         c.weights.scale = 1.0;
         c.weights.rotation = 1.0;
+        // Each arm names its λ_swd: no frame recipe.
+        c.frame_recipe = false;
         c.weights.sliced_depth = 0.0;
         match self {
             Arm::ColourOnly => c.mode = Mode::ColorOnly,

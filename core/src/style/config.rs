@@ -173,6 +173,13 @@ pub struct StyleConfig {
     /// nine styles on guitar, biker and playbot) when both are 0. On by
     /// default; off in the `paper` preset. See [`StyleConfig::resolved`].
     pub object_recipe: bool,
+    /// Where the losses take the whole frame (`focus frame`, or `auto` on a
+    /// full-frame scene), switch on the depth's sliced Wasserstein term at
+    /// [`FRAME_RECIPE_SLICED_DEPTH`] when λ_swd is 0 (`docs/geometry.md`: on
+    /// fern it tiles the depth with the style's blocks where GCFM alone
+    /// leaves it smooth; on objects it adds nothing yet). On by default; off
+    /// in the `paper` preset. See [`StyleConfig::resolved`].
+    pub frame_recipe: bool,
     /// Carry each phase's gradients on the other phase's parameters over to
     /// that phase's next step, as the reference does: its colour steps'
     /// `backward()` also fills the geometry's gradients (of GCFM on RGB and
@@ -202,6 +209,9 @@ pub struct CpuOnly {
 
 /// The most Gaussians [`StyleConfig::split_px`] may make, as a multiple of the scene's.
 pub const SPLIT_MAX_FACTOR: usize = 8;
+
+/// λ_swd of the frame recipe ([`StyleConfig::frame_recipe`]).
+pub const FRAME_RECIPE_SLICED_DEPTH: f32 = 1.0;
 
 /// λ_asc of the object recipe ([`StyleConfig::object_recipe`]).
 pub const OBJECT_RECIPE_ASSIGN_COS: f32 = 10.0;
@@ -261,6 +271,7 @@ impl Default for StyleConfig {
             feature_mean_steps: MeanSteps::default(),
             param_regulariser: ParamRegulariser::default(),
             object_recipe: true,
+            frame_recipe: true,
             phase_leak: false,
             split_px: 0.0,
         }
@@ -270,26 +281,33 @@ impl Default for StyleConfig {
 impl StyleConfig {
     /// The reference's behaviour (`--preset paper`): whole-frame losses, the
     /// style depth near dark as the reference inverts it, the norm
-    /// regularisers, no object recipe; every other value is the default.
+    /// regularisers, no object or frame recipe; every other value is the default.
     pub fn paper() -> Self {
         Self {
             focus: super::focus::Focus::Frame,
             depth_polarity: DepthPolarity::NearDark,
             param_regulariser: ParamRegulariser::Norm,
             object_recipe: false,
+            frame_recipe: false,
             ..Self::default()
         }
     }
 
     /// The configuration a run with views of mean coverage `coverage` uses:
     /// with [`StyleConfig::object_recipe`] on, losses on the object and both
-    /// assignment weights 0, those weights take the recipe's values.
+    /// assignment weights 0, those weights take the recipe's values; with
+    /// [`StyleConfig::frame_recipe`] on, losses on the whole frame and λ_swd
+    /// 0, λ_swd takes the recipe's.
     pub fn resolved(&self, coverage: f32) -> Self {
         let mut c = self.clone();
+        let object = c.focus.is_object(coverage);
         let w = &mut c.weights;
-        if c.object_recipe && c.focus.is_object(coverage) && w.assignment == 0.0 && w.assignment_cosine == 0.0 {
+        if c.object_recipe && object && w.assignment == 0.0 && w.assignment_cosine == 0.0 {
             w.assignment = OBJECT_RECIPE_ASSIGN;
             w.assignment_cosine = OBJECT_RECIPE_ASSIGN_COS;
+        }
+        if c.frame_recipe && !object && w.sliced_depth == 0.0 {
+            w.sliced_depth = FRAME_RECIPE_SLICED_DEPTH;
         }
         c
     }
@@ -469,28 +487,40 @@ mod tests {
     }
 
     #[test]
-    fn the_object_recipe_applies_only_on_objects_and_only_where_the_terms_are_off() {
+    fn each_recipe_applies_only_on_its_focus_and_only_where_its_terms_are_off() {
         use crate::style::focus::Focus;
         let c = StyleConfig::default();
         let on_object = c.resolved(0.2);
         assert_eq!((on_object.weights.assignment, on_object.weights.assignment_cosine), (0.015, 10.0));
-        assert_eq!(c.resolved(0.9), c, "a full frame keeps the paper's terms alone");
+        assert_eq!(on_object.weights.sliced_depth, 0.0, "no frame recipe on an object");
+        let on_frame = c.resolved(0.9);
+        assert_eq!(on_frame.weights.sliced_depth, FRAME_RECIPE_SLICED_DEPTH);
+        let mut want = c.clone();
+        want.weights.sliced_depth = FRAME_RECIPE_SLICED_DEPTH;
+        assert_eq!(on_frame, want, "a full frame gets λ_swd and nothing else");
         let frame = StyleConfig { focus: Focus::Frame, ..c.clone() };
-        assert_eq!(frame.resolved(0.2), frame);
-        let off = StyleConfig { object_recipe: false, ..c.clone() };
+        assert_eq!(frame.resolved(0.2).weights.assignment, 0.0, "frame focus on an object: no object recipe");
+        assert_eq!(frame.resolved(0.2).weights.sliced_depth, FRAME_RECIPE_SLICED_DEPTH);
+        let off = StyleConfig { object_recipe: false, frame_recipe: false, ..c.clone() };
         assert_eq!(off.resolved(0.2), off);
+        assert_eq!(off.resolved(0.9), off);
         let mut chosen = c.clone();
         chosen.weights.assignment = 0.5;
+        chosen.weights.sliced_depth = 0.25;
         assert_eq!(chosen.resolved(0.2), chosen, "a weight the user set is kept");
+        assert_eq!(chosen.resolved(0.9), chosen, "a weight the user set is kept");
         let paper = StyleConfig::paper();
         assert_eq!(paper.resolved(0.2), paper);
+        assert_eq!(paper.resolved(0.9), paper);
         assert_eq!(
-            (paper.focus, paper.depth_polarity, paper.object_recipe),
-            (Focus::Frame, DepthPolarity::NearDark, false)
+            (paper.focus, paper.depth_polarity, paper.object_recipe, paper.frame_recipe),
+            (Focus::Frame, DepthPolarity::NearDark, false, false)
         );
-        // Old presets (no key) get the recipe; the key round-trips.
-        assert!(StyleConfig::from_json("{}").expect("a preset").object_recipe);
-        assert!(!StyleConfig::from_json(&paper.to_json()).expect("a preset").object_recipe);
+        // Old presets (no key) get the recipes; the keys round-trip.
+        let old = StyleConfig::from_json("{}").expect("a preset");
+        assert!(old.object_recipe && old.frame_recipe);
+        let back = StyleConfig::from_json(&paper.to_json()).expect("a preset");
+        assert!(!back.object_recipe && !back.frame_recipe);
     }
 
     #[test]

@@ -61,6 +61,11 @@ pub struct StylizeArgs {
     /// 0.015, the focus study's winner).
     #[arg(long)]
     pub no_object_recipe: bool,
+    /// Keep the depth's sliced Wasserstein term off on full-frame scenes (by
+    /// default, with the losses on the whole frame and λ_swd = 0, the run
+    /// uses λ_swd 1: the style's relief in the depth, docs/geometry.md).
+    #[arg(long)]
+    pub no_frame_recipe: bool,
     /// Write the effective configuration to this preset file and continue.
     #[arg(long)]
     pub save_preset: Option<PathBuf>,
@@ -193,6 +198,9 @@ impl StylizeArgs {
         }
         if self.no_object_recipe {
             c.object_recipe = false;
+        }
+        if self.no_frame_recipe {
+            c.frame_recipe = false;
         }
         set!(self.cycles, c.cycles);
         set!(self.steps_per_cycle, c.steps_per_cycle);

@@ -327,6 +327,13 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             used.assignment_cosine, used.assignment
         );
     }
+    if used.sliced_depth != config.weights.sliced_depth {
+        eprintln!(
+            "  frame recipe: the losses are on the whole frame, so λ_swd {} (the style's relief in the depth; \
+             --no-frame-recipe or --preset paper for the paper's terms alone)",
+            used.sliced_depth
+        );
+    }
     let config = session.config().clone();
     let total = session.total_steps();
     let pb = progress::bar(total as u64, "stylize");
@@ -585,7 +592,7 @@ mod tests {
     }
 
     /// `--preset paper` is the reference's configuration, flags still override
-    /// it, and `--no-object-recipe` turns the recipe off.
+    /// it, and `--no-object-recipe` and `--no-frame-recipe` turn the recipes off.
     #[test]
     fn the_paper_preset_and_the_recipe_switch() {
         #[derive(clap::Parser)]
@@ -600,8 +607,9 @@ mod tests {
         };
         assert_eq!(parse(&["--preset", "paper"]), StyleConfig::paper());
         assert_eq!(parse(&["--preset", "paper", "--cycles", "3"]).cycles, 3);
-        assert!(parse(&[]).object_recipe);
+        assert!(parse(&[]).object_recipe && parse(&[]).frame_recipe);
         assert!(!parse(&["--no-object-recipe"]).object_recipe);
+        assert!(!parse(&["--no-frame-recipe"]).frame_recipe && parse(&["--no-frame-recipe"]).object_recipe);
     }
 
     /// The collapse warning's advice names flags `stylize` takes, with values it accepts.
