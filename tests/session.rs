@@ -281,6 +281,28 @@ fn lambda_mean_acts_on_the_steps_asked_for() {
     }
 }
 
+/// A term turned on in a session of each engine (`inputs`, then the same on
+/// the GPU): 0 on a step before it is on, above 0 on the step after, and the
+/// first step's report of a session started with it, per engine (CPU, GPU).
+fn term_on_both_engines(
+    name: &str,
+    cpu_inputs: &SessionInputs,
+    on: LossWeights,
+    measured: fn(&gast_core::session::StepReport) -> f32,
+) -> [gast_core::session::StepReport; 2] {
+    use gast_core::session::Session;
+    let gpu_inputs = SessionInputs { gpu: Some(gpu_context()), ..cpu_inputs.clone() };
+    [("CPU", cpu_inputs.clone()), ("GPU", gpu_inputs)].map(|(device, inputs)| {
+        let mut s = Session::prepare(inputs.clone(), &mut |_| {}).expect("session");
+        let off = measured(&s.step().expect("a step"));
+        s.set_config(StyleConfig { weights: on, ..s.config().clone() }).expect("the term on");
+        let after = measured(&s.step().expect("a step with the term"));
+        assert!(off == 0.0 && after > 0.0 && after.is_finite(), "{device}, {name}: before {off}, after {after}");
+        let started = SessionInputs { config: StyleConfig { weights: on, ..inputs.config.clone() }, ..inputs };
+        Session::prepare(started, &mut |_| {}).expect("session with the term").step().expect("a step")
+    })
+}
+
 /// λ_sw and λ_swd (the sliced Wasserstein terms on the RGB and the depth
 /// features) on both engines: measured from the step they are turned on
 /// (λ_swd on geometry steps, which take the depth's gradient), and on the
@@ -288,7 +310,7 @@ fn lambda_mean_acts_on_the_steps_asked_for() {
 /// to the features' rounding.
 #[test]
 fn the_sliced_terms_run_on_both_engines() {
-    use gast_core::session::{Session, StepReport};
+    use gast_core::session::StepReport;
     type Term = (&'static str, Mode, LossWeights, fn(&StepReport) -> f32);
     let terms: [Term; 2] = [
         ("λ_sw = 100", Mode::ColorOnly, LossWeights { sliced: 100.0, ..Default::default() }, |r| r.losses.sliced),
@@ -298,19 +320,8 @@ fn the_sliced_terms_run_on_both_engines() {
     ];
     for (name, mode, on, measured) in terms {
         let Some(cpu_inputs) = inputs(object_config(mode, LossWeights::default())) else { return };
-        let gpu_inputs = SessionInputs { gpu: Some(gpu_context()), ..cpu_inputs.clone() };
-        let mut first = Vec::new();
-        for (device, inputs) in [("CPU", cpu_inputs), ("GPU", gpu_inputs)] {
-            let mut s = Session::prepare(inputs.clone(), &mut |_| {}).expect("session");
-            let off = measured(&s.step().expect("a step"));
-            s.set_config(StyleConfig { weights: on, ..s.config().clone() }).expect("the term on");
-            let after = measured(&s.step().expect("a step with the term"));
-            assert!(off == 0.0 && after > 0.0 && after.is_finite(), "{device}, {name}: before {off}, after {after}");
-            let started = SessionInputs { config: StyleConfig { weights: on, ..inputs.config.clone() }, ..inputs };
-            let r = Session::prepare(started, &mut |_| {}).expect("session with the term").step().expect("a step");
-            first.push((measured(&r), r.losses.total));
-        }
-        let [(cpu, cpu_total), (gpu, gpu_total)] = first[..] else { unreachable!() };
+        let [a, b] = term_on_both_engines(name, &cpu_inputs, on, measured);
+        let ((cpu, cpu_total), (gpu, gpu_total)) = ((measured(&a), a.losses.total), (measured(&b), b.losses.total));
         eprintln!("{name}: first step's term CPU {cpu}, GPU {gpu}; total {cpu_total} / {gpu_total}");
         assert!((cpu - gpu).abs() <= 1e-3 * cpu, "{name}: the first step's term, CPU {cpu}, GPU {gpu}");
         assert!((cpu_total - gpu_total).abs() <= 1e-3 * cpu_total.abs(), "{name}: total {cpu_total} vs {gpu_total}");
@@ -326,7 +337,7 @@ fn the_sliced_terms_run_on_both_engines() {
 /// the CPU's for one draw.
 #[test]
 fn the_assignment_terms_run_on_both_engines() {
-    use gast_core::session::{Session, StepReport};
+    use gast_core::session::StepReport;
     type Term = (&'static str, LossWeights, fn(&StepReport) -> f32);
     let terms: [Term; 2] = [
         ("λ_as = 10", LossWeights { assignment: 10.0, ..Default::default() }, |r| r.losses.assignment),
@@ -337,20 +348,10 @@ fn the_assignment_terms_run_on_both_engines() {
         ),
     ];
     let Some(cpu_inputs) = inputs(object_config(Mode::ColorOnly, LossWeights::default())) else { return };
-    let gpu_inputs = SessionInputs { gpu: Some(gpu_context()), ..cpu_inputs.clone() };
     for (name, on, measured) in terms {
-        let mut first = Vec::new();
-        for (device, inputs) in [("CPU", cpu_inputs.clone()), ("GPU", gpu_inputs.clone())] {
-            let mut s = Session::prepare(inputs.clone(), &mut |_| {}).expect("session");
-            let off = measured(&s.step().expect("a step"));
-            s.set_config(StyleConfig { weights: on, ..s.config().clone() }).expect("the term on");
-            let after = measured(&s.step().expect("a step with the term"));
-            assert!(off == 0.0 && after > 0.0 && after.is_finite(), "{device}, {name}: before {off}, after {after}");
-            let started = SessionInputs { config: StyleConfig { weights: on, ..inputs.config.clone() }, ..inputs };
-            let r = Session::prepare(started, &mut |_| {}).expect("session with the term").step().expect("a step");
-            first.push((measured(&r), r.losses.gcfm, r.losses.content));
-        }
-        let [(cpu, cpu_gcfm, cpu_content), (gpu, gpu_gcfm, gpu_content)] = first[..] else { unreachable!() };
+        let [a, b] = term_on_both_engines(name, &cpu_inputs, on, measured);
+        let (cpu, cpu_gcfm, cpu_content) = (measured(&a), a.losses.gcfm, a.losses.content);
+        let (gpu, gpu_gcfm, gpu_content) = (measured(&b), b.losses.gcfm, b.losses.content);
         eprintln!("{name}: first step's term CPU {cpu}, GPU {gpu}; GCFM {cpu_gcfm} / {gpu_gcfm}");
         assert!((cpu_gcfm - gpu_gcfm).abs() <= 1e-4 * cpu_gcfm.abs().max(1.0), "{name}: GCFM {cpu_gcfm} vs {gpu_gcfm}");
         assert!((cpu_content - gpu_content).abs() <= 1e-4, "{name}: content {cpu_content} vs {gpu_content}");

@@ -96,6 +96,15 @@ if j and len(j["runs"]) == 2:
 else:
     figure("assignment terms, with / without", None, "×", None, False, status("compare_assign"))
 
+# The depth's sliced Wasserstein term (the frame recipe), at the largest step size.
+j = load("compare_sliced_depth.json")
+if j and len(j["runs"]) == 2:
+    a, b = j["runs"]
+    figure("λ_swd 1 (frame recipe), step time with / without", b["ms_per_step"] / max(a["ms_per_step"], 1e-9), "×",
+           None, None, f"{a['ms_per_step']:.2f} ms without, {b['ms_per_step']:.2f} ms with, whole frame at {j['resolution']} px")
+else:
+    figure("λ_swd 1, with / without", None, "×", None, False, status("compare_sliced_depth"))
+
 # The full schedule, load to export.
 for name, what, target in (("full_guitar", "full schedule, guitar × block2", 60.0), ("full_fern", "full schedule, fern × block2", 180.0)):
     s = doc["steps"].get(name)

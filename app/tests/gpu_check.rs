@@ -30,7 +30,16 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
     let doc: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("gpu-check.json")).expect("gpu-check.json written"))
             .expect("gpu-check.json parses");
-    for step in ["golden", "guitar_32", "guitar_48", "full_guitar", "guitar_64", "compare_assign", "playbot_32"] {
+    for step in [
+        "golden",
+        "guitar_32",
+        "guitar_48",
+        "full_guitar",
+        "guitar_64",
+        "compare_assign",
+        "compare_sliced_depth",
+        "playbot_32",
+    ] {
         assert_eq!(doc["steps"][step]["rc"], 0, "step {step}: {}\n{tail}", doc["steps"][step]);
     }
     let figures = doc["figures"].as_array().expect("figures");

@@ -68,6 +68,11 @@ pub struct StepArgs {
     /// terms (λ_asc 10, λ_as 0.015: the focus study's object recipe), and print what they cost.
     #[arg(long, conflicts_with_all = ["compare", "compare_focus"])]
     pub compare_assign: bool,
+    /// Run the same steps on --device twice in this process, without and with the depth's
+    /// sliced Wasserstein term (λ_swd 1: the frame recipe's), and print what it costs
+    /// (give --focus frame: the term is the full-frame default).
+    #[arg(long, conflicts_with_all = ["compare", "compare_focus", "compare_assign"])]
+    pub compare_sliced_depth: bool,
     /// Depth Anything V2 checkpoint for the style depth line (else $GAST_DEPTH_MODEL or the
     /// caches; never downloaded here).
     #[arg(long)]
@@ -187,9 +192,11 @@ pub(super) fn reuse_on_gpu(args: &StepArgs) -> anyhow::Result<Option<ExitCode>> 
         && f.matching_dims.is_none()
         && f.matching_candidates.is_none()
         && f.vgg_window.is_none();
-    if let (Some(reuse), true, false) =
-        (f.matching_reuse, reuse_only, args.compare || args.compare_focus || args.compare_assign)
-        && let Some(ctx) = args.device.resolve().with_context(|| format!("--device {}", args.device))?
+    if let (Some(reuse), true, false) = (
+        f.matching_reuse,
+        reuse_only,
+        args.compare || args.compare_focus || args.compare_assign || args.compare_sliced_depth,
+    ) && let Some(ctx) = args.device.resolve().with_context(|| format!("--device {}", args.device))?
     {
         return compare_reuse_gpu(args, ctx, reuse).map(Some);
     }
@@ -229,6 +236,13 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         let mut on = config.clone();
         (on.weights.assignment_cosine, on.weights.assignment) = (10.0, 0.015);
         return compare_arms(&args, &inputs, [("without", config), ("λ_asc 10 + λ_as 0.015", on)], gpu, budget);
+    }
+    if args.compare_sliced_depth {
+        let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
+        let off = StyleConfig { frame_recipe: false, ..config.clone() };
+        let mut on = off.clone();
+        on.weights.sliced_depth = gast_core::style::config::FRAME_RECIPE_SLICED_DEPTH;
+        return compare_arms(&args, &inputs, [("without", off), ("λ_swd 1", on)], gpu, budget);
     }
     let devices: Vec<DeviceChoice> =
         if args.compare { vec![DeviceChoice::Cpu, DeviceChoice::Gpu] } else { vec![args.device] };
