@@ -10,6 +10,10 @@
 //! dict and builds no Python objects: a tensor becomes its storage key,
 //! offset, shape and stride, and only the storages of the wanted tensors are
 //! read (the VGG16 file is 528 MB, the layers we need 7 MB).
+//!
+//! It returns [`super::weights`]' tensor and error types, and `weights.rs`
+//! calls it for a `.pth` file (beside its safetensors reader): one loader,
+//! its pickle reader in its own file by size.
 
 use std::collections::HashMap;
 use std::fs::File;
