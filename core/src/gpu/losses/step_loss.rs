@@ -4,8 +4,9 @@
 //!
 //! [`StepLossPlan`] holds the scratch buffers and planned launches for one
 //! image size: the clamp, the 0.5× downscale, the depth map, the edge map,
-//! three VGG forwards, GCFM, content, the two VGG backwards and the image-space
-//! adjoints, TV and the depth regulariser. The engine ([`super::GpuEngine`])
+//! three VGG forwards, GCFM, content, the feature-mean and sliced terms where
+//! their weights are on, the two VGG backwards and the image-space adjoints,
+//! TV and the depth regulariser. The engine ([`super::GpuEngine`])
 //! records it between the rasterizer's forward and backward passes;
 //! [`step_loss_gpu`] runs it on uploaded maps (the golden checks). With a
 //! [`GpuFocus`] (the object focus), GCFM, content, TV and the depth map's
