@@ -50,14 +50,41 @@ fn weight(ui: &mut Ui, value: &mut f32, max: f32, label: &str, hover: &str) -> b
         .changed()
 }
 
-/// Edits `c` in place; returns true when anything changed.
-pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig) -> bool {
+/// The loss weights a run of `c` uses that differ from its sliders because a
+/// recipe lifts them ([`StyleConfig::resolved`]): (term symbol, the value the
+/// run uses). `coverage`: the running session's mean coverage; without a
+/// run, only a fixed focus tells which recipe applies.
+pub fn recipe_weights(c: &StyleConfig, coverage: Option<f32>) -> Vec<(&'static str, f32)> {
+    let coverage = match (coverage, c.focus) {
+        (Some(v), _) => v,
+        (None, Focus::Auto) => return Vec::new(),
+        // A fixed focus ignores the coverage.
+        (None, _) => 1.0,
+    };
+    let (mut run, mut set) = (c.resolved(coverage).weights, c.weights);
+    TERMS
+        .iter()
+        .filter_map(|t| {
+            let (used, slider) = (*(t.weight)(&mut run), *(t.weight)(&mut set));
+            (used != slider).then_some((t.symbol, used))
+        })
+        .collect()
+}
+
+/// Edits `c` in place; returns true when anything changed. `coverage`: the
+/// running session's mean coverage, which settles `auto` focus and so which
+/// recipe lifts which weight (shown under the slider it lifts).
+pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>) -> bool {
     let mut changed = false;
     ui.label(egui::RichText::new("Loss weights").strong());
+    let lifted = recipe_weights(c, coverage);
     // One slider per loss term (`gast_core::style::terms`), with the choices that belong to a term after it.
     for t in &TERMS {
         let hover = if t.gpu { t.help.to_string() } else { format!("{} (CPU device only so far)", t.help) };
         changed |= weight(ui, (t.weight)(&mut c.weights), t.max, t.symbol, &hover);
+        if let Some((_, used)) = lifted.iter().find(|(s, _)| *s == t.symbol) {
+            ui.weak(format!("    the run uses {} {used} (a recipe below; set it here to override)", t.symbol));
+        }
         if t.key == "rotation" {
             changed |= egui::ComboBox::from_label("λ_α, λ_s, λ_r form")
                 .selected_text(regulariser_label(c.param_regulariser))
@@ -321,4 +348,31 @@ pub(super) fn robust_range(values: &[f32]) -> Option<(f32, f32)> {
 /// around 1e-4 and would all read 0.000).
 pub(super) fn loss_label(v: f32) -> String {
     if v == 0.0 || v.abs() >= 0.01 { format!("{v:.3}") } else { format!("{v:.2e}") }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_editor_names_the_weights_a_recipe_lifts_for_the_run() {
+        let auto = StyleConfig::default();
+        assert_eq!(auto.focus, Focus::Auto);
+        // Before a run, auto focus does not say which recipe applies.
+        assert!(recipe_weights(&auto, None).is_empty());
+        // A full frame: the frame recipe's λ_swd, nothing else.
+        let frame = recipe_weights(&auto, Some(1.0));
+        assert_eq!(frame.len(), 1, "{frame:?}");
+        assert_eq!(frame[0].1, FRAME_RECIPE_SLICED_DEPTH);
+        // An object: the two assignment weights.
+        let mut object: Vec<f32> = recipe_weights(&auto, Some(0.2)).into_iter().map(|(_, v)| v).collect();
+        object.sort_by(f32::total_cmp);
+        assert_eq!(object, vec![OBJECT_RECIPE_ASSIGN, OBJECT_RECIPE_ASSIGN_COS]);
+        // A fixed focus tells without a run; a weight the user set, or the paper's preset, lifts nothing.
+        assert_eq!(recipe_weights(&StyleConfig { focus: Focus::Frame, ..auto.clone() }, None).len(), 1);
+        let mut own = auto.clone();
+        own.weights.sliced_depth = 3.0;
+        assert!(recipe_weights(&own, Some(1.0)).is_empty());
+        assert!(recipe_weights(&StyleConfig::paper(), Some(1.0)).is_empty());
+    }
 }

@@ -226,7 +226,8 @@ impl StudioApp {
 
         ui.separator();
         ui.heading("Parameters");
-        if controls::config_editor(ui, &mut self.config) && self.run.is_live() {
+        let coverage = self.run.start().map(|s| s.coverage);
+        if controls::config_editor(ui, &mut self.config, coverage) && self.run.is_live() {
             self.run.send(Command::SetConfig(Box::new(self.config.clone())));
         }
         ui.horizontal(|ui| {

@@ -164,7 +164,9 @@ impl GpuEngine {
             opacity: GpuAdam::new(ctx, n, config.adam),
         };
         let pair_capacity = busiest_view(ctx, &k.raster, &g_ref_gpu, cameras, config)?;
-        let style = GpuStyle::new(ctx, style);
+        let mut gpu_style = GpuStyle::new(ctx, style);
+        gpu_style.upload_sliced(ctx, style, &config.weights);
+        let style = gpu_style;
         let mut engine = Self {
             ctx: ctx.clone(),
             k,
@@ -216,10 +218,12 @@ impl GpuEngine {
         std::mem::take(&mut self.warnings)
     }
 
-    /// New style features (a new texture scale or depth polarity).
-    pub fn set_style(&mut self, style: &StyleFeatures) {
+    /// New style features (a new texture scale or depth polarity), with the
+    /// sliced targets `weights` turns on.
+    pub fn set_style(&mut self, style: &StyleFeatures, weights: &LossWeights) {
         let before = self.ctx.allocated_bytes();
         self.style = GpuStyle::new(&self.ctx, style);
+        self.style.upload_sliced(&self.ctx, style, weights);
         // GCFM workspaces depend on the style's size: rebuild the plans; the
         // views' subset searches and kept matches belong to the old style, so
         // their targets are made anew at their next visit.
@@ -241,6 +245,15 @@ impl GpuEngine {
         self.plans.clear();
         self.targets = (0..views).map(|_| None).collect();
         self.background = background;
+    }
+
+    /// Uploads the style's sliced targets that `weights` turns on and the
+    /// engine has not uploaded yet (a slider turned λ_sw or λ_swd on): call
+    /// before the first step with those weights.
+    pub fn upload_style_terms(&mut self, style: &StyleFeatures, weights: &LossWeights) {
+        let before = self.ctx.allocated_bytes();
+        self.style.upload_sliced(&self.ctx, style, weights);
+        self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
     }
 
     /// Whether the next steps' GCFM, content, TV and depth normalisation look

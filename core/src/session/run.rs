@@ -440,8 +440,11 @@ impl Session {
                 config.depth_polarity,
             );
             if let Some(e) = &mut self.engine {
-                e.set_style(&self.style.targets.features);
+                e.set_style(&self.style.targets.features, &config.weights);
             }
+        }
+        if let Some(e) = &mut self.engine {
+            e.upload_style_terms(&self.style.targets.features, &config.weights);
         }
         self.vgg = with_conv(self.vgg.clone(), config.conv);
         let restyled =

@@ -27,6 +27,7 @@
 use super::gemm::{Gemm, GemmPlan, GemmSpec, Strided};
 use super::kernel::Launch;
 use super::{Bind, GpuContext, GpuFocus, GpuSlicedTarget, Kernel};
+use crate::style::config::LossWeights;
 use crate::style::gcfm::StyleFeatures;
 
 /// Threads per workgroup of the `gcfm.wgsl` kernels.
@@ -63,12 +64,14 @@ pub struct GpuStyle {
     modal_inv_norm: Vec<wgpu::Buffer>,
     /// The RGB features' per-channel means (λ_mean's target), on the host.
     rgb_mean: Vec<f32>,
-    /// The sliced Wasserstein targets of the RGB and depth features (λ_sw, λ_swd).
-    sliced: [GpuSlicedTarget; 2],
+    /// The sliced Wasserstein targets of the RGB and depth features (λ_sw,
+    /// λ_swd), uploaded only once their term is on ([`GpuStyle::upload_sliced`]).
+    sliced: [Option<GpuSlicedTarget>; 2],
 }
 
 impl GpuStyle {
-    /// Uploads the three modalities' features and their norms.
+    /// Uploads the three modalities' features and their norms; the sliced
+    /// targets wait for [`GpuStyle::upload_sliced`].
     pub fn new(ctx: &GpuContext, style: &StyleFeatures) -> Self {
         Self {
             channels: style.channels,
@@ -82,13 +85,24 @@ impl GpuStyle {
                 })
                 .collect(),
             rgb_mean: style.rgb_mean().to_vec(),
-            sliced: [0, 1].map(|m| GpuSlicedTarget::new(ctx, style.sliced(m))),
+            sliced: [None, None],
         }
     }
 
-    /// The sliced Wasserstein target of modality `m` (0 RGB, 1 depth).
-    pub fn sliced(&self, m: usize) -> &GpuSlicedTarget {
-        &self.sliced[m]
+    /// Uploads the sliced Wasserstein target of each sliced term `weights`
+    /// turns on (λ_sw: RGB, λ_swd: depth) that has none yet: a style whose
+    /// terms stay off never projects and sorts its features for them.
+    pub fn upload_sliced(&mut self, ctx: &GpuContext, style: &StyleFeatures, weights: &LossWeights) {
+        for (m, weight) in [weights.sliced, weights.sliced_depth].into_iter().enumerate() {
+            if weight > 0.0 && self.sliced[m].is_none() {
+                self.sliced[m] = Some(GpuSlicedTarget::new(ctx, style.sliced(m)));
+            }
+        }
+    }
+
+    /// The sliced Wasserstein target of modality `m` (0 RGB, 1 depth), if uploaded.
+    pub fn sliced(&self, m: usize) -> Option<&GpuSlicedTarget> {
+        self.sliced[m].as_ref()
     }
 
     /// The RGB features' per-channel means ([`StyleFeatures::rgb_mean`]).

@@ -397,8 +397,9 @@ impl StepLossPlan {
         }
         // λ_sw on the RGB features on every step, λ_swd on the depth's where its gradient is taken.
         for (m, wanted) in [(0, true), (1, depth_grad)] {
-            if let Some(term) = self.sliced[m].as_ref().filter(|_| wanted && self.sliced_on[m]) {
-                term.record(ctx, enc, style.sliced(m), feats[m], focus, &self.v_feat[m], scalars);
+            let term = self.sliced[m].as_ref().filter(|_| wanted && self.sliced_on[m]);
+            if let (Some(term), Some(target)) = (term, style.sliced(m)) {
+                term.record(ctx, enc, target, feats[m], focus, &self.v_feat[m], scalars);
             }
         }
 
@@ -436,7 +437,12 @@ fn sliced_term(
     if weight <= 0.0 {
         return Ok(None);
     }
-    SlicedLoss::new(ctx, &k.sliced, &k.reduce, style.sliced(m), positions, weight, at).map(Some)
+    let target = style.sliced(m).ok_or_else(|| {
+        GpuError::TooLarge(format!(
+            "the sliced term {m} is on but its style target was not uploaded (GpuStyle::upload_sliced)"
+        ))
+    })?;
+    SlicedLoss::new(ctx, &k.sliced, &k.reduce, target, positions, weight, at).map(Some)
 }
 
 /// The whole per-step loss of uploaded maps on the GPU, read back: the twin
@@ -459,7 +465,8 @@ pub fn step_loss_gpu(
     focus_alpha: Option<&[f32]>,
 ) -> Result<StepLoss, GpuError> {
     let (h, w) = (maps.height, maps.width);
-    let gstyle = GpuStyle::new(ctx, &style.features);
+    let mut gstyle = GpuStyle::new(ctx, &style.features);
+    gstyle.upload_sliced(ctx, &style.features, weights);
     let plan = StepLossPlan::new(ctx, k, &gstyle, h, w, weights)?;
     let rgb = ctx.upload("loss.in.rgb", maps.rgb);
     let inv_depth = ctx.upload("loss.in.inv_depth", maps.inv_depth);
