@@ -615,6 +615,7 @@ fn the_evaluation_ring_can_be_rendered_over_the_style_colour() {
         64,
         &inputs.style_depth,
         inputs.config.depth_polarity,
+        0,
     );
     let want = mean_colour(&style.maps.rgb);
     assert!(want.iter().any(|&v| v > 0.05), "mosaic is not black: {want:?}");

@@ -87,23 +87,22 @@ for scene in ("guitar", "playbot"):
                        (mib is not None and mib <= 2048) if res == 512 else None,
                        f"engine allocations; process peak resident {j['peak_resident_mib']:.0f} MiB")
 
-# The assignment terms' host round trip.
-j = load("compare_assign.json")
-if j and len(j["runs"]) == 2:
-    a, b = j["runs"]
-    figure("assignment terms (λ_asc 10 + λ_as 0.015), step time with / without", b["ms_per_step"] / max(a["ms_per_step"], 1e-9), "×",
-           None, None, f"{a['ms_per_step']:.2f} ms without, {b['ms_per_step']:.2f} ms with")
-else:
-    figure("assignment terms, with / without", None, "×", None, False, status("compare_assign"))
+def with_without(step, what, short, extra=lambda j: ""):
+    """A term's cost: the step time of `gast bench step --compare-*` with the term on against off."""
+    j = load(f"{step}.json")
+    if j and len(j["runs"]) == 2:
+        a, b = j["runs"]
+        figure(f"{what}, step time with / without", b["ms_per_step"] / max(a["ms_per_step"], 1e-9), "×",
+               None, None, f"{a['ms_per_step']:.2f} ms without, {b['ms_per_step']:.2f} ms with{extra(j)}")
+    else:
+        figure(f"{short}, with / without", None, "×", None, False, status(step))
 
+
+# The assignment terms' host round trip.
+with_without("compare_assign", "assignment terms (λ_asc 10 + λ_as 0.015)", "assignment terms")
 # The depth's sliced Wasserstein term (the frame recipe), at the largest step size.
-j = load("compare_sliced_depth.json")
-if j and len(j["runs"]) == 2:
-    a, b = j["runs"]
-    figure("λ_swd 1 (frame recipe), step time with / without", b["ms_per_step"] / max(a["ms_per_step"], 1e-9), "×",
-           None, None, f"{a['ms_per_step']:.2f} ms without, {b['ms_per_step']:.2f} ms with, whole frame at {j['resolution']} px")
-else:
-    figure("λ_swd 1, with / without", None, "×", None, False, status("compare_sliced_depth"))
+with_without("compare_sliced_depth", "λ_swd 1 (frame recipe)", "λ_swd 1",
+             lambda j: f", whole frame at {j['resolution']} px")
 
 # The full schedule, load to export.
 for name, what, target in (("full_guitar", "full schedule, guitar × block2", 60.0), ("full_fern", "full schedule, fern × block2", 180.0)):

@@ -89,8 +89,14 @@ pub fn run(
             let path = shared.join(&sizes.styles[s]);
             let image = StyleImage::open(&path).map_err(anyhow::Error::msg)?;
             let base = sizes.base_config(seed);
-            let prepared =
-                prepare_style(vgg, &image, base.texture_scale, &StyleDepthSource::Heuristic, base.depth_polarity);
+            let prepared = prepare_style(
+                vgg,
+                &image,
+                base.texture_scale,
+                &StyleDepthSource::Heuristic,
+                base.depth_polarity,
+                base.depth_relief_px,
+            );
             let m = &prepared.maps;
             let refs = StyleRefs {
                 rgb: vgg.features(&m.rgb, m.height, m.width),

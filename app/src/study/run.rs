@@ -60,7 +60,14 @@ pub fn run_grid(
         if !styles.contains_key(&spec.style) {
             let image = spec.style.image().with_context(|| format!("style {}", spec.style.name()))?;
             let c = &spec.config;
-            let prepared = prepare_style(vgg, &image, c.texture_scale, &StyleDepthSource::Heuristic, c.depth_polarity);
+            let prepared = prepare_style(
+                vgg,
+                &image,
+                c.texture_scale,
+                &StyleDepthSource::Heuristic,
+                c.depth_polarity,
+                c.depth_relief_px,
+            );
             styles.insert(spec.style.clone(), (image, prepared));
         }
         let Some((image, prepared)) = styles.get(&spec.style) else { continue };

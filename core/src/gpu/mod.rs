@@ -208,6 +208,44 @@ pub(crate) mod test_util {
         f
     }
 
+    /// Records a feature-space loss term (weight 0.5, scalar slot 3) on the
+    /// features `f` (`c × positions`, `positions = cells.len()`) over the
+    /// positions `cells` covers, into a gradient buffer that starts as noise,
+    /// and checks it against the CPU's `(value, gradient)`: the value within
+    /// `tol` of it, the gradient added at half weight within `tol` of its
+    /// largest element (plus the rounding of adding to the noise), nothing
+    /// outside the mask touched. `record(encoder, features, focus, gradient,
+    /// scalars)` records the term.
+    pub fn check_masked_term(
+        ctx: &GpuContext,
+        label: &str,
+        f: &[f32],
+        cells: &[bool],
+        (want, grad): (f32, Vec<f32>),
+        tol: f32,
+        record: impl FnOnce(&mut wgpu::CommandEncoder, &wgpu::Buffer, &GpuFocus, &wgpu::Buffer, &wgpu::Buffer),
+    ) {
+        let (n, positions) = (f.len(), cells.len());
+        let g0 = noise(n, 3);
+        let (fb, gb) = (ctx.upload("f", f), ctx.upload("g", &g0));
+        let focus = cells_focus(ctx, cells);
+        let scalars = ctx.upload("scalars", &noise(8, 4));
+        let mut enc = ctx.encoder("masked term test");
+        record(&mut enc, &fb, &focus, &gb, &scalars);
+        ctx.submit(enc);
+        let got: Vec<f32> = ctx.read(&scalars).expect("scalars");
+        assert!((got[3] - want).abs() <= tol * want.abs().max(1e-6), "{label}: {} vs {want}", got[3]);
+        let g: Vec<f32> = ctx.read(&gb).expect("grad");
+        let scale = grad.iter().fold(1e-6f32, |m, v| m.max(v.abs()));
+        let worst = (0..n).map(|i| (g[i] - (g0[i] + 0.5 * grad[i])).abs()).fold(0.0f32, f32::max);
+        // Adding to g0 (about 1) rounds at f32's epsilon of it.
+        let rounding = 2.0 * f32::EPSILON * g0.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        assert!(worst <= tol * scale + rounding, "{label}: gradient off by {worst} of {scale}");
+        for i in (0..n).filter(|i| !cells[i % positions]) {
+            assert_eq!(g[i], g0[i], "{label}: element {i} is outside the mask");
+        }
+    }
+
     /// The shared test context; panics with the reason when no adapter exists
     /// (CI installs Mesa's lavapipe, see `.ci/run`).
     pub fn ctx() -> &'static GpuContext {

@@ -170,6 +170,7 @@ pub fn prepare_style(
     scale: u32,
     depth: &StyleDepthSource,
     polarity: DepthPolarity,
+    relief_px: u32,
 ) -> PreparedStyle {
     let maps = match depth {
         StyleDepthSource::Heuristic => {
@@ -179,7 +180,14 @@ pub fn prepare_style(
             style_maps(&style.rgb, style.height, style.width, scale as usize, img, polarity)
         }
     };
-    let targets = maps.targets(vgg);
+    // With the depth relief on, VGG sees the style depth's relief, as it sees the render's.
+    let targets = if relief_px > 0 {
+        let (h, w) = (maps.height, maps.width);
+        let depth = crate::style::relief::relief_normalised(&maps.depth, h, w, None, relief_px as usize);
+        crate::style::StyleTargets::new(vgg, &maps.rgb, &depth, &maps.edge, h, w)
+    } else {
+        maps.targets(vgg)
+    };
     PreparedStyle { maps, targets }
 }
 

@@ -239,7 +239,14 @@ impl Session {
         let t = Instant::now();
         let style_maps_ = match prepared {
             Some(p) => p,
-            None => prepare_style(&vgg, &style, config.texture_scale, &style_depth, config.depth_polarity),
+            None => prepare_style(
+                &vgg,
+                &style,
+                config.texture_scale,
+                &style_depth,
+                config.depth_polarity,
+                config.depth_relief_px,
+            ),
         };
         on_event(Event::Stage { name: "style features".into(), seconds: t.elapsed().as_secs_f64() });
         let t = Instant::now();
@@ -431,13 +438,17 @@ impl Session {
         if !problems.is_empty() {
             return Err(SessionError::Config(problems));
         }
-        if config.texture_scale != self.config.texture_scale || config.depth_polarity != self.config.depth_polarity {
+        let restyled = config.texture_scale != self.config.texture_scale
+            || config.depth_polarity != self.config.depth_polarity
+            || config.depth_relief_px != self.config.depth_relief_px;
+        if restyled {
             self.style = prepare_style(
                 &self.vgg,
                 &self.inputs_style,
                 config.texture_scale,
                 &self.style_depth,
                 config.depth_polarity,
+                config.depth_relief_px,
             );
             if let Some(e) = &mut self.engine {
                 e.set_style(&self.style.targets.features, &config.weights);
@@ -447,8 +458,6 @@ impl Session {
             e.upload_style_terms(&self.style.targets.features, &config.weights);
         }
         self.vgg = with_conv(self.vgg.clone(), config.conv);
-        let restyled =
-            config.texture_scale != self.config.texture_scale || config.depth_polarity != self.config.depth_polarity;
         if restyled
             || config.matching.method != self.config.matching.method
             || config.matching.dims != self.config.matching.dims

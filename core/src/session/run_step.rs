@@ -131,6 +131,7 @@ impl Session {
                 outside: (target.outside.as_ref())
                     .filter(|_| self.focus_on_object())
                     .map(|(mask, rgb)| Outside { mask, rgb }),
+                relief_px: self.config.depth_relief_px as usize,
             },
             &mut matcher,
         );

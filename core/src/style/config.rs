@@ -194,6 +194,12 @@ pub struct StyleConfig {
     /// scene's count: room for the style's relief on large smooth surfaces.
     /// 0 (the default) keeps the scene as it is.
     pub split_px: f32,
+    /// Above 0: both depth maps (the render's, min-max normalised, and the
+    /// style's) minus their blur of this radius in pixels, min-max
+    /// normalised again, before VGG (`style::relief`): relief compared with
+    /// relief where the layout would take the render's 0–1 range. 0 (the
+    /// default, the paper): the min-max normalised depth. CPU engine only.
+    pub depth_relief_px: u32,
 }
 
 /// A setting the GPU engine does not compute yet ([`StyleConfig::cpu_only`]).
@@ -274,6 +280,7 @@ impl Default for StyleConfig {
             frame_recipe: true,
             phase_leak: false,
             split_px: 0.0,
+            depth_relief_px: 0,
         }
     }
 }
@@ -325,6 +332,13 @@ impl StyleConfig {
                 off: "set it to 0",
             })
             .collect();
+        if self.depth_relief_px > 0 {
+            out.push(CpuOnly {
+                name: "the depth relief".into(),
+                detail: format!("the depth relief (depth_relief_px = {})", self.depth_relief_px),
+                off: "set it to 0",
+            });
+        }
         if self.phase_leak {
             out.push(CpuOnly {
                 name: "the phase leak".into(),
@@ -419,6 +433,9 @@ impl StyleConfig {
         if !(self.split_px == 0.0 || (1.0..=4096.0).contains(&self.split_px)) {
             out.push(format!("split_px must be 0 (off) or lie in 1..=4096 pixels, found {}", self.split_px));
         }
+        if self.depth_relief_px > 1024 {
+            out.push(format!("depth_relief_px must be 0 (off) or at most 1024 pixels, found {}", self.depth_relief_px));
+        }
         let lr = self.lr;
         let weights = self.weights.terms().map(|(t, v)| (format!("weights.{}", t.key), v));
         for (name, v) in weights.into_iter().chain([
@@ -484,6 +501,9 @@ mod tests {
         let names: Vec<String> = c.cpu_only().into_iter().map(|x| x.name).collect();
         assert_eq!(names, ["the phase leak"], "λ_sw runs on both engines");
         assert_eq!(c.cpu_only()[0].off, "turn it off");
+        let relief = StyleConfig { depth_relief_px: 8, ..StyleConfig::default() };
+        assert_eq!(relief.cpu_only()[0].name, "the depth relief");
+        assert!(StyleConfig { depth_relief_px: 5000, ..StyleConfig::default() }.problems()[0].contains("depth_relief_px"));
     }
 
     #[test]

@@ -19,6 +19,7 @@ pub mod gcfm;
 pub mod matching;
 pub mod outside;
 pub mod regularizers;
+pub mod relief;
 pub mod schedule;
 pub mod sliced;
 pub mod stage1;

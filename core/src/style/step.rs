@@ -53,6 +53,9 @@ pub struct LossFocus<'a> {
     /// The pixels the background hold keeps ([`super::outside`]); used when
     /// λ_out is above 0.
     pub outside: Option<Outside<'a>>,
+    /// Above 0: the depth map's relief at this radius in pixels goes to VGG
+    /// instead of the min-max normalised depth ([`super::relief`]).
+    pub relief_px: usize,
 }
 
 /// A frozen feature extractor with an input gradient (VGG relu3_1..3).
@@ -272,7 +275,7 @@ pub fn step_loss_masked<N: FeatureNet>(
         depth_ref,
         weights,
         depth_grad,
-        LossFocus { mask, window: true, outside: None },
+        LossFocus { mask, window: true, outside: None, relief_px: 0 },
         exact,
     )
 }
@@ -321,6 +324,16 @@ pub fn step_loss_with<N: FeatureNet>(
         .enumerate()
         .map(|(k, &x)| if mask.is_none_or(|m| m[k]) { (x - lo) / r } else { 0.0 })
         .collect();
+    // Its relief instead, when asked (`super::relief`).
+    let depth_rel = (focus.relief_px > 0).then(|| super::relief::relief(&depth_n, h, w, mask, focus.relief_px));
+    let depth_n = match &depth_rel {
+        Some(rel) => {
+            let (rlo, rhi) = masked_range(rel, mask);
+            let rr = rhi - rlo + 1e-8;
+            rel.iter().enumerate().map(|(k, &x)| if mask.is_none_or(|m| m[k]) { (x - rlo) / rr } else { 0.0 }).collect()
+        }
+        None => depth_n,
+    };
     let images = [maps.rgb.to_vec(), replicate3(&depth_n), replicate3(maps.edge)];
     let downs: Vec<(Vec<f32>, usize, usize)> = images.iter().map(|im| downscale_half(im, h, w, 3)).collect();
     let (sh, sw) = (downs[0].1, downs[0].2);
@@ -442,7 +455,15 @@ pub fn step_loss_with<N: FeatureNet>(
         Some(v) => {
             let v_depth3 = downscale_half_backward(&v, h, w, 3);
             let v_depth_n: Vec<f32> = v_depth3.chunks_exact(3).map(|p| p[0] + p[1] + p[2]).collect();
-            min_max_backward(maps.inv_depth, &v_depth_n, fmask.is_some().then_some(mask).flatten())
+            let pmask = fmask.is_some().then_some(mask).flatten();
+            let v_depth_n = match &depth_rel {
+                Some(rel) => {
+                    let v_rel = min_max_backward(rel, &v_depth_n, pmask);
+                    super::relief::relief_backward(&v_rel, h, w, mask, focus.relief_px)
+                }
+                None => v_depth_n,
+            };
+            min_max_backward(maps.inv_depth, &v_depth_n, pmask)
         }
         None => vec![0.0; h * w],
     };

@@ -286,7 +286,7 @@ fn vgg_on_the_covered_window_equals_the_whole_frame() {
         let run = |window: bool| {
             let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
             let exact = &mut |r: [&[f32]; 3], n: usize| match_features(&st.features, r, n);
-            let focus = LossFocus { mask: Some(&mask), window, outside: None };
+            let focus = LossFocus { mask: Some(&mask), window, outside: None, relief_px: 0 };
             step_loss_with(&net, &st, maps, Some(&content), Some(&dref), &weights, true, focus, exact)
         };
         let (whole, windowed) = (run(false), run(true));
@@ -391,7 +391,12 @@ fn the_background_hold_adds_its_weighted_value_and_moves_only_the_held_pixels() 
         let weights = LossWeights { gcfm: 2.0, content: 0.5, tv: 0.02, outside: lambda, ..LossWeights::default() };
         let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
         let exact = &mut |r: [&[f32]; 3], n: usize| match_features(&st.features, r, n);
-        let focus = LossFocus { mask: Some(&mask), window: true, outside: Some(Outside { mask: &held, rgb: &target }) };
+        let focus = LossFocus {
+            mask: Some(&mask),
+            window: true,
+            outside: Some(Outside { mask: &held, rgb: &target }),
+            relief_px: 0,
+        };
         step_loss_with(&net, &st, maps, Some(&content), None, &weights, false, focus, exact)
     };
     let (off, on) = (eval(0.0), eval(3.0));
@@ -407,4 +412,41 @@ fn the_background_hold_adds_its_weighted_value_and_moves_only_the_held_pixels() 
             assert_eq!(on.v_rgb[k], off.v_rgb[k], "channel {k} is not held");
         }
     }
+}
+
+#[test]
+fn the_depth_relief_gradient_matches_finite_differences_inside_the_mask() {
+    let (h, w) = (16, 24);
+    let (net, st, rgb, inv_depth, content, _) = focus_inputs();
+    let edge = vec![0.0f32; h * w];
+    let mask: Vec<bool> = (0..h * w).map(|k| k % w < 16).collect();
+    let weights = LossWeights { gcfm: 2.0, sliced_depth: 0.7, ..LossWeights::default() };
+    let eval = |d: &[f32], relief_px: usize| {
+        let maps = RenderedMaps { rgb: &rgb, inv_depth: d, edge: &edge, height: h, width: w };
+        let focus = LossFocus { mask: Some(&mask), window: false, outside: None, relief_px };
+        let exact = &mut |r: [&[f32]; 3], n: usize| crate::style::gcfm::match_features(&st.features, r, n);
+        step_loss_with(&net, &st, maps, Some(&content), None, &weights, true, focus, exact)
+    };
+    let (global, base) = (eval(&inv_depth, 0), eval(&inv_depth, 2));
+    assert!(base.terms.gcfm != global.terms.gcfm, "the relief changed what VGG sees of the depth");
+    let mut bad = Vec::new();
+    let eps = 1e-3f32;
+    for i in (0..h * w).step_by(5) {
+        let (mut p, mut m) = (inv_depth.clone(), inv_depth.clone());
+        p[i] += eps;
+        m[i] -= eps;
+        let (lp, lm) = (eval(&p, 2), eval(&m, 2));
+        if !mask[i] {
+            assert_eq!(base.v_inv_depth[i], 0.0, "pixel {i} outside the mask");
+            continue;
+        }
+        if lp.matches != base.matches || lm.matches != base.matches {
+            continue;
+        }
+        let fd = (lp.terms.total - lm.terms.total) / (2.0 * eps);
+        if (fd - base.v_inv_depth[i]).abs() > 2e-3 + 3e-2 * fd.abs() {
+            bad.push(format!("inv_depth {i}: fd {fd} analytic {}", base.v_inv_depth[i]));
+        }
+    }
+    assert!(bad.is_empty(), "{} failures:\n{}", bad.len(), bad.join("\n"));
 }

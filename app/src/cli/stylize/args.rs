@@ -167,6 +167,12 @@ pub struct StylizeArgs {
     /// surfaces, at up to 8× the Gaussians. 0 keeps the scene [default: 0].
     #[arg(long)]
     pub split_px: Option<f32>,
+    /// Compare the depth's relief with the style depth's: both depth maps
+    /// minus their blur of this radius (px), min-max normalised, before VGG,
+    /// so an object's layout does not take the whole 0–1 range. CPU only;
+    /// 0 is the paper's min-max normalised depth [default: 0].
+    #[arg(long, value_name = "PX")]
+    pub depth_relief: Option<u32>,
     /// Views rendered before/after into the output folder.
     #[arg(long, default_value_t = 4)]
     pub preview_views: usize,
@@ -227,6 +233,7 @@ impl StylizeArgs {
         set!(self.param_regulariser, c.param_regulariser);
         set!(self.phase_leak, c.phase_leak);
         set!(self.split_px, c.split_px);
+        set!(self.depth_relief, c.depth_relief_px);
         let problems = c.problems();
         anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
         Ok(c)

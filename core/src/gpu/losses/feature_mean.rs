@@ -110,7 +110,7 @@ impl FeatureMeanLoss {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::test_util::{cells_focus, ctx, noise};
+    use crate::gpu::test_util::{check_masked_term, ctx, noise};
     use crate::style::feature_mean::feature_mean_loss;
 
     #[test]
@@ -120,28 +120,20 @@ mod tests {
         for (c, positions, cover) in
             [(1usize, 1usize, 1.0f32), (7, 111, 1.0), (13, 6_364, 1.0), (7, 111, 0.3), (13, 6_364, 0.3), (5, 40, 0.0)]
         {
-            let n = c * positions;
-            let (f, g0) = (noise(n, 1), noise(n, 3));
+            let f = noise(c * positions, 1);
             let style_mean: Vec<f32> = noise(c, 2).iter().map(|v| 0.5 * v).collect();
             let cells: Vec<bool> = noise(positions, 4).iter().map(|&v| v.abs() < cover).collect();
             let loss = FeatureMeanLoss::new(ctx, &reduce, &style_mean, positions, 0.5, 3).expect("plan");
-            let (fb, gb) = (ctx.upload("f", &f), ctx.upload("g", &g0));
-            let focus = cells_focus(ctx, &cells);
-            let scalars = ctx.upload("scalars", &noise(8, 4));
-            let mut enc = ctx.encoder("feature mean test");
-            loss.record(ctx, &mut enc, &fb, &focus, &gb, &scalars);
-            ctx.submit(enc);
-            let (want, grad) = feature_mean_loss(&f, c, &style_mean, Some(&cells));
-            let got: Vec<f32> = ctx.read(&scalars).expect("scalars");
-            let label = format!("{c} × {positions}, cover {cover}");
-            assert!((got[3] - want).abs() <= 1e-5 * want.abs().max(1e-6), "{label}: {} vs {want}", got[3]);
-            let g: Vec<f32> = ctx.read(&gb).expect("grad");
-            let scale = grad.iter().fold(1e-6f32, |m, v| m.max(v.abs()));
-            let worst = (0..n).map(|i| (g[i] - (g0[i] + 0.5 * grad[i])).abs()).fold(0.0f32, f32::max);
-            assert!(worst <= 1e-5 * scale, "{label}: gradient off by {worst} of {scale}");
-            for i in (0..n).filter(|i| !cells[i % positions]) {
-                assert_eq!(g[i], g0[i], "{label}: element {i} is outside the mask");
-            }
+            let cpu = feature_mean_loss(&f, c, &style_mean, Some(&cells));
+            check_masked_term(
+                ctx,
+                &format!("{c} × {positions}, cover {cover}"),
+                &f,
+                &cells,
+                cpu,
+                1e-5,
+                |enc, fb, focus, gb, scalars| loss.record(ctx, enc, fb, focus, gb, scalars),
+            );
         }
     }
 }

@@ -211,7 +211,7 @@ impl SlicedLoss {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::test_util::{cells_focus, ctx, noise};
+    use crate::gpu::test_util::{check_masked_term, ctx, noise};
     use crate::style::sliced::sliced_loss;
 
     #[test]
@@ -225,34 +225,18 @@ mod tests {
             (24, 3_000, 900, 64, 0.7),
             (8, 50, 40, 16, 0.0),
         ] {
-            let n = c * positions;
             // ReLU features, as VGG's: many exact zeros, so many ties.
-            let f: Vec<f32> = noise(n, 1).iter().map(|v| v.max(0.0)).collect();
-            let g0 = noise(n, 3);
+            let f: Vec<f32> = noise(c * positions, 1).iter().map(|v| v.max(0.0)).collect();
             let style: Vec<f32> = noise(c * style_positions, 2).iter().map(|v| (v + 0.2).max(0.0)).collect();
             let target = SlicedTarget::new(&style, c, projections);
             let cells: Vec<bool> = noise(positions, 4).iter().map(|&v| v.abs() < cover).collect();
             let gtarget = GpuSlicedTarget::new(ctx, &target);
             let loss = SlicedLoss::new(ctx, &kernels, &reduce, &gtarget, positions, 0.5, 3).expect("plan");
-            let (fb, gb) = (ctx.upload("f", &f), ctx.upload("g", &g0));
-            let focus = cells_focus(ctx, &cells);
-            let scalars = ctx.upload("scalars", &noise(8, 4));
-            let mut enc = ctx.encoder("sliced test");
-            loss.record(ctx, &mut enc, &gtarget, &fb, &focus, &gb, &scalars);
-            ctx.submit(enc);
-            let (want, grad) = sliced_loss(&f, c, &target, Some(&cells));
-            let got: Vec<f32> = ctx.read(&scalars).expect("scalars");
+            let cpu = sliced_loss(&f, c, &target, Some(&cells));
             let label = format!("{c} × {positions} against {style_positions}, {projections} directions, cover {cover}");
-            assert!((got[3] - want).abs() <= 1e-4 * want.abs().max(1e-6), "{label}: {} vs {want}", got[3]);
-            let g: Vec<f32> = ctx.read(&gb).expect("grad");
-            let scale = grad.iter().fold(1e-6f32, |m, v| m.max(v.abs()));
-            let worst = (0..n).map(|i| (g[i] - (g0[i] + 0.5 * grad[i])).abs()).fold(0.0f32, f32::max);
-            // Adding to g0 (about 1) rounds at f32's epsilon of it.
-            let rounding = 2.0 * f32::EPSILON * g0.iter().fold(0.0f32, |m, v| m.max(v.abs()));
-            assert!(worst <= 1e-4 * scale + rounding, "{label}: gradient off by {worst} of {scale}");
-            for i in (0..n).filter(|i| !cells[i % positions]) {
-                assert_eq!(g[i], g0[i], "{label}: element {i} is outside the mask");
-            }
+            check_masked_term(ctx, &label, &f, &cells, cpu, 1e-4, |enc, fb, focus, gb, scalars| {
+                loss.record(ctx, enc, &gtarget, fb, focus, gb, scalars)
+            });
         }
     }
 }
