@@ -176,6 +176,13 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>) ->
         .checkbox(&mut c.color_floor, "colour floor")
         .on_hover_text("keep every Gaussian's base colour out of the clamp at 0, where no gradient reaches it")
         .changed();
+    changed |= ui
+        .add(egui::Slider::new(&mut c.depth_relief_px, 0..=64).text("depth relief (px)"))
+        .on_hover_text(
+            "above 0, VGG sees both depth maps minus their blur of this radius: relief compared with relief, \
+             not the scene's layout; 0 is the paper's min-max depth (CPU device only so far)",
+        )
+        .changed();
 
     ui.separator();
     egui::CollapsingHeader::new("Learning rates").default_open(false).show(ui, |ui| {

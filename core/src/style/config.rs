@@ -195,8 +195,8 @@ pub struct StyleConfig {
     /// 0 (the default) keeps the scene as it is.
     pub split_px: f32,
     /// Above 0: both depth maps (the render's, min-max normalised, and the
-    /// style's) minus their blur of this radius in pixels, min-max
-    /// normalised again, before VGG (`style::relief`): relief compared with
+    /// style's) minus their blur of this radius in pixels, centred on 0.5,
+    /// before VGG (`style::relief`): relief compared with
     /// relief where the layout would take the render's 0–1 range. 0 (the
     /// default, the paper): the min-max normalised depth. CPU engine only.
     pub depth_relief_px: u32,
@@ -503,7 +503,9 @@ mod tests {
         assert_eq!(c.cpu_only()[0].off, "turn it off");
         let relief = StyleConfig { depth_relief_px: 8, ..StyleConfig::default() };
         assert_eq!(relief.cpu_only()[0].name, "the depth relief");
-        assert!(StyleConfig { depth_relief_px: 5000, ..StyleConfig::default() }.problems()[0].contains("depth_relief_px"));
+        assert!(
+            StyleConfig { depth_relief_px: 5000, ..StyleConfig::default() }.problems()[0].contains("depth_relief_px")
+        );
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! The depth map's relief: both depth maps (the render's, min-max normalised,
-//! and the style's) minus their blur at a pattern's scale, min-max normalised
-//! again, before VGG ([`StyleConfig::depth_relief_px`](super::StyleConfig::depth_relief_px)).
+//! and the style's) minus their blur at a pattern's scale, centred on 0.5,
+//! before VGG ([`StyleConfig::depth_relief_px`](super::StyleConfig::depth_relief_px)).
 //!
 //! Min-max normalisation over a whole object or frame gives its 0–1 range to
 //! the layout (a near neck, a far body), while a style's depth spans 0–1
@@ -9,7 +9,9 @@
 //! filter of radius `r` applied twice (a tent of half-width `2r`), each pass
 //! normalised by the mask's own box sum so uncovered pixels do not pull a
 //! silhouette's relief down: a linear map for a fixed mask, whose adjoint
-//! ([`relief_backward`]) takes the gradient back.
+//! ([`relief_backward`]) takes the gradient back. The relief is then centred
+//! on 0.5 ([`centred`]), so the background, which has none, leaves no edge
+//! at an object's silhouette.
 
 /// The box sum of radius `r` over rows then columns of `h × w` values
 /// (clipped at the borders): a symmetric linear map, its own adjoint.
@@ -70,16 +72,50 @@ pub fn relief_backward(v: &[f32], h: usize, w: usize, mask: Option<&[bool]>, r: 
     mv.iter().zip(bt).map(|(a, b)| a - b).collect()
 }
 
-/// The relief of `d` min-max normalised over `mask` (0 outside): what VGG
-/// sees of a depth map with [`StyleConfig::depth_relief_px`](super::StyleConfig::depth_relief_px) `r`.
-pub fn relief_normalised(d: &[f32], h: usize, w: usize, mask: Option<&[bool]>, r: usize) -> Vec<f32> {
-    let rel = relief(d, h, w, mask, r);
+/// The relief `rel` (0 outside `mask`) centred on 0.5: `0.5 + rel / (2M)`
+/// with `M = max |rel|` over `mask`, so no relief, and every uncovered pixel,
+/// reads 0.5 (an object's silhouette leaves no edge in it) and the map spans
+/// at most 0–1.
+pub fn centred(rel: &[f32], mask: Option<&[bool]>) -> Vec<f32> {
+    let m = peak(rel, mask);
+    rel.iter().map(|&x| 0.5 + x / (2.0 * m)).collect()
+}
+
+/// `max |rel| + 1e-8` over `mask`.
+fn peak(rel: &[f32], mask: Option<&[bool]>) -> f32 {
     let inside = |k: usize| mask.is_none_or(|m| m[k]);
-    let (lo, hi) = (0..h * w)
-        .filter(|&k| inside(k))
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), k| (a.min(rel[k]), b.max(rel[k])));
-    let range = hi - lo + 1e-8;
-    (0..h * w).map(|k| if inside(k) { (rel[k] - lo) / range } else { 0.0 }).collect()
+    (0..rel.len()).filter(|&k| inside(k)).fold(0.0f32, |a, k| a.max(rel[k].abs())) + 1e-8
+}
+
+/// The adjoint of [`centred`] at `rel`: `v / (2M)` inside the mask, plus the
+/// peak's share `−sign · Σ v·rel / (2M²)` (ties at the peak share it).
+pub fn centred_backward(rel: &[f32], v: &[f32], mask: Option<&[bool]>) -> Vec<f32> {
+    let inside = |k: usize| mask.is_none_or(|m| m[k]);
+    let m = peak(rel, mask);
+    let top = m - 1e-8;
+    let at_peak = |k: usize| inside(k) && rel[k].abs() == top;
+    let ties = (0..rel.len()).filter(|&k| at_peak(k)).count().max(1) as f64;
+    let dot: f64 = rel.iter().zip(v).map(|(a, b)| f64::from(a * b)).sum();
+    let g_peak = -dot / (2.0 * f64::from(m) * f64::from(m)) / ties;
+    (0..rel.len())
+        .map(|k| {
+            if !inside(k) {
+                return 0.0;
+            }
+            let mut o = f64::from(v[k]) / (2.0 * f64::from(m));
+            if at_peak(k) {
+                o += g_peak * f64::from(rel[k].signum());
+            }
+            o as f32
+        })
+        .collect()
+}
+
+/// What VGG sees of a depth map `d` with
+/// [`StyleConfig::depth_relief_px`](super::StyleConfig::depth_relief_px) `r`:
+/// its relief ([`relief`]) [`centred`].
+pub fn relief_normalised(d: &[f32], h: usize, w: usize, mask: Option<&[bool]>, r: usize) -> Vec<f32> {
+    centred(&relief(d, h, w, mask, r), mask)
 }
 
 #[cfg(test)]
@@ -97,7 +133,7 @@ mod tests {
                 assert!(rel[y * w + x].abs() < 1e-4, "plane relief at {y},{x}: {}", rel[y * w + x]);
             }
         }
-        // A bump on the plane: its relief peaks at the bump, the normalised map spans 0–1.
+        // A bump on the plane: its relief peaks at the bump, at 1 in the centred map, within 0–1.
         let mut bumped = plane.clone();
         bumped[12 * w + 15] += 1.0;
         let n = relief_normalised(&bumped, h, w, None, 3);
@@ -114,6 +150,25 @@ mod tests {
         let d: Vec<f32> = mask.iter().map(|&m| if m { 0.7 } else { 0.0 }).collect();
         let rel = relief(&d, h, w, Some(&mask), 2);
         assert!(rel.iter().all(|v| v.abs() < 1e-6), "a flat object has no relief at its silhouette: {rel:?}");
+    }
+
+    #[test]
+    fn the_centring_backward_matches_finite_differences() {
+        let mut rel: Vec<f32> = (0..40).map(|k| ((k as f32) * 0.7).sin() * 0.3).collect();
+        // One clear peak, so the finite differences do not cross to another.
+        rel[5] = -0.6;
+        let mask: Vec<bool> = (0..40).map(|k| k % 6 != 0).collect();
+        let v: Vec<f32> = (0..40).map(|k| ((k as f32) * 0.23).cos()).collect();
+        let f = |x: &[f32]| -> f64 { centred(x, Some(&mask)).iter().zip(&v).map(|(a, b)| f64::from(a * b)).sum() };
+        let g = centred_backward(&rel, &v, Some(&mask));
+        for k in (0..40).filter(|&k| mask[k]) {
+            let (mut p, mut m) = (rel.clone(), rel.clone());
+            p[k] += 1e-3;
+            m[k] -= 1e-3;
+            let fd = (f(&p) - f(&m)) / 2e-3;
+            assert!((fd - f64::from(g[k])).abs() < 2e-3 * fd.abs().max(1.0), "{k}: fd {fd} vs {}", g[k]);
+        }
+        assert!(centred(&rel, Some(&mask)).iter().all(|v| (0.0..=1.0).contains(v)));
     }
 
     #[test]

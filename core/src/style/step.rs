@@ -327,11 +327,7 @@ pub fn step_loss_with<N: FeatureNet>(
     // Its relief instead, when asked (`super::relief`).
     let depth_rel = (focus.relief_px > 0).then(|| super::relief::relief(&depth_n, h, w, mask, focus.relief_px));
     let depth_n = match &depth_rel {
-        Some(rel) => {
-            let (rlo, rhi) = masked_range(rel, mask);
-            let rr = rhi - rlo + 1e-8;
-            rel.iter().enumerate().map(|(k, &x)| if mask.is_none_or(|m| m[k]) { (x - rlo) / rr } else { 0.0 }).collect()
-        }
+        Some(rel) => super::relief::centred(rel, mask),
         None => depth_n,
     };
     let images = [maps.rgb.to_vec(), replicate3(&depth_n), replicate3(maps.edge)];
@@ -458,7 +454,7 @@ pub fn step_loss_with<N: FeatureNet>(
             let pmask = fmask.is_some().then_some(mask).flatten();
             let v_depth_n = match &depth_rel {
                 Some(rel) => {
-                    let v_rel = min_max_backward(rel, &v_depth_n, pmask);
+                    let v_rel = super::relief::centred_backward(rel, &v_depth_n, mask);
                     super::relief::relief_backward(&v_rel, h, w, mask, focus.relief_px)
                 }
                 None => v_depth_n,
