@@ -76,13 +76,13 @@ pub struct Jobs {
     pub running: usize,
 }
 
-/// A grey image of `v`, min-max normalised over the pixels where `mask` is set
-/// (the rest black), so that empty background does not flatten the contrast.
 /// An 8-bit RGB buffer as an image.
 fn jet_image(w: u32, h: u32, rgb: &[u8]) -> egui::ColorImage {
     egui::ColorImage::from_rgb([w as usize, h as usize], rgb)
 }
 
+/// A grey image of `v`, min-max normalised over the pixels where `mask` is set
+/// (the rest black), so that empty background does not flatten the contrast.
 fn gray_image(w: u32, h: u32, v: &[f32], mask: impl Fn(usize) -> bool) -> egui::ColorImage {
     let inside: Vec<f32> = v.iter().enumerate().filter(|(i, _)| mask(*i)).map(|(_, &x)| x).collect();
     let (lo, hi) = gast_core::io::finite_range(&inside);

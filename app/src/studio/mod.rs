@@ -554,20 +554,16 @@ impl StudioApp {
                 Color32::from_rgb(250, 210, 60),
                 egui::Stroke::new(1.5, Color32::BLACK),
             );
-            ui.painter().text(
-                egui::pos2(x - 6.0, rect.top() + 6.0),
-                egui::Align2::RIGHT_TOP,
-                "before",
-                egui::FontId::proportional(13.0),
-                Color32::WHITE,
-            );
-            ui.painter().text(
-                egui::pos2(x + 6.0, rect.top() + 6.0),
-                egui::Align2::LEFT_TOP,
-                "after",
-                egui::FontId::proportional(13.0),
-                Color32::WHITE,
-            );
+            // White on a dark pill, legible over a bright wall as over black.
+            for (dx, align, label) in
+                [(-6.0, egui::Align2::RIGHT_TOP, "before"), (6.0, egui::Align2::LEFT_TOP, "after")]
+            {
+                let galley =
+                    ui.painter().layout_no_wrap(label.into(), egui::FontId::proportional(13.0), Color32::WHITE);
+                let at = align.anchor_size(egui::pos2(x + dx, rect.top() + 6.0), galley.size());
+                ui.painter().rect_filled(at.expand(3.0), 4.0, Color32::from_black_alpha(160));
+                ui.painter().galley(at.min, galley, Color32::WHITE);
+            }
         }
         if self.scene.is_none() {
             ui.painter().text(

@@ -103,6 +103,12 @@ impl StudioApp {
     pub(super) fn set_cameras(&mut self, set: gast_core::camera::CameraSet, from: &Path) {
         self.cameras = set.cameras;
         self.camera_source = from.display().to_string();
+        // The view starts at the first training camera: a forward-facing
+        // capture (fern) seen from the orbit around it shows its blurred back.
+        if let Some(cam) = self.cameras.first().cloned() {
+            let focus = self.current().and_then(|g| gast_core::camera::robust_bounds(&g.means)).map(|b| b.center);
+            self.view.snap_to(&cam, focus);
+        }
         for w in set.warnings {
             self.run.log.push(format!("cameras: {w}"));
         }

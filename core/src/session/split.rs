@@ -58,10 +58,14 @@ pub fn footprints(g: &Gaussians, cams: &[Camera]) -> Vec<f32> {
             let p = Vec3::from(g.means[i]);
             cams.iter()
                 .filter_map(|c| {
+                    // One transform per camera: the projection from the camera-space point.
                     let q = c.world_to_camera(p);
-                    let uv = c.project(p)?;
-                    let inside = uv.x >= 0.0 && uv.y >= 0.0 && uv.x < c.width as f32 && uv.y < c.height as f32;
-                    (inside && q.z > 1e-3).then(|| s * c.fx.max(c.fy) / q.z)
+                    if q.z <= 1e-3 {
+                        return None;
+                    }
+                    let (u, v) = (c.fx * q.x / q.z + c.cx, c.fy * q.y / q.z + c.cy);
+                    let inside = u >= 0.0 && v >= 0.0 && u < c.width as f32 && v < c.height as f32;
+                    inside.then(|| s * c.fx.max(c.fy) / q.z)
                 })
                 .fold(0.0f32, f32::max)
         })
