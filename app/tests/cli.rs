@@ -232,6 +232,37 @@ fn a_bad_camera_file_fails_before_the_depth_model_is_looked_for() {
     std::fs::remove_dir_all(&out).ok();
 }
 
+#[test]
+fn a_cpu_only_setting_on_the_gpu_fails_before_the_depth_model_is_looked_for() {
+    let (Some(scene), Some(style)) =
+        (shared_file("data/scenes/guitar.compressed.ply"), shared_file("data/styles/block2.jpg"))
+    else {
+        return;
+    };
+    let out = temp("cpuonly");
+    let missing_model = out.join("no-such-model.safetensors");
+    let o = gast(&[
+        "stylize",
+        s(&scene),
+        s(&style),
+        "--device",
+        "gpu",
+        "--depth-relief",
+        "8",
+        "--depth-provider",
+        "learned",
+        "--depth-model",
+        s(&missing_model),
+        "--out",
+        s(&out.join("run")),
+    ]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(err.contains("--device gpu") && err.contains("depth relief") && err.contains("--device cpu"), "{err}");
+    assert!(!err.contains("no-such-model") && !err.contains("depth model"), "the depth model came first:\n{err}");
+    std::fs::remove_dir_all(&out).ok();
+}
+
 /// Ctrl-C during `stylize`: the run stops after its step and still writes the
 /// scene, the renders and a report that says where it stopped.
 #[cfg(unix)]

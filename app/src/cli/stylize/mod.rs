@@ -226,6 +226,13 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             eprintln!("{} runs on the CPU engine only so far: the steps run on the CPU", on.join(", "));
             None
         }
+        // `gpu` refuses it now, before the depth model and the run, as the session would after them.
+        gast_core::gpu::DeviceChoice::Gpu if !config.cpu_only().is_empty() => {
+            let why: Vec<String> = (config.cpu_only().into_iter())
+                .map(|c| format!("{} runs on the CPU engine only so far: use --device cpu or {}", c.detail, c.off))
+                .collect();
+            anyhow::bail!("--device gpu: {}", why.join("; "));
+        }
         device => device.resolve().with_context(|| format!("--device {device}"))?,
     };
     // On a software rasterizer (lavapipe) the network's GEMMs run at about
