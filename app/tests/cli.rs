@@ -200,66 +200,43 @@ fn bad_inputs_fail_with_the_file_named_and_keep_existing_outputs() {
     std::fs::remove_dir_all(&out).ok();
 }
 
+/// Runs `gast stylize` on guitar × block2 with `extra` flags and a learned
+/// depth model that does not exist, in folder `out`; checks that it fails
+/// without having looked for the model, and returns its stderr (`None`
+/// without the shared data).
+fn stylize_fails_before_the_depth_model(out: &Path, extra: &[&str]) -> Option<String> {
+    let scene = shared_file("data/scenes/guitar.compressed.ply")?;
+    let style = shared_file("data/styles/block2.jpg")?;
+    let missing_model = out.join("no-such-model.safetensors");
+    let run = out.join("run");
+    let mut args = vec!["stylize", s(&scene), s(&style)];
+    args.extend_from_slice(extra);
+    args.extend(["--depth-provider", "learned", "--depth-model", s(&missing_model), "--out", s(&run)]);
+    let o = gast(&args);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(!err.contains("no-such-model") && !err.contains("depth model"), "the depth model came first:\n{err}");
+    Some(err)
+}
+
 #[test]
 fn a_bad_camera_file_fails_before_the_depth_model_is_looked_for() {
-    let (Some(scene), Some(style)) =
-        (shared_file("data/scenes/guitar.compressed.ply"), shared_file("data/styles/block2.jpg"))
-    else {
-        return;
-    };
     let out = temp("badcams");
     std::fs::create_dir_all(&out).expect("dir");
     let cams = out.join("cams.json");
     std::fs::write(&cams, b"{ not json").expect("write");
-    let missing_model = out.join("no-such-model.safetensors");
-    let o = gast(&[
-        "stylize",
-        s(&scene),
-        s(&style),
-        "--cameras",
-        s(&cams),
-        "--depth-provider",
-        "learned",
-        "--depth-model",
-        s(&missing_model),
-        "--out",
-        s(&out.join("run")),
-    ]);
-    assert!(!o.status.success());
-    let err = stderr(&o);
-    assert!(err.contains("cams.json"), "{err}");
-    assert!(!err.contains("no-such-model") && !err.contains("depth model"), "the depth model came first:\n{err}");
+    if let Some(err) = stylize_fails_before_the_depth_model(&out, &["--cameras", s(&cams)]) {
+        assert!(err.contains("cams.json"), "{err}");
+    }
     std::fs::remove_dir_all(&out).ok();
 }
 
 #[test]
 fn a_cpu_only_setting_on_the_gpu_fails_before_the_depth_model_is_looked_for() {
-    let (Some(scene), Some(style)) =
-        (shared_file("data/scenes/guitar.compressed.ply"), shared_file("data/styles/block2.jpg"))
-    else {
-        return;
-    };
     let out = temp("cpuonly");
-    let missing_model = out.join("no-such-model.safetensors");
-    let o = gast(&[
-        "stylize",
-        s(&scene),
-        s(&style),
-        "--device",
-        "gpu",
-        "--depth-relief",
-        "8",
-        "--depth-provider",
-        "learned",
-        "--depth-model",
-        s(&missing_model),
-        "--out",
-        s(&out.join("run")),
-    ]);
-    assert!(!o.status.success());
-    let err = stderr(&o);
-    assert!(err.contains("--device gpu") && err.contains("depth relief") && err.contains("--device cpu"), "{err}");
-    assert!(!err.contains("no-such-model") && !err.contains("depth model"), "the depth model came first:\n{err}");
+    if let Some(err) = stylize_fails_before_the_depth_model(&out, &["--device", "gpu", "--depth-relief", "8"]) {
+        assert!(err.contains("--device gpu") && err.contains("depth relief") && err.contains("--device cpu"), "{err}");
+    }
     std::fs::remove_dir_all(&out).ok();
 }
 
