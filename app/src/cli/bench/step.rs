@@ -233,9 +233,12 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     }
     if args.compare_assign {
         let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
-        let mut on = config.clone();
-        (on.weights.assignment_cosine, on.weights.assignment) = (10.0, 0.015);
-        return compare_arms(&args, &inputs, [("without", config), ("λ_asc 10 + λ_as 0.015", on)], gpu, budget);
+        // The object recipe would switch the terms on in the arm without them.
+        let off = StyleConfig { object_recipe: false, ..config.clone() };
+        let mut on = off.clone();
+        (on.weights.assignment_cosine, on.weights.assignment) =
+            (gast_core::style::config::OBJECT_RECIPE_ASSIGN_COS, gast_core::style::config::OBJECT_RECIPE_ASSIGN);
+        return compare_arms(&args, &inputs, [("without", off), ("λ_asc 10 + λ_as 0.015", on)], gpu, budget);
     }
     if args.compare_sliced_depth {
         let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
