@@ -320,10 +320,12 @@ impl GpuEngine {
             _ => Search::Every,
         };
         plan.loss.record_features(ctx, &k.loss, &mut enc, rgb, inv_depth, None, focus);
-        // The assignment terms: the drawn columns gathered here, paired on the
-        // host between two submissions, their gradient added in the second.
+        // The assignment terms: the drawn columns gathered and submitted
+        // first, the feature-space losses submitted behind them, so the device
+        // runs the GCFM search while the host pairs the columns; the pull's
+        // gradient joins in the backward pass's submission.
         let assigning = w.assignment > 0.0 || w.assignment_cosine > 0.0;
-        let mut pulled = None;
+        let mut gathered = None;
         if assigning {
             let n = plan.loss.positions();
             let covered: Vec<usize> = match focus.and(target.covered_at.as_ref()) {
@@ -334,24 +336,37 @@ impl GpuEngine {
             let a =
                 self.assign.get_or_insert_with(|| GpuAssignment::new(ctx, style.channels(), config.seed ^ ASSIGN_SEED));
             a.record_gather(ctx, &mut enc, plan.loss.rgb_features(), n, covered, style.modality(0), style.positions());
-            ctx.submit(enc);
-            pulled = Some(a.pull(ctx, w.assignment_cosine, w.assignment)?);
-            enc = ctx.encoder("engine.step.losses");
+            gathered = Some(ctx.submit_indexed(enc));
+            enc = ctx.encoder("engine.step.feature_losses");
         }
-        plan.loss.record_losses(
+        plan.loss.record_feature_losses(
             ctx,
             &k.loss,
             &mut enc,
             &self.style,
+            content,
+            geometry,
+            focus,
+            &self.scalars,
+            search,
+        );
+        let mut pulled = None;
+        if let (Some(gathered), Some(a)) = (gathered, self.assign.as_mut()) {
+            ctx.submit(enc);
+            pulled = Some(a.pull(ctx, gathered, w.assignment_cosine, w.assignment)?);
+            enc = ctx.encoder("engine.step.backward");
+        }
+        plan.loss.record_backward(
+            ctx,
+            &k.loss,
+            &mut enc,
             rgb,
             inv_depth,
-            content,
             depth_ref,
             hold,
             geometry,
             focus,
             &self.scalars,
-            search,
             if assigning { self.assign.as_ref() } else { None },
         );
         let keep = if searched && reuse > 1 {

@@ -229,21 +229,56 @@ impl GpuContext {
         offset: u64,
         bytes: u64,
     ) -> Result<Vec<T>, GpuError> {
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("readback"),
-            size: bytes.max(4),
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let staging = self.staging("readback", bytes);
         let mut enc = self.encoder("readback");
         enc.copy_buffer_to_buffer(buffer, offset, &staging, 0, bytes);
         self.submit(enc);
+        self.map_read(&staging, bytes, None)
+    }
+
+    /// A buffer the host maps to read (`MAP_READ | COPY_DST`), of `bytes` bytes.
+    pub fn staging(&self, label: &str, bytes: u64) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes.max(4),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// Submits `encoder`'s commands and returns their index, for
+    /// [`GpuContext::read_staged`] to wait for them alone.
+    pub fn submit_indexed(&self, encoder: wgpu::CommandEncoder) -> wgpu::SubmissionIndex {
+        self.queue.submit([encoder.finish()])
+    }
+
+    /// Reads the first `bytes` bytes of `staging` (filled by a copy in
+    /// submission `after`) as `T`s, waiting for that submission only: work
+    /// submitted after it runs on while the host reads.
+    pub fn read_staged<T: bytemuck::Pod>(
+        &self,
+        staging: &wgpu::Buffer,
+        bytes: u64,
+        after: wgpu::SubmissionIndex,
+    ) -> Result<Vec<T>, GpuError> {
+        self.map_read(staging, bytes, Some(after))
+    }
+
+    /// Maps `bytes` of `staging`, waits for submission `after` (the latest
+    /// without one), copies them out and unmaps.
+    fn map_read<T: bytemuck::Pod>(
+        &self,
+        staging: &wgpu::Buffer,
+        bytes: u64,
+        after: Option<wgpu::SubmissionIndex>,
+    ) -> Result<Vec<T>, GpuError> {
         let slice = staging.slice(..bytes);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
         });
-        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+        let wait = wgpu::PollType::Wait { submission_index: after, timeout: None };
+        self.device.poll(wait).map_err(|e| GpuError::Readback(e.to_string()))?;
         match rx.recv() {
             Ok(Ok(())) => {}
             Ok(Err(e)) => return Err(GpuError::Readback(e.to_string())),

@@ -1,7 +1,7 @@
 //! The assignment terms on the GPU engine (`shaders/assignment.wgsl`): λ_as
 //! and λ_asc, the twin of [`crate::style::assignment::assignment_loss`].
 //!
-//! The pairing is a Hungarian assignment of at most
+//! The pairing is a least-cost one-to-one assignment of at most
 //! [`crate::style::assignment::ASSIGN_MAX`] rendered positions, sequential
 //! work that stays on the host. The device gathers only the columns a step
 //! pairs (the drawn rendered positions of this step's RGB relu3 features and
@@ -10,7 +10,9 @@
 //! [`crate::style::assignment::pull_pairs`], and the device adds the
 //! gradient back at those positions before VGG's backward pass. A step moves
 //! `2 · channels · r` floats down and `channels · r` up (3 MiB at r = 512),
-//! not the feature maps.
+//! not the feature maps. The columns come down in one copy, and the host
+//! waits for the submission that gathered them alone, so the device runs the
+//! step's GCFM search while the host pairs (`GpuEngine::step`).
 //!
 //! The draw differs from the CPU step's in its seed only: the CPU seeds from
 //! the features' bits (which would need the whole maps here), the engine from
@@ -48,6 +50,8 @@ pub struct GpuAssignment {
     x: wgpu::Buffer,
     s: wgpu::Buffer,
     g: wgpu::Buffer,
+    /// `x` then `s`, copied for the host to read (`2 · channels × r`).
+    staging: wgpu::Buffer,
     /// The uniforms of the two gathers and the scatter (one each: a uniform
     /// is not rewritten between the dispatches of one encoder).
     u_x: wgpu::Buffer,
@@ -76,6 +80,7 @@ impl GpuAssignment {
             x: ctx.zeros("assignment.x", cols),
             s: ctx.zeros("assignment.s", cols),
             g: ctx.zeros("assignment.g", cols),
+            staging: ctx.staging("assignment.staging", (2 * cols * 4) as u64),
             u_x: ctx.uniform("assignment.u_x", &zero),
             u_s: ctx.uniform("assignment.u_s", &zero),
             u_g: ctx.uniform("assignment.u_g", &zero),
@@ -91,7 +96,7 @@ impl GpuAssignment {
     /// Draws this step's pairs ([`draw_pairs`]) among the `covered` positions
     /// of the `channels × n` rendered features and the `m` style positions,
     /// and records the gathers of both sides' columns from `features` and
-    /// `style`. Returns the rows drawn (0 when nothing is covered or the style
+    /// `style` and their copy for the host. Returns the rows drawn (0 when nothing is covered or the style
     /// is empty: then nothing is recorded and the step pulls nothing).
     #[allow(clippy::too_many_arguments)]
     pub fn record_gather(
@@ -136,21 +141,32 @@ impl GpuAssignment {
         let groups = Kernel::groups_1d(self.channels * r, WORKGROUP);
         self.gather.dispatch(ctx, enc, &[&self.u_x, &self.rows, features, &self.x], groups);
         self.gather.dispatch(ctx, enc, &[&self.u_s, &self.targets, style, &self.s], groups);
+        let bytes = (self.channels * r * 4) as u64;
+        enc.copy_buffer_to_buffer(&self.x, 0, &self.staging, 0, bytes);
+        enc.copy_buffer_to_buffer(&self.s, 0, &self.staging, bytes, bytes);
         self.drawn = r;
     }
 
-    /// After the gathers' submission: reads the gathered columns back, pairs
-    /// them and computes both pulls on the host ([`pull_pairs`]), and uploads
-    /// the weighted gradient for [`GpuAssignment::record_scatter`]. Returns the
-    /// terms (the gradient stays on the device; `grad` is empty).
-    pub fn pull(&mut self, ctx: &GpuContext, cosine_weight: f32, l2_weight: f32) -> Result<Assignment, GpuError> {
+    /// Once `gathered` (the submission holding the gathers) has run: reads
+    /// the gathered columns back, pairs them and computes both pulls on the
+    /// host ([`pull_pairs`]), and uploads the weighted gradient for
+    /// [`GpuAssignment::record_scatter`]. Work submitted after `gathered`
+    /// runs on meanwhile. Returns the terms (the gradient stays on the
+    /// device; `grad` is empty).
+    pub fn pull(
+        &mut self,
+        ctx: &GpuContext,
+        gathered: wgpu::SubmissionIndex,
+        cosine_weight: f32,
+        l2_weight: f32,
+    ) -> Result<Assignment, GpuError> {
         if self.drawn == 0 {
             return Ok(Assignment { cosine: 0.0, l2: 0.0, grad: Vec::new() });
         }
-        let bytes = (self.channels * self.drawn * 4) as u64;
-        let x: Vec<f32> = ctx.read_range(&self.x, 0, bytes)?;
-        let s: Vec<f32> = ctx.read_range(&self.s, 0, bytes)?;
-        let pulled = pull_pairs(&x, &s, self.channels, cosine_weight, l2_weight);
+        let half = self.channels * self.drawn;
+        let xs: Vec<f32> = ctx.read_staged(&self.staging, (2 * half * 4) as u64, gathered)?;
+        let (x, s) = xs.split_at(half);
+        let pulled = pull_pairs(x, s, self.channels, cosine_weight, l2_weight);
         ctx.write(&self.g, &pulled.grad);
         Ok(Assignment { grad: Vec::new(), ..pulled })
     }
@@ -195,8 +211,8 @@ mod tests {
             let (fb, sb, vb) = (ctx.upload("f", &f), ctx.upload("s", &style), ctx.upload("v", &v0));
             let mut enc = ctx.encoder("assignment test gather");
             a.record_gather_of(ctx, &mut enc, &fb, n, &rows, &sb, m, &targets);
-            ctx.submit(enc);
-            let got = a.pull(ctx, weights.0, weights.1).expect("pull");
+            let gathered = ctx.submit_indexed(enc);
+            let got = a.pull(ctx, gathered, weights.0, weights.1).expect("pull");
             let mut enc = ctx.encoder("assignment test scatter");
             a.record_scatter(ctx, &mut enc, &vb);
             ctx.submit(enc);
@@ -230,8 +246,8 @@ mod tests {
         let mut enc = ctx.encoder("empty");
         assert_eq!(a.record_gather(ctx, &mut enc, &fb, 10, Vec::new(), &sb, 10), 0);
         assert_eq!(a.record_gather(ctx, &mut enc, &fb, 10, vec![1, 2], &sb, 0), 0);
-        ctx.submit(enc);
-        let t = a.pull(ctx, 10.0, 1.0).expect("pull");
+        let gathered = ctx.submit_indexed(enc);
+        let t = a.pull(ctx, gathered, 10.0, 1.0).expect("pull");
         assert_eq!((t.cosine, t.l2), (0.0, 0.0));
         let mut enc = ctx.encoder("empty scatter");
         a.record_scatter(ctx, &mut enc, &vb);

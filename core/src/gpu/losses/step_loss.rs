@@ -362,7 +362,9 @@ impl StepLossPlan {
     /// [`StepLossPlan::record_features`] (in this encoder or an earlier
     /// submission): the losses and the gradients back to the render, with the
     /// assignment terms' gradient added to the RGB features' when `assign` is
-    /// given ([`GpuAssignment::record_scatter`]).
+    /// given ([`GpuAssignment::record_scatter`]). The two parts
+    /// ([`StepLossPlan::record_feature_losses`], [`StepLossPlan::record_backward`])
+    /// may go in two submissions, the assignment's pairing on the host between them.
     #[allow(clippy::too_many_arguments)]
     pub fn record_losses(
         &self,
@@ -381,9 +383,28 @@ impl StepLossPlan {
         search: Search<'_>,
         assign: Option<&GpuAssignment>,
     ) {
+        self.record_feature_losses(ctx, k, enc, style, content, depth_grad, focus, scalars, search);
+        self.record_backward(ctx, k, enc, rgb_raw, inv_depth, depth_ref, hold, depth_grad, focus, scalars, assign);
+    }
+
+    /// The losses in feature space and their gradients w.r.t. the features:
+    /// GCFM (gradients scaled by λ_GC), then content, the feature-mean term
+    /// and the sliced terms (λ_sw on the RGB features on every step, λ_swd on
+    /// the depth's where its gradient is taken).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_feature_losses(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        enc: &mut wgpu::CommandEncoder,
+        style: &GpuStyle,
+        content: Option<&wgpu::Buffer>,
+        depth_grad: bool,
+        focus: Option<&GpuFocus>,
+        scalars: &wgpu::Buffer,
+        search: Search<'_>,
+    ) {
         let focus = focus.unwrap_or(&self.frame);
-        // Feature space: GCFM (gradients scaled by λ_GC), then content and
-        // the feature-mean term on the RGB features.
         let feats = [self.states[0].features(), self.states[1].features(), self.states[2].features()];
         k.gcfm.record(ctx, enc, &self.gcfm_ws, style, feats, focus, &self.v_feat[0], &self.v_feat[1], scalars, search);
         if let Some(target) = content {
@@ -392,15 +413,36 @@ impl StepLossPlan {
         if self.feature_mean_on {
             self.feature_mean.record(ctx, enc, feats[0], focus, &self.v_feat[0], scalars);
         }
-        if let Some(a) = assign {
-            a.record_scatter(ctx, enc, &self.v_feat[0]);
-        }
-        // λ_sw on the RGB features on every step, λ_swd on the depth's where its gradient is taken.
         for (m, wanted) in [(0, true), (1, depth_grad)] {
             let term = self.sliced[m].as_ref().filter(|_| wanted && self.sliced_on[m]);
             if let (Some(term), Some(target)) = (term, style.sliced(m)) {
                 term.record(ctx, enc, target, feats[m], focus, &self.v_feat[m], scalars);
             }
+        }
+    }
+
+    /// After [`StepLossPlan::record_feature_losses`]: the assignment terms'
+    /// gradient added to the RGB features' (`assign`), then the gradients
+    /// through VGG back to the render, with TV, the hold, the clamp's mask
+    /// and the depth terms on the way.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_backward(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        enc: &mut wgpu::CommandEncoder,
+        rgb_raw: &wgpu::Buffer,
+        inv_depth: &wgpu::Buffer,
+        depth_ref: Option<&wgpu::Buffer>,
+        hold: Option<&wgpu::Buffer>,
+        depth_grad: bool,
+        focus: Option<&GpuFocus>,
+        scalars: &wgpu::Buffer,
+        assign: Option<&GpuAssignment>,
+    ) {
+        let focus = focus.unwrap_or(&self.frame);
+        if let Some(a) = assign {
+            a.record_scatter(ctx, enc, &self.v_feat[0]);
         }
 
         // Image space: RGB through VGG and the downscale, plus TV, then the clamp's mask.
