@@ -322,12 +322,11 @@ impl StepLossPlan {
         search: Search<'_>,
     ) {
         self.record_features(ctx, k, enc, rgb_raw, inv_depth, edge, focus);
-        self.record_losses(
-            ctx, k, enc, style, rgb_raw, inv_depth, content, depth_ref, hold, depth_grad, focus, scalars, search, None,
-        );
+        self.record_feature_losses(ctx, k, enc, style, content, depth_grad, focus, scalars, search);
+        self.record_backward(ctx, k, enc, rgb_raw, inv_depth, depth_ref, hold, depth_grad, focus, scalars, None);
     }
 
-    /// The first half of [`StepLossPlan::record`]: the three maps VGG sees and
+    /// The first of [`StepLossPlan::record`]'s three parts: the three maps VGG sees and
     /// their features ([`StepLossPlan::rgb_features`] holds the RGB ones).
     #[allow(clippy::too_many_arguments)]
     pub fn record_features(
@@ -358,39 +357,13 @@ impl StepLossPlan {
         }
     }
 
-    /// The second half of [`StepLossPlan::record`], after
-    /// [`StepLossPlan::record_features`] (in this encoder or an earlier
-    /// submission): the losses and the gradients back to the render, with the
-    /// assignment terms' gradient added to the RGB features' when `assign` is
-    /// given ([`GpuAssignment::record_scatter`]). The two parts
-    /// ([`StepLossPlan::record_feature_losses`], [`StepLossPlan::record_backward`])
-    /// may go in two submissions, the assignment's pairing on the host between them.
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_losses(
-        &self,
-        ctx: &GpuContext,
-        k: &StepLossKernels,
-        enc: &mut wgpu::CommandEncoder,
-        style: &GpuStyle,
-        rgb_raw: &wgpu::Buffer,
-        inv_depth: &wgpu::Buffer,
-        content: Option<&wgpu::Buffer>,
-        depth_ref: Option<&wgpu::Buffer>,
-        hold: Option<&wgpu::Buffer>,
-        depth_grad: bool,
-        focus: Option<&GpuFocus>,
-        scalars: &wgpu::Buffer,
-        search: Search<'_>,
-        assign: Option<&GpuAssignment>,
-    ) {
-        self.record_feature_losses(ctx, k, enc, style, content, depth_grad, focus, scalars, search);
-        self.record_backward(ctx, k, enc, rgb_raw, inv_depth, depth_ref, hold, depth_grad, focus, scalars, assign);
-    }
-
-    /// The losses in feature space and their gradients w.r.t. the features:
-    /// GCFM (gradients scaled by λ_GC), then content, the feature-mean term
-    /// and the sliced terms (λ_sw on the RGB features on every step, λ_swd on
-    /// the depth's where its gradient is taken).
+    /// After [`StepLossPlan::record_features`] (in this encoder or an
+    /// earlier submission): the losses in feature space and their gradients
+    /// w.r.t. the features: GCFM (gradients scaled by λ_GC), then content,
+    /// the feature-mean term and the sliced terms (λ_sw on the RGB features on
+    /// every step, λ_swd on the depth's where its gradient is taken). The
+    /// engine submits them apart from [`StepLossPlan::record_backward`] when
+    /// the assignment terms pair on the host in between.
     #[allow(clippy::too_many_arguments)]
     pub fn record_feature_losses(
         &self,
