@@ -109,7 +109,8 @@ for name, what, target in (("full_guitar", "full schedule, guitar × block2", 60
     s = doc["steps"].get(name)
     if s is None:
         if name == "full_fern":
-            figure(what, None, "s", f"≤ {target:.0f} s", None, "no fitted fern in .gpu-check (GAST_FERN_SCENE at prepare)")
+            figure(what, None, "s", f"≤ {target:.0f} s", None,
+                   "not run (not asked for, or no fitted fern in .gpu-check: GAST_FERN_SCENE at prepare)")
         continue
     rep = load(os.path.join(name, "report.json"))
     note = status(name)
@@ -131,6 +132,21 @@ if rep and rep.get("steps"):
            f"prepare {prep:.1f} s")
 elif "fern_500" in doc["steps"]:
     figure("full schedule, fern × block2, from 500 steps", None, "s", "≤ 180 s", False, status("fern_500"))
+
+# fern at 504×378 with each style asked for (fern504_STYLE): the run's time and its measures.
+for name in sorted(n for n in doc["steps"] if n.startswith("fern504_")):
+    rep = load(os.path.join(name, "report.json"))
+    sm = (rep or {}).get("summary") or {}
+    note = status(name)
+    if sm:
+        note = (note + "; " if note else "") + (
+            f"{len(rep.get('steps') or [])} steps, {rep['optimisation_s']:.0f} s optimising; "
+            f"RGB NN-cos {sm['nn_distance_matched']:.4f} -> {sm['nn_distance_after']:.4f}, "
+            f"depth SW {sm['depth_style_matched']['sw']:.3f} -> {sm['depth_style_after']['sw']:.3f}, "
+            f"depth changed {100 * sm['inverse_depth_change']:.1f}%, collapse {'yes' if sm.get('colour_collapse') else 'no'}")
+    s = doc["steps"][name]
+    figure(f"fern × {name[len('fern504_'):]} at 504×378 (load to export)", s["wall_s"] if s["rc"] == 0 else None, "s",
+           None, None, note)
 
 # The depth network.
 d = log("depth_net")
