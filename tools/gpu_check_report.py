@@ -155,8 +155,11 @@ figure("Depth Anything V2 Small on the GPU engine", None if not lines else lines
 
 # The studio.
 shot = os.path.join(out, "studio.png")
-figure("studio under Xvfb, GPU as the window's device", "screenshot" if os.path.exists(shot) else None, "", None,
-       None, status("studio") or ("no Xvfb" if "studio" not in doc["steps"] else ""))
+adapter = re.findall(r"studio: headless on (.+)", log("studio"))
+ran = re.findall(r"scripted run paused after (\d+) steps", log("studio"))
+figure("studio drawn headless on the GPU (gast studio --headless)", "screenshot" if os.path.exists(shot) else None, "",
+       None, None, "; ".join(x for x in (status("studio"), adapter[-1] if adapter else "",
+                                         f"a {ran[-1]}-step run" if ran else "") if x))
 
 with open(os.path.join(out, "gpu-check.json"), "w") as f:
     json.dump(doc, f, indent=2)

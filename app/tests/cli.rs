@@ -362,7 +362,8 @@ fn gast_without_display(args: &[&str], dir: &Path, weights: &Path) -> Output {
 }
 
 const NO_DESKTOP: &str = "the studio needs a desktop session, and none was found \
-                          (DISPLAY, WAYLAND_DISPLAY and WAYLAND_SOCKET are unset)";
+                          (DISPLAY, WAYLAND_DISPLAY and WAYLAND_SOCKET are unset); \
+                          `gast studio --headless` draws it offscreen instead";
 
 #[test]
 fn without_a_display_gast_runs_the_headless_demo_and_studio_fails() {

@@ -39,6 +39,7 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
         "compare_assign",
         "compare_sliced_depth",
         "playbot_32",
+        "studio",
     ] {
         assert_eq!(doc["steps"][step]["rc"], 0, "step {step}: {}\n{tail}", doc["steps"][step]);
     }
@@ -47,6 +48,9 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
     assert_eq!(golden["ok"], true, "{golden}");
     let step = figures.iter().find(|f| f["what"] == "guitar step at 48 px").expect("step figure");
     assert!(step["value"].as_f64().is_some_and(|ms| ms > 0.0), "{step}");
+    // The studio drawn headless (`gast studio --headless`), at the window size the step asks for.
+    let shot = image::open(out.join("studio.png")).expect("the headless studio's screenshot").to_rgb8();
+    assert_eq!((shot.width(), shot.height()), (1600, 1000), "the studio's screenshot");
     let table = std::fs::read_to_string(out.join("gpu-check.md")).expect("gpu-check.md");
     assert!(table.contains("| what | measured | target | notes |"), "{table}");
     std::fs::remove_dir_all(&out).ok();

@@ -1,5 +1,6 @@
 //! The real window: `gast studio` under Xvfb with the self-exit and screenshot
-//! switches, on the shared guitar scene when present (the demo scene otherwise).
+//! switches, on the shared guitar scene when present (the demo scene otherwise),
+//! and the same window drawn offscreen by `gast studio --headless`.
 //! Needs `xvfb-run` and a Vulkan driver (lavapipe); without them the test skips
 //! loudly, or fails when `CI=true`.
 
@@ -75,6 +76,46 @@ fn studio_opens_a_scene_in_a_real_window() {
     println!("luminance spread in the viewport: {viewport:.1}");
     assert!(viewport > 8.0, "the viewport looks empty (luminance spread {viewport:.1})");
     std::fs::remove_dir_all(&xdg).ok();
+}
+
+/// `gast studio --headless`: the same window drawn offscreen with no display
+/// at all (no DISPLAY or Wayland variable), its screenshot taken by the app's
+/// own switches: the whole window at its size, the scene in the viewport.
+#[test]
+fn the_headless_studio_draws_the_window_with_no_display() {
+    if !Path::new("/usr/share/vulkan/icd.d").exists() {
+        return skip_or_fail("no Vulkan driver (apt-get install mesa-vulkan-drivers libvulkan1)");
+    }
+    let dir = std::env::temp_dir().join(format!("gast-studio-headless-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let shot = dir.join("shot.png");
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_gast"));
+    for var in ["DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"] {
+        cmd.env_remove(var);
+    }
+    let guitar = gast_tests::shared_dir().join("data/scenes/guitar.compressed.ply");
+    cmd.args(["studio", "--headless"]);
+    if guitar.exists() {
+        cmd.arg(&guitar);
+    }
+    let out = cmd
+        .env("GAST_STUDIO_WINDOW", "1024x640")
+        .env("GAST_STUDIO_EXIT_AFTER_FRAMES", "6")
+        .env("GAST_STUDIO_SCREENSHOT", &shot)
+        .env("XDG_RUNTIME_DIR", &dir)
+        .output()
+        .expect("run gast studio --headless");
+    let log = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    println!("{log}");
+    assert!(out.status.success(), "the headless studio exited with {:?}", out.status);
+    assert!(log.contains("studio: headless on "), "it does not say which adapter draws:\n{log}");
+    let img = image::open(&shot).unwrap_or_else(|e| panic!("{}: no screenshot ({e})", shot.display())).to_rgb8();
+    assert_eq!((img.width(), img.height()), (1024, 640), "the screenshot is the window's size");
+    let (w, h) = (img.width(), img.height());
+    let viewport = spread(&img, w / 10, h / 10, w * 6 / 10, h * 6 / 10);
+    println!("luminance spread in the viewport: {viewport:.1}");
+    assert!(viewport > 8.0, "the viewport looks empty (luminance spread {viewport:.1})");
+    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// A scripted studio run on the guitar: Start, 12 steps, pause, export, a

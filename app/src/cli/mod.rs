@@ -43,6 +43,13 @@ pub enum Command {
         /// CPU), cpu, or gpu (the window's adapter even when it is a software one).
         #[arg(long, default_value_t = gast_core::gpu::DeviceChoice::Auto)]
         device: gast_core::gpu::DeviceChoice,
+        /// No window: draw the studio's frames offscreen on a graphics device of
+        /// its own, with no display (a GPU server). It closes after
+        /// GAST_STUDIO_EXIT_AFTER_FRAMES frames (30 without), after a scripted
+        /// run (GAST_STUDIO_RUN_STEPS) when one is asked for, saving
+        /// GAST_STUDIO_SCREENSHOT first when set.
+        #[arg(long)]
+        headless: bool,
     },
     /// Regenerate the demo assets (scene, styles, icon) into a folder.
     Assets {
@@ -140,9 +147,14 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     };
     match command {
-        Command::Studio { scene, style, device } => {
-            anyhow::ensure!(demo::desktop_session(), "{}", demo::NO_DESKTOP);
-            studio::run_with(studio::StudioArgs { scene, style, device }, Some(studio::worker::starter()))?;
+        Command::Studio { scene, style, device, headless } => {
+            let args = studio::StudioArgs { scene, style, device };
+            if headless {
+                studio::run_headless(args, Some(studio::worker::starter()))?;
+            } else {
+                anyhow::ensure!(demo::desktop_session(), "{}", demo::NO_DESKTOP);
+                studio::run_with(args, Some(studio::worker::starter()))?;
+            }
         }
         Command::Assets { out } => {
             for p in studio::assets::generate(&out)? {

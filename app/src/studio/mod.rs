@@ -14,10 +14,12 @@
 //! exit switch then starts from there), as a user would with the Export menu.
 //! `GAST_STUDIO_STRENGTH=C[,S]` sets the strength sliders (percent);
 //! `GAST_STUDIO_WINDOW=WxH` opens the window at that size (1280×800 without),
-//! so a screenshot can show the whole side panel.
+//! so a screenshot can show the whole side panel. `gast studio --headless`
+//! runs the same app with no window ([`headless`]).
 
 pub mod assets;
 pub mod controls;
+mod headless;
 pub mod inspect;
 mod open;
 mod panels;
@@ -38,6 +40,7 @@ use gast_core::session::Command;
 use gast_core::style::StyleConfig;
 use gast_core::{Camera, Gaussians};
 
+pub use headless::run as run_headless;
 use session_link::{RunMonitor, RunStatus, SessionStarter};
 use view::ViewState;
 use viewport::{FrameStats, LiveRef, SceneRef, SharedGaussians, ViewportCallback, ViewportNotes, ViewportResources};
@@ -174,23 +177,7 @@ pub fn run_with(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Re
             let Some(rs) = cc.wgpu_render_state.as_ref() else {
                 return Err("the studio needs the wgpu renderer, which did not start".into());
             };
-            let mut app = StudioApp::new(cc.egui_ctx.clone(), args);
-            let info = rs.adapter.get_info();
-            match viewport_support(&rs.device.limits(), &info.name) {
-                Ok(()) => {
-                    let gpu = gast_core::gpu::GpuContext::from_device(rs.device.clone(), rs.queue.clone(), info);
-                    let mut resources = ViewportResources::new(&rs.device, rs.target_format);
-                    resources.use_gpu_sort(gpu.clone());
-                    rs.renderer.write().callback_resources.insert(resources);
-                    app.set_gpu(gpu);
-                }
-                // The window still opens (menus, export, CPU runs); the viewport stays empty.
-                Err(why) => app.report(anyhow::anyhow!(why)),
-            }
-            if let Some(starter) = starter {
-                app.set_session_starter(starter);
-            }
-            Ok(Box::new(app))
+            Ok(Box::new(StudioApp::on_device(cc.egui_ctx.clone(), args, rs, starter)))
         }),
     )
     .map_err(|e| anyhow::anyhow!("the studio window failed: {e}"))
@@ -259,6 +246,35 @@ fn env_u64(name: &str) -> Option<u64> {
 }
 
 impl StudioApp {
+    /// The studio on the renderer's device `rs` (the window's, or the
+    /// headless one's): the device becomes the GPU engine's context and the
+    /// viewport's, when it can run the viewport's compute passes, and
+    /// `starter` is connected to the Start button.
+    fn on_device(
+        ctx: egui::Context,
+        args: StudioArgs,
+        rs: &egui_wgpu::RenderState,
+        starter: Option<SessionStarter>,
+    ) -> Self {
+        let mut app = StudioApp::new(ctx, args);
+        let info = rs.adapter.get_info();
+        match viewport_support(&rs.device.limits(), &info.name) {
+            Ok(()) => {
+                let gpu = gast_core::gpu::GpuContext::from_device(rs.device.clone(), rs.queue.clone(), info);
+                let mut resources = ViewportResources::new(&rs.device, rs.target_format);
+                resources.use_gpu_sort(gpu.clone());
+                rs.renderer.write().callback_resources.insert(resources);
+                app.set_gpu(gpu);
+            }
+            // The window still opens (menus, export, CPU runs); the viewport stays empty.
+            Err(why) => app.report(anyhow::anyhow!(why)),
+        }
+        if let Some(starter) = starter {
+            app.set_session_starter(starter);
+        }
+        app
+    }
+
     /// The studio with `args` opened (the demo scene and style when absent).
     pub fn new(ctx: egui::Context, args: StudioArgs) -> Self {
         let waker_ctx = ctx.clone();

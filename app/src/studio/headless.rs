@@ -1,0 +1,167 @@
+//! The studio with no window (`gast studio --headless`): the same app, its
+//! frames drawn offscreen by egui-wgpu on a device of its own and read back,
+//! with no display or window system at all. It serves a machine whose GPU no
+//! X server can show (a lent GPU machine, where Xvfb has no GLX for the
+//! NVIDIA driver), so a scripted run (`GAST_STUDIO_RUN_STEPS`) and a
+//! screenshot (`GAST_STUDIO_SCREENSHOT`) take the same paths as in a window:
+//! the app's own frame count asks for the screenshot and the close, and this
+//! loop answers them.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+
+use super::{SessionStarter, StudioApp, StudioArgs, wgpu_options, window_size};
+
+/// Frames drawn when `GAST_STUDIO_EXIT_AFTER_FRAMES` is not set.
+const DEFAULT_FRAMES: u64 = 30;
+
+/// Runs the studio offscreen until it closes itself: after
+/// `GAST_STUDIO_EXIT_AFTER_FRAMES` frames (30 without), counted from the end
+/// of a scripted run when there is one, with the screenshot before it.
+pub fn run(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Result<()> {
+    let config = wgpu_options();
+    let instance = pollster::block_on(config.wgpu_setup.new_instance());
+    let rs = pollster::block_on(egui_wgpu::RenderState::create(
+        &config,
+        &instance,
+        None,
+        egui_wgpu::RendererOptions::default(),
+    ))
+    .map_err(|e| anyhow::anyhow!("no graphics adapter for the headless studio: {e}"))?;
+    let info = rs.adapter.get_info();
+    eprintln!("studio: headless on {} ({:?}, {:?})", info.name, info.backend, info.device_type);
+    let ctx = egui::Context::default();
+    let mut app = StudioApp::on_device(ctx.clone(), args, &rs, starter);
+    if app.exit_after.is_none() {
+        app.exit_after = Some(DEFAULT_FRAMES);
+    }
+    let size = window_size(std::env::var("GAST_STUDIO_WINDOW").ok().as_deref());
+    let screen = egui::Rect::from_min_size(egui::Pos2::ZERO, egui::vec2(size[0], size[1]));
+    let start = Instant::now();
+    loop {
+        let input = egui::RawInput {
+            screen_rect: Some(screen),
+            time: Some(start.elapsed().as_secs_f64()),
+            max_texture_side: Some(rs.device.limits().max_texture_dimension_2d as usize),
+            ..Default::default()
+        };
+        let mut output = ctx.run_ui(input, |ui| app.show(ui));
+        let mut close = false;
+        let mut shots = Vec::new();
+        for vp in output.viewport_output.values_mut() {
+            for command in vp.commands.drain(..) {
+                match command {
+                    egui::ViewportCommand::Close => close = true,
+                    egui::ViewportCommand::Screenshot(cb) => shots.push(cb),
+                    _ => {}
+                }
+            }
+        }
+        let image = draw(&rs, &ctx, output)?;
+        for cb in shots {
+            cb.complete(image.clone());
+        }
+        if close {
+            return Ok(());
+        }
+        // A window's frames come at the display's pace; here the workers
+        // (the run, the inspection maps) need the time between them.
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// Draws one frame's output into a texture of the screen's size and reads it back.
+fn draw(
+    rs: &egui_wgpu::RenderState,
+    ctx: &egui::Context,
+    mut output: egui::FullOutput,
+) -> anyhow::Result<Arc<egui::ColorImage>> {
+    let (device, queue) = (&rs.device, &rs.queue);
+    let ppp = output.pixels_per_point;
+    let size = ctx.content_rect().size() * ppp;
+    let (w, h) = ((size.x.round() as u32).max(1), (size.y.round() as u32).max(1));
+    let screen = egui_wgpu::ScreenDescriptor { size_in_pixels: [w, h], pixels_per_point: ppp };
+    let mut textures = std::mem::take(&mut output.textures_delta);
+    let mut renderer = rs.renderer.write();
+    #[expect(clippy::iter_over_hash_type, reason = "each texture's deltas are applied in their order; textures apart")]
+    for (id, deltas) in textures.set.drain() {
+        for delta in &deltas {
+            renderer.update_texture(device, queue, id, delta);
+        }
+    }
+    let jobs = ctx.tessellate(output.shapes, ppp);
+    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("headless") });
+    let extra = renderer.update_buffers(device, queue, &mut encoder, &jobs, &screen);
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("headless.frame"),
+        size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: rs.target_format,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    });
+    let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+    {
+        let mut pass = encoder
+            .begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("headless.egui"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &view,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        store: wgpu::StoreOp::Store,
+                    },
+                    depth_slice: None,
+                })],
+                ..Default::default()
+            })
+            .forget_lifetime();
+        renderer.render(&mut pass, &jobs, &screen);
+    }
+    // The frame's rows, padded to the copy alignment.
+    let row = (w * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("headless.readback"),
+        size: u64::from(row) * u64::from(h),
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    encoder.copy_texture_to_buffer(
+        texture.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &staging,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) },
+        },
+        wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+    );
+    queue.submit(extra.into_iter().chain(std::iter::once(encoder.finish())));
+    for id in std::mem::take(&mut textures.free) {
+        renderer.free_texture(&id);
+    }
+    drop(renderer);
+    let slice = staging.slice(..);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    device.poll(wgpu::PollType::wait_indefinitely()).context("waiting for the headless frame")?;
+    rx.recv().context("the headless frame's readback")?.context("mapping the headless frame")?;
+    let data = slice.get_mapped_range().map_err(|e| anyhow::anyhow!("reading the headless frame: {e}"))?;
+    let bgra = matches!(rs.target_format, wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb);
+    let mut pixels = Vec::with_capacity((w * h) as usize);
+    for y in 0..h as usize {
+        let line = &data[y * row as usize..][..w as usize * 4];
+        pixels.extend(line.chunks_exact(4).map(|p| {
+            let (r, b) = if bgra { (p[2], p[0]) } else { (p[0], p[2]) };
+            egui::Color32::from_rgba_premultiplied(r, p[1], b, p[3])
+        }));
+    }
+    drop(data);
+    staging.unmap();
+    Ok(Arc::new(egui::ColorImage::new([w as usize, h as usize], pixels)))
+}
