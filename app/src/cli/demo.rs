@@ -21,8 +21,8 @@ use super::stylize::{self, StylizeArgs};
 use crate::studio::assets;
 
 /// The sentence that says why there is no window.
-pub const NO_DESKTOP: &str = "the studio needs a desktop session, and none was found (DISPLAY, WAYLAND_DISPLAY and WAYLAND_SOCKET are unset); \
-     `gast studio --headless` draws it offscreen instead";
+pub const NO_DESKTOP: &str = "the studio needs a desktop session, and none was found (DISPLAY, WAYLAND_DISPLAY and \
+                              WAYLAND_SOCKET are unset); `gast studio --headless` draws it offscreen instead";
 
 /// The display variables a Linux or BSD window needs one of.
 const DISPLAY_VARS: [&str; 3] = ["DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"];

@@ -64,6 +64,10 @@ pub fn run(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Result<
             cb.complete(image.clone());
         }
         if close {
+            // What the window would have shown in its bottom panel, for the log.
+            for e in &app.errors {
+                eprintln!("studio: shown in the window: {e}");
+            }
             return Ok(());
         }
         // A window's frames come at the display's pace; here the workers

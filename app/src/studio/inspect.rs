@@ -264,7 +264,7 @@ impl Jobs {
             };
             match write_sheet(&path, &content) {
                 Ok(()) => JobDone::Exported(path),
-                Err(e) => JobDone::Failed(format!("{e:#}")),
+                Err(e) => JobDone::Failed(crate::error_text(&e)),
             }
         });
     }

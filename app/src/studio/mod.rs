@@ -361,7 +361,7 @@ impl StudioApp {
 
     /// Shows an error in the bottom panel (and keeps everything else as it was).
     pub fn report(&mut self, err: anyhow::Error) {
-        self.errors.push(format!("{err:#}"));
+        self.errors.push(crate::error_text(&err));
         if self.errors.len() > 20 {
             self.errors.remove(0);
         }

@@ -48,7 +48,7 @@ impl StudioApp {
             }
             Err(e) => {
                 let keep = self.keeping_scene();
-                self.report(anyhow::anyhow!("{e:#}; {keep}"))
+                self.report(anyhow::anyhow!("{}; {keep}", crate::error_text(&e)))
             }
         }
     }

@@ -96,8 +96,9 @@ impl GpuAssignment {
     /// Draws this step's pairs ([`draw_pairs`]) among the `covered` positions
     /// of the `channels × n` rendered features and the `m` style positions,
     /// and records the gathers of both sides' columns from `features` and
-    /// `style` and their copy for the host. Returns the rows drawn (0 when nothing is covered or the style
-    /// is empty: then nothing is recorded and the step pulls nothing).
+    /// `style` and their copy for the host. Returns the rows drawn (0 when
+    /// nothing is covered or the style is empty: then nothing is recorded and
+    /// the step pulls nothing).
     #[allow(clippy::too_many_arguments)]
     pub fn record_gather(
         &mut self,
