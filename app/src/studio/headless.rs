@@ -10,8 +10,6 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::Context as _;
-
 use super::{SessionStarter, StudioApp, StudioArgs, wgpu_options, window_size};
 
 /// Frames drawn when `GAST_STUDIO_EXIT_AFTER_FRAMES` is not set.
@@ -127,45 +125,21 @@ fn draw(
             .forget_lifetime();
         renderer.render(&mut pass, &jobs, &screen);
     }
-    // The frame's rows, padded to the copy alignment.
-    let row = (w * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-    let staging = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("headless.readback"),
-        size: u64::from(row) * u64::from(h),
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    encoder.copy_texture_to_buffer(
-        texture.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &staging,
-            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) },
-        },
-        wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
-    );
     queue.submit(extra.into_iter().chain(std::iter::once(encoder.finish())));
     for id in std::mem::take(&mut textures.free) {
         renderer.free_texture(&id);
     }
     drop(renderer);
-    let slice = staging.slice(..);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    device.poll(wgpu::PollType::wait_indefinitely()).context("waiting for the headless frame")?;
-    rx.recv().context("the headless frame's readback")?.context("mapping the headless frame")?;
-    let data = slice.get_mapped_range().map_err(|e| anyhow::anyhow!("reading the headless frame: {e}"))?;
+    let rows = super::viewport::read_texture_rows(device, queue, &texture, 4)
+        .ok_or_else(|| anyhow::anyhow!("the headless frame could not be read back"))?;
     let bgra = matches!(rs.target_format, wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb);
-    let mut pixels = Vec::with_capacity((w * h) as usize);
-    for y in 0..h as usize {
-        let line = &data[y * row as usize..][..w as usize * 4];
-        pixels.extend(line.chunks_exact(4).map(|p| {
+    let pixels = rows
+        .iter()
+        .flat_map(|line| line.chunks_exact(4))
+        .map(|p| {
             let (r, b) = if bgra { (p[2], p[0]) } else { (p[0], p[2]) };
             egui::Color32::from_rgba_premultiplied(r, p[1], b, p[3])
-        }));
-    }
-    drop(data);
-    staging.unmap();
+        })
+        .collect();
     Ok(Arc::new(egui::ColorImage::new([w as usize, h as usize], pixels)))
 }

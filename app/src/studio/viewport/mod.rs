@@ -512,11 +512,34 @@ pub fn f16_to_f32(bits: u16) -> f32 {
 /// (blocking; for tests, benchmarks and exports).
 #[cfg_attr(not(test), allow(dead_code))] // tests; GPU exports will use it
 pub fn read_target(device: &wgpu::Device, queue: &wgpu::Queue, texture: &wgpu::Texture) -> Vec<[f32; 4]> {
+    let (w, h) = (texture.width() as usize, texture.height() as usize);
+    let Some(rows) = read_texture_rows(device, queue, texture, 8) else {
+        return vec![[0.0; 4]; w * h];
+    };
+    let mut out = Vec::with_capacity(w * h);
+    for line in &rows {
+        for px in line.chunks_exact(8) {
+            let c = |k: usize| f16_to_f32(u16::from_le_bytes([px[2 * k], px[2 * k + 1]]));
+            out.push([c(0), c(1), c(2), c(3)]);
+        }
+    }
+    out
+}
+
+/// The rows of a 2-D texture of `texel` bytes a texel, read back (blocking)
+/// through a buffer whose rows are padded to the copy alignment; `None` when
+/// the read-back fails.
+pub fn read_texture_rows(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    texel: u32,
+) -> Option<Vec<Vec<u8>>> {
     let (w, h) = (texture.width(), texture.height());
-    let row = (w * 8).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let row = (w * texel).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
     let buffer = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("readback"),
-        size: (row * h) as u64,
+        size: u64::from(row) * u64::from(h),
         usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
         mapped_at_creation: false,
     });
@@ -532,17 +555,8 @@ pub fn read_target(device: &wgpu::Device, queue: &wgpu::Queue, texture: &wgpu::T
     queue.submit([encoder.finish()]);
     let slice = buffer.slice(..);
     slice.map_async(wgpu::MapMode::Read, |_| {});
-    let _ = device.poll(wgpu::PollType::wait_indefinitely());
-    let Ok(data) = slice.get_mapped_range() else {
-        return vec![[0.0; 4]; (w * h) as usize];
-    };
-    let mut out = Vec::with_capacity((w * h) as usize);
-    for y in 0..h as usize {
-        let line = &data[y * row as usize..y * row as usize + w as usize * 8];
-        for px in line.chunks_exact(8) {
-            let c = |k: usize| f16_to_f32(u16::from_le_bytes([px[2 * k], px[2 * k + 1]]));
-            out.push([c(0), c(1), c(2), c(3)]);
-        }
-    }
-    out
+    device.poll(wgpu::PollType::wait_indefinitely()).ok()?;
+    let data = slice.get_mapped_range().ok()?;
+    let (row, line) = (row as usize, (w * texel) as usize);
+    Some((0..h as usize).map(|y| data[y * row..y * row + line].to_vec()).collect())
 }
