@@ -125,7 +125,14 @@ impl Camera {
     /// the camera plane (`z ≤ 0`). The position may lie outside the image.
     pub fn project(&self, p: Vec3) -> Option<Vec2> {
         let c = self.world_to_camera(p);
-        (c.z > 0.0).then(|| Vec2::new(self.fx * c.x / c.z + self.cx, self.fy * c.y / c.z + self.cy))
+        (c.z > 0.0).then(|| self.pixel_of(c))
+    }
+
+    /// The pixel position of a camera-space point `c` (in front of the
+    /// camera: `c.z > 0`, which the caller checks), for a caller that holds
+    /// the camera-space point already. The position may lie outside the image.
+    pub fn pixel_of(&self, c: Vec3) -> Vec2 {
+        Vec2::new(self.fx * c.x / c.z + self.cx, self.fy * c.y / c.z + self.cy)
     }
 
     /// The same camera at another resolution: focal lengths and principal

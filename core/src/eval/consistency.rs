@@ -99,7 +99,7 @@ fn warp(
             if pb.z <= 0.0 {
                 continue;
             }
-            let (u, v) = (cam_b.fx * pb.x / pb.z + cam_b.cx, cam_b.fy * pb.y / pb.z + cam_b.cy);
+            let (u, v) = cam_b.pixel_of(pb).into();
             if !(u >= 0.0 && v >= 0.0 && u < wb as f32 && v < hb as f32) {
                 continue;
             }

@@ -63,8 +63,8 @@ pub fn footprints(g: &Gaussians, cams: &[Camera]) -> Vec<f32> {
                     if q.z <= 1e-3 {
                         return None;
                     }
-                    let (u, v) = (c.fx * q.x / q.z + c.cx, c.fy * q.y / q.z + c.cy);
-                    let inside = u >= 0.0 && v >= 0.0 && u < c.width as f32 && v < c.height as f32;
+                    let uv = c.pixel_of(q);
+                    let inside = uv.x >= 0.0 && uv.y >= 0.0 && uv.x < c.width as f32 && uv.y < c.height as f32;
                     inside.then(|| s * c.fx.max(c.fy) / q.z)
                 })
                 .fold(0.0f32, f32::max)
