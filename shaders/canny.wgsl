@@ -37,8 +37,6 @@ const CANDIDATE: u32 = 0u;
 const EDGE: u32 = 2u;
 // tan(22.5°) in Q15, as OpenCV rounds it.
 const TG22: i32 = 13573;
-const TILE: u32 = 16u;
-const HALO: u32 = 18u;
 
 // The 8-bit value of channel ch at (i, j), borders replicated:
 // (v − min)/(max − min)·255 truncated (0 for a flat image).
@@ -108,70 +106,117 @@ fn nms(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) n
     atomicStore(&state[t], out);
 }
 
-var<workgroup> tile: array<atomic<u32>, 324>;
+// A hysteresis tile: TILE × TILE pixels of one channel and a one-pixel
+// halo, as bit rows of HALO bits in WORDS words each (bit b of word k is
+// column 32k + b of the halo). `cand` holds candidates and edges, `grown`
+// the edges; thread t < HALO·WORDS owns word t.
+const TILE: u32 = 64u;
+const HALO: u32 = 66u;
+const WORDS: u32 = 3u;
+const ROW_WORDS: u32 = 198u;
+var<workgroup> cand: array<u32, 198>;
+var<workgroup> grown: array<u32, 198>;
 var<workgroup> wg_changed: atomic<u32>;
 var<workgroup> wg_again: u32;
 
-// One hysteresis pass: each workgroup loads a 16×16 tile of one channel with
-// a one-pixel halo and grows edges through 8-connected candidates until the
-// tile is stable, then writes its new edges back. Edges cross tile borders
-// from one pass to the next; only a pass that changed a tile border launches
-// the next one (an indirect dispatch), so a generous bound on passes is free.
-@compute @workgroup_size(16, 16)
+// The interior columns (1 ..= TILE of the halo) in word k.
+fn interior(k: u32) -> u32 {
+    return select(select(1u, 0xffffffffu, k == 1u), 0xfffffffeu, k == 0u);
+}
+
+// Word k of halo row r of `grown`, widened by one column each way
+// (its bits, and those of its left and right neighbours).
+fn widened(r: u32, k: u32) -> u32 {
+    let e = grown[r * WORDS + k];
+    var v = e | (e << 1u) | (e >> 1u);
+    if k > 0u {
+        v = v | (grown[r * WORDS + k - 1u] >> 31u);
+    }
+    if k + 1u < WORDS {
+        v = v | (grown[r * WORDS + k + 1u] << 31u);
+    }
+    return v;
+}
+
+// One hysteresis pass: each workgroup loads a 64×64 tile of one channel with
+// a one-pixel halo as bit rows and grows edges through 8-connected
+// candidates until the tile is stable (a candidate becomes an edge when its
+// row, or the rows above and below, widened by a column, hold an edge), then
+// writes its new edges back. Edges cross tile borders from one pass to the
+// next; only a pass that changed a tile border launches the next one (an
+// indirect dispatch), so a generous bound on passes is free.
+@compute @workgroup_size(256)
 fn hysteresis(
-    @builtin(local_invocation_id) lid: vec3<u32>,
-    @builtin(local_invocation_index) lidx: u32,
+    @builtin(local_invocation_index) t: u32,
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(num_workgroups) nwg: vec3<u32>,
 ) {
-    if lidx == 0u {
+    if t == 0u {
         atomicStore(&wg_changed, 0u);
     }
     let base = wid.z * u.n;
     let i0 = i32(wid.y * TILE) - 1;
     let j0 = i32(wid.x * TILE) - 1;
-    for (var t = lidx; t < HALO * HALO; t = t + 256u) {
-        let gi = i0 + i32(t / HALO);
-        let gj = j0 + i32(t % HALO);
-        var s = NONE;
-        if gi >= 0 && gj >= 0 && gi < i32(u.h) && gj < i32(u.w) {
-            s = atomicLoad(&state[base + u32(gi) * u.w + u32(gj)]);
-        }
-        atomicStore(&tile[t], s);
-    }
-    workgroupBarrier();
-    let li = lid.y + 1u;
-    let lj = lid.x + 1u;
-    let me = li * HALO + lj;
-    let start = atomicLoad(&tile[me]);
-    loop {
-        if atomicLoad(&tile[me]) == CANDIDATE {
-            var strong = false;
-            for (var di = 0u; di < 3u; di = di + 1u) {
-                for (var dj = 0u; dj < 3u; dj = dj + 1u) {
-                    if atomicLoad(&tile[(li + di - 1u) * HALO + lj + dj - 1u]) == EDGE {
-                        strong = true;
-                    }
+    let owner = t < ROW_WORDS;
+    let r = t / WORDS;
+    let k = t % WORDS;
+    var c = 0u;
+    var e = 0u;
+    if owner {
+        let gi = i0 + i32(r);
+        for (var b = 0u; b < 32u; b = b + 1u) {
+            let gj = j0 + i32(32u * k + b);
+            if 32u * k + b < HALO && gi >= 0 && gj >= 0 && gi < i32(u.h) && gj < i32(u.w) {
+                let s = atomicLoad(&state[base + u32(gi) * u.w + u32(gj)]);
+                if s != NONE {
+                    c = c | (1u << b);
+                }
+                if s == EDGE {
+                    e = e | (1u << b);
                 }
             }
-            if strong {
-                atomicStore(&tile[me], EDGE);
-                atomicStore(&wg_changed, 1u);
-            }
+        }
+        cand[t] = c;
+        grown[t] = e;
+    }
+    let start = e;
+    let grows = owner && r >= 1u && r <= TILE && (c & ~e & interior(k)) != 0u;
+    workgroupBarrier();
+    loop {
+        var next_e = e;
+        if grows {
+            let near = widened(r - 1u, k) | widened(r, k) | widened(r + 1u, k);
+            next_e = e | (c & near & interior(k));
         }
         workgroupBarrier();
-        if lidx == 0u {
+        if next_e != e {
+            e = next_e;
+            grown[t] = e;
+            atomicStore(&wg_changed, 1u);
+        }
+        workgroupBarrier();
+        if t == 0u {
             wg_again = atomicExchange(&wg_changed, 0u);
         }
         if workgroupUniformLoad(&wg_again) == 0u {
             break;
         }
     }
-    if start == CANDIDATE && atomicLoad(&tile[me]) == EDGE {
-        let gi = u32(i0) + li;
-        let gj = u32(j0) + lj;
-        atomicStore(&state[base + gi * u.w + gj], EDGE);
-        if lid.x == 0u || lid.y == 0u || lid.x == TILE - 1u || lid.y == TILE - 1u {
+    var fresh = e & ~start;
+    if fresh != 0u {
+        let gi = u32(i0 + i32(r));
+        var border = r == 1u || r == TILE;
+        loop {
+            if fresh == 0u {
+                break;
+            }
+            let b = firstTrailingBit(fresh);
+            fresh = fresh & (fresh - 1u);
+            let col = 32u * k + b;
+            atomicStore(&state[base + gi * u.w + u32(j0 + i32(col))], EDGE);
+            border = border || col == 1u || col == TILE;
+        }
+        if border {
             let a = 3u * (u.iteration + 1u);
             atomicStore(&next[a], nwg.x);
             atomicStore(&next[a + 1u], nwg.y);

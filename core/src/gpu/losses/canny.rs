@@ -5,8 +5,9 @@
 //! Everything after the min-max is integer arithmetic, so the GPU map equals
 //! the CPU's exactly. Hysteresis is a connected-component growth, sequential
 //! on the CPU (a stack); here it is a bounded number of passes of a tiled
-//! kernel that grows edges inside each 16×16 tile until stable and hands them
-//! across tile borders from pass to pass. Each pass writes the next one's
+//! kernel that grows edges inside each 64×64 tile until stable (the tile held
+//! as bit rows, a row's growth a few word operations) and hands them across
+//! tile borders from pass to pass. Each pass writes the next one's
 //! indirect dispatch arguments, zero workgroups unless it changed a tile
 //! border, so the passes after the map settles cost nothing but their
 //! recording; [`EdgeMap::converged`] tells (by a read-back, for tests and
@@ -19,8 +20,10 @@ use crate::vision::canny::CannyParams;
 
 /// Threads per workgroup of the 1-D entry points of `canny.wgsl`.
 const WORKGROUP: u32 = 256;
-/// Side of a hysteresis tile.
-const TILE: usize = 16;
+/// Side of a hysteresis tile (`TILE` in `canny.wgsl`). At 16 px (one pixel
+/// a thread) a 512 px map needed a bound of 136 passes, each a dispatch even
+/// when empty; at 64 px it is 40.
+const TILE: usize = 64;
 
 /// The uniform block of `canny.wgsl`.
 #[repr(C)]

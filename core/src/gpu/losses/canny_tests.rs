@@ -70,33 +70,45 @@ fn random_images_give_the_cpu_map_exactly() {
     }
 }
 
-#[test]
-fn a_long_weak_chain_needs_its_passes_and_gets_them() {
-    // A vertical step strong in its last rows and weak above (as the CPU's
-    // hysteresis test, upside down): the edge grows up through 7 tiles, one
-    // per pass (lavapipe runs workgroups in order, so growing down would
-    // cross several tiles in one pass).
-    let (h, w) = (112, 20);
+/// A step edge strong over its last 4 rows (or columns) and weak elsewhere:
+/// `h × w`, the step at row/column 10 of the other axis.
+fn weak_step(h: usize, w: usize, across: bool) -> Vec<f32> {
     let mut rgb = vec![0f32; h * w * 3];
     for i in 0..h {
-        for j in 10..w {
-            let v = if i >= h - 4 { 1.0 } else { 0.1 };
-            rgb[(i * w + j) * 3..(i * w + j) * 3 + 3].copy_from_slice(&[v, v, v]);
+        for j in 0..w {
+            let (along, side, len) = if across { (j, i, w) } else { (i, j, h) };
+            if side >= 10 {
+                let v = if along >= len - 4 { 1.0 } else { 0.1 };
+                rgb[(i * w + j) * 3..(i * w + j) * 3 + 3].copy_from_slice(&[v, v, v]);
+            }
         }
     }
+    rgb
+}
+
+#[test]
+fn a_long_weak_chain_needs_its_passes_and_gets_them() {
+    // A step strong at its far end and weak before it (as the CPU's
+    // hysteresis test, reversed): the edge grows back through 7 tiles, one
+    // per pass (lavapipe runs workgroups in order, so growing forward would
+    // cross several tiles in one pass); down the rows, then along them,
+    // across the bit words of each tile's rows.
     let ctx = ctx();
     let kernels = CannyKernels::new(ctx);
     let reduce = ReduceKernels::new(ctx);
-    let short = EdgeMap::with_passes(ctx, &kernels, &reduce, h, w, 2).expect("plan");
-    let (got, _, done) = gpu_edges(ctx, &short, &rgb);
-    assert!(!done, "two passes cannot carry the edge through 7 tiles");
-    assert!(!differences(&got, &rgb, h, w).is_empty());
-    let full = EdgeMap::new(ctx, &kernels, &reduce, h, w).expect("plan");
-    let (got, busy, done) = gpu_edges(ctx, &full, &rgb);
-    assert!(done && busy >= 3, "settled: {done}, passes crossing a border: {busy}");
-    eprintln!("weak chain through 7 tiles: {busy} passes crossed a border");
-    let diff = differences(&got, &rgb, h, w);
-    assert!(diff.is_empty(), "{} pixels differ:\n{}", diff.len(), diff.join("\n"));
+    for (h, w, across) in [(7 * TILE, 20, false), (20, 7 * TILE, true)] {
+        let rgb = weak_step(h, w, across);
+        let short = EdgeMap::with_passes(ctx, &kernels, &reduce, h, w, 2).expect("plan");
+        let (got, _, done) = gpu_edges(ctx, &short, &rgb);
+        assert!(!done, "{h}×{w}: two passes cannot carry the edge through 7 tiles");
+        assert!(!differences(&got, &rgb, h, w).is_empty());
+        let full = EdgeMap::new(ctx, &kernels, &reduce, h, w).expect("plan");
+        let (got, busy, done) = gpu_edges(ctx, &full, &rgb);
+        assert!(done && busy >= 3, "{h}×{w}: settled: {done}, passes crossing a border: {busy}");
+        eprintln!("{h}×{w} weak chain through 7 tiles: {busy} passes crossed a border");
+        let diff = differences(&got, &rgb, h, w);
+        assert!(diff.is_empty(), "{h}×{w}: {} pixels differ:\n{}", diff.len(), diff.join("\n"));
+    }
 }
 
 #[test]

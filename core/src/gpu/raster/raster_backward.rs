@@ -28,9 +28,19 @@ fn add_grad(i: u32, v: f32) {
 /// The per-thread flush in `raster_backward.wgsl`, between these markers.
 const FLUSH_BEGIN: &str = "// BEGIN flush";
 const FLUSH_END: &str = "// END flush";
-/// What replaces it where the device has subgroups: one add per subgroup.
+/// What replaces it where the device has subgroups: one add per subgroup,
+/// and no sums at all in a subgroup none of whose pixels the splat touched
+/// (at low resolution most splats cover a few pixels of a 256-pixel tile,
+/// and the ten sums per splat were most of the pass's work).
 /// (naga 30 has no `subgroupElect`: the first invocation is the one with nothing before it.)
 const SUBGROUP_FLUSH: &str = "fn flush(base: u32, gv: array<f32, 10>) {
+    var touched = false;
+    for (var c = 0u; c < 10u; c = c + 1u) {
+        touched = touched || gv[c] != 0.0;
+    }
+    if !subgroupAny(touched) {
+        return;
+    }
     let first = subgroupExclusiveAdd(1u) == 0u;
     for (var c = 0u; c < 10u; c = c + 1u) {
         let s = subgroupAdd(gv[c]);
