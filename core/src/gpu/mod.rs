@@ -49,6 +49,8 @@ mod sort;
 mod raster_backward;
 #[path = "raster/raster_forward.rs"]
 mod raster_forward;
+#[path = "raster/raster_kernels.rs"]
+mod raster_kernels;
 #[path = "raster/raster_project.rs"]
 mod raster_project;
 #[path = "raster/raster_run.rs"]
@@ -109,8 +111,8 @@ pub use kernel::{Bind, Kernel};
 pub use live::LiveGaussians;
 pub use losses::{LossKernels, RefLoss, TvLoss};
 pub use ops_bench::bench_image_ops;
-pub use raster_backward::Accumulation;
-pub use raster_forward::{GpuRaster, RasterKernels};
+pub use raster_forward::GpuRaster;
+pub use raster_kernels::{Accumulation, RasterKernels};
 pub use raster_run::{bench_raster, render_and_backward_gpu, render_gpu};
 pub use reduce::{ReduceKernels, ReduceOp, ReduceSpec, Reduction};
 pub use resize::{Clamp01, Downscale, ResizeKernels};

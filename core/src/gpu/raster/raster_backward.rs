@@ -5,91 +5,15 @@
 //! `raster/backward.rs`; float atomics make the sum order vary, so the two
 //! agree to rounding, not bit for bit.
 //!
-//! `raster_forward.rs` holds every raster kernel (this file's
-//! `tile_backward` among them, compiled for the device's accumulation) and
-//! this file runs them through its types: one rasterizer, split by direction.
+//! `raster_kernels.rs` compiles every raster kernel (this file's
+//! `tile_backward` among them, for the device's accumulation) and this file
+//! runs the backward ones on the forward pass's workspace.
 
-use super::raster_forward::{GpuRaster, RasterKernels};
+use super::raster_forward::GpuRaster;
+use super::raster_kernels::RasterKernels;
 use super::raster_project::WORKGROUP;
-use super::{Bind, GpuContext, GpuGaussians, GpuGrads, Kernel};
+use super::{GpuContext, GpuGaussians, GpuGrads, Kernel};
 use crate::raster::TILE;
-
-/// The fallback accumulator in `raster_backward.wgsl`, between these markers.
-const CAS_BEGIN: &str = "// BEGIN add_grad";
-const CAS_END: &str = "// END add_grad";
-/// What replaces it where the device has `SHADER_FLOAT32_ATOMIC`.
-const NATIVE_ADD: &str = "@group(0) @binding(8) var<storage, read_write> v_splat: array<atomic<f32>>;
-
-fn add_grad(i: u32, v: f32) {
-    atomicAdd(&v_splat[i], v);
-}
-";
-
-/// The per-thread flush in `raster_backward.wgsl`, between these markers.
-const FLUSH_BEGIN: &str = "// BEGIN flush";
-const FLUSH_END: &str = "// END flush";
-/// What replaces it where the device has subgroups: one add per subgroup,
-/// and no sums at all in a subgroup none of whose pixels the splat touched
-/// (at low resolution most splats cover a few pixels of a 256-pixel tile,
-/// and the ten sums per splat were most of the pass's work).
-/// (naga 30 has no `subgroupElect`: the first invocation is the one with nothing before it.)
-const SUBGROUP_FLUSH: &str = "fn flush(base: u32, gv: array<f32, 10>) {
-    var touched = false;
-    for (var c = 0u; c < 10u; c = c + 1u) {
-        touched = touched || gv[c] != 0.0;
-    }
-    if !subgroupAny(touched) {
-        return;
-    }
-    let first = subgroupExclusiveAdd(1u) == 0u;
-    for (var c = 0u; c < 10u; c = c + 1u) {
-        let s = subgroupAdd(gv[c]);
-        if first && s != 0.0 {
-            add_grad(base + c, s);
-        }
-    }
-}
-";
-
-/// How the backward pass accumulates gradients: the device features it uses.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Accumulation {
-    /// Native `atomic<f32>` adds (`SHADER_FLOAT32_ATOMIC`), else a compare-and-swap loop.
-    pub float_atomics: bool,
-    /// A subgroup sum before each add (`SUBGROUP`), else one add per pixel.
-    pub subgroups: bool,
-}
-
-/// `src` with the text between `begin` and `end` replaced by `with`.
-fn splice(src: &str, begin: &str, end: &str, with: &str) -> String {
-    let (head, rest) = src.split_once(begin).expect("raster_backward.wgsl has its markers");
-    let (_, tail) = rest.split_once(end).expect("raster_backward.wgsl has its markers");
-    format!("{head}{with}{tail}")
-}
-
-/// The `raster_backward.wgsl` source for an accumulation mode.
-pub(crate) fn tile_backward_source(acc: Accumulation) -> String {
-    let mut src = super::raster_project::with_camera(include_str!("../../../../shaders/raster_backward.wgsl"));
-    if acc.float_atomics {
-        src = splice(&src, CAS_BEGIN, CAS_END, NATIVE_ADD);
-    }
-    if acc.subgroups {
-        src = splice(&src, FLUSH_BEGIN, FLUSH_END, SUBGROUP_FLUSH);
-    }
-    src
-}
-
-/// Compiles `tile_backward` for an accumulation mode.
-pub(crate) fn tile_backward_kernel(ctx: &GpuContext, acc: Accumulation) -> Kernel {
-    use Bind::{Read, ReadWrite, Uniform};
-    Kernel::new(
-        ctx,
-        &format!("raster_backward.tile_backward ({acc:?})"),
-        &tile_backward_source(acc),
-        "tile_backward",
-        &[Uniform, Read, Read, Read, Read, Read, Read, Read, ReadWrite],
-    )
-}
 
 impl GpuRaster {
     /// Records the backward pass of the last recorded [`GpuRaster::forward`]

@@ -10,69 +10,16 @@
 //! capacity; [`GpuRaster::pairs`] reads the number a pass needed (with the
 //! step's scalars, say) so that the caller can grow the workspace.
 
-use super::raster_backward::Accumulation;
-use super::raster_project::{ProjectKernels, RasterUniform, WORKGROUP};
+use super::raster_kernels::RasterKernels;
+use super::raster_project::{RasterUniform, WORKGROUP};
 use super::scan::GpuScan;
-use super::sort::{GpuSort, SortKernels, bits_for};
+use super::sort::{GpuSort, bits_for};
 use super::{GpuContext, GpuError, GpuGaussians, Kernel};
 use crate::camera::Camera;
 use crate::raster::{Render, RenderOptions, TILE};
 
 /// Floats per splat in the `splats` buffer (the CPU `Splat`'s 16 fields, in order).
 pub(crate) const SPLAT_FLOATS: usize = 16;
-
-/// Every compiled raster kernel, forward and backward, and the sort's.
-#[derive(Debug)]
-pub struct RasterKernels {
-    pub(crate) project: ProjectKernels,
-    count_tiles: Kernel,
-    emit: Kernel,
-    ranges: Kernel,
-    composite: Kernel,
-    pub(crate) tile_backward: Kernel,
-    pub(crate) sort: SortKernels,
-}
-
-impl RasterKernels {
-    /// Compiles the raster shaders, the backward pass using native float
-    /// atomics where the device has them, and subgroup sums where it has
-    /// subgroups and is hardware: on lavapipe, whose subgroup operations are
-    /// emulated, they made the backward tiles 3× slower (12.3 s against 4.1 s
-    /// on the guitar at 256 px), so a software adapter adds per pixel.
-    pub fn new(ctx: &GpuContext) -> Self {
-        let subgroups = ctx.caps.subgroups && !ctx.is_software();
-        Self::with_accumulation(ctx, Accumulation { float_atomics: ctx.caps.float_atomics, subgroups })
-    }
-
-    /// As [`RasterKernels::new`] with a chosen accumulation (each feature it
-    /// asks for must be on the device; tests force the fallbacks with it).
-    pub fn with_accumulation(ctx: &GpuContext, acc: Accumulation) -> Self {
-        let src = &super::raster_project::with_camera(include_str!("../../../../shaders/raster_forward.wgsl"));
-        use super::Bind::{Read, ReadWrite, Uniform};
-        let bin = [Uniform, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite];
-        Self {
-            project: ProjectKernels::new(ctx),
-            count_tiles: Kernel::new(ctx, "raster_forward.count_tiles", src, "count_tiles", &bin),
-            emit: Kernel::new(ctx, "raster_forward.emit", src, "emit", &bin),
-            ranges: Kernel::new(
-                ctx,
-                "raster_forward.ranges",
-                src,
-                "ranges_of_tiles",
-                &[Uniform, Read, Read, ReadWrite],
-            ),
-            composite: Kernel::new(
-                ctx,
-                "raster_forward.composite",
-                src,
-                "composite",
-                &[Uniform, Read, Read, Read, Read, ReadWrite, ReadWrite, ReadWrite, ReadWrite],
-            ),
-            tile_backward: super::raster_backward::tile_backward_kernel(ctx, acc),
-            sort: SortKernels::new(ctx),
-        }
-    }
-}
 
 /// The stages of the forward pass, in order (benchmarks time them one by one).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

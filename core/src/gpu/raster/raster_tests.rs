@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use glam::Vec3;
 
-use super::raster_backward::Accumulation;
+use super::raster_kernels::Accumulation;
 use super::test_util::{ctx, noise};
 use super::{GpuGaussians, GpuGrads, GpuRaster, RasterKernels};
 use crate::camera::{Camera, OrbitOptions, orbit_cameras};
