@@ -114,8 +114,8 @@ const TILE: u32 = 64u;
 const HALO: u32 = 66u;
 const WORDS: u32 = 3u;
 const ROW_WORDS: u32 = 198u;
-var<workgroup> cand: array<u32, 198>;
-var<workgroup> grown: array<u32, 198>;
+var<workgroup> cand: array<atomic<u32>, 198>;
+var<workgroup> grown: array<atomic<u32>, 198>;
 var<workgroup> wg_changed: atomic<u32>;
 var<workgroup> wg_again: u32;
 
@@ -127,13 +127,13 @@ fn interior(k: u32) -> u32 {
 // Word k of halo row r of `grown`, widened by one column each way
 // (its bits, and those of its left and right neighbours).
 fn widened(r: u32, k: u32) -> u32 {
-    let e = grown[r * WORDS + k];
+    let e = atomicLoad(&grown[r * WORDS + k]);
     var v = e | (e << 1u) | (e >> 1u);
     if k > 0u {
-        v = v | (grown[r * WORDS + k - 1u] >> 31u);
+        v = v | (atomicLoad(&grown[r * WORDS + k - 1u]) >> 31u);
     }
     if k + 1u < WORDS {
-        v = v | (grown[r * WORDS + k + 1u] << 31u);
+        v = v | (atomicLoad(&grown[r * WORDS + k + 1u]) << 31u);
     }
     return v;
 }
@@ -154,34 +154,44 @@ fn hysteresis(
     if t == 0u {
         atomicStore(&wg_changed, 0u);
     }
+    if t < ROW_WORDS {
+        atomicStore(&cand[t], 0u);
+        atomicStore(&grown[t], 0u);
+    }
+    workgroupBarrier();
     let base = wid.z * u.n;
     let i0 = i32(wid.y * TILE) - 1;
     let j0 = i32(wid.x * TILE) - 1;
+    // Neighbouring threads read neighbouring pixels, each setting its bit.
+    for (var p = t; p < HALO * HALO; p = p + 256u) {
+        let hr = p / HALO;
+        let hc = p % HALO;
+        let gi = i0 + i32(hr);
+        let gj = j0 + i32(hc);
+        if gi >= 0 && gj >= 0 && gi < i32(u.h) && gj < i32(u.w) {
+            let s = atomicLoad(&state[base + u32(gi) * u.w + u32(gj)]);
+            let word = hr * WORDS + hc / 32u;
+            let bit = 1u << (hc % 32u);
+            if s != NONE {
+                atomicOr(&cand[word], bit);
+            }
+            if s == EDGE {
+                atomicOr(&grown[word], bit);
+            }
+        }
+    }
+    workgroupBarrier();
     let owner = t < ROW_WORDS;
     let r = t / WORDS;
     let k = t % WORDS;
     var c = 0u;
     var e = 0u;
     if owner {
-        let gi = i0 + i32(r);
-        for (var b = 0u; b < 32u; b = b + 1u) {
-            let gj = j0 + i32(32u * k + b);
-            if 32u * k + b < HALO && gi >= 0 && gj >= 0 && gi < i32(u.h) && gj < i32(u.w) {
-                let s = atomicLoad(&state[base + u32(gi) * u.w + u32(gj)]);
-                if s != NONE {
-                    c = c | (1u << b);
-                }
-                if s == EDGE {
-                    e = e | (1u << b);
-                }
-            }
-        }
-        cand[t] = c;
-        grown[t] = e;
+        c = atomicLoad(&cand[t]);
+        e = atomicLoad(&grown[t]);
     }
     let start = e;
     let grows = owner && r >= 1u && r <= TILE && (c & ~e & interior(k)) != 0u;
-    workgroupBarrier();
     loop {
         var next_e = e;
         if grows {
@@ -191,7 +201,7 @@ fn hysteresis(
         workgroupBarrier();
         if next_e != e {
             e = next_e;
-            grown[t] = e;
+            atomicStore(&grown[t], e);
             atomicStore(&wg_changed, 1u);
         }
         workgroupBarrier();

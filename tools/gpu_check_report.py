@@ -148,6 +148,56 @@ for name in sorted(n for n in doc["steps"] if n.startswith("fern504_")):
     figure(f"fern × {name[len('fern504_'):]} at 504×378 (load to export)", s["wall_s"] if s["rc"] == 0 else None, "s",
            None, None, note)
 
+# A baseline build against this one (ab_RES_ARMROUND steps): step medians and each GPU part.
+def parts(name):
+    """The "GPU parts" rows of a bench step log: {part: ms}."""
+    rows, on = {}, False
+    for line in log(name).splitlines():
+        if line.startswith("GPU parts on"):
+            on = True
+        elif on:
+            m = re.match(r"^  (\S.*?)\s+(-?[\d.]+)$", line)
+            if m:
+                rows[m.group(1)] = float(m.group(2))
+            elif line.strip():
+                on = False
+    return rows
+
+
+def median(xs):
+    xs = sorted(xs)
+    return None if not xs else (xs[len(xs) // 2] if len(xs) % 2 else 0.5 * (xs[len(xs) // 2 - 1] + xs[len(xs) // 2]))
+
+
+ab_parts = []
+base_rev = ""
+try:
+    with open(os.path.join(raw, "baseline.txt")) as f:
+        base_rev = f.read().strip()
+except OSError:
+    pass
+for res in sorted({int(n.split("_")[1]) for n in doc["steps"] if n.startswith("ab_")}):
+    arms = {}
+    for arm in ("base", "new"):
+        names = sorted(n for n in doc["steps"] if n.startswith(f"ab_{res}_{arm}"))
+        runs = [next((r for r in (load(n + ".json") or {"runs": []})["runs"] if r["label"] == "gpu"), None) for n in names]
+        arms[arm] = {"runs": [r for r in runs if r], "parts": [parts(n) for n in names], "status": [status(n) for n in names]}
+    b, n = arms["base"], arms["new"]
+    for key, what in (("colour_step_median_ms", "colour"), ("geometry_step_median_ms", "geometry")):
+        bv = median([r[key] for r in b["runs"] if r.get(key) is not None])
+        nv = median([r[key] for r in n["runs"] if r.get(key) is not None])
+        rounds = lambda a: ", ".join(f"{r[key]:.2f}" for r in a["runs"] if r.get(key) is not None)
+        figure(f"guitar {what} step at {res} px, this build / baseline", None if not (bv and nv) else nv / bv, "×",
+               None, None, f"baseline {base_rev or '(--base)'}: {rounds(b)} ms; this build: {rounds(n)} ms"
+               + ("" if bv and nv else "".join(f"; {x}" for x in b["status"] + n["status"] if x)))
+    for part in (b["parts"][0] if b["parts"] else {}):
+        bv = median([p[part] for p in b["parts"] if part in p])
+        nv = median([p[part] for p in n["parts"] if part in p])
+        if bv is not None and nv is not None:
+            ab_parts.append({"resolution": res, "part": part, "baseline_ms": bv, "new_ms": nv,
+                             "ratio": nv / bv if bv > 0 else None})
+doc["ab_parts"] = ab_parts
+
 # The depth network.
 d = log("depth_net")
 lines = [l.strip() for l in d.splitlines() if "GPU" in l or "gpu" in l]
@@ -167,6 +217,11 @@ md = [f"# gpu-check, {meta.get('date', '?')}", "",
       f"Card: {meta.get('card') or 'no nvidia-smi (not an NVIDIA machine)'}; {meta.get('cores', '?')} CPU cores; "
       f"dry run: {'yes (reduced sizes)' if meta.get('dry_run') else 'no'}; {total_s:.0f} s in all.", "",
       "| what | measured | target | notes |", "|---|---|---|---|", *rows, ""]
+if ab_parts:
+    md += [f"GPU parts, this build against the baseline ({base_rev or '--base'}), medians of the rounds:", "",
+           "| px | part | baseline ms | this build ms | ratio |", "|---|---|---|---|---|",
+           *(f"| {p['resolution']} | {p['part']} | {p['baseline_ms']:.3f} | {p['new_ms']:.3f} | "
+             f"{'–' if p['ratio'] is None else format(p['ratio'], '.3g')} |" for p in ab_parts), ""]
 with open(os.path.join(out, "gpu-check.md"), "w") as f:
     f.write("\n".join(md))
 print("\n".join(md))

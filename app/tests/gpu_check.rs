@@ -55,3 +55,69 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
     assert!(table.contains("| what | measured | target | notes |"), "{table}");
     std::fs::remove_dir_all(&out).ok();
 }
+
+/// The report's side-by-side figures from a baseline build's and this build's
+/// bench logs (`ab_RES_ARMROUND`, as `run` writes them when a baseline is
+/// packed): the step medians' ratio and each GPU part's. The runs themselves
+/// are `gast bench step`, which the dry run above takes; at the dry run's
+/// sizes on lavapipe two more would double its time, so the report is given
+/// their files here.
+#[test]
+fn the_gpu_check_report_gives_this_build_against_the_baseline() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let dir = std::env::temp_dir().join(format!("gast-gpu-check-ab-{}", std::process::id()));
+    let (raw, out) = (dir.join("raw"), dir.join("out"));
+    std::fs::create_dir_all(&raw).expect("raw dir");
+    std::fs::create_dir_all(&out).expect("out dir");
+    let write = |name: &str, text: String| std::fs::write(raw.join(name), text).expect("write");
+    write("meta.json", r#"{"date":"2026-11-27T00:00:00Z","card":"","cores":2,"dry_run":1}"#.into());
+    write("baseline.txt", "37a1bd3 the build before".into());
+    // colour ms, geometry ms, edge map ms, raster backward tiles ms, per arm and round.
+    let runs = [
+        ("base", 1, 40.0, 44.0, 6.5, 16.0),
+        ("new", 1, 20.0, 23.0, 2.0, 9.0),
+        ("base", 2, 42.0, 46.0, 6.7, 16.4),
+        ("new", 2, 22.0, 25.0, 2.2, 9.4),
+    ];
+    for (arm, round, colour, geometry, edge, backward) in runs {
+        let name = format!("ab_256_{arm}{round}");
+        write(&format!("{name}.rc.json"), format!(r#"{{"name":"{name}","rc":0,"wall_s":9.5}}"#));
+        write(
+            &format!("{name}.json"),
+            format!(
+                r#"{{"runs":[{{"label":"gpu","device":"GPU: test","steps":12,"ms_per_step":{colour},"colour_step_median_ms":{colour},"geometry_step_median_ms":{geometry}}}]}}"#
+            ),
+        );
+        write(
+            &format!("{name}.log"),
+            format!(
+                "step benchmark: ...\n\nGPU parts on test (median ms)\n  edge map 256²                       {edge:>9.3}\n  raster backward tiles               {backward:>9.3}\n\nschedule: ...\n"
+            ),
+        );
+    }
+    let run = Command::new("python3")
+        .arg(root.join("tools/gpu_check_report.py"))
+        .args([&raw, &out])
+        .arg("60")
+        .output()
+        .expect("python3 runs the report");
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let doc: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("gpu-check.json")).expect("gpu-check.json")).expect("parses");
+    let figure = |what: &str| {
+        doc["figures"].as_array().expect("figures").iter().find(|f| f["what"] == what).cloned().expect(what)
+    };
+    // Medians of the two rounds: colour 21 / 41, geometry 24 / 45.
+    let colour = figure("guitar colour step at 256 px, this build / baseline");
+    assert!((colour["value"].as_f64().expect("ratio") - 21.0 / 41.0).abs() < 1e-9, "{colour}");
+    assert!(colour["note"].as_str().is_some_and(|n| n.contains("37a1bd3") && n.contains("40.00, 42.00")), "{colour}");
+    let geometry = figure("guitar geometry step at 256 px, this build / baseline");
+    assert!((geometry["value"].as_f64().expect("ratio") - 24.0 / 45.0).abs() < 1e-9, "{geometry}");
+    let parts = doc["ab_parts"].as_array().expect("ab_parts");
+    let part = |name: &str| parts.iter().find(|p| p["part"] == name).cloned().expect(name);
+    assert!((part("edge map 256²")["ratio"].as_f64().expect("ratio") - 2.1 / 6.6).abs() < 1e-9, "{parts:?}");
+    assert!((part("raster backward tiles")["ratio"].as_f64().expect("ratio") - 9.2 / 16.2).abs() < 1e-9, "{parts:?}");
+    let table = std::fs::read_to_string(out.join("gpu-check.md")).expect("gpu-check.md");
+    assert!(table.contains("| 256 | edge map 256² | 6.600 | 2.100 | 0.318 |"), "{table}");
+    std::fs::remove_dir_all(&dir).ok();
+}
