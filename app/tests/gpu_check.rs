@@ -20,7 +20,7 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
         .args(["run", "--dry-run", "--bin", env!("CARGO_BIN_EXE_gast"), "--data"])
         .arg(&shared)
         .env("OUT", &out)
-        .env("GPU_CHECK_DEADLINE", "600")
+        .env("GPU_CHECK_DEADLINE", "900")
         .output()
         .expect("bash runs tools/gpu-check");
     let log = String::from_utf8_lossy(&run.stdout);
