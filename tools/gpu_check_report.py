@@ -6,6 +6,7 @@ bare GPU machine."""
 import json
 import os
 import re
+import statistics
 import sys
 
 raw, out, total_s = sys.argv[1], sys.argv[2], float(sys.argv[3])
@@ -165,8 +166,7 @@ def parts(name):
 
 
 def median(xs):
-    xs = sorted(xs)
-    return None if not xs else (xs[len(xs) // 2] if len(xs) % 2 else 0.5 * (xs[len(xs) // 2 - 1] + xs[len(xs) // 2]))
+    return statistics.median(xs) if xs else None
 
 
 ab_parts = []

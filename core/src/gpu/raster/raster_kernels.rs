@@ -115,7 +115,7 @@ fn splice(src: &str, begin: &str, end: &str, with: &str) -> String {
 }
 
 /// The `raster_backward.wgsl` source for an accumulation mode.
-pub(crate) fn tile_backward_source(acc: Accumulation) -> String {
+fn tile_backward_source(acc: Accumulation) -> String {
     let mut src = super::raster_project::with_camera(include_str!("../../../../shaders/raster_backward.wgsl"));
     if acc.float_atomics {
         src = splice(&src, CAS_BEGIN, CAS_END, NATIVE_ADD);
