@@ -1,10 +1,15 @@
 // Reverse compositing per tile (core/src/gpu/raster_backward.rs; CPU twin:
-// core/src/raster/backward.rs): one workgroup per tile, one thread per pixel,
-// splats staged 256 at a time in workgroup memory from the back of the list.
-// Each pixel walks from its last composited splat to the front, recovering
-// T_i = T_{i+1} / (1 − α_i) and the colour and depth behind each splat, and
-// adds its share of ∂L/∂(x, y, A, B, C, opacity, r, g, b, 1/z) to the
-// splat's Gaussian with atomic adds.
+// core/src/raster/backward.rs): `cam.splits` workgroups per tile, each
+// walking one slice of the tile's list (whole batches of 256, `slice_len`),
+// one thread per pixel, splats staged 256 at a time in workgroup memory from
+// the back of the slice. Each pixel starts from the transmittance at the
+// slice's end and the colour and depth behind it (the later slices' sums the
+// forward pass recorded, and the background), walks back to the slice's
+// front, recovering T_i = T_{i+1} / (1 − α_i) and the colour and depth behind
+// each splat, and adds its share of ∂L/∂(x, y, A, B, C, opacity, r, g, b,
+// 1/z) to the splat's Gaussian with atomic adds. With one slice a tile this
+// is one walk from the last composited splat; at low resolution, where a few
+// hundred tiles hold long lists, the slices keep the GPU's cores busy.
 //
 // The lines between the add_grad markers are the fallback, a compare-and-swap
 // loop on u32 bits; raster_backward.rs swaps them for a native atomic<f32>
@@ -73,6 +78,8 @@ fn tile_backward(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgrou
     let py = wid.y * TILE + lid.y;
     let inside = px < cam.width && py < cam.height;
     let first = tile_ranges[2u * tile];
+    let per_slice = slice_len(max(tile_ranges[2u * tile + 1u], first) - first);
+    let lo = wid.z * per_slice;
     if t == 0u {
         atomicStore(&max_nc, 0u);
     }
@@ -80,19 +87,37 @@ fn tile_backward(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgrou
     var trans = 0.0;
     var n_contrib = 0u;
     var cot = vec4<f32>(0.0);
-    var behind = vec4<f32>(cam.bg.xyz, 0.0);
+    let bg = vec4<f32>(cam.bg.xyz, 0.0);
+    var behind = bg;
     if inside {
         let q = py * cam.width + px;
         trans = bitcast<f32>(px_state[2u * q]);
         n_contrib = px_state[2u * q + 1u];
         cot = vec4<f32>(v_rgb[3u * q], v_rgb[3u * q + 1u], v_rgb[3u * q + 2u], v_inv_depth[q]);
         atomicMax(&max_nc, n_contrib);
+        if wid.z + 1u < cam.splits {
+            // behind·T at the slice's end: what the later slices and the background add.
+            var later = trans * bg;
+            for (var c = wid.z + 1u; c < cam.splits; c = c + 1u) {
+                let at = slice_at(q, c);
+                later += vec4<f32>(
+                    bitcast<f32>(px_state[at + 1u]),
+                    bitcast<f32>(px_state[at + 2u]),
+                    bitcast<f32>(px_state[at + 3u]),
+                    bitcast<f32>(px_state[at + 4u])
+                );
+            }
+            trans = bitcast<f32>(px_state[slice_at(q, wid.z + 1u)]);
+            behind = later / trans;
+        }
     }
     let count = workgroupUniformLoad(&max_nc);
     let pos = vec2<f32>(f32(px) + 0.5, f32(py) + 0.5);
-    var end = count;
-    while end > 0u {
-        let start = select(0u, end - 256u, end > 256u);
+    // This slice's part of the tile's composited positions (none when every
+    // pixel stopped before it).
+    var end = min(count, lo + per_slice);
+    while end > lo {
+        let start = select(lo, end - 256u, end > lo + 256u);
         workgroupBarrier();
         if start + t < end {
             let g = order[tile_splats[first + start + t]];

@@ -24,6 +24,24 @@ struct Cam {
     sh_coeffs: u32,
     capacity: u32,
     sh_degree: u32,
-    _p0: u32,
+    // Workgroups per tile in the backward pass, each a slice of its list
+    // (raster_forward.rs: GpuRaster::splits; the forward pass records where each slice starts).
+    splits: u32,
     _p1: u32,
+}
+
+// The backward pass's slices of a tile's list (raster_forward.wgsl records
+// them, raster_backward.wgsl walks them).
+
+// List positions per slice of a tile's list of `len`: whole batches of 256,
+// as few per slice as make at most `cam.splits` slices.
+fn slice_len(len: u32) -> u32 {
+    let batches = (len + 255u) / 256u;
+    return max((batches + cam.splits - 1u) / cam.splits, 1u) * 256u;
+}
+
+// Where pixel q's record of slice c starts in px_state.
+fn slice_at(q: u32, c: u32) -> u32 {
+    let npx = cam.width * cam.height;
+    return 2u * npx + 5u * (c * npx + q);
 }

@@ -4,8 +4,12 @@
 // α ≥ 1/255 ellipse reaches (the CPU's box-then-ellipse test); scan.wgsl
 // turns the counts into offsets; `emit` writes (tile, depth rank) pairs; the
 // stable tile sort groups them by tile keeping depth order; `ranges` finds
-// each tile's slice; `composite` blends each tile front to back in one
-// workgroup, splats staged 256 at a time in workgroup memory.
+// each tile's range; `composite` blends each tile front to back in one
+// workgroup, splats staged 256 at a time in workgroup memory, and records
+// for each pixel where each of the backward pass's `cam.splits` slices of
+// the list starts (the transmittance there) and what the slice adds (its
+// colour and inverse depth, premultiplied), so that raster_backward.wgsl can
+// walk the slices in separate workgroups.
 
 // `struct Cam` (the uniform block): shaders/raster_camera.wgsl, prepended by the Rust side.
 
@@ -27,7 +31,10 @@
 @group(0) @binding(5) var<storage, read_write> rgb: array<f32>;
 @group(0) @binding(6) var<storage, read_write> inv_depth: array<f32>;
 @group(0) @binding(7) var<storage, read_write> alpha_out: array<f32>;
-// Per pixel: final transmittance (bits), then one past the last composited list position.
+// Per pixel: final transmittance (bits), then one past the last composited
+// list position; after those 2·H·W words, per slice and pixel (`slice_at`):
+// the transmittance at the slice's start, then its premultiplied colour and
+// inverse depth (f32 bits).
 @group(0) @binding(8) var<storage, read_write> px_state: array<u32>;
 
 const TILE: u32 = 16u;
@@ -146,6 +153,15 @@ fn ranges_of_tiles(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_w
     }
 }
 
+fn put_slice(q: u32, c: u32, t_start: f32, sum: vec4<f32>) {
+    let at = slice_at(q, c);
+    px_state[at] = bitcast<u32>(t_start);
+    px_state[at + 1u] = bitcast<u32>(sum.x);
+    px_state[at + 2u] = bitcast<u32>(sum.y);
+    px_state[at + 3u] = bitcast<u32>(sum.z);
+    px_state[at + 4u] = bitcast<u32>(sum.w);
+}
+
 var<workgroup> s_xy: array<vec2<f32>, 256>;
 var<workgroup> s_conic: array<vec4<f32>, 256>;
 var<workgroup> s_feat: array<vec4<f32>, 256>;
@@ -170,10 +186,21 @@ fn composite(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id
         atomicAdd(&n_done, 1u);
     }
     let pos = vec2<f32>(f32(px) + 0.5, f32(py) + 0.5);
+    let q = py * cam.width + px;
     var trans = 1.0;
     var acc = vec4<f32>(0.0);
     var n_contrib = 0u;
+    let per_slice = slice_len(end - first);
+    var cur = 0u;
+    var slice_t = 1.0;
+    var slice_sum = vec4<f32>(0.0);
     for (var start = first; start < end; start = start + 256u) {
+        if inside && start > first && (start - first) % per_slice == 0u {
+            put_slice(q, cur, slice_t, slice_sum);
+            cur += 1u;
+            slice_t = trans;
+            slice_sum = vec4<f32>(0.0);
+        }
         workgroupBarrier();
         if start + t < end {
             let g = order[tile_splats[start + t]];
@@ -201,7 +228,9 @@ fn composite(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id
                 atomicAdd(&n_done, 1u);
                 break;
             }
-            acc += (alpha * trans) * s_feat[j];
+            let add = (alpha * trans) * s_feat[j];
+            acc += add;
+            slice_sum += add;
             trans = test_t;
             n_contrib = start - first + j + 1u;
         }
@@ -214,7 +243,11 @@ fn composite(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id
         }
     }
     if inside {
-        let q = py * cam.width + px;
+        // The slice under way, then those the pixel never reached.
+        put_slice(q, cur, slice_t, slice_sum);
+        for (var c = cur + 1u; c < cam.splits; c = c + 1u) {
+            put_slice(q, c, trans, vec4<f32>(0.0));
+        }
         rgb[3u * q] = acc.x + trans * cam.bg.x;
         rgb[3u * q + 1u] = acc.y + trans * cam.bg.y;
         rgb[3u * q + 2u] = acc.z + trans * cam.bg.z;

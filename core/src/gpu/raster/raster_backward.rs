@@ -59,7 +59,7 @@ impl GpuRaster {
                 v_inv_depth,
                 &self.v_splat,
             ],
-            [self.width.div_ceil(TILE), self.height.div_ceil(TILE), 1],
+            [self.width.div_ceil(TILE), self.height.div_ceil(TILE), self.splits],
         );
     }
 

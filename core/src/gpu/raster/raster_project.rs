@@ -45,13 +45,15 @@ pub(crate) struct RasterUniform {
     sh_coeffs: u32,
     capacity: u32,
     sh_degree: u32,
-    _pad: [u32; 2],
+    splits: u32,
+    _pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<RasterUniform>() == 160);
 
 impl RasterUniform {
-    /// The uniform for `n` Gaussians of SH degree `sh_degree` seen by `cam`.
-    pub fn new(cam: &Camera, opts: &RenderOptions, n: usize, sh_degree: u32, capacity: usize) -> Self {
+    /// The uniform for `n` Gaussians of SH degree `sh_degree` seen by `cam`,
+    /// the backward pass splitting each tile's list into `splits` slices.
+    pub fn new(cam: &Camera, opts: &RenderOptions, n: usize, sh_degree: u32, capacity: usize, splits: u32) -> Self {
         let (tx, ty) = cam.tan_half_fov();
         let r = cam.rotation;
         let row = |i: usize| {
@@ -80,7 +82,8 @@ impl RasterUniform {
             sh_coeffs: crate::scene::sh_coeffs_for_degree(sh_degree) as u32,
             capacity: capacity as u32,
             sh_degree,
-            _pad: [0; 2],
+            splits,
+            _pad: 0,
         }
     }
 }

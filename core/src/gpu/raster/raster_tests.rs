@@ -44,7 +44,8 @@ fn random_case(seed: u64, n: usize, deg: u32, scales: (f32, f32), width: u32, he
     (g, cam)
 }
 
-/// The GPU forward and backward of one case, every buffer noise-filled first.
+/// The GPU forward and backward of one case (with `splits` backward slices
+/// per tile, else the size's own choice), every buffer noise-filled first.
 fn gpu_run(
     k: &RasterKernels,
     g: &Gaussians,
@@ -52,10 +53,14 @@ fn gpu_run(
     opts: &RenderOptions,
     v_rgb: &[f32],
     v_d: &[f32],
+    splits: Option<u32>,
 ) -> (Render, Grads) {
     let ctx = ctx();
     let gg = GpuGaussians::upload(ctx, g);
-    let raster = GpuRaster::fitted(ctx, k, &gg, cam, opts).expect("workspace");
+    let mut raster = GpuRaster::fitted(ctx, k, &gg, cam, opts).expect("workspace");
+    if let Some(s) = splits {
+        raster = raster.with_splits(ctx, s);
+    }
     raster.fill_noise(ctx, 77);
     let grads = GpuGrads::new(ctx, &gg);
     for (i, b) in [&grads.v_means, &grads.v_log_scales, &grads.v_quats, &grads.v_opacity_logits, &grads.v_sh]
@@ -81,13 +86,14 @@ fn compare_with_cpu(
     cam: &Camera,
     opts: &RenderOptions,
     seed: u64,
+    splits: Option<u32>,
 ) -> (Vec<String>, usize) {
     let npx = (cam.width * cam.height) as usize;
     let v_rgb = noise(3 * npx, seed ^ 0x55);
     let v_d = noise(npx, seed ^ 0x66);
     let (img, state) = forward(g, cam, opts);
     let want = backward(g, cam, opts, &state, &v_rgb, &v_d);
-    let (got_img, got) = gpu_run(k, g, cam, opts, &v_rgb, &v_d);
+    let (got_img, got) = gpu_run(k, g, cam, opts, &v_rgb, &v_d, splits);
     let mut failures = Vec::new();
     // A case worth comparing: most pixels covered, many Gaussians composited.
     let covered = img.alpha.iter().filter(|&&a| a > 0.1).count();
@@ -150,7 +156,7 @@ fn check_random_scenes(float_atomics: bool, subgroups: bool) {
     ] {
         let (g, cam) = random_case(seed, n, deg, scales, 40, 32);
         let opts = RenderOptions { background: [0.2, 0.4, 0.7] };
-        let (f, d) = compare_with_cpu(&format!("seed {seed} deg {deg}"), &k, &g, &cam, &opts, seed);
+        let (f, d) = compare_with_cpu(&format!("seed {seed} deg {deg}"), &k, &g, &cam, &opts, seed, None);
         failures.extend(f);
         differing += d;
     }
@@ -178,6 +184,45 @@ fn matches_the_cpu_on_random_scenes_with_the_cas_fallback_and_no_subgroups() {
 fn matches_the_cpu_on_random_scenes_with_subgroups_and_the_cas_fallback() {
     let subgroups = ctx().caps.subgroups;
     check_random_scenes(false, subgroups);
+}
+
+#[test]
+fn matches_the_cpu_whatever_the_backward_slices() {
+    let ctx = ctx();
+    let k = RasterKernels::new(ctx);
+    // Thousands of faint splats: long lists whose pixels composite hundreds
+    // of them, so that a slice spans several batches of 256 and the later
+    // slices start deep in the list.
+    let n = 3000;
+    let (mut g, cam) = random_case(6, n, 1, (-1.6, -0.8), 40, 32);
+    g.opacity_logits = uniform(n, 66, -5.3, -3.5);
+    let opts = RenderOptions { background: [0.9, 0.3, 0.1] };
+    let (_, state) = forward(&g, &cam, &opts);
+    let deepest = state.n_contrib.iter().copied().max().unwrap_or(0);
+    println!("{} pairs over 6 tiles, the deepest pixel composites up to list position {deepest}", state.pairs());
+    assert!(deepest > 3 * 256, "a case too shallow for the slices: deepest position {deepest}");
+    let mut failures = Vec::new();
+    let mut differing = 0;
+    for splits in [Some(1), Some(2), Some(3), Some(16), None] {
+        let (f, d) = compare_with_cpu(&format!("{splits:?} slices"), &k, &g, &cam, &opts, 6, splits);
+        failures.extend(f);
+        differing += d;
+    }
+    assert!(differing <= 2, "{differing} pixels differ by 1e-4 or more");
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+#[test]
+fn the_backward_slices_follow_the_tile_count() {
+    use super::raster_forward::backward_splits;
+    // 1,024 px square and fern's 1,008×756 walk each tile in one workgroup;
+    // 512 px square in two slices, 256 px in eight, tiny images in sixteen.
+    assert_eq!(backward_splits(64 * 64), 1);
+    assert_eq!(backward_splits(63 * 48), 1);
+    assert_eq!(backward_splits(32 * 32), 2);
+    assert_eq!(backward_splits(16 * 16), 8);
+    assert_eq!(backward_splits(3 * 2), 16);
+    assert_eq!(backward_splits(0), 16);
 }
 
 /// A file of the shared data (`$GAST_SHARED`, else `../shared` beside the
@@ -223,6 +268,7 @@ fn matches_the_cpu_on_part_of_the_guitar() {
             cam,
             &RenderOptions::default(),
             40 + i as u64,
+            None,
         );
         failures.extend(f);
         differing += d;
@@ -240,8 +286,15 @@ fn matches_the_golden_rasterizer_files() {
         let Some(path) = shared(&format!("golden/{name}.safetensors")) else { return };
         let file = GoldenFile::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         let case = crate::golden::raster_case(&file).expect("raster case");
-        let (img, grads) =
-            gpu_run(&k, &case.gaussians, &case.camera, &case.options, &case.cotangent_rgb, &case.cotangent_inv_depth);
+        let (img, grads) = gpu_run(
+            &k,
+            &case.gaussians,
+            &case.camera,
+            &case.options,
+            &case.cotangent_rgb,
+            &case.cotangent_inv_depth,
+            None,
+        );
         const IMAGE: Tolerance = Tolerance::Abs(1e-5);
         const GRAD: Tolerance = Tolerance::RelToMax(1e-3);
         let outputs: [(&str, &[f32], Tolerance); 8] = [
