@@ -78,7 +78,7 @@ fn tile_backward(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgrou
     let py = wid.y * TILE + lid.y;
     let inside = px < cam.width && py < cam.height;
     let first = tile_ranges[2u * tile];
-    let per_slice = slice_len(max(tile_ranges[2u * tile + 1u], first) - first);
+    let per_slice = slice_len(max(tile_ranges[2u * tile + 1u], first) - first, cam.splits);
     let lo = wid.z * per_slice;
     if t == 0u {
         atomicStore(&max_nc, 0u);
@@ -99,7 +99,7 @@ fn tile_backward(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgrou
             // behind·T at the slice's end: what the later slices and the background add.
             var later = trans * bg;
             for (var c = wid.z + 1u; c < cam.splits; c = c + 1u) {
-                let at = slice_at(q, c);
+                let at = slice_at(q, c, cam.width * cam.height);
                 later += vec4<f32>(
                     bitcast<f32>(px_state[at + 1u]),
                     bitcast<f32>(px_state[at + 2u]),
@@ -107,7 +107,7 @@ fn tile_backward(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgrou
                     bitcast<f32>(px_state[at + 4u])
                 );
             }
-            trans = bitcast<f32>(px_state[slice_at(q, wid.z + 1u)]);
+            trans = bitcast<f32>(px_state[slice_at(q, wid.z + 1u, cam.width * cam.height)]);
             behind = later / trans;
         }
     }

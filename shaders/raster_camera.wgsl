@@ -33,15 +33,15 @@ struct Cam {
 // The backward pass's slices of a tile's list (raster_forward.wgsl records
 // them, raster_backward.wgsl walks them).
 
-// List positions per slice of a tile's list of `len`: whole batches of 256,
-// as few per slice as make at most `cam.splits` slices.
-fn slice_len(len: u32) -> u32 {
+// List positions per slice of a tile's list of `len` (`splits`: the
+// uniform's): whole batches of 256, as few per slice as make at most
+// `splits` slices.
+fn slice_len(len: u32, splits: u32) -> u32 {
     let batches = (len + 255u) / 256u;
-    return max((batches + cam.splits - 1u) / cam.splits, 1u) * 256u;
+    return max((batches + splits - 1u) / splits, 1u) * 256u;
 }
 
-// Where pixel q's record of slice c starts in px_state.
-fn slice_at(q: u32, c: u32) -> u32 {
-    let npx = cam.width * cam.height;
+// Where pixel q's record of slice c starts in px_state, for `npx` pixels.
+fn slice_at(q: u32, c: u32, npx: u32) -> u32 {
     return 2u * npx + 5u * (c * npx + q);
 }

@@ -154,7 +154,7 @@ fn ranges_of_tiles(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_w
 }
 
 fn put_slice(q: u32, c: u32, t_start: f32, sum: vec4<f32>) {
-    let at = slice_at(q, c);
+    let at = slice_at(q, c, cam.width * cam.height);
     px_state[at] = bitcast<u32>(t_start);
     px_state[at + 1u] = bitcast<u32>(sum.x);
     px_state[at + 2u] = bitcast<u32>(sum.y);
@@ -190,7 +190,7 @@ fn composite(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id
     var trans = 1.0;
     var acc = vec4<f32>(0.0);
     var n_contrib = 0u;
-    let per_slice = slice_len(end - first);
+    let per_slice = slice_len(end - first, cam.splits);
     var cur = 0u;
     var slice_t = 1.0;
     var slice_sum = vec4<f32>(0.0);
