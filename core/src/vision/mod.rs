@@ -26,6 +26,7 @@ pub mod style_depth;
 pub mod vgg;
 pub mod vgg_cone;
 pub mod weights;
+mod weights_file;
 pub mod winograd;
 
 pub(crate) use conv::matmul;

@@ -20,7 +20,7 @@ use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::Path;
 
-use super::weights::{RawTensor, WeightsError};
+use super::weights_file::{RawTensor, WeightsError};
 
 /// A tensor as the pickle describes it.
 #[derive(Clone, Debug)]
