@@ -32,7 +32,8 @@
 @group(0) @binding(6) var<storage, read_write> inv_depth: array<f32>;
 @group(0) @binding(7) var<storage, read_write> alpha_out: array<f32>;
 // Per pixel: final transmittance (bits), then one past the last composited
-// list position; after those 2·H·W words, per slice and pixel (`slice_at`):
+// list position; after those 2·H·W words, with more than one slice, per
+// slice and pixel (`slice_at`):
 // the transmittance at the slice's start, then its premultiplied colour and
 // inverse depth (f32 bits).
 @group(0) @binding(8) var<storage, read_write> px_state: array<u32>;
@@ -195,7 +196,7 @@ fn composite(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id
     var slice_t = 1.0;
     var slice_sum = vec4<f32>(0.0);
     for (var start = first; start < end; start = start + 256u) {
-        if inside && start > first && (start - first) % per_slice == 0u {
+        if inside && cam.splits > 1u && start > first && (start - first) % per_slice == 0u {
             put_slice(q, cur, slice_t, slice_sum);
             cur += 1u;
             slice_t = trans;
@@ -243,10 +244,13 @@ fn composite(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id
         }
     }
     if inside {
-        // The slice under way, then those the pixel never reached.
-        put_slice(q, cur, slice_t, slice_sum);
-        for (var c = cur + 1u; c < cam.splits; c = c + 1u) {
-            put_slice(q, c, trans, vec4<f32>(0.0));
+        // The slice under way, then those the pixel never reached (with one
+        // slice the backward pass needs no record: px_state has none).
+        if cam.splits > 1u {
+            put_slice(q, cur, slice_t, slice_sum);
+            for (var c = cur + 1u; c < cam.splits; c = c + 1u) {
+                put_slice(q, c, trans, vec4<f32>(0.0));
+            }
         }
         rgb[3u * q] = acc.x + trans * cam.bg.x;
         rgb[3u * q + 1u] = acc.y + trans * cam.bg.y;

@@ -213,6 +213,44 @@ fn matches_the_cpu_whatever_the_backward_slices() {
 }
 
 #[test]
+fn one_slice_keeps_each_pixels_final_state_and_no_more() {
+    // With one slice the buffer has room for no slice record (and the
+    // forward pass writes none: lavapipe drops writes past a buffer's end,
+    // so only the size shows here); each pixel's final transmittance and
+    // count, all the backward pass reads, are the CPU's.
+    let ctx = ctx();
+    let k = RasterKernels::new(ctx);
+    let n = 3000;
+    let (mut g, cam) = random_case(6, n, 1, (-1.6, -0.8), 40, 32);
+    g.opacity_logits = uniform(n, 66, -5.3, -3.5);
+    let opts = RenderOptions { background: [0.9, 0.3, 0.1] };
+    let (_, state) = forward(&g, &cam, &opts);
+    let gg = GpuGaussians::upload(ctx, &g);
+    let raster = GpuRaster::fitted(ctx, &k, &gg, &cam, &opts).expect("workspace").with_splits(ctx, 1);
+    raster.fill_noise(ctx, 78);
+    let mut enc = ctx.encoder("one slice");
+    raster.forward(ctx, &k, &mut enc, &gg, &cam, &opts);
+    ctx.submit(enc);
+    let words: Vec<u32> = ctx.read(&raster.px_state).expect("px_state");
+    let npx = (cam.width * cam.height) as usize;
+    assert_eq!(words.len(), 2 * npx);
+    let mut wrong = Vec::new();
+    for q in 0..npx {
+        let t = f32::from_bits(words[2 * q]);
+        let t_close = (t - state.final_t[q]).abs() < 1e-4; // false for NaN
+        if words[2 * q + 1] != state.n_contrib[q] || !t_close {
+            wrong.push(format!(
+                "pixel {q}: T {t} count {} (CPU {} {})",
+                words[2 * q + 1],
+                state.final_t[q],
+                state.n_contrib[q]
+            ));
+        }
+    }
+    assert!(wrong.len() <= 2, "{} pixels' state differs: {}", wrong.len(), wrong.join("; "));
+}
+
+#[test]
 fn the_backward_slices_follow_the_tile_count() {
     use super::raster_forward::backward_splits;
     // 1,024 px square and fern's 1,008×756 walk each tile in one workgroup;
@@ -223,6 +261,16 @@ fn the_backward_slices_follow_the_tile_count() {
     assert_eq!(backward_splits(16 * 16), 8);
     assert_eq!(backward_splits(3 * 2), 16);
     assert_eq!(backward_splits(0), 16);
+}
+
+#[test]
+fn the_slice_records_exist_only_with_more_than_one_slice() {
+    use super::raster_forward::state_words;
+    // One slice: each pixel's final transmittance and count, nothing more
+    // (1,008×756 keeps 6 MB, not 21); eight: five words more per slice.
+    assert_eq!(state_words(1, 1008 * 756), 2 * 1008 * 756);
+    assert_eq!(state_words(8, 256 * 256), 42 * 256 * 256);
+    assert_eq!(state_words(2, 10), 120);
 }
 
 /// A file of the shared data (`$GAST_SHARED`, else `../shared` beside the
