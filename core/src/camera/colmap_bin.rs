@@ -6,9 +6,9 @@
 //! once instead of exhausting memory, and a short file fails with the record
 //! and byte offset where it ends.
 //!
-//! It imports the record types and checks of `colmap.rs` (text) and
-//! `colmap_points.rs`, which call back into it for the `.bin` files: one
-//! format's two encodings, one record type, split by size.
+//! The record types and their checks, shared with the text readers
+//! (`colmap.rs`, `colmap_points.rs`, which call this for `.bin` files), are
+//! `colmap_records.rs`'s.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -16,8 +16,9 @@ use std::io::{BufReader, Read};
 use std::path::{Path, PathBuf};
 
 use super::CameraError;
-use super::colmap::{ColmapCamera, ColmapImage, MODELS, check_image, insert_camera, known_models};
-use super::colmap_points::{ColmapPoints, check_point};
+use super::colmap_records::{
+    ColmapCamera, ColmapImage, ColmapPoints, MODELS, check_image, check_point, insert_camera, known_models,
+};
 
 /// A little-endian reader that knows the file length, so every read and
 /// every count is checked against the bytes that are really there.

@@ -7,35 +7,9 @@
 
 use std::path::{Path, PathBuf};
 
-use glam::Vec3;
-
+pub use super::colmap_records::ColmapPoints;
+use super::colmap_records::check_point;
 use super::{CameraError, colmap_bin};
-
-/// SfM points: position and 8-bit RGB colour, in the file's order.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct ColmapPoints {
-    /// World positions.
-    pub positions: Vec<Vec3>,
-    /// Colours, one per position.
-    pub colors: Vec<[u8; 3]>,
-}
-
-impl ColmapPoints {
-    /// An empty set with room for `n` points.
-    pub fn with_capacity(n: usize) -> Self {
-        Self { positions: Vec::with_capacity(n), colors: Vec::with_capacity(n) }
-    }
-
-    /// The number of points.
-    pub fn len(&self) -> usize {
-        self.positions.len()
-    }
-
-    /// Whether there are no points.
-    pub fn is_empty(&self) -> bool {
-        self.positions.is_empty()
-    }
-}
 
 /// The `points3D` file of a dataset, if it has one: `path` is a scene folder
 /// (looked in: `sparse/0/`, `sparse/`, the folder itself), a COLMAP model
@@ -65,15 +39,6 @@ pub fn load_colmap_points(path: impl AsRef<Path>) -> Result<ColmapPoints, Camera
         read_points3d_txt(&file)
     } else {
         colmap_bin::read_points3d_bin(&file)
-    }
-}
-
-/// Checks a point's position, shared by the text and binary readers.
-pub(crate) fn check_point(path: &Path, record: &str, xyz: [f64; 3]) -> Result<Vec3, CameraError> {
-    if xyz.iter().all(|v| v.is_finite() && v.abs() < f64::from(f32::MAX)) {
-        Ok(Vec3::new(xyz[0] as f32, xyz[1] as f32, xyz[2] as f32))
-    } else {
-        Err(CameraError::format(path, format!("{record}.xyz"), "finite coordinates", format!("{xyz:?}")))
     }
 }
 

@@ -14,6 +14,7 @@
 mod colmap;
 mod colmap_bin;
 mod colmap_points;
+mod colmap_records;
 mod colmap_write;
 mod error;
 mod framing;
