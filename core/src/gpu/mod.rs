@@ -64,6 +64,8 @@ mod raster_tests;
 mod depth_dpt;
 #[path = "networks/depth_net.rs"]
 mod depth_net;
+#[path = "networks/depth_rec.rs"]
+mod depth_rec;
 #[path = "networks/feature_net.rs"]
 mod feature_net;
 #[path = "networks/vgg.rs"]

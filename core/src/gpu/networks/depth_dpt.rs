@@ -10,7 +10,7 @@
 //! accumulate flag. The bilinear resizes use the taps the CPU computes, so
 //! their weights are the CPU's to the bit.
 
-use super::depth_net::{GpuLinear, Rec};
+use super::depth_rec::{GpuLinear, Rec};
 use super::gemm::{GemmSpec, Strided};
 use super::{Bind, GpuContext, Kernel};
 use crate::vision::depth::dpt::{Dpt, Resize};

@@ -17,20 +17,19 @@
 //! per style and its scratch (≈300 MB at 518 px for the Small model) should
 //! not stay on the device.
 //!
-//! [`super::depth_dpt`] (the neck and head) takes this file's linear layers
-//! and recorder, and this file runs it after the backbone: one network split
-//! in two files by size.
+//! [`super::depth_dpt`] (the neck and head) runs after the backbone: one
+//! network split in two files by size, both recording through
+//! [`super::depth_rec`]'s linear layers and recorder.
 
 use super::depth_dpt::GpuDpt;
+use super::depth_rec::{GpuLinear, Rec};
 use super::gemm::{Gemm, GemmSpec, Strided};
 use super::{Bind, GpuContext, GpuError, Kernel};
-use crate::vision::depth::ops::{Linear, Norm};
+use crate::vision::depth::ops::Norm;
 use crate::vision::depth::{DepthAnything, INPUT_SIZE, input_size};
 use crate::vision::resize::resize_bicubic;
 use crate::vision::style_depth::DepthImage;
 
-/// Threads per workgroup of the elementwise kernels.
-pub(super) const WORKGROUP: u32 = 256;
 /// Largest attention-score block, in f32 elements (64 MiB), below lavapipe's
 /// 128 MiB binding limit.
 const SCORE_ELEMS: usize = 1 << 24;
@@ -49,21 +48,6 @@ struct NetParams {
     eps: f32,
 }
 const _: () = assert!(std::mem::size_of::<NetParams>() == 32);
-
-/// A linear layer (or 1×1 convolution) on the device: `out × in` weights, `out` biases.
-#[derive(Debug)]
-pub(super) struct GpuLinear {
-    pub w: wgpu::Buffer,
-    pub b: wgpu::Buffer,
-    pub out: usize,
-    pub inp: usize,
-}
-
-impl GpuLinear {
-    pub fn new(ctx: &GpuContext, l: &Linear) -> Self {
-        Self { w: ctx.upload("depth.w", &l.w), b: ctx.upload("depth.b", &l.b), out: l.out(), inp: l.inp }
-    }
-}
 
 /// A layer norm's scale then shift in one buffer, and its epsilon.
 #[derive(Debug)]
@@ -95,86 +79,6 @@ struct NetKernels {
     layer_norm: Kernel,
     softmax: Kernel,
     gelu: Kernel,
-}
-
-/// One forward's command encoder, the buffers it made (kept alive until
-/// the submission), and whether scratch starts as NaN (tests).
-pub(super) struct Rec<'a> {
-    pub ctx: &'a GpuContext,
-    pub enc: wgpu::CommandEncoder,
-    pub gemm: &'a Gemm,
-    poison: bool,
-    /// The im2col scratch every convolution shares (launches run in order).
-    cols: Option<wgpu::Buffer>,
-}
-
-impl Rec<'_> {
-    /// The shared column scratch, at least `len` f32s (grown when needed).
-    pub fn cols(&mut self, len: usize) -> wgpu::Buffer {
-        match &self.cols {
-            Some(b) if b.size() >= (len * 4) as u64 => b.clone(),
-            _ => {
-                let b = self.scratch("depth.cols", len);
-                self.cols = Some(b.clone());
-                b
-            }
-        }
-    }
-
-    /// A scratch buffer of `len` f32s; its contents are not to be relied on
-    /// (NaN when poisoned, so a kernel reading unwritten memory shows).
-    pub fn scratch(&self, label: &str, len: usize) -> wgpu::Buffer {
-        if self.poison { self.ctx.upload(label, &vec![f32::NAN; len.max(1)]) } else { self.ctx.zeros(label, len) }
-    }
-
-    /// Records one GEMM (plan made on the spot: a forward runs once per style).
-    pub fn gemm(
-        &mut self,
-        spec: &GemmSpec,
-        a: &wgpu::Buffer,
-        b: &wgpu::Buffer,
-        bias: Option<&wgpu::Buffer>,
-        c: &wgpu::Buffer,
-    ) {
-        let plan = self.gemm.plan(self.ctx, spec);
-        self.gemm.record(self.ctx, &mut self.enc, &plan, a, b, bias, c);
-    }
-
-    /// `y (= or +=) W x + b` for `x` of `in × n` at column offset `x_off`
-    /// with row stride `x_rs`, into `y` (`out × n`) at `y_off`, row stride `y_rs`.
-    #[allow(clippy::too_many_arguments)]
-    pub fn linear(
-        &mut self,
-        l: &GpuLinear,
-        x: &wgpu::Buffer,
-        (x_off, x_rs): (usize, usize),
-        n: usize,
-        y: &wgpu::Buffer,
-        (y_off, y_rs): (usize, usize),
-        accumulate: bool,
-    ) {
-        let spec = GemmSpec {
-            a: Strided::rows(0, l.inp),
-            b: Strided::rows(x_off, x_rs),
-            c: Strided::rows(y_off, y_rs),
-            accumulate,
-            bias: Some(0),
-            ..GemmSpec::plain(l.out, n, l.inp)
-        };
-        self.gemm(&spec, &l.w, x, Some(&l.b), y);
-    }
-
-    /// Records one elementwise launch of `kernel` over `len` threads with bindings (src, aux, dst).
-    pub fn launch<T: bytemuck::Pod>(
-        &mut self,
-        kernel: &Kernel,
-        params: &T,
-        len: usize,
-        (src, aux, dst): (&wgpu::Buffer, &wgpu::Buffer, &wgpu::Buffer),
-    ) {
-        let uniform = self.ctx.uniform("depth.params", params);
-        kernel.dispatch(self.ctx, &mut self.enc, &[&uniform, src, aux, dst], Kernel::groups_1d(len, WORKGROUP));
-    }
 }
 
 /// The network on the device, with the CPU network it was uploaded from
@@ -253,7 +157,7 @@ impl GpuDepthNet {
             h.is_multiple_of(p) && w.is_multiple_of(p) && pixels.len() == 3 * h * w,
             "GpuDepthNet::forward: bad input size"
         );
-        let mut rec = Rec { ctx, enc: ctx.encoder("depth forward"), gemm: &self.gemm, poison: self.poison, cols: None };
+        let mut rec = Rec::new(ctx, "depth forward", &self.gemm, self.poison);
         let img = ctx.upload("depth.input", pixels);
         let stages = self.backbone(&mut rec, &img, h, w);
         let depth = self.dpt.record(&mut rec, &stages, (h / p, w / p));
