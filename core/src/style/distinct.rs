@@ -18,10 +18,18 @@
 //! hashing reads each feature twice: two passes over the `3c × n` values
 //! against the search's `3c × n × m` multiply-adds).
 //!
-//! It fills GCFM's [`Matches`] and GCFM calls it: a part of the search,
-//! in its own file.
+//! It fills [`Matches`], the search's result, which lives here because
+//! GCFM (`gcfm.rs`, which calls this) and the matching index share it.
 
-use super::gcfm::Matches;
+/// For every rendered position, the flat (row-major) index into the style
+/// feature map of its best and worst match.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Matches {
+    /// `y+`: argmin of the joint cosine distance.
+    pub best: Vec<u32>,
+    /// `y−`: argmax of the joint cosine distance.
+    pub worst: Vec<u32>,
+}
 
 /// Below this share of distinct positions, the search runs on the
 /// representatives only (above it the gather costs more than it saves).

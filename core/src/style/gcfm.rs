@@ -20,6 +20,7 @@ use std::sync::OnceLock;
 
 use rayon::prelude::*;
 
+pub use super::distinct::Matches;
 use super::distinct::search_distinct;
 use super::sliced::{SLICED_PROJECTIONS, SlicedTarget};
 
@@ -114,16 +115,6 @@ pub(super) fn column_sq_norms(f: &[f32], c: usize, n: usize) -> Vec<f64> {
         }
     }
     s
-}
-
-/// For every rendered position, the flat (row-major) index into the style
-/// feature map of its best and worst match.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct Matches {
-    /// `y+`: argmin of the joint cosine distance.
-    pub best: Vec<u32>,
-    /// `y−`: argmax of the joint cosine distance.
-    pub worst: Vec<u32>,
 }
 
 /// Result of [`gcfm_loss`].
