@@ -186,17 +186,21 @@ fn matches_the_cpu_on_random_scenes_with_subgroups_and_the_cas_fallback() {
     check_random_scenes(false, subgroups);
 }
 
+/// Thousands of faint splats at 40×32: long lists whose pixels composite
+/// hundreds of them, so that a slice spans several batches of 256 and the
+/// later slices start deep in the list.
+fn faint_crowd() -> (Gaussians, Camera, RenderOptions) {
+    let n = 3000;
+    let (mut g, cam) = random_case(6, n, 1, (-1.6, -0.8), 40, 32);
+    g.opacity_logits = uniform(n, 66, -5.3, -3.5);
+    (g, cam, RenderOptions { background: [0.9, 0.3, 0.1] })
+}
+
 #[test]
 fn matches_the_cpu_whatever_the_backward_slices() {
     let ctx = ctx();
     let k = RasterKernels::new(ctx);
-    // Thousands of faint splats: long lists whose pixels composite hundreds
-    // of them, so that a slice spans several batches of 256 and the later
-    // slices start deep in the list.
-    let n = 3000;
-    let (mut g, cam) = random_case(6, n, 1, (-1.6, -0.8), 40, 32);
-    g.opacity_logits = uniform(n, 66, -5.3, -3.5);
-    let opts = RenderOptions { background: [0.9, 0.3, 0.1] };
+    let (g, cam, opts) = faint_crowd();
     let (_, state) = forward(&g, &cam, &opts);
     let deepest = state.n_contrib.iter().copied().max().unwrap_or(0);
     println!("{} pairs over 6 tiles, the deepest pixel composites up to list position {deepest}", state.pairs());
@@ -220,10 +224,7 @@ fn one_slice_keeps_each_pixels_final_state_and_no_more() {
     // count, all the backward pass reads, are the CPU's.
     let ctx = ctx();
     let k = RasterKernels::new(ctx);
-    let n = 3000;
-    let (mut g, cam) = random_case(6, n, 1, (-1.6, -0.8), 40, 32);
-    g.opacity_logits = uniform(n, 66, -5.3, -3.5);
-    let opts = RenderOptions { background: [0.9, 0.3, 0.1] };
+    let (g, cam, opts) = faint_crowd();
     let (_, state) = forward(&g, &cam, &opts);
     let gg = GpuGaussians::upload(ctx, &g);
     let raster = GpuRaster::fitted(ctx, &k, &gg, &cam, &opts).expect("workspace").with_splits(ctx, 1);
