@@ -8,7 +8,7 @@ use super::{GpuContext, Kernel};
 use crate::vision::depth::ops::Linear;
 
 /// Threads per workgroup of the elementwise kernels.
-pub(super) const WORKGROUP: u32 = 256;
+const WORKGROUP: u32 = 256;
 
 /// A linear layer (or 1×1 convolution) on the device: `out × in` weights, `out` biases.
 #[derive(Debug)]
