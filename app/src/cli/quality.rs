@@ -21,6 +21,8 @@ use crate::study::{Sizes, Study};
 #[derive(Args, Debug)]
 pub struct QualityArgs {
     /// Output folder (default: `gast-quality-<UTC date and time>` in the current folder).
+    /// Each finished trial is journalled there (`trials.jsonl`): the same
+    /// command with the same folder resumes a run that was stopped.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// A small subset (the guitar, two styles, short budgets, small images) that

@@ -258,11 +258,16 @@ fn focus_studies(
         // Both arms as a user gets them: `--preset paper` on the plain orbit,
         // the shipped defaults on the views `gast stylize` frames; the
         // budget and resolution are the study's, the rest is each preset's.
-        let sized = |c: StyleConfig| StyleConfig {
-            resolution: sizes.defaults_resolution,
-            steps_per_cycle: DEFAULTS_CYCLE,
-            cycles: sizes.defaults_budget.div_ceil(DEFAULTS_CYCLE).max(1),
-            ..c
+        // With `defaults_plan_s` each arm keeps its preset's schedule here
+        // and the runner plans it on the scene's views ([`super::run`]).
+        let sized = |c: StyleConfig| match sizes.defaults_plan_s {
+            Some(_) => StyleConfig { steps_per_cycle: DEFAULTS_CYCLE, ..c },
+            None => StyleConfig {
+                resolution: sizes.defaults_resolution,
+                steps_per_cycle: DEFAULTS_CYCLE,
+                cycles: sizes.defaults_budget.div_ceil(DEFAULTS_CYCLE).max(1),
+                ..c
+            },
         };
         let (paper, defaults) = (sized(StyleConfig::paper()), sized(StyleConfig::default()));
         for scene in 0..sizes.scenes.len() {

@@ -1,8 +1,9 @@
 //! The studies of `gast bench quality`, in one place: their definitions here
 //! (the studies, the grid's sizes, one trial's specification, the rows that
 //! read trials, what a run records), the grid of trials each study asks for
-//! ([`grid`]), the trial runner ([`run`]), the geometry study
-//! ([`geometry`], [`geometry_run`]) and the pages a run writes ([`pages`]).
+//! ([`grid`]), the trial runner ([`run`]) and its journal of finished trials
+//! ([`journal`]), the geometry study ([`geometry`], [`geometry_run`]) and the
+//! pages a run writes ([`pages`]).
 //! The command (`cli::quality`) parses its arguments and calls in here.
 
 use std::path::PathBuf;
@@ -10,6 +11,7 @@ use std::path::PathBuf;
 pub mod geometry;
 pub mod geometry_run;
 pub mod grid;
+pub mod journal;
 pub mod pages;
 pub mod run;
 
@@ -212,6 +214,13 @@ pub struct Sizes {
     /// Working resolution of both arms of the defaults study.
     #[serde(default = "defaults_resolution")]
     pub defaults_resolution: u32,
+    /// Seconds of CPU time each arm of the defaults study is planned for, in
+    /// place of `defaults_budget` and `defaults_resolution`: each arm then
+    /// runs what `gast stylize` plans with no `--resolution` or `--cycles`
+    /// (the scene's span in its views, the arm's focus, [`gast_core::session::plan::auto_plan`];
+    /// 600 is its default run), so both arms get the same wait.
+    #[serde(default)]
+    pub defaults_plan_s: Option<f64>,
 }
 
 fn defaults_budget() -> u32 {
@@ -306,6 +315,7 @@ impl Sizes {
             focus_object: serde_json::Value::Null,
             defaults_budget: defaults_budget(),
             defaults_resolution: defaults_resolution(),
+            defaults_plan_s: None,
         }
     }
 
@@ -349,6 +359,7 @@ impl Sizes {
             focus_object: serde_json::Value::Null,
             defaults_budget: 100,
             defaults_resolution: 64,
+            defaults_plan_s: None,
         }
     }
 }
@@ -475,6 +486,12 @@ impl Record {
         }
     }
 
+    /// Seconds the trial took: preparing and optimising (its last
+    /// checkpoint's time), then measuring.
+    pub fn seconds(&self) -> f64 {
+        self.checkpoints.last().map_or(self.prepare_s, |c| c.seconds) + self.measure_s
+    }
+
     /// The checkpoint at `step`, or the last one when the run stopped earlier.
     pub fn at(&self, step: u32) -> Option<&Checkpoint> {
         self.checkpoints.iter().find(|c| c.step == step).or_else(|| self.checkpoints.last().filter(|c| c.step < step))
@@ -498,6 +515,38 @@ pub struct RunSummary {
     pub rows: Vec<Row>,
     /// Every trial.
     pub trials: Vec<Record>,
+}
+
+/// A record of trial `id` on guitar × `style`: `before` at step 0, `after` at its budget of 200.
+#[cfg(test)]
+pub(crate) fn test_record(
+    id: &str,
+    style: &str,
+    before: gast_core::eval::Measures,
+    after: gast_core::eval::Measures,
+) -> Record {
+    let at = |step, measures| gast_core::eval::Checkpoint { step, seconds: 0.0, measures };
+    Record {
+        id: id.into(),
+        scene: "data/scenes/guitar.compressed.ply".into(),
+        gaussians: 10,
+        optimised: 10,
+        style: style.into(),
+        mode: "decoupled".into(),
+        ratio_geo: 0.9,
+        lambda_gc: 2.0,
+        lr_scale: 1.0,
+        resolution: 128,
+        steps_per_cycle: 20,
+        budget: 200,
+        steps: 200,
+        prepare_s: 0.0,
+        measure_s: 0.0,
+        stable: true,
+        issues: Vec::new(),
+        checkpoints: vec![at(0, before), at(200, after)],
+        sample: (0, 0, Vec::new()),
+    }
 }
 
 #[cfg(test)]

@@ -1,20 +1,25 @@
 //! The trial runner of `gast bench quality`: every trial of a grid, grouped
 //! by scene and style so that each scene is loaded and each style's features
-//! computed once, with a progress bar and one summary line per trial.
+//! computed once, with a progress bar and one summary line per trial. Each
+//! finished trial goes to the output folder's journal ([`super::journal`]),
+//! from which the same command resumes.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::Context;
-use gast_core::Gaussians;
 use gast_core::eval::{EvalOptions, StabilityThresholds, TrialOutcome, run_trial};
+use gast_core::session::plan::{StepModel, ViewsSurvey, auto_plan, survey};
 use gast_core::session::{PreparedStyle, SessionInputs, StyleDepthSource, StyleImage, prepare_style};
 use gast_core::vision::Vgg;
+use gast_core::{Camera, Gaussians};
 
 use super::grid::build_grid;
-use super::{Record, RunSummary, Sizes, Study, StyleSource, TrialSpec};
+use super::journal::Journal;
+use super::pages::quality::write_sample;
+use super::{Record, Row, RunSummary, Sizes, Study, StyleSource, TrialSpec};
 use crate::views::{ViewArgs, load_scene, views_for};
 
 /// Runs the grid of `sizes` restricted to `studies` (scenes and styles read
@@ -27,30 +32,46 @@ pub fn run_grid(
     vgg: &Arc<Vgg>,
     out: &Path,
 ) -> anyhow::Result<(RunSummary, Vec<(String, StyleImage)>)> {
-    let grid = build_grid(&sizes, shared, studies)?;
-    let total_steps: u64 = grid.trials.iter().map(|t| u64::from(t.config.schedule().total_steps())).sum();
+    let mut grid = build_grid(&sizes, shared, studies)?;
+    let (mut journal, mut records) = Journal::open(out, &serde_json::json!({ "sizes": &sizes, "studies": studies }))?;
+    let done: BTreeSet<String> = records.iter().map(|r| r.id.clone()).collect();
+    let todo = |t: &&TrialSpec| !done.contains(&t.id);
+    let total_steps: u64 = grid.trials.iter().filter(todo).map(|t| u64::from(t.config.schedule().total_steps())).sum();
     println!(
         "quality benchmark: {} trials ({} rows, {total_steps} steps) over {} scenes, {} threads; writing {}",
-        grid.trials.len(),
+        grid.trials.iter().filter(todo).count(),
         grid.rows.len(),
-        grid.trials.iter().map(|t| t.scene).collect::<std::collections::BTreeSet<_>>().len(),
+        grid.trials.iter().map(|t| t.scene).collect::<BTreeSet<_>>().len(),
         rayon::current_num_threads(),
         out.display()
     );
+    if !records.is_empty() {
+        println!(
+            "  resuming: {} of {} trials already finished in {}",
+            records.len(),
+            grid.trials.len(),
+            out.join(super::journal::JOURNAL).display()
+        );
+    }
+    // The defaults study's arms that run what `gast stylize` plans (`defaults_plan_s`).
+    let planned: BTreeSet<String> = match sizes.defaults_plan_s {
+        Some(_) => grid.rows.iter().filter(|r| r.study == Study::Defaults).map(|r| r.trial.clone()).collect(),
+        None => BTreeSet::new(),
+    };
 
     let started = Instant::now();
+    let resumed_s: f64 = records.iter().map(Record::seconds).sum();
     let bar = crate::progress::bar(total_steps, "steps");
-    let mut order: Vec<usize> = (0..grid.trials.len()).collect();
+    let mut order: Vec<usize> = (0..grid.trials.len()).filter(|&i| !done.contains(&grid.trials[i].id)).collect();
     order.sort_by(|&a, &b| {
         let (ta, tb) = (&grid.trials[a], &grid.trials[b]);
         (ta.scene, &ta.style).cmp(&(tb.scene, &tb.style))
     });
     let mut scenes: BTreeMap<usize, Gaussians> = BTreeMap::new();
     let mut styles: BTreeMap<StyleSource, (StyleImage, PreparedStyle)> = BTreeMap::new();
-    let mut records = Vec::new();
     let eval = EvalOptions { resolution: sizes.eval_resolution, ..EvalOptions::default() };
     for &i in &order {
-        let spec = &grid.trials[i];
+        let mut spec = grid.trials[i].clone();
         if !scenes.contains_key(&spec.scene) {
             scenes.clear(); // trials are grouped by scene: keep one in memory
             let path = shared.join(&sizes.scenes[spec.scene]);
@@ -71,17 +92,17 @@ pub fn run_grid(
             styles.insert(spec.style.clone(), (image, prepared));
         }
         let Some((image, prepared)) = styles.get(&spec.style) else { continue };
-        let views = views_for(
-            scene,
-            &ViewArgs {
-                cameras: None,
-                views: sizes.views,
-                size: spec.config.resolution,
-                fov: 50.0,
-                framing: spec.framing,
-                crop: false,
-            },
-        )?;
+        let framing = spec.framing;
+        let view_args =
+            |size: u32| ViewArgs { cameras: None, views: sizes.views, size, fov: 50.0, framing, crop: false };
+        let mut views = views_for(scene, &view_args(spec.config.resolution))?;
+        if let Some(budget_s) = sizes.defaults_plan_s.filter(|_| planned.contains(&spec.id)) {
+            let before = spec.config.schedule().total_steps();
+            plan_arm(&mut spec, scene, &views, budget_s);
+            let after = spec.config.schedule().total_steps();
+            bar.set_length((bar.length().unwrap_or(0) + u64::from(after)).saturating_sub(u64::from(before)));
+            views = views_for(scene, &view_args(spec.config.resolution))?;
+        }
         let inputs = SessionInputs {
             scene: scene.clone(),
             cameras: views,
@@ -107,12 +128,31 @@ pub fn run_grid(
         )
         .with_context(|| format!("trial {}", spec.id))?;
         bar.set_position(base + u64::from(spec.config.schedule().total_steps()));
-        bar.suspend(|| println!("{}", summary_line(spec, &outcome)));
-        records.push(Record::new(spec, &sizes.scenes[spec.scene], scene.len(), outcome));
+        bar.suspend(|| println!("{}", summary_line(&spec, &outcome)));
+        let record = Record::new(&spec, &sizes.scenes[spec.scene], scene.len(), outcome);
+        write_sample(out, &record)?;
+        journal.push(&record)?;
+        records.push(record);
     }
     bar.finish_and_clear();
-    let wall = started.elapsed().as_secs_f64();
-    let styles_used: Vec<(String, StyleImage)> = styles.into_iter().map(|(s, (image, _))| (s.name(), image)).collect();
+    for r in &records {
+        if let Some(spec) = grid.trials.iter().find(|t| t.id == r.id) {
+            read_at_budget(&mut grid.rows, spec.config.schedule().total_steps(), r);
+        }
+    }
+    // The resumed trials' own seconds stand in for the earlier processes' wall time.
+    let wall = started.elapsed().as_secs_f64() + resumed_s;
+    let mut styles_used: Vec<(String, StyleImage)> = Vec::new();
+    for spec in &grid.trials {
+        let name = spec.style.name();
+        if styles_used.iter().all(|(n, _)| *n != name) {
+            let image = match styles.remove(&spec.style) {
+                Some((image, _)) => image,
+                None => spec.style.image().with_context(|| format!("style {name}"))?,
+            };
+            styles_used.push((name, image));
+        }
+    }
     let run = RunSummary {
         command: std::env::args().collect::<Vec<_>>().join(" "),
         threads: rayon::current_num_threads(),
@@ -122,6 +162,31 @@ pub fn run_grid(
         trials: records,
     };
     Ok((run, styles_used))
+}
+
+/// Sets `spec`'s working resolution and cycles to what `gast stylize` plans
+/// for a CPU run of `budget_s` seconds with no `--resolution` or `--cycles`:
+/// the subject's span in `views` and the losses' focus (auto decides on the
+/// views' coverage) pick the step model, [`auto_plan`] the rest. The
+/// checkpoint at the old budget moves to the new one.
+fn plan_arm(spec: &mut TrialSpec, scene: &Gaussians, views: &[Camera], budget_s: f64) {
+    let before = spec.config.schedule().total_steps();
+    let ViewsSurvey { span, object } = survey(scene, views, spec.config.focus, spec.config.background);
+    let plan = auto_plan(span, StepModel::for_focus(object), spec.config.cycles, spec.config.steps_per_cycle, budget_s);
+    spec.config.resolution = plan.resolution;
+    spec.config.cycles = plan.cycles;
+    let after = spec.config.schedule().total_steps();
+    for c in spec.checkpoints.iter_mut().filter(|c| **c == before) {
+        *c = after;
+    }
+}
+
+/// Points the rows that read trial `r` at its planned budget `scheduled`
+/// to the budget it ran (they differ where the runner planned the arm).
+fn read_at_budget(rows: &mut [Row], scheduled: u32, r: &Record) {
+    for row in rows.iter_mut().filter(|row| row.trial == r.id && row.step == scheduled) {
+        row.step = r.budget;
+    }
 }
 
 fn summary_line(spec: &TrialSpec, o: &TrialOutcome) -> String {
@@ -140,4 +205,69 @@ fn summary_line(spec: &TrialSpec, o: &TrialOutcome) -> String {
         last.nn_cosine,
         last.consistency_long
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::study::{DEFAULTS_NEW, DEFAULTS_PAPER};
+    use gast_core::session::plan::AUTO_RUN_BUDGET_S;
+    use std::path::PathBuf;
+
+    /// The defaults study's arm `label` as the grid specifies it.
+    fn arm(grid: &super::super::grid::Grid, label: &str) -> TrialSpec {
+        let row = grid.rows.iter().find(|r| r.label == label).expect("the arm's row");
+        grid.trials.iter().find(|t| t.id == row.trial).expect("the row's trial").clone()
+    }
+
+    #[test]
+    fn each_defaults_arm_runs_what_stylize_plans_for_ten_minutes_on_this_cpu() {
+        let shared = std::env::var_os("GAST_SHARED")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
+        let sizes = Sizes {
+            scenes: vec!["data/scenes/guitar.compressed.ply".into()],
+            styles: vec!["data/styles/wave.jpg".into()],
+            defaults_plan_s: Some(AUTO_RUN_BUDGET_S),
+            ..Sizes::quick()
+        };
+        let mut grid = build_grid(&sizes, &shared, &[Study::Defaults]).expect("grid");
+        let scene = load_scene(&shared.join(&sizes.scenes[0])).expect("the shared guitar (set GAST_SHARED)");
+        let mut planned = Vec::new();
+        for label in [DEFAULTS_NEW, DEFAULTS_PAPER] {
+            let mut spec = arm(&grid, label);
+            // Unplanned, each arm holds its preset's schedule: 30 cycles of 100 steps.
+            let scheduled = spec.config.schedule().total_steps();
+            assert_eq!(scheduled, 3000, "{label}");
+            let views = views_for(
+                &scene,
+                &ViewArgs {
+                    cameras: None,
+                    views: sizes.views,
+                    size: spec.config.resolution,
+                    fov: 50.0,
+                    framing: spec.framing,
+                    crop: false,
+                },
+            )
+            .expect("views");
+            plan_arm(&mut spec, &scene, &views, AUTO_RUN_BUDGET_S);
+            let steps = spec.config.schedule().total_steps();
+            let moved = steps == scheduled || !spec.checkpoints.contains(&scheduled);
+            assert!(spec.checkpoints.contains(&steps) && moved, "{label}: measured at the budget it runs");
+            let r = Record {
+                budget: steps,
+                id: spec.id.clone(),
+                ..crate::study::test_record("x", "wave", Default::default(), Default::default())
+            };
+            read_at_budget(&mut grid.rows, scheduled, &r);
+            let row = grid.rows.iter().find(|row| row.trial == spec.id).expect("row");
+            assert_eq!(row.step, steps, "{label}: the row reads the trial at the budget it ran");
+            planned.push((spec.config.resolution, steps));
+        }
+        // The defaults (object focus on guitar) fit the whole schedule in ten
+        // minutes at 256 px (0.18 s a step); the paper's whole-frame losses
+        // (0.57 s a step) fit 10 of the 30 cycles at the same resolution.
+        assert_eq!(planned, [(256, 3000), (256, 1000)]);
+    }
 }

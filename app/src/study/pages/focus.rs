@@ -577,33 +577,8 @@ fn comparison_page(out: &Path, run: &RunSummary, c: &Comparison) -> anyhow::Resu
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::study::Sizes;
+    use crate::study::{Sizes, test_record as record};
     use gast_core::eval::CoveredColour;
-
-    fn record(id: &str, style: &str, before: Measures, after: Measures) -> Record {
-        let at = |step, measures| gast_core::eval::Checkpoint { step, seconds: 0.0, measures };
-        Record {
-            id: id.into(),
-            scene: "data/scenes/guitar.compressed.ply".into(),
-            gaussians: 10,
-            optimised: 10,
-            style: style.into(),
-            mode: "decoupled".into(),
-            ratio_geo: 0.9,
-            lambda_gc: 2.0,
-            lr_scale: 1.0,
-            resolution: 128,
-            steps_per_cycle: 20,
-            budget: 200,
-            steps: 200,
-            prepare_s: 0.0,
-            measure_s: 0.0,
-            stable: true,
-            issues: Vec::new(),
-            checkpoints: vec![at(0, before), at(200, after)],
-            sample: (0, 0, Vec::new()),
-        }
-    }
 
     fn measures(sw: f32, mean: f32, nn: f32, length: f32, luminance: f32) -> Measures {
         Measures {

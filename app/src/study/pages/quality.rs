@@ -34,18 +34,15 @@ impl Record {
     }
 }
 
-/// Writes everything under `out` (`results.json`, sample renders, generated
-/// styles, then [`rewrite_report`]); returns the index's path.
+/// Writes everything under `out` (`results.json`, generated styles, then
+/// [`rewrite_report`]; the runner wrote each trial's sample render as it
+/// finished, [`write_sample`]); returns the index's path.
 pub fn write_report(out: &Path, run: &RunSummary, styles: &[(String, StyleImage)]) -> anyhow::Result<PathBuf> {
     for dir in ["charts", "renders", "styles"] {
         std::fs::create_dir_all(out.join(dir))
             .with_context(|| format!("could not create {}", out.join(dir).display()))?;
     }
     write_text(&out.join("results.json"), &serde_json::to_string_pretty(run)?)?;
-    for r in &run.trials {
-        let (w, h, rgb) = &r.sample;
-        write_png_rgb(&out.join(format!("renders/{}.png", r.id)), *w, *h, rgb)?;
-    }
     for (name, image) in styles {
         if ["noise", "checker", "flat"].contains(&name.as_str()) {
             let rgb: Vec<f32> = image.to_f32();
@@ -53,6 +50,15 @@ pub fn write_report(out: &Path, run: &RunSummary, styles: &[(String, StyleImage)
         }
     }
     rewrite_report(out, run)
+}
+
+/// Writes `r`'s sample sheet (input, result, their depths) to
+/// `out/renders/<id>.png`.
+pub fn write_sample(out: &Path, r: &Record) -> anyhow::Result<()> {
+    let dir = out.join("renders");
+    std::fs::create_dir_all(&dir).with_context(|| format!("could not create {}", dir.display()))?;
+    let (w, h, rgb) = &r.sample;
+    Ok(write_png_rgb(&dir.join(format!("{}.png", r.id)), *w, *h, rgb)?)
 }
 
 /// Writes `results.csv`, the charts and `index.md` of `run` under `out`
