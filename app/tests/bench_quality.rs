@@ -125,6 +125,50 @@ fn quick_quality_benchmark_writes_a_complete_linked_report() {
         .expect("run gast");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert_eq!(std::fs::read_to_string(out.join("index.md")).expect("redrawn index"), index);
+
+    // A stopped run resumes: with its shortest trial taken out of the journal
+    // (as if the run had stopped in it), the same command runs that trial
+    // alone and reports every trial again, the rerun one with the same measures.
+    let journal = std::fs::read_to_string(out.join("trials.jsonl")).expect("trials.jsonl");
+    let lines: Vec<&str> = journal.lines().collect();
+    assert_eq!(lines.len(), trials.len() + 1, "the grid's line, then one line a trial");
+    let (cut, _) = (lines.iter().enumerate().skip(1))
+        .min_by_key(|(_, l)| {
+            serde_json::from_str::<Value>(l).map_or(u64::MAX, |t| t["steps"].as_u64().unwrap_or(u64::MAX))
+        })
+        .expect("a trial");
+    let kept: String = lines.iter().enumerate().filter(|(k, _)| *k != cut).map(|(_, l)| format!("{l}\n")).collect();
+    std::fs::write(out.join("trials.jsonl"), kept).expect("journal without one trial");
+    let before: Value = serde_json::from_str(lines[cut]).expect("the cut trial");
+    let o = Command::new(env!("CARGO_BIN_EXE_gast"))
+        .args(["bench", "quality", "--quick", "--out"])
+        .arg(&out)
+        .env("GAST_SHARED", shared_dir())
+        .output()
+        .expect("run gast");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "the resumed run failed:\n{stdout}\n{}", String::from_utf8_lossy(&o.stderr));
+    let resumed = format!("resuming: {} of {} trials already finished", trials.len() - 1, trials.len());
+    assert!(stdout.contains("quality benchmark: 1 trials") && stdout.contains(&resumed), "{stdout}");
+    let again: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).expect("results.json")).expect("json");
+    let again = again["trials"].as_array().expect("trials");
+    assert_eq!(again.len(), trials.len(), "every trial is reported after resuming");
+    let after = again.iter().find(|t| t["id"] == before["id"]).expect("the rerun trial");
+    let measures = |t: &Value| -> Vec<(u64, String, f64)> {
+        let mut all = Vec::new();
+        for c in t["checkpoints"].as_array().expect("checkpoints") {
+            for (k, v) in c["measures"].as_object().expect("measures") {
+                all.push((c["step"].as_u64().expect("step"), k.clone(), v.as_f64().unwrap_or(f64::NAN)));
+            }
+        }
+        all
+    };
+    assert_eq!(measures(&before).len(), measures(after).len());
+    for ((step, k, a), (_, _, b)) in measures(&before).into_iter().zip(measures(after)) {
+        assert!((a - b).abs() <= 1e-4 * a.abs().max(1e-3), "{}: {k} at step {step}: {a} then {b}", before["id"]);
+    }
+    assert!(out.join(format!("renders/{}.png", before["id"].as_str().expect("id"))).exists());
     let _ = std::fs::remove_dir_all(&out);
 }
 
