@@ -219,13 +219,19 @@ fn focus_table(run: &RunSummary, c: &Comparison) -> (Vec<String>, Vec<Margin>) {
         _ => format!("both at {} px", run.sizes.resolution),
     };
     let (b, o) = (c.base, c.candidate);
-    let heading = if c.study == Study::Defaults {
-        format!(
+    let heading = match run.sizes.defaults_plan_s {
+        _ if c.study != Study::Defaults => format!("## Focus: frame against object, {sizes}"),
+        Some(s) => format!(
+            "## Defaults: `--preset paper` against the shipped defaults, each arm planned as `gast stylize` plans \
+             a {:.0}-minute CPU run (its resolution and cycles from the scene's views and the arm's focus; the \
+             steps column gives paper's, then the defaults'; {} per cycle)",
+            s / 60.0,
+            DEFAULTS_CYCLE
+        ),
+        None => format!(
             "## Defaults: `--preset paper` against the shipped defaults, both at {} px, {} steps ({} per cycle)",
             run.sizes.defaults_resolution, run.sizes.defaults_budget, DEFAULTS_CYCLE
-        )
-    } else {
-        format!("## Focus: frame against object, {sizes}")
+        ),
     };
     let mut out = vec![
         format!(
@@ -244,7 +250,12 @@ fn focus_table(run: &RunSummary, c: &Comparison) -> (Vec<String>, Vec<Margin>) {
         let (scene, style) = (frame.scene_name(), frame.style.clone());
         let step = row.step;
         let frame_collapsed = collapsed(frame);
-        let object_arm = find(c.candidate, &scene, &style).map(|(_, t)| t);
+        // Each arm is read at its own row's budget: the defaults study's
+        // planned arms (`defaults_plan_s`) run different step counts.
+        let object_arm = find(c.candidate, &scene, &style);
+        let object_step = object_arm.map_or(step, |(r, _)| r.step);
+        let object_arm = object_arm.map(|(_, t)| t);
+        let steps = if object_step == step { step.to_string() } else { format!("{step}, {object_step}") };
         let object_collapsed = object_arm.is_some_and(collapsed);
         let count = |per_scene: &mut Vec<SceneTally>, pass: bool, nn_more: bool, sw_more: bool| {
             let i = match per_scene.iter().position(|t| t.scene == scene) {
@@ -263,19 +274,19 @@ fn focus_table(run: &RunSummary, c: &Comparison) -> (Vec<String>, Vec<Margin>) {
             t.sw_more += usize::from(sw_more);
         };
         let Some(object) = object_arm else {
-            out.push(format!("| {scene} | {style} | {step} | no {o} arm in this run ||||||||||||||| no |"));
+            out.push(format!("| {scene} | {style} | {steps} | no {o} arm in this run ||||||||||||||| no |"));
             count(&mut per_scene, false, false, false);
             continue;
         };
         let floor = |f: fn(&Measures) -> f32| seed_floor(&rows, c, &scene, f);
         let (Some(sw_f), Some(sw_o), Some(nn_f), Some(nn_o)) = (
             decrease(frame, step, sw),
-            decrease(object, step, sw),
+            decrease(object, object_step, sw),
             decrease(frame, step, nn),
-            decrease(object, step, nn),
+            decrease(object, object_step, nn),
         ) else {
             out.push(format!(
-                "| {scene} | {style} | {step} | failed: {b} {} ({} steps), {o} {} ({} steps) ||||||||||||||| no |",
+                "| {scene} | {style} | {steps} | failed: {b} {} ({} steps), {o} {} ({} steps) ||||||||||||||| no |",
                 frame.health(),
                 frame.steps,
                 object.health(),
@@ -284,10 +295,11 @@ fn focus_table(run: &RunSummary, c: &Comparison) -> (Vec<String>, Vec<Margin>) {
             count(&mut per_scene, false, false, false);
             continue;
         };
-        let at = |r: &Record, f: fn(&Measures) -> f32| r.at(step).map_or(f32::NAN, |c| f(&c.measures));
-        let (rmse_f, rmse_o) = (at(frame, |m| m.consistency_long_object), at(object, |m| m.consistency_long_object));
-        let (content_f, content_o) = (at(frame, |m| m.content_object), at(object, |m| m.content_object));
-        let (haze_f, haze_o) = (at(frame, |m| m.outside_change), at(object, |m| m.outside_change));
+        let at = |r: &Record, step: u32, f: fn(&Measures) -> f32| r.at(step).map_or(f32::NAN, |c| f(&c.measures));
+        let both = |f: fn(&Measures) -> f32| (at(frame, step, f), at(object, object_step, f));
+        let (rmse_f, rmse_o) = both(|m| m.consistency_long_object);
+        let (content_f, content_o) = both(|m| m.content_object);
+        let (haze_f, haze_o) = both(|m| m.outside_change);
         let (floor_sw, floor_nn) = (floor(sw), floor(nn));
         let rmse_ok = rmse_o <= RMSE_FACTOR * rmse_f;
         let pass = sw_o - sw_f > floor_sw && nn_o - nn_f > floor_nn && rmse_ok;
@@ -303,7 +315,7 @@ fn focus_table(run: &RunSummary, c: &Comparison) -> (Vec<String>, Vec<Margin>) {
         // frame's decrease is positive; elsewhere it is left out ("–").
         let of_decreases = |o: f32, f: f32| (f > 0.0).then_some(o / f);
         let (ratio_sw, ratio_nn, ratio_rmse) = (of_decreases(sw_o, sw_f), of_decreases(nn_o, nn_f), rmse_o / rmse_f);
-        let (time_f, time_o) = (optimising_s(frame, step), optimising_s(object, step));
+        let (time_f, time_o) = (optimising_s(frame, step), optimising_s(object, object_step));
         time_ratios.push((time_o / time_f) as f32);
         ratios.extend(ratio_sw);
         nn_ratios.extend(ratio_nn);
@@ -312,7 +324,7 @@ fn focus_table(run: &RunSummary, c: &Comparison) -> (Vec<String>, Vec<Margin>) {
         let (ratio_sw, ratio_nn) = (shown(ratio_sw), shown(ratio_nn));
         count(&mut per_scene, pass, nn_o > nn_f, sw_o > sw_f);
         out.push(format!(
-            "| {scene} | {style} | {step} | {sw_f:.4} | {sw_o:.4} | {ratio_sw} | {nn_f:.4} | {nn_o:.4} | {ratio_nn} | {content_f:.4} | {content_o:.4} | {rmse_f:.4} | {rmse_o:.4} | {ratio_rmse:.2} | {}, {} | {haze_f:.4}, {haze_o:.4} | {time_f:.0}, {time_o:.0} | {} |",
+            "| {scene} | {style} | {steps} | {sw_f:.4} | {sw_o:.4} | {ratio_sw} | {nn_f:.4} | {nn_o:.4} | {ratio_nn} | {content_f:.4} | {content_o:.4} | {rmse_f:.4} | {rmse_o:.4} | {ratio_rmse:.2} | {}, {} | {haze_f:.4}, {haze_o:.4} | {time_f:.0}, {time_o:.0} | {} |",
             yes_no(frame_collapsed),
             yes_no(collapsed(object)),
             yes_no(pass)
@@ -323,7 +335,14 @@ fn focus_table(run: &RunSummary, c: &Comparison) -> (Vec<String>, Vec<Margin>) {
         ("SW decreases", ratios),
         ("NN-cos decreases", nn_ratios),
         (if c.study == Study::Focus { "object RMSEs" } else { "RMSEs" }, rmse_ratios),
-        ("optimising times (the same steps; both arms interleaved in one process)", time_ratios),
+        (
+            if run.sizes.defaults_plan_s.is_some() && c.study == Study::Defaults {
+                "optimising times (each arm's planned steps; both arms interleaved in one process)"
+            } else {
+                "optimising times (the same steps; both arms interleaved in one process)"
+            },
+            time_ratios,
+        ),
     ] {
         let n = v.len();
         if let Some(m) = median(v) {
@@ -578,7 +597,7 @@ fn comparison_page(out: &Path, run: &RunSummary, c: &Comparison) -> anyhow::Resu
 mod tests {
     use super::*;
     use crate::study::{Sizes, test_record as record};
-    use gast_core::eval::CoveredColour;
+    use gast_core::eval::{Checkpoint, CoveredColour};
 
     fn measures(sw: f32, mean: f32, nn: f32, length: f32, luminance: f32) -> Measures {
         Measures {
@@ -611,6 +630,37 @@ mod tests {
         assert!(!written.is_empty() && dir.join("defaults.md").is_file() && !dir.join("focus.md").exists());
         assert!(dir.join("charts/defaults_margins.png").is_file());
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn planned_arms_are_each_read_at_the_budget_they_ran() {
+        // Paper's planned run stopped at 1,000 steps, the defaults' at 3,000;
+        // each arm's measures at its own budget (the defaults' at 1,000 would
+        // not exist, and a wrong reading fails the pair).
+        let at = |r: &mut Record, budget: u32| {
+            let (first, last) = (r.checkpoints[0], r.checkpoints[1]);
+            r.checkpoints = vec![first, Checkpoint { step: budget, ..last }];
+            (r.budget, r.steps) = (budget, budget);
+        };
+        let mut paper = record("p", "wave", measures(2.0, 1.0, 0.4, 1.0, 0.5), measures(1.9, 1.0, 0.39, 1.0, 0.5));
+        let mut seed = record("s", "wave", measures(2.0, 1.0, 0.4, 1.0, 0.5), measures(1.89, 1.0, 0.389, 1.0, 0.5));
+        let mut new = record("d", "wave", measures(2.0, 1.0, 0.4, 1.0, 0.5), measures(1.5, 1.0, 0.3, 1.0, 0.5));
+        (at(&mut paper, 1000), at(&mut seed, 1000), at(&mut new, 3000));
+        let mut run = focus_run(vec![(DEFAULTS_PAPER, paper), (DEFAULTS_SEED, seed), (DEFAULTS_NEW, new)]);
+        run.sizes.defaults_plan_s = Some(600.0);
+        for r in &mut run.rows {
+            r.study = Study::Defaults;
+            r.step = if r.label == DEFAULTS_NEW { 3000 } else { 1000 };
+        }
+        let (lines, margins) = focus_table(&run, &DEFAULTS);
+        assert!(lines[0].contains("each arm planned as `gast stylize` plans a 10-minute CPU run"), "{}", lines[0]);
+        let row = lines.iter().find(|l| l.starts_with("| guitar | wave |")).expect("the pair's line");
+        assert!(
+            row.starts_with("| guitar | wave | 1000, 3000 | 0.1000 | 0.5000 |") && row.ends_with("| yes |"),
+            "{row}"
+        );
+        assert!(lines.iter().any(|l| l.contains("on 1 of 1")));
+        assert_eq!(margins.len(), 1);
     }
 
     /// A focus run of one pair with the arms `(label, record)`, each row at step 200.
