@@ -645,7 +645,9 @@ mod tests {
         let mut paper = record("p", "wave", measures(2.0, 1.0, 0.4, 1.0, 0.5), measures(1.9, 1.0, 0.39, 1.0, 0.5));
         let mut seed = record("s", "wave", measures(2.0, 1.0, 0.4, 1.0, 0.5), measures(1.89, 1.0, 0.389, 1.0, 0.5));
         let mut new = record("d", "wave", measures(2.0, 1.0, 0.4, 1.0, 0.5), measures(1.5, 1.0, 0.3, 1.0, 0.5));
-        (at(&mut paper, 1000), at(&mut seed, 1000), at(&mut new, 3000));
+        at(&mut paper, 1000);
+        at(&mut seed, 1000);
+        at(&mut new, 3000);
         let mut run = focus_run(vec![(DEFAULTS_PAPER, paper), (DEFAULTS_SEED, seed), (DEFAULTS_NEW, new)]);
         run.sizes.defaults_plan_s = Some(600.0);
         for r in &mut run.rows {
