@@ -21,14 +21,19 @@ fn quick_quality_benchmark_writes_a_complete_linked_report() {
     }
     let out: PathBuf = std::env::temp_dir().join(format!("gast-quality-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
-    let o = Command::new(env!("CARGO_BIN_EXE_gast"))
-        .args(["bench", "quality", "--quick", "--out"])
-        .arg(&out)
-        .env("GAST_SHARED", shared_dir())
-        .output()
-        .expect("run gast");
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "bench quality failed:\n{stdout}\n{}", String::from_utf8_lossy(&o.stderr));
+    // `gast bench quality --quick --out OUT`, which must succeed: its stdout.
+    let run_quick = |what: &str| {
+        let o = Command::new(env!("CARGO_BIN_EXE_gast"))
+            .args(["bench", "quality", "--quick", "--out"])
+            .arg(&out)
+            .env("GAST_SHARED", shared_dir())
+            .output()
+            .expect("run gast");
+        let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+        assert!(o.status.success(), "{what} failed:\n{stdout}\n{}", String::from_utf8_lossy(&o.stderr));
+        stdout
+    };
+    run_quick("bench quality");
 
     let json: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).expect("results.json")).expect("json");
@@ -140,14 +145,7 @@ fn quick_quality_benchmark_writes_a_complete_linked_report() {
     let kept: String = lines.iter().enumerate().filter(|(k, _)| *k != cut).map(|(_, l)| format!("{l}\n")).collect();
     std::fs::write(out.join("trials.jsonl"), kept).expect("journal without one trial");
     let before: Value = serde_json::from_str(lines[cut]).expect("the cut trial");
-    let o = Command::new(env!("CARGO_BIN_EXE_gast"))
-        .args(["bench", "quality", "--quick", "--out"])
-        .arg(&out)
-        .env("GAST_SHARED", shared_dir())
-        .output()
-        .expect("run gast");
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "the resumed run failed:\n{stdout}\n{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = run_quick("the resumed run");
     let resumed = format!("resuming: {} of {} trials already finished", trials.len() - 1, trials.len());
     assert!(stdout.contains("quality benchmark: 1 trials") && stdout.contains(&resumed), "{stdout}");
     let again: Value =
