@@ -97,9 +97,7 @@ pub fn run_grid(
             |size: u32| ViewArgs { cameras: None, views: sizes.views, size, fov: 50.0, framing, crop: false };
         let mut views = views_for(scene, &view_args(spec.config.resolution))?;
         if let Some(budget_s) = sizes.defaults_plan_s.filter(|_| planned.contains(&spec.id)) {
-            let before = spec.config.schedule().total_steps();
-            plan_arm(&mut spec, scene, &views, budget_s);
-            let after = spec.config.schedule().total_steps();
+            let (before, after) = plan_arm(&mut spec, scene, &views, budget_s);
             bar.set_length((bar.length().unwrap_or(0) + u64::from(after)).saturating_sub(u64::from(before)));
             views = views_for(scene, &view_args(spec.config.resolution))?;
         }
@@ -168,8 +166,9 @@ pub fn run_grid(
 /// for a CPU run of `budget_s` seconds with no `--resolution` or `--cycles`:
 /// the subject's span in `views` and the losses' focus (auto decides on the
 /// views' coverage) pick the step model, [`auto_plan`] the rest. The
-/// checkpoint at the old budget moves to the new one.
-fn plan_arm(spec: &mut TrialSpec, scene: &Gaussians, views: &[Camera], budget_s: f64) {
+/// checkpoint at the old budget moves to the new one. Returns the steps
+/// scheduled before and after.
+fn plan_arm(spec: &mut TrialSpec, scene: &Gaussians, views: &[Camera], budget_s: f64) -> (u32, u32) {
     let before = spec.config.schedule().total_steps();
     let ViewsSurvey { span, object } = survey(scene, views, spec.config.focus, spec.config.background);
     let plan = auto_plan(span, StepModel::for_focus(object), spec.config.cycles, spec.config.steps_per_cycle, budget_s);
@@ -179,6 +178,7 @@ fn plan_arm(spec: &mut TrialSpec, scene: &Gaussians, views: &[Camera], budget_s:
     for c in spec.checkpoints.iter_mut().filter(|c| **c == before) {
         *c = after;
     }
+    (before, after)
 }
 
 /// Points the rows that read trial `r` at its planned budget `scheduled`
@@ -251,8 +251,8 @@ mod tests {
                 },
             )
             .expect("views");
-            plan_arm(&mut spec, &scene, &views, AUTO_RUN_BUDGET_S);
-            let steps = spec.config.schedule().total_steps();
+            let (_, steps) = plan_arm(&mut spec, &scene, &views, AUTO_RUN_BUDGET_S);
+            assert_eq!(steps, spec.config.schedule().total_steps(), "{label}");
             let moved = steps == scheduled || !spec.checkpoints.contains(&scheduled);
             assert!(spec.checkpoints.contains(&steps) && moved, "{label}: measured at the budget it runs");
             let r = Record {
