@@ -102,9 +102,9 @@ pub struct StylizeArgs {
     /// follows the object: the smallest size (a multiple of 32) at which it
     /// spans 64 relu3 positions across its longer side, at most the size where a
     /// CPU step takes about 1 s; on a 2-core CPU a step with the object focus
-    /// takes about 0.18 s at 256 px, 0.36 s at 384 px, 0.58 s at 512 px and
-    /// 1 s at 672 px; with whole-frame losses 0.57 s at 256 px and 2.3 s at
-    /// 512 px].
+    /// takes about 0.29 s at 256 px, 0.58 s at 384 px and 0.94 s at 512 px;
+    /// with whole-frame losses 0.57 s at 256 px and 2.3 s at 512 px. With
+    /// neither this nor --cycles, a CPU run is planned to about 10 min].
     #[arg(long)]
     pub resolution: Option<u32>,
     /// One flag per loss weight (`--lambda-gc`, …), from `gast_core::style::terms`.
