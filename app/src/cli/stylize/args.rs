@@ -103,8 +103,9 @@ pub struct StylizeArgs {
     /// spans 64 relu3 positions across its longer side, at most the size where a
     /// CPU step takes about 1 s; on a 2-core CPU a step with the object focus
     /// takes about 0.29 s at 256 px, 0.58 s at 384 px and 0.94 s at 512 px;
-    /// with whole-frame losses 0.57 s at 256 px and 2.3 s at 512 px. With
-    /// neither this nor --cycles, a CPU run is planned to about 10 min].
+    /// with whole-frame losses 0.57 s at 256 px and 2.3 s at 512 px. Without
+    /// this or --preset, a CPU run is planned to about 10 min, taking fewer
+    /// cycles unless --cycles is given].
     #[arg(long)]
     pub resolution: Option<u32>,
     /// One flag per loss weight (`--lambda-gc`, …), from `gast_core::style::terms`.
