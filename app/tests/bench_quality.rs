@@ -114,6 +114,11 @@ fn quick_quality_benchmark_writes_a_complete_linked_report() {
     }
 
     let index = std::fs::read_to_string(out.join("index.md")).expect("index.md");
+    // The header gives the resolutions the trials ran, not the grid's default alone.
+    let res: Vec<u64> = trials.iter().map(|t| t["resolution"].as_u64().expect("resolution")).collect();
+    let (lo, hi) = (res.iter().min().expect("a trial"), res.iter().max().expect("a trial"));
+    let ran = if lo == hi { format!("Optimisation at {lo} px") } else { format!("Optimisation at {lo}–{hi} px") };
+    assert!(index.contains(&ran), "index.md does not say {ran}");
     for heading in ["Optimisation strategy", "N_g ratio", "λ_GC", "Stability", "Sample renders"] {
         assert!(index.contains(heading), "index.md lacks {heading}");
     }

@@ -333,7 +333,8 @@ fn layout(c: &Chart) -> Vec<Item> {
         }
     } else {
         for (r, row) in rows.iter().enumerate() {
-            let mut x = x0;
+            // From the chart's left margin: the rows were wrapped to `w − 2·PAD`.
+            let mut x = PAD;
             for &i in row {
                 entry(&c.series[i], x, y1 + below + 0.3 * AXIS + ROW * (r as f64 + 0.5) + 4.0);
                 x += entries[i] + 18.0;
@@ -603,6 +604,39 @@ mod tests {
         let svg = std::fs::read_to_string(dir.join("quality.v1.svg")).expect("read svg");
         assert!(svg.contains("</svg>"));
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// A legend in rows below the plot stays inside the chart: the defaults
+    /// study's margin chart, with "guitar stone (colours collapsed)" among
+    /// nine entries, once cut its last column at the right edge.
+    #[test]
+    fn a_legend_below_the_plot_stays_inside_the_chart() {
+        let names = ["guitar block2", "guitar fire", "guitar galaxy", "guitar hydrangea", "guitar mosaic"]
+            .into_iter()
+            .chain(["guitar particle", "guitar starry", "guitar stone (colours collapsed)", "guitar wave"]);
+        let series: Vec<Series> = names
+            .enumerate()
+            .map(|(i, name)| Series {
+                name: name.into(),
+                points: vec![(i as f64, 1.0 + i as f64)],
+                color: palette(i),
+                line: false,
+                dashed: false,
+            })
+            .collect();
+        let chart = Chart { series, ..sample() };
+        let (w, _) = chart.size();
+        let mut legend = 0;
+        for item in layout(&chart) {
+            if let Item::Text(t) = item
+                && t.text.starts_with("guitar ")
+            {
+                legend += 1;
+                let end = t.x + SLACK * text_width(&t.text, t.size);
+                assert!(t.x >= 0.0 && end <= f64::from(w), "{:?} ends at {end:.0} of {w}", t.text);
+            }
+        }
+        assert_eq!(legend, 9);
     }
 
     /// Writes sample charts to look at: `cargo test -p gast chart -- --ignored`.

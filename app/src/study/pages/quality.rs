@@ -347,16 +347,27 @@ fn index_markdown(run: &RunSummary, charts: &[(String, String)]) -> String {
     let (sizes, rows, records) = (&run.sizes, run.rows.as_slice(), run.trials.as_slice());
     let mut s = String::new();
     let _ = writeln!(s, "# Quality benchmark\n");
+    // What the trials ran, from the trials themselves: a study's own settings
+    // (the defaults study's planned 256 px and 100 steps a cycle) override
+    // the grid's.
+    let span = |values: Vec<u32>, fallback: u32| {
+        let (lo, hi) = (values.iter().min().copied(), values.iter().max().copied());
+        match (lo, hi) {
+            (Some(lo), Some(hi)) if lo != hi => format!("{lo}–{hi}"),
+            (Some(lo), _) => lo.to_string(),
+            _ => fallback.to_string(),
+        }
+    };
+    let resolution = span(records.iter().map(|r| r.resolution).collect(), sizes.resolution);
+    let per_cycle = span(records.iter().map(|r| r.steps_per_cycle).collect(), sizes.steps_per_cycle);
     let _ = writeln!(
         s,
-        "`{}` — {} trials in {:.1} min on {} threads. Optimisation at {} px from {} orbit views, {} steps per cycle (the paper's 10:90 split of 100 scaled down; the geometry share is kept), measured on a fixed ring of {} px views (see `core/src/eval/measure.rs`). Times are preparation plus optimisation, measuring excluded.\n",
+        "`{}` — {} trials in {:.1} min on {} threads. Optimisation at {resolution} px from {} orbit views, {per_cycle} steps per cycle (the paper's 10:90 split, scaled where a cycle is shorter than its 100 steps; the geometry share is kept), measured on a fixed ring of {} px views (see `core/src/eval/measure.rs`). Times are preparation plus optimisation, measuring excluded.\n",
         run.command,
         records.len(),
         run.wall_s / 60.0,
         run.threads,
-        sizes.resolution,
         sizes.views,
-        sizes.steps_per_cycle,
         sizes.eval_resolution
     );
     let _ = writeln!(
