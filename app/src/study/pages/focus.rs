@@ -341,7 +341,7 @@ fn focus_table(run: &RunSummary, c: &Comparison) -> (Vec<String>, Vec<Margin>) {
         out.push(format!(
             "| {scene} | {style} | {steps} | {sw_f:.4} | {sw_o:.4} | {ratio_sw} | {nn_f:.4} | {nn_o:.4} | {ratio_nn} | {content_f:.4} | {content_o:.4} | {rmse_f:.4} | {rmse_o:.4} | {ratio_rmse:.2} | {}, {} | {haze_f:.4}, {haze_o:.4} | {time_f:.0}, {time_o:.0} | {} |",
             yes_no(frame_collapsed),
-            yes_no(collapsed(object)),
+            yes_no(object_collapsed),
             yes_no(pass)
         ));
     }
