@@ -66,6 +66,8 @@ pub fn run(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Result<
             for e in &app.errors {
                 eprintln!("studio: shown in the window: {e}");
             }
+            // The run's thread ends before the device and the process do.
+            app.run.shut_down();
             return Ok(());
         }
         // A window's frames come at the display's pace; here the workers

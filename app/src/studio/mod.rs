@@ -217,6 +217,10 @@ impl eframe::App for StudioApp {
     fn ui(&mut self, ui: &mut Ui, _frame: &mut eframe::Frame) {
         self.show(ui);
     }
+
+    fn on_exit(&mut self) {
+        self.run.shut_down();
+    }
 }
 
 /// The window's size from `WxH` (1280×800 without one, or when it does not read as two sizes of 200 to 8192).

@@ -29,10 +29,23 @@ pub struct SessionLink {
     pub live: Arc<Slot<gast_core::gpu::LiveGaussians>>,
     /// The run's start (colour-matched scene, cameras, style maps), once prepared.
     pub start: Arc<Slot<RunStart>>,
-    /// The worker thread, stopped when the link is dropped (`None` in tests
-    /// that play the worker's part themselves).
-    #[expect(dead_code, reason = "held for its Drop, which stops the worker")]
+    /// The worker thread, told to stop when the link is dropped, and stopped
+    /// and waited for by [`Self::stop_and_join`] (`None` in tests that play
+    /// the worker's part themselves).
     pub worker: Option<gast_core::session::SessionHandle>,
+}
+
+impl SessionLink {
+    /// Stops the worker and waits for its thread to end (a step at most), so
+    /// that no thread is still inside the graphics driver when the studio's
+    /// device is dropped and the process exits: on an H200 the headless
+    /// studio, closing with its paused run's thread alive, ended in a
+    /// segmentation fault after its screenshot was saved.
+    pub fn stop_and_join(&mut self) {
+        if let Some(worker) = self.worker.take() {
+            worker.stop_and_join();
+        }
+    }
 }
 
 /// Everything a worker needs to start a run.
@@ -105,6 +118,13 @@ impl RunMonitor {
     /// Starts following a new run.
     pub fn attach(&mut self, link: SessionLink) {
         *self = Self { link: Some(link), status: RunStatus::Running, ..Self::default() };
+    }
+
+    /// Stops the connected worker, if any, and waits for it (the studio's close).
+    pub fn shut_down(&mut self) {
+        if let Some(link) = &mut self.link {
+            link.stop_and_join();
+        }
     }
 
     /// Whether a worker is connected and has not ended.
