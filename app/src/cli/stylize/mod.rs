@@ -162,6 +162,9 @@ struct Report {
     views: usize,
     stages_s: Vec<(String, f64)>,
     optimisation_s: f64,
+    /// What came after the steps, in seconds: the scenes written, the preview
+    /// views rendered and measured, the contact sheet.
+    outputs_s: Vec<(String, f64)>,
     /// The step a Ctrl-C stopped the run at; `None`: the whole schedule ran.
     stopped_at: Option<u32>,
     steps: Vec<StepReport>,
@@ -391,6 +394,16 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         optimisation_s / done.max(1) as f64
     );
 
+    // After the steps the work is the host's (renders, VGG measures, files):
+    // each part is timed and said, so a minute of it is not a silent one.
+    let mut outputs = Vec::new();
+    let mut t_part = Instant::now();
+    let mut part_done = |name: &str, t: &mut Instant| {
+        let seconds = t.elapsed().as_secs_f64();
+        eprintln!("  {name}: {seconds:.1} s");
+        outputs.push((name.to_string(), seconds));
+        *t = Instant::now();
+    };
     let result = session.result();
     // The colour-matched scene, for `gast convert --blend` to set a strength later.
     let matched_path = args.out.join("colour_matched.ply");
@@ -407,6 +420,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         }
         None => super::convert::save_scene(&args.out.join(&args.scene_name), &result, &args.save)?,
     }
+    part_done("scenes written", &mut t_part);
     let preview = write_previews(
         &args.out,
         &scene,
@@ -417,6 +431,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         &vgg,
         args.preview_views,
     )?;
+    part_done("preview views rendered and measured", &mut t_part);
     let sheet_path = args.out.join("sheet.png");
     let settings = sheet::settings_line(&config, done, optimisation_s, session.focus_on_object(), session.coverage());
     let title = format!(
@@ -433,6 +448,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             views: sheet::session_views(&session, &scene, args.preview_views),
         },
     )?;
+    part_done("contact sheet drawn", &mut t_part);
     eprintln!("  contact sheet: {}", sheet_path.display());
     let mut summary = Summary::default();
     let n = preview.len().max(1) as f32;
@@ -498,6 +514,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         views: cameras.len(),
         stages_s: stages,
         optimisation_s,
+        outputs_s: outputs,
         stopped_at,
         steps,
         preview,
@@ -530,7 +547,9 @@ fn write_previews(
     write_png_rgb(&out.join("style.png"), style.width as u32, style.height as u32, &style.rgb)?;
     write_png_gray_normalized(&out.join("style_depth.png"), style.width as u32, style.height as u32, &style.depth)?;
     write_png_gray_normalized(&out.join("style_edge.png"), style.width as u32, style.height as u32, &style.edge)?;
-    for (k, cam) in sheet::spread(cameras, count).enumerate() {
+    let views: Vec<&Camera> = sheet::spread(cameras, count).collect();
+    for (k, cam) in views.iter().copied().enumerate() {
+        eprintln!("  preview view {} of {}: rendering and measuring", k + 1, views.len());
         let (w, h) = (cam.width, cam.height);
         let before = raster::render(input, cam, &opts);
         let matched = raster::render(colour_matched, cam, &opts);
