@@ -282,11 +282,21 @@ impl StudioApp {
             }
         });
         self.device_selector(ui, live);
-        ui.add_enabled(!live, egui::Checkbox::new(&mut self.fit_budget, "fit the run to about 10 min on the CPU"))
-            .on_hover_text(
-                "on the CPU, lower the working resolution and the cycles so that the whole run takes about ten \
-                 minutes, as `gast stylize` does; off: the resolution and cycles set below",
-            );
+        // The budget is the CPU's: a run on the GPU keeps the resolution and cycles set.
+        let on_gpu = self.device.pick(self.gpu.as_ref()).is_some();
+        ui.add_enabled(
+            !live && !on_gpu,
+            egui::Checkbox::new(&mut self.fit_budget, "fit the run to about 10 min on the CPU"),
+        )
+        .on_hover_text(
+            "on the CPU, lower the working resolution and the cycles so that the whole run takes about ten \
+             minutes, as `gast stylize` does; off: the resolution and cycles set below",
+        )
+        .on_disabled_hover_text(if on_gpu {
+            "the run steps on the GPU: it keeps the resolution and cycles set below"
+        } else {
+            "a run is in progress"
+        });
         let status = match &self.run.status {
             RunStatus::Idle => "idle".to_string(),
             RunStatus::Running => "running".into(),
