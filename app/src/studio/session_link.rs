@@ -35,14 +35,25 @@ pub struct SessionLink {
     pub worker: Option<gast_core::session::SessionHandle>,
 }
 
+/// How long a close waits for the run's thread to end.
+const JOIN_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
+
 impl SessionLink {
-    /// Stops the worker and waits for its thread to end (a step at most), so
+    /// Stops the worker and waits for its thread to end (a step, mostly), so
     /// that no thread is still inside the graphics driver when the studio's
     /// device is dropped and the process exits: on an H200 the headless
     /// studio, closing with its paused run's thread alive, ended in a
-    /// segmentation fault after its screenshot was saved.
+    /// segmentation fault after its screenshot was saved. A worker still
+    /// loading (a weights download answers no command) is left after
+    /// [`JOIN_WAIT`], as before, so a close never hangs on it.
     pub fn stop_and_join(&mut self) {
-        if let Some(worker) = self.worker.take() {
+        let Some(worker) = self.worker.take() else { return };
+        let _ = self.commands.send(Command::Stop);
+        let t = std::time::Instant::now();
+        while !worker.is_finished() && t.elapsed() < JOIN_WAIT {
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        if worker.is_finished() {
             worker.stop_and_join();
         }
     }
@@ -249,5 +260,42 @@ mod tests {
         etx.send(Event::Finished { completed: false, steps: 2, seconds: 2.0 }).expect("send");
         m.poll();
         assert!(!m.is_live());
+    }
+
+    /// A close joins a worker that answers its Stop, and leaves one still
+    /// loading after [`JOIN_WAIT`] rather than hang.
+    #[test]
+    fn a_close_joins_the_worker_or_leaves_one_that_is_still_loading() {
+        use gast_core::session::spawn_with;
+        let link = |handle: gast_core::session::SessionHandle| SessionLink {
+            commands: handle.commands.clone(),
+            events: handle.events.clone(),
+            snapshots: handle.snapshots.clone(),
+            live: handle.live.clone(),
+            start: handle.start.clone(),
+            worker: Some(handle),
+        };
+        // A load that fails at once: its thread ends and the close joins it.
+        let mut m = RunMonitor::default();
+        m.attach(link(spawn_with(|_| Err("no inputs".into()), Arc::new(|| {}))));
+        let t = std::time::Instant::now();
+        m.shut_down();
+        assert!(t.elapsed() < JOIN_WAIT, "the close waited {:?} for a thread that had ended", t.elapsed());
+        assert!(m.link.as_ref().is_some_and(|l| l.worker.is_none()), "the worker was not taken and joined");
+        // A load that waits (as a weights download does): the close returns after the wait.
+        let (hold, release) = crossbeam_channel::bounded::<()>(0);
+        let mut slow = link(spawn_with(
+            move |_| {
+                let _ = release.recv();
+                Err("released".into())
+            },
+            Arc::new(|| {}),
+        ));
+        let t = std::time::Instant::now();
+        slow.stop_and_join();
+        let waited = t.elapsed();
+        assert!(slow.worker.is_none());
+        assert!(waited >= JOIN_WAIT && waited < JOIN_WAIT * 3, "waited {waited:?}");
+        drop(hold); // the load returns and its thread ends
     }
 }
