@@ -39,6 +39,18 @@ pub struct SessionLink {
 const JOIN_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
 
 impl SessionLink {
+    /// The link to a running session worker: its channels and its thread.
+    pub fn of(handle: gast_core::session::SessionHandle) -> Self {
+        Self {
+            commands: handle.commands.clone(),
+            events: handle.events.clone(),
+            snapshots: handle.snapshots.clone(),
+            live: handle.live.clone(),
+            start: handle.start.clone(),
+            worker: Some(handle),
+        }
+    }
+
     /// Stops the worker and waits for its thread to end (a step, mostly), so
     /// that no thread is still inside the graphics driver when the studio's
     /// device is dropped and the process exits: on an H200 the headless
@@ -267,14 +279,7 @@ mod tests {
     #[test]
     fn a_close_joins_the_worker_or_leaves_one_that_is_still_loading() {
         use gast_core::session::spawn_with;
-        let link = |handle: gast_core::session::SessionHandle| SessionLink {
-            commands: handle.commands.clone(),
-            events: handle.events.clone(),
-            snapshots: handle.snapshots.clone(),
-            live: handle.live.clone(),
-            start: handle.start.clone(),
-            worker: Some(handle),
-        };
+        let link = SessionLink::of;
         // A load that fails at once: its thread ends and the close joins it.
         let mut m = RunMonitor::default();
         m.attach(link(spawn_with(|_| Err("no inputs".into()), Arc::new(|| {}))));

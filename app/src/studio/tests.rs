@@ -681,14 +681,7 @@ fn the_contact_sheet_of_a_run_is_exported() {
             gpu: None,
         };
         let handle = gast_core::session::spawn(inputs, req.waker);
-        Ok(session_link::SessionLink {
-            commands: handle.commands.clone(),
-            events: handle.events.clone(),
-            snapshots: handle.snapshots.clone(),
-            live: handle.live.clone(),
-            start: handle.start.clone(),
-            worker: Some(handle),
-        })
+        Ok(session_link::SessionLink::of(handle))
     }));
     app.config = StyleConfig {
         resolution: 64,

@@ -101,13 +101,6 @@ pub fn starter() -> SessionStarter {
             },
             waker,
         );
-        Ok(SessionLink {
-            commands: handle.commands.clone(),
-            events: handle.events.clone(),
-            snapshots: handle.snapshots.clone(),
-            live: handle.live.clone(),
-            start: handle.start.clone(),
-            worker: Some(handle),
-        })
+        Ok(SessionLink::of(handle))
     })
 }
