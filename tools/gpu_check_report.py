@@ -101,6 +101,15 @@ def with_without(step, what, short, extra=lambda j: ""):
 
 # The assignment terms' host round trip.
 with_without("compare_assign", "assignment terms (λ_asc 10 + λ_as 0.015)", "assignment terms")
+# The host pairing itself (`gast bench pairing`): Jonker–Volgenant's start against the plain paths.
+j = load("pairing.json")
+if j:
+    figure(f"host pairing at {j['resolution']} px (guitar × wave, {j['threads']} threads)", j["pairing_ms"], "ms", None, None,
+           f"median of {j['draws']} draws, {j['rows_median']:.0f} rows: cost matrix {j['cost_ms']:.2f}, assignment "
+           f"{j['assign_ms']:.2f} (the plain shortest paths {j['plain_ms']:.2f}, ratio {j['assign_over_plain']:.3f}), "
+           f"pulls {j['pull_ms']:.2f} ms")
+else:
+    figure("host pairing", None, "ms", None, False, status("pairing"))
 # The depth's sliced Wasserstein term (the frame recipe), at the largest step size.
 with_without("compare_sliced_depth", "λ_swd 1 (frame recipe)", "λ_swd 1",
              lambda j: f", whole frame at {j['resolution']} px")

@@ -97,6 +97,9 @@ pub enum BenchCommand {
     /// The style depth network's time per style (Depth Anything V2: the checkpoint found
     /// here, else random weights at the Small model's sizes).
     Depth(bench::DepthArgs),
+    /// The assignment terms' host pairing part by part (cost matrix, least-cost assignment,
+    /// pulls) on the columns a step draws from real views: the work a GPU step waits for.
+    Pairing(bench::PairingArgs),
     /// Speed against quality over a grid of modes, budgets, resolutions, N_g ratios and
     /// λ_GC on the shared scenes and the nine styles; the stability study; the paper's
     /// ablation tables. Writes a folder with an index.md, CSV/JSON tables, charts and renders
@@ -166,6 +169,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Bench(BenchCommand::Raster(args)) => return bench::run_raster(args),
         Command::Bench(BenchCommand::Step(args)) => return bench::run_step(args),
         Command::Bench(BenchCommand::Depth(args)) => return bench::run_depth(args),
+        Command::Bench(BenchCommand::Pairing(args)) => return bench::run_pairing(args),
         Command::Bench(BenchCommand::Quality(args)) => return quality::run(args),
         Command::Bench(BenchCommand::ViewportLive { scene, style, weights, reps }) => {
             let shared = bench::shared_dir();

@@ -9,7 +9,7 @@
 //!
 //! over the `r` rendered positions `x_i` (the object's with object focus) and
 //! `r` style positions `y_j` drawn uniformly without repetition, `σ` the
-//! minimum-cost assignment (shortest augmenting paths, [`assign_min_cost`]) under
+//! minimum-cost assignment ([`assign_min_cost`], `super::min_cost`) under
 //! the cosine distance when λ_asc is on, the squared distance otherwise.
 //!
 //! Why: GCFM pulls each rendered feature toward its *nearest* style feature,
@@ -36,101 +36,12 @@
 
 use super::focus::{gather_positions, scatter_positions};
 use super::gcfm::{EPS, column_sq_norms};
+pub use super::min_cost::assign_min_cost;
 use crate::rng::Rng;
 use crate::vision::matmul;
 
 /// Most rendered positions one step's assignment pairs (its cost is cubic in it).
 pub const ASSIGN_MAX: usize = 512;
-
-/// For each of the `n` rows of the row-major `n × k` matrix `cost` (`n ≤ k`),
-/// the column it takes in an assignment of distinct columns of least total
-/// cost. Costs that are not finite count as very large.
-///
-/// The shortest augmenting path algorithm with dual potentials, in the form
-/// of Crouse ("On implementing 2D rectangular assignment algorithms", IEEE
-/// TAES 2016): each row's Dijkstra search scans only the columns it has not
-/// reached yet and updates the potentials once, at its end, so a search
-/// costs one pass over the remaining columns per step of its path. On the
-/// relu3 cosine costs of a 1,024 px guitar render against wave (512 × 512)
-/// it takes 27 ms where the textbook Hungarian form (two passes over every
-/// column per step) took 74 ms, with the same assignment (`docs/figures.md`).
-pub fn assign_min_cost(cost: &[f64], n: usize, k: usize) -> Vec<usize> {
-    assert!(n <= k, "assign_min_cost: {n} rows need at least as many columns, found {k}");
-    assert_eq!(cost.len(), n * k, "assign_min_cost: the cost matrix's size");
-    const NONE: usize = usize::MAX;
-    const HUGE: f64 = 1e30;
-    let finite: Vec<f64>;
-    let cost = if cost.iter().all(|c| c.is_finite()) {
-        cost
-    } else {
-        finite = cost.iter().map(|&c| if c.is_finite() { c } else { HUGE }).collect();
-        &finite
-    };
-    let (mut u, mut v) = (vec![0.0f64; n], vec![0.0f64; k]);
-    let mut shortest = vec![f64::INFINITY; k];
-    let mut path = vec![NONE; k];
-    let (mut col_of, mut row_of) = (vec![NONE; n], vec![NONE; k]);
-    let (mut rows_seen, mut cols_seen) = (vec![false; n], vec![false; k]);
-    let mut remaining = vec![0usize; k];
-    for start in 0..n {
-        // Dijkstra from `start` over reduced costs until a free column.
-        let mut min_val = 0.0f64;
-        let mut i = start;
-        for (t, r) in remaining.iter_mut().enumerate() {
-            *r = k - 1 - t;
-        }
-        let mut left = k;
-        rows_seen.fill(false);
-        cols_seen.fill(false);
-        shortest.fill(f64::INFINITY);
-        let sink = loop {
-            rows_seen[i] = true;
-            let row = &cost[i * k..(i + 1) * k];
-            let base = min_val - u[i];
-            let (mut index, mut lowest) = (0, f64::INFINITY);
-            for (t, &j) in remaining[..left].iter().enumerate() {
-                let reduced = base + row[j] - v[j];
-                if reduced < shortest[j] {
-                    path[j] = i;
-                    shortest[j] = reduced;
-                }
-                // Ties go to a free column, which ends the search.
-                if shortest[j] < lowest || (shortest[j] == lowest && row_of[j] == NONE) {
-                    lowest = shortest[j];
-                    index = t;
-                }
-            }
-            min_val = lowest;
-            let j = remaining[index];
-            cols_seen[j] = true;
-            left -= 1;
-            remaining[index] = remaining[left];
-            if row_of[j] == NONE {
-                break j;
-            }
-            i = row_of[j];
-        };
-        // The potentials of the rows and columns the search reached.
-        u[start] += min_val;
-        for r in (0..n).filter(|&r| rows_seen[r] && r != start) {
-            u[r] += min_val - shortest[col_of[r]];
-        }
-        for j in (0..k).filter(|&j| cols_seen[j]) {
-            v[j] -= min_val - shortest[j];
-        }
-        // Flip the augmenting path.
-        let mut j = sink;
-        loop {
-            let r = path[j];
-            row_of[j] = r;
-            std::mem::swap(&mut col_of[r], &mut j);
-            if r == start {
-                break;
-            }
-        }
-    }
-    col_of
-}
 
 /// A seed from the bits of the covered columns of `x` (`channels × n`, CHW).
 fn seed_of(x: &[f32], n: usize, covered: &[usize]) -> u64 {
@@ -216,55 +127,94 @@ pub(crate) fn draw_pairs(rng: &mut Rng, covered: Vec<usize>, m: usize) -> (Vec<u
     (rows, targets)
 }
 
+/// [`draw_pairs`] from a generator seeded by `seed` (for benchmarks: the
+/// step seeds from the features, the GPU engine from a counter).
+pub fn draw_pairs_seeded(seed: u64, covered: Vec<usize>, m: usize) -> (Vec<usize>, Vec<usize>) {
+    draw_pairs(&mut Rng::new(seed), covered, m)
+}
+
 /// The assignment of the gathered rendered features `x` to the gathered style
 /// features `s` (both `channels × r`, CHW, column `i` of `s` drawn for row
 /// `i` of `x`'s step) and the two pulls along it: the terms and the weighted
 /// gradient w.r.t. `x` (`channels × r`). The CPU step and the GPU engine's
 /// (which gathers on the device) share it.
 pub fn pull_pairs(x: &[f32], s: &[f32], channels: usize, cosine_weight: f32, l2_weight: f32) -> Assignment {
-    let channels = channels.max(1);
-    let r = x.len() / channels;
-    assert_eq!(s.len(), x.len(), "pull_pairs: one style column per rendered one");
-    let mut grad = vec![0.0f32; x.len()];
-    if r == 0 {
-        return Assignment { cosine: 0.0, l2: 0.0, grad };
-    }
-    let mut dot = vec![0.0f32; r * r];
-    matmul(&mut dot, r, (x, 1, r), (s, r), (r, r, channels), false);
-    let (xx, ss) = (column_sq_norms(x, channels, r), column_sq_norms(s, channels, r));
-    let (x_len, s_len): (Vec<f64>, Vec<f64>) =
-        (xx.iter().map(|v| v.sqrt() + EPS).collect(), ss.iter().map(|v| v.sqrt() + EPS).collect());
-    let cost: Vec<f64> = if cosine_weight > 0.0 {
-        (0..r * r).map(|ij| 1.0 - f64::from(dot[ij]) / (x_len[ij / r] * s_len[ij % r])).collect()
-    } else {
-        // Squared distances ‖x_i‖² + ‖s_j‖² − 2 x_i·s_j.
-        (0..r * r).map(|ij| xx[ij / r] + ss[ij % r] - 2.0 * f64::from(dot[ij])).collect()
-    };
-    let sigma = assign_min_cost(&cost, r, r);
-    // The terms and their gradients from the features themselves (not the
-    // cancelling expansion above).
-    let l2_scale = 1.0 / (r * channels) as f64;
-    let cos_scale = 1.0 / r as f64;
-    let (mut l2, mut cosine) = (0.0f64, 0.0f64);
-    for i in 0..r {
-        let j = sigma[i];
-        let mut xs = 0.0f64;
-        for c in 0..channels {
-            xs += f64::from(x[c * r + i]) * f64::from(s[c * r + j]);
+    let costs = PairCosts::new(x, s, channels, cosine_weight > 0.0);
+    let sigma = assign_min_cost(&costs.cost, costs.r, costs.r);
+    costs.pull(x, s, &sigma, cosine_weight, l2_weight)
+}
+
+/// The pairing's cost matrix between gathered columns (the first part of
+/// [`pull_pairs`]; `gast bench pairing` times the parts).
+#[derive(Clone, Debug)]
+pub struct PairCosts {
+    /// Channels of a column.
+    pub channels: usize,
+    /// Columns on each side.
+    pub r: usize,
+    /// `r × r` row-major: the cosine distance `1 − cos(x_i, s_j)`, or the
+    /// squared distance when the pairing is not by cosine.
+    pub cost: Vec<f64>,
+    x_len: Vec<f64>,
+    s_len: Vec<f64>,
+}
+
+impl PairCosts {
+    /// The costs between the columns of `x` and `s` (both `channels × r`,
+    /// CHW): cosine distances when `cosine`, squared distances otherwise.
+    pub fn new(x: &[f32], s: &[f32], channels: usize, cosine: bool) -> Self {
+        let channels = channels.max(1);
+        let r = x.len() / channels;
+        assert_eq!(s.len(), x.len(), "pull_pairs: one style column per rendered one");
+        let mut dot = vec![0.0f32; r * r];
+        if r > 0 {
+            matmul(&mut dot, r, (x, 1, r), (s, r), (r, r, channels), false);
         }
-        let cos = xs / (x_len[i] * s_len[j]);
-        cosine += 1.0 - cos;
-        for c in 0..channels {
-            let (xv, sv) = (f64::from(x[c * r + i]), f64::from(s[c * r + j]));
-            let d = xv - sv;
-            l2 += d * d;
-            // ∂(1 − cos)/∂x = −(s/(|x||s|) − cos·x/|x|²).
-            let g_cos = -(sv / (x_len[i] * s_len[j]) - cos * xv / (x_len[i] * x_len[i]));
-            let g = f64::from(l2_weight) * 2.0 * d * l2_scale + f64::from(cosine_weight) * g_cos * cos_scale;
-            grad[c * r + i] = g as f32;
-        }
+        let (xx, ss) = (column_sq_norms(x, channels, r), column_sq_norms(s, channels, r));
+        let (x_len, s_len): (Vec<f64>, Vec<f64>) =
+            (xx.iter().map(|v| v.sqrt() + EPS).collect(), ss.iter().map(|v| v.sqrt() + EPS).collect());
+        let cost: Vec<f64> = if cosine {
+            (0..r * r).map(|ij| 1.0 - f64::from(dot[ij]) / (x_len[ij / r] * s_len[ij % r])).collect()
+        } else {
+            // Squared distances ‖x_i‖² + ‖s_j‖² − 2 x_i·s_j.
+            (0..r * r).map(|ij| xx[ij / r] + ss[ij % r] - 2.0 * f64::from(dot[ij])).collect()
+        };
+        Self { channels, r, cost, x_len, s_len }
     }
-    Assignment { cosine: (cosine * cos_scale) as f32, l2: (l2 * l2_scale) as f32, grad }
+
+    /// The terms and the weighted gradient w.r.t. `x` along the assignment
+    /// `sigma` (row `i` of `x` to column `sigma[i]` of `s`), computed from the
+    /// features themselves (not the cancelling expansion of the costs).
+    pub fn pull(&self, x: &[f32], s: &[f32], sigma: &[usize], cosine_weight: f32, l2_weight: f32) -> Assignment {
+        let (channels, r) = (self.channels, self.r);
+        let (x_len, s_len) = (&self.x_len, &self.s_len);
+        let mut grad = vec![0.0f32; x.len()];
+        if r == 0 {
+            return Assignment { cosine: 0.0, l2: 0.0, grad };
+        }
+        let l2_scale = 1.0 / (r * channels) as f64;
+        let cos_scale = 1.0 / r as f64;
+        let (mut l2, mut cosine) = (0.0f64, 0.0f64);
+        for i in 0..r {
+            let j = sigma[i];
+            let mut xs = 0.0f64;
+            for c in 0..channels {
+                xs += f64::from(x[c * r + i]) * f64::from(s[c * r + j]);
+            }
+            let cos = xs / (x_len[i] * s_len[j]);
+            cosine += 1.0 - cos;
+            for c in 0..channels {
+                let (xv, sv) = (f64::from(x[c * r + i]), f64::from(s[c * r + j]));
+                let d = xv - sv;
+                l2 += d * d;
+                // ∂(1 − cos)/∂x = −(s/(|x||s|) − cos·x/|x|²).
+                let g_cos = -(sv / (x_len[i] * s_len[j]) - cos * xv / (x_len[i] * x_len[i]));
+                let g = f64::from(l2_weight) * 2.0 * d * l2_scale + f64::from(cosine_weight) * g_cos * cos_scale;
+                grad[c * r + i] = g as f32;
+            }
+        }
+        Assignment { cosine: (cosine * cos_scale) as f32, l2: (l2 * l2_scale) as f32, grad }
+    }
 }
 
 #[cfg(test)]
@@ -279,46 +229,6 @@ mod tests {
 
     fn features(c: usize, n: usize, phase: usize) -> Vec<f32> {
         (0..c * n).map(|i| (((i + phase) * 37 % 101) as f32 / 50.0 - 1.0).abs()).collect()
-    }
-
-    /// The least total cost over every injective choice of columns, by brute force.
-    fn brute(cost: &[f64], n: usize, k: usize) -> f64 {
-        fn go(row: usize, cost: &[f64], n: usize, k: usize, used: &mut Vec<bool>) -> f64 {
-            if row == n {
-                return 0.0;
-            }
-            let mut best = f64::INFINITY;
-            for j in 0..k {
-                if !used[j] {
-                    used[j] = true;
-                    best = best.min(cost[row * k + j] + go(row + 1, cost, n, k, used));
-                    used[j] = false;
-                }
-            }
-            best
-        }
-        go(0, cost, n, k, &mut vec![false; k])
-    }
-
-    #[test]
-    fn the_assignment_is_one_to_one_and_of_least_cost() {
-        let mut rng = Rng::new(7);
-        for (n, k) in [(1, 1), (3, 3), (4, 6), (6, 6), (5, 8)] {
-            for _ in 0..20 {
-                let cost: Vec<f64> = (0..n * k).map(|_| f64::from(rng.uniform() * 10.0).floor()).collect();
-                let sigma = assign_min_cost(&cost, n, k);
-                let mut seen = vec![false; k];
-                for &j in &sigma {
-                    assert!(!seen[j], "column {j} taken twice ({n}×{k})");
-                    seen[j] = true;
-                }
-                let total: f64 = sigma.iter().enumerate().map(|(i, &j)| cost[i * k + j]).sum();
-                assert!((total - brute(&cost, n, k)).abs() < 1e-9, "{n}×{k}: {total} against {}", brute(&cost, n, k));
-            }
-        }
-        // Non-finite costs are avoided, not looped on.
-        let cost = [f64::NAN, 1.0, 2.0, f64::INFINITY];
-        assert_eq!(assign_min_cost(&cost, 2, 2), vec![1, 0]);
     }
 
     #[test]

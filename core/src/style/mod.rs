@@ -17,6 +17,7 @@ pub mod feature_mean;
 pub mod focus;
 pub mod gcfm;
 pub mod matching;
+pub mod min_cost;
 pub mod outside;
 pub mod regularizers;
 pub mod relief;

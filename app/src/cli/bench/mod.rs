@@ -13,10 +13,12 @@ use gast_core::raster::{self, RenderOptions};
 use crate::views::{Framing, ViewArgs, load_scene, views_for};
 
 mod depth;
+mod pairing;
 mod step;
 mod step_fast;
 
 pub use depth::{DepthArgs, run_depth};
+pub use pairing::{PairingArgs, run_pairing};
 pub use step::StepArgs;
 
 /// Arguments of `gast bench raster`.
