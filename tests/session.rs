@@ -359,6 +359,34 @@ fn the_assignment_terms_run_on_both_engines() {
     }
 }
 
+/// With the assignment terms the GPU engine submits the depth's backward
+/// pass before it waits for the host's pairing, and the RGB's after: the
+/// geometry steps' updates are the same as without them when their pull is
+/// nil (λ_as 1e-30 takes the assigning path and adds nothing a float keeps),
+/// step after step. Without the depth's gradient, or with it twice, the
+/// third step's losses would differ.
+#[test]
+fn the_gpu_geometry_step_with_the_assignment_terms_keeps_the_depth_gradient() {
+    use gast_core::session::Session;
+    let nil = LossWeights { assignment: 1e-30, ..Default::default() };
+    let reports = [LossWeights::default(), nil].map(|weights| {
+        let Some(cpu_inputs) = inputs(object_config(Mode::GeometryOnly, weights)) else { return Vec::new() };
+        let mut s = Session::prepare(SessionInputs { gpu: Some(gpu_context()), ..cpu_inputs }, &mut |_| {})
+            .expect("GPU session");
+        (0..3).map(|_| s.step().unwrap_or_else(|| panic!("GPU step failed: {:?}", s.failure())).losses).collect()
+    });
+    let [without, with] = &reports;
+    if without.is_empty() {
+        return;
+    }
+    for (step, (a, b)) in without.iter().zip(with).enumerate() {
+        for (name, x, y) in [("gcfm", a.gcfm, b.gcfm), ("content", a.content, b.content), ("depth", a.depth, b.depth)] {
+            assert!((x - y).abs() <= 1e-5 * x.abs().max(1e-6), "step {step}, {name}: without {x}, with the nil pull {y}");
+        }
+    }
+    assert!(with[2].assignment > 0.0, "the third step pairs: {:?}", with[2]);
+}
+
 /// λ_out (the background hold) on both devices, in colour and in geometry
 /// steps: 0 on the first step (the render is `G^c`'s), the same after one
 /// update, and measured (above 0) on both after two.

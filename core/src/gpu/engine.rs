@@ -350,25 +350,32 @@ impl GpuEngine {
             &self.scalars,
             search,
         );
+        // The depth's backward pass does not need the pairing: with the
+        // assignment terms it is submitted before the host waits, so the
+        // device runs it while the host pairs.
+        let depth_backward = |enc: &mut wgpu::CommandEncoder| {
+            plan.loss.record_backward_depth(ctx, &k.loss, enc, inv_depth, depth_ref, geometry, focus, &self.scalars)
+        };
         let mut pulled = None;
         if let (Some(gathered), Some(a)) = (gathered, self.assign.as_mut()) {
+            depth_backward(&mut enc);
             ctx.submit(enc);
             pulled = Some(a.pull(ctx, gathered, w.assignment_cosine, w.assignment)?);
             enc = ctx.encoder("engine.step.backward");
         }
-        plan.loss.record_backward(
+        plan.loss.record_backward_rgb(
             ctx,
             &k.loss,
             &mut enc,
             rgb,
-            inv_depth,
-            depth_ref,
             hold,
-            geometry,
             focus,
             &self.scalars,
             if assigning { self.assign.as_ref() } else { None },
         );
+        if pulled.is_none() {
+            depth_backward(&mut enc);
+        }
         let keep = if searched && reuse > 1 {
             // The buffer of an earlier search of this view, or a new one.
             let m = match &target.kept {

@@ -12,7 +12,8 @@
 //! `2 · channels · r` floats down and `channels · r` up (3 MiB at r = 512),
 //! not the feature maps. The columns come down in one copy, and the host
 //! waits for the submission that gathered them alone, so the device runs the
-//! step's GCFM search while the host pairs (`GpuEngine::step`).
+//! step's GCFM search, and on geometry steps the depth's backward pass, while
+//! the host pairs (`GpuEngine::step`).
 //!
 //! The draw differs from the CPU step's in its seed only: the CPU seeds from
 //! the features' bits (which would need the whole maps here), the engine from

@@ -394,10 +394,9 @@ impl StepLossPlan {
         }
     }
 
-    /// After [`StepLossPlan::record_feature_losses`]: the assignment terms'
-    /// gradient added to the RGB features' (`assign`), then the gradients
-    /// through VGG back to the render, with TV, the hold, the clamp's mask
-    /// and the depth terms on the way.
+    /// After [`StepLossPlan::record_feature_losses`]: the gradients back to
+    /// the render, [`StepLossPlan::record_backward_rgb`] then
+    /// [`StepLossPlan::record_backward_depth`].
     #[allow(clippy::too_many_arguments)]
     pub fn record_backward(
         &self,
@@ -413,12 +412,30 @@ impl StepLossPlan {
         scalars: &wgpu::Buffer,
         assign: Option<&GpuAssignment>,
     ) {
+        self.record_backward_rgb(ctx, k, enc, rgb_raw, hold, focus, scalars, assign);
+        self.record_backward_depth(ctx, k, enc, inv_depth, depth_ref, depth_grad, focus, scalars);
+    }
+
+    /// After [`StepLossPlan::record_feature_losses`]: the assignment terms'
+    /// gradient added to the RGB features' (`assign`), then the RGB
+    /// gradient through VGG back to the render, with TV, the hold and the
+    /// clamp's mask on the way.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_backward_rgb(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        enc: &mut wgpu::CommandEncoder,
+        rgb_raw: &wgpu::Buffer,
+        hold: Option<&wgpu::Buffer>,
+        focus: Option<&GpuFocus>,
+        scalars: &wgpu::Buffer,
+        assign: Option<&GpuAssignment>,
+    ) {
         let focus = focus.unwrap_or(&self.frame);
         if let Some(a) = assign {
             a.record_scatter(ctx, enc, &self.v_feat[0]);
         }
-
-        // Image space: RGB through VGG and the downscale, plus TV, then the clamp's mask.
         k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[0], &self.v_feat[0], &self.v_small[0]);
         self.down.backward(ctx, enc, &self.v_small[0], &self.v_rgb, false);
         self.tv.record(ctx, enc, &self.rgb, focus, &self.v_rgb, scalars);
@@ -426,6 +443,25 @@ impl StepLossPlan {
             self.hold.record(ctx, enc, &self.rgb, reference, &self.v_rgb, scalars);
         }
         self.clamp.backward(ctx, enc, rgb_raw, &self.v_rgb);
+    }
+
+    /// After [`StepLossPlan::record_feature_losses`]: the depth features'
+    /// gradient back to the inverse depth (zero when `depth_grad` is off),
+    /// and the depth terms. It does not depend on the assignment terms, so
+    /// the engine records it before it waits for their host pairing.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_backward_depth(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        enc: &mut wgpu::CommandEncoder,
+        inv_depth: &wgpu::Buffer,
+        depth_ref: Option<&wgpu::Buffer>,
+        depth_grad: bool,
+        focus: Option<&GpuFocus>,
+        scalars: &wgpu::Buffer,
+    ) {
+        let focus = focus.unwrap_or(&self.frame);
         if depth_grad {
             k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[1], &self.v_feat[1], &self.v_small[1]);
             self.down.backward(ctx, enc, &self.v_small[1], &self.v_depth3, false);
