@@ -10,7 +10,7 @@
 //! row reduction (auction-like bids of the free rows on their two cheapest
 //! columns) is left out: on the crowded relu3 cosine costs the assignment
 //! terms pair, where many rows are cheapest in the same few columns, its bids
-//! move the potentials by tiny steps, and with it the pairing took 1.5–1.9
+//! move the potentials by tiny steps, and with it the assignment took 1.5–1.9
 //! times the plain paths' time instead of 0.7 (`gast bench pairing`,
 //! `docs/figures.md`). The plain shortest augmenting paths, every row
 //! searched from an empty assignment ([`assign_shortest_paths`]), stay as
