@@ -35,6 +35,36 @@ pub struct RasterArgs {
     pub views: usize,
 }
 
+/// The scene, style and VGG weights a step-level benchmark runs on
+/// (`gast bench step`, `gast bench pairing`).
+#[derive(clap::Args, Debug, Clone)]
+pub struct BenchData {
+    /// Scene (default: guitar.compressed.ply from the shared data folder).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Style image (default: styles/wave.jpg from the shared data folder).
+    #[arg(long)]
+    pub style: Option<PathBuf>,
+    /// VGG weights (default: the shared vgg19-conv3.safetensors, else the usual resolution).
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+}
+
+impl BenchData {
+    /// The scene's and the style's paths and the weights' (when given or
+    /// in the shared data folder), the shared data's guitar and wave by default.
+    pub fn paths(&self) -> (PathBuf, PathBuf, Option<PathBuf>) {
+        let shared = shared_dir();
+        let scene = self.scene.clone().unwrap_or_else(|| shared.join("data/scenes/guitar.compressed.ply"));
+        let style = self.style.clone().unwrap_or_else(|| shared.join("data/styles/wave.jpg"));
+        let weights = self.weights.clone().or_else(|| {
+            let p = shared.join("data/weights/vgg19-conv3.safetensors");
+            p.exists().then_some(p)
+        });
+        (scene, style, weights)
+    }
+}
+
 /// The shared data folder: `$GAST_SHARED`, else `../shared`.
 pub(super) fn shared_dir() -> PathBuf {
     std::env::var_os("GAST_SHARED").map(PathBuf::from).unwrap_or_else(|| PathBuf::from("../shared"))

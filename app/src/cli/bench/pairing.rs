@@ -13,21 +13,14 @@ use gast_core::style::assignment::{ASSIGN_MAX, PairCosts, draw_pairs_seeded};
 use gast_core::style::min_cost::{assign_min_cost, assign_shortest_paths};
 use gast_core::style::focus::{feature_mask, gather_positions};
 
-use super::{median, shared_dir};
+use super::median;
 use crate::views::{Framing, ViewArgs, load_scene, views_for};
 
 /// Arguments of `gast bench pairing`.
 #[derive(Args, Debug)]
 pub struct PairingArgs {
-    /// Scene (default: guitar.compressed.ply from the shared data folder).
-    #[arg(long)]
-    pub scene: Option<PathBuf>,
-    /// Style image (default: styles/wave.jpg from the shared data folder).
-    #[arg(long)]
-    pub style: Option<PathBuf>,
-    /// VGG weights (default: the shared vgg19-conv3.safetensors, else the usual resolution).
-    #[arg(long)]
-    pub weights: Option<PathBuf>,
+    #[command(flatten)]
+    pub data: super::BenchData,
     /// Working resolution (longer side, pixels): the render VGG sees is half of it.
     #[arg(long, default_value_t = 512)]
     pub resolution: u32,
@@ -52,13 +45,7 @@ pub struct PairingArgs {
 /// covered positions, as the object focus draws them) and times the pairing's
 /// parts on each draw; prints the medians.
 pub fn run_pairing(args: PairingArgs) -> anyhow::Result<ExitCode> {
-    let shared = shared_dir();
-    let scene_path = args.scene.clone().unwrap_or_else(|| shared.join("data/scenes/guitar.compressed.ply"));
-    let style_path = args.style.clone().unwrap_or_else(|| shared.join("data/styles/wave.jpg"));
-    let weights = args.weights.clone().or_else(|| {
-        let p = shared.join("data/weights/vgg19-conv3.safetensors");
-        p.exists().then_some(p)
-    });
+    let (scene_path, style_path, weights) = args.data.paths();
     let scene = load_scene(&scene_path)?;
     let style = gast_core::session::StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
     let vgg = super::super::stylize::load_vgg(weights.as_deref())?;

@@ -14,21 +14,14 @@ use gast_core::camera::Camera;
 use anyhow::Context as _;
 
 use super::depth::time_style_depth;
-use super::{median, memory_mib, reset_peak_memory, shared_dir};
+use super::{median, memory_mib, reset_peak_memory};
 use crate::views::{Framing, ViewArgs, load_scene, views_for};
 
 /// Arguments of `gast bench step`.
 #[derive(Args, Debug)]
 pub struct StepArgs {
-    /// Scene (default: guitar.compressed.ply from the shared data folder).
-    #[arg(long)]
-    pub scene: Option<PathBuf>,
-    /// Style image (default: styles/wave.jpg from the shared data folder).
-    #[arg(long)]
-    pub style: Option<PathBuf>,
-    /// VGG weights (default: the shared vgg19-conv3.safetensors, else the usual resolution).
-    #[arg(long)]
-    pub weights: Option<PathBuf>,
+    #[command(flatten)]
+    pub data: super::BenchData,
     /// Working resolution (longer side, pixels).
     #[arg(long, default_value_t = 256)]
     pub resolution: u32,
@@ -124,7 +117,7 @@ fn write_json(args: &StepArgs, runs: &[(&str, &StepRun)]) -> anyhow::Result<()> 
     let Some(path) = &args.json else { return Ok(()) };
     let (peak, _) = memory_mib();
     let doc = serde_json::json!({
-        "scene": args.scene.as_ref().map(|p| p.display().to_string()),
+        "scene": args.data.scene.as_ref().map(|p| p.display().to_string()),
         "resolution": args.resolution,
         "views": args.views,
         "framing": format!("{:?}", args.framing).to_lowercase(),
@@ -148,13 +141,7 @@ pub(super) struct StepInputs {
 /// VGG file by default), after resetting the peak-memory mark, makes the
 /// orbit views and prints the benchmark's first line.
 pub(super) fn step_inputs(args: &StepArgs) -> anyhow::Result<StepInputs> {
-    let shared = shared_dir();
-    let scene_path = args.scene.clone().unwrap_or_else(|| shared.join("data/scenes/guitar.compressed.ply"));
-    let style_path = args.style.clone().unwrap_or_else(|| shared.join("data/styles/wave.jpg"));
-    let weights = args.weights.clone().or_else(|| {
-        let p = shared.join("data/weights/vgg19-conv3.safetensors");
-        p.exists().then_some(p)
-    });
+    let (scene_path, style_path, weights) = args.data.paths();
     reset_peak_memory();
     let scene = load_scene(&scene_path)?;
     let style = gast_core::session::StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
