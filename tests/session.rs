@@ -373,18 +373,25 @@ fn the_gpu_geometry_step_with_the_assignment_terms_keeps_the_depth_gradient() {
         let Some(cpu_inputs) = inputs(object_config(Mode::GeometryOnly, weights)) else { return Vec::new() };
         let mut s = Session::prepare(SessionInputs { gpu: Some(gpu_context()), ..cpu_inputs }, &mut |_| {})
             .expect("GPU session");
-        (0..3).map(|_| s.step().unwrap_or_else(|| panic!("GPU step failed: {:?}", s.failure())).losses).collect()
+        (0..3).map(|_| s.step().unwrap_or_else(|| panic!("GPU step failed: {:?}", s.failure()))).collect::<Vec<_>>()
     });
     let [without, with] = &reports;
     if without.is_empty() {
         return;
     }
     for (step, (a, b)) in without.iter().zip(with).enumerate() {
+        let (a, b) = (&a.losses, &b.losses);
         for (name, x, y) in [("gcfm", a.gcfm, b.gcfm), ("content", a.content, b.content), ("depth", a.depth, b.depth)] {
             assert!((x - y).abs() <= 1e-5 * x.abs().max(1e-6), "step {step}, {name}: without {x}, with the nil pull {y}");
         }
     }
-    assert!(with[2].assignment > 0.0, "the third step pairs: {:?}", with[2]);
+    assert!(with[2].losses.assignment > 0.0, "the third step pairs: {:?}", with[2].losses);
+    // The host's share of each step: its pairing only with the terms on, its waits on the device always.
+    for (a, b) in without.iter().zip(with) {
+        assert_eq!(a.timings.pairing_ms, 0.0, "no pairing without the terms: {:?}", a.timings);
+        assert!(b.timings.pairing_ms > 0.0, "the pairing is timed: {:?}", b.timings);
+        assert!(a.timings.device_wait_ms > 0.0 && b.timings.device_wait_ms > 0.0, "{:?} {:?}", a.timings, b.timings);
+    }
 }
 
 /// λ_out (the background hold) on both devices, in colour and in geometry

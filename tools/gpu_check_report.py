@@ -79,6 +79,11 @@ for scene in ("guitar", "playbot"):
             # Judged on the geometry step's median (90% of the schedule), else the mean.
             judged = geo if geo is not None else gpu["ms_per_step"]
             note = f"{gpu['device']}; medians: colour {fmt(col)} ms, geometry {fmt(geo)} ms; mean {gpu['ms_per_step']:.2f} ms over {gpu['steps']} steps"
+            # The host's share (absent before 2026-11-28's second session): its pairing and its waits on the device.
+            if gpu.get("geometry_pairing_median_ms") is not None or gpu.get("colour_pairing_median_ms") is not None:
+                note += (f"; host pairing colour {fmt(med(gpu, 'colour_pairing_median_ms'))} / geometry "
+                         f"{fmt(med(gpu, 'geometry_pairing_median_ms'))} ms, waiting on the device "
+                         f"{fmt(med(gpu, 'colour_device_wait_median_ms'))} / {fmt(med(gpu, 'geometry_device_wait_median_ms'))} ms")
             if cpu:
                 note += f"; CPU engine {cpu['ms_per_step']:.1f} ms a step on {meta.get('cores', '?')} cores (mean), CPU/GPU {cpu['ms_per_step'] / max(gpu['ms_per_step'], 1e-9):.3g}x"
             figure(f"{scene} step at {res} px", judged, "ms", t and f"≤ {t:.0f} ms", t and judged <= t, note)

@@ -119,6 +119,18 @@ pub struct GpuEngine {
     subset_scratch: Option<wgpu::Buffer>,
     /// The assignment terms' workspace, made at the first step with λ_as or λ_asc on.
     assign: Option<GpuAssignment>,
+    /// The host's share of the last step ([`GpuEngine::host_times`]).
+    host: HostTimes,
+}
+
+/// What the host spent of one GPU step: the time the device's part timings
+/// do not cover.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HostTimes {
+    /// The assignment terms' pairing on the host (0 without them).
+    pub pairing_ms: f32,
+    /// Waiting on the device: for the gathered columns, then for the step's scalars.
+    pub wait_ms: f32,
 }
 
 impl GpuEngine {
@@ -187,6 +199,7 @@ impl GpuEngine {
             warnings: Vec::new(),
             subset_scratch: None,
             assign: None,
+            host: HostTimes::default(),
         };
         engine.bytes = ctx.allocated_bytes().saturating_sub(before);
         Ok(engine)
@@ -261,6 +274,11 @@ impl GpuEngine {
     /// session's resolved [`crate::style::Focus`]), or at the whole frame.
     pub fn set_object_focus(&mut self, on: bool) {
         self.object_focus = on;
+    }
+
+    /// The host's share of the last step: its pairing and its waits on the device.
+    pub fn host_times(&self) -> HostTimes {
+        self.host
     }
 
     /// One optimisation step from view `view` seen by `cam` in `phase`; the
@@ -357,10 +375,12 @@ impl GpuEngine {
             plan.loss.record_backward_depth(ctx, &k.loss, enc, inv_depth, depth_ref, geometry, focus, &self.scalars)
         };
         let mut pulled = None;
+        let mut host = HostTimes::default();
         if let (Some(gathered), Some(a)) = (gathered, self.assign.as_mut()) {
             depth_backward(&mut enc);
             ctx.submit(enc);
             pulled = Some(a.pull(ctx, gathered, w.assignment_cosine, w.assignment)?);
+            (host.wait_ms, host.pairing_ms) = a.last_pull_ms();
             enc = ctx.encoder("engine.step.backward");
         }
         plan.loss.record_backward_rgb(
@@ -420,7 +440,10 @@ impl GpuEngine {
         }
         self.bytes += self.ctx.allocated_bytes().saturating_sub(allocated);
 
+        let waited = std::time::Instant::now();
         let s: Vec<f32> = ctx.read(&self.scalars)?;
+        host.wait_ms += waited.elapsed().as_secs_f32() * 1e3;
+        self.host = host;
         let pairs = s[slot::PAIRS].to_bits() as usize;
         if pairs > plan.raster.capacity() {
             self.grow_pairs(size, pairs);

@@ -102,7 +102,7 @@ pub use content::ContentLoss;
 pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};
 pub use depth_map::{DepthMap, DepthMapKernels};
 pub use depth_net::GpuDepthNet;
-pub use engine::GpuEngine;
+pub use engine::{GpuEngine, HostTimes};
 pub use feature_mean::FeatureMeanLoss;
 pub use feature_net::{GpuFeatureNet, GpuFeatureState};
 pub use focus::{FocusKernels, GpuFocus};

@@ -37,6 +37,17 @@ pub struct StepTimings {
     pub raster_backward_ms: f32,
     /// Regularisers and Adam.
     pub update_ms: f32,
+    /// The assignment terms' host pairing (cost matrix, assignment, pulls);
+    /// on the CPU part of `matching_ms`, on the GPU engine host work the
+    /// device's GCFM search (and on geometry steps the depth's backward
+    /// pass) runs beside.
+    #[serde(default)]
+    pub pairing_ms: f32,
+    /// GPU engine: how long the host waited on the device within the step
+    /// (for the gathered columns the pairing reads, and for the step's
+    /// scalars at its end). 0 on the CPU.
+    #[serde(default)]
+    pub device_wait_ms: f32,
 }
 
 /// One optimisation step's report.

@@ -69,8 +69,10 @@ impl Session {
                 self.colour_watch.observe(view, c);
             }
         }
-        // The session measures the whole step; its stages are not timed apart.
-        Ok((losses, StepTimings::default()))
+        // The session measures the whole step; its device stages are not
+        // timed apart, only the host's pairing and its waits on the device.
+        let host = engine.host_times();
+        Ok((losses, StepTimings { pairing_ms: host.pairing_ms, device_wait_ms: host.wait_ms, ..StepTimings::default() }))
     }
 
     /// One step on the CPU: render, the losses through VGG, the rasterizer's
@@ -142,6 +144,7 @@ impl Session {
         timings.features_ms = loss.timings.features_ms;
         timings.matching_ms = loss.timings.matching_ms - (audit_s * 1e3) as f32;
         timings.vgg_backward_ms = loss.timings.backward_ms;
+        timings.pairing_ms = loss.timings.pairing_ms;
 
         // The clamp to [0, 1] passes no gradient outside the range.
         let mut v_rgb = loss.v_rgb;

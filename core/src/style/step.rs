@@ -184,6 +184,8 @@ pub struct StepLossTimings {
     pub matching_ms: f32,
     /// VGG backward of the RGB (and depth) maps and the image-space adjoints.
     pub backward_ms: f32,
+    /// The assignment terms' pairing, part of `matching_ms`.
+    pub pairing_ms: f32,
 }
 
 /// The min and max of `d` over the positions in `mask` (all without one).
@@ -409,6 +411,7 @@ pub fn step_loss_with<N: FeatureNet>(
     }
     let (mut assignment_value, mut assignment_cosine_value) = (0.0, 0.0);
     if weights.assignment > 0.0 || weights.assignment_cosine > 0.0 {
+        let paired = std::time::Instant::now();
         let a = assignment_loss(
             &fwd[0].0.data,
             fwd[0].0.channels,
@@ -417,6 +420,7 @@ pub fn step_loss_with<N: FeatureNet>(
             weights.assignment_cosine,
             weights.assignment,
         );
+        timings.pairing_ms = paired.elapsed().as_secs_f32() * 1e3;
         (assignment_value, assignment_cosine_value) = (a.l2, a.cosine);
         for (v, g) in v_feat_rgb.iter_mut().zip(a.grad) {
             *v += g;

@@ -89,6 +89,8 @@ struct StepRun {
     steps: usize,
     wall_s: f64,
     per_phase: Vec<(gast_core::style::Phase, f64)>,
+    /// Per phase, the medians of the host's pairing and of its waits on the device (ms).
+    host_per_phase: Vec<(gast_core::style::Phase, f64, f64)>,
     first_losses: Option<gast_core::session::LossTerms>,
     gpu_memory_mib: Option<f64>,
     targets_s: f64,
@@ -98,6 +100,7 @@ impl StepRun {
     /// The run as the `--json` file's record, under `label`.
     fn to_json(&self, label: &str) -> serde_json::Value {
         let phase = |p: gast_core::style::Phase| self.per_phase.iter().find(|x| x.0 == p).map(|x| x.1);
+        let host = |p: gast_core::style::Phase| self.host_per_phase.iter().find(|x| x.0 == p).map(|x| (x.1, x.2));
         serde_json::json!({
             "label": label,
             "device": self.device,
@@ -106,6 +109,10 @@ impl StepRun {
             "ms_per_step": self.wall_s * 1e3 / self.steps.max(1) as f64,
             "colour_step_median_ms": phase(gast_core::style::Phase::Color),
             "geometry_step_median_ms": phase(gast_core::style::Phase::Geometry),
+            "colour_pairing_median_ms": host(gast_core::style::Phase::Color).map(|h| h.0),
+            "geometry_pairing_median_ms": host(gast_core::style::Phase::Geometry).map(|h| h.0),
+            "colour_device_wait_median_ms": host(gast_core::style::Phase::Color).map(|h| h.1),
+            "geometry_device_wait_median_ms": host(gast_core::style::Phase::Geometry).map(|h| h.1),
             "gpu_memory_mib": self.gpu_memory_mib,
             "targets_s": self.targets_s,
         })
@@ -457,10 +464,10 @@ fn time_steps(
     }
     println!("per-step medians (ms), every view's targets computed before the timed steps");
     println!(
-        "{:<10} {:>6} {:>8} {:>10} {:>9} {:>10} {:>10} {:>8} {:>9}",
-        "phase", "steps", "render", "vgg fwd×3", "matching", "vgg bwd", "raster bwd", "adam", "step"
+        "{:<10} {:>6} {:>8} {:>10} {:>9} {:>10} {:>10} {:>8} {:>8} {:>8} {:>9}",
+        "phase", "steps", "render", "vgg fwd×3", "matching", "vgg bwd", "raster bwd", "adam", "pairing", "waits", "step"
     );
-    let mut per_phase = Vec::new();
+    let (mut per_phase, mut host_per_phase) = (Vec::new(), Vec::new());
     for phase in [Phase::Color, Phase::Geometry] {
         let rows: Vec<&(StepReport, f64)> = reports.iter().filter(|(r, _)| r.phase == phase).collect();
         if rows.is_empty() {
@@ -469,8 +476,10 @@ fn time_steps(
         let m = |f: &dyn Fn(&StepReport) -> f32| median(rows.iter().map(|(r, _)| f64::from(f(r))).collect());
         let wall = median(rows.iter().map(|(_, w)| *w).collect());
         per_phase.push((phase, wall));
+        let (pairing, waits) = (m(&|r| r.timings.pairing_ms), m(&|r| r.timings.device_wait_ms));
+        host_per_phase.push((phase, pairing, waits));
         println!(
-            "{:<10} {:>6} {:>8.1} {:>10.1} {:>9.1} {:>10.1} {:>10.1} {:>8.1} {:>9.2}",
+            "{:<10} {:>6} {:>8.1} {:>10.1} {:>9.1} {:>10.1} {:>10.1} {:>8.1} {:>8.1} {:>8.1} {:>9.2}",
             format!("{phase:?}").to_lowercase(),
             rows.len(),
             m(&|r| r.timings.render_ms),
@@ -479,17 +488,23 @@ fn time_steps(
             m(&|r| r.timings.vgg_backward_ms),
             m(&|r| r.timings.raster_backward_ms),
             m(&|r| r.timings.update_ms),
+            pairing,
+            waits,
             wall
         );
     }
     if session.gpu_memory_bytes().is_some() {
-        println!("(on the GPU the parts run back to back in one submission; their times are below)");
+        println!(
+            "(on the GPU the parts run back to back in one submission; their times are below; \
+             \"pairing\" is the host's, \"waits\" the host waiting on the device)"
+        );
     }
     Ok(StepRun {
         device,
         steps: reports.len(),
         wall_s,
         per_phase,
+        host_per_phase,
         first_losses: reports.first().map(|r| r.0.losses),
         gpu_memory_mib,
         targets_s: warm,

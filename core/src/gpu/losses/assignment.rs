@@ -61,6 +61,8 @@ pub struct GpuAssignment {
     rng: Rng,
     /// Rows of the last draw (0: nothing to pull or add).
     drawn: usize,
+    /// The last pull's wait for the gathered columns and its pairing, ms.
+    pull_ms: (f32, f32),
 }
 
 impl GpuAssignment {
@@ -87,6 +89,7 @@ impl GpuAssignment {
             u_g: ctx.uniform("assignment.u_g", &zero),
             rng: Rng::new(seed),
             drawn: 0,
+            pull_ms: (0.0, 0.0),
         }
     }
 
@@ -162,15 +165,26 @@ impl GpuAssignment {
         cosine_weight: f32,
         l2_weight: f32,
     ) -> Result<Assignment, GpuError> {
+        self.pull_ms = (0.0, 0.0);
         if self.drawn == 0 {
             return Ok(Assignment { cosine: 0.0, l2: 0.0, grad: Vec::new() });
         }
         let half = self.channels * self.drawn;
+        let waited = std::time::Instant::now();
         let xs: Vec<f32> = ctx.read_staged(&self.staging, (2 * half * 4) as u64, gathered)?;
+        let paired = std::time::Instant::now();
         let (x, s) = xs.split_at(half);
         let pulled = pull_pairs(x, s, self.channels, cosine_weight, l2_weight);
+        let ms = |d: std::time::Duration| d.as_secs_f32() * 1e3;
+        self.pull_ms = (ms(paired - waited), ms(paired.elapsed()));
         ctx.write(&self.g, &pulled.grad);
         Ok(Assignment { grad: Vec::new(), ..pulled })
+    }
+
+    /// The last pull's wait for the gathered columns and its pairing on the
+    /// host, in ms (zeros when it drew nothing).
+    pub fn last_pull_ms(&self) -> (f32, f32) {
+        self.pull_ms
     }
 
     /// Records `v_features += ` the last pull's gradient at the rows drawn
