@@ -382,7 +382,10 @@ fn the_gpu_geometry_step_with_the_assignment_terms_keeps_the_depth_gradient() {
     for (step, (a, b)) in without.iter().zip(with).enumerate() {
         let (a, b) = (&a.losses, &b.losses);
         for (name, x, y) in [("gcfm", a.gcfm, b.gcfm), ("content", a.content, b.content), ("depth", a.depth, b.depth)] {
-            assert!((x - y).abs() <= 1e-5 * x.abs().max(1e-6), "step {step}, {name}: without {x}, with the nil pull {y}");
+            assert!(
+                (x - y).abs() <= 1e-5 * x.abs().max(1e-6),
+                "step {step}, {name}: without {x}, with the nil pull {y}"
+            );
         }
     }
     assert!(with[2].losses.assignment > 0.0, "the third step pairs: {:?}", with[2].losses);

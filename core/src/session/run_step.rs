@@ -72,7 +72,10 @@ impl Session {
         // The session measures the whole step; its device stages are not
         // timed apart, only the host's pairing and its waits on the device.
         let host = engine.host_times();
-        Ok((losses, StepTimings { pairing_ms: host.pairing_ms, device_wait_ms: host.wait_ms, ..StepTimings::default() }))
+        Ok((
+            losses,
+            StepTimings { pairing_ms: host.pairing_ms, device_wait_ms: host.wait_ms, ..StepTimings::default() },
+        ))
     }
 
     /// One step on the CPU: render, the losses through VGG, the rasterizer's

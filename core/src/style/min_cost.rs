@@ -273,7 +273,6 @@ pub fn assign_shortest_paths(cost: &[f64], n: usize, k: usize) -> Vec<usize> {
     col_of
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -312,7 +311,11 @@ mod tests {
                         seen[j] = true;
                     }
                     let total: f64 = sigma.iter().enumerate().map(|(i, &j)| cost[i * k + j]).sum();
-                    assert!((total - brute(&cost, n, k)).abs() < 1e-9, "{n}×{k}: {total} against {}", brute(&cost, n, k));
+                    assert!(
+                        (total - brute(&cost, n, k)).abs() < 1e-9,
+                        "{n}×{k}: {total} against {}",
+                        brute(&cost, n, k)
+                    );
                 }
             }
         }
@@ -329,7 +332,14 @@ mod tests {
     #[test]
     fn jonker_volgenant_matches_the_plain_shortest_paths() {
         let mut rng = Rng::new(3);
-        for (n, k, levels, crowd) in [(40, 40, 0, 0.0), (64, 64, 5, 0.0), (50, 70, 0, 0.0), (120, 120, 0, 2.0), (90, 90, 3, 1.0), (200, 200, 0, 4.0)] {
+        for (n, k, levels, crowd) in [
+            (40, 40, 0, 0.0),
+            (64, 64, 5, 0.0),
+            (50, 70, 0, 0.0),
+            (120, 120, 0, 2.0),
+            (90, 90, 3, 1.0),
+            (200, 200, 0, 4.0),
+        ] {
             for _ in 0..3 {
                 // A crowd: columns below k/8 are cheaper for every row by `crowd` spread.
                 let cost: Vec<f64> = (0..n * k)
@@ -346,7 +356,12 @@ mod tests {
                     assert!(!seen[j], "{n}×{k}: column {j} taken twice");
                     seen[j] = true;
                 }
-                assert!((total(&a) - total(&b)).abs() < 1e-9, "{n}×{k}, {levels} levels: {} against {}", total(&a), total(&b));
+                assert!(
+                    (total(&a) - total(&b)).abs() < 1e-9,
+                    "{n}×{k}, {levels} levels: {} against {}",
+                    total(&a),
+                    total(&b)
+                );
                 if levels == 0 {
                     assert_eq!(a, b, "{n}×{k}: a unique least-cost assignment");
                 }

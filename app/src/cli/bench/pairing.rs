@@ -10,8 +10,8 @@ use anyhow::Context as _;
 use clap::Args;
 use gast_core::style::FeatureNet;
 use gast_core::style::assignment::{ASSIGN_MAX, PairCosts, draw_pairs_seeded};
-use gast_core::style::min_cost::{assign_min_cost, assign_shortest_paths};
 use gast_core::style::focus::{feature_mask, gather_positions};
+use gast_core::style::min_cost::{assign_min_cost, assign_shortest_paths};
 
 use super::median;
 use crate::views::{Framing, ViewArgs, load_scene, views_for};

@@ -465,7 +465,17 @@ fn time_steps(
     println!("per-step medians (ms), every view's targets computed before the timed steps");
     println!(
         "{:<10} {:>6} {:>8} {:>10} {:>9} {:>10} {:>10} {:>8} {:>8} {:>8} {:>9}",
-        "phase", "steps", "render", "vgg fwd×3", "matching", "vgg bwd", "raster bwd", "adam", "pairing", "waits", "step"
+        "phase",
+        "steps",
+        "render",
+        "vgg fwd×3",
+        "matching",
+        "vgg bwd",
+        "raster bwd",
+        "adam",
+        "pairing",
+        "waits",
+        "step"
     );
     let (mut per_phase, mut host_per_phase) = (Vec::new(), Vec::new());
     for phase in [Phase::Color, Phase::Geometry] {
