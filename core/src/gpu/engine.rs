@@ -283,7 +283,8 @@ impl GpuEngine {
 
     /// One optimisation step from view `view` seen by `cam` in `phase`; the
     /// parts run back to back on the device, so no stage timings come back
-    /// (`gast bench step --device gpu` times them separately).
+    /// (`gast bench step --device gpu` times them separately), only the
+    /// host's share ([`GpuEngine::host_times`]).
     pub fn step(
         &mut self,
         view: usize,
