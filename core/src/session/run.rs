@@ -69,6 +69,8 @@ struct ViewTarget {
     /// With λ_out above 0, the pixels `G^c` leaves empty and its render
     /// ([`crate::style::outside`]); `None` otherwise, so no render is kept.
     outside: Option<(Vec<bool>, Vec<f32>)>,
+    /// The colour-matched render's palette over `coverage` (λ_pal's reference).
+    palette: crate::style::palette::Palette,
 }
 
 /// Optimiser state, one Adam per parameter group, per phase (kept across cycles).
@@ -522,9 +524,11 @@ impl Session {
         }
         self.colour_watch.set_reference(view, CoveredColour::of(&rgb, &r.alpha));
         let outside = want_hold.then(|| (outside_mask(&r.alpha), rgb.clone()));
+        let coverage = coverage_mask(&r.alpha, h, w);
         self.targets[view] = Some(ViewTarget {
             content: content_target(&*self.vgg, &rgb, h, w),
-            coverage: coverage_mask(&r.alpha, h, w),
+            palette: crate::style::palette::palette_of(&rgb, &coverage),
+            coverage,
             inv_depth: r.inv_depth,
             outside,
         });

@@ -136,6 +136,7 @@ impl Session {
                 outside: (target.outside.as_ref())
                     .filter(|_| self.focus_on_object())
                     .map(|(mask, rgb)| Outside { mask, rgb }),
+                palette: self.focus_on_object().then_some(target.palette),
                 relief_px: self.config.depth_relief_px as usize,
             },
             &mut matcher,

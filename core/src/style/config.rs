@@ -45,6 +45,12 @@ pub struct LossWeights {
     /// focus, the pixels the colour-matched scene leaves empty keep its
     /// render. Not in the reference: 0 (off) by default. Both engines.
     pub outside: f32,
+    /// λ_pal, the palette hold ([`crate::style::palette`]): with object
+    /// focus, the covered pixels' per-channel mean and deviation keep the
+    /// colour-matched render's. Not in the reference: 0 (off) by default.
+    /// CPU engine.
+    #[serde(default)]
+    pub palette: f32,
     /// λ_sw, the sliced Wasserstein term ([`crate::style::sliced`]): the
     /// distribution of the rendered RGB relu3 features over the positions the
     /// losses average over, pulled toward the style's along fixed random
@@ -84,6 +90,7 @@ impl Default for LossWeights {
             depth: 10.0,
             feature_mean: 0.0,
             outside: 0.0,
+            palette: 0.0,
             sliced: 0.0,
             sliced_depth: 0.0,
             assignment: 0.0,

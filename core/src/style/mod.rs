@@ -19,6 +19,7 @@ pub mod gcfm;
 pub mod matching;
 pub mod min_cost;
 pub mod outside;
+pub mod palette;
 pub mod regularizers;
 pub mod relief;
 pub mod schedule;

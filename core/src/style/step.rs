@@ -17,6 +17,7 @@ use super::feature_mean::feature_mean_loss;
 use super::focus::{feature_mask, gather_positions, scatter_positions};
 use super::gcfm::{GcfmOutput, Matches, StyleFeatures, gcfm_loss_with_matches, match_features};
 use super::outside::{Outside, outside_loss};
+use super::palette::{Palette, palette_loss};
 use super::regularizers::depth_l1;
 use super::sliced::sliced_loss;
 use super::terms::LossTerms;
@@ -53,6 +54,9 @@ pub struct LossFocus<'a> {
     /// The pixels the background hold keeps ([`super::outside`]); used when
     /// λ_out is above 0.
     pub outside: Option<Outside<'a>>,
+    /// The colour-matched render's palette over `mask` ([`super::palette`]);
+    /// used when λ_pal is above 0 and there is a mask.
+    pub palette: Option<Palette>,
     /// Above 0: the depth map's relief at this radius in pixels goes to VGG
     /// instead of the min-max normalised depth ([`super::relief`]).
     pub relief_px: usize,
@@ -277,7 +281,7 @@ pub fn step_loss_masked<N: FeatureNet>(
         depth_ref,
         weights,
         depth_grad,
-        LossFocus { mask, window: true, outside: None, relief_px: 0 },
+        LossFocus { mask, window: true, outside: None, palette: None, relief_px: 0 },
         exact,
     )
 }
@@ -481,6 +485,14 @@ pub fn step_loss_with<N: FeatureNet>(
             *a += weights.outside * b;
         }
     }
+    let mut palette_value = 0.0;
+    if let (Some(reference), Some(mask)) = (focus.palette.filter(|_| weights.palette > 0.0), mask) {
+        let (l, g) = palette_loss(maps.rgb, mask, &reference);
+        palette_value = l;
+        for (a, b) in v_rgb.iter_mut().zip(g) {
+            *a += weights.palette * b;
+        }
+    }
     let mut depth_value = 0.0;
     if let Some(dref) = depth_ref {
         let (l, g) = depth_l1(maps.inv_depth, dref);
@@ -496,6 +508,7 @@ pub fn step_loss_with<N: FeatureNet>(
         depth: depth_value,
         feature_mean: feature_mean_value,
         outside: outside_value,
+        palette: palette_value,
         sliced: sliced_value,
         sliced_depth: sliced_depth_value,
         assignment: assignment_value,

@@ -35,6 +35,9 @@ pub struct LossTerms {
     /// The background hold (0 when λ_out is 0 or the focus is the frame).
     #[serde(default)]
     pub outside: f32,
+    /// The palette hold (0 when λ_pal is 0 or the focus is the frame).
+    #[serde(default)]
+    pub palette: f32,
     /// The sliced Wasserstein term (0 when λ_sw is 0).
     #[serde(default)]
     pub sliced: f32,
@@ -88,7 +91,7 @@ impl Term {
 }
 
 /// Every loss term, in the order of the sliders and the chart.
-pub static TERMS: [Term; 13] = [
+pub static TERMS: [Term; 14] = [
     Term {
         key: "gcfm",
         flag: "lambda-gc",
@@ -200,6 +203,20 @@ pub static TERMS: [Term; 13] = [
         value: |l| l.outside,
     },
     Term {
+        key: "palette",
+        flag: "lambda-palette",
+        symbol: "λ_pal",
+        chart: "palette",
+        help: "palette hold, not in the paper: with object focus, the covered pixels' per-channel mean and \
+               deviation keep the colour-matched render's (the style's palette after colour matching), so the \
+               object cannot darken or grey while its pattern changes",
+        max: 1e4,
+        gpu: false,
+        paper: false,
+        weight: |w| &mut w.palette,
+        value: |l| l.palette,
+    },
+    Term {
         key: "sliced",
         flag: "lambda-sliced",
         symbol: "λ_sw",
@@ -304,12 +321,12 @@ mod tests {
         // Distinct values per field: each term's value accessor names one of them, no two the same.
         let v: serde_json::Value = serde_json::json!({
             "total": 0.5, "gcfm": 1.0, "content": 2.0, "tv": 3.0, "reg_opacity": 4.0, "reg_scale": 5.0,
-            "reg_rotation": 6.0, "depth": 7.0, "feature_mean": 8.0, "outside": 9.0, "sliced": 10.0,
-            "sliced_depth": 11.0, "assignment": 12.0, "assignment_cosine": 13.0
+            "reg_rotation": 6.0, "depth": 7.0, "feature_mean": 8.0, "outside": 9.0, "palette": 10.0,
+            "sliced": 11.0, "sliced_depth": 12.0, "assignment": 13.0, "assignment_cosine": 14.0
         });
         let l: LossTerms = serde_json::from_value(v).expect("terms");
         let values: Vec<f32> = TERMS.iter().map(|t| (t.value)(&l)).collect();
-        assert_eq!(values, (1..=13).map(|k| k as f32).collect::<Vec<_>>());
+        assert_eq!(values, (1..=14).map(|k| k as f32).collect::<Vec<_>>());
     }
 
     #[test]
@@ -319,9 +336,11 @@ mod tests {
             assert_eq!(t.paper, v > 0.0, "{}", t.key);
         }
         assert_eq!(d.cpu_only().count(), 0);
-        // λ_sw and λ_swd, the last CPU-only terms, run on the GPU too.
+        // λ_sw and λ_swd run on the GPU too; λ_pal, the palette hold, on the CPU alone.
         let w = LossWeights { sliced: 1.0, sliced_depth: 1.0, ..d };
         assert_eq!(w.cpu_only().count(), 0);
+        let w = LossWeights { palette: 1.0, ..d };
+        assert_eq!(w.cpu_only().map(|(t, _)| t.key).collect::<Vec<_>>(), ["palette"]);
         assert_eq!(Term::find("lambda-assign-cos").map(|t| t.key), Some("assignment_cosine"));
         assert_eq!(Term::find("tv").map(|t| t.flag), Some("lambda-tv"));
     }
