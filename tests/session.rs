@@ -154,6 +154,7 @@ fn gpu_and_cpu_agree(label: &str, config: StyleConfig) -> Option<[gast_core::ses
             ("reg_rotation", l.reg_rotation),
             ("feature_mean", l.feature_mean),
             ("outside", l.outside),
+            ("palette", l.palette),
         ]
     };
     // The CPU reference convolution: im2col computes each output the same way
@@ -407,6 +408,21 @@ fn gpu_background_hold_gives_the_cpu_losses() {
         let label = format!("λ_out {mode:?}");
         let Some([mut cpu, mut gpu]) = gpu_and_cpu_agree(&label, config) else { return };
         let (a, b) = (cpu.step().expect("CPU step").losses.outside, gpu.step().expect("GPU step").losses.outside);
+        assert!(a > 0.0 && b > 0.0, "{label}: the hold is measured on both: CPU {a}, GPU {b}");
+        assert!((a - b).abs() <= 0.05 * a, "{label}: third step CPU {a}, GPU {b}");
+    }
+}
+
+/// λ_pal (the palette hold) on both devices, in colour and in geometry
+/// steps: 0 on the first step (the render is `G^c`'s), the same after one
+/// update, and measured (above 0) on both after two.
+#[test]
+fn gpu_palette_hold_gives_the_cpu_losses() {
+    for mode in [Mode::ColorOnly, Mode::GeometryOnly] {
+        let config = object_config(mode, LossWeights { palette: 100.0, ..Default::default() });
+        let label = format!("λ_pal {mode:?}");
+        let Some([mut cpu, mut gpu]) = gpu_and_cpu_agree(&label, config) else { return };
+        let (a, b) = (cpu.step().expect("CPU step").losses.palette, gpu.step().expect("GPU step").losses.palette);
         assert!(a > 0.0 && b > 0.0, "{label}: the hold is measured on both: CPU {a}, GPU {b}");
         assert!((a - b).abs() <= 0.05 * a, "{label}: third step CPU {a}, GPU {b}");
     }

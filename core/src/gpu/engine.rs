@@ -31,8 +31,10 @@ use crate::raster::RenderOptions;
 use crate::scene::Gaussians;
 use crate::style::StyleConfig;
 use crate::style::config::LossWeights;
+use crate::style::focus::coverage_mask;
 use crate::style::gcfm::StyleFeatures;
 use crate::style::outside::outside_mask;
+use crate::style::palette::{Palette, palette_of};
 use crate::style::schedule::Phase;
 use crate::style::terms::LossTerms;
 use crate::vision::Vgg;
@@ -74,6 +76,8 @@ struct ViewTarget {
     /// The background hold's reference ([`RefLoss::hold_reference`]), made
     /// on the first step with λ_out > 0.
     hold: Option<wgpu::Buffer>,
+    /// `G^c`'s palette over the covered pixels (λ_pal's reference).
+    palette: Palette,
 }
 
 /// Mixed into the session's seed for the assignment terms' draws.
@@ -326,6 +330,11 @@ impl GpuEngine {
         // The hold acts with the object focus only, as on the CPU.
         let hold = if self.object_focus { target.hold.as_ref() } else { None };
         let holding = hold.is_some();
+        // The palette hold acts with the object focus only, as on the CPU.
+        let palette_held = w.palette > 0.0 && focus.is_some();
+        if palette_held {
+            plan.loss.set_palette_reference(ctx, &target.palette);
+        }
         // Matches kept from this view's last visits (copied in), or searched.
         let reuse = config.matching.reuse.max(1);
         let kept = target.kept.as_ref().filter(|(_, uses)| *uses < reuse);
@@ -456,6 +465,7 @@ impl GpuEngine {
             depth: if geometry { s[slot::DEPTH] } else { 0.0 },
             feature_mean: if w.feature_mean > 0.0 { s[slot::FEATURE_MEAN] } else { 0.0 },
             outside: if w.outside > 0.0 && holding { s[slot::OUTSIDE] } else { 0.0 },
+            palette: if palette_held { s[slot::PALETTE] } else { 0.0 },
             sliced: if w.sliced > 0.0 { s[slot::SLICED] } else { 0.0 },
             sliced_depth: if w.sliced_depth > 0.0 && geometry { s[slot::SLICED_DEPTH] } else { 0.0 },
             assignment: pulled.as_ref().map_or(0.0, |a| a.l2),
@@ -598,12 +608,14 @@ impl GpuEngine {
         // One read-back of G^c's render serves the colour watch and the hold.
         let (rgb, alpha) = self.read_render(cam)?;
         let colour = CoveredColour::of(&rgb, &alpha);
+        let clamped: Vec<f32> = rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+        let palette = palette_of(&clamped, &coverage_mask(&alpha, cam.height as usize, cam.width as usize));
         let hold = hold.then(|| self.hold_of(&rgb, &alpha));
         if view >= self.targets.len() {
             self.targets.resize_with(view + 1, || None);
         }
         self.targets[view] =
-            Some(ViewTarget { content, inv_depth, focus, colour, kept: None, subset, covered_at, hold });
+            Some(ViewTarget { content, inv_depth, focus, colour, kept: None, subset, covered_at, hold, palette });
         Ok(())
     }
 

@@ -88,6 +88,8 @@ mod focus;
 mod gcfm;
 #[path = "losses/losses.rs"]
 mod losses;
+#[path = "losses/palette.rs"]
+mod palette;
 #[path = "losses/sliced.rs"]
 mod sliced;
 #[path = "losses/step_loss.rs"]
@@ -113,6 +115,7 @@ pub use kernel::{Bind, Kernel};
 pub use live::LiveGaussians;
 pub use losses::{LossKernels, RefLoss, TvLoss};
 pub use ops_bench::bench_image_ops;
+pub use palette::PaletteLoss;
 pub use raster_forward::GpuRaster;
 pub use raster_kernels::{Accumulation, RasterKernels};
 pub use raster_run::{bench_raster, render_and_backward_gpu, render_gpu};

@@ -48,7 +48,7 @@ pub struct LossWeights {
     /// λ_pal, the palette hold ([`crate::style::palette`]): with object
     /// focus, the covered pixels' per-channel mean and deviation keep the
     /// colour-matched render's. Not in the reference: 0 (off) by default.
-    /// CPU engine.
+    /// Both engines.
     #[serde(default)]
     pub palette: f32,
     /// λ_sw, the sliced Wasserstein term ([`crate::style::sliced`]): the

@@ -486,7 +486,10 @@ pub fn step_loss_with<N: FeatureNet>(
         }
     }
     let mut palette_value = 0.0;
-    if let (Some(reference), Some(mask)) = (focus.palette.filter(|_| weights.palette > 0.0), mask) {
+    // On the covered pixels, when some feature position is covered (else the
+    // losses look at the whole frame, and the hold sits out, as on the GPU).
+    let covered = fmask.is_some().then_some(mask).flatten();
+    if let (Some(reference), Some(mask)) = (focus.palette.filter(|_| weights.palette > 0.0), covered) {
         let (l, g) = palette_loss(maps.rgb, mask, &reference);
         palette_value = l;
         for (a, b) in v_rgb.iter_mut().zip(g) {

@@ -395,6 +395,7 @@ fn the_background_hold_adds_its_weighted_value_and_moves_only_the_held_pixels() 
             mask: Some(&mask),
             window: true,
             outside: Some(Outside { mask: &held, rgb: &target }),
+            palette: None,
             relief_px: 0,
         };
         step_loss_with(&net, &st, maps, Some(&content), None, &weights, false, focus, exact)
@@ -410,6 +411,43 @@ fn the_background_hold_adds_its_weighted_value_and_moves_only_the_held_pixels() 
         assert!((moved - 3.0 * grad[k]).abs() <= 1e-6 * grad[k].abs().max(1e-3), "channel {k}: moved {moved}");
         if !held[k / 3] {
             assert_eq!(on.v_rgb[k], off.v_rgb[k], "channel {k} is not held");
+        }
+    }
+}
+
+#[test]
+fn the_palette_hold_adds_its_weighted_value_and_moves_only_the_covered_pixels() {
+    let (h, w) = (16, 24);
+    let (net, st, rgb, inv_depth, content, _) = focus_inputs();
+    let edge = vec![0.0f32; h * w];
+    let mask: Vec<bool> = (0..h * w).map(|k| k % w < 16).collect();
+    // A darker, flatter palette than the render's.
+    let reference = [0.2, 0.25, 0.3, 0.05, 0.05, 0.05];
+    let eval = |lambda: f32| {
+        let weights = LossWeights { gcfm: 2.0, content: 0.5, tv: 0.02, palette: lambda, ..LossWeights::default() };
+        let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
+        let exact = &mut |r: [&[f32]; 3], n: usize| match_features(&st.features, r, n);
+        let focus =
+            LossFocus { mask: Some(&mask), window: true, outside: None, palette: Some(reference), relief_px: 0 };
+        step_loss_with(&net, &st, maps, Some(&content), None, &weights, false, focus, exact)
+    };
+    let (off, on) = (eval(0.0), eval(3.0));
+    assert_eq!(off.terms.palette, 0.0, "λ_pal = 0 measures nothing");
+    let (want, grad) = crate::style::palette::palette_loss(&rgb, &mask, &reference);
+    assert!(want > 0.0);
+    assert_eq!(on.terms.palette, want);
+    assert!((on.terms.total - off.terms.total - 3.0 * want).abs() < 1e-5 * on.terms.total.abs().max(1.0));
+    for k in 0..h * w * 3 {
+        let moved = on.v_rgb[k] - off.v_rgb[k];
+        // The other terms' gradient is there too: f32 rounds the sum at its size.
+        let size = off.v_rgb[k].abs() + 3.0 * grad[k].abs();
+        assert!(
+            (moved - 3.0 * grad[k]).abs() <= 1e-6 * size.max(1e-3),
+            "channel {k}: moved {moved}, want {}",
+            3.0 * grad[k]
+        );
+        if !mask[k / 3] {
+            assert_eq!(on.v_rgb[k], off.v_rgb[k], "channel {k} is not covered");
         }
     }
 }

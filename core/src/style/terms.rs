@@ -211,7 +211,7 @@ pub static TERMS: [Term; 14] = [
                deviation keep the colour-matched render's (the style's palette after colour matching), so the \
                object cannot darken or grey while its pattern changes",
         max: 1e4,
-        gpu: false,
+        gpu: true,
         paper: false,
         weight: |w| &mut w.palette,
         value: |l| l.palette,
@@ -336,11 +336,9 @@ mod tests {
             assert_eq!(t.paper, v > 0.0, "{}", t.key);
         }
         assert_eq!(d.cpu_only().count(), 0);
-        // λ_sw and λ_swd run on the GPU too; λ_pal, the palette hold, on the CPU alone.
-        let w = LossWeights { sliced: 1.0, sliced_depth: 1.0, ..d };
+        // λ_sw, λ_swd and λ_pal, once CPU-only terms, run on the GPU too.
+        let w = LossWeights { sliced: 1.0, sliced_depth: 1.0, palette: 1.0, ..d };
         assert_eq!(w.cpu_only().count(), 0);
-        let w = LossWeights { palette: 1.0, ..d };
-        assert_eq!(w.cpu_only().map(|(t, _)| t.key).collect::<Vec<_>>(), ["palette"]);
         assert_eq!(Term::find("lambda-assign-cos").map(|t| t.key), Some("assignment_cosine"));
         assert_eq!(Term::find("tv").map(|t| t.flag), Some("lambda-tv"));
     }

@@ -19,6 +19,7 @@ use std::sync::Arc;
 use super::assignment::GpuAssignment;
 use super::content::ContentLoss;
 use super::feature_mean::FeatureMeanLoss;
+use super::palette::PaletteLoss;
 use super::{
     CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, FocusKernels, GcfmSubset, GcfmWorkspace,
     GpuContext, GpuError, GpuFocus, GpuGcfm, GpuStyle, GpuVgg, GpuVggState, GpuVggWorkspace, LossKernels,
@@ -56,8 +57,10 @@ pub mod slot {
     pub const SLICED: usize = 13;
     /// The same on the depth features (unweighted; written only when λ_swd > 0 on steps taking the depth's gradient).
     pub const SLICED_DEPTH: usize = 14;
+    /// The palette hold (unweighted; written only when λ_pal > 0 with an object focus).
+    pub const PALETTE: usize = 15;
     /// Words in all.
-    pub const LEN: usize = 15;
+    pub const LEN: usize = 16;
 }
 
 /// The kernels of the loss, compiled once per context (with the network's weights).
@@ -103,6 +106,10 @@ pub struct StepLossPlan {
     hold: RefLoss,
     /// Whether λ_out is above 0 (the hold is recorded only then).
     hold_on: bool,
+    palette: PaletteLoss,
+    /// Whether λ_pal is above 0 (the palette hold is recorded only then, and
+    /// only with an object focus).
+    palette_on: bool,
     vgg_ws: GpuVggWorkspace,
     /// VGG states of the RGB, depth and edge maps (the edge state doubles as
     /// the scratch of [`StepLossPlan::record_content_target`]).
@@ -159,6 +166,8 @@ impl StepLossPlan {
             depth_l1: RefLoss::depth_l1(ctx, &k.losses, &k.reduce, h * w, weights.depth, slot::DEPTH)?,
             hold: RefLoss::hold(ctx, &k.losses, &k.reduce, h * w, weights.outside, slot::OUTSIDE)?,
             hold_on: weights.outside > 0.0,
+            palette: PaletteLoss::new(ctx, &k.reduce, h * w, weights.palette, slot::PALETTE)?,
+            palette_on: weights.palette > 0.0,
             vgg_ws: k.vgg.workspace(ctx, sh, sw),
             gcfm_ws: k.gcfm.workspace(ctx, style, positions, slot::GCFM, weights.gcfm),
             content: ContentLoss::new(ctx, &k.reduce, feature_len, positions, weights.content, slot::CONTENT)?,
@@ -206,8 +215,10 @@ impl StepLossPlan {
             && (w.sliced_depth == 0.0 || self.sliced[1].is_some())
     }
 
-    /// Changes λ_TV, λ_d, λ_cont, λ_mean and λ_out (from the next submission on).
+    /// Changes λ_TV, λ_d, λ_cont, λ_mean, λ_out and λ_pal (from the next submission on).
     pub fn set_weights(&mut self, ctx: &GpuContext, w: &LossWeights) {
+        self.palette.set_weight(ctx, w.palette);
+        self.palette_on = w.palette > 0.0;
         self.tv.set_weight(ctx, w.tv);
         self.depth_l1.set_weight(ctx, w.depth);
         self.hold.set_weight(ctx, w.outside);
@@ -221,6 +232,12 @@ impl StepLossPlan {
             }
             self.sliced_on[m] = weight > 0.0 && self.sliced[m].is_some();
         }
+    }
+
+    /// The palette hold's reference for the next submission: the
+    /// colour-matched render's palette of the view it steps on.
+    pub fn set_palette_reference(&self, ctx: &GpuContext, reference: &crate::style::palette::Palette) {
+        self.palette.set_reference(ctx, reference);
     }
 
     /// After [`StepLossPlan::record`]: the gradient w.r.t. the raw render's
@@ -418,8 +435,9 @@ impl StepLossPlan {
 
     /// After [`StepLossPlan::record_feature_losses`]: the assignment terms'
     /// gradient added to the RGB features' (`assign`), then the RGB
-    /// gradient through VGG back to the render, with TV, the hold and the
-    /// clamp's mask on the way.
+    /// gradient through VGG back to the render, with TV, the hold, the
+    /// palette hold (with an object focus, against
+    /// [`StepLossPlan::set_palette_reference`]) and the clamp's mask on the way.
     #[allow(clippy::too_many_arguments)]
     pub fn record_backward_rgb(
         &self,
@@ -432,6 +450,7 @@ impl StepLossPlan {
         scalars: &wgpu::Buffer,
         assign: Option<&GpuAssignment>,
     ) {
+        let object = focus;
         let focus = focus.unwrap_or(&self.frame);
         if let Some(a) = assign {
             a.record_scatter(ctx, enc, &self.v_feat[0]);
@@ -441,6 +460,9 @@ impl StepLossPlan {
         self.tv.record(ctx, enc, &self.rgb, focus, &self.v_rgb, scalars);
         if let Some(reference) = hold.filter(|_| self.hold_on) {
             self.hold.record(ctx, enc, &self.rgb, reference, &self.v_rgb, scalars);
+        }
+        if let Some(object) = object.filter(|_| self.palette_on) {
+            self.palette.record(ctx, enc, &self.rgb, object.pixels(), &self.v_rgb, scalars);
         }
         self.clamp.backward(ctx, enc, rgb_raw, &self.v_rgb);
     }
