@@ -269,7 +269,10 @@ fn focus_studies(
                 ..c
             },
         };
-        let (paper, defaults) = (sized(StyleConfig::paper()), sized(StyleConfig::default()));
+        let candidate = StyleConfig::default()
+            .patched(&sizes.defaults_patch)
+            .map_err(|e| anyhow::anyhow!("the defaults study's candidate arm: defaults_patch: {e}"))?;
+        let (paper, defaults) = (sized(StyleConfig::paper()), sized(candidate));
         for scene in 0..sizes.scenes.len() {
             for (k, style) in sizes.styles.iter().enumerate() {
                 let style = file(style);
@@ -494,6 +497,20 @@ mod tests {
         // It runs only when named.
         let g = build_grid(&sizes, Path::new("/shared"), &Study::ALL).expect("grid");
         assert!(!g.rows.iter().any(|r| r.study == Study::Defaults));
+
+        // A candidate recipe patches the defaults arm alone; a bad patch names its key.
+        use gast_core::style::config::LossWeights;
+        let patch = serde_json::json!({ "weights": { "palette": 100.0 } });
+        let tried = Sizes { defaults_patch: patch, ..sizes.clone() };
+        let g = build_grid(&tried, Path::new("/shared"), &[Study::Defaults]).expect("grid");
+        let of = |label: &str| g.rows.iter().filter(|r| r.label == label).map(|r| r.trial.clone()).collect::<Vec<_>>();
+        let config = |id: &String| g.trials.iter().find(|t| &t.id == id).expect("trial").config.clone();
+        let want = StyleConfig { weights: LossWeights { palette: 100.0, ..Default::default() }, ..Default::default() };
+        assert!(of(DEFAULTS_NEW).iter().all(|id| config(id) == sized(want.clone())));
+        assert!(of(DEFAULTS_PAPER).iter().all(|id| config(id) == sized(StyleConfig::paper())));
+        let bad = Sizes { defaults_patch: serde_json::json!({ "weights": { "nope": 1 } }), ..sizes.clone() };
+        let e = build_grid(&bad, Path::new("/shared"), &[Study::Defaults]).err().expect("a bad patch");
+        assert!(e.to_string().contains("defaults_patch") && e.to_string().contains("nope"), "{e}");
     }
 
     #[test]

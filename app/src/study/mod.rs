@@ -221,6 +221,12 @@ pub struct Sizes {
     /// 600 is its default run), so both arms get the same wait.
     #[serde(default)]
     pub defaults_plan_s: Option<f64>,
+    /// The defaults study's candidate arm as a patch of the shipped defaults
+    /// (a JSON object of preset keys, [`StyleConfig::patched`]): a recipe
+    /// tried against `--preset paper` before it ships, e.g. `{"weights":
+    /// {"palette": 100}}`. Empty: the shipped defaults.
+    #[serde(default)]
+    pub defaults_patch: serde_json::Value,
 }
 
 fn defaults_budget() -> u32 {
@@ -316,6 +322,7 @@ impl Sizes {
             defaults_budget: defaults_budget(),
             defaults_resolution: defaults_resolution(),
             defaults_plan_s: None,
+            defaults_patch: serde_json::Value::Null,
         }
     }
 
@@ -326,6 +333,9 @@ impl Sizes {
         let sizes: Self = merged_from_file(path, &Self::full(), "grid sizes")?;
         if let Err(e) = StyleConfig::default().patched(&sizes.focus_object) {
             anyhow::bail!("{}: focus_object: {e}", path.display());
+        }
+        if let Err(e) = StyleConfig::default().patched(&sizes.defaults_patch) {
+            anyhow::bail!("{}: defaults_patch: {e}", path.display());
         }
         if let Some(bad) = sizes.collapse_arms.iter().find(|a| !COLLAPSE_ARMS.contains(&a.as_str())) {
             anyhow::bail!("{}: unknown collapse arm {bad:?} (known: {})", path.display(), COLLAPSE_ARMS.join(", "));
@@ -360,6 +370,7 @@ impl Sizes {
             defaults_budget: 100,
             defaults_resolution: 64,
             defaults_plan_s: None,
+            defaults_patch: serde_json::Value::Null,
         }
     }
 }
