@@ -378,16 +378,14 @@ impl GpuEngine {
             &self.scalars,
             search,
         );
-        // The depth's backward pass does not need the pairing: with the
-        // assignment terms it is submitted before the host waits, so the
-        // device runs it while the host pairs.
-        let depth_backward = |enc: &mut wgpu::CommandEncoder| {
-            plan.loss.record_backward_depth(ctx, &k.loss, enc, inv_depth, depth_ref, geometry, focus, &self.scalars)
-        };
+        // The depth's backward pass does not need the pairing: it is recorded
+        // first, so with the assignment terms it is submitted before the host
+        // waits and the device runs it while the host pairs. (It writes its
+        // own buffers and slots: the order leaves the results as they were.)
+        plan.loss.record_backward_depth(ctx, &k.loss, &mut enc, inv_depth, depth_ref, geometry, focus, &self.scalars);
         let mut pulled = None;
         let mut host = HostTimes::default();
         if let (Some(gathered), Some(a)) = (gathered, self.assign.as_mut()) {
-            depth_backward(&mut enc);
             ctx.submit(enc);
             pulled = Some(a.pull(ctx, gathered, w.assignment_cosine, w.assignment)?);
             (host.wait_ms, host.pairing_ms) = a.last_pull_ms();
@@ -403,9 +401,6 @@ impl GpuEngine {
             &self.scalars,
             if assigning { self.assign.as_ref() } else { None },
         );
-        if pulled.is_none() {
-            depth_backward(&mut enc);
-        }
         let keep = if searched && reuse > 1 {
             // The buffer of an earlier search of this view, or a new one.
             let m = match &target.kept {
