@@ -187,6 +187,12 @@ fn augment(
     }
 }
 
+/// The total cost of an assignment: row `i` takes column `sigma[i]` of the
+/// `n × k` row-major `cost` (`n = sigma.len()`).
+pub fn assignment_cost(cost: &[f64], k: usize, sigma: &[usize]) -> f64 {
+    sigma.iter().enumerate().map(|(i, &j)| cost[i * k + j]).sum()
+}
+
 /// For each of the `n` rows of the row-major `n × k` matrix `cost` (`n ≤ k`),
 /// the column it takes in an assignment of distinct columns of least total
 /// cost. Costs that are not finite count as very large.
@@ -310,7 +316,7 @@ mod tests {
                         assert!(!seen[j], "column {j} taken twice ({n}×{k})");
                         seen[j] = true;
                     }
-                    let total: f64 = sigma.iter().enumerate().map(|(i, &j)| cost[i * k + j]).sum();
+                    let total = assignment_cost(&cost, k, &sigma);
                     assert!(
                         (total - brute(&cost, n, k)).abs() < 1e-9,
                         "{n}×{k}: {total} against {}",
@@ -350,7 +356,7 @@ mod tests {
                     })
                     .collect();
                 let (a, b) = (assign_min_cost(&cost, n, k), assign_shortest_paths(&cost, n, k));
-                let total = |s: &[usize]| s.iter().enumerate().map(|(i, &j)| cost[i * k + j]).sum::<f64>();
+                let total = |s: &[usize]| assignment_cost(&cost, k, s);
                 let mut seen = vec![false; k];
                 for &j in &a {
                     assert!(!seen[j], "{n}×{k}: column {j} taken twice");

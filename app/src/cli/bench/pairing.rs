@@ -11,7 +11,7 @@ use clap::Args;
 use gast_core::style::FeatureNet;
 use gast_core::style::assignment::{ASSIGN_MAX, PairCosts, draw_pairs_seeded};
 use gast_core::style::focus::{feature_mask, gather_positions};
-use gast_core::style::min_cost::{assign_min_cost, assign_shortest_paths};
+use gast_core::style::min_cost::{assign_min_cost, assign_shortest_paths, assignment_cost};
 
 use super::median;
 use crate::views::{Framing, ViewArgs, load_scene, views_for};
@@ -117,7 +117,7 @@ pub fn run_pairing(args: PairingArgs) -> anyhow::Result<ExitCode> {
             let t4 = Instant::now();
             let plain = assign_shortest_paths(&costs.cost, costs.r, costs.r);
             let t5 = Instant::now();
-            let total = |s: &[usize]| s.iter().enumerate().map(|(i, &j)| costs.cost[i * costs.r + j]).sum::<f64>();
+            let total = |s: &[usize]| assignment_cost(&costs.cost, costs.r, s);
             let (a, b) = (total(&sigma), total(&plain));
             if (a - b).abs() > 1e-9 * b.abs().max(1.0) {
                 anyhow::bail!("view {v}, draw {d}: the assignment costs {a}, the plain shortest paths' {b}");
