@@ -117,8 +117,5 @@ fn inputs(out: &Path) -> anyhow::Result<(PathBuf, PathBuf)> {
 /// shared data's small VGG file when the checkout has one beside it; `None`
 /// leaves the usual resolution (a one-time download) to `gast stylize`.
 fn demo_weights() -> Option<PathBuf> {
-    WeightsLocations::from_env(None).find().ok().or_else(|| {
-        let p = super::bench::shared_dir().join("data/weights/vgg19-conv3.safetensors");
-        p.is_file().then_some(p)
-    })
+    WeightsLocations::from_env(None).find().ok().or_else(super::bench::shared_weights)
 }

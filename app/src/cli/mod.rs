@@ -108,15 +108,8 @@ pub enum BenchCommand {
     /// What the studio viewport pays per optimiser step to show a GPU run: a CPU
     /// snapshot against the copy from the engine's buffers (headless, any adapter).
     ViewportLive {
-        /// Scene (default: guitar.compressed.ply from the shared data folder).
-        #[arg(long)]
-        scene: Option<PathBuf>,
-        /// Style image (default: styles/wave.jpg from the shared data folder).
-        #[arg(long)]
-        style: Option<PathBuf>,
-        /// VGG weights (default: the shared vgg19-conv3.safetensors, else the usual resolution).
-        #[arg(long)]
-        weights: Option<PathBuf>,
+        #[command(flatten)]
+        data: bench::BenchData,
         /// Updates to time (one optimiser step before each).
         #[arg(long, default_value_t = 5)]
         reps: u32,
@@ -171,12 +164,8 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Bench(BenchCommand::Depth(args)) => return bench::run_depth(args),
         Command::Bench(BenchCommand::Pairing(args)) => return bench::run_pairing(args),
         Command::Bench(BenchCommand::Quality(args)) => return quality::run(args),
-        Command::Bench(BenchCommand::ViewportLive { scene, style, weights, reps }) => {
-            let shared = bench::shared_dir();
-            let scene = scene.unwrap_or_else(|| shared.join("data/scenes/guitar.compressed.ply"));
-            let style = style.unwrap_or_else(|| shared.join("data/styles/wave.jpg"));
-            let weights =
-                weights.or_else(|| Some(shared.join("data/weights/vgg19-conv3.safetensors")).filter(|p| p.exists()));
+        Command::Bench(BenchCommand::ViewportLive { data, reps }) => {
+            let (scene, style, weights) = data.paths();
             let g = load_scene(&scene)?;
             let style = gast_core::session::StyleImage::open(&style).map_err(anyhow::Error::msg)?;
             let vgg = std::sync::Arc::new(stylize::load_vgg(weights.as_deref())?);

@@ -83,10 +83,7 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
     };
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("gast-quality-{}", crate::report::utc_stamp())));
     std::fs::create_dir_all(&out).with_context(|| format!("could not create the output folder {}", out.display()))?;
-    let weights = args.weights.clone().or_else(|| {
-        let p = shared.join("data/weights/vgg19-conv3.safetensors");
-        p.exists().then_some(p)
-    });
+    let weights = args.weights.clone().or_else(super::bench::shared_weights);
     let vgg = Arc::new(super::stylize::load_vgg(weights.as_deref())?);
     if studies.contains(&Study::Geometry) {
         let mut g = match &args.sizes {

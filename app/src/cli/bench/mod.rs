@@ -57,12 +57,14 @@ impl BenchData {
         let shared = shared_dir();
         let scene = self.scene.clone().unwrap_or_else(|| shared.join("data/scenes/guitar.compressed.ply"));
         let style = self.style.clone().unwrap_or_else(|| shared.join("data/styles/wave.jpg"));
-        let weights = self.weights.clone().or_else(|| {
-            let p = shared.join("data/weights/vgg19-conv3.safetensors");
-            p.exists().then_some(p)
-        });
-        (scene, style, weights)
+        (scene, style, self.weights.clone().or_else(shared_weights))
     }
+}
+
+/// The shared data's small VGG file, when the checkout has one beside it.
+pub(super) fn shared_weights() -> Option<PathBuf> {
+    let p = shared_dir().join("data/weights/vgg19-conv3.safetensors");
+    p.is_file().then_some(p)
 }
 
 /// The shared data folder: `$GAST_SHARED`, else `../shared`.
