@@ -18,6 +18,11 @@ pub type Palette = [f32; 6];
 /// The palette of `rgb` (HWC) over the pixels in `mask` (`h × w`); zeros
 /// when the mask is empty.
 pub fn palette_of(rgb: &[f32], mask: &[bool]) -> Palette {
+    palette_and_count(rgb, mask).0
+}
+
+/// [`palette_of`] and the number of pixels in the mask.
+fn palette_and_count(rgb: &[f32], mask: &[bool]) -> (Palette, usize) {
     assert_eq!(rgb.len(), mask.len() * 3, "palette_of: mask size");
     let (mut s, mut n) = ([0f64; 6], 0usize);
     for (p, _) in rgb.chunks_exact(3).zip(mask).filter(|(_, m)| **m) {
@@ -30,23 +35,22 @@ pub fn palette_of(rgb: &[f32], mask: &[bool]) -> Palette {
     }
     let mut out = [0f32; 6];
     if n == 0 {
-        return out;
+        return (out, 0);
     }
-    let n = n as f64;
+    let count = n as f64;
     for c in 0..3 {
-        let m = s[c] / n;
+        let m = s[c] / count;
         out[c] = m as f32;
-        out[3 + c] = (s[3 + c] / n - m * m).max(0.0).sqrt() as f32;
+        out[3 + c] = (s[3 + c] / count - m * m).max(0.0).sqrt() as f32;
     }
-    out
+    (out, n)
 }
 
 /// The term and its gradient w.r.t. `rgb` (HWC): zero off the mask, and
 /// `(0, zeros)` for an empty mask.
 pub fn palette_loss(rgb: &[f32], mask: &[bool], reference: &Palette) -> (f32, Vec<f32>) {
-    let now = palette_of(rgb, mask);
+    let (now, n) = palette_and_count(rgb, mask);
     let mut grad = vec![0f32; rgb.len()];
-    let n = mask.iter().filter(|m| **m).count();
     if n == 0 {
         return (0.0, grad);
     }
