@@ -550,15 +550,15 @@ impl GpuEngine {
         plan.raster.forward(ctx, &k.raster, &mut enc, &self.g_ref, cam, &opts);
         ctx.submit(enc);
         let (rgb, alpha) = self.read_render(cam)?;
-        Ok(self.hold_of(&rgb, &alpha))
+        let clamped: Vec<f32> = rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+        Ok(self.hold_of(&clamped, &alpha))
     }
 
-    /// The hold's reference from `G^c`'s render (`rgb` before the clamp):
-    /// its clamped colours and the pixels it leaves empty
-    /// ([`crate::style::outside`]), uploaded as `[r, g, b, k]` per pixel.
-    fn hold_of(&self, rgb: &[f32], alpha: &[f32]) -> wgpu::Buffer {
-        let clamped: Vec<f32> = rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
-        self.ctx.upload("engine.target.hold", &RefLoss::hold_reference(&clamped, &outside_mask(alpha)))
+    /// The hold's reference from `G^c`'s render (`clamped` to [0, 1]): its
+    /// colours and the pixels it leaves empty ([`crate::style::outside`]),
+    /// uploaded as `[r, g, b, k]` per pixel.
+    fn hold_of(&self, clamped: &[f32], alpha: &[f32]) -> wgpu::Buffer {
+        self.ctx.upload("engine.target.hold", &RefLoss::hold_reference(clamped, &outside_mask(alpha)))
     }
 
     /// The targets of `view` from `G^c`'s render, with the hold's when `hold`.
@@ -605,7 +605,7 @@ impl GpuEngine {
         let colour = CoveredColour::of(&rgb, &alpha);
         let clamped: Vec<f32> = rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
         let palette = palette_of(&clamped, &coverage_mask(&alpha, cam.height as usize, cam.width as usize));
-        let hold = hold.then(|| self.hold_of(&rgb, &alpha));
+        let hold = hold.then(|| self.hold_of(&clamped, &alpha));
         if view >= self.targets.len() {
             self.targets.resize_with(view + 1, || None);
         }
