@@ -106,6 +106,8 @@ def with_without(step, what, short, extra=lambda j: ""):
 
 # The assignment terms' host round trip.
 with_without("compare_assign", "assignment terms (λ_asc 10 + λ_as 0.015)", "assignment terms")
+# The palette hold's kernels (λ_pal 100 with the object focus).
+with_without("compare_palette", "palette hold (λ_pal 100)", "palette hold")
 # The host pairing itself (`gast bench pairing`): Jonker–Volgenant's start against the plain paths.
 j = load("pairing.json")
 if j:

@@ -38,6 +38,7 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
         "full_guitar",
         "guitar_64",
         "compare_assign",
+        "compare_palette",
         "pairing",
         "compare_sliced_depth",
         "playbot_32",

@@ -1,6 +1,7 @@
 //! `gast bench step`: one optimisation step part by part on a device (or two,
 //! `--compare`), the focus's cost (`--compare-focus`), the assignment terms'
-//! (`--compare-assign`), what re-used matches buy
+//! (`--compare-assign`), the palette hold's (`--compare-palette`), what
+//! re-used matches buy
 //! on a GPU (`--matching-reuse N` alone with a GPU device), the whole
 //! schedule's time and memory.
 
@@ -16,6 +17,10 @@ use anyhow::Context as _;
 use super::depth::time_style_depth;
 use super::{median, memory_mib, reset_peak_memory};
 use crate::views::{Framing, ViewArgs, load_scene, views_for};
+
+/// λ_pal in `--compare-palette`'s arm with the hold: the value the defaults
+/// study tries in the object recipe (`docs/studies/defaults.md`).
+const PALETTE_CANDIDATE: f32 = 100.0;
 
 /// Arguments of `gast bench step`.
 #[derive(Args, Debug)]
@@ -66,6 +71,11 @@ pub struct StepArgs {
     /// (give --focus frame: the term is the full-frame default).
     #[arg(long, conflicts_with_all = ["compare", "compare_focus", "compare_assign"])]
     pub compare_sliced_depth: bool,
+    /// Run the same steps on --device twice in this process, without and with the palette
+    /// hold (λ_pal 100, the candidate for the object recipe), and print what it costs (give
+    /// --focus object: the hold reads the object's pixels).
+    #[arg(long, conflicts_with_all = ["compare", "compare_focus", "compare_assign", "compare_sliced_depth"])]
+    pub compare_palette: bool,
     /// Depth Anything V2 checkpoint for the style depth line (else $GAST_DEPTH_MODEL or the
     /// caches; never downloaded here).
     #[arg(long)]
@@ -189,7 +199,7 @@ pub(super) fn reuse_on_gpu(args: &StepArgs) -> anyhow::Result<Option<ExitCode>> 
     if let (Some(reuse), true, false) = (
         f.matching_reuse,
         reuse_only,
-        args.compare || args.compare_focus || args.compare_assign || args.compare_sliced_depth,
+        args.compare || args.compare_focus || args.compare_assign || args.compare_sliced_depth || args.compare_palette,
     ) && let Some(ctx) = args.device.resolve().with_context(|| format!("--device {}", args.device))?
     {
         return compare_reuse_gpu(args, ctx, reuse).map(Some);
@@ -240,6 +250,12 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         let mut on = off.clone();
         on.weights.sliced_depth = gast_core::style::config::FRAME_RECIPE_SLICED_DEPTH;
         return compare_arms(&args, &inputs, [("without", off), ("λ_swd 1", on)], gpu, budget);
+    }
+    if args.compare_palette {
+        let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
+        let mut on = config.clone();
+        on.weights.palette = PALETTE_CANDIDATE;
+        return compare_arms(&args, &inputs, [("without", config.clone()), ("λ_pal 100", on)], gpu, budget);
     }
     let devices: Vec<DeviceChoice> =
         if args.compare { vec![DeviceChoice::Cpu, DeviceChoice::Gpu] } else { vec![args.device] };
