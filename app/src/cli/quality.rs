@@ -45,6 +45,14 @@ pub struct QualityArgs {
     /// results.json, without running anything.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["quick", "studies", "out", "sizes"])]
     pub report: Option<PathBuf>,
+    /// Take finished trials from other runs' folders (their `trials.jsonl`) instead of running
+    /// them: a trial whose scene and arm such a journal holds, when that run's grid differs
+    /// from this one only in its scenes (a run of one scene joins a grid of three), or in
+    /// `defaults_patch` (a candidate recipe's run takes paper's arms and its seed twin, which
+    /// the patch leaves alone). Each taken trial names its journal in results.json (`from`);
+    /// a grid that differs in anything else is refused, naming what differs.
+    #[arg(long, value_name = "DIR", value_delimiter = ',', conflicts_with_all = ["quick", "report"])]
+    pub from: Vec<PathBuf>,
     /// The geometry study's scene: a fit of the fern (`gast fit
     /// ../shared/data/datasets/fern --holdout-every 8 --resolution 504 --out fern.ply`).
     /// Default: fit one into the output folder first (a few minutes).
@@ -103,7 +111,7 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
     if studies.is_empty() {
         return Ok(ExitCode::SUCCESS);
     }
-    let (run, styles_used) = run_grid(sizes, &studies, &shared, &vgg, &out)?;
+    let (run, styles_used) = run_grid(sizes, &studies, &shared, &vgg, &out, &args.from)?;
     let wall = run.wall_s;
     let index = write_report(&out, &run, &styles_used)?;
     for line in crate::study::pages::focus::write_focus_report(&out, &run)? {

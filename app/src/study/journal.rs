@@ -34,11 +34,7 @@ impl Journal {
         let header = json!({ "grid": key });
         let mut records = Vec::new();
         if path.exists() {
-            let reader =
-                BufReader::new(File::open(&path).with_context(|| format!("could not read {}", path.display()))?);
-            let mut lines = reader.lines();
-            let first = lines.next().transpose().with_context(|| format!("could not read {}", path.display()))?;
-            let found: Option<Value> = first.as_deref().and_then(|l| serde_json::from_str(l).ok());
+            let (found, first, read) = lines_of(&path)?;
             if found.as_ref() != Some(&header) {
                 anyhow::bail!(
                     "{}: holds the trials of another grid (its first line should name this command's sizes and \
@@ -52,17 +48,7 @@ impl Journal {
                     }
                 );
             }
-            for (n, line) in lines.enumerate() {
-                let line = line.with_context(|| format!("could not read {}", path.display()))?;
-                match serde_json::from_str::<Record>(&line) {
-                    Ok(r) => records.push(r),
-                    Err(e) => eprintln!(
-                        "warning: {} line {}: not a finished trial ({e}); it runs again",
-                        path.display(),
-                        n + 2
-                    ),
-                }
-            }
+            records = read;
         }
         // Rewritten whole (temporary file, then rename): the header and the
         // records that parsed, so a torn last line does not stay in the middle.
@@ -87,6 +73,42 @@ impl Journal {
             .and_then(|()| self.file.sync_data())
             .with_context(|| format!("could not append to {}", self.path.display()))
     }
+}
+
+/// Reads `dir/trials.jsonl` without changing it: the file's path, the grid
+/// key its first line names, and its finished trials. An error names the
+/// file when there is none or its first line names no grid.
+pub fn read(dir: &Path) -> anyhow::Result<(PathBuf, Value, Vec<Record>)> {
+    let path = dir.join(JOURNAL);
+    if !path.is_file() {
+        anyhow::bail!("{}: no such file (expected the journal of a `gast bench quality` run's folder)", path.display());
+    }
+    let (found, _, records) = lines_of(&path)?;
+    match found.as_ref().and_then(|h| h.get("grid")) {
+        Some(key) => Ok((path, key.clone(), records)),
+        None => anyhow::bail!("{}: its first line names no grid (expected {{\"grid\": …}})", path.display()),
+    }
+}
+
+/// The journal at `path`: its first line as JSON (when it is), that line,
+/// and the later lines that parse as trials (a line that does not, a trial
+/// cut off while it was written, is dropped with a warning).
+fn lines_of(path: &Path) -> anyhow::Result<(Option<Value>, Option<String>, Vec<Record>)> {
+    let reader = BufReader::new(File::open(path).with_context(|| format!("could not read {}", path.display()))?);
+    let mut lines = reader.lines();
+    let first = lines.next().transpose().with_context(|| format!("could not read {}", path.display()))?;
+    let found: Option<Value> = first.as_deref().and_then(|l| serde_json::from_str(l).ok());
+    let mut records = Vec::new();
+    for (n, line) in lines.enumerate() {
+        let line = line.with_context(|| format!("could not read {}", path.display()))?;
+        match serde_json::from_str::<Record>(&line) {
+            Ok(r) => records.push(r),
+            Err(e) => {
+                eprintln!("warning: {} line {}: not a finished trial ({e}); it runs again", path.display(), n + 2)
+            }
+        }
+    }
+    Ok((found, first, records))
 }
 
 #[cfg(test)]

@@ -8,6 +8,7 @@
 
 use std::path::PathBuf;
 
+pub mod adopt;
 pub mod geometry;
 pub mod geometry_run;
 pub mod grid;
@@ -468,6 +469,9 @@ pub struct Record {
     /// Sample sheet of the final scene (input, result, their depths).
     #[serde(skip)]
     pub sample: (u32, u32, Vec<f32>),
+    /// The journal this trial was taken from (`--from`), when another run ran it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub from: Option<String>,
 }
 
 impl Record {
@@ -494,6 +498,7 @@ impl Record {
             issues: o.stability.issues,
             checkpoints: o.checkpoints,
             sample,
+            from: None,
         }
     }
 
@@ -557,6 +562,7 @@ pub(crate) fn test_record(
         issues: Vec::new(),
         checkpoints: vec![at(0, before), at(200, after)],
         sample: (0, 0, Vec::new()),
+        from: None,
     }
 }
 

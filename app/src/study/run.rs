@@ -5,7 +5,7 @@
 //! from which the same command resumes.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -16,6 +16,7 @@ use gast_core::session::{PreparedStyle, SessionInputs, StyleDepthSource, StyleIm
 use gast_core::vision::Vgg;
 use gast_core::{Camera, Gaussians};
 
+use super::adopt::take;
 use super::grid::build_grid;
 use super::journal::Journal;
 use super::pages::quality::write_sample;
@@ -31,10 +32,23 @@ pub fn run_grid(
     shared: &Path,
     vgg: &Arc<Vgg>,
     out: &Path,
+    from: &[PathBuf],
 ) -> anyhow::Result<(RunSummary, Vec<(String, StyleImage)>)> {
     let mut grid = build_grid(&sizes, shared, studies)?;
-    let (mut journal, mut records) = Journal::open(out, &serde_json::json!({ "sizes": &sizes, "studies": studies }))?;
-    let done: BTreeSet<String> = records.iter().map(|r| r.id.clone()).collect();
+    let key = serde_json::json!({ "sizes": &sizes, "studies": studies });
+    let (mut journal, mut records) = Journal::open(out, &key)?;
+    let mut done: BTreeSet<String> = records.iter().map(|r| r.id.clone()).collect();
+    // Trials other runs finished the same way (`--from`), journalled here as if run here.
+    for dir in from {
+        let taken = take(&key, &grid, &sizes.scenes, dir, &done)?;
+        println!("  taking {} finished trials from {}", taken.len(), dir.join(super::journal::JOURNAL).display());
+        for (other_id, r) in taken {
+            copy_sample(dir, &other_id, out, &r.id)?;
+            journal.push(&r)?;
+            done.insert(r.id.clone());
+            records.push(r);
+        }
+    }
     let todo = |t: &&TrialSpec| !done.contains(&t.id);
     let total_steps: u64 = grid.trials.iter().filter(todo).map(|t| u64::from(t.config.schedule().total_steps())).sum();
     println!(
@@ -205,6 +219,21 @@ fn summary_line(spec: &TrialSpec, o: &TrialOutcome) -> String {
         last.nn_cosine,
         last.consistency_long
     )
+}
+
+/// Copies the sample render (colour-matched, result, their depths) of the
+/// trial `other_id` of the run in `from` into `out`'s `renders/` as `id`'s;
+/// the journal does not carry it. A folder without it leaves the page
+/// without that render.
+fn copy_sample(from: &Path, other_id: &str, out: &Path, id: &str) -> anyhow::Result<()> {
+    let src = from.join("renders").join(format!("{other_id}.png"));
+    if !src.is_file() {
+        return Ok(());
+    }
+    let bytes = std::fs::read(&src).with_context(|| format!("could not read {}", src.display()))?;
+    let dir = out.join("renders");
+    std::fs::create_dir_all(&dir).with_context(|| format!("could not create {}", dir.display()))?;
+    Ok(gast_core::io::write_bytes(&dir.join(format!("{id}.png")), &bytes)?)
 }
 
 #[cfg(test)]

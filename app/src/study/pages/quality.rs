@@ -374,6 +374,20 @@ fn index_markdown(run: &RunSummary, charts: &[(String, String)]) -> String {
         s,
         "Files: [results.csv](results.csv) (one line per trial and checkpoint), [results.json](results.json) (the same with the grid), `renders/` (per trial: colour-matched input, result, and their inverse depths, first evaluation view).\n"
     );
+    let mut taken: std::collections::BTreeMap<&str, usize> = std::collections::BTreeMap::new();
+    for r in records {
+        if let Some(from) = &r.from {
+            *taken.entry(from.as_str()).or_default() += 1;
+        }
+    }
+    if !taken.is_empty() {
+        let list: Vec<String> = taken.iter().map(|(from, n)| format!("{n} from `{from}`")).collect();
+        let _ = writeln!(
+            s,
+            "Taken from other runs' journals (`--from`, the same computation; their times are those runs'): {}.\n",
+            list.join(", ")
+        );
+    }
     let _ = writeln!(
         s,
         "Columns: **SW** sliced Wasserstein and **Gram** distances between the VGG relu3 features of the renders and of the style; **NN-cos** mean cosine distance of each render feature to its nearest style feature, and **NN depth**, **NN edge** the same for the rendered depth and edge maps against the style's depth and edge maps (GCFM's three modalities, each on its own; depth and edges show structure rather than colour), and **NN joint** GCFM's own criterion on the concatenated features; **content** feature distance to the colour-matched render, relative; **RMSE** colour disagreement after warping one view into another by rendered depth, at a 5° and a 37.5° baseline; **depth Δ** relative inverse-depth change and **normal Δ** mean change of depth normals against the input (how much the geometry moved); **stable** whether any degeneration detector fired.\n"
