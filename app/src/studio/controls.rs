@@ -4,7 +4,7 @@
 use egui::{Color32, Ui};
 use gast_core::session::{LossTerms, StepReport};
 use gast_core::style::config::{
-    FRAME_RECIPE_SLICED_DEPTH, OBJECT_RECIPE_ASSIGN, OBJECT_RECIPE_ASSIGN_COS, ParamRegulariser,
+    FRAME_RECIPE_SLICED_DEPTH, OBJECT_RECIPE_ASSIGN, OBJECT_RECIPE_ASSIGN_COS, OBJECT_RECIPE_PALETTE, ParamRegulariser,
 };
 use gast_core::style::terms::TERMS;
 use gast_core::style::{Focus, MeanSteps, Mode, Phase, StyleConfig};
@@ -116,11 +116,16 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>) ->
     changed |= ui
         .checkbox(
             &mut c.object_recipe,
-            format!("object recipe: λ_asc {OBJECT_RECIPE_ASSIGN_COS}, λ_as {OBJECT_RECIPE_ASSIGN} on objects"),
+            format!(
+                "object recipe: λ_asc {OBJECT_RECIPE_ASSIGN_COS}, λ_as {OBJECT_RECIPE_ASSIGN}, λ_pal \
+                 {OBJECT_RECIPE_PALETTE} on objects"
+            ),
         )
         .on_hover_text(format!(
             "with the losses on the object and λ_as = λ_asc = 0, the run uses λ_asc {OBJECT_RECIPE_ASSIGN_COS} and \
-             λ_as {OBJECT_RECIPE_ASSIGN} (the focus study's winner on guitar, biker and playbot); off in the paper"
+             λ_as {OBJECT_RECIPE_ASSIGN} (the focus study's winner on guitar, biker and playbot); with λ_pal = 0, \
+             the palette hold at λ_pal {OBJECT_RECIPE_PALETTE}, so the object keeps its colour-matched brightness \
+             (the defaults study: without it guitar × stone darkens to near black); off in the paper"
         ))
         .changed();
     changed |= ui
@@ -371,10 +376,10 @@ mod tests {
         let frame = recipe_weights(&auto, Some(1.0));
         assert_eq!(frame.len(), 1, "{frame:?}");
         assert_eq!(frame[0].1, FRAME_RECIPE_SLICED_DEPTH);
-        // An object: the two assignment weights.
+        // An object: the two assignment weights and the palette hold.
         let mut object: Vec<f32> = recipe_weights(&auto, Some(0.2)).into_iter().map(|(_, v)| v).collect();
         object.sort_by(f32::total_cmp);
-        assert_eq!(object, vec![OBJECT_RECIPE_ASSIGN, OBJECT_RECIPE_ASSIGN_COS]);
+        assert_eq!(object, vec![OBJECT_RECIPE_ASSIGN, OBJECT_RECIPE_ASSIGN_COS, OBJECT_RECIPE_PALETTE]);
         // A fixed focus tells without a run; a weight the user set, or the paper's preset, lifts nothing.
         assert_eq!(recipe_weights(&StyleConfig { focus: Focus::Frame, ..auto.clone() }, None).len(), 1);
         let mut own = auto.clone();

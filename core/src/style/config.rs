@@ -47,7 +47,8 @@ pub struct LossWeights {
     pub outside: f32,
     /// λ_pal, the palette hold ([`crate::style::palette`]): with object
     /// focus, the covered pixels' per-channel mean and deviation keep the
-    /// colour-matched render's. Not in the reference: 0 (off) by default.
+    /// colour-matched render's. Not in the reference: 0 by default, which
+    /// the object recipe lifts to [`OBJECT_RECIPE_PALETTE`] on objects.
     /// Both engines.
     #[serde(default)]
     pub palette: f32,
@@ -177,8 +178,11 @@ pub struct StyleConfig {
     /// object), switch on the assignment terms at the weights that won the
     /// focus study ([`OBJECT_RECIPE_ASSIGN_COS`], [`OBJECT_RECIPE_ASSIGN`];
     /// `docs/studies/focus.md`: the object beat the frame on 9, 8 and 9 of the
-    /// nine styles on guitar, biker and playbot) when both are 0. On by
-    /// default; off in the `paper` preset. See [`StyleConfig::resolved`].
+    /// nine styles on guitar, biker and playbot) when both are 0, and the
+    /// palette hold at [`OBJECT_RECIPE_PALETTE`] when λ_pal is 0
+    /// (`docs/studies/defaults.md`: without it guitar × stone darkens into a
+    /// colour collapse at the default budget). On by default; off in the
+    /// `paper` preset. See [`StyleConfig::resolved`].
     pub object_recipe: bool,
     /// Where the losses take the whole frame (`focus frame`, or `auto` on a
     /// full-frame scene), switch on the depth's sliced Wasserstein term at
@@ -230,6 +234,8 @@ pub const FRAME_RECIPE_SLICED_DEPTH: f32 = 1.0;
 pub const OBJECT_RECIPE_ASSIGN_COS: f32 = 10.0;
 /// λ_as of the object recipe ([`StyleConfig::object_recipe`]).
 pub const OBJECT_RECIPE_ASSIGN: f32 = 0.015;
+/// λ_pal of the object recipe ([`StyleConfig::object_recipe`]).
+pub const OBJECT_RECIPE_PALETTE: f32 = 100.0;
 
 /// The form of the geometry phase's parameter regularisers
 /// ([`crate::style::regularizers`]).
@@ -308,8 +314,9 @@ impl StyleConfig {
     }
 
     /// The configuration a run with views of mean coverage `coverage` uses:
-    /// with [`StyleConfig::object_recipe`] on, losses on the object and both
-    /// assignment weights 0, those weights take the recipe's values; with
+    /// with [`StyleConfig::object_recipe`] on and losses on the object, both
+    /// assignment weights take the recipe's values when both are 0, and λ_pal
+    /// takes the recipe's when it is 0; with
     /// [`StyleConfig::frame_recipe`] on, losses on the whole frame and λ_swd
     /// 0, λ_swd takes the recipe's.
     pub fn resolved(&self, coverage: f32) -> Self {
@@ -319,6 +326,9 @@ impl StyleConfig {
         if c.object_recipe && object && w.assignment == 0.0 && w.assignment_cosine == 0.0 {
             w.assignment = OBJECT_RECIPE_ASSIGN;
             w.assignment_cosine = OBJECT_RECIPE_ASSIGN_COS;
+        }
+        if c.object_recipe && object && w.palette == 0.0 {
+            w.palette = OBJECT_RECIPE_PALETTE;
         }
         if c.frame_recipe && !object && w.sliced_depth == 0.0 {
             w.sliced_depth = FRAME_RECIPE_SLICED_DEPTH;
@@ -521,6 +531,7 @@ mod tests {
         let c = StyleConfig::default();
         let on_object = c.resolved(0.2);
         assert_eq!((on_object.weights.assignment, on_object.weights.assignment_cosine), (0.015, 10.0));
+        assert_eq!(on_object.weights.palette, OBJECT_RECIPE_PALETTE);
         assert_eq!(on_object.weights.sliced_depth, 0.0, "no frame recipe on an object");
         let on_frame = c.resolved(0.9);
         assert_eq!(on_frame.weights.sliced_depth, FRAME_RECIPE_SLICED_DEPTH);
@@ -535,9 +546,21 @@ mod tests {
         assert_eq!(off.resolved(0.9), off);
         let mut chosen = c.clone();
         chosen.weights.assignment = 0.5;
+        chosen.weights.palette = 7.0;
         chosen.weights.sliced_depth = 0.25;
         assert_eq!(chosen.resolved(0.2), chosen, "a weight the user set is kept");
         assert_eq!(chosen.resolved(0.9), chosen, "a weight the user set is kept");
+        // The hold and the assignment pair fill apart: either set leaves the other to the recipe.
+        let mut pair = c.clone();
+        pair.weights.assignment = 0.5;
+        assert_eq!(pair.resolved(0.2).weights.palette, OBJECT_RECIPE_PALETTE);
+        assert_eq!(pair.resolved(0.2).weights.assignment_cosine, 0.0);
+        let mut hold = c.clone();
+        hold.weights.palette = 7.0;
+        assert_eq!(hold.resolved(0.2).weights.palette, 7.0);
+        assert_eq!(hold.resolved(0.2).weights.assignment_cosine, OBJECT_RECIPE_ASSIGN_COS);
+        assert_eq!(hold.resolved(0.9).weights.palette, 7.0, "no hold added on a full frame");
+        assert_eq!(c.resolved(0.9).weights.palette, 0.0, "no hold on a full frame");
         let paper = StyleConfig::paper();
         assert_eq!(paper.resolved(0.2), paper);
         assert_eq!(paper.resolved(0.9), paper);

@@ -209,7 +209,7 @@ pub static TERMS: [Term; 14] = [
         chart: "palette",
         help: "palette hold, not in the paper: with object focus, the covered pixels' per-channel mean and \
                deviation keep the colour-matched render's (the style's palette after colour matching), so the \
-               object cannot darken or grey while its pattern changes",
+               object cannot darken or grey while its pattern changes (the object recipe: 100)",
         max: 1e4,
         gpu: true,
         paper: false,

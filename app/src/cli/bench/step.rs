@@ -18,10 +18,6 @@ use super::depth::time_style_depth;
 use super::{median, memory_mib, reset_peak_memory};
 use crate::views::{Framing, ViewArgs, load_scene, views_for};
 
-/// λ_pal in `--compare-palette`'s arm with the hold: the value the defaults
-/// study tries in the object recipe (`docs/studies/defaults.md`).
-const PALETTE_CANDIDATE: f32 = 100.0;
-
 /// Arguments of `gast bench step`.
 #[derive(Args, Debug)]
 pub struct StepArgs {
@@ -72,7 +68,7 @@ pub struct StepArgs {
     #[arg(long, conflicts_with_all = ["compare", "compare_focus", "compare_assign"])]
     pub compare_sliced_depth: bool,
     /// Run the same steps on --device twice in this process, without and with the palette
-    /// hold (λ_pal 100, the candidate for the object recipe), and print what it costs (give
+    /// hold (λ_pal 100, the object recipe's), and print what it costs (give
     /// --focus object: the hold reads the object's pixels).
     #[arg(long, conflicts_with_all = ["compare", "compare_focus", "compare_assign", "compare_sliced_depth"])]
     pub compare_palette: bool,
@@ -253,9 +249,13 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     }
     if args.compare_palette {
         let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
-        let mut on = config.clone();
-        on.weights.palette = PALETTE_CANDIDATE;
-        return compare_arms(&args, &inputs, [("without", config.clone()), ("λ_pal 100", on)], gpu, budget);
+        use gast_core::style::config::{OBJECT_RECIPE_ASSIGN, OBJECT_RECIPE_ASSIGN_COS, OBJECT_RECIPE_PALETTE};
+        // The object recipe without its hold, then with it: the recipe itself would fill λ_pal in both.
+        let mut off = StyleConfig { object_recipe: false, ..config.clone() };
+        (off.weights.assignment_cosine, off.weights.assignment) = (OBJECT_RECIPE_ASSIGN_COS, OBJECT_RECIPE_ASSIGN);
+        let mut on = off.clone();
+        on.weights.palette = OBJECT_RECIPE_PALETTE;
+        return compare_arms(&args, &inputs, [("without", off), ("λ_pal 100", on)], gpu, budget);
     }
     let devices: Vec<DeviceChoice> =
         if args.compare { vec![DeviceChoice::Cpu, DeviceChoice::Gpu] } else { vec![args.device] };

@@ -56,9 +56,10 @@ pub struct StylizeArgs {
     /// recipe); flags below override it.
     #[arg(long)]
     pub preset: Option<PathBuf>,
-    /// Keep the assignment terms off on objects (by default, with the losses
-    /// on the object and λ_as = λ_asc = 0, the run uses λ_asc 10 and λ_as
-    /// 0.015, the focus study's winner).
+    /// Keep the object recipe off (by default, with the losses on the object,
+    /// the run uses λ_asc 10 and λ_as 0.015, the focus study's winner, when
+    /// both are 0, and the palette hold λ_pal 100, which keeps the object's
+    /// colour-matched brightness, when λ_pal is 0).
     #[arg(long)]
     pub no_object_recipe: bool,
     /// Keep the depth's sliced Wasserstein term off on full-frame scenes (by

@@ -330,11 +330,22 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     })?;
 
     let used = session.config().weights;
-    if used.assignment_cosine != config.weights.assignment_cosine || used.assignment != config.weights.assignment {
+    let (pair, hold) = (
+        used.assignment_cosine != config.weights.assignment_cosine || used.assignment != config.weights.assignment,
+        used.palette != config.weights.palette,
+    );
+    if pair || hold {
+        let mut lifted = Vec::new();
+        if pair {
+            lifted.push(format!("λ_asc {} and λ_as {}", used.assignment_cosine, used.assignment));
+        }
+        if hold {
+            lifted.push(format!("the palette hold λ_pal {}", used.palette));
+        }
         eprintln!(
-            "  object recipe: the losses are on the object, so λ_asc {} and λ_as {} (--no-object-recipe or \
-             --preset paper for the paper's terms alone)",
-            used.assignment_cosine, used.assignment
+            "  object recipe: the losses are on the object, so {} (--no-object-recipe or --preset paper for the \
+             paper's terms alone)",
+            lifted.join(" and ")
         );
     }
     if used.sliced_depth != config.weights.sliced_depth {
