@@ -2,11 +2,14 @@
 //! --from DIR`). A trial of this grid is taken from another run's
 //! `trials.jsonl` when that run computed it the same way: the other grid's
 //! sizes and studies equal this one's but for the scenes (a run of one scene
-//! joins a run of three) and `defaults_patch` (a candidate recipe's run takes
-//! the arms the patch leaves alone: paper and its seed twin). A trial is
-//! known by its scene and its id without the leading number (the number
-//! counts trials over the whole grid, so it moves with the scenes); the
-//! taken record gets this grid's id and names the journal it came from.
+//! joins a run of three), the styles (a run of a few styles, or of one pair,
+//! joins a run of nine: a trial computes its own style alone) and
+//! `defaults_patch` (a candidate recipe's run takes the arms the patch leaves
+//! alone: paper and its seed twin). A trial is known by its scene and its id
+//! without the leading number (the number counts trials over the whole grid,
+//! so it moves with the scenes and styles; the id names the arm and the
+//! style); the taken record gets this grid's id and names the journal it
+//! came from.
 
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -18,7 +21,7 @@ use super::journal::read;
 use super::{DEFAULTS_NEW, Record, Study};
 
 /// The keys of the sizes in which another grid may differ from this one.
-const MAY_DIFFER: [&str; 2] = ["scenes", "defaults_patch"];
+const MAY_DIFFER: [&str; 3] = ["scenes", "styles", "defaults_patch"];
 
 /// The records of `dir`'s journal that compute trials of `grid` (keyed
 /// `key`, as [`super::journal::Journal::open`] takes it) not in `done`,
@@ -37,8 +40,8 @@ pub fn take(
     let bad: Vec<&String> = differ.iter().filter(|k| !MAY_DIFFER.contains(&k.as_str())).collect();
     if !bad.is_empty() {
         anyhow::bail!(
-            "{}: its grid differs from this command's in {}; only the scenes and defaults_patch may differ for \
-             its trials to be taken",
+            "{}: its grid differs from this command's in {}; only the scenes, styles and defaults_patch may \
+             differ for its trials to be taken",
             path.display(),
             bad.iter().map(|k| format!("`{k}`")).collect::<Vec<_>>().join(", ")
         );
@@ -186,6 +189,26 @@ mod tests {
         assert!(!labels.contains(DEFAULTS_NEW), "{labels:?}");
         let arms = gp.rows.iter().filter(|r| r.label != DEFAULTS_NEW).count();
         assert_eq!(taken.len(), arms, "paper's arms and the seed twin: {labels:?}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_run_of_fewer_styles_gives_the_trials_of_its_styles() {
+        let guitar = "data/scenes/guitar.compressed.ply";
+        let nine = sizes(&[guitar]);
+        // A run of wave alone: its seed twin is on wave, the nine's on block2 (their first styles).
+        let one = Sizes { styles: vec!["data/styles/wave.jpg".into()], ..nine.clone() };
+        let g1 = build_grid(&one, Path::new("/shared"), &[Study::Defaults]).expect("grid");
+        let g9 = build_grid(&nine, Path::new("/shared"), &[Study::Defaults]).expect("grid");
+        let dir = folder("styles");
+        journal(&dir, &one, &g1.trials.iter().map(|t| finished(&t.id, guitar, 3.0)).collect::<Vec<_>>());
+        let taken = take(&key(&nine), &g9, &nine.scenes, &dir, &BTreeSet::new()).expect("taken");
+        let ids: BTreeSet<&str> = taken.iter().map(|(_, r)| unnumbered(&r.id)).collect();
+        let wave: BTreeSet<&str> =
+            g9.trials.iter().map(|t| unnumbered(&t.id)).filter(|id| id.ends_with("-wave")).collect();
+        assert!(!wave.is_empty());
+        assert_eq!(ids, wave, "wave's trials of the nine, not wave's seed twin");
+        assert!(g1.trials.len() > taken.len(), "the one-style run's twin has no place among the nine's trials");
         std::fs::remove_dir_all(&dir).ok();
     }
 
