@@ -48,8 +48,9 @@ pub struct QualityArgs {
     /// Take finished trials from other runs' folders (their `trials.jsonl`) instead of running
     /// them: a trial whose scene and arm such a journal holds, when that run's grid differs
     /// from this one only in its scenes (a run of one scene joins a grid of three), its styles
-    /// (a run of a few styles joins a run of nine), or in `defaults_patch` (a candidate recipe's run takes paper's arms and its seed twin, which
-    /// the patch leaves alone). Each taken trial names its journal in results.json (`from`);
+    /// (a run of a few styles joins a run of nine), or in `defaults_patch` (a candidate
+    /// recipe's run takes paper's arms and its seed twin, which the patch leaves alone).
+    /// Each taken trial names its journal in results.json (`from`);
     /// a grid that differs in anything else is refused, naming what differs.
     #[arg(long, value_name = "DIR", value_delimiter = ',', conflicts_with_all = ["quick", "report"])]
     pub from: Vec<PathBuf>,
