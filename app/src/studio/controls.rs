@@ -51,8 +51,8 @@ fn weight(ui: &mut Ui, value: &mut f32, max: f32, label: &str, hover: &str) -> b
 }
 
 /// The loss weights a run of `c` uses that differ from its sliders because a
-/// recipe lifts them ([`StyleConfig::resolved`]): (term symbol, the value the
-/// run uses). `coverage`: the running session's mean coverage; without a
+/// recipe lifts them ([`StyleConfig::recipe_lifts`]): (term symbol, the value
+/// the run uses). `coverage`: the running session's mean coverage; without a
 /// run, only a fixed focus tells which recipe applies.
 pub fn recipe_weights(c: &StyleConfig, coverage: Option<f32>) -> Vec<(&'static str, f32)> {
     let coverage = match (coverage, c.focus) {
@@ -61,14 +61,7 @@ pub fn recipe_weights(c: &StyleConfig, coverage: Option<f32>) -> Vec<(&'static s
         // A fixed focus ignores the coverage.
         (None, _) => 1.0,
     };
-    let (mut run, mut set) = (c.resolved(coverage).weights, c.weights);
-    TERMS
-        .iter()
-        .filter_map(|t| {
-            let (used, slider) = (*(t.weight)(&mut run), *(t.weight)(&mut set));
-            (used != slider).then_some((t.symbol, used))
-        })
-        .collect()
+    c.recipe_lifts(coverage)
 }
 
 /// Edits `c` in place; returns true when anything changed. `coverage`: the

@@ -336,6 +336,14 @@ impl StyleConfig {
         c
     }
 
+    /// The loss weights a run at `coverage` uses that differ from those set,
+    /// because a recipe lifts them ([`StyleConfig::resolved`]): (term symbol,
+    /// the value the run uses), in the order of the terms. The studio shows
+    /// them under their sliders and `gast stylize` prints them.
+    pub fn recipe_lifts(&self, coverage: f32) -> Vec<(&'static str, f32)> {
+        self.resolved(coverage).weights.differing(&self.weights).map(|(t, v)| (t.symbol, v)).collect()
+    }
+
     /// What this configuration asks that the GPU engine does not compute yet
     /// (a term whose row says `gpu: false`, the phase leak): the session's
     /// GPU refusal and `gast stylize --device auto`'s choice of the CPU read it.
@@ -523,6 +531,21 @@ mod tests {
         assert!(
             StyleConfig { depth_relief_px: 5000, ..StyleConfig::default() }.problems()[0].contains("depth_relief_px")
         );
+    }
+
+    #[test]
+    fn the_recipe_lifts_name_each_lifted_weight_with_the_value_the_run_uses() {
+        let c = StyleConfig::default();
+        assert_eq!(
+            c.recipe_lifts(0.2),
+            vec![("λ_pal", OBJECT_RECIPE_PALETTE), ("λ_as", OBJECT_RECIPE_ASSIGN), ("λ_asc", OBJECT_RECIPE_ASSIGN_COS)]
+        );
+        assert_eq!(c.recipe_lifts(0.9), vec![("λ_swd", FRAME_RECIPE_SLICED_DEPTH)]);
+        let mut hold = c.clone();
+        hold.weights.palette = 7.0;
+        assert_eq!(hold.recipe_lifts(0.2).len(), 2, "a weight the user set is not lifted");
+        assert!(StyleConfig::paper().recipe_lifts(0.2).is_empty());
+        assert!(StyleConfig::paper().recipe_lifts(0.9).is_empty());
     }
 
     #[test]

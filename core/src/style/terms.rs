@@ -289,6 +289,11 @@ impl LossWeights {
     pub fn cpu_only(&self) -> impl Iterator<Item = (&'static Term, f32)> + '_ {
         self.terms().filter(|(t, v)| !t.gpu && *v > 0.0)
     }
+
+    /// The terms whose weight here differs from `other`'s, with the weight here.
+    pub fn differing<'a>(&'a self, other: &'a LossWeights) -> impl Iterator<Item = (&'static Term, f32)> + 'a {
+        self.terms().filter(move |(t, v)| *v != t.get(other))
+    }
 }
 
 #[cfg(test)]

@@ -329,31 +329,21 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         _ => {}
     })?;
 
-    let used = session.config().weights;
-    let (pair, hold) = (
-        used.assignment_cosine != config.weights.assignment_cosine || used.assignment != config.weights.assignment,
-        used.palette != config.weights.palette,
-    );
-    if pair || hold {
-        let mut lifted = Vec::new();
-        if pair {
-            lifted.push(format!("λ_asc {} and λ_as {}", used.assignment_cosine, used.assignment));
+    // The weights a recipe lifts for this run (the studio shows the same under its sliders).
+    let lifted = config.recipe_lifts(session.coverage());
+    if !lifted.is_empty() {
+        let list = lifted.iter().map(|(s, v)| format!("{s} {v}")).collect::<Vec<_>>().join(", ");
+        if session.focus_on_object() {
+            eprintln!(
+                "  object recipe: the losses are on the object, so {list} (the assignment pair and the palette \
+                 hold; --no-object-recipe or --preset paper for the paper's terms alone)"
+            );
+        } else {
+            eprintln!(
+                "  frame recipe: the losses are on the whole frame, so {list} (the style's relief in the depth; \
+                 --no-frame-recipe or --preset paper for the paper's terms alone)"
+            );
         }
-        if hold {
-            lifted.push(format!("the palette hold λ_pal {}", used.palette));
-        }
-        eprintln!(
-            "  object recipe: the losses are on the object, so {} (--no-object-recipe or --preset paper for the \
-             paper's terms alone)",
-            lifted.join(" and ")
-        );
-    }
-    if used.sliced_depth != config.weights.sliced_depth {
-        eprintln!(
-            "  frame recipe: the losses are on the whole frame, so λ_swd {} (the style's relief in the depth; \
-             --no-frame-recipe or --preset paper for the paper's terms alone)",
-            used.sliced_depth
-        );
     }
     let config = session.config().clone();
     let total = session.total_steps();
