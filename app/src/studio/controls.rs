@@ -61,7 +61,7 @@ pub fn recipe_weights(c: &StyleConfig, coverage: Option<f32>) -> Vec<(&'static s
         // A fixed focus ignores the coverage.
         (None, _) => 1.0,
     };
-    c.recipe_lifts(coverage)
+    c.recipe_lifts(coverage).into_iter().map(|(t, v)| (t.symbol, v)).collect()
 }
 
 /// Edits `c` in place; returns true when anything changed. `coverage`: the

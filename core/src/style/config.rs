@@ -337,11 +337,11 @@ impl StyleConfig {
     }
 
     /// The loss weights a run at `coverage` uses that differ from those set,
-    /// because a recipe lifts them ([`StyleConfig::resolved`]): (term symbol,
+    /// because a recipe lifts them ([`StyleConfig::resolved`]): (the term,
     /// the value the run uses), in the order of the terms. The studio shows
     /// them under their sliders and `gast stylize` prints them.
-    pub fn recipe_lifts(&self, coverage: f32) -> Vec<(&'static str, f32)> {
-        self.resolved(coverage).weights.differing(&self.weights).map(|(t, v)| (t.symbol, v)).collect()
+    pub fn recipe_lifts(&self, coverage: f32) -> Vec<(&'static super::terms::Term, f32)> {
+        self.resolved(coverage).weights.differing(&self.weights).collect()
     }
 
     /// What this configuration asks that the GPU engine does not compute yet
@@ -535,12 +535,14 @@ mod tests {
 
     #[test]
     fn the_recipe_lifts_name_each_lifted_weight_with_the_value_the_run_uses() {
+        use crate::style::terms::Term;
         let c = StyleConfig::default();
+        let symbols = |lifts: Vec<(&Term, f32)>| lifts.into_iter().map(|(t, v)| (t.symbol, v)).collect::<Vec<_>>();
         assert_eq!(
-            c.recipe_lifts(0.2),
+            symbols(c.recipe_lifts(0.2)),
             vec![("λ_pal", OBJECT_RECIPE_PALETTE), ("λ_as", OBJECT_RECIPE_ASSIGN), ("λ_asc", OBJECT_RECIPE_ASSIGN_COS)]
         );
-        assert_eq!(c.recipe_lifts(0.9), vec![("λ_swd", FRAME_RECIPE_SLICED_DEPTH)]);
+        assert_eq!(symbols(c.recipe_lifts(0.9)), vec![("λ_swd", FRAME_RECIPE_SLICED_DEPTH)]);
         let mut hold = c.clone();
         hold.weights.palette = 7.0;
         assert_eq!(hold.recipe_lifts(0.2).len(), 2, "a weight the user set is not lifted");

@@ -24,6 +24,7 @@ use gast_core::session::plan::{
 };
 use gast_core::session::{Event, Session, SessionInputs, Stage1Cache, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::StyleConfig;
+use gast_core::style::terms::Term;
 use gast_core::vision::Vgg;
 use gast_core::vision::style_depth::{DepthImage, DepthProvider};
 use serde::Serialize;
@@ -332,16 +333,18 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     // The weights a recipe lifts for this run (the studio shows the same under its sliders).
     let lifted = config.recipe_lifts(session.coverage());
     if !lifted.is_empty() {
-        let list = lifted.iter().map(|(s, v)| format!("{s} {v}")).collect::<Vec<_>>().join(", ");
+        // Each with its name, the help's first words: "λ_pal 100 (palette hold)".
+        let name = |t: &Term| t.help.split([',', ':']).next().unwrap_or(t.key).to_string();
+        let list = lifted.iter().map(|(t, v)| format!("{} {v} ({})", t.symbol, name(t))).collect::<Vec<_>>().join(", ");
         if session.focus_on_object() {
             eprintln!(
-                "  object recipe: the losses are on the object, so {list} (the assignment pair and the palette \
-                 hold; --no-object-recipe or --preset paper for the paper's terms alone)"
+                "  object recipe: the losses are on the object, so the run uses {list}; --no-object-recipe or \
+                 --preset paper for the paper's terms alone"
             );
         } else {
             eprintln!(
-                "  frame recipe: the losses are on the whole frame, so {list} (the style's relief in the depth; \
-                 --no-frame-recipe or --preset paper for the paper's terms alone)"
+                "  frame recipe: the losses are on the whole frame, so the run uses {list}, the style's relief \
+                 in the depth; --no-frame-recipe or --preset paper for the paper's terms alone"
             );
         }
     }
