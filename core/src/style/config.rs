@@ -11,94 +11,14 @@ pub use super::feature_mean::MeanSteps;
 use super::focus::Focus;
 pub use super::matching::{MatchMethod, MatchingConfig};
 use super::schedule::{Mode, Phase, Schedule};
+pub use super::terms::LossWeights;
+use super::terms::Term;
 pub use crate::vision::ConvAlgo;
 pub use crate::vision::style_depth::{DepthPolarity, DepthProvider};
 
 /// The lowest DC colour coefficient [`StyleConfig::color_floor`] allows: the
 /// channel's base colour `0.5 + C0·f_dc` is then at least 0.
 pub const DC_FLOOR: f32 = -0.5 / crate::scene::SH_C0;
-
-/// Loss weights (λ of ALGORITHM.md).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct LossWeights {
-    /// λ_GC, the geometry-aware contrastive feature matching.
-    pub gcfm: f32,
-    /// λ_cont, the content feature loss.
-    pub content: f32,
-    /// λ_TV, total variation of the rendered RGB.
-    pub tv: f32,
-    /// λ_α, opacity-logit regulariser (geometry phase).
-    pub opacity: f32,
-    /// λ_s, log-scale regulariser (geometry phase).
-    pub scale: f32,
-    /// λ_r, quaternion regulariser (geometry phase).
-    pub rotation: f32,
-    /// λ_d, inverse-depth regulariser (geometry phase).
-    pub depth: f32,
-    /// λ_mean, the feature-mean term ([`crate::style::feature_mean`]): the
-    /// mean of the rendered RGB relu3 features over the positions the losses
-    /// average over, pulled toward the style's. Not in the reference: 0 (off)
-    /// by default. Both engines.
-    pub feature_mean: f32,
-    /// λ_out, the background hold ([`crate::style::outside`]): with object
-    /// focus, the pixels the colour-matched scene leaves empty keep its
-    /// render. Not in the reference: 0 (off) by default. Both engines.
-    pub outside: f32,
-    /// λ_pal, the palette hold ([`crate::style::palette`]): with object
-    /// focus, the covered pixels' per-channel mean and deviation keep the
-    /// colour-matched render's. Not in the reference: 0 by default, which
-    /// the object recipe lifts to [`OBJECT_RECIPE_PALETTE`] on objects.
-    /// Both engines.
-    #[serde(default)]
-    pub palette: f32,
-    /// λ_sw, the sliced Wasserstein term ([`crate::style::sliced`]): the
-    /// distribution of the rendered RGB relu3 features over the positions the
-    /// losses average over, pulled toward the style's along fixed random
-    /// directions. Not in the reference: 0 (off) by default. CPU engine.
-    pub sliced: f32,
-    /// λ_swd, the same sliced Wasserstein term on the depth map's relu3
-    /// features against the style depth's, on the steps that take the
-    /// depth's gradient (geometry steps): GCFM's nearest neighbours are
-    /// content with any fine depth texture, this asks for the style depth's
-    /// whole distribution of features (its plateaus and its edges in their
-    /// proportions). Not in the reference: 0 (off) by default. CPU engine.
-    #[serde(default)]
-    pub sliced_depth: f32,
-    /// λ_as, the assignment term ([`crate::style::assignment`]): each
-    /// rendered RGB relu3 feature over the positions the losses average over
-    /// pulled to a distinct style feature, by a least-cost one-to-one
-    /// assignment to a fresh sample of the style's features each step. Not in
-    /// the reference: 0 (off) by default. Both engines.
-    pub assignment: f32,
-    /// λ_asc, the cosine assignment term ([`crate::style::assignment`]): the
-    /// same pairing, made by cosine distance, pulling each feature's
-    /// direction to its partner's (`1 − cos`). With it on, λ_as pulls along
-    /// the cosine pairing. Not in the reference: 0 (off) by default. Both
-    /// engines.
-    pub assignment_cosine: f32,
-}
-
-impl Default for LossWeights {
-    fn default() -> Self {
-        Self {
-            gcfm: 2.0,
-            content: 1e-3,
-            tv: 0.02,
-            opacity: 1.0,
-            scale: 1.0,
-            rotation: 1.0,
-            depth: 10.0,
-            feature_mean: 0.0,
-            outside: 0.0,
-            palette: 0.0,
-            sliced: 0.0,
-            sliced_depth: 0.0,
-            assignment: 0.0,
-            assignment_cosine: 0.0,
-        }
-    }
-}
 
 /// Learning rates per parameter group.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -340,7 +260,7 @@ impl StyleConfig {
     /// because a recipe lifts them ([`StyleConfig::resolved`]): (the term,
     /// the value the run uses), in the order of the terms. The studio shows
     /// them under their sliders and `gast stylize` prints them.
-    pub fn recipe_lifts(&self, coverage: f32) -> Vec<(&'static super::terms::Term, f32)> {
+    pub fn recipe_lifts(&self, coverage: f32) -> Vec<(&'static Term, f32)> {
         self.resolved(coverage).weights.differing(&self.weights).collect()
     }
 
@@ -535,7 +455,6 @@ mod tests {
 
     #[test]
     fn the_recipe_lifts_name_each_lifted_weight_with_the_value_the_run_uses() {
-        use crate::style::terms::Term;
         let c = StyleConfig::default();
         let symbols = |lifts: Vec<(&Term, f32)>| lifts.into_iter().map(|(t, v)| (t.symbol, v)).collect::<Vec<_>>();
         assert_eq!(
