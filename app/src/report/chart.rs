@@ -31,6 +31,9 @@ pub struct Series {
     pub line: bool,
     /// Draw the line dashed.
     pub dashed: bool,
+    /// Draw a marker at each point (and in the legend's swatch); off for a
+    /// reference line, whose end points are not data.
+    pub markers: bool,
 }
 
 /// A chart with axes, light grid lines, its series and a legend.
@@ -306,7 +309,9 @@ fn layout(c: &Chart) -> Vec<Item> {
         } else {
             3.5
         };
-        items.extend(pts.iter().flatten().map(|&(x, y)| Item::Dot { x: px(x), y: py(y), r, color: s.color }));
+        if s.markers {
+            items.extend(pts.iter().flatten().map(|&(x, y)| Item::Dot { x: px(x), y: py(y), r, color: s.color }));
+        }
     }
     if all.is_empty() {
         items.push(text((x0 + x1) / 2.0, (top + y1) / 2.0 + 5.0, "no data", 14.0, SOFT, Anchor::Middle));
@@ -324,7 +329,9 @@ fn layout(c: &Chart) -> Vec<Item> {
             let line = vec![(x, cy), (x + SWATCH, cy)];
             items.push(Item::Line { points: line, color: s.color, width: 2.0, dashed: s.dashed });
         }
-        items.push(Item::Dot { x: x + SWATCH / 2.0, y: cy, r: 3.5, color: s.color });
+        if s.markers {
+            items.push(Item::Dot { x: x + SWATCH / 2.0, y: cy, r: 3.5, color: s.color });
+        }
         items.push(text(x + SWATCH + 6.0, cy + 0.35 * LEGEND, &s.name, LEGEND, INK, Anchor::Start));
     };
     if legend_right {
@@ -484,6 +491,7 @@ mod tests {
             color: palette(i),
             line: true,
             dashed,
+            markers: true,
         };
         Chart {
             title: "Quality against iterations".into(),
@@ -503,14 +511,29 @@ mod tests {
             y_label: "LPIPS".into(),
             x_log: true,
             series: vec![
-                Series { name: "GPU".into(), points: points(0.2, 0.6), color: palette(0), line: true, dashed: false },
-                Series { name: "CPU".into(), points: points(3.0, 0.7), color: palette(1), line: true, dashed: false },
+                Series {
+                    name: "GPU".into(),
+                    points: points(0.2, 0.6),
+                    color: palette(0),
+                    line: true,
+                    dashed: false,
+                    markers: true,
+                },
+                Series {
+                    name: "CPU".into(),
+                    points: points(3.0, 0.7),
+                    color: palette(1),
+                    line: true,
+                    dashed: false,
+                    markers: true,
+                },
                 Series {
                     name: "reference".into(),
                     points: vec![(40.0, 0.1)],
                     color: palette(2),
                     line: false,
                     dashed: false,
+                    markers: true,
                 },
             ],
             ..Chart::default()
@@ -567,8 +590,16 @@ mod tests {
                     color: palette(3),
                     line: true,
                     dashed: true,
+                    markers: true,
                 },
-                Series { name: "empty".into(), points: vec![], color: palette(4), line: true, dashed: false },
+                Series {
+                    name: "empty".into(),
+                    points: vec![],
+                    color: palette(4),
+                    line: true,
+                    dashed: false,
+                    markers: true,
+                },
             ],
             ..Chart::default()
         };
@@ -622,6 +653,7 @@ mod tests {
                 color: palette(i),
                 line: false,
                 dashed: false,
+                markers: true,
             })
             .collect();
         let chart = Chart { series, ..sample() };
@@ -637,6 +669,32 @@ mod tests {
             }
         }
         assert_eq!(legend, 9);
+    }
+
+    #[test]
+    fn a_series_without_markers_draws_its_line_and_no_dot() {
+        let floor = Series {
+            name: "one seed floor".into(),
+            points: vec![(0.0, 1.0), (5.0, 1.0)],
+            color: [90, 90, 90],
+            line: true,
+            dashed: true,
+            markers: false,
+        };
+        let chart = Chart { series: vec![floor.clone()], ..sample() };
+        let items = layout(&chart);
+        assert!(!items.iter().any(|i| matches!(i, Item::Dot { .. })), "no dot, in the plot or the legend");
+        assert_eq!(
+            items.iter().filter(|i| matches!(i, Item::Line { dashed: true, .. })).count(),
+            2,
+            "the line and its swatch"
+        );
+        let with = Chart { series: vec![Series { markers: true, ..floor }], ..sample() };
+        assert_eq!(
+            layout(&with).iter().filter(|i| matches!(i, Item::Dot { .. })).count(),
+            3,
+            "two points and the swatch"
+        );
     }
 
     /// Writes sample charts to look at: `cargo test -p gast chart -- --ignored`.

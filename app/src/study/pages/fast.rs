@@ -44,6 +44,7 @@ pub(super) fn fast_charts(out: &Path, rows: &[Row], records: &[Record]) -> anyho
                 color: palette(i),
                 line: true,
                 dashed: name.contains("seed 1"),
+                markers: true,
             })
             .collect();
         let stem = format!("fast_sw_vs_time_{style}");

@@ -165,6 +165,7 @@ fn margins_chart(margins: &[Margin], c: &Comparison) -> Chart {
             color: palette(styles.iter().position(|s| *s == m.style).unwrap_or(0)),
             line: false,
             dashed: false,
+            markers: true,
         })
         .collect();
     let finite = |f: fn(&Margin) -> f32| margins.iter().map(f).filter(|v| v.is_finite());
@@ -176,6 +177,7 @@ fn margins_chart(margins: &[Margin], c: &Comparison) -> Chart {
         color: [90, 90, 90],
         line: true,
         dashed: true,
+        markers: false,
     };
     series.push(dashed("one seed floor (SW)", vec![(1.0, y_lo.into()), (1.0, y_hi.into())]));
     series.push(dashed("one seed floor (NN-cos)", vec![(x_lo.into(), 1.0), (x_hi.into(), 1.0)]));
@@ -855,7 +857,10 @@ mod tests {
         let chart = margins_chart(&margins, &FOCUS);
         assert_eq!(chart.series[0].points, vec![(f64::from(m.sw), f64::from(m.nn))]);
         assert_eq!(chart.series[0].name, "guitar galaxy");
-        assert!(chart.series.iter().any(|s| s.dashed && s.points.iter().all(|p| p.0 == 1.0)), "the SW floor line");
+        assert!(
+            chart.series.iter().any(|s| s.dashed && !s.markers && s.points.iter().all(|p| p.0 == 1.0)),
+            "the SW floor line, without markers at its ends"
+        );
         let dir = std::env::temp_dir().join(format!("gast-focus-margins-{}", std::process::id()));
         let written = write_focus_report(&dir, &run).expect("the report");
         assert!(written.iter().any(|l| l.contains("focus_margins.png")));

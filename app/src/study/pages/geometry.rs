@@ -97,6 +97,7 @@ fn write_charts(dir: &Path, run: &GeometryRun) -> anyhow::Result<Vec<(String, St
                 color: palette(i),
                 line: true,
                 dashed: arm == Arm::ColourOnly,
+                markers: true,
             })
             .filter(|s| !s.points.is_empty())
             .collect();

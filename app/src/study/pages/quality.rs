@@ -175,6 +175,7 @@ fn write_charts(out: &Path, rows: &[Row], records: &[Record]) -> anyhow::Result<
                         color: palette(mode_index(&rec.mode)),
                         line: true,
                         dashed: row.label == SEED_LABEL,
+                        markers: true,
                     })
                     .collect();
                 let stem = format!("{key}_vs_{x_key}_{style}");
@@ -215,6 +216,7 @@ fn write_charts(out: &Path, rows: &[Row], records: &[Record]) -> anyhow::Result<
                 color: palette(i),
                 line: true,
                 dashed: false,
+                markers: true,
             })
             .collect();
         Chart {
@@ -253,6 +255,7 @@ fn write_charts(out: &Path, rows: &[Row], records: &[Record]) -> anyhow::Result<
                     color: palette(i + 4),
                     line: true,
                     dashed: false,
+                    markers: true,
                 })
                 .collect();
             Chart {
