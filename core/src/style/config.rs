@@ -273,7 +273,7 @@ impl StyleConfig {
             .cpu_only()
             .map(|(t, v)| CpuOnly {
                 name: t.symbol.into(),
-                detail: format!("{} = {v} ({})", t.symbol, t.help.split(':').next().unwrap_or(t.key)),
+                detail: format!("{} = {v} ({})", t.symbol, t.name()),
                 off: "set it to 0",
             })
             .collect();

@@ -166,6 +166,12 @@ impl Term {
         *(self.weight)(&mut w)
     }
 
+    /// The term's short name, the help's first words up to its first comma
+    /// or colon ("palette hold"), for lines that list terms with their values.
+    pub fn name(&self) -> &'static str {
+        self.help.split([',', ':']).next().unwrap_or(self.key)
+    }
+
     /// The term by its preset key or flag.
     pub fn find(name: &str) -> Option<&'static Term> {
         TERMS.iter().find(|t| t.key == name || t.flag == name)
@@ -428,5 +434,17 @@ mod tests {
         assert_eq!(w.cpu_only().count(), 0);
         assert_eq!(Term::find("lambda-assign-cos").map(|t| t.key), Some("assignment_cosine"));
         assert_eq!(Term::find("tv").map(|t| t.flag), Some("lambda-tv"));
+    }
+
+    #[test]
+    fn a_terms_name_is_its_helps_first_words() {
+        let name = |key| Term::find(key).map(|t| t.name());
+        assert_eq!(name("palette"), Some("palette hold"));
+        assert_eq!(name("opacity"), Some("opacity regulariser"));
+        assert_eq!(name("sliced_depth"), Some("sliced Wasserstein on depth"));
+        assert_eq!(name("tv"), Some("total variation of the rendered RGB"));
+        for t in &TERMS {
+            assert!(!t.name().is_empty() && !t.name().contains([',', ':']), "{}", t.key);
+        }
     }
 }

@@ -24,7 +24,6 @@ use gast_core::session::plan::{
 };
 use gast_core::session::{Event, Session, SessionInputs, Stage1Cache, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::StyleConfig;
-use gast_core::style::terms::Term;
 use gast_core::vision::Vgg;
 use gast_core::vision::style_depth::{DepthImage, DepthProvider};
 use serde::Serialize;
@@ -333,9 +332,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     // The weights a recipe lifts for this run (the studio shows the same under its sliders).
     let lifted = config.recipe_lifts(session.coverage());
     if !lifted.is_empty() {
-        // Each with its name, the help's first words: "λ_pal 100 (palette hold)".
-        let name = |t: &Term| t.help.split([',', ':']).next().unwrap_or(t.key).to_string();
-        let list = lifted.iter().map(|(t, v)| format!("{} {v} ({})", t.symbol, name(t))).collect::<Vec<_>>().join(", ");
+        // Each with its name: "λ_pal 100 (palette hold)".
+        let list = lifted.iter().map(|(t, v)| format!("{} {v} ({})", t.symbol, t.name())).collect::<Vec<_>>().join(", ");
         if session.focus_on_object() {
             eprintln!(
                 "  object recipe: the losses are on the object, so the run uses {list}; --no-object-recipe or \
