@@ -214,7 +214,7 @@ impl StudioApp {
         self.run_buttons(ui);
         controls::loss_chart(ui, &self.run.steps);
         if let Some((p, eta)) = self.run.progress() {
-            ui.add(egui::ProgressBar::new(p).text(format!("{:.0}%  ETA {:.0} s", p * 100.0, eta)));
+            ui.add(egui::ProgressBar::new(p).text(format!("{:.0}%  ETA {}", p * 100.0, time_left(eta))));
         }
         if let Some(c) = self.run.steps.last().and_then(|s| s.colour) {
             let object = self.run.start().is_some_and(|s| s.focus_on_object);
@@ -581,5 +581,22 @@ fn colour_line(ui: &mut Ui, c: &gast_core::session::ColourReading, object: bool)
                 ),
             );
         }
+    }
+}
+
+/// Seconds left as a person reads them: "45 s", "12 min 05 s".
+fn time_left(seconds: f64) -> String {
+    let s = seconds.max(0.0).round() as u64;
+    if s < 90 { format!("{s} s") } else { format!("{} min {:02} s", s / 60, s % 60) }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn time_left_reads_in_seconds_then_minutes() {
+        assert_eq!(super::time_left(44.6), "45 s");
+        assert_eq!(super::time_left(-3.0), "0 s");
+        assert_eq!(super::time_left(89.0), "89 s");
+        assert_eq!(super::time_left(725.0), "12 min 05 s");
     }
 }

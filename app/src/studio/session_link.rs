@@ -213,13 +213,29 @@ impl RunMonitor {
         }
     }
 
-    /// Progress in [0, 1] and the estimated seconds left, from the last step.
+    /// Progress in [0, 1] and the estimated seconds left: the steps left at
+    /// the pace of the last whole cycle (its colour and geometry steps in
+    /// their proportion), so the estimate follows a machine whose load
+    /// changes; before a cycle has ended, at the pace since the start.
     pub fn progress(&self) -> Option<(f32, f64)> {
         let last = self.steps.last()?;
         let done = (last.iter + 1) as f64;
         let total = last.total.max(1) as f64;
-        let eta = last.elapsed_s / done * (total - done);
-        Some(((done / total) as f32, eta.max(0.0)))
+        let per_step = self.last_cycle_pace().unwrap_or(last.elapsed_s / done);
+        Some(((done / total) as f32, (per_step * (total - done)).max(0.0)))
+    }
+
+    /// Seconds a step over the last cycle that has ended, from the elapsed
+    /// times at its two ends.
+    fn last_cycle_pace(&self) -> Option<f64> {
+        let current = self.steps.last()?.cycle;
+        let ended = current.checked_sub(1)?;
+        // The last step of the ended cycle and the last one before it (if any).
+        let end = self.steps.iter().rposition(|r| r.cycle == ended)?;
+        let start = self.steps[..end].iter().rposition(|r| r.cycle < ended);
+        let (s0, i0) = start.map_or((0.0, -1), |k| (self.steps[k].elapsed_s, self.steps[k].iter as i64));
+        let steps = self.steps[end].iter as i64 - i0;
+        (steps > 0).then(|| (self.steps[end].elapsed_s - s0) / steps as f64)
     }
 }
 
@@ -272,6 +288,41 @@ mod tests {
         etx.send(Event::Finished { completed: false, steps: 2, seconds: 2.0 }).expect("send");
         m.poll();
         assert!(!m.is_live());
+    }
+
+    /// The estimate follows the pace of the last whole cycle: a machine that
+    /// slowed down after the first cycle is not read at the first cycle's pace.
+    #[test]
+    fn the_eta_takes_the_pace_of_the_last_whole_cycle() {
+        let mut m = RunMonitor::default();
+        // Cycles of 4 steps (2 colour, 2 geometry); 1 s a step in cycle 0, 3 s in cycle 1.
+        let mut elapsed = 0.0;
+        for iter in 0..10u32 {
+            let cycle = iter / 4;
+            elapsed += if cycle == 0 { 1.0 } else { 3.0 };
+            m.steps.push(StepReport {
+                iter,
+                total: 20,
+                cycle,
+                phase: if iter % 4 < 2 { Phase::Color } else { Phase::Geometry },
+                view: 0,
+                losses: LossTerms::default(),
+                timings: Default::default(),
+                elapsed_s: elapsed,
+                colour: None,
+            });
+            let (p, eta) = m.progress().expect("progress");
+            assert!((p - (iter + 1) as f32 / 20.0).abs() < 1e-6);
+            let left = f64::from(20 - (iter + 1));
+            // In cycle 0 no cycle has ended: the pace since the start; in cycle 1,
+            // cycle 0's 1 s; in cycle 2, cycle 1's 3 s (not the mean since the start).
+            let pace = match cycle {
+                0 => elapsed / f64::from(iter + 1),
+                1 => 1.0,
+                _ => 3.0,
+            };
+            assert!((eta - pace * left).abs() < 1e-9, "step {iter}: ETA {eta} against {}", pace * left);
+        }
     }
 
     /// A close joins a worker that answers its Stop, and leaves one still
