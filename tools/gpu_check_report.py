@@ -84,6 +84,12 @@ for scene in ("guitar", "playbot"):
                 note += (f"; host pairing colour {fmt(med(gpu, 'colour_pairing_median_ms'))} / geometry "
                          f"{fmt(med(gpu, 'geometry_pairing_median_ms'))} ms, waiting on the device "
                          f"{fmt(med(gpu, 'colour_device_wait_median_ms'))} / {fmt(med(gpu, 'geometry_device_wait_median_ms'))} ms")
+            # Recording and submitting the step's commands (absent before 2026-11-29).
+            if gpu.get("geometry_record_median_ms") is not None:
+                note += (f"; recording colour {fmt(med(gpu, 'colour_record_median_ms'))} / geometry "
+                         f"{fmt(med(gpu, 'geometry_record_median_ms'))} ms, submitting "
+                         f"{fmt(med(gpu, 'colour_submit_median_ms'))} / {fmt(med(gpu, 'geometry_submit_median_ms'))} ms, "
+                         f"{med(gpu, 'geometry_bind_groups') or 0:.0f} bind groups a geometry step")
             if cpu:
                 note += f"; CPU engine {cpu['ms_per_step']:.1f} ms a step on {meta.get('cores', '?')} cores (mean), CPU/GPU {cpu['ms_per_step'] / max(gpu['ms_per_step'], 1e-9):.3g}x"
             figure(f"{scene} step at {res} px", judged, "ms", t and f"≤ {t:.0f} ms", t and judged <= t, note)

@@ -220,11 +220,11 @@ mod tests {
         let g = build_grid(&here, Path::new("/shared"), &[Study::Defaults]).expect("grid");
         let dir = folder("refused");
         journal(&dir, &other, &[finished(&g.trials[0].id, biker, 2.0)]);
-        let e = take(&key(&here), &g, &here.scenes, &dir, &BTreeSet::new()).err().expect("refused");
+        let e = take(&key(&here), &g, &here.scenes, &dir, &BTreeSet::new()).expect_err("refused");
         let text = e.to_string();
         assert!(text.contains("eval_resolution") && text.contains("trials.jsonl"), "{text}");
         let empty = folder("none");
-        let e = take(&key(&here), &g, &here.scenes, &empty, &BTreeSet::new()).err().expect("no journal");
+        let e = take(&key(&here), &g, &here.scenes, &empty, &BTreeSet::new()).expect_err("no journal");
         assert!(e.to_string().contains("trials.jsonl"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
         std::fs::remove_dir_all(&empty).ok();

@@ -135,6 +135,14 @@ pub struct HostTimes {
     pub pairing_ms: f32,
     /// Waiting on the device: for the gathered columns, then for the step's scalars.
     pub wait_ms: f32,
+    /// Recording the step's commands (bind groups, passes, uploads): the
+    /// host's own work, the same on any adapter, that the device idles
+    /// through while the step waits for its scalars at the end.
+    pub record_ms: f32,
+    /// Handing the command buffers to the queue (`Queue::submit`).
+    pub submit_ms: f32,
+    /// Bind groups the step made, one per dispatch recorded.
+    pub bind_groups: u32,
 }
 
 impl GpuEngine {
@@ -318,6 +326,14 @@ impl GpuEngine {
         };
         let (ctx, k) = (&self.ctx, &self.k);
         let allocated = ctx.allocated_bytes();
+        let (started, binds) = (std::time::Instant::now(), ctx.bind_groups_made());
+        let mut host = HostTimes::default();
+        let submit = |host: &mut HostTimes, enc: wgpu::CommandEncoder| {
+            let t = std::time::Instant::now();
+            let index = ctx.submit_indexed(enc);
+            host.submit_ms += t.elapsed().as_secs_f32() * 1e3;
+            index
+        };
         let opts = RenderOptions { background: self.background };
         let geometry = phase.updates_geometry();
         let mut enc = ctx.encoder("engine.step");
@@ -364,7 +380,7 @@ impl GpuEngine {
             let a =
                 self.assign.get_or_insert_with(|| GpuAssignment::new(ctx, style.channels(), config.seed ^ ASSIGN_SEED));
             a.record_gather(ctx, &mut enc, plan.loss.rgb_features(), n, covered, style.modality(0), style.positions());
-            gathered = Some(ctx.submit_indexed(enc));
+            gathered = Some(submit(&mut host, enc));
             enc = ctx.encoder("engine.step.feature_losses");
         }
         plan.loss.record_feature_losses(
@@ -384,9 +400,8 @@ impl GpuEngine {
         // own buffers and slots: the order leaves the results as they were.)
         plan.loss.record_backward_depth(ctx, &k.loss, &mut enc, inv_depth, depth_ref, geometry, focus, &self.scalars);
         let mut pulled = None;
-        let mut host = HostTimes::default();
         if let (Some(gathered), Some(a)) = (gathered, self.assign.as_mut()) {
-            ctx.submit(enc);
+            submit(&mut host, enc);
             pulled = Some(a.pull(ctx, gathered, w.assignment_cosine, w.assignment)?);
             (host.wait_ms, host.pairing_ms) = a.last_pull_ms();
             enc = ctx.encoder("engine.step.backward");
@@ -439,7 +454,7 @@ impl GpuEngine {
             self.opt.opacity.step(ctx, &k.adam, &mut enc, &g.opacity_logits, &v.v_opacity_logits, lr.opacity);
         }
         enc.copy_buffer_to_buffer(plan.raster.pair_count(), 0, &self.scalars, (slot::PAIRS * 4) as u64, 4);
-        ctx.submit(enc);
+        submit(&mut host, enc);
         if let Some(Some(t)) = self.targets.get_mut(view) {
             t.kept = keep;
         }
@@ -448,6 +463,9 @@ impl GpuEngine {
         let waited = std::time::Instant::now();
         let s: Vec<f32> = ctx.read(&self.scalars)?;
         host.wait_ms += waited.elapsed().as_secs_f32() * 1e3;
+        let total = started.elapsed().as_secs_f32() * 1e3;
+        host.record_ms = (total - host.wait_ms - host.pairing_ms - host.submit_ms).max(0.0);
+        host.bind_groups = u32::try_from(ctx.bind_groups_made() - binds).unwrap_or(u32::MAX);
         self.host = host;
         let pairs = s[slot::PAIRS].to_bits() as usize;
         if pairs > plan.raster.capacity() {

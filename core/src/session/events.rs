@@ -48,6 +48,17 @@ pub struct StepTimings {
     /// scalars at its end). 0 on the CPU.
     #[serde(default)]
     pub device_wait_ms: f32,
+    /// GPU engine: the host recording the step's commands (the rest of the
+    /// step's host time beside the pairing, the waits and the submits). 0 on
+    /// the CPU.
+    #[serde(default)]
+    pub record_ms: f32,
+    /// GPU engine: handing the step's command buffers to the queue. 0 on the CPU.
+    #[serde(default)]
+    pub submit_ms: f32,
+    /// GPU engine: bind groups the step made (one per dispatch). 0 on the CPU.
+    #[serde(default)]
+    pub bind_groups: u32,
 }
 
 /// One optimisation step's report.

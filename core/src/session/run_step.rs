@@ -74,7 +74,14 @@ impl Session {
         let host = engine.host_times();
         Ok((
             losses,
-            StepTimings { pairing_ms: host.pairing_ms, device_wait_ms: host.wait_ms, ..StepTimings::default() },
+            StepTimings {
+                pairing_ms: host.pairing_ms,
+                device_wait_ms: host.wait_ms,
+                record_ms: host.record_ms,
+                submit_ms: host.submit_ms,
+                bind_groups: host.bind_groups,
+                ..StepTimings::default()
+            },
         ))
     }
 

@@ -89,14 +89,24 @@ pub struct StepArgs {
     pub json: Option<PathBuf>,
 }
 
+/// Per-step medians of the host's share of a GPU step (ms; zeros on the CPU).
+#[derive(Clone, Copy, Debug)]
+struct HostMedians {
+    pairing: f64,
+    waits: f64,
+    record: f64,
+    submit: f64,
+    bind_groups: f64,
+}
+
 /// What one device's run of the step benchmark measured.
 struct StepRun {
     device: String,
     steps: usize,
     wall_s: f64,
     per_phase: Vec<(gast_core::style::Phase, f64)>,
-    /// Per phase, the medians of the host's pairing and of its waits on the device (ms).
-    host_per_phase: Vec<(gast_core::style::Phase, f64, f64)>,
+    /// Per phase, the medians of the host's share of a GPU step.
+    host_per_phase: Vec<(gast_core::style::Phase, HostMedians)>,
     first_losses: Option<gast_core::session::LossTerms>,
     gpu_memory_mib: Option<f64>,
     targets_s: f64,
@@ -106,7 +116,7 @@ impl StepRun {
     /// The run as the `--json` file's record, under `label`.
     fn to_json(&self, label: &str) -> serde_json::Value {
         let phase = |p: gast_core::style::Phase| self.per_phase.iter().find(|x| x.0 == p).map(|x| x.1);
-        let host = |p: gast_core::style::Phase| self.host_per_phase.iter().find(|x| x.0 == p).map(|x| (x.1, x.2));
+        let host = |p: gast_core::style::Phase| self.host_per_phase.iter().find(|x| x.0 == p).map(|x| x.1);
         serde_json::json!({
             "label": label,
             "device": self.device,
@@ -115,10 +125,16 @@ impl StepRun {
             "ms_per_step": self.wall_s * 1e3 / self.steps.max(1) as f64,
             "colour_step_median_ms": phase(gast_core::style::Phase::Color),
             "geometry_step_median_ms": phase(gast_core::style::Phase::Geometry),
-            "colour_pairing_median_ms": host(gast_core::style::Phase::Color).map(|h| h.0),
-            "geometry_pairing_median_ms": host(gast_core::style::Phase::Geometry).map(|h| h.0),
-            "colour_device_wait_median_ms": host(gast_core::style::Phase::Color).map(|h| h.1),
-            "geometry_device_wait_median_ms": host(gast_core::style::Phase::Geometry).map(|h| h.1),
+            "colour_pairing_median_ms": host(gast_core::style::Phase::Color).map(|h| h.pairing),
+            "geometry_pairing_median_ms": host(gast_core::style::Phase::Geometry).map(|h| h.pairing),
+            "colour_device_wait_median_ms": host(gast_core::style::Phase::Color).map(|h| h.waits),
+            "geometry_device_wait_median_ms": host(gast_core::style::Phase::Geometry).map(|h| h.waits),
+            "colour_record_median_ms": host(gast_core::style::Phase::Color).map(|h| h.record),
+            "geometry_record_median_ms": host(gast_core::style::Phase::Geometry).map(|h| h.record),
+            "colour_submit_median_ms": host(gast_core::style::Phase::Color).map(|h| h.submit),
+            "geometry_submit_median_ms": host(gast_core::style::Phase::Geometry).map(|h| h.submit),
+            "colour_bind_groups": host(gast_core::style::Phase::Color).map(|h| h.bind_groups),
+            "geometry_bind_groups": host(gast_core::style::Phase::Geometry).map(|h| h.bind_groups),
             "gpu_memory_mib": self.gpu_memory_mib,
             "targets_s": self.targets_s,
         })
@@ -480,7 +496,7 @@ fn time_steps(
     }
     println!("per-step medians (ms), every view's targets computed before the timed steps");
     println!(
-        "{:<10} {:>6} {:>8} {:>10} {:>9} {:>10} {:>10} {:>8} {:>8} {:>8} {:>9}",
+        "{:<10} {:>6} {:>8} {:>10} {:>9} {:>10} {:>10} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6} {:>9}",
         "phase",
         "steps",
         "render",
@@ -491,6 +507,9 @@ fn time_steps(
         "adam",
         "pairing",
         "waits",
+        "record",
+        "submit",
+        "binds",
         "step"
     );
     let (mut per_phase, mut host_per_phase) = (Vec::new(), Vec::new());
@@ -502,10 +521,16 @@ fn time_steps(
         let m = |f: &dyn Fn(&StepReport) -> f32| median(rows.iter().map(|(r, _)| f64::from(f(r))).collect());
         let wall = median(rows.iter().map(|(_, w)| *w).collect());
         per_phase.push((phase, wall));
-        let (pairing, waits) = (m(&|r| r.timings.pairing_ms), m(&|r| r.timings.device_wait_ms));
-        host_per_phase.push((phase, pairing, waits));
+        let host = HostMedians {
+            pairing: m(&|r| r.timings.pairing_ms),
+            waits: m(&|r| r.timings.device_wait_ms),
+            record: m(&|r| r.timings.record_ms),
+            submit: m(&|r| r.timings.submit_ms),
+            bind_groups: m(&|r| r.timings.bind_groups as f32),
+        };
+        host_per_phase.push((phase, host));
         println!(
-            "{:<10} {:>6} {:>8.1} {:>10.1} {:>9.1} {:>10.1} {:>10.1} {:>8.1} {:>8.1} {:>8.1} {:>9.2}",
+            "{:<10} {:>6} {:>8.1} {:>10.1} {:>9.1} {:>10.1} {:>10.1} {:>8.1} {:>8.1} {:>8.1} {:>8.1} {:>8.1} {:>6.0} {:>9.2}",
             format!("{phase:?}").to_lowercase(),
             rows.len(),
             m(&|r| r.timings.render_ms),
@@ -514,15 +539,20 @@ fn time_steps(
             m(&|r| r.timings.vgg_backward_ms),
             m(&|r| r.timings.raster_backward_ms),
             m(&|r| r.timings.update_ms),
-            pairing,
-            waits,
+            host.pairing,
+            host.waits,
+            host.record,
+            host.submit,
+            host.bind_groups,
             wall
         );
     }
     if session.gpu_memory_bytes().is_some() {
         println!(
             "(on the GPU the parts run back to back in one submission; their times are below; \
-             \"pairing\" is the host's, \"waits\" the host waiting on the device)"
+             \"pairing\" is the host's, \"waits\" the host waiting on the device, \"record\" the host \
+             recording the step's commands, \"submit\" handing them to the queue, \"binds\" the bind \
+             groups made, one per dispatch)"
         );
     }
     Ok(StepRun {

@@ -89,6 +89,9 @@ pub struct GpuContext {
     /// Bytes of buffers made through this context (and its clones) so far:
     /// what the engine reports as its GPU memory.
     allocated: Arc<AtomicU64>,
+    /// Bind groups made through this context (and its clones): one per
+    /// dispatch recorded with [`super::Kernel::dispatch`].
+    bind_groups: Arc<AtomicU64>,
 }
 
 impl GpuContext {
@@ -139,7 +142,7 @@ impl GpuContext {
     /// Wraps a device someone else created (the studio's, from eframe).
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue, info: wgpu::AdapterInfo) -> Self {
         let caps = GpuCaps::of(device.features());
-        Self { device, queue, info, caps, allocated: Arc::default() }
+        Self { device, queue, info, caps, allocated: Arc::default(), bind_groups: Arc::default() }
     }
 
     /// "NVIDIA H100 (Vulkan, discrete)", for reports.
@@ -152,6 +155,16 @@ impl GpuContext {
     /// for a run that allocates once).
     pub fn allocated_bytes(&self) -> u64 {
         self.allocated.load(Ordering::Relaxed)
+    }
+
+    /// Bind groups made so far ([`super::Kernel::bind`]); the difference
+    /// over a step is the dispatches it records with fresh bind groups.
+    pub fn bind_groups_made(&self) -> u64 {
+        self.bind_groups.load(Ordering::Relaxed)
+    }
+
+    pub(crate) fn count_bind_group(&self) {
+        self.bind_groups.fetch_add(1, Ordering::Relaxed);
     }
 
     fn count(&self, bytes: u64) {
