@@ -91,7 +91,6 @@ impl Default for LossWeights {
     }
 }
 
-
 /// Each loss term of a step, unweighted, and the weighted total.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct LossTerms {

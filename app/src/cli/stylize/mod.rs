@@ -333,7 +333,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let lifted = config.recipe_lifts(session.coverage());
     if !lifted.is_empty() {
         // Each with its name: "λ_pal 100 (palette hold)".
-        let list = lifted.iter().map(|(t, v)| format!("{} {v} ({})", t.symbol, t.name())).collect::<Vec<_>>().join(", ");
+        let list =
+            lifted.iter().map(|(t, v)| format!("{} {v} ({})", t.symbol, t.name())).collect::<Vec<_>>().join(", ");
         if session.focus_on_object() {
             eprintln!(
                 "  object recipe: the losses are on the object, so the run uses {list}; --no-object-recipe or \
