@@ -6,8 +6,12 @@
 // with A(i, p) = a[a_off + i·a_rs + p·a_cs], B(p, j) = b[b_off + p·b_rs + j·b_cs],
 // C(i, j) = c[c_off + i·c_rs + j]: the strides express A·B, Aᵀ·B and A·Bᵀ.
 // Batches run along workgroup z with per-batch offsets `*_bs`.
-// A 64×64 block of C per workgroup of 16×16 threads, 4×4 outputs per thread,
-// K in slices of 16 staged in workgroup memory.
+// `gemm`: a 64×64 block of C per workgroup of 16×16 threads, 4×4 outputs
+// per thread, K in slices of 16 staged in workgroup memory. `gemm_wide`: a
+// 128×128 block, 8×8 outputs per thread, K in slices of 8 (twice the
+// multiply-adds per value read from workgroup memory; for products large
+// enough to fill the device with its four times fewer workgroups).
+// A thread's outputs are rows ty + 16·qi and columns tx + 16·qj of the block.
 
 struct GemmParams {
     m: u32,
@@ -72,41 +76,11 @@ fn gemm(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid
     for (var kt = 0u; kt < tiles; kt++) {
         let p0 = kt * TK;
         for (var r = 0u; r < 4u; r++) {
-            let e = t + r * 256u;
-            // e indexes the 16 × 64 tile; pick (p, i) so consecutive threads
-            // walk the contiguous direction of A.
-            var pp: u32;
-            var ii: u32;
-            if a_along_i {
-                pp = e / TM;
-                ii = e % TM;
-            } else {
-                pp = e % TK;
-                ii = e / TK;
-            }
-            let gi = i0 + ii;
-            let gp = p0 + pp;
-            var va = 0.0;
-            if gi < u.m && gp < u.k {
-                va = a[a_base + gi * u.a_rs + gp * u.a_cs];
-            }
-            As[pp * TM + ii] = va;
-            var pb: u32;
-            var jb: u32;
-            if b_along_j {
-                pb = e / TN;
-                jb = e % TN;
-            } else {
-                pb = e % TK;
-                jb = e / TK;
-            }
-            let gj = j0 + jb;
-            let gq = p0 + pb;
-            var vb = 0.0;
-            if gj < u.n && gq < u.k {
-                vb = b[b_base + gq * u.b_rs + gj * u.b_cs];
-            }
-            Bs[pb * TN + jb] = vb;
+            // Element t + 256·r of the TK × TM slices of A and B.
+            let ea = slice_at(t + r * 256u, a_along_i, TK, TM);
+            As[ea.x * TM + ea.y] = a_at(a_base, i0 + ea.y, p0 + ea.x);
+            let eb = slice_at(t + r * 256u, b_along_j, TK, TN);
+            Bs[eb.x * TN + eb.y] = b_at(b_base, p0 + eb.x, j0 + eb.y);
         }
         workgroupBarrier();
         for (var p = 0u; p < TK; p++) {
@@ -124,6 +98,129 @@ fn gemm(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid
     store_row(i0 + ty + 16u, j0 + tx, c_base, acc1);
     store_row(i0 + ty + 32u, j0 + tx, c_base, acc2);
     store_row(i0 + ty + 48u, j0 + tx, c_base, acc3);
+}
+
+const WM: u32 = 128u;
+const WK: u32 = 8u;
+
+var<workgroup> Aw: array<f32, 1024>; // [WK][WM]
+var<workgroup> Bw: array<f32, 1024>; // [WK][WM]
+
+@compute @workgroup_size(16, 16)
+fn gemm_wide(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {
+    let tx = lid.x;
+    let ty = lid.y;
+    let t = ty * 16u + tx;
+    let i0 = wid.y * WM;
+    let j0 = wid.x * WM;
+    let a_base = u.a_off + wid.z * u.a_bs;
+    let b_base = u.b_off + wid.z * u.b_bs;
+    let c_base = u.c_off + wid.z * u.c_bs;
+    let a_along_i = u.a_rs == 1u;
+    let b_along_j = u.b_cs == 1u;
+
+    // Row qi in r{qi}l (columns qj 0..3) and r{qi}h (qj 4..7).
+    var r0l = vec4<f32>(0.0);
+    var r0h = vec4<f32>(0.0);
+    var r1l = vec4<f32>(0.0);
+    var r1h = vec4<f32>(0.0);
+    var r2l = vec4<f32>(0.0);
+    var r2h = vec4<f32>(0.0);
+    var r3l = vec4<f32>(0.0);
+    var r3h = vec4<f32>(0.0);
+    var r4l = vec4<f32>(0.0);
+    var r4h = vec4<f32>(0.0);
+    var r5l = vec4<f32>(0.0);
+    var r5h = vec4<f32>(0.0);
+    var r6l = vec4<f32>(0.0);
+    var r6h = vec4<f32>(0.0);
+    var r7l = vec4<f32>(0.0);
+    var r7h = vec4<f32>(0.0);
+    let tiles = (u.k + WK - 1u) / WK;
+    for (var kt = 0u; kt < tiles; kt++) {
+        let p0 = kt * WK;
+        for (var r = 0u; r < 4u; r++) {
+            let ea = slice_at(t + r * 256u, a_along_i, WK, WM);
+            Aw[ea.x * WM + ea.y] = a_at(a_base, i0 + ea.y, p0 + ea.x);
+            let eb = slice_at(t + r * 256u, b_along_j, WK, WM);
+            Bw[eb.x * WM + eb.y] = b_at(b_base, p0 + eb.x, j0 + eb.y);
+        }
+        workgroupBarrier();
+        for (var p = 0u; p < WK; p++) {
+            let ao = p * WM + ty;
+            let bo = p * WM + tx;
+            let bl = vec4<f32>(Bw[bo], Bw[bo + 16u], Bw[bo + 32u], Bw[bo + 48u]);
+            let bh = vec4<f32>(Bw[bo + 64u], Bw[bo + 80u], Bw[bo + 96u], Bw[bo + 112u]);
+            let a0 = vec4<f32>(Aw[ao]);
+            let a1 = vec4<f32>(Aw[ao + 16u]);
+            let a2 = vec4<f32>(Aw[ao + 32u]);
+            let a3 = vec4<f32>(Aw[ao + 48u]);
+            let a4 = vec4<f32>(Aw[ao + 64u]);
+            let a5 = vec4<f32>(Aw[ao + 80u]);
+            let a6 = vec4<f32>(Aw[ao + 96u]);
+            let a7 = vec4<f32>(Aw[ao + 112u]);
+            r0l = fma(a0, bl, r0l);
+            r0h = fma(a0, bh, r0h);
+            r1l = fma(a1, bl, r1l);
+            r1h = fma(a1, bh, r1h);
+            r2l = fma(a2, bl, r2l);
+            r2h = fma(a2, bh, r2h);
+            r3l = fma(a3, bl, r3l);
+            r3h = fma(a3, bh, r3h);
+            r4l = fma(a4, bl, r4l);
+            r4h = fma(a4, bh, r4h);
+            r5l = fma(a5, bl, r5l);
+            r5h = fma(a5, bh, r5h);
+            r6l = fma(a6, bl, r6l);
+            r6h = fma(a6, bh, r6h);
+            r7l = fma(a7, bl, r7l);
+            r7h = fma(a7, bh, r7h);
+        }
+        workgroupBarrier();
+    }
+    let gi = i0 + ty;
+    let gj = j0 + tx;
+    store_row(gi, gj, c_base, r0l);
+    store_row(gi, gj + 64u, c_base, r0h);
+    store_row(gi + 16u, gj, c_base, r1l);
+    store_row(gi + 16u, gj + 64u, c_base, r1h);
+    store_row(gi + 32u, gj, c_base, r2l);
+    store_row(gi + 32u, gj + 64u, c_base, r2h);
+    store_row(gi + 48u, gj, c_base, r3l);
+    store_row(gi + 48u, gj + 64u, c_base, r3h);
+    store_row(gi + 64u, gj, c_base, r4l);
+    store_row(gi + 64u, gj + 64u, c_base, r4h);
+    store_row(gi + 80u, gj, c_base, r5l);
+    store_row(gi + 80u, gj + 64u, c_base, r5h);
+    store_row(gi + 96u, gj, c_base, r6l);
+    store_row(gi + 96u, gj + 64u, c_base, r6h);
+    store_row(gi + 112u, gj, c_base, r7l);
+    store_row(gi + 112u, gj + 64u, c_base, r7h);
+}
+
+// Element `e` of a `tk × tm` slice as (p, i): consecutive `e` walk i when the
+// matrix is contiguous along it (`along`), else p.
+fn slice_at(e: u32, along: bool, tk: u32, tm: u32) -> vec2<u32> {
+    if along {
+        return vec2<u32>(e / tm, e % tm);
+    }
+    return vec2<u32>(e % tk, e / tk);
+}
+
+// A(i, p) of the batch at `base`, 0 outside the matrix.
+fn a_at(base: u32, i: u32, p: u32) -> f32 {
+    if i < u.m && p < u.k {
+        return a[base + i * u.a_rs + p * u.a_cs];
+    }
+    return 0.0;
+}
+
+// B(p, j) of the batch at `base`, 0 outside the matrix.
+fn b_at(base: u32, p: u32, j: u32) -> f32 {
+    if j < u.n && p < u.k {
+        return b[base + p * u.b_rs + j * u.b_cs];
+    }
+    return 0.0;
 }
 
 // The epilogue of one row of a thread's block: columns gj0 + 16·q.

@@ -195,33 +195,46 @@ def median(xs):
     return statistics.median(xs) if xs else None
 
 
-ab_parts = []
 base_rev = ""
 try:
     with open(os.path.join(raw, "baseline.txt")) as f:
         base_rev = f.read().strip()
 except OSError:
     pass
-for res in sorted({int(n.split("_")[1]) for n in doc["steps"] if n.startswith("ab_")}):
-    arms = {}
-    for arm in ("base", "new"):
-        names = sorted(n for n in doc["steps"] if n.startswith(f"ab_{res}_{arm}"))
-        runs = [next((r for r in (load(n + ".json") or {"runs": []})["runs"] if r["label"] == "gpu"), None) for n in names]
-        arms[arm] = {"runs": [r for r in runs if r], "parts": [parts(n) for n in names], "status": [status(n) for n in names]}
-    b, n = arms["base"], arms["new"]
-    for key, what in (("colour_step_median_ms", "colour"), ("geometry_step_median_ms", "geometry")):
-        bv = median([r[key] for r in b["runs"] if r.get(key) is not None])
-        nv = median([r[key] for r in n["runs"] if r.get(key) is not None])
-        rounds = lambda a: ", ".join(f"{r[key]:.2f}" for r in a["runs"] if r.get(key) is not None)
-        figure(f"guitar {what} step at {res} px, this build / baseline", None if not (bv and nv) else nv / bv, "×",
-               None, None, f"baseline {base_rev or '(--base)'}: {rounds(b)} ms; this build: {rounds(n)} ms"
-               + ("" if bv and nv else "".join(f"; {x}" for x in b["status"] + n["status"] if x)))
-    for part in (b["parts"][0] if b["parts"] else {}):
-        bv = median([p[part] for p in b["parts"] if part in p])
-        nv = median([p[part] for p in n["parts"] if part in p])
-        if bv is not None and nv is not None:
-            ab_parts.append({"resolution": res, "part": part, "baseline_ms": bv, "new_ms": nv,
-                             "ratio": nv / bv if bv > 0 else None})
+
+
+def compare(prefix, arms, title, names):
+    """Two arms alternated (PREFIX_RES_ARMROUND steps): the step medians' ratio, second arm over
+    first, one figure per phase, and each GPU part's medians and ratio (returned)."""
+    out = []
+    for res in sorted({int(n.split("_")[1]) for n in doc["steps"] if n.startswith(prefix + "_")}):
+        got = {}
+        for arm in arms:
+            steps = sorted(n for n in doc["steps"] if n.startswith(f"{prefix}_{res}_{arm}"))
+            runs = [next((r for r in (load(n + ".json") or {"runs": []})["runs"] if r["label"] == "gpu"), None)
+                    for n in steps]
+            got[arm] = {"runs": [r for r in runs if r], "parts": [parts(n) for n in steps],
+                        "status": [status(n) for n in steps]}
+        b, n = got[arms[0]], got[arms[1]]
+        for key, what in (("colour_step_median_ms", "colour"), ("geometry_step_median_ms", "geometry")):
+            bv = median([r[key] for r in b["runs"] if r.get(key) is not None])
+            nv = median([r[key] for r in n["runs"] if r.get(key) is not None])
+            rounds = lambda a: ", ".join(f"{r[key]:.2f}" for r in a["runs"] if r.get(key) is not None)
+            figure(f"guitar {what} step at {res} px, {title}", None if not (bv and nv) else nv / bv, "×",
+                   None, None, f"{names[0]}: {rounds(b)} ms; {names[1]}: {rounds(n)} ms"
+                   + ("" if bv and nv else "".join(f"; {x}" for x in b["status"] + n["status"] if x)))
+        for part in (b["parts"][0] if b["parts"] else {}):
+            bv = median([p[part] for p in b["parts"] if part in p])
+            nv = median([p[part] for p in n["parts"] if part in p])
+            if bv is not None and nv is not None:
+                out.append({"resolution": res, "part": part, "baseline_ms": bv, "new_ms": nv,
+                            "ratio": nv / bv if bv > 0 else None})
+    return out
+
+
+ab_parts = compare("ab", ("base", "new"), "this build / baseline", (f"baseline {base_rev or '(--base)'}", "this build"))
+tile_parts = compare("tile", ("t64", "auto"), "GEMM tiles auto / 64²", ("GAST_GEMM_TILE=64", "auto"))
+doc["tile_parts"] = tile_parts
 doc["ab_parts"] = ab_parts
 
 # The depth network.
@@ -248,6 +261,12 @@ if ab_parts:
            "| px | part | baseline ms | this build ms | ratio |", "|---|---|---|---|---|",
            *(f"| {p['resolution']} | {p['part']} | {p['baseline_ms']:.3f} | {p['new_ms']:.3f} | "
              f"{'–' if p['ratio'] is None else format(p['ratio'], '.3g')} |" for p in ab_parts), ""]
+if tile_parts:
+    md += ["GPU parts with the GEMM's 64² tiles against auto (128² for the large products), this build, "
+           "medians of the rounds:", "",
+           "| px | part | 64² ms | auto ms | ratio |", "|---|---|---|---|---|",
+           *(f"| {p['resolution']} | {p['part']} | {p['baseline_ms']:.3f} | {p['new_ms']:.3f} | "
+             f"{'–' if p['ratio'] is None else format(p['ratio'], '.3g')} |" for p in tile_parts), ""]
 with open(os.path.join(out, "gpu-check.md"), "w") as f:
     f.write("\n".join(md))
 print("\n".join(md))

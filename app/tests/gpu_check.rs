@@ -43,6 +43,8 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
         "compare_sliced_depth",
         "playbot_32",
         "studio",
+        "tile_48_t641",
+        "tile_48_auto1",
     ] {
         assert_eq!(doc["steps"][step]["rc"], 0, "step {step}: {}\n{tail}", doc["steps"][step]);
     }
@@ -61,7 +63,8 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
 
 /// The report's side-by-side figures from a baseline build's and this build's
 /// bench logs (`ab_RES_ARMROUND`, as `run` writes them when a baseline is
-/// packed): the step medians' ratio and each GPU part's. The runs themselves
+/// packed), and from the GEMM tilings' (`tile_RES_ARMROUND`): the step
+/// medians' ratio and each GPU part's. The runs themselves
 /// are `gast bench step`, which the dry run above takes; at the dry run's
 /// sizes on lavapipe two more would double its time, so the report is given
 /// their files here.
@@ -82,8 +85,11 @@ fn the_gpu_check_report_gives_this_build_against_the_baseline() {
         ("base", 2, 42.0, 46.0, 6.7, 16.4),
         ("new", 2, 22.0, 25.0, 2.2, 9.4),
     ];
-    for (arm, round, colour, geometry, edge, backward) in runs {
-        let name = format!("ab_256_{arm}{round}");
+    // The same figures as the GEMM tilings' arms (64² first, like the baseline).
+    let tiles = runs.map(|(arm, round, c, g, e, b)| (if arm == "base" { "t64" } else { "auto" }, round, c, g, e, b));
+    let named = runs.iter().map(|r| ("ab", *r)).chain(tiles.iter().map(|r| ("tile", *r)));
+    for (prefix, (arm, round, colour, geometry, edge, backward)) in named {
+        let name = format!("{prefix}_256_{arm}{round}");
         write(&format!("{name}.rc.json"), format!(r#"{{"name":"{name}","rc":0,"wall_s":9.5}}"#));
         write(
             &format!("{name}.json"),
@@ -120,7 +126,13 @@ fn the_gpu_check_report_gives_this_build_against_the_baseline() {
     let part = |name: &str| parts.iter().find(|p| p["part"] == name).cloned().expect(name);
     assert!((part("edge map 256²")["ratio"].as_f64().expect("ratio") - 2.1 / 6.6).abs() < 1e-9, "{parts:?}");
     assert!((part("raster backward tiles")["ratio"].as_f64().expect("ratio") - 9.2 / 16.2).abs() < 1e-9, "{parts:?}");
+    let tiled = figure("guitar colour step at 256 px, GEMM tiles auto / 64²");
+    assert!((tiled["value"].as_f64().expect("ratio") - 21.0 / 41.0).abs() < 1e-9, "{tiled}");
+    assert!(tiled["note"].as_str().is_some_and(|n| n.contains("GAST_GEMM_TILE=64: 40.00, 42.00")), "{tiled}");
+    let tile_parts = doc["tile_parts"].as_array().expect("tile_parts");
+    assert_eq!(tile_parts.len(), 2, "{tile_parts:?}");
     let table = std::fs::read_to_string(out.join("gpu-check.md")).expect("gpu-check.md");
     assert!(table.contains("| 256 | edge map 256² | 6.600 | 2.100 | 0.318 |"), "{table}");
+    assert!(table.contains("| 64² ms | auto ms | ratio |"), "{table}");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -110,7 +110,7 @@ pub use feature_net::{GpuFeatureNet, GpuFeatureState};
 pub use focus::{FocusKernels, GpuFocus};
 pub use gaussians::{GpuGaussians, GpuGrads};
 pub use gcfm::{GcfmSubset, GcfmWorkspace, GpuGcfm, GpuStyle, Search, bench_gcfm};
-pub use gemm::{Gemm, GemmPlan, GemmSpec, Strided, bench_gemm};
+pub use gemm::{Gemm, GemmPlan, GemmSpec, GemmTile, Strided, WIDE_MIN_GROUPS, bench_gemm};
 pub use kernel::{Bind, Kernel};
 pub use live::LiveGaussians;
 pub use losses::{LossKernels, RefLoss, TvLoss};

@@ -582,6 +582,13 @@ fn gpu_parts(
     rows.extend(gpu::bench_vgg(ctx, vgg, side, side, 5));
     let n = (side / 4) * (side / 4);
     rows.extend(gpu::bench_gcfm(ctx, 768, n, 4096, 5));
+    // The GEMM at the step's shapes in both tilings (`GAST_GEMM_TILE` picks
+    // one for the parts above; auto takes 128² where the grid stays full).
+    for (m, n, k) in [(n, 4096, 256), (1152, n, 256), (256, n, 1152)] {
+        for tile in [gpu::GemmTile::Narrow, gpu::GemmTile::Wide] {
+            rows.extend(gpu::bench_gemm(ctx, m, n, k, 3, tile));
+        }
+    }
     rows.extend(gpu::bench_image_ops(ctx, &[resolution], scene.len(), 5)?);
     for (name, ms) in rows {
         println!("  {name:<36} {ms:>9.3}");

@@ -8,6 +8,18 @@
 //! ReLU, which saves the convolutions a pass over their output. The CPU twin
 //! is `vision::conv::matmul`.
 //!
+//! Two tilings of the same kernel: `gemm` computes a 64×64 block of C per
+//! workgroup, `gemm_wide` a 128×128 one with four times the outputs per
+//! thread and half the workgroup-memory reads per multiply-add. Both sum
+//! every output over `k` in the same order, so their results are the same
+//! bits. [`Gemm::plan`] takes the wide one for products whose wide grid still
+//! has [`WIDE_MIN_GROUPS`] workgroups (the GCFM search's scores, VGG's
+//! input gradients), the narrow one otherwise; on a software adapter
+//! (lavapipe, where the wide tiling ran twice as fast at the three shapes
+//! `gast bench step` times) every product of a wide block or more.
+//! `GAST_GEMM_TILE=64` or `128` forces one (the device check times both on
+//! the same build).
+//!
 //! A call's sizes and strides live in a uniform made once by [`Gemm::plan`]
 //! (a workspace allocates its plans with its buffers): uniforms written with
 //! `queue.write_buffer` land before the whole encoder runs, so a uniform
@@ -40,8 +52,54 @@ struct GemmParams {
 }
 const _: () = assert!(std::mem::size_of::<GemmParams>() == 80);
 
-/// Rows and columns of C computed by one workgroup.
+/// Rows and columns of C computed by one workgroup of `gemm`.
 const TILE: u32 = 64;
+/// Rows and columns of C computed by one workgroup of `gemm_wide`.
+const WIDE_TILE: u32 = 128;
+/// The fewest workgroups a wide grid may have for [`Gemm::plan`] to choose
+/// it: twice the streaming multiprocessors of an H100/H200 (132), so that
+/// each holds at least two blocks. (A guess to be checked on the device:
+/// `tools/gpu-check` times both tilings at the step's shapes.)
+pub const WIDE_MIN_GROUPS: usize = 264;
+
+/// Which tiling [`Gemm::plan`] uses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum GemmTile {
+    /// The wide tiling for products large enough ([`WIDE_MIN_GROUPS`]), else the narrow one.
+    #[default]
+    Auto,
+    /// Always 64×64 blocks.
+    Narrow,
+    /// Always 128×128 blocks.
+    Wide,
+}
+
+impl GemmTile {
+    /// `GAST_GEMM_TILE`: `64`, `128` or anything else (unset) for [`GemmTile::Auto`].
+    pub fn from_env() -> Self {
+        match std::env::var("GAST_GEMM_TILE").as_deref() {
+            Ok("64") => Self::Narrow,
+            Ok("128") => Self::Wide,
+            _ => Self::Auto,
+        }
+    }
+
+    /// Whether a product of `spec`'s sizes runs wide; on a `software`
+    /// adapter (lavapipe: a few CPU threads, no grid to fill) every product
+    /// of at least one wide block each way does.
+    fn wide(self, spec: &GemmSpec, software: bool) -> bool {
+        match self {
+            Self::Narrow => false,
+            Self::Wide => true,
+            Self::Auto => {
+                let tile = WIDE_TILE as usize;
+                spec.m >= tile
+                    && spec.n >= tile
+                    && (software || spec.m.div_ceil(tile) * spec.n.div_ceil(tile) * spec.batch >= WIDE_MIN_GROUPS)
+            }
+        }
+    }
+}
 /// Workgroups along one dispatch dimension (WebGPU's limit).
 const MAX_GROUPS: usize = 65_535;
 
@@ -128,12 +186,24 @@ pub struct GemmPlan {
     uniform: wgpu::Buffer,
     groups: [u32; 3],
     uses_bias: bool,
+    wide: bool,
 }
 
-/// The compiled kernel and a placeholder for calls without bias.
+impl GemmPlan {
+    /// Whether the call runs the 128×128 tiling.
+    pub fn is_wide(&self) -> bool {
+        self.wide
+    }
+}
+
+/// The compiled kernels and a placeholder for calls without bias.
 #[derive(Debug)]
 pub struct Gemm {
     kernel: Kernel,
+    wide: Kernel,
+    tile: GemmTile,
+    /// Whether the adapter is a software rasterizer ([`GemmTile::wide`]).
+    software: bool,
     no_bias: wgpu::Buffer,
 }
 
@@ -142,16 +212,21 @@ fn u32_of(v: usize, what: &str) -> u32 {
 }
 
 impl Gemm {
-    /// Compiles `gemm.wgsl`.
+    /// Compiles `gemm.wgsl`'s two tilings, choosing between them as
+    /// `GAST_GEMM_TILE` says ([`GemmTile::from_env`]).
     pub fn new(ctx: &GpuContext) -> Self {
+        Self::with_tile(ctx, GemmTile::from_env())
+    }
+
+    /// [`Gemm::new`] with the tiling policy given.
+    pub fn with_tile(ctx: &GpuContext, tile: GemmTile) -> Self {
+        let src = include_str!("../../../../shaders/gemm.wgsl");
+        let binds = [Bind::Uniform, Bind::Read, Bind::Read, Bind::Read, Bind::ReadWrite];
         Self {
-            kernel: Kernel::new(
-                ctx,
-                "gemm",
-                include_str!("../../../../shaders/gemm.wgsl"),
-                "gemm",
-                &[Bind::Uniform, Bind::Read, Bind::Read, Bind::Read, Bind::ReadWrite],
-            ),
+            kernel: Kernel::new(ctx, "gemm", src, "gemm", &binds),
+            wide: Kernel::new(ctx, "gemm_wide", src, "gemm_wide", &binds),
+            tile,
+            software: ctx.is_software(),
             no_bias: ctx.zeros("gemm.no_bias", 1),
         }
     }
@@ -183,13 +258,15 @@ impl Gemm {
             alpha: spec.alpha,
             _pad: [0; 3],
         };
-        let gx = spec.n.div_ceil(TILE as usize);
-        let gy = spec.m.div_ceil(TILE as usize);
+        let wide = self.tile.wide(spec, self.software);
+        let tile = if wide { WIDE_TILE } else { TILE } as usize;
+        let (gx, gy) = (spec.n.div_ceil(tile), spec.m.div_ceil(tile));
         assert!(gx <= MAX_GROUPS && gy <= MAX_GROUPS && spec.batch <= MAX_GROUPS, "gemm: grid too large: {spec:?}");
         GemmPlan {
             uniform: ctx.uniform("gemm.params", &p),
             groups: [gx as u32, gy as u32, spec.batch as u32],
             uses_bias: spec.bias.is_some(),
+            wide,
         }
     }
 
@@ -208,14 +285,15 @@ impl Gemm {
     ) {
         debug_assert!(!plan.uses_bias || bias.is_some(), "gemm: the plan adds a bias but none was given");
         let bias = bias.unwrap_or(&self.no_bias);
-        self.kernel.dispatch(ctx, encoder, &[&plan.uniform, a, b, bias, c], plan.groups);
+        let kernel = if plan.wide { &self.wide } else { &self.kernel };
+        kernel.dispatch(ctx, encoder, &[&plan.uniform, a, b, bias, c], plan.groups);
     }
 }
 
 /// Milliseconds per `m × n × k` product and its GFLOP/s, best of `reps`
-/// (after a warm-up), for `gast bench`.
-pub fn bench_gemm(ctx: &GpuContext, m: usize, n: usize, k: usize, reps: usize) -> Vec<(String, f64)> {
-    let gemm = Gemm::new(ctx);
+/// (after a warm-up), for `gast bench`, with the tiling `tile` chooses.
+pub fn bench_gemm(ctx: &GpuContext, m: usize, n: usize, k: usize, reps: usize, tile: GemmTile) -> Vec<(String, f64)> {
+    let gemm = Gemm::with_tile(ctx, tile);
     let a = ctx.upload("bench.a", &vec![0.5f32; m * k]);
     let b = ctx.upload("bench.b", &vec![0.25f32; k * n]);
     let c = ctx.zeros("bench.c", m * n);
@@ -238,7 +316,8 @@ pub fn bench_gemm(ctx: &GpuContext, m: usize, n: usize, k: usize, reps: usize) -
         best = best.min(t.elapsed().as_secs_f64() * 1e3);
     }
     let gflops = 2.0 * (m * n * k) as f64 / (best * 1e-3) / 1e9;
-    vec![(format!("gemm {m}×{n}×{k} ms"), best), (format!("gemm {m}×{n}×{k} GFLOP/s"), gflops)]
+    let name = format!("gemm {m}×{n}×{k} {}", if plan.wide { "128²" } else { "64²" });
+    vec![(format!("{name} ms"), best), (format!("{name} GFLOP/s"), gflops)]
 }
 
 #[cfg(test)]
@@ -280,9 +359,60 @@ mod tests {
 
     #[test]
     fn matches_a_cpu_product_on_odd_sizes_and_every_layout() {
+        for tile in [GemmTile::Narrow, GemmTile::Wide] {
+            matches_a_cpu_product_with(tile, (67, 45, 33));
+            // Past one wide block in every direction, k not a whole slice.
+            matches_a_cpu_product_with(tile, (131, 140, 21));
+        }
+    }
+
+    /// Both tilings sum each output in the same order: the same bits, on a
+    /// product of several blocks each way with a partial last block.
+    #[test]
+    fn the_wide_tiling_gives_the_narrow_ones_bits() {
         let ctx = ctx();
-        let gemm = Gemm::new(ctx);
-        let (m, n, k) = (67, 45, 33);
+        let (m, n, k) = (300, 270, 77);
+        let (a, b) = (noise(m * k, 5), noise(k * n, 6));
+        let (ab, bb) = (ctx.upload("a", &a), ctx.upload("b", &b));
+        let spec = GemmSpec { a: Strided::transposed(0, m), ..GemmSpec::plain(m, n, k) };
+        let mut results = Vec::new();
+        for tile in [GemmTile::Narrow, GemmTile::Wide] {
+            let gemm = Gemm::with_tile(ctx, tile);
+            let plan = gemm.plan(ctx, &spec);
+            assert_eq!(plan.is_wide(), tile == GemmTile::Wide);
+            let cb = ctx.zeros("c", m * n);
+            let mut enc = ctx.encoder("gemm tilings");
+            gemm.record(ctx, &mut enc, &plan, &ab, &bb, None, &cb);
+            ctx.submit(enc);
+            results.push(ctx.read::<f32>(&cb).expect("read back"));
+        }
+        assert!(results[0].iter().any(|v| *v != 0.0));
+        let differ = results[0].iter().zip(&results[1]).filter(|(x, y)| x.to_bits() != y.to_bits()).count();
+        assert_eq!(differ, 0, "{differ} of {} outputs differ between the tilings", m * n);
+    }
+
+    /// Auto takes the wide tiling where its grid still fills a GPU: the
+    /// GCFM search's scores and VGG's input gradients, not conv3_1's forward
+    /// at a 512 px step (256 × 4,096) nor small products; on a software
+    /// adapter every product of a wide block or more.
+    #[test]
+    fn auto_tiles_wide_only_where_the_grid_stays_full() {
+        let auto = |m, n, k| GemmTile::Auto.wide(&GemmSpec::plain(m, n, k), false);
+        assert!(auto(4096, 4096, 256), "GCFM scores at 512 px");
+        assert!(auto(1152, 4096, 256), "conv3_1's input gradient at 512 px");
+        assert!(!auto(256, 4096, 1152), "conv3_1's forward at 512 px");
+        assert!(!auto(64, 65536, 27), "conv1_1: fewer than 128 rows");
+        assert!(!auto(67, 45, 33));
+        let software = |m, n, k| GemmTile::Auto.wide(&GemmSpec::plain(m, n, k), true);
+        assert!(software(256, 4096, 1152) && software(128, 128, 9));
+        assert!(!software(64, 65536, 27) && !software(67, 45, 33));
+        let (tiny, big) = (GemmSpec::plain(3, 3, 3), GemmSpec::plain(4096, 4096, 256));
+        assert!(GemmTile::Wide.wide(&tiny, false) && !GemmTile::Narrow.wide(&big, true));
+    }
+
+    fn matches_a_cpu_product_with(tile: GemmTile, (m, n, k): (usize, usize, usize)) {
+        let ctx = ctx();
+        let gemm = Gemm::with_tile(ctx, tile);
         let mut cases = vec![
             ("A·B", GemmSpec::plain(m, n, k)),
             ("Aᵀ·B", GemmSpec { a: Strided::transposed(0, m), ..GemmSpec::plain(m, n, k) }),
@@ -323,7 +453,7 @@ mod tests {
             let want = reference(spec, &a, &b, &bias, &c0);
             let worst = got.iter().zip(&want).map(|(g, w)| (g - w).abs()).fold(0f32, f32::max);
             if worst >= 1e-4 {
-                failures.push(format!("{name}: largest difference {worst}"));
+                failures.push(format!("{tile:?} {m}×{n}×{k} {name}: largest difference {worst}"));
             }
         }
         assert!(failures.is_empty(), "{}", failures.join("\n"));
