@@ -172,9 +172,18 @@ struct Report {
     summary: Summary,
 }
 
+/// One preview view's measures (`report.json`'s `preview`).
 #[derive(Serialize, Clone, Copy)]
 struct PreviewMetrics {
     view: usize,
+    #[serde(flatten)]
+    measures: Measures,
+}
+
+/// The style distances, depth change and covered colour of a view's renders
+/// (input, colour-matched, after), or their mean over the preview views.
+#[derive(Serialize, Clone, Copy, Default)]
+struct Measures {
     mean_std_before: f32,
     /// The colour-matched render's, the state the optimisation starts from.
     mean_std_matched: f32,
@@ -194,22 +203,41 @@ struct PreviewMetrics {
     colour_after: CoveredColour,
 }
 
-#[derive(Serialize, Default)]
+impl Measures {
+    /// The mean of each measure over `all` (zeros when empty).
+    fn mean<'a>(all: impl ExactSizeIterator<Item = &'a Measures>) -> Self {
+        let n = all.len().max(1) as f32;
+        let mut m = Self::default();
+        for p in all {
+            m.mean_std_before += p.mean_std_before / n;
+            m.mean_std_matched += p.mean_std_matched / n;
+            m.mean_std_after += p.mean_std_after / n;
+            m.nn_distance_before += p.nn_distance_before / n;
+            m.nn_distance_matched += p.nn_distance_matched / n;
+            m.nn_distance_after += p.nn_distance_after / n;
+            m.inverse_depth_change += p.inverse_depth_change / n;
+            m.depth_style_matched.nn_cos += p.depth_style_matched.nn_cos / n;
+            m.depth_style_matched.sw += p.depth_style_matched.sw / n;
+            m.depth_style_after.nn_cos += p.depth_style_after.nn_cos / n;
+            m.depth_style_after.sw += p.depth_style_after.sw / n;
+            m.relief_energy += p.relief_energy / n;
+            m.colour_matched.luminance += p.colour_matched.luminance / n;
+            m.colour_matched.chroma += p.colour_matched.chroma / n;
+            m.colour_after.luminance += p.colour_after.luminance / n;
+            m.colour_after.chroma += p.colour_after.chroma / n;
+        }
+        m
+    }
+}
+
+/// The preview views' mean measures and the colour-collapse detector on them
+/// (`report.json`'s `summary`).
+#[derive(Serialize)]
 struct Summary {
-    mean_std_before: f32,
-    mean_std_matched: f32,
-    mean_std_after: f32,
-    nn_distance_before: f32,
-    nn_distance_matched: f32,
-    nn_distance_after: f32,
-    inverse_depth_change: f32,
-    depth_style_matched: DepthStyleDistance,
-    depth_style_after: DepthStyleDistance,
-    relief_energy: f32,
-    /// The colour-collapse detector on the preview views: covered luminance
-    /// and chroma, colour-matched and after, and what fired (null: nothing).
-    colour_matched: CoveredColour,
-    colour_after: CoveredColour,
+    #[serde(flatten)]
+    measures: Measures,
+    /// What the detector fired on, from the covered luminance and chroma
+    /// (colour-matched against after); null: nothing.
     colour_collapse: Option<Degeneration>,
 }
 
@@ -453,37 +481,16 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     )?;
     part_done("contact sheet drawn", &mut t_part);
     eprintln!("  contact sheet: {}", sheet_path.display());
-    let mut summary = Summary::default();
-    let n = preview.len().max(1) as f32;
-    for p in &preview {
-        summary.mean_std_before += p.mean_std_before / n;
-        summary.mean_std_matched += p.mean_std_matched / n;
-        summary.mean_std_after += p.mean_std_after / n;
-        summary.nn_distance_matched += p.nn_distance_matched / n;
-        summary.nn_distance_before += p.nn_distance_before / n;
-        summary.nn_distance_after += p.nn_distance_after / n;
-        summary.inverse_depth_change += p.inverse_depth_change / n;
-        summary.depth_style_matched.nn_cos += p.depth_style_matched.nn_cos / n;
-        summary.depth_style_matched.sw += p.depth_style_matched.sw / n;
-        summary.depth_style_after.nn_cos += p.depth_style_after.nn_cos / n;
-        summary.depth_style_after.sw += p.depth_style_after.sw / n;
-        summary.relief_energy += p.relief_energy / n;
-        summary.colour_matched.luminance += p.colour_matched.luminance / n;
-        summary.colour_matched.chroma += p.colour_matched.chroma / n;
-        summary.colour_after.luminance += p.colour_after.luminance / n;
-        summary.colour_after.chroma += p.colour_after.chroma / n;
-    }
-    summary.colour_collapse = gast_core::eval::stability::colour_collapse(
-        summary.colour_matched,
-        summary.colour_after,
-        &StabilityThresholds::default(),
-    );
+    let m = Measures::mean(preview.iter().map(|p| &p.measures));
+    let colour_collapse =
+        gast_core::eval::stability::colour_collapse(m.colour_matched, m.colour_after, &StabilityThresholds::default());
+    let summary = Summary { measures: m, colour_collapse };
     eprintln!(
         "  covered colour: luminance {:.3} -> {:.3}, chroma {:.3} -> {:.3} (colour-matched -> after); colour collapse: {}",
-        summary.colour_matched.luminance,
-        summary.colour_after.luminance,
-        summary.colour_matched.chroma,
-        summary.colour_after.chroma,
+        m.colour_matched.luminance,
+        m.colour_after.luminance,
+        m.colour_matched.chroma,
+        m.colour_after.chroma,
         summary
             .colour_collapse
             .as_ref()
@@ -492,21 +499,21 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     eprintln!(
         "  style distance (mean-std of VGG relu3) {:.4} -> {:.4} -> {:.4}; nearest-neighbour {:.4} -> {:.4} -> {:.4} \
          (input -> colour-matched -> after); inverse depth changed by {:.1}%",
-        summary.mean_std_before,
-        summary.mean_std_matched,
-        summary.mean_std_after,
-        summary.nn_distance_before,
-        summary.nn_distance_matched,
-        summary.nn_distance_after,
-        100.0 * summary.inverse_depth_change
+        m.mean_std_before,
+        m.mean_std_matched,
+        m.mean_std_after,
+        m.nn_distance_before,
+        m.nn_distance_matched,
+        m.nn_distance_after,
+        100.0 * m.inverse_depth_change
     );
     eprintln!(
         "  depth against the style's depth: nearest-neighbour {:.4} -> {:.4}, sliced Wasserstein {:.3} -> {:.3} (colour-matched -> after); relief energy {:.4} of the depth range",
-        summary.depth_style_matched.nn_cos,
-        summary.depth_style_after.nn_cos,
-        summary.depth_style_matched.sw,
-        summary.depth_style_after.sw,
-        summary.relief_energy
+        m.depth_style_matched.nn_cos,
+        m.depth_style_after.nn_cos,
+        m.depth_style_matched.sw,
+        m.depth_style_after.sw,
+        m.relief_energy
     );
     let report = Report {
         scene: args.scene.display().to_string(),
@@ -568,8 +575,7 @@ fn write_previews(
             vgg.features(&rgb, h as usize, w as usize)
         };
         let (fb, fm, fa) = (feats(&before), feats(&matched), feats(&after));
-        metrics.push(PreviewMetrics {
-            view: k,
+        let measures = Measures {
             mean_std_before: mean_std_distance(&fb.data, &style_feats.data, fb.c),
             mean_std_matched: mean_std_distance(&fm.data, &style_feats.data, fm.c),
             mean_std_after: mean_std_distance(&fa.data, &style_feats.data, fa.c),
@@ -588,7 +594,8 @@ fn write_previews(
             // As the detector of `gast bench quality` reads them: each render's own covered pixels.
             colour_matched: CoveredColour::of(&matched.rgb, &matched.alpha),
             colour_after: CoveredColour::of(&after.rgb, &after.alpha),
-        });
+        };
+        metrics.push(PreviewMetrics { view: k, measures });
     }
     Ok(metrics)
 }
@@ -596,6 +603,31 @@ fn write_previews(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The summary is the preview views' mean, and report.json keeps its
+    /// flat keys (`summary.nn_distance_after`, `preview[0].view`) that the
+    /// studies and the device check's report read.
+    #[test]
+    fn the_summary_is_the_views_mean_with_flat_keys() {
+        let view = |v: f32| Measures {
+            nn_distance_after: v,
+            depth_style_after: DepthStyleDistance { nn_cos: v, sw: 2.0 * v },
+            colour_after: CoveredColour { luminance: v, chroma: 0.5 },
+            ..Measures::default()
+        };
+        let preview =
+            [PreviewMetrics { view: 0, measures: view(0.2) }, PreviewMetrics { view: 1, measures: view(0.4) }];
+        let m = Measures::mean(preview.iter().map(|p| &p.measures));
+        assert!((m.nn_distance_after - 0.3).abs() < 1e-6 && (m.depth_style_after.sw - 0.6).abs() < 1e-6);
+        assert!((m.colour_after.chroma - 0.5).abs() < 1e-6);
+        assert_eq!(Measures::mean([].iter()).nn_distance_after, 0.0);
+        let json = serde_json::to_value(Summary { measures: m, colour_collapse: None }).expect("serialises");
+        assert!(json["nn_distance_after"].as_f64().is_some_and(|v| (v - 0.3).abs() < 1e-6), "{json}");
+        assert!(json["depth_style_after"]["sw"].is_number() && json["colour_collapse"].is_null(), "{json}");
+        let first = serde_json::to_value(preview[0]).expect("serialises");
+        assert_eq!(first["view"], 0);
+        assert!(first["mean_std_after"].is_number() && first.get("measures").is_none(), "{first}");
+    }
 
     #[test]
     fn a_failed_weights_lookup_names_the_flag_only_when_none_was_given() {
