@@ -235,6 +235,9 @@ def compare(prefix, arms, title, names):
 ab_parts = compare("ab", ("base", "new"), "this build / baseline", (f"baseline {base_rev or '(--base)'}", "this build"))
 tile_parts = compare("tile", ("t64", "auto"), "GEMM tiles auto / 64²", ("GAST_GEMM_TILE=64", "auto"))
 doc["tile_parts"] = tile_parts
+# Every product in 128² blocks (arm t128, not in the dry run): whether auto's threshold is right.
+wide_parts = compare("tile", ("t64", "t128"), "GEMM tiles 128² / 64²", ("GAST_GEMM_TILE=64", "GAST_GEMM_TILE=128"))
+doc["wide_parts"] = wide_parts
 doc["ab_parts"] = ab_parts
 
 # The depth network.
@@ -262,11 +265,15 @@ if ab_parts:
            *(f"| {p['resolution']} | {p['part']} | {p['baseline_ms']:.3f} | {p['new_ms']:.3f} | "
              f"{'–' if p['ratio'] is None else format(p['ratio'], '.3g')} |" for p in ab_parts), ""]
 if tile_parts:
-    md += ["GPU parts with the GEMM's 64² tiles against auto (128² for the large products), this build, "
-           "medians of the rounds:", "",
-           "| px | part | 64² ms | auto ms | ratio |", "|---|---|---|---|---|",
-           *(f"| {p['resolution']} | {p['part']} | {p['baseline_ms']:.3f} | {p['new_ms']:.3f} | "
-             f"{'–' if p['ratio'] is None else format(p['ratio'], '.3g')} |" for p in tile_parts), ""]
+    wide = {(p["resolution"], p["part"]): p for p in wide_parts}
+    ratio = lambda p: "–" if p is None or p["ratio"] is None else format(p["ratio"], ".3g")
+    ms = lambda p: "–" if p is None else f"{p['new_ms']:.3f}"
+    md += ["GPU parts with the GEMM's 64² tiles, auto (128² for the large products) and 128² for every "
+           "product, this build, medians of the rounds:", "",
+           "| px | part | 64² ms | auto ms | auto / 64² | 128² ms | 128² / 64² |", "|---|---|---|---|---|---|---|",
+           *(f"| {p['resolution']} | {p['part']} | {p['baseline_ms']:.3f} | {p['new_ms']:.3f} | {ratio(p)} | "
+             f"{ms(wide.get((p['resolution'], p['part'])))} | {ratio(wide.get((p['resolution'], p['part'])))} |"
+             for p in tile_parts), ""]
 with open(os.path.join(out, "gpu-check.md"), "w") as f:
     f.write("\n".join(md))
 print("\n".join(md))

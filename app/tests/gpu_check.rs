@@ -85,9 +85,11 @@ fn the_gpu_check_report_gives_this_build_against_the_baseline() {
         ("base", 2, 42.0, 46.0, 6.7, 16.4),
         ("new", 2, 22.0, 25.0, 2.2, 9.4),
     ];
-    // The same figures as the GEMM tilings' arms (64² first, like the baseline).
+    // The same figures as the GEMM tilings' arms (64² first, like the baseline;
+    // every product in 128² blocks as fast as auto).
     let tiles = runs.map(|(arm, round, c, g, e, b)| (if arm == "base" { "t64" } else { "auto" }, round, c, g, e, b));
-    let named = runs.iter().map(|r| ("ab", *r)).chain(tiles.iter().map(|r| ("tile", *r)));
+    let wide = runs.iter().filter(|r| r.0 == "new").map(|&(_, round, c, g, e, b)| ("t128", round, c, g, e, b));
+    let named = runs.iter().map(|r| ("ab", *r)).chain(tiles.iter().map(|r| ("tile", *r))).chain(wide.map(|r| ("tile", r)));
     for (prefix, (arm, round, colour, geometry, edge, backward)) in named {
         let name = format!("{prefix}_256_{arm}{round}");
         write(&format!("{name}.rc.json"), format!(r#"{{"name":"{name}","rc":0,"wall_s":9.5}}"#));
@@ -131,8 +133,11 @@ fn the_gpu_check_report_gives_this_build_against_the_baseline() {
     assert!(tiled["note"].as_str().is_some_and(|n| n.contains("GAST_GEMM_TILE=64: 40.00, 42.00")), "{tiled}");
     let tile_parts = doc["tile_parts"].as_array().expect("tile_parts");
     assert_eq!(tile_parts.len(), 2, "{tile_parts:?}");
+    let wide = figure("guitar geometry step at 256 px, GEMM tiles 128² / 64²");
+    assert!((wide["value"].as_f64().expect("ratio") - 24.0 / 45.0).abs() < 1e-9, "{wide}");
     let table = std::fs::read_to_string(out.join("gpu-check.md")).expect("gpu-check.md");
     assert!(table.contains("| 256 | edge map 256² | 6.600 | 2.100 | 0.318 |"), "{table}");
-    assert!(table.contains("| 64² ms | auto ms | ratio |"), "{table}");
+    assert!(table.contains("| 64² ms | auto ms | auto / 64² | 128² ms | 128² / 64² |"), "{table}");
+    assert!(table.contains("| 256 | edge map 256² | 6.600 | 2.100 | 0.318 | 2.100 | 0.318 |"), "{table}");
     std::fs::remove_dir_all(&dir).ok();
 }
