@@ -89,7 +89,8 @@ fn the_gpu_check_report_gives_this_build_against_the_baseline() {
     // every product in 128² blocks as fast as auto).
     let tiles = runs.map(|(arm, round, c, g, e, b)| (if arm == "base" { "t64" } else { "auto" }, round, c, g, e, b));
     let wide = runs.iter().filter(|r| r.0 == "new").map(|&(_, round, c, g, e, b)| ("t128", round, c, g, e, b));
-    let named = runs.iter().map(|r| ("ab", *r)).chain(tiles.iter().map(|r| ("tile", *r))).chain(wide.map(|r| ("tile", r)));
+    let named =
+        runs.iter().map(|r| ("ab", *r)).chain(tiles.iter().map(|r| ("tile", *r))).chain(wide.map(|r| ("tile", r)));
     for (prefix, (arm, round, colour, geometry, edge, backward)) in named {
         let name = format!("{prefix}_256_{arm}{round}");
         write(&format!("{name}.rc.json"), format!(r#"{{"name":"{name}","rc":0,"wall_s":9.5}}"#));
