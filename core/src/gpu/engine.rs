@@ -20,7 +20,7 @@ use std::collections::HashMap;
 
 use super::adam::AdamKernel;
 use super::assignment::GpuAssignment;
-use super::step_loss::{StepLossKernels, StepLossPlan, slot};
+use super::step_loss::{StepInputs, StepLossKernels, StepLossPlan, slot};
 use super::{
     GcfmSubset, GpuAdam, GpuContext, GpuError, GpuFocus, GpuGaussians, GpuGrads, GpuRaster, GpuStyle, RasterKernels,
     RefLoss, Search,
@@ -339,13 +339,20 @@ impl GpuEngine {
         let mut enc = ctx.encoder("engine.step");
         enc.clear_buffer(&self.scalars, 0, None);
         plan.raster.forward(ctx, &k.raster, &mut enc, &self.g, cam, &opts);
-        let (rgb, inv_depth) = (&plan.raster.rgb, &plan.raster.inv_depth);
-        let depth_ref = geometry.then_some(&target.inv_depth);
-        let content = Some(&target.content);
         let focus = if self.object_focus { target.focus.as_ref() } else { None };
-        // The hold acts with the object focus only, as on the CPU.
-        let hold = if self.object_focus { target.hold.as_ref() } else { None };
-        let holding = hold.is_some();
+        let inputs = StepInputs {
+            rgb_raw: &plan.raster.rgb,
+            inv_depth: &plan.raster.inv_depth,
+            edge: None,
+            content: Some(&target.content),
+            depth_ref: geometry.then_some(&target.inv_depth),
+            // The hold acts with the object focus only, as on the CPU.
+            hold: if self.object_focus { target.hold.as_ref() } else { None },
+            depth_grad: geometry,
+            focus,
+            scalars: &self.scalars,
+        };
+        let holding = inputs.hold.is_some();
         // The palette hold acts with the object focus only, as on the CPU.
         let palette_held = w.palette > 0.0 && focus.is_some();
         if palette_held {
@@ -363,7 +370,7 @@ impl GpuEngine {
             (None, Some(subset), Some(scratch)) => Search::Subset { subset, scratch },
             _ => Search::Every,
         };
-        plan.loss.record_features(ctx, &k.loss, &mut enc, rgb, inv_depth, None, focus);
+        plan.loss.record_features(ctx, &k.loss, &mut enc, &inputs);
         // The assignment terms: the drawn columns gathered and submitted
         // first, the feature-space losses submitted behind them, so the device
         // runs the GCFM search while the host pairs the columns; the pull's
@@ -383,22 +390,12 @@ impl GpuEngine {
             gathered = Some(submit(&mut host, enc));
             enc = ctx.encoder("engine.step.feature_losses");
         }
-        plan.loss.record_feature_losses(
-            ctx,
-            &k.loss,
-            &mut enc,
-            &self.style,
-            content,
-            geometry,
-            focus,
-            &self.scalars,
-            search,
-        );
+        plan.loss.record_feature_losses(ctx, &k.loss, &mut enc, &self.style, &inputs, search);
         // The depth's backward pass does not need the pairing: it is recorded
         // first, so with the assignment terms it is submitted before the host
         // waits and the device runs it while the host pairs. (It writes its
         // own buffers and slots: the order leaves the results as they were.)
-        plan.loss.record_backward_depth(ctx, &k.loss, &mut enc, inv_depth, depth_ref, geometry, focus, &self.scalars);
+        plan.loss.record_backward_depth(ctx, &k.loss, &mut enc, &inputs);
         let mut pulled = None;
         if let (Some(gathered), Some(a)) = (gathered, self.assign.as_mut()) {
             submit(&mut host, enc);
@@ -406,16 +403,8 @@ impl GpuEngine {
             (host.wait_ms, host.pairing_ms) = a.last_pull_ms();
             enc = ctx.encoder("engine.step.backward");
         }
-        plan.loss.record_backward_rgb(
-            ctx,
-            &k.loss,
-            &mut enc,
-            rgb,
-            hold,
-            focus,
-            &self.scalars,
-            if assigning { self.assign.as_ref() } else { None },
-        );
+        let assign = if assigning { self.assign.as_ref() } else { None };
+        plan.loss.record_backward_rgb(ctx, &k.loss, &mut enc, &inputs, assign);
         let keep = if searched && reuse > 1 {
             // The buffer of an earlier search of this view, or a new one.
             let m = match &target.kept {

@@ -124,7 +124,7 @@ pub use resize::{Clamp01, Downscale, ResizeKernels};
 pub use scan::{GpuScan, ScanKernels};
 pub use sliced::{GpuSlicedTarget, SlicedKernels, SlicedLoss};
 pub use sort::{GpuSort, SortKernels, bits_for};
-pub use step_loss::{StepLossKernels, StepLossPlan, step_loss_gpu};
+pub use step_loss::{StepInputs, StepLossKernels, StepLossPlan, step_loss_gpu};
 pub use vgg::{GpuVgg, GpuVggState, GpuVggWorkspace, bench_vgg};
 
 use serde::{Deserialize, Serialize};

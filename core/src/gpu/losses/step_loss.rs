@@ -308,61 +308,41 @@ impl StepLossPlan {
         enc.copy_buffer_to_buffer(self.states[2].features(), 0, out, 0, (self.feature_len * 4) as u64);
     }
 
-    /// Records the whole loss of one render: `rgb_raw` (`h × w × 3`, before
-    /// the clamp) and `inv_depth` (`h × w`); `edge` the render's edge map
-    /// (`h × w`) when given, else computed from the clamped render; `content`
-    /// a content target and `depth_ref` the inverse depth of `G^c`, when the
-    /// step uses them; `hold` the background hold's reference
-    /// ([`RefLoss::hold_reference`]), used when λ_out > 0; the depth map's
-    /// gradient only when `depth_grad`; `focus` the object focus ([`StepLossPlan::record_focus`]), the whole
-    /// frame without one; `search` where the GCFM matches come from (a
-    /// search of every position or of a subset, or the ones
-    /// [`StepLossPlan::matches`] holds). The
-    /// unweighted terms go to `scalars` ([`slot`]), the gradients of the
+    /// Records the whole loss of one render ([`StepInputs`]); `search`
+    /// where the GCFM matches come from (a search of every position or of a
+    /// subset, or the ones [`StepLossPlan::matches`] holds). The unweighted
+    /// terms go to the inputs' `scalars` ([`slot`]), the gradients of the
     /// weighted total to [`StepLossPlan::v_rgb`] and [`StepLossPlan::v_inv_depth`].
-    #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
         enc: &mut wgpu::CommandEncoder,
         style: &GpuStyle,
-        rgb_raw: &wgpu::Buffer,
-        inv_depth: &wgpu::Buffer,
-        edge: Option<&wgpu::Buffer>,
-        content: Option<&wgpu::Buffer>,
-        depth_ref: Option<&wgpu::Buffer>,
-        hold: Option<&wgpu::Buffer>,
-        depth_grad: bool,
-        focus: Option<&GpuFocus>,
-        scalars: &wgpu::Buffer,
+        inputs: &StepInputs<'_>,
         search: Search<'_>,
     ) {
-        self.record_features(ctx, k, enc, rgb_raw, inv_depth, edge, focus);
-        self.record_feature_losses(ctx, k, enc, style, content, depth_grad, focus, scalars, search);
-        self.record_backward(ctx, k, enc, rgb_raw, inv_depth, depth_ref, hold, depth_grad, focus, scalars, None);
+        self.record_features(ctx, k, enc, inputs);
+        self.record_feature_losses(ctx, k, enc, style, inputs, search);
+        self.record_backward(ctx, k, enc, inputs, None);
     }
 
     /// The first of [`StepLossPlan::record`]'s three parts: the three maps VGG sees and
     /// their features ([`StepLossPlan::rgb_features`] holds the RGB ones).
-    #[allow(clippy::too_many_arguments)]
     pub fn record_features(
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
         enc: &mut wgpu::CommandEncoder,
-        rgb_raw: &wgpu::Buffer,
-        inv_depth: &wgpu::Buffer,
-        edge: Option<&wgpu::Buffer>,
-        focus: Option<&GpuFocus>,
+        inputs: &StepInputs<'_>,
     ) {
-        let focus = focus.unwrap_or(&self.frame);
+        let focus = inputs.focus.unwrap_or(&self.frame);
         // The three maps VGG sees.
-        self.clamp.forward(ctx, enc, rgb_raw, &self.rgb);
+        self.clamp.forward(ctx, enc, inputs.rgb_raw, &self.rgb);
         self.down.forward(ctx, enc, &self.rgb, &self.small[0]);
-        self.depth_map.forward(ctx, enc, inv_depth, focus.pixels(), &self.depth3);
+        self.depth_map.forward(ctx, enc, inputs.inv_depth, focus.pixels(), &self.depth3);
         self.down.forward(ctx, enc, &self.depth3, &self.small[1]);
-        match edge {
+        match inputs.edge {
             Some(e) => self.down.forward(ctx, enc, e, &self.small[2]),
             None => {
                 self.edges.record(ctx, enc, &self.rgb, &self.edge3);
@@ -381,29 +361,25 @@ impl StepLossPlan {
     /// every step, λ_swd on the depth's where its gradient is taken). The
     /// engine submits them apart from [`StepLossPlan::record_backward`] when
     /// the assignment terms pair on the host in between.
-    #[allow(clippy::too_many_arguments)]
     pub fn record_feature_losses(
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
         enc: &mut wgpu::CommandEncoder,
         style: &GpuStyle,
-        content: Option<&wgpu::Buffer>,
-        depth_grad: bool,
-        focus: Option<&GpuFocus>,
-        scalars: &wgpu::Buffer,
+        inputs: &StepInputs<'_>,
         search: Search<'_>,
     ) {
-        let focus = focus.unwrap_or(&self.frame);
+        let (focus, scalars) = (inputs.focus.unwrap_or(&self.frame), inputs.scalars);
         let feats = [self.states[0].features(), self.states[1].features(), self.states[2].features()];
         k.gcfm.record(ctx, enc, &self.gcfm_ws, style, feats, focus, &self.v_feat[0], &self.v_feat[1], scalars, search);
-        if let Some(target) = content {
+        if let Some(target) = inputs.content {
             self.content.record(ctx, enc, feats[0], target, focus, &self.v_feat[0], scalars);
         }
         if self.feature_mean_on {
             self.feature_mean.record(ctx, enc, feats[0], focus, &self.v_feat[0], scalars);
         }
-        for (m, wanted) in [(0, true), (1, depth_grad)] {
+        for (m, wanted) in [(0, true), (1, inputs.depth_grad)] {
             let term = self.sliced[m].as_ref().filter(|_| wanted && self.sliced_on[m]);
             if let (Some(term), Some(target)) = (term, style.sliced(m)) {
                 term.record(ctx, enc, target, feats[m], focus, &self.v_feat[m], scalars);
@@ -414,23 +390,16 @@ impl StepLossPlan {
     /// After [`StepLossPlan::record_feature_losses`]: the gradients back to
     /// the render, [`StepLossPlan::record_backward_rgb`] then
     /// [`StepLossPlan::record_backward_depth`].
-    #[allow(clippy::too_many_arguments)]
     pub fn record_backward(
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
         enc: &mut wgpu::CommandEncoder,
-        rgb_raw: &wgpu::Buffer,
-        inv_depth: &wgpu::Buffer,
-        depth_ref: Option<&wgpu::Buffer>,
-        hold: Option<&wgpu::Buffer>,
-        depth_grad: bool,
-        focus: Option<&GpuFocus>,
-        scalars: &wgpu::Buffer,
+        inputs: &StepInputs<'_>,
         assign: Option<&GpuAssignment>,
     ) {
-        self.record_backward_rgb(ctx, k, enc, rgb_raw, hold, focus, scalars, assign);
-        self.record_backward_depth(ctx, k, enc, inv_depth, depth_ref, depth_grad, focus, scalars);
+        self.record_backward_rgb(ctx, k, enc, inputs, assign);
+        self.record_backward_depth(ctx, k, enc, inputs);
     }
 
     /// After [`StepLossPlan::record_feature_losses`]: the assignment terms'
@@ -438,63 +407,79 @@ impl StepLossPlan {
     /// gradient through VGG back to the render, with TV, the hold, the
     /// palette hold (with an object focus, against
     /// [`StepLossPlan::set_palette_reference`]) and the clamp's mask on the way.
-    #[allow(clippy::too_many_arguments)]
     pub fn record_backward_rgb(
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
         enc: &mut wgpu::CommandEncoder,
-        rgb_raw: &wgpu::Buffer,
-        hold: Option<&wgpu::Buffer>,
-        focus: Option<&GpuFocus>,
-        scalars: &wgpu::Buffer,
+        inputs: &StepInputs<'_>,
         assign: Option<&GpuAssignment>,
     ) {
-        let object = focus;
-        let focus = focus.unwrap_or(&self.frame);
+        let (object, scalars) = (inputs.focus, inputs.scalars);
+        let focus = object.unwrap_or(&self.frame);
         if let Some(a) = assign {
             a.record_scatter(ctx, enc, &self.v_feat[0]);
         }
         k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[0], &self.v_feat[0], &self.v_small[0]);
         self.down.backward(ctx, enc, &self.v_small[0], &self.v_rgb, false);
         self.tv.record(ctx, enc, &self.rgb, focus, &self.v_rgb, scalars);
-        if let Some(reference) = hold.filter(|_| self.hold_on) {
+        if let Some(reference) = inputs.hold.filter(|_| self.hold_on) {
             self.hold.record(ctx, enc, &self.rgb, reference, &self.v_rgb, scalars);
         }
         if let Some(object) = object.filter(|_| self.palette_on) {
             self.palette.record(ctx, enc, &self.rgb, object.pixels(), &self.v_rgb, scalars);
         }
-        self.clamp.backward(ctx, enc, rgb_raw, &self.v_rgb);
+        self.clamp.backward(ctx, enc, inputs.rgb_raw, &self.v_rgb);
     }
 
     /// After [`StepLossPlan::record_feature_losses`]: the depth features'
-    /// gradient back to the inverse depth (zero when `depth_grad` is off),
-    /// and the depth terms. It does not depend on the assignment terms, so
-    /// the engine records it before it waits for their host pairing.
-    #[allow(clippy::too_many_arguments)]
+    /// gradient back to the inverse depth (zero when the inputs' `depth_grad`
+    /// is off), and the depth terms. It does not depend on the assignment
+    /// terms, so the engine records it before it waits for their host pairing.
     pub fn record_backward_depth(
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
         enc: &mut wgpu::CommandEncoder,
-        inv_depth: &wgpu::Buffer,
-        depth_ref: Option<&wgpu::Buffer>,
-        depth_grad: bool,
-        focus: Option<&GpuFocus>,
-        scalars: &wgpu::Buffer,
+        inputs: &StepInputs<'_>,
     ) {
-        let focus = focus.unwrap_or(&self.frame);
-        if depth_grad {
+        let focus = inputs.focus.unwrap_or(&self.frame);
+        if inputs.depth_grad {
             k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[1], &self.v_feat[1], &self.v_small[1]);
             self.down.backward(ctx, enc, &self.v_small[1], &self.v_depth3, false);
-            self.depth_map.backward(ctx, enc, inv_depth, focus.pixels(), &self.v_depth3, &self.v_inv_depth, false);
+            let pixels = focus.pixels();
+            self.depth_map.backward(ctx, enc, inputs.inv_depth, pixels, &self.v_depth3, &self.v_inv_depth, false);
         } else {
             enc.clear_buffer(&self.v_inv_depth, 0, None);
         }
-        if let Some(d) = depth_ref {
-            self.depth_l1.record(ctx, enc, inv_depth, d, &self.v_inv_depth, scalars);
+        if let Some(d) = inputs.depth_ref {
+            self.depth_l1.record(ctx, enc, inputs.inv_depth, d, &self.v_inv_depth, inputs.scalars);
         }
     }
+}
+
+/// What one step's loss reads and writes beside its plan: the render's maps,
+/// the view's targets, the focus and the scalars.
+#[derive(Clone, Copy, Debug)]
+pub struct StepInputs<'a> {
+    /// The render's colour, `h × w × 3`, before the clamp.
+    pub rgb_raw: &'a wgpu::Buffer,
+    /// The render's inverse depth, `h × w`.
+    pub inv_depth: &'a wgpu::Buffer,
+    /// The render's edge map (`h × w × 3`) when given, else computed from the clamped render.
+    pub edge: Option<&'a wgpu::Buffer>,
+    /// The content target ([`StepLossPlan::record_content_target`]) when the step uses one.
+    pub content: Option<&'a wgpu::Buffer>,
+    /// The inverse depth of `G^c`, when the depth regulariser acts.
+    pub depth_ref: Option<&'a wgpu::Buffer>,
+    /// The background hold's reference ([`RefLoss::hold_reference`]), used when λ_out > 0.
+    pub hold: Option<&'a wgpu::Buffer>,
+    /// Whether the depth map's gradient is taken (geometry steps).
+    pub depth_grad: bool,
+    /// The object focus ([`StepLossPlan::record_focus`]); the whole frame without one.
+    pub focus: Option<&'a GpuFocus>,
+    /// Where the unweighted terms go ([`slot`]).
+    pub scalars: &'a wgpu::Buffer,
 }
 
 /// The sliced term of modality `m` (0 RGB, 1 depth) when its weight is on.
@@ -562,22 +547,18 @@ pub fn step_loss_gpu(
         target
     });
     let dref = depth_ref.map(|d| ctx.upload("loss.in.depth_ref", d));
-    plan.record(
-        ctx,
-        k,
-        &mut enc,
-        &gstyle,
-        &rgb,
-        &inv_depth,
-        Some(&edge),
-        content.as_ref(),
-        dref.as_ref(),
-        None,
+    let inputs = StepInputs {
+        rgb_raw: &rgb,
+        inv_depth: &inv_depth,
+        edge: Some(&edge),
+        content: content.as_ref(),
+        depth_ref: dref.as_ref(),
+        hold: None,
         depth_grad,
-        focus.as_ref(),
-        &scalars,
-        Search::Every,
-    );
+        focus: focus.as_ref(),
+        scalars: &scalars,
+    };
+    plan.record(ctx, k, &mut enc, &gstyle, &inputs, Search::Every);
     ctx.submit(enc);
     let s: Vec<f32> = ctx.read(&scalars)?;
     let mut m: Vec<u32> = ctx.read(plan.matches())?;
