@@ -261,18 +261,9 @@ mod tests {
         });
         assert!(m.send(Command::Pause));
         assert_eq!(crx.try_recv().ok(), Some(Command::Pause));
-        let step = |iter| {
-            Event::Step(StepReport {
-                iter,
-                total: 10,
-                cycle: 0,
-                phase: Phase::Color,
-                view: 0,
-                losses: LossTerms { total: 1.0 / (iter + 1) as f32, ..LossTerms::default() },
-                timings: Default::default(),
-                elapsed_s: (iter + 1) as f64,
-                colour: None,
-            })
+        let step = |iter: u32| {
+            let losses = LossTerms { total: 1.0 / (iter + 1) as f32, ..LossTerms::default() };
+            Event::Step(StepReport { losses, ..report(iter, 10, 0, Phase::Color, f64::from(iter + 1)) })
         };
         etx.send(step(0)).expect("send");
         etx.send(step(1)).expect("send");
@@ -290,6 +281,21 @@ mod tests {
         assert!(!m.is_live());
     }
 
+    /// A step's report of view 0 with zero losses and timings.
+    fn report(iter: u32, total: u32, cycle: u32, phase: Phase, elapsed_s: f64) -> StepReport {
+        StepReport {
+            iter,
+            total,
+            cycle,
+            phase,
+            view: 0,
+            losses: LossTerms::default(),
+            timings: Default::default(),
+            elapsed_s,
+            colour: None,
+        }
+    }
+
     /// The estimate follows the pace of the last whole cycle: a machine that
     /// slowed down after the first cycle is not read at the first cycle's pace.
     #[test]
@@ -300,17 +306,7 @@ mod tests {
         for iter in 0..10u32 {
             let cycle = iter / 4;
             elapsed += if cycle == 0 { 1.0 } else { 3.0 };
-            m.steps.push(StepReport {
-                iter,
-                total: 20,
-                cycle,
-                phase: if iter % 4 < 2 { Phase::Color } else { Phase::Geometry },
-                view: 0,
-                losses: LossTerms::default(),
-                timings: Default::default(),
-                elapsed_s: elapsed,
-                colour: None,
-            });
+            m.steps.push(report(iter, 20, cycle, if iter % 4 < 2 { Phase::Color } else { Phase::Geometry }, elapsed));
             let (p, eta) = m.progress().expect("progress");
             assert!((p - (iter + 1) as f32 / 20.0).abs() < 1e-6);
             let left = f64::from(20 - (iter + 1));
