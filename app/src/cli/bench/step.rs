@@ -117,6 +117,7 @@ impl StepRun {
     fn to_json(&self, label: &str) -> serde_json::Value {
         let phase = |p: gast_core::style::Phase| self.per_phase.iter().find(|x| x.0 == p).map(|x| x.1);
         let host = |p: gast_core::style::Phase| self.host_per_phase.iter().find(|x| x.0 == p).map(|x| x.1);
+        let (colour, geometry) = (host(gast_core::style::Phase::Color), host(gast_core::style::Phase::Geometry));
         serde_json::json!({
             "label": label,
             "device": self.device,
@@ -125,16 +126,16 @@ impl StepRun {
             "ms_per_step": self.wall_s * 1e3 / self.steps.max(1) as f64,
             "colour_step_median_ms": phase(gast_core::style::Phase::Color),
             "geometry_step_median_ms": phase(gast_core::style::Phase::Geometry),
-            "colour_pairing_median_ms": host(gast_core::style::Phase::Color).map(|h| h.pairing),
-            "geometry_pairing_median_ms": host(gast_core::style::Phase::Geometry).map(|h| h.pairing),
-            "colour_device_wait_median_ms": host(gast_core::style::Phase::Color).map(|h| h.waits),
-            "geometry_device_wait_median_ms": host(gast_core::style::Phase::Geometry).map(|h| h.waits),
-            "colour_record_median_ms": host(gast_core::style::Phase::Color).map(|h| h.record),
-            "geometry_record_median_ms": host(gast_core::style::Phase::Geometry).map(|h| h.record),
-            "colour_submit_median_ms": host(gast_core::style::Phase::Color).map(|h| h.submit),
-            "geometry_submit_median_ms": host(gast_core::style::Phase::Geometry).map(|h| h.submit),
-            "colour_bind_groups": host(gast_core::style::Phase::Color).map(|h| h.bind_groups),
-            "geometry_bind_groups": host(gast_core::style::Phase::Geometry).map(|h| h.bind_groups),
+            "colour_pairing_median_ms": colour.map(|h| h.pairing),
+            "geometry_pairing_median_ms": geometry.map(|h| h.pairing),
+            "colour_device_wait_median_ms": colour.map(|h| h.waits),
+            "geometry_device_wait_median_ms": geometry.map(|h| h.waits),
+            "colour_record_median_ms": colour.map(|h| h.record),
+            "geometry_record_median_ms": geometry.map(|h| h.record),
+            "colour_submit_median_ms": colour.map(|h| h.submit),
+            "geometry_submit_median_ms": geometry.map(|h| h.submit),
+            "colour_bind_groups": colour.map(|h| h.bind_groups),
+            "geometry_bind_groups": geometry.map(|h| h.bind_groups),
             "gpu_memory_mib": self.gpu_memory_mib,
             "targets_s": self.targets_s,
         })
@@ -584,9 +585,9 @@ fn gpu_parts(
     rows.extend(gpu::bench_gcfm(ctx, 768, n, 4096, 5));
     // The GEMM at the step's shapes in both tilings (`GAST_GEMM_TILE` picks
     // one for the parts above; auto takes 128² where the grid stays full).
-    for (m, n, k) in [(n, 4096, 256), (1152, n, 256), (256, n, 1152)] {
+    for (rows_a, cols_b, inner) in [(n, 4096, 256), (1152, n, 256), (256, n, 1152)] {
         for tile in [gpu::GemmTile::Narrow, gpu::GemmTile::Wide] {
-            rows.extend(gpu::bench_gemm(ctx, m, n, k, 3, tile));
+            rows.extend(gpu::bench_gemm(ctx, rows_a, cols_b, inner, 3, tile));
         }
     }
     rows.extend(gpu::bench_image_ops(ctx, &[resolution], scene.len(), 5)?);

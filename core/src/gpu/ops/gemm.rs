@@ -100,6 +100,7 @@ impl GemmTile {
         }
     }
 }
+
 /// Workgroups along one dispatch dimension (WebGPU's limit).
 const MAX_GROUPS: usize = 65_535;
 
