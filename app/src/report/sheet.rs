@@ -89,20 +89,6 @@ pub struct SheetContent {
     pub views: Vec<[Render; 3]>,
 }
 
-/// Renders the sheet's views of a session: `input` (the scene as loaded)
-/// before, the colour-matched scene, and the current result, from `count`
-/// optimisation cameras spread over the set.
-pub fn session_views(session: &Session, input: &Gaussians, count: usize) -> Vec<[Render; 3]> {
-    let run = RunViews {
-        input,
-        colour_matched: session.colour_matched(),
-        result: &session.result(),
-        cameras: session.cameras(),
-        background: session.config().background,
-    };
-    run.render(count)
-}
-
 /// The three scenes of a run and the cameras they are seen from.
 pub struct RunViews<'a> {
     /// The scene as loaded.

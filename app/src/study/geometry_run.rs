@@ -100,7 +100,7 @@ pub fn run(
             let m = &prepared.maps;
             let refs = StyleRefs {
                 rgb: vgg.features(&m.rgb, m.height, m.width),
-                depth: depth_structure::style_depth_reference(vgg, &m.depth, m.height, m.width)
+                depth: depth_structure::style_depth_reference(&**vgg, &m.depth, m.height, m.width)
                     .with_context(|| format!("{}: the style's depth map has no features", path.display()))?,
             };
             prepared_for = Some((s, image, prepared, refs));

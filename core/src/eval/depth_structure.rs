@@ -27,7 +27,7 @@
 //!   the depth style distance too, for the wrong reason.
 
 use crate::raster::Render;
-use crate::vision::Vgg;
+use crate::style::FeatureNet;
 use crate::vision::resize::downscale_half;
 use crate::vision::style_depth::box_blur;
 
@@ -51,11 +51,12 @@ pub fn depth_input(render: &Render) -> (Vec<f32>, usize, usize) {
     downscale_half(&d, h, w, 3)
 }
 
-/// The style side: the style depth map (`h × w`, [0, 1]) through VGG, as a reference.
-pub fn style_depth_reference(vgg: &Vgg, depth: &[f32], h: usize, w: usize) -> Option<StyleReference> {
+/// The style side: the style depth map (`h × w`, [0, 1]) through VGG (the
+/// CPU's or the GPU's), as a reference.
+pub fn style_depth_reference<N: FeatureNet>(vgg: &N, depth: &[f32], h: usize, w: usize) -> Option<StyleReference> {
     let d3: Vec<f32> = depth.iter().flat_map(|&v| [v; 3]).collect();
     let f = vgg.features(&d3, h, w);
-    StyleReference::new(&f.data, f.c, DEPTH_PROJECTIONS)
+    StyleReference::new(&f.data, f.channels, DEPTH_PROJECTIONS)
 }
 
 /// Nearest-neighbour cosine and sliced-Wasserstein distances of the render's depth to the style's.
@@ -68,10 +69,17 @@ pub struct DepthStyleDistance {
 }
 
 /// [`DepthStyleDistance`] of `render`'s inverse depth to the style depth `reference`.
-pub fn depth_style_distance(vgg: &Vgg, render: &Render, reference: &StyleReference) -> DepthStyleDistance {
+pub fn depth_style_distance<N: FeatureNet>(vgg: &N, render: &Render, reference: &StyleReference) -> DepthStyleDistance {
     let (d, h, w) = depth_input(render);
-    let f = vgg.features(&d, h, w);
-    DepthStyleDistance { nn_cos: reference.nn_cosine(&f.data), sw: reference.sliced_wasserstein(&f.data) }
+    DepthStyleDistance::of(&vgg.features(&d, h, w).data, reference)
+}
+
+impl DepthStyleDistance {
+    /// The distances of the depth features `features` ([`depth_input`]
+    /// through VGG) to the style depth `reference`.
+    pub fn of(features: &[f32], reference: &StyleReference) -> Self {
+        Self { nn_cos: reference.nn_cosine(features), sw: reference.sliced_wasserstein(features) }
+    }
 }
 
 /// The relief energy of the change from `before` to `after` (see the module docs);

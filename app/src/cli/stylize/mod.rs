@@ -10,10 +10,8 @@ use std::time::Instant;
 use anyhow::Context;
 use gast_core::Camera;
 use gast_core::eval::depth_structure::{self, DepthStyleDistance};
-use gast_core::eval::{
-    CoveredColour, Degeneration, StabilityThresholds, inverse_depth_change, mean_std_distance, nn_cosine_distance,
-};
-use gast_core::gpu::GpuContext;
+use gast_core::eval::{CoveredColour, Degeneration, StabilityThresholds, StyleReference, inverse_depth_change};
+use gast_core::gpu::{GpuContext, GpuFeatureNet};
 use gast_core::io::{
     write_bytes, write_depth_jet_png, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb,
 };
@@ -23,7 +21,7 @@ use gast_core::session::plan::{
     survey,
 };
 use gast_core::session::{Event, Session, SessionInputs, Stage1Cache, StepReport, StyleDepthSource, StyleImage};
-use gast_core::style::StyleConfig;
+use gast_core::style::{FeatureNet, StyleConfig, StyleMaps};
 use gast_core::vision::Vgg;
 use gast_core::vision::style_depth::{DepthImage, DepthProvider};
 use serde::Serialize;
@@ -270,6 +268,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     // 1 GFLOP/s, ~40× slower than the CPU kernels (`gast bench depth
     // --device gpu`): there the depth stays on the CPU.
     let depth_gpu = gpu.as_ref().filter(|g| !g.is_software());
+    // The preview views' VGG measures after the steps run there too.
+    let preview_gpu = depth_gpu.cloned();
     // Everything that can fail fast is checked before the slow work (the depth
     // model's download, the run): the output folder, the cameras, the weights.
     std::fs::create_dir_all(&args.out).with_context(|| format!("could not create {}", args.out.display()))?;
@@ -429,10 +429,12 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     // each part is timed and said, so a minute of it is not a silent one.
     let mut outputs = Vec::new();
     let mut t_part = Instant::now();
-    let mut part_done = |name: &str, t: &mut Instant| {
-        let seconds = t.elapsed().as_secs_f64();
+    let part_took = |outputs: &mut Vec<(String, f64)>, name: &str, seconds: f64| {
         eprintln!("  {name}: {seconds:.1} s");
         outputs.push((name.to_string(), seconds));
+    };
+    let part_done = |outputs: &mut Vec<(String, f64)>, name: &str, t: &mut Instant| {
+        part_took(outputs, name, t.elapsed().as_secs_f64());
         *t = Instant::now();
     };
     let result = session.result();
@@ -451,18 +453,22 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         }
         None => super::convert::save_scene(&args.out.join(&args.scene_name), &result, &args.save)?,
     }
-    part_done("scenes written", &mut t_part);
-    let preview = write_previews(
-        &args.out,
-        &scene,
-        session.colour_matched(),
-        &result,
-        session.cameras(),
-        &session,
-        &vgg,
-        args.preview_views,
-    )?;
-    part_done("preview views rendered and measured", &mut t_part);
+    part_done(&mut outputs, "scenes written", &mut t_part);
+    let (matched, cameras, views) = (session.colour_matched(), session.cameras(), args.preview_views);
+    let (maps, background) = (&session.style().maps, session.config().background);
+    let previews = match &preview_gpu {
+        Some(ctx) => {
+            eprintln!("  preview measures: VGG on {}", ctx.describe());
+            let net = GpuFeatureNet::new(ctx.clone(), &vgg);
+            write_previews(&args.out, &scene, matched, &result, cameras, maps, background, &net, views)?
+        }
+        None => write_previews(&args.out, &scene, matched, &result, cameras, maps, background, &*vgg, views)?,
+    };
+    for (name, seconds) in previews.parts {
+        part_took(&mut outputs, name, seconds);
+    }
+    t_part = Instant::now();
+    let preview = previews.metrics;
     let sheet_path = args.out.join("sheet.png");
     let settings = sheet::settings_line(&config, done, optimisation_s, session.focus_on_object(), session.coverage());
     let title = format!(
@@ -476,10 +482,11 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             title,
             settings,
             style: sheet::style_tiles(&session),
-            views: sheet::session_views(&session, &scene, args.preview_views),
+            // The preview views' renders: the same cameras, scenes and background.
+            views: previews.renders,
         },
     )?;
-    part_done("contact sheet drawn", &mut t_part);
+    part_done(&mut outputs, "contact sheet drawn", &mut t_part);
     eprintln!("  contact sheet: {}", sheet_path.display());
     let m = Measures::mean(preview.iter().map(|p| &p.measures));
     let colour_collapse =
@@ -536,27 +543,56 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Renders a few views before (input scene) and after, with depth, and measures them.
+/// The preview views' renders (before, colour-matched, after, per view, for
+/// the contact sheet too), their measures, and the time each kind of work took.
+struct Previews {
+    metrics: Vec<PreviewMetrics>,
+    renders: Vec<[raster::Render; 3]>,
+    /// Seconds spent rendering, in VGG forwards, on the distances, writing files.
+    parts: [(&'static str, f64); 4],
+}
+
+/// Renders a few views before (input scene) and after, with depth, and
+/// measures them with `net` (the CPU's VGG, or the GPU's when the run has a
+/// hardware one: at 1,008×756 the twenty forwards are most of the time).
 #[allow(clippy::too_many_arguments)]
-fn write_previews(
+fn write_previews<N: FeatureNet>(
     out: &Path,
     input: &gast_core::Gaussians,
     colour_matched: &gast_core::Gaussians,
     result: &gast_core::Gaussians,
     cameras: &[Camera],
-    session: &Session,
-    vgg: &Vgg,
+    style: &StyleMaps,
+    background: [f32; 3],
+    net: &N,
     count: usize,
-) -> anyhow::Result<Vec<PreviewMetrics>> {
-    let opts = RenderOptions { background: session.config().background };
-    let style = &session.style().maps;
-    let style_feats = vgg.features(&style.rgb, style.height, style.width);
-    let depth_ref = depth_structure::style_depth_reference(vgg, &style.depth, style.height, style.width)
+) -> anyhow::Result<Previews> {
+    let mut parts = [
+        ("preview views rendered", 0.0),
+        ("preview VGG features", 0.0),
+        ("preview style distances", 0.0),
+        ("preview files written", 0.0),
+    ];
+    let mut clock = Instant::now();
+    let mut lap = |part: usize, parts: &mut [(&'static str, f64); 4]| {
+        parts[part].1 += clock.elapsed().as_secs_f64();
+        clock = Instant::now();
+    };
+    let opts = RenderOptions { background };
+    // The style side of each distance once (its features, statistics and unit
+    // features), not once per render.
+    let style_feats = net.features(&style.rgb, style.height, style.width);
+    let rgb_ref =
+        StyleReference::new(&style_feats.data, style_feats.channels, 0).context("the style image has no features")?;
+    let depth_ref = depth_structure::style_depth_reference(net, &style.depth, style.height, style.width)
         .context("the style's depth map has no features")?;
+    lap(1, &mut parts);
     let mut metrics = Vec::new();
+    let mut renders = Vec::new();
     write_png_rgb(&out.join("style.png"), style.width as u32, style.height as u32, &style.rgb)?;
     write_png_gray_normalized(&out.join("style_depth.png"), style.width as u32, style.height as u32, &style.depth)?;
     write_png_gray_normalized(&out.join("style_edge.png"), style.width as u32, style.height as u32, &style.edge)?;
+    lap(3, &mut parts);
     let views: Vec<&Camera> = sheet::spread(cameras, count).collect();
     for (k, cam) in views.iter().copied().enumerate() {
         eprintln!("  preview view {} of {}: rendering and measuring", k + 1, views.len());
@@ -564,40 +600,50 @@ fn write_previews(
         let before = raster::render(input, cam, &opts);
         let matched = raster::render(colour_matched, cam, &opts);
         let after = raster::render(result, cam, &opts);
+        lap(0, &mut parts);
         for (tag, img) in [("before", &before), ("colour_matched", &matched), ("after", &after)] {
             write_png_rgb(&out.join(format!("view{k}_{tag}.png")), w, h, &img.rgb)?;
             write_depth_png(&out.join(format!("view{k}_{tag}_depth.png")), w, h, &img.inv_depth, &img.alpha)?;
             write_exr_depth(&out.join(format!("view{k}_{tag}_depth.exr")), w, h, &img.inv_depth)?;
             write_depth_jet_png(&out.join(format!("view{k}_{tag}_depth_jet.png")), w, h, &img.inv_depth, &img.alpha)?;
         }
+        lap(3, &mut parts);
         let feats = |img: &raster::Render| {
             let rgb: Vec<f32> = img.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
-            vgg.features(&rgb, h as usize, w as usize)
+            net.features(&rgb, h as usize, w as usize)
+        };
+        let depth_feats = |img: &raster::Render| {
+            let (d, h, w) = depth_structure::depth_input(img);
+            net.features(&d, h, w)
         };
         let (fb, fm, fa) = (feats(&before), feats(&matched), feats(&after));
+        let (dm, da) = (depth_feats(&matched), depth_feats(&after));
+        lap(1, &mut parts);
         let measures = Measures {
-            mean_std_before: mean_std_distance(&fb.data, &style_feats.data, fb.c),
-            mean_std_matched: mean_std_distance(&fm.data, &style_feats.data, fm.c),
-            mean_std_after: mean_std_distance(&fa.data, &style_feats.data, fa.c),
-            nn_distance_matched: nn_cosine_distance(&fm.data, &style_feats.data, fm.c),
-            nn_distance_before: nn_cosine_distance(&fb.data, &style_feats.data, fb.c),
-            nn_distance_after: nn_cosine_distance(&fa.data, &style_feats.data, fa.c),
+            mean_std_before: rgb_ref.mean_std_distance(&fb.data),
+            mean_std_matched: rgb_ref.mean_std_distance(&fm.data),
+            mean_std_after: rgb_ref.mean_std_distance(&fa.data),
+            nn_distance_matched: rgb_ref.nn_cosine(&fm.data),
+            nn_distance_before: rgb_ref.nn_cosine(&fb.data),
+            nn_distance_after: rgb_ref.nn_cosine(&fa.data),
             inverse_depth_change: inverse_depth_change(
                 &matched.inv_depth,
                 &after.inv_depth,
                 &matched.alpha,
                 &after.alpha,
             ),
-            depth_style_matched: depth_structure::depth_style_distance(vgg, &matched, &depth_ref),
-            depth_style_after: depth_structure::depth_style_distance(vgg, &after, &depth_ref),
+            depth_style_matched: DepthStyleDistance::of(&dm.data, &depth_ref),
+            depth_style_after: DepthStyleDistance::of(&da.data, &depth_ref),
             relief_energy: depth_structure::relief_energy(&matched, &after),
             // As the detector of `gast bench quality` reads them: each render's own covered pixels.
             colour_matched: CoveredColour::of(&matched.rgb, &matched.alpha),
             colour_after: CoveredColour::of(&after.rgb, &after.alpha),
         };
+        lap(2, &mut parts);
         metrics.push(PreviewMetrics { view: k, measures });
+        renders.push([before, matched, after]);
     }
-    Ok(metrics)
+    Ok(Previews { metrics, renders, parts })
 }
 
 #[cfg(test)]
@@ -627,6 +673,81 @@ mod tests {
         let first = serde_json::to_value(preview[0]).expect("serialises");
         assert_eq!(first["view"], 0);
         assert!(first["mean_std_after"].is_number() && first.get("measures").is_none(), "{first}");
+    }
+
+    /// The preview measures with the GPU's VGG (lavapipe here) are the CPU's:
+    /// `gast stylize` takes the GPU's after a run on a hardware adapter.
+    #[test]
+    fn the_preview_measures_on_the_gpu_are_the_cpus() {
+        use gast_core::camera::{OrbitOptions, orbit_cameras};
+        use gast_core::gpu::AdapterPolicy;
+        use gast_core::vision::style_depth::{DepthPolarity, HeuristicDepth};
+        let in_ci = std::env::var("CI").is_ok_and(|v| v == "true" || v == "1");
+        let shared = std::env::var_os("GAST_SHARED")
+            .map(std::path::PathBuf::from)
+            .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
+        let weights = shared.join("data/weights/vgg19-conv3.safetensors");
+        let ctx = match GpuContext::headless(AdapterPolicy::AnyAdapter) {
+            Ok(ctx) if weights.is_file() => ctx,
+            found => {
+                let why = found.err().map_or("no shared VGG weights".to_string(), |e| e.to_string());
+                assert!(!in_ci, "{why} (CI=true, so this is a failure)");
+                eprintln!("SKIPPED the_preview_measures_on_the_gpu_are_the_cpus: {why}");
+                return;
+            }
+        };
+        let vgg = load_vgg(Some(&weights)).expect("the shared VGG weights");
+        let before = crate::studio::assets::demo_scene();
+        // The colour-matched and "after" scenes: recoloured, then moved, so every measure has something to see.
+        let mut matched = before.clone();
+        matched.sh.iter_mut().step_by(3).for_each(|v| *v += 0.2);
+        let mut after = matched.clone();
+        after.means.iter_mut().enumerate().for_each(|(i, m)| m[2] += 0.02 * ((i % 7) as f32 - 3.0));
+        let opts = OrbitOptions { count: 2, width: 80, height: 60, ..Default::default() };
+        let cameras = orbit_cameras(&before.means, &opts);
+        let (_, image) = &crate::studio::assets::demo_styles()[0];
+        let (w, h) = (image.width() as usize, image.height() as usize);
+        let maps = gast_core::style::style_maps(
+            image.as_raw(),
+            h,
+            w,
+            48,
+            &HeuristicDepth::default(),
+            DepthPolarity::NearBright,
+        );
+        let dir = std::env::temp_dir().join(format!("gast-previews-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("a temporary folder");
+        let measures = |p: Previews| numbers(&serde_json::to_value(&p.metrics).expect("serialises"));
+        let (scenes, bg) = ([&before, &matched, &after], [0.0; 3]);
+        let cpu = write_previews(&dir, scenes[0], scenes[1], scenes[2], &cameras, &maps, bg, &vgg, 2).expect("CPU");
+        let net = GpuFeatureNet::new(ctx, &vgg);
+        let gpu = write_previews(&dir, scenes[0], scenes[1], scenes[2], &cameras, &maps, bg, &net, 2).expect("GPU");
+        let (cpu, gpu) = (measures(cpu), measures(gpu));
+        std::fs::remove_dir_all(&dir).ok();
+        assert_eq!(cpu.len(), gpu.len());
+        assert!(cpu.len() >= 2 * 16, "{} measures", cpu.len());
+        for ((name, c), (_, g)) in cpu.iter().zip(&gpu) {
+            assert!((c - g).abs() <= 1e-3 * c.abs().max(1e-2), "{name}: CPU {c}, GPU {g}");
+        }
+        let changed = |key: &str| cpu.iter().filter(|(n, v)| n.ends_with(key) && *v > 0.0).count();
+        assert_eq!(changed("inverse_depth_change"), 2, "the moved scene's depth changed in both views");
+    }
+
+    /// Every number of a JSON value with its path, in order.
+    fn numbers(v: &serde_json::Value) -> Vec<(String, f64)> {
+        fn walk(v: &serde_json::Value, path: String, out: &mut Vec<(String, f64)>) {
+            match v {
+                serde_json::Value::Number(n) => out.push((path, n.as_f64().unwrap_or(f64::NAN))),
+                serde_json::Value::Array(a) => {
+                    a.iter().enumerate().for_each(|(i, x)| walk(x, format!("{path}[{i}]"), out))
+                }
+                serde_json::Value::Object(o) => o.iter().for_each(|(k, x)| walk(x, format!("{path}.{k}"), out)),
+                _ => {}
+            }
+        }
+        let mut out = Vec::new();
+        walk(v, String::new(), &mut out);
+        out
     }
 
     #[test]
