@@ -108,6 +108,11 @@ impl StyleReference {
     pub fn nn_cosine(&self, a: &[f32]) -> f32 {
         self.nearest.nn_cosine(a)
     }
+
+    /// The nearest-neighbour side alone (its unit style features).
+    pub fn nearest(&self) -> &NearestStyle {
+        &self.nearest
+    }
 }
 
 /// Unit-length style features, for nearest-neighbour cosines only (cheap to
@@ -128,6 +133,44 @@ impl NearestStyle {
         }
         let n = b.len() / channels;
         Some(Self { channels, positions: n, unit: unit_columns(&b[..n * channels], channels) })
+    }
+
+    /// Channels of a position.
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+
+    /// Style positions.
+    pub fn positions(&self) -> usize {
+        self.positions
+    }
+
+    /// The unit-length style features, `C × N` CHW.
+    pub fn unit(&self) -> &[f32] {
+        &self.unit
+    }
+
+    /// [`NearestStyle::nn_cosine`] with the nearest style position of each of
+    /// `a`'s positions given (`nearest[x] < positions`, found elsewhere: a
+    /// GPU's search); only the cosines of those pairs are computed.
+    ///
+    /// # Panics
+    /// When `nearest` has fewer entries than `a` positions or one is out of range.
+    pub fn nn_cosine_at(&self, a: &[f32], nearest: &[u32]) -> f32 {
+        if a.len() < self.channels {
+            return 0.0;
+        }
+        let (c, na, nb) = (self.channels, a.len() / self.channels, self.positions);
+        let unit_a = unit_columns(&a[..na * c], c);
+        let total: f64 = nearest[..na]
+            .par_iter()
+            .enumerate()
+            .map(|(x, &y)| {
+                let cos: f32 = (0..c).map(|ch| unit_a[ch * na + x] * self.unit[ch * nb + y as usize]).sum();
+                f64::from(1.0 - cos)
+            })
+            .sum();
+        (total / na as f64) as f32
     }
 
     /// [`nn_cosine_distance`] of `a` to the style.

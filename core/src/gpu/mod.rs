@@ -88,6 +88,8 @@ mod focus;
 mod gcfm;
 #[path = "losses/losses.rs"]
 mod losses;
+#[path = "losses/nearest.rs"]
+mod nearest;
 #[path = "losses/palette.rs"]
 mod palette;
 #[path = "losses/sliced.rs"]
@@ -114,6 +116,7 @@ pub use gemm::{Gemm, GemmPlan, GemmSpec, GemmTile, Strided, WIDE_MIN_GROUPS, ben
 pub use kernel::{Bind, Kernel};
 pub use live::LiveGaussians;
 pub use losses::{LossKernels, RefLoss, TvLoss};
+pub use nearest::GpuNearest;
 pub use ops_bench::bench_image_ops;
 pub use palette::PaletteLoss;
 pub use raster_forward::GpuRaster;

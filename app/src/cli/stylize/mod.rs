@@ -11,7 +11,7 @@ use anyhow::Context;
 use gast_core::Camera;
 use gast_core::eval::depth_structure::{self, DepthStyleDistance};
 use gast_core::eval::{CoveredColour, Degeneration, StabilityThresholds, StyleReference, inverse_depth_change};
-use gast_core::gpu::{GpuContext, GpuFeatureNet};
+use gast_core::gpu::{GpuContext, GpuFeatureNet, GpuNearest};
 use gast_core::io::{
     write_bytes, write_depth_jet_png, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb,
 };
@@ -458,11 +458,11 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let (maps, background) = (&session.style().maps, session.config().background);
     let previews = match &preview_gpu {
         Some(ctx) => {
-            eprintln!("  preview measures: VGG on {}", ctx.describe());
-            let net = GpuFeatureNet::new(ctx.clone(), &vgg);
-            write_previews(&args.out, &scene, matched, &result, cameras, maps, background, &net, views)?
+            eprintln!("  preview measures: VGG and nearest-neighbour searches on {}", ctx.describe());
+            let (net, nearest) = (GpuFeatureNet::new(ctx.clone(), &vgg), GpuNearest::new(ctx.clone()));
+            write_previews(&args.out, &scene, matched, &result, cameras, maps, background, &net, Some(&nearest), views)?
         }
-        None => write_previews(&args.out, &scene, matched, &result, cameras, maps, background, &*vgg, views)?,
+        None => write_previews(&args.out, &scene, matched, &result, cameras, maps, background, &*vgg, None, views)?,
     };
     for (name, seconds) in previews.parts {
         part_took(&mut outputs, name, seconds);
@@ -554,7 +554,9 @@ struct Previews {
 
 /// Renders a few views before (input scene) and after, with depth, and
 /// measures them with `net` (the CPU's VGG, or the GPU's when the run has a
-/// hardware one: at 1,008×756 the twenty forwards are most of the time).
+/// hardware one: at 1,008×756 the twenty forwards are most of the time) and
+/// the nearest-neighbour searches on `nearest`'s device when given (the rest
+/// of the distances on the CPU).
 #[allow(clippy::too_many_arguments)]
 fn write_previews<N: FeatureNet>(
     out: &Path,
@@ -565,6 +567,7 @@ fn write_previews<N: FeatureNet>(
     style: &StyleMaps,
     background: [f32; 3],
     net: &N,
+    nearest: Option<&GpuNearest>,
     count: usize,
 ) -> anyhow::Result<Previews> {
     let mut parts = [
@@ -579,6 +582,12 @@ fn write_previews<N: FeatureNet>(
         clock = Instant::now();
     };
     let opts = RenderOptions { background };
+    let nn = |r: &StyleReference, a: &[f32]| -> anyhow::Result<f32> {
+        Ok(match nearest {
+            Some(gpu) => gpu.nn_cosine(r.nearest(), a)?,
+            None => r.nn_cosine(a),
+        })
+    };
     // The style side of each distance once (its features, statistics and unit
     // features), not once per render.
     let style_feats = net.features(&style.rgb, style.height, style.width);
@@ -623,17 +632,23 @@ fn write_previews<N: FeatureNet>(
             mean_std_before: rgb_ref.mean_std_distance(&fb.data),
             mean_std_matched: rgb_ref.mean_std_distance(&fm.data),
             mean_std_after: rgb_ref.mean_std_distance(&fa.data),
-            nn_distance_matched: rgb_ref.nn_cosine(&fm.data),
-            nn_distance_before: rgb_ref.nn_cosine(&fb.data),
-            nn_distance_after: rgb_ref.nn_cosine(&fa.data),
+            nn_distance_matched: nn(&rgb_ref, &fm.data)?,
+            nn_distance_before: nn(&rgb_ref, &fb.data)?,
+            nn_distance_after: nn(&rgb_ref, &fa.data)?,
             inverse_depth_change: inverse_depth_change(
                 &matched.inv_depth,
                 &after.inv_depth,
                 &matched.alpha,
                 &after.alpha,
             ),
-            depth_style_matched: DepthStyleDistance::of(&dm.data, &depth_ref),
-            depth_style_after: DepthStyleDistance::of(&da.data, &depth_ref),
+            depth_style_matched: DepthStyleDistance {
+                nn_cos: nn(&depth_ref, &dm.data)?,
+                sw: depth_ref.sliced_wasserstein(&dm.data),
+            },
+            depth_style_after: DepthStyleDistance {
+                nn_cos: nn(&depth_ref, &da.data)?,
+                sw: depth_ref.sliced_wasserstein(&da.data),
+            },
             relief_energy: depth_structure::relief_energy(&matched, &after),
             // As the detector of `gast bench quality` reads them: each render's own covered pixels.
             colour_matched: CoveredColour::of(&matched.rgb, &matched.alpha),
@@ -675,8 +690,9 @@ mod tests {
         assert!(first["mean_std_after"].is_number() && first.get("measures").is_none(), "{first}");
     }
 
-    /// The preview measures with the GPU's VGG (lavapipe here) are the CPU's:
-    /// `gast stylize` takes the GPU's after a run on a hardware adapter.
+    /// The preview measures with the GPU's VGG and nearest-neighbour search
+    /// (lavapipe here) are the CPU's: `gast stylize` takes the GPU's after a
+    /// run on a hardware adapter.
     #[test]
     fn the_preview_measures_on_the_gpu_are_the_cpus() {
         use gast_core::camera::{OrbitOptions, orbit_cameras};
@@ -719,9 +735,11 @@ mod tests {
         std::fs::create_dir_all(&dir).expect("a temporary folder");
         let measures = |p: Previews| numbers(&serde_json::to_value(&p.metrics).expect("serialises"));
         let (scenes, bg) = ([&before, &matched, &after], [0.0; 3]);
-        let cpu = write_previews(&dir, scenes[0], scenes[1], scenes[2], &cameras, &maps, bg, &vgg, 2).expect("CPU");
-        let net = GpuFeatureNet::new(ctx, &vgg);
-        let gpu = write_previews(&dir, scenes[0], scenes[1], scenes[2], &cameras, &maps, bg, &net, 2).expect("GPU");
+        let cpu =
+            write_previews(&dir, scenes[0], scenes[1], scenes[2], &cameras, &maps, bg, &vgg, None, 2).expect("CPU");
+        let (net, nearest) = (GpuFeatureNet::new(ctx.clone(), &vgg), GpuNearest::new(ctx));
+        let gpu = write_previews(&dir, scenes[0], scenes[1], scenes[2], &cameras, &maps, bg, &net, Some(&nearest), 2)
+            .expect("GPU");
         let (cpu, gpu) = (measures(cpu), measures(gpu));
         std::fs::remove_dir_all(&dir).ok();
         assert_eq!(cpu.len(), gpu.len());

@@ -418,6 +418,60 @@ impl GpuGcfm {
     }
 }
 
+impl GpuGcfm {
+    /// The search alone, outside a step: for each of the `n` rendered
+    /// positions of `rendered` (`c × n` CHW) the style position `y` (of the
+    /// `m` in `style`, `c × m` CHW) with the largest `⟨r(x), s(y)⟩ · scale(y)`
+    /// (`scale`: `m` floats), the first on ties. With unit style columns and
+    /// unit scales, the largest cosine: what [`crate::eval::NearestStyle`]
+    /// measures (`gast stylize`'s preview distances).
+    #[allow(clippy::too_many_arguments)]
+    pub fn nearest(
+        &self,
+        ctx: &GpuContext,
+        rendered: &wgpu::Buffer,
+        n: usize,
+        style: &wgpu::Buffer,
+        scale: &wgpu::Buffer,
+        m: usize,
+        c: usize,
+    ) -> Result<Vec<u32>, super::GpuError> {
+        let limit = SCORE_ELEMS.min((ctx.max_binding_bytes() / 4) as usize);
+        self.nearest_chunked(ctx, rendered, n, style, scale, m, c, limit)
+    }
+
+    /// [`GpuGcfm::nearest`] with score chunks of at most `limit` elements.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn nearest_chunked(
+        &self,
+        ctx: &GpuContext,
+        rendered: &wgpu::Buffer,
+        n: usize,
+        style: &wgpu::Buffer,
+        scale: &wgpu::Buffer,
+        m: usize,
+        c: usize,
+        limit: usize,
+    ) -> Result<Vec<u32>, super::GpuError> {
+        if n == 0 || m == 0 {
+            return Ok(vec![0; n]);
+        }
+        let rows = (limit / m).clamp(1, MAX_ROWS).min(n);
+        let base = GcfmParams { n: u32_of(n), m: u32_of(m), c: u32_of(c), ..Default::default() };
+        let scores = ctx.zeros("gcfm.nearest.scores", rows * m);
+        let matches = ctx.zeros("gcfm.nearest.matches", 2 * n);
+        let mut enc = ctx.encoder("gcfm.nearest");
+        // One modality: each chunk's first (non-accumulating) GEMM.
+        for chunk in self.chunks(ctx, &base, n, rows, "gcfm.nearest") {
+            self.gemm.record(ctx, &mut enc, &chunk.gemms[0], rendered, style, None, &scores);
+            let l = &chunk.argext;
+            self.argext.dispatch(ctx, &mut enc, &[&l.uniform, &scores, scale, &matches], l.groups);
+        }
+        ctx.submit(enc);
+        ctx.read_range::<u32>(&matches, 0, (n * 4) as u64)
+    }
+}
+
 /// Milliseconds of one GCFM run (search, loss, gradients) for `n` rendered
 /// positions against `m` style positions of `c` channels per modality (best of
 /// `reps` after a warm-up), for `gast bench`.
