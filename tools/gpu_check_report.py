@@ -52,6 +52,21 @@ def status(name):
     return "timed out" if s["rc"] in (124, 137) else (f"failed (rc {s['rc']})" if s["rc"] else "")
 
 
+def parts(name):
+    """The "GPU parts" rows of a bench step log: {part: ms}."""
+    rows, on = {}, False
+    for line in log(name).splitlines():
+        if line.startswith("GPU parts on"):
+            on = True
+        elif on:
+            m = re.match(r"^  (\S.*?)\s+(-?[\d.]+)$", line)
+            if m:
+                rows[m.group(1)] = float(m.group(2))
+            elif line.strip():
+                on = False
+    return rows
+
+
 # Golden numerics on the GPU engine.
 m = re.findall(r"(\d+) passed, (\d+) failed", log("golden"))
 if m:
@@ -160,6 +175,20 @@ if rep and rep.get("steps"):
 elif "fern_500" in doc["steps"]:
     figure("full schedule, fern × block2, from 500 steps", None, "s", "≤ 180 s", False, status("fern_500"))
 
+# One fern step on its LLFF cameras at the reference's scale, and where it goes (the GPU parts).
+j = load("fern_parts.json")
+fern_gpu = next((r for r in (j or {"runs": []})["runs"] if r["label"] == "gpu"), None)
+doc["fern_parts"] = parts("fern_parts") if fern_gpu else {}
+if fern_gpu:
+    fmt = lambda k: "–" if fern_gpu.get(k) is None else f"{fern_gpu[k]:.2f}"
+    judged = fern_gpu.get("geometry_step_median_ms") or fern_gpu["ms_per_step"]
+    figure(f"fern step at {j.get('resolution', '?')} px on the longer side (its LLFF cameras, frame recipe)", judged,
+           "ms", "≤ 57 ms (what 3,000 steps in 3 min leave)", judged <= 57.0,
+           f"medians: colour {fmt('colour_step_median_ms')} ms, geometry {fmt('geometry_step_median_ms')} ms; "
+           f"the GPU parts in the table below")
+elif "fern_parts" in doc["steps"]:
+    figure("fern step (its LLFF cameras)", None, "ms", "≤ 57 ms", False, status("fern_parts"))
+
 # fern at 504×378 with each style asked for (fern504_STYLE): the run's time and its measures.
 for name in sorted(n for n in doc["steps"] if n.startswith("fern504_")):
     rep = load(os.path.join(name, "report.json"))
@@ -176,21 +205,6 @@ for name in sorted(n for n in doc["steps"] if n.startswith("fern504_")):
            None, None, note)
 
 # A baseline build against this one (ab_RES_ARMROUND steps): step medians and each GPU part.
-def parts(name):
-    """The "GPU parts" rows of a bench step log: {part: ms}."""
-    rows, on = {}, False
-    for line in log(name).splitlines():
-        if line.startswith("GPU parts on"):
-            on = True
-        elif on:
-            m = re.match(r"^  (\S.*?)\s+(-?[\d.]+)$", line)
-            if m:
-                rows[m.group(1)] = float(m.group(2))
-            elif line.strip():
-                on = False
-    return rows
-
-
 def median(xs):
     return statistics.median(xs) if xs else None
 
@@ -259,6 +273,9 @@ md = [f"# gpu-check, {meta.get('date', '?')}", "",
       f"Card: {meta.get('card') or 'no nvidia-smi (not an NVIDIA machine)'}; {meta.get('cores', '?')} CPU cores; "
       f"dry run: {'yes (reduced sizes)' if meta.get('dry_run') else 'no'}; {total_s:.0f} s in all.", "",
       "| what | measured | target | notes |", "|---|---|---|---|", *rows, ""]
+if doc["fern_parts"]:
+    md += ["GPU parts of a fern step (VGG and GCFM at the step's side squared; the raster on a fern camera):", "",
+           "| part | ms |", "|---|---|", *(f"| {k} | {v:.3f} |" for k, v in doc["fern_parts"].items()), ""]
 if ab_parts:
     md += [f"GPU parts, this build against the baseline ({base_rev or '--base'}), medians of the rounds:", "",
            "| px | part | baseline ms | this build ms | ratio |", "|---|---|---|---|---|",

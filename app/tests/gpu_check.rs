@@ -105,6 +105,16 @@ fn the_gpu_check_report_gives_this_build_against_the_baseline() {
             ),
         );
     }
+    // A fern step on its LLFF cameras and its GPU parts.
+    write("fern_parts.rc.json", r#"{"name":"fern_parts","rc":0,"wall_s":30.0}"#.into());
+    write(
+        "fern_parts.json",
+        r#"{"resolution":1008,"runs":[{"label":"gpu","device":"GPU: test","steps":12,"ms_per_step":80.0,"colour_step_median_ms":78.5,"geometry_step_median_ms":81.25}]}"#.into(),
+    );
+    write(
+        "fern_parts.log",
+        "step benchmark: ...\n\nGPU parts on test (median ms)\n  vgg forward 504×504 ms                5.250\n  raster backward tiles               3.000\n\nschedule: ...\n".into(),
+    );
     let run = Command::new("python3")
         .arg(root.join("tools/gpu_check_report.py"))
         .args([&raw, &out])
@@ -134,8 +144,12 @@ fn the_gpu_check_report_gives_this_build_against_the_baseline() {
     assert_eq!(tile_parts.len(), 2, "{tile_parts:?}");
     let wide = figure("guitar geometry step at 256 px, GEMM tiles 128² / 64²");
     assert!((wide["value"].as_f64().expect("ratio") - 24.0 / 45.0).abs() < 1e-9, "{wide}");
+    let fern = figure("fern step at 1008 px on the longer side (its LLFF cameras, frame recipe)");
+    assert_eq!((fern["value"].as_f64(), fern["ok"].as_bool()), (Some(81.25), Some(false)), "{fern}");
+    assert!(fern["note"].as_str().is_some_and(|n| n.contains("colour 78.50 ms, geometry 81.25 ms")), "{fern}");
     let table = std::fs::read_to_string(out.join("gpu-check.md")).expect("gpu-check.md");
     assert!(table.contains("| 256 | edge map 256² | 6.600 | 2.100 | 0.318 |"), "{table}");
+    assert!(table.contains("| vgg forward 504×504 ms | 5.250 |"), "{table}");
     assert!(table.contains("| 64² ms | auto ms | auto / 64² | 128² ms | 128² / 64² |"), "{table}");
     assert!(table.contains("| 256 | edge map 256² | 6.600 | 2.100 | 0.318 | 2.100 | 0.318 |"), "{table}");
     std::fs::remove_dir_all(&dir).ok();

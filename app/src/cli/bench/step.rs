@@ -29,6 +29,11 @@ pub struct StepArgs {
     /// Orbit views.
     #[arg(long, default_value_t = 36)]
     pub views: usize,
+    /// The scene's own cameras instead of an orbit (a camera file or folder as
+    /// `gast stylize --cameras` takes: COLMAP sparse/0, poses_bounds.npy, ...),
+    /// at --resolution on the longer side: fern's 20 LLFF views at 1,008×756.
+    #[arg(long, value_name = "PATH")]
+    pub cameras: Option<PathBuf>,
     /// Orbit framing: full (the paper's orbit, the object as the scene's extent frames it) or
     /// object (each view fitted to the object, as `gast stylize` does by default).
     #[arg(long, value_enum, default_value_t = Framing::Full)]
@@ -179,7 +184,7 @@ pub(super) fn step_inputs(args: &StepArgs) -> anyhow::Result<StepInputs> {
     let views = views_for(
         &scene,
         &ViewArgs {
-            cameras: None,
+            cameras: args.cameras.clone(),
             views: args.views,
             size: args.resolution,
             fov: 50.0,
@@ -187,14 +192,17 @@ pub(super) fn step_inputs(args: &StepArgs) -> anyhow::Result<StepInputs> {
             crop: false,
         },
     )?;
+    let framing = match &args.cameras {
+        Some(path) => format!("the cameras of {}", path.display()),
+        None => format!("{:?} framing", args.framing),
+    };
     println!(
-        "step benchmark: {} ({} Gaussians), style {}, {} views at {} px ({:?} framing), {} threads",
+        "step benchmark: {} ({} Gaussians), style {}, {} views at {} px ({framing}), {} threads",
         scene_path.display(),
         scene.len(),
         style_path.display(),
         views.len(),
         args.resolution,
-        args.framing,
         rayon::current_num_threads()
     );
     Ok(StepInputs { scene, views, style, vgg })
@@ -626,4 +634,59 @@ pub(super) fn phase_rows(
         out.push((phase, rows.len(), row));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        step: StepArgs,
+    }
+
+    /// `--cameras` takes the scene's own views (fern's 20 LLFF cameras, 4:3)
+    /// at `--resolution` on the longer side, as `gast stylize --cameras` does.
+    #[test]
+    fn the_step_benchmark_takes_the_scenes_own_cameras() {
+        let shared = std::env::var_os("GAST_SHARED")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
+        let (scene, fern) = (shared.join("data/scenes/guitar.compressed.ply"), shared.join("data/datasets/fern"));
+        let (weights, style) =
+            (shared.join("data/weights/vgg19-conv3.safetensors"), shared.join("data/styles/wave.jpg"));
+        if !(scene.is_file() && fern.is_dir() && weights.is_file() && style.is_file()) {
+            assert!(std::env::var("CI").is_err(), "no shared data at {} (CI: a failure)", shared.display());
+            eprintln!(
+                "SKIPPED the_step_benchmark_takes_the_scenes_own_cameras: no shared data at {}",
+                shared.display()
+            );
+            return;
+        }
+        let arg = |p: &PathBuf| p.to_string_lossy().into_owned();
+        let cli = Cli::try_parse_from([
+            "bench-step".to_string(),
+            "--scene".into(),
+            arg(&scene),
+            "--weights".into(),
+            arg(&weights),
+            "--style".into(),
+            arg(&style),
+            "--cameras".into(),
+            arg(&fern),
+            "--resolution".into(),
+            "64".into(),
+        ])
+        .expect("the flags parse");
+        let inputs = step_inputs(&cli.step).expect("the inputs load");
+        assert_eq!(inputs.views.len(), 20, "fern's LLFF cameras");
+        assert!(
+            inputs.views.iter().all(|c| (c.width, c.height) == (64, 48)),
+            "{:?}",
+            (inputs.views[0].width, inputs.views[0].height)
+        );
+    }
 }
