@@ -268,7 +268,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     // 1 GFLOP/s, ~40× slower than the CPU kernels (`gast bench depth
     // --device gpu`): there the depth stays on the CPU.
     let depth_gpu = gpu.as_ref().filter(|g| !g.is_software());
-    // The preview views' VGG measures after the steps run there too.
+    // The preview measures' VGG forwards and nearest-neighbour searches run there too.
     let preview_gpu = depth_gpu.cloned();
     // Everything that can fail fast is checked before the slow work (the depth
     // model's download, the run): the output folder, the cameras, the weights.
