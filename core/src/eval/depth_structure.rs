@@ -28,6 +28,7 @@
 
 use crate::raster::Render;
 use crate::style::FeatureNet;
+use crate::vision::Vgg;
 use crate::vision::resize::downscale_half;
 use crate::vision::style_depth::box_blur;
 
@@ -69,17 +70,10 @@ pub struct DepthStyleDistance {
 }
 
 /// [`DepthStyleDistance`] of `render`'s inverse depth to the style depth `reference`.
-pub fn depth_style_distance<N: FeatureNet>(vgg: &N, render: &Render, reference: &StyleReference) -> DepthStyleDistance {
+pub fn depth_style_distance(vgg: &Vgg, render: &Render, reference: &StyleReference) -> DepthStyleDistance {
     let (d, h, w) = depth_input(render);
-    DepthStyleDistance::of(&vgg.features(&d, h, w).data, reference)
-}
-
-impl DepthStyleDistance {
-    /// The distances of the depth features `features` ([`depth_input`]
-    /// through VGG) to the style depth `reference`.
-    pub fn of(features: &[f32], reference: &StyleReference) -> Self {
-        Self { nn_cos: reference.nn_cosine(features), sw: reference.sliced_wasserstein(features) }
-    }
+    let f = vgg.features(&d, h, w);
+    DepthStyleDistance { nn_cos: reference.nn_cosine(&f.data), sw: reference.sliced_wasserstein(&f.data) }
 }
 
 /// The relief energy of the change from `before` to `after` (see the module docs);

@@ -262,8 +262,7 @@ impl GpuGcfm {
         scalars_offset: usize,
         scale: f32,
     ) -> GcfmWorkspace {
-        let limit = SCORE_ELEMS.min((ctx.max_binding_bytes() / 4) as usize);
-        self.workspace_chunked(ctx, style, n, scalars_offset, scale, limit)
+        self.workspace_chunked(ctx, style, n, scalars_offset, scale, Self::score_limit(ctx))
     }
 
     /// [`GpuGcfm::workspace`] with score chunks of at most `limit` elements.
@@ -419,30 +418,21 @@ impl GpuGcfm {
 }
 
 impl GpuGcfm {
+    /// The largest score chunk on `ctx`'s device, in `f32` elements: the
+    /// storage-binding limit, at most [`SCORE_ELEMS`].
+    pub fn score_limit(ctx: &GpuContext) -> usize {
+        SCORE_ELEMS.min((ctx.max_binding_bytes() / 4) as usize)
+    }
+
     /// The search alone, outside a step: for each of the `n` rendered
     /// positions of `rendered` (`c × n` CHW) the style position `y` (of the
     /// `m` in `style`, `c × m` CHW) with the largest `⟨r(x), s(y)⟩ · scale(y)`
-    /// (`scale`: `m` floats), the first on ties. With unit style columns and
-    /// unit scales, the largest cosine: what [`crate::eval::NearestStyle`]
+    /// (`scale`: `m` floats), the first on ties, in score chunks of at most
+    /// `limit` elements ([`GpuGcfm::score_limit`]). With unit style columns
+    /// and unit scales, the largest cosine: what [`crate::eval::NearestStyle`]
     /// measures (`gast stylize`'s preview distances).
     #[allow(clippy::too_many_arguments)]
     pub fn nearest(
-        &self,
-        ctx: &GpuContext,
-        rendered: &wgpu::Buffer,
-        n: usize,
-        style: &wgpu::Buffer,
-        scale: &wgpu::Buffer,
-        m: usize,
-        c: usize,
-    ) -> Result<Vec<u32>, super::GpuError> {
-        let limit = SCORE_ELEMS.min((ctx.max_binding_bytes() / 4) as usize);
-        self.nearest_chunked(ctx, rendered, n, style, scale, m, c, limit)
-    }
-
-    /// [`GpuGcfm::nearest`] with score chunks of at most `limit` elements.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn nearest_chunked(
         &self,
         ctx: &GpuContext,
         rendered: &wgpu::Buffer,

@@ -36,7 +36,7 @@ impl GpuNearest {
         let rendered = ctx.upload("nearest.rendered", &a[..n * c]);
         let unit = ctx.upload("nearest.style", style.unit());
         let ones = ctx.upload("nearest.scale", &vec![1.0f32; m]);
-        let nearest = self.gcfm.nearest(ctx, &rendered, n, &unit, &ones, m, c)?;
+        let nearest = self.gcfm.nearest(ctx, &rendered, n, &unit, &ones, m, c, GpuGcfm::score_limit(ctx))?;
         Ok(style.nn_cosine_at(a, &nearest))
     }
 }
@@ -66,8 +66,9 @@ mod tests {
         let rendered = ctx().upload("a", &a);
         let unit = ctx().upload("s", near.unit());
         let ones = ctx().upload("ones", &vec![1.0f32; m]);
-        let whole = gpu.gcfm.nearest(ctx(), &rendered, n, &unit, &ones, m, c).expect("one chunk");
-        let chunked = gpu.gcfm.nearest_chunked(ctx(), &rendered, n, &unit, &ones, m, c, 7 * m).expect("chunks");
+        let search = |limit| gpu.gcfm.nearest(ctx(), &rendered, n, &unit, &ones, m, c, limit);
+        let whole = search(GpuGcfm::score_limit(ctx())).expect("one chunk");
+        let chunked = search(7 * m).expect("a hundred chunks");
         assert_eq!(whole, chunked);
         assert_eq!(near.nn_cosine_at(&a, &whole), got);
         // Nothing rendered: 0, as on the CPU.
