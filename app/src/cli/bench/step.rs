@@ -652,9 +652,7 @@ mod tests {
     /// at `--resolution` on the longer side, as `gast stylize --cameras` does.
     #[test]
     fn the_step_benchmark_takes_the_scenes_own_cameras() {
-        let shared = std::env::var_os("GAST_SHARED")
-            .map(PathBuf::from)
-            .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
+        let shared = gast_tests::shared_dir();
         let (scene, fern) = (shared.join("data/scenes/guitar.compressed.ply"), shared.join("data/datasets/fern"));
         let (weights, style) =
             (shared.join("data/weights/vgg19-conv3.safetensors"), shared.join("data/styles/wave.jpg"));

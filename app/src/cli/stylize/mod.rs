@@ -699,10 +699,7 @@ mod tests {
         use gast_core::gpu::AdapterPolicy;
         use gast_core::vision::style_depth::{DepthPolarity, HeuristicDepth};
         let in_ci = std::env::var("CI").is_ok_and(|v| v == "true" || v == "1");
-        let shared = std::env::var_os("GAST_SHARED")
-            .map(std::path::PathBuf::from)
-            .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
-        let weights = shared.join("data/weights/vgg19-conv3.safetensors");
+        let weights = gast_tests::shared_dir().join("data/weights/vgg19-conv3.safetensors");
         let ctx = match GpuContext::headless(AdapterPolicy::AnyAdapter) {
             Ok(ctx) if weights.is_file() => ctx,
             found => {
