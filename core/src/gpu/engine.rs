@@ -370,11 +370,12 @@ impl GpuEngine {
             (None, Some(subset), Some(scratch)) => Search::Subset { subset, scratch },
             _ => Search::Every,
         };
-        plan.loss.record_features(ctx, &k.loss, &mut enc, &inputs);
-        // The assignment terms: the drawn columns gathered and submitted
-        // first, the feature-space losses submitted behind them, so the device
-        // runs the GCFM search while the host pairs the columns; the pull's
-        // gradient joins in the backward pass's submission.
+        plan.loss.record_rgb_features(ctx, &k.loss, &mut enc, &inputs);
+        // The assignment terms: the drawn columns gathered from the RGB
+        // features and submitted first, the depth and edge maps' features and
+        // the feature-space losses submitted behind them, so the device runs
+        // those and the GCFM search while the host pairs the columns; the
+        // pull's gradient joins in the backward pass's submission.
         let assigning = w.assignment > 0.0 || w.assignment_cosine > 0.0;
         let mut gathered = None;
         if assigning {
@@ -390,6 +391,7 @@ impl GpuEngine {
             gathered = Some(submit(&mut host, enc));
             enc = ctx.encoder("engine.step.feature_losses");
         }
+        plan.loss.record_other_features(ctx, &k.loss, &mut enc, &inputs);
         plan.loss.record_feature_losses(ctx, &k.loss, &mut enc, &self.style, &inputs, search);
         // The depth's backward pass does not need the pairing: it is recorded
         // first, so with the assignment terms it is submitted before the host

@@ -11,9 +11,10 @@
 //! gradient back at those positions before VGG's backward pass. A step moves
 //! `2 · channels · r` floats down and `channels · r` up (3 MiB at r = 512),
 //! not the feature maps. The columns come down in one copy, and the host
-//! waits for the submission that gathered them alone, so the device runs the
-//! step's GCFM search, and on geometry steps the depth's backward pass, while
-//! the host pairs (`GpuEngine::step`).
+//! waits for the submission that gathered them alone, right after the RGB
+//! features, so the device computes the depth and edge maps' features, runs
+//! the step's GCFM search, and on geometry steps the depth's backward pass,
+//! while the host pairs (`GpuEngine::step`).
 //!
 //! The draw differs from the CPU step's in its seed only: the CPU seeds from
 //! the features' bits (which would need the whole maps here), the engine from

@@ -328,7 +328,9 @@ impl StepLossPlan {
     }
 
     /// The first of [`StepLossPlan::record`]'s three parts: the three maps VGG sees and
-    /// their features ([`StepLossPlan::rgb_features`] holds the RGB ones).
+    /// their features ([`StepLossPlan::rgb_features`] holds the RGB ones):
+    /// [`StepLossPlan::record_rgb_features`] then
+    /// [`StepLossPlan::record_other_features`].
     pub fn record_features(
         &self,
         ctx: &GpuContext,
@@ -336,10 +338,35 @@ impl StepLossPlan {
         enc: &mut wgpu::CommandEncoder,
         inputs: &StepInputs<'_>,
     ) {
-        let focus = inputs.focus.unwrap_or(&self.frame);
-        // The three maps VGG sees.
+        self.record_rgb_features(ctx, k, enc, inputs);
+        self.record_other_features(ctx, k, enc, inputs);
+    }
+
+    /// The RGB map VGG sees and its features, all the assignment terms'
+    /// gather needs: the engine submits it with the gather, so the host
+    /// pairs while the device goes on with the other maps.
+    pub fn record_rgb_features(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        enc: &mut wgpu::CommandEncoder,
+        inputs: &StepInputs<'_>,
+    ) {
         self.clamp.forward(ctx, enc, inputs.rgb_raw, &self.rgb);
         self.down.forward(ctx, enc, &self.rgb, &self.small[0]);
+        k.vgg.forward(ctx, enc, &self.vgg_ws, &self.small[0], &self.states[0]);
+    }
+
+    /// After [`StepLossPlan::record_rgb_features`]: the depth and edge maps
+    /// VGG sees and their features.
+    pub fn record_other_features(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        enc: &mut wgpu::CommandEncoder,
+        inputs: &StepInputs<'_>,
+    ) {
+        let focus = inputs.focus.unwrap_or(&self.frame);
         self.depth_map.forward(ctx, enc, inputs.inv_depth, focus.pixels(), &self.depth3);
         self.down.forward(ctx, enc, &self.depth3, &self.small[1]);
         match inputs.edge {
@@ -349,7 +376,7 @@ impl StepLossPlan {
                 self.down.forward(ctx, enc, &self.edge3, &self.small[2]);
             }
         }
-        for (small, state) in self.small.iter().zip(&self.states) {
+        for (small, state) in self.small[1..].iter().zip(&self.states[1..]) {
             k.vgg.forward(ctx, enc, &self.vgg_ws, small, state);
         }
     }
