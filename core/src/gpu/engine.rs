@@ -398,11 +398,8 @@ impl GpuEngine {
         // waits and the device runs it while the host pairs. (It writes its
         // own buffers and slots: the order leaves the results as they were.)
         plan.loss.record_backward_depth(ctx, &k.loss, &mut enc, &inputs);
-        let mut pulled = None;
-        if let (Some(gathered), Some(a)) = (gathered, self.assign.as_mut()) {
+        if gathered.is_some() {
             submit(&mut host, enc);
-            pulled = Some(a.pull(ctx, gathered, w.assignment_cosine, w.assignment)?);
-            (host.wait_ms, host.pairing_ms) = a.last_pull_ms();
             enc = ctx.encoder("engine.step.backward");
         }
         let assign = if assigning { self.assign.as_ref() } else { None };
@@ -445,6 +442,15 @@ impl GpuEngine {
             self.opt.opacity.step(ctx, &k.adam, &mut enc, &g.opacity_logits, &v.v_opacity_logits, lr.opacity);
         }
         enc.copy_buffer_to_buffer(plan.raster.pair_count(), 0, &self.scalars, (slot::PAIRS * 4) as u64, 4);
+        // The pull's gradient is uploaded before this submission runs: the
+        // host records the backward pass above while the device still works
+        // on the submissions before, then waits for the gathered columns and
+        // pairs them.
+        let mut pulled = None;
+        if let (Some(gathered), Some(a)) = (gathered, self.assign.as_mut()) {
+            pulled = Some(a.pull(ctx, gathered, w.assignment_cosine, w.assignment)?);
+            (host.wait_ms, host.pairing_ms) = a.last_pull_ms();
+        }
         submit(&mut host, enc);
         if let Some(Some(t)) = self.targets.get_mut(view) {
             t.kept = keep;

@@ -156,8 +156,9 @@ impl GpuAssignment {
     /// Once `gathered` (the submission holding the gathers) has run: reads
     /// the gathered columns back, pairs them and computes both pulls on the
     /// host ([`pull_pairs`]), and uploads the weighted gradient for
-    /// [`GpuAssignment::record_scatter`]. Work submitted after `gathered`
-    /// runs on meanwhile. Returns the terms (the gradient stays on the
+    /// [`GpuAssignment::record_scatter`] (recorded before or after: the
+    /// upload lands before the next submission). Work submitted after
+    /// `gathered` runs on meanwhile. Returns the terms (the gradient stays on the
     /// device; `grad` is empty).
     pub fn pull(
         &mut self,
@@ -207,7 +208,8 @@ mod tests {
 
     /// The device's gather, the host's pull and the device's scatter give the
     /// CPU step's terms and gradient for the same draw, the gradient added to
-    /// what was there and nothing added off the drawn rows.
+    /// what was there and nothing added off the drawn rows, with the scatter
+    /// recorded before the pull uploads the gradient (as the engine records it).
     #[test]
     fn gather_pull_and_scatter_match_the_cpu_assignment() {
         let ctx = ctx();
@@ -229,9 +231,11 @@ mod tests {
             let mut enc = ctx.encoder("assignment test gather");
             a.record_gather_of(ctx, &mut enc, &fb, n, &rows, &sb, m, &targets);
             let gathered = ctx.submit_indexed(enc);
-            let got = a.pull(ctx, gathered, weights.0, weights.1).expect("pull");
+            // As the engine does: the scatter recorded before the pull,
+            // whose upload of the gradient the scatter's submission sees.
             let mut enc = ctx.encoder("assignment test scatter");
             a.record_scatter(ctx, &mut enc, &vb);
+            let got = a.pull(ctx, gathered, weights.0, weights.1).expect("pull");
             ctx.submit(enc);
             let v: Vec<f32> = ctx.read(&vb).expect("gradient");
 
