@@ -194,25 +194,37 @@ impl PairCosts {
         }
         let l2_scale = 1.0 / (r * channels) as f64;
         let cos_scale = 1.0 / r as f64;
-        let (mut l2, mut cosine) = (0.0f64, 0.0f64);
-        for i in 0..r {
-            let j = sigma[i];
-            let mut xs = 0.0f64;
-            for c in 0..channels {
-                xs += f64::from(x[c * r + i]) * f64::from(s[c * r + j]);
-            }
-            let cos = xs / (x_len[i] * s_len[j]);
-            cosine += 1.0 - cos;
-            for c in 0..channels {
-                let (xv, sv) = (f64::from(x[c * r + i]), f64::from(s[c * r + j]));
-                let d = xv - sv;
-                l2 += d * d;
-                // ∂(1 − cos)/∂x = −(s/(|x||s|) − cos·x/|x|²).
-                let g_cos = -(sv / (x_len[i] * s_len[j]) - cos * xv / (x_len[i] * x_len[i]));
-                let g = f64::from(l2_weight) * 2.0 * d * l2_scale + f64::from(cosine_weight) * g_cos * cos_scale;
-                grad[c * r + i] = g as f32;
+        // Channel by channel over the pairs, so every pass reads the columns
+        // contiguously (`s` brought into the rows' order first); each pair's
+        // sums still run over the channels in order.
+        let mut paired = vec![0.0f32; x.len()];
+        for (to, from) in paired.chunks_exact_mut(r).zip(s.chunks_exact(r)) {
+            for (t, &j) in to.iter_mut().zip(sigma) {
+                *t = from[j];
             }
         }
+        let mut dots = vec![0.0f64; r];
+        for (xc, sc) in x.chunks_exact(r).zip(paired.chunks_exact(r)) {
+            for ((d, &xv), &sv) in dots.iter_mut().zip(xc).zip(sc) {
+                *d += f64::from(xv) * f64::from(sv);
+            }
+        }
+        let lens: Vec<f64> = sigma.iter().enumerate().map(|(i, &j)| x_len[i] * s_len[j]).collect();
+        let cos: Vec<f64> = dots.iter().zip(&lens).map(|(d, l)| d / l).collect();
+        let cosine: f64 = cos.iter().map(|c| 1.0 - c).sum();
+        let (l2_w, cos_w) = (f64::from(l2_weight) * 2.0 * l2_scale, f64::from(cosine_weight) * cos_scale);
+        let mut l2_of = vec![0.0f64; r];
+        for ((gc, xc), sc) in grad.chunks_exact_mut(r).zip(x.chunks_exact(r)).zip(paired.chunks_exact(r)) {
+            for i in 0..r {
+                let (xv, sv) = (f64::from(xc[i]), f64::from(sc[i]));
+                let d = xv - sv;
+                l2_of[i] += d * d;
+                // ∂(1 − cos)/∂x = −(s/(|x||s|) − cos·x/|x|²).
+                let g_cos = -(sv / lens[i] - cos[i] * xv / (x_len[i] * x_len[i]));
+                gc[i] = (l2_w * d + cos_w * g_cos) as f32;
+            }
+        }
+        let l2: f64 = l2_of.iter().sum();
         Assignment { cosine: (cosine * cos_scale) as f32, l2: (l2 * l2_scale) as f32, grad }
     }
 }
