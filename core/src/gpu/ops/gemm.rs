@@ -10,9 +10,11 @@
 //!
 //! Two tilings of the same kernel: `gemm` computes a 64×64 block of C per
 //! workgroup, `gemm_wide` a 128×128 one with four times the outputs per
-//! thread and half the workgroup-memory reads per multiply-add. Both sum
-//! every output over `k` in the same order, so their results are the same
-//! bits. [`Gemm::plan`] takes the wide one for products whose wide grid still
+//! thread and half the workgroup-memory reads per multiply-add. Both read
+//! workgroup memory in 16-byte vectors (a thread's outputs are runs of four
+//! consecutive rows and columns) and load the next slice of `k` from global
+//! memory before multiplying the current one. Both sum every output over
+//! `k` in the same order, so their results are the same bits. [`Gemm::plan`] takes the wide one for products whose wide grid still
 //! has [`WIDE_MIN_GROUPS`] workgroups (the GCFM search's scores, VGG's
 //! input gradients), the narrow one otherwise; on a software adapter
 //! (lavapipe, where the wide tiling ran twice as fast at the three shapes
