@@ -214,6 +214,18 @@ fn gpu_object_focus_gives_the_cpu_losses() {
     }
 }
 
+/// The object focus at a size where the GPU engine runs VGG on the object's
+/// window (the CPU engine windows too): the same losses, colour and geometry.
+#[test]
+fn gpu_vgg_window_gives_the_cpu_losses() {
+    for mode in [Mode::ColorOnly, Mode::GeometryOnly] {
+        let config = StyleConfig { resolution: 256, texture_scale: 128, ..object_config(mode, LossWeights::default()) };
+        let Some([_, gpu]) = gpu_and_cpu_agree(&format!("object {mode:?} at 256 px"), config) else { return };
+        let share = gpu.gpu_vgg_window_share().expect("a VGG window at 256 px");
+        assert!(share > 0.1 && share < 0.8, "the window covers {share} of the frame");
+    }
+}
+
 /// The GPU the device tests run on (lavapipe in CI).
 fn gpu_context() -> gast_core::gpu::GpuContext {
     match gast_core::gpu::DeviceChoice::Gpu.resolve() {

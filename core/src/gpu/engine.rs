@@ -73,6 +73,8 @@ struct ViewTarget {
     subset: Option<GcfmSubset>,
     /// The covered feature positions (with `focus`).
     covered_at: Option<Vec<u32>>,
+    /// Their bounding box (feature cells): VGG runs on the window around it.
+    window: Option<crate::vision::vgg_cone::Region>,
     /// The background hold's reference ([`RefLoss::hold_reference`]), made
     /// on the first step with λ_out > 0.
     hold: Option<wgpu::Buffer>,
@@ -288,6 +290,17 @@ impl GpuEngine {
         self.object_focus = on;
     }
 
+    /// The share of the frame's feature positions VGG runs on with the
+    /// object focus (its window, [`StepLossPlan::fit_window`]), the largest
+    /// over the image sizes met; `None` while every plan runs the whole frame.
+    pub fn vgg_window_share(&self) -> Option<f64> {
+        let share = |p: &ViewPlan| {
+            let (fh, fw) = p.loss.feature_size();
+            p.loss.window_size().map(|s| s.share(fh, fw))
+        };
+        self.plans.values().filter_map(share).reduce(f64::max)
+    }
+
     /// The host's share of the last step: its pairing and its waits on the device.
     pub fn host_times(&self) -> HostTimes {
         self.host
@@ -350,6 +363,7 @@ impl GpuEngine {
             hold: if self.object_focus { target.hold.as_ref() } else { None },
             depth_grad: geometry,
             focus,
+            window: focus.and(target.window).filter(|_| config.vgg_window),
             scalars: &self.scalars,
         };
         let holding = inputs.hold.is_some();
@@ -540,6 +554,14 @@ impl GpuEngine {
             self.make_target(view, cam, weights.outside > 0.0)?;
             self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
         }
+        // The plan's VGG window holds this view's covered box (a plan made
+        // anew, after a view's target, fits it here).
+        let window = self.targets[view].as_ref().and_then(|t| t.window);
+        if let (Some(b), Some(plan)) = (window, self.plans.get_mut(&size)) {
+            let before = self.ctx.allocated_bytes();
+            plan.loss.fit_window(&self.ctx, &self.k.loss, b);
+            self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
+        }
         // λ_out turned on after the target was made (a slider): its hold now.
         if weights.outside > 0.0 && self.targets[view].as_ref().is_some_and(|t| t.hold.is_none()) {
             let before = self.ctx.allocated_bytes();
@@ -605,6 +627,14 @@ impl GpuEngine {
             }
             None => None,
         };
+        let window = covered_at.as_ref().and_then(|at| {
+            let (fh, fw) = plan.loss.feature_size();
+            let mut covered = vec![false; fh * fw];
+            for &x in at {
+                covered[x as usize] = true;
+            }
+            crate::style::window::covered_box(&covered, fh, fw)
+        });
         let subset = match &covered_at {
             Some(at) if (covered as f64) <= SUBSET_SHARE * positions as f64 => {
                 Some(plan.loss.gcfm_subset(ctx, &k.loss, &self.style, at))
@@ -624,8 +654,18 @@ impl GpuEngine {
         if view >= self.targets.len() {
             self.targets.resize_with(view + 1, || None);
         }
-        self.targets[view] =
-            Some(ViewTarget { content, inv_depth, focus, colour, kept: None, subset, covered_at, hold, palette });
+        self.targets[view] = Some(ViewTarget {
+            content,
+            inv_depth,
+            focus,
+            colour,
+            kept: None,
+            subset,
+            covered_at,
+            window,
+            hold,
+            palette,
+        });
         Ok(())
     }
 

@@ -70,6 +70,8 @@ mod depth_rec;
 mod feature_net;
 #[path = "networks/vgg.rs"]
 mod vgg;
+#[path = "networks/vgg_window.rs"]
+mod vgg_window;
 
 // The loss terms, their maps and the step that ties them (`losses/`).
 #[path = "losses/assignment.rs"]
@@ -129,6 +131,7 @@ pub use sliced::{GpuSlicedTarget, SlicedKernels, SlicedLoss};
 pub use sort::{GpuSort, SortKernels, bits_for};
 pub use step_loss::{StepInputs, StepLossKernels, StepLossPlan, step_loss_gpu};
 pub use vgg::{GpuVgg, GpuVggState, GpuVggWorkspace, bench_vgg};
+pub use vgg_window::{VggWindow, WindowKernel, WindowSize};
 
 use serde::{Deserialize, Serialize};
 

@@ -418,6 +418,12 @@ impl Session {
         self.engine.as_ref().map(|e| e.memory_bytes())
     }
 
+    /// The share of the frame VGG runs on in the GPU engine's object focus
+    /// ([`GpuEngine::vgg_window_share`]; `None` on the CPU or on whole frames).
+    pub fn gpu_vgg_window_share(&self) -> Option<f64> {
+        self.engine.as_ref().and_then(|e| e.vgg_window_share())
+    }
+
     /// Why stepping stopped before the schedule ended (a GPU failure), if it did.
     pub fn failure(&self) -> Option<&str> {
         self.failure.as_deref()

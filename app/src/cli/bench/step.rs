@@ -114,6 +114,8 @@ struct StepRun {
     host_per_phase: Vec<(gast_core::style::Phase, HostMedians)>,
     first_losses: Option<gast_core::session::LossTerms>,
     gpu_memory_mib: Option<f64>,
+    /// The share of the frame the GPU engine's VGG runs on (its object window).
+    vgg_window_share: Option<f64>,
     targets_s: f64,
 }
 
@@ -142,6 +144,7 @@ impl StepRun {
             "colour_bind_groups": colour.map(|h| h.bind_groups),
             "geometry_bind_groups": geometry.map(|h| h.bind_groups),
             "gpu_memory_mib": self.gpu_memory_mib,
+            "vgg_window_share": self.vgg_window_share,
             "targets_s": self.targets_s,
         })
     }
@@ -489,6 +492,13 @@ fn time_steps(
         views.len(),
         warm * 1e3
     );
+    let vgg_window_share = session.gpu_vgg_window_share();
+    if let Some(share) = vgg_window_share {
+        println!(
+            "  VGG on the object's window: {:.0}% of the frame's feature positions (GAST_VGG_WINDOW=0: the whole frame)",
+            share * 1e2
+        );
+    }
     let pb = crate::progress::bar(u64::from(budget), "steps");
     let mut reports: Vec<(StepReport, f64)> = Vec::new();
     let t_all = Instant::now();
@@ -572,6 +582,7 @@ fn time_steps(
         host_per_phase,
         first_losses: reports.first().map(|r| r.0.losses),
         gpu_memory_mib,
+        vgg_window_share,
         targets_s: warm,
     })
 }

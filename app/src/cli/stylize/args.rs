@@ -261,7 +261,7 @@ pub struct FastArgs {
     #[arg(long)]
     pub matching_reuse: Option<u32>,
     /// With object focus, run VGG only on what the object's feature positions depend on: their
-    /// receptive-field window and, inside it, the cone of their box (true), or on the whole
+    /// receptive-field window and, inside it on the CPU, the cone of their box (true), or on the whole
     /// frame (false); the same losses up to rounding either way [default: true].
     #[arg(long)]
     pub vgg_window: Option<bool>,

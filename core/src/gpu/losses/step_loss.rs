@@ -23,13 +23,17 @@ use super::palette::PaletteLoss;
 use super::{
     CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, FocusKernels, GcfmSubset, GcfmWorkspace,
     GpuContext, GpuError, GpuFocus, GpuGcfm, GpuStyle, GpuVgg, GpuVggState, GpuVggWorkspace, LossKernels,
-    ReduceKernels, RefLoss, ResizeKernels, Search, SlicedKernels, SlicedLoss, TvLoss,
+    ReduceKernels, RefLoss, ResizeKernels, Search, SlicedKernels, SlicedLoss, TvLoss, VggWindow, WindowKernel,
+    WindowSize,
 };
 use crate::style::config::LossWeights;
 use crate::style::gcfm::Matches;
 use crate::style::step::{RenderedMaps, StepLoss, StepLossTimings, StyleTargets, replicate3};
 use crate::style::terms::LossTerms;
 use crate::vision::Vgg;
+use crate::vision::vgg_cone::Region;
+
+use super::vgg_window::MAX_SHARE as MAX_WINDOW_SHARE;
 
 /// Where each loss value lives in a scalars buffer (in 4-byte words).
 pub mod slot {
@@ -75,6 +79,7 @@ pub struct StepLossKernels {
     pub(crate) vgg: GpuVgg,
     pub(crate) gcfm: GpuGcfm,
     pub(crate) sliced: Arc<SlicedKernels>,
+    pub(crate) window: WindowKernel,
 }
 
 impl StepLossKernels {
@@ -90,6 +95,7 @@ impl StepLossKernels {
             vgg: GpuVgg::new(ctx, vgg),
             gcfm: GpuGcfm::new(ctx),
             sliced: SlicedKernels::new(ctx),
+            window: WindowKernel::new(ctx),
         }
     }
 }
@@ -112,8 +118,16 @@ pub struct StepLossPlan {
     palette_on: bool,
     vgg_ws: GpuVggWorkspace,
     /// VGG states of the RGB, depth and edge maps (the edge state doubles as
-    /// the scratch of [`StepLossPlan::record_content_target`]).
+    /// the scratch of [`StepLossPlan::record_content_target`]); with a
+    /// window, their features buffers hold the window's features put back.
     states: [GpuVggState; 3],
+    /// VGG on the object's window ([`StepLossPlan::fit_window`]), at the
+    /// largest size this plan's views have needed.
+    window: Option<VggWindow>,
+    /// Whether the plan runs VGG on the whole frame only: its VGG input is
+    /// not four whole pixels a feature cell, `GAST_VGG_WINDOW=0`, or a view
+    /// needed more than `MAX_WINDOW_SHARE` of the frame.
+    window_off: bool,
     gcfm_ws: GcfmWorkspace,
     content: ContentLoss,
     feature_mean: FeatureMeanLoss,
@@ -189,6 +203,8 @@ impl StepLossPlan {
             frame: GpuFocus::frame(ctx, h, w, fh, fw),
             sizes: [(h, w), (fh, fw)],
             states,
+            window: None,
+            window_off: !windows_allowed([(h, w), (fh, fw)]),
             rgb: ctx.zeros("loss.rgb", h * w * 3),
             depth3: ctx.zeros("loss.depth3", h * w * 3),
             edge3: ctx.zeros("loss.edge3", h * w * 3),
@@ -205,6 +221,82 @@ impl StepLossPlan {
     /// Floats of one feature map (768 × h/8 × w/8), the size of a content target.
     pub fn feature_len(&self) -> usize {
         self.feature_len
+    }
+
+    /// The relu3 feature grid of a render, rows × columns.
+    pub fn feature_size(&self) -> (usize, usize) {
+        self.sizes[1]
+    }
+
+    /// Makes the object-focus VGG window hold the covered box `b` (feature
+    /// cells) of a view: grows it when `b` with its margin does not fit,
+    /// or turns windows off for this plan when the window would cover more
+    /// than `MAX_WINDOW_SHARE` (0.8) of the frame. The engine calls it when it
+    /// makes a view's targets; [`StepInputs::window`] then names the box.
+    pub fn fit_window(&mut self, ctx: &GpuContext, k: &StepLossKernels, b: Region) {
+        if self.window_off || self.window.as_ref().is_some_and(|w| w.holds(b)) {
+            return;
+        }
+        let (fh, fw) = self.sizes[1];
+        let size = WindowSize::grown(self.window.as_ref().map(VggWindow::size), b, fh, fw);
+        self.window = None;
+        if size.share(fh, fw) > MAX_WINDOW_SHARE {
+            self.window_off = true;
+        } else {
+            self.window = Some(VggWindow::new(ctx, &k.vgg, (fh, fw), size));
+        }
+    }
+
+    /// Turns the VGG window off (the whole frame, as before it existed), or
+    /// back on for the views fitted after.
+    pub fn set_window_enabled(&mut self, on: bool) {
+        self.window = None;
+        self.window_off = !on || !windows_allowed(self.sizes);
+    }
+
+    /// The VGG window's size, when the plan has one.
+    pub fn window_size(&self) -> Option<WindowSize> {
+        self.window.as_ref().map(VggWindow::size)
+    }
+
+    /// The window this step's VGG passes run on, placed over the view's
+    /// covered box (its copies' uniforms written for the next submission),
+    /// or `None` for the whole frame.
+    fn window_for(&self, ctx: &GpuContext, inputs: &StepInputs<'_>) -> Option<&VggWindow> {
+        let b = inputs.window.filter(|_| inputs.focus.is_some())?;
+        let win = self.window.as_ref().filter(|w| w.holds(b))?;
+        win.place(ctx, b);
+        Some(win)
+    }
+
+    /// VGG's forward pass of map `m` (0 RGB, 1 depth, 2 edge) into `states[m]`'s features.
+    fn vgg_forward(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        enc: &mut wgpu::CommandEncoder,
+        win: Option<&VggWindow>,
+        m: usize,
+    ) {
+        match win {
+            Some(win) => win.forward(ctx, &k.window, &k.vgg, enc, m, &self.small[m], self.states[m].features()),
+            None => k.vgg.forward(ctx, enc, &self.vgg_ws, &self.small[m], &self.states[m]),
+        }
+    }
+
+    /// VGG's backward pass of map `m` (0 RGB, 1 depth), `v_feat[m]` to `v_small[m]`.
+    fn vgg_backward(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        enc: &mut wgpu::CommandEncoder,
+        win: Option<&VggWindow>,
+        m: usize,
+    ) {
+        match win {
+            Some(win) => win.backward(ctx, &k.window, &k.vgg, enc, m, &self.v_feat[m], &self.v_small[m]),
+            None => k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[m], &self.v_feat[m], &self.v_small[m]),
+        }
     }
 
     /// Whether this plan serves `w`: the λ_GC it was made with (baked into
@@ -354,7 +446,7 @@ impl StepLossPlan {
     ) {
         self.clamp.forward(ctx, enc, inputs.rgb_raw, &self.rgb);
         self.down.forward(ctx, enc, &self.rgb, &self.small[0]);
-        k.vgg.forward(ctx, enc, &self.vgg_ws, &self.small[0], &self.states[0]);
+        self.vgg_forward(ctx, k, enc, self.window_for(ctx, inputs), 0);
     }
 
     /// After [`StepLossPlan::record_rgb_features`]: the depth and edge maps
@@ -376,8 +468,9 @@ impl StepLossPlan {
                 self.down.forward(ctx, enc, &self.edge3, &self.small[2]);
             }
         }
-        for (small, state) in self.small[1..].iter().zip(&self.states[1..]) {
-            k.vgg.forward(ctx, enc, &self.vgg_ws, small, state);
+        let win = self.window_for(ctx, inputs);
+        for m in 1..3 {
+            self.vgg_forward(ctx, k, enc, win, m);
         }
     }
 
@@ -447,7 +540,7 @@ impl StepLossPlan {
         if let Some(a) = assign {
             a.record_scatter(ctx, enc, &self.v_feat[0]);
         }
-        k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[0], &self.v_feat[0], &self.v_small[0]);
+        self.vgg_backward(ctx, k, enc, self.window_for(ctx, inputs), 0);
         self.down.backward(ctx, enc, &self.v_small[0], &self.v_rgb, false);
         self.tv.record(ctx, enc, &self.rgb, focus, &self.v_rgb, scalars);
         if let Some(reference) = inputs.hold.filter(|_| self.hold_on) {
@@ -472,7 +565,7 @@ impl StepLossPlan {
     ) {
         let focus = inputs.focus.unwrap_or(&self.frame);
         if inputs.depth_grad {
-            k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[1], &self.v_feat[1], &self.v_small[1]);
+            self.vgg_backward(ctx, k, enc, self.window_for(ctx, inputs), 1);
             self.down.backward(ctx, enc, &self.v_small[1], &self.v_depth3, false);
             let pixels = focus.pixels();
             self.depth_map.backward(ctx, enc, inputs.inv_depth, pixels, &self.v_depth3, &self.v_inv_depth, false);
@@ -505,8 +598,20 @@ pub struct StepInputs<'a> {
     pub depth_grad: bool,
     /// The object focus ([`StepLossPlan::record_focus`]); the whole frame without one.
     pub focus: Option<&'a GpuFocus>,
+    /// With the focus, the bounding box of its covered feature cells: VGG
+    /// then runs on the window around it, when the plan has one that holds
+    /// it ([`StepLossPlan::fit_window`]); else, or without it, on the whole frame.
+    pub window: Option<Region>,
     /// Where the unweighted terms go ([`slot`]).
     pub scalars: &'a wgpu::Buffer,
+}
+
+/// Whether a plan for `h × w` renders (relu3 grid `fh × fw`) may run VGG on
+/// a window: its VGG input (the half-size render) is four whole pixels a
+/// feature cell, so a window's pools fall as the frame's, and
+/// `GAST_VGG_WINDOW` is not `0`.
+fn windows_allowed([(h, w), (fh, fw)]: [(usize, usize); 2]) -> bool {
+    h / 2 == 4 * fh && w / 2 == 4 * fw && !std::env::var("GAST_VGG_WINDOW").is_ok_and(|v| v == "0")
 }
 
 /// The sliced term of modality `m` (0 RGB, 1 depth) when its weight is on.
@@ -549,10 +654,29 @@ pub fn step_loss_gpu(
     depth_grad: bool,
     focus_alpha: Option<&[f32]>,
 ) -> Result<StepLoss, GpuError> {
+    step_loss_gpu_windowed(ctx, k, style, maps, content_rgb, depth_ref, weights, depth_grad, focus_alpha, true)
+}
+
+/// [`step_loss_gpu`], with VGG on the focus's window where the plan allows
+/// one (`window`, as the engine and the CPU do) or on the whole frame.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn step_loss_gpu_windowed(
+    ctx: &GpuContext,
+    k: &StepLossKernels,
+    style: &StyleTargets,
+    maps: RenderedMaps<'_>,
+    content_rgb: Option<&[f32]>,
+    depth_ref: Option<&[f32]>,
+    weights: &LossWeights,
+    depth_grad: bool,
+    focus_alpha: Option<&[f32]>,
+    window: bool,
+) -> Result<StepLoss, GpuError> {
     let (h, w) = (maps.height, maps.width);
     let mut gstyle = GpuStyle::new(ctx, &style.features);
     gstyle.upload_sliced(ctx, &style.features, weights);
-    let plan = StepLossPlan::new(ctx, k, &gstyle, h, w, weights)?;
+    let mut plan = StepLossPlan::new(ctx, k, &gstyle, h, w, weights)?;
+    plan.set_window_enabled(window);
     let rgb = ctx.upload("loss.in.rgb", maps.rgb);
     let inv_depth = ctx.upload("loss.in.inv_depth", maps.inv_depth);
     let edge = ctx.upload("loss.in.edge", &replicate3(maps.edge));
@@ -566,6 +690,18 @@ pub fn step_loss_gpu(
         }
         None => None,
     };
+    let mut covered_cells = None;
+    let mut window_box = None;
+    if let Some(f) = &focus {
+        let cells: Vec<f32> = ctx.read(f.cells())?;
+        let (fh, fw) = plan.feature_size();
+        let covered: Vec<bool> = cells.iter().map(|&c| c != 0.0).collect();
+        window_box = crate::style::window::covered_box(&covered, fh, fw);
+        if let Some(b) = window_box {
+            plan.fit_window(ctx, k, b);
+        }
+        covered_cells = Some(covered);
+    }
     let mut enc = ctx.encoder("step_loss_gpu");
     let content = content_rgb.map(|c| {
         let image = ctx.upload("loss.in.content", c);
@@ -583,6 +719,7 @@ pub fn step_loss_gpu(
         hold: None,
         depth_grad,
         focus: focus.as_ref(),
+        window: window_box,
         scalars: &scalars,
     };
     plan.record(ctx, k, &mut enc, &gstyle, &inputs, Search::Every);
@@ -590,10 +727,9 @@ pub fn step_loss_gpu(
     let s: Vec<f32> = ctx.read(&scalars)?;
     let mut m: Vec<u32> = ctx.read(plan.matches())?;
     let n = m.len() / 2;
-    if let Some(f) = &focus {
+    if let Some(covered) = &covered_cells {
         // As the CPU: no matches where the focus does not look.
-        let cells: Vec<f32> = ctx.read(f.cells())?;
-        for x in (0..n).filter(|&x| cells[x] == 0.0) {
+        for x in (0..n).filter(|&x| !covered[x]) {
             (m[x], m[n + x]) = (u32::MAX, u32::MAX);
         }
     }

@@ -124,3 +124,74 @@ fn the_object_focus_gives_the_cpu_masked_loss_and_all_ones_the_frame() {
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// VGG on the object's window gives the whole frame's loss, gradients and
+/// matches (and the CPU's, which windows too), on a frame where the window
+/// is about half of it.
+#[test]
+fn the_vgg_window_gives_the_whole_frames_loss() {
+    let ctx = ctx();
+    let t = inputs();
+    let (h, w) = (192, 160);
+    let unit = |len: usize, seed: u64| -> Vec<f32> { noise(len, seed).iter().map(|v| 0.5 + 0.45 * v).collect() };
+    let (rgb, content) = (unit(h * w * 3, 14), unit(h * w * 3, 17));
+    let inv_depth: Vec<f32> = noise(h * w, 15).iter().map(|v| 0.4 + 0.2 * v).collect();
+    let depth_ref: Vec<f32> = noise(h * w, 18).iter().map(|v| 0.4 + 0.2 * v).collect();
+    let edge: Vec<f32> = noise(h * w, 16).iter().map(|&v| f32::from(u8::from(v > 0.6))).collect();
+    // A small blob off the centre: a tenth of the frame.
+    let alpha: Vec<f32> = (0..h * w)
+        .map(|p| {
+            let (y, x) = ((p / w) as f32 / h as f32 - 0.4, (p % w) as f32 / w as f32 - 0.6);
+            (1.8 - 10.0 * (x * x + y * y).sqrt()).clamp(0.0, 1.0)
+        })
+        .collect();
+    let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
+    let weights = LossWeights { sliced: 10.0, sliced_depth: 10.0, ..Default::default() };
+    let k = StepLossKernels::new(ctx, &t.vgg);
+
+    // The plan's window: about half the frame's feature cells.
+    let mut gstyle = GpuStyle::new(ctx, &t.style.features);
+    gstyle.upload_sliced(ctx, &t.style.features, &weights);
+    let mut plan = StepLossPlan::new(ctx, &k, &gstyle, h, w, &weights).expect("plan");
+    let mut enc = ctx.encoder("test.focus");
+    let focus = plan.record_focus(ctx, &k, &mut enc, &ctx.upload("alpha", &alpha)).expect("focus");
+    ctx.submit(enc);
+    let cells: Vec<f32> = ctx.read(focus.cells()).expect("cells");
+    let (fh, fw) = plan.feature_size();
+    let covered: Vec<bool> = cells.iter().map(|&c| c != 0.0).collect();
+    let b = crate::style::window::covered_box(&covered, fh, fw).expect("a covered box");
+    plan.fit_window(ctx, &k, b);
+    let size = plan.window_size().expect("a window");
+    let share = size.share(fh, fw);
+    assert!(share > 0.2 && share < 0.7, "the window is {size:?} of {fh}×{fw}");
+
+    let target = content_target(&t.vgg, &content, h, w);
+    let mask = coverage_mask(&alpha, h, w);
+    let mut failures = Vec::new();
+    for depth_grad in [true, false] {
+        let dref = depth_grad.then_some(depth_ref.as_slice());
+        let run = |window| {
+            step_loss_gpu_windowed(
+                ctx,
+                &k,
+                &t.style,
+                maps,
+                Some(&content),
+                dref,
+                &weights,
+                depth_grad,
+                Some(&alpha),
+                window,
+            )
+            .expect("GPU loss")
+        };
+        let (windowed, whole) = (run(true), run(false));
+        failures.extend(differences(&format!("window vs frame, depth grad {depth_grad}:"), &whole, &windowed, 1e-5));
+        let cpu = step_loss_masked(&t.vgg, &t.style, maps, Some(&target), dref, &weights, depth_grad, Some(&mask));
+        failures.extend(differences(&format!("window vs CPU, depth grad {depth_grad}:"), &cpu, &windowed, 1e-3));
+        // Pixels far outside the window get no gradient either way.
+        assert!(windowed.v_rgb[..3 * w].iter().all(|&g| g == 0.0), "the top row has a gradient");
+        assert!(windowed.v_rgb.iter().any(|&g| g != 0.0), "no gradient at all");
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
