@@ -247,6 +247,8 @@ def compare(prefix, arms, title, names):
 
 
 ab_parts = compare("ab", ("base", "new"), "this build / baseline", (f"baseline {base_rev or '(--base)'}", "this build"))
+# VGG on the object's window against the whole frame (win_RES_ARMROUND, this build alone).
+compare("win", ("off", "on"), "VGG window / whole frame", ("GAST_VGG_WINDOW=0", "window"))
 tile_parts = compare("tile", ("t64", "auto"), "GEMM tiles auto / 64²", ("GAST_GEMM_TILE=64", "auto"))
 doc["tile_parts"] = tile_parts
 # Every product in 128² blocks (arm t128, not in the dry run): whether auto's threshold is right.
