@@ -618,23 +618,18 @@ impl GpuEngine {
         let covered = focus.covered_cells(ctx)?;
         let focus = (covered > 0).then_some(focus);
         // The covered positions' list, read once: with few of them, the GCFM
-        // search looks at those only; the assignment terms draw from them.
+        // search looks at those only; the assignment terms draw from them;
+        // their bounding box places VGG's window.
         let positions = plan.loss.positions();
-        let covered_at: Option<Vec<u32>> = match &focus {
+        let (covered_at, window) = match &focus {
             Some(f) => {
-                let cells: Vec<f32> = ctx.read(f.cells())?;
-                Some((0..positions as u32).filter(|&x| cells[x as usize] != 0.0).collect())
+                let covered = f.covered_mask(ctx)?;
+                let (fh, fw) = plan.loss.feature_size();
+                let at: Vec<u32> = (0..positions as u32).filter(|&x| covered[x as usize]).collect();
+                (Some(at), crate::style::window::covered_box(&covered, fh, fw))
             }
-            None => None,
+            None => (None, None),
         };
-        let window = covered_at.as_ref().and_then(|at| {
-            let (fh, fw) = plan.loss.feature_size();
-            let mut covered = vec![false; fh * fw];
-            for &x in at {
-                covered[x as usize] = true;
-            }
-            crate::style::window::covered_box(&covered, fh, fw)
-        });
         let subset = match &covered_at {
             Some(at) if (covered as f64) <= SUBSET_SHARE * positions as f64 => {
                 Some(plan.loss.gcfm_subset(ctx, &k.loss, &self.style, at))

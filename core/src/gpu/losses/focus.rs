@@ -141,6 +141,12 @@ impl GpuFocus {
         &self.counts
     }
 
+    /// Reads back the feature-position mask ([`GpuFocus::cells`]) as flags.
+    pub fn covered_mask(&self, ctx: &GpuContext) -> Result<Vec<bool>, GpuError> {
+        let cells: Vec<f32> = ctx.read(&self.cells)?;
+        Ok(cells.iter().map(|&c| c != 0.0).collect())
+    }
+
     /// Reads back how many feature positions are covered (once per view,
     /// after the submission that made the focus): with none, the CPU falls
     /// back to the whole frame, and so does the engine.

@@ -693,9 +693,8 @@ pub(crate) fn step_loss_gpu_windowed(
     let mut covered_cells = None;
     let mut window_box = None;
     if let Some(f) = &focus {
-        let cells: Vec<f32> = ctx.read(f.cells())?;
+        let covered = f.covered_mask(ctx)?;
         let (fh, fw) = plan.feature_size();
-        let covered: Vec<bool> = cells.iter().map(|&c| c != 0.0).collect();
         window_box = crate::style::window::covered_box(&covered, fh, fw);
         if let Some(b) = window_box {
             plan.fit_window(ctx, k, b);

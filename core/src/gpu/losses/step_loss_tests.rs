@@ -156,9 +156,8 @@ fn the_vgg_window_gives_the_whole_frames_loss() {
     let mut enc = ctx.encoder("test.focus");
     let focus = plan.record_focus(ctx, &k, &mut enc, &ctx.upload("alpha", &alpha)).expect("focus");
     ctx.submit(enc);
-    let cells: Vec<f32> = ctx.read(focus.cells()).expect("cells");
+    let covered = focus.covered_mask(ctx).expect("cells");
     let (fh, fw) = plan.feature_size();
-    let covered: Vec<bool> = cells.iter().map(|&c| c != 0.0).collect();
     let b = crate::style::window::covered_box(&covered, fh, fw).expect("a covered box");
     plan.fit_window(ctx, &k, b);
     let size = plan.window_size().expect("a window");
