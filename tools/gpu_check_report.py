@@ -129,13 +129,19 @@ def with_without(step, what, short, extra=lambda j: ""):
 with_without("compare_assign", "assignment terms (λ_asc 10 + λ_as 0.015)", "assignment terms")
 # The palette hold's kernels (λ_pal 100 with the object focus).
 with_without("compare_palette", "palette hold (λ_pal 100)", "palette hold")
-# The host pairing itself (`gast bench pairing`): Jonker–Volgenant's start against the plain paths.
+# The host pairing itself (`gast bench pairing`): in blocks (since 2026-11-30) and in one block,
+# Jonker–Volgenant's start against the plain paths.
 j = load("pairing.json")
 if j:
+    blocks = ""
+    if j.get("one_block_pairing_ms") is not None:
+        blocks = (f"; {j['blocks_median']:.0f} blocks of ≤ {j['assign_block']} rows (one block: {j['one_block_pairing_ms']:.2f} ms, "
+                  f"assignment {j['one_block_assign_ms']:.2f}); mean pair cost {j['pair_cost']:.4f} against "
+                  f"{j['one_block_pair_cost']:.4f} in one block, {j['drawn_pair_cost']:.4f} as drawn")
     figure(f"host pairing at {j['resolution']} px (guitar × wave, {j['threads']} threads)", j["pairing_ms"], "ms", None, None,
            f"median of {j['draws']} draws, {j['rows_median']:.0f} rows: cost matrix {j['cost_ms']:.2f}, assignment "
-           f"{j['assign_ms']:.2f} (the plain shortest paths {j['plain_ms']:.2f}, ratio {j['assign_over_plain']:.3f}), "
-           f"pulls {j['pull_ms']:.2f} ms")
+           f"{j['assign_ms']:.2f} (one block: the plain shortest paths {j['plain_ms']:.2f}, ratio {j['assign_over_plain']:.3f}), "
+           f"pulls {j['pull_ms']:.2f} ms{blocks}")
 else:
     figure("host pairing", None, "ms", None, False, status("pairing"))
 # The depth's sliced Wasserstein term (the frame recipe), at the largest step size.
@@ -249,6 +255,8 @@ def compare(prefix, arms, title, names):
 ab_parts = compare("ab", ("base", "new"), "this build / baseline", (f"baseline {base_rev or '(--base)'}", "this build"))
 # VGG on the object's window against the whole frame (win_RES_ARMROUND, this build alone).
 compare("win", ("off", "on"), "VGG window / whole frame", ("GAST_VGG_WINDOW=0", "window"))
+# The assignment pairing in blocks of 256 rows against one block of up to 512 (blk_RES_ARMROUND).
+compare("blk", ("one", "two"), "pairing in blocks of 256 / one block", ("--assign-block 512", "--assign-block 256"))
 tile_parts = compare("tile", ("t64", "auto"), "GEMM tiles auto / 64²", ("GAST_GEMM_TILE=64", "auto"))
 doc["tile_parts"] = tile_parts
 # Every product in 128² blocks (arm t128, not in the dry run): whether auto's threshold is right.

@@ -462,7 +462,7 @@ impl GpuEngine {
         // pairs them.
         let mut pulled = None;
         if let (Some(gathered), Some(a)) = (gathered, self.assign.as_mut()) {
-            pulled = Some(a.pull(ctx, gathered, w.assignment_cosine, w.assignment)?);
+            pulled = Some(a.pull(ctx, gathered, (w.assignment_cosine, w.assignment), config.assign_block as usize)?);
             (host.wait_ms, host.pairing_ms) = a.last_pull_ms();
         }
         submit(&mut host, enc);

@@ -145,6 +145,7 @@ impl Session {
                     .map(|(mask, rgb)| Outside { mask, rgb }),
                 palette: self.focus_on_object().then_some(target.palette),
                 relief_px: self.config.depth_relief_px as usize,
+                assign_block: self.config.assign_block as usize,
             },
             &mut matcher,
         );

@@ -131,6 +131,13 @@ pub struct StyleConfig {
     /// relief where the layout would take the render's 0–1 range. 0 (the
     /// default, the paper): the min-max normalised depth. CPU engine only.
     pub depth_relief_px: u32,
+    /// Most rows of one least-cost block of the assignment terms' pairing
+    /// (`style::assignment`): a step's up to 512 drawn rows are dealt into
+    /// interleaved blocks of at most this many, each paired one-to-one on
+    /// its own (in parallel), since one assignment of `r` rows costs up to
+    /// `r³` serial work. 256 (the default) splits only past 256 rows; 512
+    /// pairs every step's rows in one assignment, as before 2026-11-30.
+    pub assign_block: u32,
 }
 
 /// A setting the GPU engine does not compute yet ([`StyleConfig::cpu_only`]).
@@ -214,6 +221,7 @@ impl Default for StyleConfig {
             phase_leak: false,
             split_px: 0.0,
             depth_relief_px: 0,
+            assign_block: super::assignment::ASSIGN_BLOCK as u32,
         }
     }
 }
@@ -378,6 +386,13 @@ impl StyleConfig {
         if !(self.split_px == 0.0 || (1.0..=4096.0).contains(&self.split_px)) {
             out.push(format!("split_px must be 0 (off) or lie in 1..=4096 pixels, found {}", self.split_px));
         }
+        if !(16..=super::assignment::ASSIGN_MAX as u32).contains(&self.assign_block) {
+            out.push(format!(
+                "assign_block must lie in 16..={} rows, found {}",
+                super::assignment::ASSIGN_MAX,
+                self.assign_block
+            ));
+        }
         if self.depth_relief_px > 1024 {
             out.push(format!("depth_relief_px must be 0 (off) or at most 1024 pixels, found {}", self.depth_relief_px));
         }
@@ -451,6 +466,12 @@ mod tests {
         assert!(
             StyleConfig { depth_relief_px: 5000, ..StyleConfig::default() }.problems()[0].contains("depth_relief_px")
         );
+        for bad in [0, 15, 513] {
+            let c = StyleConfig { assign_block: bad, ..StyleConfig::default() };
+            assert!(c.problems()[0].contains("assign_block must lie in 16..=512 rows"), "{bad}");
+        }
+        let preset = StyleConfig::from_json(r#"{"assign_block": 512}"#).expect("a preset");
+        assert!(preset.problems().is_empty() && preset.assign_block == 512);
     }
 
     #[test]

@@ -10,7 +10,7 @@
 //! behind [`FeatureNet`] so the loss does not depend on how VGG is implemented
 //! (and tests can use a small stand-in).
 
-use super::assignment::assignment_loss;
+use super::assignment::{ASSIGN_BLOCK, assignment_loss};
 use super::config::LossWeights;
 use super::content::content_loss_masked;
 use super::feature_mean::feature_mean_loss;
@@ -39,9 +39,10 @@ pub struct FeatureMap {
     pub data: Vec<f32>,
 }
 
-/// Where the image-space losses look ([`super::focus`]) and whether VGG runs
-/// on the covered positions' window only ([`super::window`]).
-#[derive(Clone, Copy, Debug, Default)]
+/// Where the image-space losses look ([`super::focus`]), whether VGG runs
+/// on the covered positions' window only ([`super::window`]), and the
+/// assignment terms' block size.
+#[derive(Clone, Copy, Debug)]
 pub struct LossFocus<'a> {
     /// The covered pixels (`h × w`); `None` is the whole frame.
     pub mask: Option<&'a [bool]>,
@@ -60,6 +61,15 @@ pub struct LossFocus<'a> {
     /// Above 0: the depth map's relief at this radius in pixels goes to VGG
     /// instead of the min-max normalised depth ([`super::relief`]).
     pub relief_px: usize,
+    /// Most rows of one least-cost block of the assignment terms' pairing
+    /// ([`super::assignment`]; `StyleConfig::assign_block`).
+    pub assign_block: usize,
+}
+
+impl Default for LossFocus<'_> {
+    fn default() -> Self {
+        Self { mask: None, window: false, outside: None, palette: None, relief_px: 0, assign_block: ASSIGN_BLOCK }
+    }
 }
 
 /// A frozen feature extractor with an input gradient (VGG relu3_1..3).
@@ -281,7 +291,7 @@ pub fn step_loss_masked<N: FeatureNet>(
         depth_ref,
         weights,
         depth_grad,
-        LossFocus { mask, window: true, outside: None, palette: None, relief_px: 0 },
+        LossFocus { mask, window: true, ..LossFocus::default() },
         exact,
     )
 }
@@ -423,6 +433,7 @@ pub fn step_loss_with<N: FeatureNet>(
             fmask.as_deref(),
             weights.assignment_cosine,
             weights.assignment,
+            focus.assign_block,
         );
         timings.pairing_ms = paired.elapsed().as_secs_f32() * 1e3;
         (assignment_value, assignment_cosine_value) = (a.l2, a.cosine);

@@ -286,7 +286,7 @@ fn vgg_on_the_covered_window_equals_the_whole_frame() {
         let run = |window: bool| {
             let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
             let exact = &mut |r: [&[f32]; 3], n: usize| match_features(&st.features, r, n);
-            let focus = LossFocus { mask: Some(&mask), window, outside: None, palette: None, relief_px: 0 };
+            let focus = LossFocus { mask: Some(&mask), window, ..LossFocus::default() };
             step_loss_with(&net, &st, maps, Some(&content), Some(&dref), &weights, true, focus, exact)
         };
         let (whole, windowed) = (run(false), run(true));
@@ -395,8 +395,7 @@ fn the_background_hold_adds_its_weighted_value_and_moves_only_the_held_pixels() 
             mask: Some(&mask),
             window: true,
             outside: Some(Outside { mask: &held, rgb: &target }),
-            palette: None,
-            relief_px: 0,
+            ..LossFocus::default()
         };
         step_loss_with(&net, &st, maps, Some(&content), None, &weights, false, focus, exact)
     };
@@ -427,8 +426,7 @@ fn the_palette_hold_adds_its_weighted_value_and_moves_only_the_covered_pixels() 
         let weights = LossWeights { gcfm: 2.0, content: 0.5, tv: 0.02, palette: lambda, ..LossWeights::default() };
         let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
         let exact = &mut |r: [&[f32]; 3], n: usize| match_features(&st.features, r, n);
-        let focus =
-            LossFocus { mask: Some(&mask), window: true, outside: None, palette: Some(reference), relief_px: 0 };
+        let focus = LossFocus { mask: Some(&mask), window: true, palette: Some(reference), ..LossFocus::default() };
         step_loss_with(&net, &st, maps, Some(&content), None, &weights, false, focus, exact)
     };
     let (off, on) = (eval(0.0), eval(3.0));
@@ -461,7 +459,7 @@ fn the_depth_relief_gradient_matches_finite_differences_inside_the_mask() {
     let weights = LossWeights { gcfm: 2.0, sliced_depth: 0.7, ..LossWeights::default() };
     let eval = |d: &[f32], relief_px: usize| {
         let maps = RenderedMaps { rgb: &rgb, inv_depth: d, edge: &edge, height: h, width: w };
-        let focus = LossFocus { mask: Some(&mask), window: false, outside: None, palette: None, relief_px };
+        let focus = LossFocus { mask: Some(&mask), relief_px, ..LossFocus::default() };
         let exact = &mut |r: [&[f32]; 3], n: usize| crate::style::gcfm::match_features(&st.features, r, n);
         step_loss_with(&net, &st, maps, Some(&content), None, &weights, true, focus, exact)
     };

@@ -77,6 +77,13 @@ pub struct StepArgs {
     /// --focus object: the hold reads the object's pixels).
     #[arg(long, conflicts_with_all = ["compare", "compare_focus", "compare_assign", "compare_sliced_depth"])]
     pub compare_palette: bool,
+    /// Run the same steps on --device twice in this process with the assignment terms on
+    /// (λ_asc 10, λ_as 0.015), their pairing in one block of up to 512 rows and in blocks of
+    /// --assign-block (default 256), and print what the blocks save.
+    #[arg(long, conflicts_with_all = [
+        "compare", "compare_focus", "compare_assign", "compare_sliced_depth", "compare_palette"
+    ])]
+    pub compare_assign_block: bool,
     /// Depth Anything V2 checkpoint for the style depth line (else $GAST_DEPTH_MODEL or the
     /// caches; never downloaded here).
     #[arg(long)]
@@ -219,11 +226,17 @@ pub(super) fn reuse_on_gpu(args: &StepArgs) -> anyhow::Result<Option<ExitCode>> 
         && f.matching.is_none()
         && f.matching_dims.is_none()
         && f.matching_candidates.is_none()
-        && f.vgg_window.is_none();
+        && f.vgg_window.is_none()
+        && f.assign_block.is_none();
     if let (Some(reuse), true, false) = (
         f.matching_reuse,
         reuse_only,
-        args.compare || args.compare_focus || args.compare_assign || args.compare_sliced_depth || args.compare_palette,
+        args.compare
+            || args.compare_focus
+            || args.compare_assign
+            || args.compare_sliced_depth
+            || args.compare_palette
+            || args.compare_assign_block,
     ) && let Some(ctx) = args.device.resolve().with_context(|| format!("--device {}", args.device))?
     {
         return compare_reuse_gpu(args, ctx, reuse).map(Some);
@@ -249,7 +262,10 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     use gast_core::style::{Phase, StyleConfig};
 
     let inputs = step_inputs(&args)?;
-    let config = StyleConfig { resolution: args.resolution, focus: args.focus, ..StyleConfig::default() };
+    let mut config = StyleConfig { resolution: args.resolution, focus: args.focus, ..StyleConfig::default() };
+    config.assign_block = args.fast.assign_block.unwrap_or(config.assign_block);
+    let problems = config.problems();
+    anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
     let schedule = config.schedule();
     let budget = match args.steps {
         Some(n) => n,
@@ -267,6 +283,15 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         (on.weights.assignment_cosine, on.weights.assignment) =
             (gast_core::style::config::OBJECT_RECIPE_ASSIGN_COS, gast_core::style::config::OBJECT_RECIPE_ASSIGN);
         return compare_arms(&args, &inputs, [("without", off), ("λ_asc 10 + λ_as 0.015", on)], gpu, budget);
+    }
+    if args.compare_assign_block {
+        let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
+        let mut blocks = StyleConfig { object_recipe: false, ..config.clone() };
+        (blocks.weights.assignment_cosine, blocks.weights.assignment) =
+            (gast_core::style::config::OBJECT_RECIPE_ASSIGN_COS, gast_core::style::config::OBJECT_RECIPE_ASSIGN);
+        let one = StyleConfig { assign_block: gast_core::style::assignment::ASSIGN_MAX as u32, ..blocks.clone() };
+        let label = format!("blocks of {}", blocks.assign_block);
+        return compare_arms(&args, &inputs, [("one block", one), (label.as_str(), blocks)], gpu, budget);
     }
     if args.compare_sliced_depth {
         let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
@@ -446,7 +471,10 @@ fn compare_arms(
 fn compare_reuse_gpu(args: &StepArgs, ctx: gast_core::gpu::GpuContext, reuse: u32) -> anyhow::Result<ExitCode> {
     use gast_core::style::{MatchingConfig, StyleConfig};
     let inputs = step_inputs(args)?;
-    let config = StyleConfig { resolution: args.resolution, focus: args.focus, ..StyleConfig::default() };
+    let mut config = StyleConfig { resolution: args.resolution, focus: args.focus, ..StyleConfig::default() };
+    config.assign_block = args.fast.assign_block.unwrap_or(config.assign_block);
+    let problems = config.problems();
+    anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
     let schedule = config.schedule();
     let budget = args.steps.unwrap_or(schedule.color_steps + args.geometry_steps);
     let kept = StyleConfig { matching: MatchingConfig { reuse, ..MatchingConfig::default() }, ..config.clone() };

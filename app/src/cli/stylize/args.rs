@@ -245,6 +245,13 @@ impl StylizeArgs {
 /// The choices of issue 10 (fewer operations per step), shared by `stylize` and `bench step`.
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct FastArgs {
+    /// Most rows of one least-cost block of the assignment terms' pairing (16 to 512): a step
+    /// pairs up to 512 drawn positions one-to-one, serial host work that grows as the cube of
+    /// the rows, so more rows than this are dealt into blocks paired on their own, in parallel
+    /// (the pairs cost about 2% more at 256 than in one block); 512 pairs them all at once
+    /// [default: 256].
+    #[arg(long)]
+    pub assign_block: Option<u32>,
     /// VGG convolutions: im2col (the reference) or winograd (4× fewer multiplies, exact) [default: winograd].
     #[arg(long)]
     pub conv: Option<ConvAlgo>,
@@ -282,6 +289,7 @@ impl FastArgs {
         }
         c.conv = self.conv.unwrap_or(c.conv);
         c.vgg_window = self.vgg_window.unwrap_or(c.vgg_window);
+        c.assign_block = self.assign_block.unwrap_or(c.assign_block);
         c.matching.method = self.matching.unwrap_or(c.matching.method);
     }
 }

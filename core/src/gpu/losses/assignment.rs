@@ -155,7 +155,8 @@ impl GpuAssignment {
 
     /// Once `gathered` (the submission holding the gathers) has run: reads
     /// the gathered columns back, pairs them and computes both pulls on the
-    /// host ([`pull_pairs`]), and uploads the weighted gradient for
+    /// host ([`pull_pairs`], by the cosine and squared weights `weights`, in
+    /// blocks of at most `block` rows), and uploads the weighted gradient for
     /// [`GpuAssignment::record_scatter`] (recorded before or after: the
     /// upload lands before the next submission). Work submitted after
     /// `gathered` runs on meanwhile. Returns the terms (the gradient stays on the
@@ -164,8 +165,8 @@ impl GpuAssignment {
         &mut self,
         ctx: &GpuContext,
         gathered: wgpu::SubmissionIndex,
-        cosine_weight: f32,
-        l2_weight: f32,
+        (cosine_weight, l2_weight): (f32, f32),
+        block: usize,
     ) -> Result<Assignment, GpuError> {
         self.pull_ms = (0.0, 0.0);
         if self.drawn == 0 {
@@ -176,7 +177,7 @@ impl GpuAssignment {
         let xs: Vec<f32> = ctx.read_staged(&self.staging, (2 * half * 4) as u64, gathered)?;
         let paired = std::time::Instant::now();
         let (x, s) = xs.split_at(half);
-        let pulled = pull_pairs(x, s, self.channels, cosine_weight, l2_weight);
+        let pulled = pull_pairs(x, s, self.channels, cosine_weight, l2_weight, block);
         let ms = |d: std::time::Duration| d.as_secs_f32() * 1e3;
         self.pull_ms = (ms(paired - waited), ms(paired.elapsed()));
         ctx.write(&self.g, &pulled.grad);
@@ -204,6 +205,7 @@ impl GpuAssignment {
 mod tests {
     use super::*;
     use crate::gpu::test_util::{ctx, noise};
+    use crate::style::assignment::ASSIGN_BLOCK;
     use crate::style::focus::gather_positions;
 
     /// The device's gather, the host's pull and the device's scatter give the
@@ -235,14 +237,14 @@ mod tests {
             // whose upload of the gradient the scatter's submission sees.
             let mut enc = ctx.encoder("assignment test scatter");
             a.record_scatter(ctx, &mut enc, &vb);
-            let got = a.pull(ctx, gathered, weights.0, weights.1).expect("pull");
+            let got = a.pull(ctx, gathered, weights, ASSIGN_BLOCK).expect("pull");
             ctx.submit(enc);
             let v: Vec<f32> = ctx.read(&vb).expect("gradient");
 
             // The CPU's pulls of the same columns, scattered by hand.
             let x = gather_positions(&f, channels, n, &rows);
             let s = gather_positions(&style, channels, m, &targets);
-            let want = pull_pairs(&x, &s, channels, weights.0, weights.1);
+            let want = pull_pairs(&x, &s, channels, weights.0, weights.1, ASSIGN_BLOCK);
             assert_eq!((got.cosine, got.l2), (want.cosine, want.l2), "{label}");
             let r = rows.len();
             let mut expect = v0.clone();
@@ -268,7 +270,7 @@ mod tests {
         assert_eq!(a.record_gather(ctx, &mut enc, &fb, 10, Vec::new(), &sb, 10), 0);
         assert_eq!(a.record_gather(ctx, &mut enc, &fb, 10, vec![1, 2], &sb, 0), 0);
         let gathered = ctx.submit_indexed(enc);
-        let t = a.pull(ctx, gathered, 10.0, 1.0).expect("pull");
+        let t = a.pull(ctx, gathered, (10.0, 1.0), ASSIGN_BLOCK).expect("pull");
         assert_eq!((t.cosine, t.l2), (0.0, 0.0));
         let mut enc = ctx.encoder("empty scatter");
         a.record_scatter(ctx, &mut enc, &vb);
