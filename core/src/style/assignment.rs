@@ -42,7 +42,8 @@
 //! one among those that keep each block to itself. On real relu3 costs of
 //! guitar × wave at 512 px (about 400 rows), two blocks raise the pairs'
 //! mean cosine distance by about 2 % (0.434 → 0.444, against 0.620 for the
-//! draw's own random pairing) for a quarter of the serial work
+//! draw's own random pairing) for a third of the assignment's time on one
+//! core
 //! (`gast bench pairing`, `docs/figures.md`).
 
 use super::focus::{gather_positions, scatter_positions};

@@ -255,6 +255,21 @@ pub(super) fn asks_fast(args: &StepArgs) -> bool {
         || f.vgg_window.is_some()
 }
 
+/// The default settings at `--resolution` and `--focus`, with `--assign-block`
+/// (the one choice of [`super::super::stylize::FastArgs`] these runs take: the
+/// others go to `step_fast`), checked.
+fn step_config(args: &StepArgs) -> anyhow::Result<gast_core::style::StyleConfig> {
+    let mut config = gast_core::style::StyleConfig {
+        resolution: args.resolution,
+        focus: args.focus,
+        ..gast_core::style::StyleConfig::default()
+    };
+    config.assign_block = args.fast.assign_block.unwrap_or(config.assign_block);
+    let problems = config.problems();
+    anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
+    Ok(config)
+}
+
 /// Per-step breakdown of the optimisation, the whole schedule's time, and
 /// memory, with the default settings (`bench::run_step` dispatches).
 pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
@@ -262,10 +277,7 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     use gast_core::style::{Phase, StyleConfig};
 
     let inputs = step_inputs(&args)?;
-    let mut config = StyleConfig { resolution: args.resolution, focus: args.focus, ..StyleConfig::default() };
-    config.assign_block = args.fast.assign_block.unwrap_or(config.assign_block);
-    let problems = config.problems();
-    anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
+    let config = step_config(&args)?;
     let schedule = config.schedule();
     let budget = match args.steps {
         Some(n) => n,
@@ -471,10 +483,7 @@ fn compare_arms(
 fn compare_reuse_gpu(args: &StepArgs, ctx: gast_core::gpu::GpuContext, reuse: u32) -> anyhow::Result<ExitCode> {
     use gast_core::style::{MatchingConfig, StyleConfig};
     let inputs = step_inputs(args)?;
-    let mut config = StyleConfig { resolution: args.resolution, focus: args.focus, ..StyleConfig::default() };
-    config.assign_block = args.fast.assign_block.unwrap_or(config.assign_block);
-    let problems = config.problems();
-    anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
+    let config = step_config(args)?;
     let schedule = config.schedule();
     let budget = args.steps.unwrap_or(schedule.color_steps + args.geometry_steps);
     let kept = StyleConfig { matching: MatchingConfig { reuse, ..MatchingConfig::default() }, ..config.clone() };
