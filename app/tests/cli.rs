@@ -413,3 +413,18 @@ fn without_a_display_gast_runs_the_headless_demo_and_studio_fails() {
     assert_eq!(stderr(&o).trim(), format!("error: {NO_DESKTOP}"));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A bad `--assign-block` is refused before `gast bench step` loads anything:
+/// the scene named does not exist, and the error is the setting's.
+#[test]
+fn bench_step_refuses_a_bad_block_before_loading_the_scene() {
+    for fast in [&[][..], &["--conv", "im2col"][..]] {
+        let mut args = vec!["bench", "step", "--scene", "/nonexistent/scene.ply", "--assign-block", "7"];
+        args.extend_from_slice(fast);
+        let o = gast(&args);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(err.contains("assign_block must lie in 16..=512 rows, found 7"), "{args:?}: {err}");
+        assert!(!err.contains("nonexistent"), "{args:?} loaded the scene first: {err}");
+    }
+}

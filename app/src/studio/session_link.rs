@@ -216,26 +216,53 @@ impl RunMonitor {
     /// Progress in [0, 1] and the estimated seconds left: the steps left at
     /// the pace of the last whole cycle (its colour and geometry steps in
     /// their proportion), so the estimate follows a machine whose load
-    /// changes; before a cycle has ended, at the pace since the start.
+    /// changes; before a cycle has ended, at the pace since every view's
+    /// first visit. A view's first step also makes its targets (the render
+    /// of `G^c` and its features), which on the CPU can cost as much as a
+    /// few steps: read into the pace, the first dozen steps of a ten-minute
+    /// run promised half an hour.
     pub fn progress(&self) -> Option<(f32, f64)> {
         let last = self.steps.last()?;
         let done = (last.iter + 1) as f64;
         let total = last.total.max(1) as f64;
-        let per_step = self.last_cycle_pace().unwrap_or(last.elapsed_s / done);
+        let per_step = self
+            .last_cycle_pace()
+            .or_else(|| self.pace_after_first_visits())
+            .unwrap_or(last.elapsed_s / done);
         Some(((done / total) as f32, (per_step * (total - done)).max(0.0)))
     }
 
     /// Seconds a step over the last cycle that has ended, from the elapsed
-    /// times at its two ends.
+    /// times at its two ends; for the first cycle, from its last first visit
+    /// of a view on.
     fn last_cycle_pace(&self) -> Option<f64> {
         let current = self.steps.last()?.cycle;
         let ended = current.checked_sub(1)?;
         // The last step of the ended cycle and the last one before it (if any).
         let end = self.steps.iter().rposition(|r| r.cycle == ended)?;
-        let start = self.steps[..end].iter().rposition(|r| r.cycle < ended);
+        let start = self.steps[..end]
+            .iter()
+            .rposition(|r| r.cycle < ended)
+            .or_else(|| self.last_first_visit().filter(|&k| k < end));
         let (s0, i0) = start.map_or((0.0, -1), |k| (self.steps[k].elapsed_s, self.steps[k].iter as i64));
         let steps = self.steps[end].iter as i64 - i0;
         (steps > 0).then(|| (self.steps[end].elapsed_s - s0) / steps as f64)
+    }
+
+    /// Seconds a step since the last first visit of a view; `None` until a
+    /// view has been visited twice.
+    fn pace_after_first_visits(&self) -> Option<f64> {
+        let (first, last) = (&self.steps[self.last_first_visit()?], self.steps.last()?);
+        let steps = last.iter.checked_sub(first.iter).filter(|&n| n > 0)?;
+        Some((last.elapsed_s - first.elapsed_s) / f64::from(steps))
+    }
+
+    /// Index in `steps` of the step before the first that revisits a view
+    /// (the session visits every view once before any twice); `None` while
+    /// every step has been a first visit.
+    fn last_first_visit(&self) -> Option<usize> {
+        let mut seen = std::collections::HashSet::new();
+        self.steps.iter().position(|r| !seen.insert(r.view))?.checked_sub(1)
     }
 }
 
@@ -318,6 +345,25 @@ mod tests {
                 _ => 3.0,
             };
             assert!((eta - pace * left).abs() < 1e-9, "step {iter}: ETA {eta} against {}", pace * left);
+        }
+    }
+
+    /// The first visits' targets are not read into the pace: views 0–3 each
+    /// cost 6 s on their first step and 1 s on every other; before any view
+    /// is seen twice the estimate is the mean since the start.
+    #[test]
+    fn the_eta_leaves_out_each_views_first_visit() {
+        let mut m = RunMonitor::default();
+        // Cycles of 10 steps (6 colour, 4 geometry) over 4 views.
+        let mut elapsed = 0.0;
+        for iter in 0..14u32 {
+            elapsed += if iter < 4 { 6.0 } else { 1.0 };
+            let phase = if iter % 10 < 6 { Phase::Color } else { Phase::Geometry };
+            m.steps.push(StepReport { view: iter % 4, ..report(iter, 40, iter / 10, phase, elapsed) });
+            let (_, eta) = m.progress().expect("progress");
+            let pace = if iter < 4 { elapsed / f64::from(iter + 1) } else { 1.0 };
+            let want = pace * f64::from(40 - (iter + 1));
+            assert!((eta - want).abs() < 1e-9, "step {iter}: ETA {eta} against {want}");
         }
     }
 

@@ -276,8 +276,9 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     use gast_core::gpu::DeviceChoice;
     use gast_core::style::{Phase, StyleConfig};
 
-    let inputs = step_inputs(&args)?;
+    // Checked before the scene, the style and VGG are loaded.
     let config = step_config(&args)?;
+    let inputs = step_inputs(&args)?;
     let schedule = config.schedule();
     let budget = match args.steps {
         Some(n) => n,
@@ -482,8 +483,8 @@ fn compare_arms(
 /// searching at every visit, then keeping each view's matches for N visits.
 fn compare_reuse_gpu(args: &StepArgs, ctx: gast_core::gpu::GpuContext, reuse: u32) -> anyhow::Result<ExitCode> {
     use gast_core::style::{MatchingConfig, StyleConfig};
-    let inputs = step_inputs(args)?;
     let config = step_config(args)?;
+    let inputs = step_inputs(args)?;
     let schedule = config.schedule();
     let budget = args.steps.unwrap_or(schedule.color_steps + args.geometry_steps);
     let kept = StyleConfig { matching: MatchingConfig { reuse, ..MatchingConfig::default() }, ..config.clone() };

@@ -15,7 +15,6 @@ pub(super) fn run_fast_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     use gast_core::session::{Event, Session, SessionInputs, StepReport, StyleDepthSource};
     use gast_core::style::{MatchMethod, Phase, StyleConfig};
 
-    let StepInputs { scene, views, style, vgg } = step_inputs(&args)?;
     let old_config = StyleConfig {
         resolution: args.resolution,
         focus: args.focus,
@@ -28,6 +27,8 @@ pub(super) fn run_fast_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     args.fast.apply(&mut new_config);
     let problems = new_config.problems();
     anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
+    // (Checked above, before the scene, the style and VGG are loaded.)
+    let StepInputs { scene, views, style, vgg } = step_inputs(&args)?;
     let (cam_h, cam_w) = (views[0].height as usize, views[0].width as usize);
     let mc = new_config.matching;
     let window = |on: bool| if on { "the object's cone" } else { "the whole frame" };
