@@ -225,10 +225,8 @@ impl RunMonitor {
         let last = self.steps.last()?;
         let done = (last.iter + 1) as f64;
         let total = last.total.max(1) as f64;
-        let per_step = self
-            .last_cycle_pace()
-            .or_else(|| self.pace_after_first_visits())
-            .unwrap_or(last.elapsed_s / done);
+        let per_step =
+            self.last_cycle_pace().or_else(|| self.pace_after_first_visits()).unwrap_or(last.elapsed_s / done);
         Some(((done / total) as f32, (per_step * (total - done)).max(0.0)))
     }
 
