@@ -112,7 +112,7 @@ for scene in ("guitar", "playbot"):
                 mib = gpu.get("gpu_memory_mib")
                 figure(f"playbot GPU memory at {res} px", mib, "MiB", "≤ 2048 MiB" if res == 512 else None,
                        (mib is not None and mib <= 2048) if res == 512 else None,
-                       f"engine allocations; process peak resident {j['peak_resident_mib']:.0f} MiB")
+                       f"engine allocations over the run (before 2026-11-30: after its load only); process peak resident {j['peak_resident_mib']:.0f} MiB")
 
 def with_without(step, what, short, extra=lambda j: ""):
     """A term's cost: the step time of `gast bench step --compare-*` with the term on against off."""

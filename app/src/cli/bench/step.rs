@@ -520,10 +520,6 @@ fn time_steps(
     })?;
     let device = session.device();
     println!("\n{device}");
-    let gpu_memory_mib = session.gpu_memory_bytes().map(|b| b as f64 / f64::from(1u32 << 20));
-    if let Some(mib) = gpu_memory_mib {
-        println!("  GPU memory allocated by the engine: {mib:.1} MiB");
-    }
     let warm = session.warm_view_targets().map_err(|e| anyhow::anyhow!("{device}: {e}"))?;
     println!(
         "  per-view targets (G^c render, content features) of {} views, once per run: {:.0} ms",
@@ -548,6 +544,11 @@ fn time_steps(
     }
     let wall_s = t_all.elapsed().as_secs_f64();
     pb.finish_and_clear();
+    // After the steps: the VGG window and the buffers made on first use are in.
+    let gpu_memory_mib = session.gpu_memory_bytes().map(|b| b as f64 / f64::from(1u32 << 20));
+    if let Some(mib) = gpu_memory_mib {
+        println!("  GPU memory allocated by the engine over the run: {mib:.1} MiB");
+    }
     if let Some(why) = session.failure() {
         anyhow::bail!("{device}: the run stopped at {why}");
     }

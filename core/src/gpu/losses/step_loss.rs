@@ -254,6 +254,13 @@ impl StepLossPlan {
         self.window_off = !on || !windows_allowed(self.sizes);
     }
 
+    /// Which of the RGB, depth and edge maps' whole-frame VGG states have
+    /// made their activations (a pass ran on the whole frame).
+    #[cfg(test)]
+    fn whole_frame_activations(&self) -> [bool; 3] {
+        self.states.each_ref().map(GpuVggState::has_activations)
+    }
+
     /// The VGG window's size, when the plan has one.
     pub fn window_size(&self) -> Option<WindowSize> {
         self.window.as_ref().map(VggWindow::size)
@@ -655,10 +662,12 @@ pub fn step_loss_gpu(
     focus_alpha: Option<&[f32]>,
 ) -> Result<StepLoss, GpuError> {
     step_loss_gpu_windowed(ctx, k, style, maps, content_rgb, depth_ref, weights, depth_grad, focus_alpha, true)
+        .map(|(loss, _)| loss)
 }
 
 /// [`step_loss_gpu`], with VGG on the focus's window where the plan allows
-/// one (`window`, as the engine and the CPU do) or on the whole frame.
+/// one (`window`, as the engine and the CPU do) or on the whole frame; with
+/// the plan it ran on.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn step_loss_gpu_windowed(
     ctx: &GpuContext,
@@ -671,7 +680,7 @@ pub(crate) fn step_loss_gpu_windowed(
     depth_grad: bool,
     focus_alpha: Option<&[f32]>,
     window: bool,
-) -> Result<StepLoss, GpuError> {
+) -> Result<(StepLoss, StepLossPlan), GpuError> {
     let (h, w) = (maps.height, maps.width);
     let mut gstyle = GpuStyle::new(ctx, &style.features);
     gstyle.upload_sliced(ctx, &style.features, weights);
@@ -748,7 +757,7 @@ pub(crate) fn step_loss_gpu_windowed(
         ..LossTerms::default()
     };
     terms.total = terms.weighted(weights);
-    Ok(StepLoss {
+    let loss = StepLoss {
         timings: StepLossTimings::default(),
         // No background hold in this check helper (nor in its CPU twin), nor
         // the assignment terms (the engine's own, `GpuAssignment`).
@@ -756,7 +765,8 @@ pub(crate) fn step_loss_gpu_windowed(
         v_rgb: ctx.read(plan.v_rgb())?,
         v_inv_depth: ctx.read(plan.v_inv_depth())?,
         matches: Matches { best: m[..n].to_vec(), worst: m[n..2 * n].to_vec() },
-    })
+    };
+    Ok((loss, plan))
 }
 
 #[cfg(test)]

@@ -185,6 +185,12 @@ fn the_vgg_window_gives_the_whole_frames_loss() {
             .expect("GPU loss")
         };
         let (windowed, whole) = (run(true), run(false));
+        // With the window, the whole frame's VGG ran only for the content
+        // target (on the edge map's state, its scratch): the RGB and depth
+        // maps' whole-frame activations were never made.
+        assert_eq!(windowed.1.whole_frame_activations(), [false, false, true]);
+        assert_eq!(whole.1.whole_frame_activations(), [true, true, true]);
+        let (windowed, whole) = (windowed.0, whole.0);
         failures.extend(differences(&format!("window vs frame, depth grad {depth_grad}:"), &whole, &windowed, 1e-5));
         let cpu = step_loss_masked(&t.vgg, &t.style, maps, Some(&target), dref, &weights, depth_grad, Some(&mask));
         failures.extend(differences(&format!("window vs CPU, depth grad {depth_grad}:"), &cpu, &windowed, 1e-3));

@@ -15,6 +15,8 @@
 //! as torch and the CPU do). The three maps of a step (RGB, depth, edges) each
 //! have a state and share one workspace.
 
+use std::sync::OnceLock;
+
 use super::gemm::{Gemm, GemmPlan, GemmSpec, Strided};
 use super::kernel::Launch;
 use super::{Bind, GpuContext, Kernel};
@@ -111,18 +113,33 @@ pub struct GpuVggWorkspace {
 #[derive(Debug)]
 pub struct GpuVggState {
     size: (usize, usize),
-    acts: Vec<wgpu::Buffer>,
+    /// conv1_1, conv1_2, conv2_1 and conv2_2's outputs, made by the first
+    /// pass that runs on this state: a step loss that runs VGG on the
+    /// object's window never makes its whole-frame states' (three quarters
+    /// of a state's bytes).
+    acts: OnceLock<Vec<wgpu::Buffer>>,
     features: wgpu::Buffer,
 }
 
 impl GpuVggState {
-    /// Buffers for one map of `h × w` pixels.
+    /// Buffers for one map of `h × w` pixels (the activations on first use).
     pub fn new(ctx: &GpuContext, h: usize, w: usize) -> Self {
-        let dims = stage_dims(h, w);
-        let n = |s: usize| dims[s].0 * dims[s].1;
-        let acts =
-            [(64, 0), (64, 0), (128, 1), (128, 1)].iter().map(|&(c, s)| ctx.zeros("vgg.act", c * n(s))).collect();
-        Self { size: (h, w), acts, features: ctx.zeros("vgg.features", FEATURE_CHANNELS * n(2)) }
+        let n = stage_dims(h, w)[2];
+        Self { size: (h, w), acts: OnceLock::new(), features: ctx.zeros("vgg.features", FEATURE_CHANNELS * n.0 * n.1) }
+    }
+
+    /// Whether a pass has run on this state (its activations are made).
+    pub fn has_activations(&self) -> bool {
+        self.acts.get().is_some()
+    }
+
+    /// The activations a pass writes and its backward reads, made on the first call.
+    fn acts(&self, ctx: &GpuContext) -> &[wgpu::Buffer] {
+        self.acts.get_or_init(|| {
+            let dims = stage_dims(self.size.0, self.size.1);
+            let n = |s: usize| dims[s].0 * dims[s].1;
+            [(64, 0), (64, 0), (128, 1), (128, 1)].iter().map(|&(c, s)| ctx.zeros("vgg.act", c * n(s))).collect()
+        })
     }
 
     /// The features of the last forward pass: 768 channels (relu3_1, relu3_2,
@@ -312,15 +329,15 @@ impl GpuVgg {
         if h3 == 0 || w3 == 0 {
             return;
         }
-        let k = &self.k;
+        let (k, acts) = (&self.k, state.acts(ctx));
         self.launch(ctx, enc, &k.normalize, &ws.normalize, input, None, &ws.ping, None);
         for (layer, plan) in ws.layers.iter().enumerate() {
             let src = match layer {
                 0 | 2 | 4 => &ws.ping,
-                1 | 3 => &state.acts[layer - 1],
+                1 | 3 => &acts[layer - 1],
                 _ => &state.features,
             };
-            let out = if layer < 4 { &state.acts[layer] } else { &state.features };
+            let out = if layer < 4 { &acts[layer] } else { &state.features };
             for band in &plan.bands {
                 self.launch(ctx, enc, &k.im2col, &band.im2col, src, None, &ws.cols, None);
                 self.gemm.record(
@@ -361,12 +378,12 @@ impl GpuVgg {
             enc.clear_buffer(v_input, 0, Some((h * w * 3 * 4) as u64));
             return;
         }
-        let k = &self.k;
+        let (k, acts) = (&self.k, state.acts(ctx));
         // `cur` holds the gradient of the current layer's output; `tmp` the masked one.
         let (mut cur, mut tmp) = (&ws.ping, &ws.pong);
         for layer in (0..7).rev() {
             let plan = &ws.layers[layer];
-            let act = if layer < 4 { &state.acts[layer] } else { &state.features };
+            let act = if layer < 4 { &acts[layer] } else { &state.features };
             let (grad, extra) = match layer {
                 6 => (v_features, None),
                 4 | 5 => (cur, Some(v_features)),
@@ -383,7 +400,7 @@ impl GpuVgg {
             if layer == 4 || layer == 2 {
                 // Through the pool in front of this stage, from its saved input.
                 let p = layer / 2 - 1;
-                let pooled_from = &state.acts[2 * p + 1];
+                let pooled_from = &acts[2 * p + 1];
                 self.launch(ctx, enc, &k.pool_back, &ws.pool_backs[p], pooled_from, Some(cur), tmp, None);
                 std::mem::swap(&mut cur, &mut tmp);
             }

@@ -16,7 +16,7 @@ fn worst(a: &[f32], b: &[f32]) -> (f32, f32) {
 /// relies on zeroed memory fails.
 fn poison(ctx: &GpuContext, ws: &GpuVggWorkspace, state: &GpuVggState, seed: u64) {
     let bufs: Vec<&wgpu::Buffer> =
-        [&ws.cols, &ws.ping, &ws.pong, &state.features].into_iter().chain(state.acts.iter()).collect();
+        [&ws.cols, &ws.ping, &ws.pong, &state.features].into_iter().chain(state.acts(ctx).iter()).collect();
     for (i, b) in bufs.into_iter().enumerate() {
         ctx.write(b, &noise((b.size() / 4) as usize, seed + i as u64));
     }
