@@ -12,7 +12,18 @@ use gast_core::style::{MeanSteps, Mode, Phase, StyleConfig};
 use gast_core::vision::Vgg;
 use gast_tests::shared_file;
 
+/// Guitar × mosaic on six orbit views, with every fourth of guitar's 90,854
+/// Gaussians: on lavapipe the GPU engine's rasterizer walks every Gaussian
+/// of a tile for each pixel, and the whole guitar made the GPU tests here
+/// the largest share of CI's time.
 fn inputs(config: StyleConfig) -> Option<SessionInputs> {
+    let full = whole_guitar_inputs(config)?;
+    let keep: Vec<u32> = (0..full.scene.len() as u32).step_by(4).collect();
+    Some(SessionInputs { scene: gast_core::session::subset(&full.scene, &keep), ..full })
+}
+
+/// [`inputs`] with all of guitar's Gaussians.
+fn whole_guitar_inputs(config: StyleConfig) -> Option<SessionInputs> {
     let scene = gast_core::scene::load(shared_file("data/scenes/guitar.compressed.ply")?).expect("scene");
     let style = StyleImage::open(&shared_file("data/styles/mosaic.jpg")?).expect("style");
     let vgg = Arc::new(Vgg::load(&shared_file("data/weights/vgg19-conv3.safetensors")?).expect("weights"));
@@ -97,7 +108,7 @@ fn worker_obeys_commands_and_reports_every_step() {
     assert_eq!(handle.snapshots.latest().expect("final snapshot").step, 16);
     assert!(wakes.load(Ordering::SeqCst) >= 16, "the waker is called for every event");
     let result = handle.stop_and_join().expect("result");
-    assert_eq!(result.len(), 90_854);
+    assert_eq!(result.len(), 90_854 / 4 + 1, "every Gaussian of the scene, not only the optimised ones");
 }
 
 #[test]
@@ -360,7 +371,12 @@ fn the_assignment_terms_run_on_both_engines() {
             |r| r.losses.assignment_cosine,
         ),
     ];
-    let Some(cpu_inputs) = inputs(object_config(Mode::ColorOnly, LossWeights::default())) else { return };
+    // The whole guitar: the terms pair a random draw of the object's positions,
+    // and on a quarter of its Gaussians the draw is too small for the engines'
+    // draws to agree within 10 %.
+    let Some(cpu_inputs) = whole_guitar_inputs(object_config(Mode::ColorOnly, LossWeights::default())) else {
+        return;
+    };
     for (name, on, measured) in terms {
         let [a, b] = term_on_both_engines(name, &cpu_inputs, on, measured);
         let (cpu, cpu_gcfm, cpu_content) = (measured(&a), a.losses.gcfm, a.losses.content);

@@ -20,7 +20,8 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
         .args(["run", "--dry-run", "--bin", env!("CARGO_BIN_EXE_gast"), "--data"])
         .arg(&shared)
         .env("OUT", &out)
-        // About 500 s on a quiet 2-core machine; beside another job it passed 900 s.
+        // About 260 s on a quiet 2-core machine (500 s before its benches other than the
+        // first left out the per-part timings); beside another job it passed 900 s.
         .env("GPU_CHECK_DEADLINE", "1500")
         .output()
         .expect("bash runs tools/gpu-check");

@@ -99,6 +99,11 @@ pub struct StepArgs {
     /// (the device runs and the `--compare*` arms; not the fast-settings comparison).
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Time the steps alone: leave out the per-part timings after them (the GPU parts, the
+    /// CPU's VGG against its GEMM floor, the style depth network), which on a software adapter
+    /// take longer than the steps.
+    #[arg(long)]
+    pub no_parts: bool,
 }
 
 /// Per-step medians of the host's share of a GPU step (ms; zeros on the CPU).
@@ -363,7 +368,7 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         }
     }
     let side = (args.resolution / 2) as usize;
-    if runs.iter().any(|r| r.device.starts_with("CPU")) {
+    if !args.no_parts && runs.iter().any(|r| r.device.starts_with("CPU")) {
         // One modality at the VGG input size (the render downscaled 0.5×), and the gemm floor.
         let vt = gast_core::vision::vgg::bench(&inputs.vgg, side, side, 3);
         let gemm = gast_core::vision::gemm_gflops(256, 64 * 64, 2304, 3);
@@ -377,8 +382,10 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
             100.0 * (flops / gemm / 1e9) / vt.forward_s
         );
     }
-    time_style_depth(&inputs.style, args.depth_model.as_deref(), 1, false)?;
-    if !runs.iter().all(|r| r.device.starts_with("CPU")) {
+    if !args.no_parts {
+        time_style_depth(&inputs.style, args.depth_model.as_deref(), 1, false)?;
+    }
+    if !args.no_parts && !runs.iter().all(|r| r.device.starts_with("CPU")) {
         let ctx = gast_core::gpu::DeviceChoice::Gpu.resolve()?.context("no GPU adapter for the per-part figures")?;
         gpu_parts(&ctx, &inputs.vgg, &inputs.scene, &inputs.views[0], args.resolution as usize)?;
     }
