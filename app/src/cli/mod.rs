@@ -180,3 +180,12 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     }
     Ok(ExitCode::SUCCESS)
 }
+
+/// `config` when it is usable, else an error listing its problems
+/// ([`gast_core::style::StyleConfig::problems`]), for `stylize` and `bench
+/// step` to refuse before they load anything.
+fn checked(config: gast_core::style::StyleConfig) -> anyhow::Result<gast_core::style::StyleConfig> {
+    let problems = config.problems();
+    anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
+    Ok(config)
+}

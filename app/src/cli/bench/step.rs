@@ -270,9 +270,7 @@ fn step_config(args: &StepArgs) -> anyhow::Result<gast_core::style::StyleConfig>
         ..gast_core::style::StyleConfig::default()
     };
     config.assign_block = args.fast.assign_block.unwrap_or(config.assign_block);
-    let problems = config.problems();
-    anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
-    Ok(config)
+    crate::cli::checked(config)
 }
 
 /// Per-step breakdown of the optimisation, the whole schedule's time, and

@@ -25,8 +25,7 @@ pub(super) fn run_fast_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     // The new settings: today's defaults (Winograd, the cone) with the flags applied.
     let mut new_config = StyleConfig { resolution: args.resolution, focus: args.focus, ..StyleConfig::default() };
     args.fast.apply(&mut new_config);
-    let problems = new_config.problems();
-    anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
+    let new_config = crate::cli::checked(new_config)?;
     // (Checked above, before the scene, the style and VGG are loaded.)
     let StepInputs { scene, views, style, vgg } = step_inputs(&args)?;
     let (cam_h, cam_w) = (views[0].height as usize, views[0].width as usize);

@@ -236,9 +236,7 @@ impl StylizeArgs {
         set!(self.phase_leak, c.phase_leak);
         set!(self.split_px, c.split_px);
         set!(self.depth_relief, c.depth_relief_px);
-        let problems = c.problems();
-        anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
-        Ok(c)
+        crate::cli::checked(c)
     }
 }
 
