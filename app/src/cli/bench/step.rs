@@ -365,27 +365,8 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
             );
         }
     }
-    let side = (args.resolution / 2) as usize;
-    if !args.no_parts && runs.iter().any(|r| r.device.starts_with("CPU")) {
-        // One modality at the VGG input size (the render downscaled 0.5×), and the gemm floor.
-        let vt = gast_core::vision::vgg::bench(&inputs.vgg, side, side, 3);
-        let gemm = gast_core::vision::gemm_gflops(256, 64 * 64, 2304, 3);
-        let flops = inputs.vgg.forward_flops(side, side);
-        println!("\none modality on the CPU: {vt}");
-        println!(
-            "gemm floor: {gemm:.0} GFLOP/s measured (256×4096×2304); one VGG forward at {side}² is {:.2} GFLOP = {:.0} ms at that rate, measured {:.0} ms ({:.0}% of the floor's speed)",
-            flops * 1e-9,
-            flops / gemm / 1e6,
-            vt.forward_s * 1e3,
-            100.0 * (flops / gemm / 1e9) / vt.forward_s
-        );
-    }
     if !args.no_parts {
-        time_style_depth(&inputs.style, args.depth_model.as_deref(), 1, false)?;
-    }
-    if !args.no_parts && !runs.iter().all(|r| r.device.starts_with("CPU")) {
-        let ctx = gast_core::gpu::DeviceChoice::Gpu.resolve()?.context("no GPU adapter for the per-part figures")?;
-        gpu_parts(&ctx, &inputs.vgg, &inputs.scene, &inputs.views[0], args.resolution as usize)?;
+        print_parts(&args, &inputs, &runs)?;
     }
     for run in &runs {
         let total = f64::from(schedule.total_steps());
@@ -656,6 +637,33 @@ fn gpu_parts(
     rows.extend(gpu::bench_image_ops(ctx, &[resolution], scene.len(), 5)?);
     for (name, ms) in rows {
         println!("  {name:<36} {ms:>9.3}");
+    }
+    Ok(())
+}
+
+/// The per-part timings after the steps (left out by `--no-parts`): one VGG
+/// modality against the CPU's GEMM floor where a run was on the CPU, the
+/// style depth network, and the GPU parts where a run was on the GPU.
+fn print_parts(args: &StepArgs, inputs: &StepInputs, runs: &[StepRun]) -> anyhow::Result<()> {
+    let side = (args.resolution / 2) as usize;
+    if runs.iter().any(|r| r.device.starts_with("CPU")) {
+        // One modality at the VGG input size (the render downscaled 0.5×), and the gemm floor.
+        let vt = gast_core::vision::vgg::bench(&inputs.vgg, side, side, 3);
+        let gemm = gast_core::vision::gemm_gflops(256, 64 * 64, 2304, 3);
+        let flops = inputs.vgg.forward_flops(side, side);
+        println!("\none modality on the CPU: {vt}");
+        println!(
+            "gemm floor: {gemm:.0} GFLOP/s measured (256×4096×2304); one VGG forward at {side}² is {:.2} GFLOP = {:.0} ms at that rate, measured {:.0} ms ({:.0}% of the floor's speed)",
+            flops * 1e-9,
+            flops / gemm / 1e6,
+            vt.forward_s * 1e3,
+            100.0 * (flops / gemm / 1e9) / vt.forward_s
+        );
+    }
+    time_style_depth(&inputs.style, args.depth_model.as_deref(), 1, false)?;
+    if !runs.iter().all(|r| r.device.starts_with("CPU")) {
+        let ctx = gast_core::gpu::DeviceChoice::Gpu.resolve()?.context("no GPU adapter for the per-part figures")?;
+        gpu_parts(&ctx, &inputs.vgg, &inputs.scene, &inputs.views[0], args.resolution as usize)?;
     }
     Ok(())
 }
