@@ -105,6 +105,9 @@ for scene in ("guitar", "playbot"):
                          f"{fmt(med(gpu, 'geometry_record_median_ms'))} ms, submitting "
                          f"{fmt(med(gpu, 'colour_submit_median_ms'))} / {fmt(med(gpu, 'geometry_submit_median_ms'))} ms, "
                          f"{med(gpu, 'geometry_bind_groups') or 0:.0f} bind groups a geometry step")
+            # The compute passes they ran in (absent before 2026-11-30's third session).
+            if gpu.get("geometry_passes") is not None:
+                note += f" in {med(gpu, 'geometry_passes'):.0f} compute passes"
             if cpu:
                 note += f"; CPU engine {cpu['ms_per_step']:.1f} ms a step on {meta.get('cores', '?')} cores (mean), CPU/GPU {cpu['ms_per_step'] / max(gpu['ms_per_step'], 1e-9):.3g}x"
             figure(f"{scene} step at {res} px", judged, "ms", t and f"≤ {t:.0f} ms", t and judged <= t, note)
@@ -253,6 +256,8 @@ def compare(prefix, arms, title, names):
 
 
 ab_parts = compare("ab", ("base", "new"), "this build / baseline", (f"baseline {base_rev or '(--base)'}", "this build"))
+# A compute pass per dispatch against runs of dispatches sharing one (pass_RES_ARMROUND, this build alone).
+compare("pass", ("each", "shared"), "shared passes / a pass per dispatch", ("GAST_GPU_PASSES=each", "shared"))
 # VGG on the object's window against the whole frame (win_RES_ARMROUND, this build alone).
 compare("win", ("off", "on"), "VGG window / whole frame", ("GAST_VGG_WINDOW=0", "window"))
 # The assignment pairing in blocks of 256 rows against one block of up to 512 (blk_RES_ARMROUND).

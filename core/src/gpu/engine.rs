@@ -18,6 +18,7 @@
 use crate::style::config::ParamRegulariser;
 use std::collections::HashMap;
 
+use super::Encoder;
 use super::adam::AdamKernel;
 use super::assignment::GpuAssignment;
 use super::step_loss::{StepInputs, StepLossKernels, StepLossPlan, slot};
@@ -145,6 +146,9 @@ pub struct HostTimes {
     pub submit_ms: f32,
     /// Bind groups the step made, one per dispatch recorded.
     pub bind_groups: u32,
+    /// Compute passes the step's dispatches ran in (one per run of
+    /// dispatches between copies; one per dispatch with `GAST_GPU_PASSES=each`).
+    pub passes: u32,
 }
 
 impl GpuEngine {
@@ -339,9 +343,9 @@ impl GpuEngine {
         };
         let (ctx, k) = (&self.ctx, &self.k);
         let allocated = ctx.allocated_bytes();
-        let (started, binds) = (std::time::Instant::now(), ctx.bind_groups_made());
+        let (started, binds, passes) = (std::time::Instant::now(), ctx.bind_groups_made(), ctx.passes_begun());
         let mut host = HostTimes::default();
-        let submit = |host: &mut HostTimes, enc: wgpu::CommandEncoder| {
+        let submit = |host: &mut HostTimes, enc: Encoder| {
             let t = std::time::Instant::now();
             let index = ctx.submit_indexed(enc);
             host.submit_ms += t.elapsed().as_secs_f32() * 1e3;
@@ -477,6 +481,7 @@ impl GpuEngine {
         let total = started.elapsed().as_secs_f32() * 1e3;
         host.record_ms = (total - host.wait_ms - host.pairing_ms - host.submit_ms).max(0.0);
         host.bind_groups = u32::try_from(ctx.bind_groups_made() - binds).unwrap_or(u32::MAX);
+        host.passes = u32::try_from(ctx.passes_begun() - passes).unwrap_or(u32::MAX);
         self.host = host;
         let pairs = s[slot::PAIRS].to_bits() as usize;
         if pairs > plan.raster.capacity() {

@@ -18,6 +18,8 @@
 // The device and its buffers (`device/`).
 #[path = "device/context.rs"]
 mod context;
+#[path = "device/encoder.rs"]
+mod encoder;
 #[path = "device/gaussians.rs"]
 mod gaussians;
 #[path = "device/kernel.rs"]
@@ -108,6 +110,7 @@ pub use content::ContentLoss;
 pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};
 pub use depth_map::{DepthMap, DepthMapKernels};
 pub use depth_net::GpuDepthNet;
+pub use encoder::{Commands, Encoder};
 pub use engine::{GpuEngine, HostTimes};
 pub use feature_mean::FeatureMeanLoss;
 pub use feature_net::{GpuFeatureNet, GpuFeatureState};
@@ -208,7 +211,7 @@ impl std::fmt::Display for DeviceChoice {
 #[cfg(test)]
 pub(crate) mod test_util {
     //! A context for kernel tests: any adapter, lavapipe included (CI has no GPU).
-    use super::{AdapterPolicy, GpuContext, GpuFocus};
+    use super::{AdapterPolicy, Commands, GpuContext, GpuFocus};
     use std::sync::OnceLock;
 
     /// The focus of a feature-position mask for the feature-space terms: its
@@ -236,7 +239,7 @@ pub(crate) mod test_util {
         cells: &[bool],
         (want, grad): (f32, Vec<f32>),
         tol: f32,
-        record: impl FnOnce(&mut wgpu::CommandEncoder, &wgpu::Buffer, &GpuFocus, &wgpu::Buffer, &wgpu::Buffer),
+        record: impl FnOnce(&mut dyn Commands, &wgpu::Buffer, &GpuFocus, &wgpu::Buffer, &wgpu::Buffer),
     ) {
         let (n, positions) = (f.len(), cells.len());
         let g0 = noise(n, 3);

@@ -59,6 +59,9 @@ pub struct StepTimings {
     /// GPU engine: bind groups the step made (one per dispatch). 0 on the CPU.
     #[serde(default)]
     pub bind_groups: u32,
+    /// GPU engine: compute passes the step's dispatches ran in. 0 on the CPU.
+    #[serde(default)]
+    pub passes: u32,
 }
 
 /// One optimisation step's report.

@@ -80,6 +80,7 @@ impl Session {
                 record_ms: host.record_ms,
                 submit_ms: host.submit_ms,
                 bind_groups: host.bind_groups,
+                passes: host.passes,
                 ..StepTimings::default()
             },
         ))

@@ -114,6 +114,7 @@ struct HostMedians {
     record: f64,
     submit: f64,
     bind_groups: f64,
+    passes: f64,
 }
 
 /// What one device's run of the step benchmark measured.
@@ -155,6 +156,8 @@ impl StepRun {
             "geometry_submit_median_ms": geometry.map(|h| h.submit),
             "colour_bind_groups": colour.map(|h| h.bind_groups),
             "geometry_bind_groups": geometry.map(|h| h.bind_groups),
+            "colour_passes": colour.map(|h| h.passes),
+            "geometry_passes": geometry.map(|h| h.passes),
             "gpu_memory_mib": self.gpu_memory_mib,
             "vgg_window_share": self.vgg_window_share,
             "targets_s": self.targets_s,
@@ -540,7 +543,7 @@ fn time_steps(
     }
     println!("per-step medians (ms), every view's targets computed before the timed steps");
     println!(
-        "{:<10} {:>6} {:>8} {:>10} {:>9} {:>10} {:>10} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6} {:>9}",
+        "{:<10} {:>6} {:>8} {:>10} {:>9} {:>10} {:>10} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6} {:>6} {:>9}",
         "phase",
         "steps",
         "render",
@@ -554,6 +557,7 @@ fn time_steps(
         "record",
         "submit",
         "binds",
+        "passes",
         "step"
     );
     let (mut per_phase, mut host_per_phase) = (Vec::new(), Vec::new());
@@ -571,10 +575,11 @@ fn time_steps(
             record: m(&|r| r.timings.record_ms),
             submit: m(&|r| r.timings.submit_ms),
             bind_groups: m(&|r| r.timings.bind_groups as f32),
+            passes: m(&|r| r.timings.passes as f32),
         };
         host_per_phase.push((phase, host));
         println!(
-            "{:<10} {:>6} {:>8.1} {:>10.1} {:>9.1} {:>10.1} {:>10.1} {:>8.1} {:>8.1} {:>8.1} {:>8.1} {:>8.1} {:>6.0} {:>9.2}",
+            "{:<10} {:>6} {:>8.1} {:>10.1} {:>9.1} {:>10.1} {:>10.1} {:>8.1} {:>8.1} {:>8.1} {:>8.1} {:>8.1} {:>6.0} {:>6.0} {:>9.2}",
             format!("{phase:?}").to_lowercase(),
             rows.len(),
             m(&|r| r.timings.render_ms),
@@ -588,6 +593,7 @@ fn time_steps(
             host.record,
             host.submit,
             host.bind_groups,
+            host.passes,
             wall
         );
     }
@@ -596,7 +602,7 @@ fn time_steps(
             "(on the GPU the parts run back to back in one submission; their times are below; \
              \"pairing\" is the host's, \"waits\" the host waiting on the device, \"record\" the host \
              recording the step's commands, \"submit\" handing them to the queue, \"binds\" the bind \
-             groups made, one per dispatch)"
+             groups made, one per dispatch, \"passes\" the compute passes they ran in)"
         );
     }
     Ok(StepRun {

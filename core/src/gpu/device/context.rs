@@ -5,6 +5,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use wgpu::util::DeviceExt as _;
 
+use super::Encoder;
+
 /// Why the GPU engine cannot run.
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
@@ -92,6 +94,8 @@ pub struct GpuContext {
     /// Bind groups made through this context (and its clones): one per
     /// dispatch recorded with [`super::Kernel::dispatch`].
     bind_groups: Arc<AtomicU64>,
+    /// Compute passes begun by the encoders of [`GpuContext::encoder`].
+    passes: Arc<AtomicU64>,
 }
 
 impl GpuContext {
@@ -142,7 +146,15 @@ impl GpuContext {
     /// Wraps a device someone else created (the studio's, from eframe).
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue, info: wgpu::AdapterInfo) -> Self {
         let caps = GpuCaps::of(device.features());
-        Self { device, queue, info, caps, allocated: Arc::default(), bind_groups: Arc::default() }
+        Self {
+            device,
+            queue,
+            info,
+            caps,
+            allocated: Arc::default(),
+            bind_groups: Arc::default(),
+            passes: Arc::default(),
+        }
     }
 
     /// "NVIDIA H100 (Vulkan, discrete)", for reports.
@@ -161,6 +173,13 @@ impl GpuContext {
     /// over a step is the dispatches it records with fresh bind groups.
     pub fn bind_groups_made(&self) -> u64 {
         self.bind_groups.load(Ordering::Relaxed)
+    }
+
+    /// Compute passes begun so far by [`GpuContext::encoder`]'s encoders:
+    /// one per run of dispatches between copies (one per dispatch with
+    /// `GAST_GPU_PASSES=each`).
+    pub fn passes_begun(&self) -> u64 {
+        self.passes.load(Ordering::Relaxed)
     }
 
     pub(crate) fn count_bind_group(&self) {
@@ -220,13 +239,14 @@ impl GpuContext {
         self.queue.write_buffer(buffer, 0, bytemuck::cast_slice(data));
     }
 
-    /// A new command encoder.
-    pub fn encoder(&self, label: &str) -> wgpu::CommandEncoder {
-        self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) })
+    /// A new command encoder, whose consecutive dispatches share a compute pass ([`Encoder`]).
+    pub fn encoder(&self, label: &str) -> Encoder {
+        let inner = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+        Encoder::new(inner, Arc::clone(&self.passes))
     }
 
     /// Submits `encoder`'s commands.
-    pub fn submit(&self, encoder: wgpu::CommandEncoder) {
+    pub fn submit(&self, encoder: Encoder) {
         self.queue.submit([encoder.finish()]);
     }
 
@@ -261,7 +281,7 @@ impl GpuContext {
 
     /// Submits `encoder`'s commands and returns their index, for
     /// [`GpuContext::read_staged`] to wait for them alone.
-    pub fn submit_indexed(&self, encoder: wgpu::CommandEncoder) -> wgpu::SubmissionIndex {
+    pub fn submit_indexed(&self, encoder: Encoder) -> wgpu::SubmissionIndex {
         self.queue.submit([encoder.finish()])
     }
 

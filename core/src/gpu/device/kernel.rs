@@ -1,6 +1,6 @@
 //! One compute entry point with its bindings, and its dispatch.
 
-use super::GpuContext;
+use super::{Commands, GpuContext};
 
 /// How a kernel binds one buffer, in binding order (group 0, bindings 0, 1, …).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -89,27 +89,21 @@ impl Kernel {
     }
 
     /// Records a dispatch of `groups` workgroups (x, y, z) with a fresh bind group of `buffers`.
-    pub fn dispatch(
-        &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        buffers: &[&wgpu::Buffer],
-        groups: [u32; 3],
-    ) {
+    pub fn dispatch(&self, ctx: &GpuContext, encoder: &mut dyn Commands, buffers: &[&wgpu::Buffer], groups: [u32; 3]) {
         let bind = self.bind(ctx, buffers);
         self.dispatch_bound(encoder, &bind, groups);
     }
 
     /// Records a dispatch with a bind group made earlier by [`Kernel::bind`].
-    pub fn dispatch_bound(&self, encoder: &mut wgpu::CommandEncoder, bind: &wgpu::BindGroup, groups: [u32; 3]) {
+    pub fn dispatch_bound(&self, encoder: &mut dyn Commands, bind: &wgpu::BindGroup, groups: [u32; 3]) {
         if groups.contains(&0) {
             return;
         }
-        let mut pass = encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(&self.label), timestamp_writes: None });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, bind, &[]);
-        pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+        encoder.compute(&self.label, &mut |pass| {
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, bind, &[]);
+            pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+        });
     }
 
     /// Records a dispatch whose workgroup counts a kernel wrote earlier into
@@ -117,17 +111,17 @@ impl Kernel {
     pub fn dispatch_indirect(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         buffers: &[&wgpu::Buffer],
         indirect: &wgpu::Buffer,
         offset: u64,
     ) {
         let bind = self.bind(ctx, buffers);
-        let mut pass = encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(&self.label), timestamp_writes: None });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &bind, &[]);
-        pass.dispatch_workgroups_indirect(indirect, offset);
+        encoder.compute(&self.label, &mut |pass| {
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups_indirect(indirect, offset);
+        });
     }
 
     /// Workgroup counts covering `items` invocations of a 1-D kernel with

@@ -20,6 +20,7 @@
 //! the features' bits (which would need the whole maps here), the engine from
 //! a counter of its own, so a run is reproducible and each step draws anew.
 
+use super::Commands;
 use super::{Bind, GpuContext, GpuError, Kernel};
 use crate::rng::Rng;
 use crate::style::assignment::{ASSIGN_MAX, Assignment, draw_pairs, pull_pairs};
@@ -108,7 +109,7 @@ impl GpuAssignment {
     pub fn record_gather(
         &mut self,
         ctx: &GpuContext,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         features: &wgpu::Buffer,
         n: usize,
         covered: Vec<usize>,
@@ -129,7 +130,7 @@ impl GpuAssignment {
     fn record_gather_of(
         &mut self,
         ctx: &GpuContext,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         features: &wgpu::Buffer,
         n: usize,
         rows: &[usize],
@@ -148,8 +149,8 @@ impl GpuAssignment {
         self.gather.dispatch(ctx, enc, &[&self.u_x, &self.rows, features, &self.x], groups);
         self.gather.dispatch(ctx, enc, &[&self.u_s, &self.targets, style, &self.s], groups);
         let bytes = (self.channels * r * 4) as u64;
-        enc.copy_buffer_to_buffer(&self.x, 0, &self.staging, 0, bytes);
-        enc.copy_buffer_to_buffer(&self.s, 0, &self.staging, bytes, bytes);
+        enc.encoder().copy_buffer_to_buffer(&self.x, 0, &self.staging, 0, bytes);
+        enc.encoder().copy_buffer_to_buffer(&self.s, 0, &self.staging, bytes, bytes);
         self.drawn = r;
     }
 
@@ -192,7 +193,7 @@ impl GpuAssignment {
 
     /// Records `v_features += ` the last pull's gradient at the rows drawn
     /// (nothing when none were).
-    pub fn record_scatter(&self, ctx: &GpuContext, enc: &mut wgpu::CommandEncoder, v_features: &wgpu::Buffer) {
+    pub fn record_scatter(&self, ctx: &GpuContext, enc: &mut dyn Commands, v_features: &wgpu::Buffer) {
         if self.drawn == 0 {
             return;
         }

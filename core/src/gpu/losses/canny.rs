@@ -15,6 +15,7 @@
 
 use std::sync::Arc;
 
+use super::Commands;
 use super::{Bind, GpuContext, GpuError, Kernel, ReduceKernels, ReduceOp, ReduceSpec, Reduction};
 use crate::vision::canny::CannyParams;
 
@@ -139,20 +140,15 @@ impl EdgeMap {
     }
 
     /// Records `edge (h × w × 3) = replicate3(render_edges(rgb))` for a clamped render `rgb` (`h × w × 3`).
-    pub fn record(
-        &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        rgb: &wgpu::Buffer,
-        edge: &wgpu::Buffer,
-    ) {
+    pub fn record(&self, ctx: &GpuContext, encoder: &mut dyn Commands, rgb: &wgpu::Buffer, edge: &wgpu::Buffer) {
         let n = self.h * self.w;
         if n == 0 {
             return;
         }
+        // The clears first: between dispatches they would end the encoder's compute pass.
+        self.next.iter().for_each(|b| encoder.encoder().clear_buffer(b, 0, None));
         self.min.record(ctx, encoder, rgb, &self.stats);
         self.max.record(ctx, encoder, rgb, &self.stats);
-        self.next.iter().for_each(|b| encoder.clear_buffer(b, 0, None));
         let first = self.buffers(&self.passes[0], rgb, edge, &self.next[1]);
         self.kernels.nms.dispatch(ctx, encoder, &first, Kernel::groups_1d(3 * n, WORKGROUP));
         let tiles = [self.w.div_ceil(TILE) as u32, self.h.div_ceil(TILE) as u32, 3];

@@ -6,6 +6,7 @@
 
 use std::sync::Arc;
 
+use super::Commands;
 use super::{Bind, GpuContext, GpuError, GpuFocus, Kernel, ReduceKernels, ReduceOp, ReduceSpec, Reduction};
 
 /// Threads per workgroup in `content.wgsl`.
@@ -78,7 +79,7 @@ impl ContentLoss {
     pub fn record(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         features: &wgpu::Buffer,
         target: &wgpu::Buffer,
         focus: &GpuFocus,

@@ -13,6 +13,7 @@
 
 use std::sync::Arc;
 
+use super::Commands;
 use super::{Bind, GpuContext, GpuError, Kernel, ReduceKernels, ReduceOp, ReduceSpec, Reduction};
 
 /// Threads per workgroup in `depth_map.wgsl`.
@@ -103,7 +104,7 @@ impl DepthMap {
     pub fn forward(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         inv_depth: &wgpu::Buffer,
         mask: &wgpu::Buffer,
         map: &wgpu::Buffer,
@@ -124,7 +125,7 @@ impl DepthMap {
     pub fn backward(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         inv_depth: &wgpu::Buffer,
         mask: &wgpu::Buffer,
         v_map: &wgpu::Buffer,

@@ -5,6 +5,7 @@
 
 use std::sync::Arc;
 
+use super::Commands;
 use super::{Bind, GpuContext, GpuError, GpuFocus, Kernel, ReduceKernels, ReduceOp, ReduceSpec, Reduction};
 
 /// Threads per workgroup in `feature_mean.wgsl`.
@@ -93,7 +94,7 @@ impl FeatureMeanLoss {
     pub fn record(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         features: &wgpu::Buffer,
         focus: &GpuFocus,
         v_features: &wgpu::Buffer,

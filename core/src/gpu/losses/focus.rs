@@ -12,6 +12,7 @@
 
 use std::sync::Arc;
 
+use super::Commands;
 use super::{Bind, GpuContext, GpuError, Kernel, ReduceKernels, ReduceOp, ReduceSpec, Reduction};
 use crate::style::focus::{COVERAGE_ALPHA, COVERAGE_ERODE_PX};
 
@@ -94,7 +95,7 @@ impl GpuFocus {
         ctx: &GpuContext,
         k: &FocusKernels,
         reduce: &Arc<ReduceKernels>,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         alpha: &wgpu::Buffer,
         (h, w): (usize, usize),
         (fh, fw): (usize, usize),

@@ -24,6 +24,7 @@
 //! norms [`StyleFeatures`] computed; a [`GcfmWorkspace`] holds the scratch and
 //! every launch's uniform for one rendered size, made once.
 
+use super::Commands;
 use super::gemm::{Gemm, GemmPlan, GemmSpec, Strided};
 use super::kernel::Launch;
 use super::{Bind, GpuContext, GpuFocus, GpuSlicedTarget, Kernel};
@@ -357,7 +358,7 @@ impl GpuGcfm {
     pub fn record(
         &self,
         ctx: &GpuContext,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         ws: &GcfmWorkspace,
         style: &GpuStyle,
         rendered: [&wgpu::Buffer; 3],

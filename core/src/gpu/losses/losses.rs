@@ -14,6 +14,7 @@
 
 use std::sync::Arc;
 
+use super::Commands;
 use super::{Bind, GpuContext, GpuError, GpuFocus, Kernel, ReduceKernels, ReduceOp, ReduceSpec, Reduction};
 
 /// Threads per workgroup in `losses.wgsl`.
@@ -99,7 +100,7 @@ impl LossPlan {
     fn dispatch(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         kernel: &Kernel,
         x: &wgpu::Buffer,
         x_ref: &wgpu::Buffer,
@@ -151,7 +152,7 @@ impl TvLoss {
     pub fn record(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         img: &wgpu::Buffer,
         focus: &GpuFocus,
         v_img: &wgpu::Buffer,
@@ -276,7 +277,7 @@ impl RefLoss {
     pub fn record(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         x: &wgpu::Buffer,
         x_ref: &wgpu::Buffer,
         v_x: &wgpu::Buffer,

@@ -4,6 +4,7 @@
 
 use std::sync::Arc;
 
+use super::Commands;
 use super::{Bind, GpuContext, GpuError, Kernel, ReduceKernels, ReduceOp, ReduceSpec, Reduction};
 use crate::style::palette::Palette;
 
@@ -84,7 +85,7 @@ impl PaletteLoss {
     pub fn record(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         rgb: &wgpu::Buffer,
         mask: &wgpu::Buffer,
         v_rgb: &wgpu::Buffer,

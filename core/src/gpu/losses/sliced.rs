@@ -11,6 +11,7 @@
 
 use std::sync::Arc;
 
+use super::Commands;
 use super::{
     Bind, Gemm, GemmPlan, GemmSpec, GpuContext, GpuError, GpuFocus, GpuSort, Kernel, ReduceKernels, ReduceOp,
     ReduceSpec, Reduction, SortKernels, Strided, bits_for,
@@ -176,7 +177,7 @@ impl SlicedLoss {
     pub fn record(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         target: &GpuSlicedTarget,
         features: &wgpu::Buffer,
         focus: &GpuFocus,

@@ -16,6 +16,7 @@
 
 use std::sync::Arc;
 
+use super::Commands;
 use super::assignment::GpuAssignment;
 use super::content::ContentLoss;
 use super::feature_mean::FeatureMeanLoss;
@@ -281,7 +282,7 @@ impl StepLossPlan {
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         win: Option<&VggWindow>,
         m: usize,
     ) {
@@ -296,7 +297,7 @@ impl StepLossPlan {
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         win: Option<&VggWindow>,
         m: usize,
     ) {
@@ -385,7 +386,7 @@ impl StepLossPlan {
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         alpha: &wgpu::Buffer,
     ) -> Result<GpuFocus, GpuError> {
         GpuFocus::from_alpha(ctx, &k.focus, &k.reduce, enc, alpha, self.sizes[0], self.sizes[1])
@@ -397,14 +398,14 @@ impl StepLossPlan {
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         rgb_raw: &wgpu::Buffer,
         out: &wgpu::Buffer,
     ) {
         self.clamp.forward(ctx, enc, rgb_raw, &self.rgb);
         self.down.forward(ctx, enc, &self.rgb, &self.small[0]);
         k.vgg.forward(ctx, enc, &self.vgg_ws, &self.small[0], &self.states[2]);
-        enc.copy_buffer_to_buffer(self.states[2].features(), 0, out, 0, (self.feature_len * 4) as u64);
+        enc.encoder().copy_buffer_to_buffer(self.states[2].features(), 0, out, 0, (self.feature_len * 4) as u64);
     }
 
     /// Records the whole loss of one render ([`StepInputs`]); `search`
@@ -416,7 +417,7 @@ impl StepLossPlan {
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         style: &GpuStyle,
         inputs: &StepInputs<'_>,
         search: Search<'_>,
@@ -434,7 +435,7 @@ impl StepLossPlan {
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         inputs: &StepInputs<'_>,
     ) {
         self.record_rgb_features(ctx, k, enc, inputs);
@@ -448,7 +449,7 @@ impl StepLossPlan {
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         inputs: &StepInputs<'_>,
     ) {
         self.clamp.forward(ctx, enc, inputs.rgb_raw, &self.rgb);
@@ -462,7 +463,7 @@ impl StepLossPlan {
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         inputs: &StepInputs<'_>,
     ) {
         let focus = inputs.focus.unwrap_or(&self.frame);
@@ -492,7 +493,7 @@ impl StepLossPlan {
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         style: &GpuStyle,
         inputs: &StepInputs<'_>,
         search: Search<'_>,
@@ -521,7 +522,7 @@ impl StepLossPlan {
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         inputs: &StepInputs<'_>,
         assign: Option<&GpuAssignment>,
     ) {
@@ -538,7 +539,7 @@ impl StepLossPlan {
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         inputs: &StepInputs<'_>,
         assign: Option<&GpuAssignment>,
     ) {
@@ -567,7 +568,7 @@ impl StepLossPlan {
         &self,
         ctx: &GpuContext,
         k: &StepLossKernels,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         inputs: &StepInputs<'_>,
     ) {
         let focus = inputs.focus.unwrap_or(&self.frame);
@@ -577,7 +578,7 @@ impl StepLossPlan {
             let pixels = focus.pixels();
             self.depth_map.backward(ctx, enc, inputs.inv_depth, pixels, &self.v_depth3, &self.v_inv_depth, false);
         } else {
-            enc.clear_buffer(&self.v_inv_depth, 0, None);
+            enc.encoder().clear_buffer(&self.v_inv_depth, 0, None);
         }
         if let Some(d) = inputs.depth_ref {
             self.depth_l1.record(ctx, enc, inputs.inv_depth, d, &self.v_inv_depth, inputs.scalars);

@@ -4,7 +4,7 @@
 //! scratch, elementwise launches).
 
 use super::gemm::{Gemm, GemmSpec, Strided};
-use super::{GpuContext, Kernel};
+use super::{Encoder, GpuContext, Kernel};
 use crate::vision::depth::ops::Linear;
 
 /// Threads per workgroup of the elementwise kernels.
@@ -29,7 +29,7 @@ impl GpuLinear {
 /// the submission), and whether scratch starts as NaN (tests).
 pub(super) struct Rec<'a> {
     pub ctx: &'a GpuContext,
-    pub enc: wgpu::CommandEncoder,
+    pub enc: Encoder,
     pub gemm: &'a Gemm,
     poison: bool,
     /// The im2col scratch every convolution shares (launches run in order).

@@ -17,6 +17,7 @@
 
 use std::sync::OnceLock;
 
+use super::Commands;
 use super::gemm::{Gemm, GemmPlan, GemmSpec, Strided};
 use super::kernel::Launch;
 use super::{Bind, GpuContext, Kernel};
@@ -297,7 +298,7 @@ impl GpuVgg {
     fn launch(
         &self,
         ctx: &GpuContext,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         kernel: &Kernel,
         l: &Launch,
         src: &wgpu::Buffer,
@@ -319,7 +320,7 @@ impl GpuVgg {
     pub fn forward(
         &self,
         ctx: &GpuContext,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         ws: &GpuVggWorkspace,
         input: &wgpu::Buffer,
         state: &GpuVggState,
@@ -365,7 +366,7 @@ impl GpuVgg {
     pub fn backward(
         &self,
         ctx: &GpuContext,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         ws: &GpuVggWorkspace,
         state: &GpuVggState,
         v_features: &wgpu::Buffer,
@@ -375,7 +376,7 @@ impl GpuVgg {
         let (h3, w3) = state.feature_size();
         if h3 == 0 || w3 == 0 {
             let (h, w) = state.size;
-            enc.clear_buffer(v_input, 0, Some((h * w * 3 * 4) as u64));
+            enc.encoder().clear_buffer(v_input, 0, Some((h * w * 3 * 4) as u64));
             return;
         }
         let (k, acts) = (&self.k, state.acts(ctx));
@@ -391,7 +392,7 @@ impl GpuVgg {
             };
             self.launch(ctx, enc, &k.relu_back, &plan.relu_back, act, Some(grad), tmp, extra);
             if plan.bands.len() > 1 {
-                enc.clear_buffer(cur, 0, Some((plan.input_len * 4) as u64));
+                enc.encoder().clear_buffer(cur, 0, Some((plan.input_len * 4) as u64));
             }
             for band in &plan.bands {
                 self.gemm.record(ctx, enc, &band.backward, &self.weights[layer], tmp, None, &ws.cols);

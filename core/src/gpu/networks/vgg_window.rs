@@ -19,6 +19,7 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use super::Commands;
 use super::{Bind, GpuContext, GpuVgg, GpuVggState, GpuVggWorkspace, Kernel};
 use crate::style::window::MARGIN_CELLS;
 use crate::vision::vgg::FEATURE_CHANNELS;
@@ -224,7 +225,7 @@ impl VggWindow {
         &self,
         ctx: &GpuContext,
         k: &WindowKernel,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         which: usize,
         src: &wgpu::Buffer,
         dst: &wgpu::Buffer,
@@ -242,14 +243,14 @@ impl VggWindow {
         ctx: &GpuContext,
         k: &WindowKernel,
         vgg: &GpuVgg,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         m: usize,
         small: &wgpu::Buffer,
         features: &wgpu::Buffer,
     ) {
         self.copy(ctx, k, enc, 0, small, &self.small[m]);
         vgg.forward(ctx, enc, &self.ws, &self.small[m], &self.states[m]);
-        enc.clear_buffer(features, 0, None);
+        enc.encoder().clear_buffer(features, 0, None);
         self.copy(ctx, k, enc, 1, self.states[m].features(), features);
     }
 
@@ -262,14 +263,14 @@ impl VggWindow {
         ctx: &GpuContext,
         k: &WindowKernel,
         vgg: &GpuVgg,
-        enc: &mut wgpu::CommandEncoder,
+        enc: &mut dyn Commands,
         m: usize,
         v_features: &wgpu::Buffer,
         v_small: &wgpu::Buffer,
     ) {
         self.copy(ctx, k, enc, 2, v_features, &self.v_feat[m]);
         vgg.backward(ctx, enc, &self.ws, &self.states[m], &self.v_feat[m], &self.v_small[m]);
-        enc.clear_buffer(v_small, 0, None);
+        enc.encoder().clear_buffer(v_small, 0, None);
         self.copy(ctx, k, enc, 3, &self.v_small[m], v_small);
     }
 }

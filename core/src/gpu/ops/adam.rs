@@ -3,6 +3,7 @@
 //! An optional floor projects the updated parameters (the colour floor,
 //! [`crate::style::StyleConfig::color_floor`]) in the same pass.
 
+use super::Commands;
 use super::{Bind, GpuContext, Kernel};
 use crate::style::adam::AdamConfig;
 
@@ -100,7 +101,7 @@ impl GpuAdam {
         &mut self,
         ctx: &GpuContext,
         kernel: &AdamKernel,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         params: &wgpu::Buffer,
         grads: &wgpu::Buffer,
         lr: f32,

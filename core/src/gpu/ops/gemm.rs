@@ -27,6 +27,7 @@
 //! `queue.write_buffer` land before the whole encoder runs, so a uniform
 //! cannot be rewritten between two dispatches of one step.
 
+use super::Commands;
 use super::{Bind, GpuContext, Kernel};
 
 /// The uniform block of `gemm.wgsl`.
@@ -279,7 +280,7 @@ impl Gemm {
     pub fn record(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         plan: &GemmPlan,
         a: &wgpu::Buffer,
         b: &wgpu::Buffer,

@@ -7,13 +7,14 @@
 
 use std::time::Instant;
 
+use super::Commands;
 use super::{
     CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, GpuContext, GpuError, LossKernels,
     ReduceKernels, RefLoss, ResizeKernels, TvLoss,
 };
 
 /// Records one call of an operation.
-type Record<'a> = &'a dyn Fn(&mut wgpu::CommandEncoder);
+type Record<'a> = &'a dyn Fn(&mut dyn Commands);
 
 /// Milliseconds per call of each image operation and loss at `side × side`
 /// renders (one row per operation and size, labelled `"tv 256²"`), plus the

@@ -12,6 +12,7 @@
 
 use std::sync::Arc;
 
+use super::Commands;
 use super::{Bind, GpuContext, GpuError, Kernel};
 
 /// Threads per workgroup in `reduce.wgsl`.
@@ -178,13 +179,7 @@ impl Reduction {
     }
 
     /// Records the reduction of `input` into `out[out_offset..out_offset + lanes]`.
-    pub fn record(
-        &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        input: &wgpu::Buffer,
-        out: &wgpu::Buffer,
-    ) {
+    pub fn record(&self, ctx: &GpuContext, encoder: &mut dyn Commands, input: &wgpu::Buffer, out: &wgpu::Buffer) {
         let buffers = [&self.uniform, input, &self.partials, out];
         let lanes = self.spec.lanes as u32;
         self.kernels.partial.dispatch(ctx, encoder, &buffers, [self.groups as u32, lanes, 1]);

@@ -9,6 +9,7 @@
 
 use std::sync::Arc;
 
+use super::Commands;
 use super::{Bind, GpuContext, Kernel};
 
 /// Threads per workgroup in `resize.wgsl`.
@@ -68,19 +69,13 @@ impl Clamp01 {
     }
 
     /// Records `out = clamp(raw, 0, 1)`.
-    pub fn forward(
-        &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        raw: &wgpu::Buffer,
-        out: &wgpu::Buffer,
-    ) {
+    pub fn forward(&self, ctx: &GpuContext, encoder: &mut dyn Commands, raw: &wgpu::Buffer, out: &wgpu::Buffer) {
         let groups = Kernel::groups_1d(self.len, WORKGROUP);
         self.kernels.clamp.dispatch(ctx, encoder, &[&self.uniform, raw, out], groups);
     }
 
     /// Records the adjoint in place: `v` is zeroed where `raw` lies outside [0, 1].
-    pub fn backward(&self, ctx: &GpuContext, encoder: &mut wgpu::CommandEncoder, raw: &wgpu::Buffer, v: &wgpu::Buffer) {
+    pub fn backward(&self, ctx: &GpuContext, encoder: &mut dyn Commands, raw: &wgpu::Buffer, v: &wgpu::Buffer) {
         let groups = Kernel::groups_1d(self.len, WORKGROUP);
         self.kernels.clamp_backward.dispatch(ctx, encoder, &[&self.uniform, raw, v], groups);
     }
@@ -125,13 +120,7 @@ impl Downscale {
     }
 
     /// Records `small = downscale(src)` (`small` holds `floor(h/2) × floor(w/2) × c` values).
-    pub fn forward(
-        &self,
-        ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
-        src: &wgpu::Buffer,
-        small: &wgpu::Buffer,
-    ) {
+    pub fn forward(&self, ctx: &GpuContext, encoder: &mut dyn Commands, src: &wgpu::Buffer, small: &wgpu::Buffer) {
         let (oh, ow) = self.out_size();
         let groups = Kernel::groups_1d(oh * ow * self.c, WORKGROUP);
         self.kernels.down.dispatch(ctx, encoder, &[&self.overwrite, src, small], groups);
@@ -142,7 +131,7 @@ impl Downscale {
     pub fn backward(
         &self,
         ctx: &GpuContext,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         v_small: &wgpu::Buffer,
         v_src: &wgpu::Buffer,
         accumulate: bool,

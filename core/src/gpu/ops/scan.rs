@@ -6,6 +6,7 @@
 //! owning one contiguous range), so three dispatches scan any length and the
 //! total lands in a buffer the next kernels read: nothing comes back to the host.
 
+use super::Commands;
 use super::{Bind, GpuContext, Kernel};
 
 /// Elements one workgroup scans per block.
@@ -85,7 +86,7 @@ impl GpuScan {
     }
 
     /// Records the in-place exclusive prefix sum of the first `len` words of `data`.
-    pub fn record(&self, ctx: &GpuContext, k: &ScanKernels, encoder: &mut wgpu::CommandEncoder, data: &wgpu::Buffer) {
+    pub fn record(&self, ctx: &GpuContext, k: &ScanKernels, encoder: &mut dyn Commands, data: &wgpu::Buffer) {
         let bufs = [&self.uniform, data, &self.sums];
         let bind = k.reduce.bind(ctx, &bufs);
         k.reduce.dispatch_bound(encoder, &bind, [self.groups, 1, 1]);

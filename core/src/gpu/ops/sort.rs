@@ -10,6 +10,7 @@
 //! the sort can decide it without a read-back; the workspace is sized for a
 //! capacity fixed when it is made.
 
+use super::Commands;
 use super::scan::{GpuScan, ScanKernels};
 use super::{Bind, GpuContext, Kernel};
 
@@ -120,7 +121,7 @@ impl GpuSort {
         &self,
         ctx: &GpuContext,
         k: &SortKernels,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         count: &wgpu::Buffer,
         keys: &wgpu::Buffer,
         values: &wgpu::Buffer,
@@ -141,8 +142,8 @@ impl GpuSort {
         }
         if passes % 2 == 1 {
             let bytes = (self.capacity.max(1) * 4) as u64;
-            encoder.copy_buffer_to_buffer(&self.keys_alt, 0, keys, 0, bytes);
-            encoder.copy_buffer_to_buffer(&self.values_alt, 0, values, 0, bytes);
+            encoder.encoder().copy_buffer_to_buffer(&self.keys_alt, 0, keys, 0, bytes);
+            encoder.encoder().copy_buffer_to_buffer(&self.values_alt, 0, values, 0, bytes);
         }
     }
 }

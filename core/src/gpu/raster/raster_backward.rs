@@ -9,6 +9,7 @@
 //! `tile_backward` among them, for the device's accumulation) and this file
 //! runs the backward ones on the forward pass's workspace.
 
+use super::Commands;
 use super::raster_forward::GpuRaster;
 use super::raster_kernels::RasterKernels;
 use super::raster_project::WORKGROUP;
@@ -25,7 +26,7 @@ impl GpuRaster {
         &self,
         ctx: &GpuContext,
         k: &RasterKernels,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         g: &GpuGaussians,
         v_rgb: &wgpu::Buffer,
         v_inv_depth: &wgpu::Buffer,
@@ -40,11 +41,11 @@ impl GpuRaster {
         &self,
         ctx: &GpuContext,
         k: &RasterKernels,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         v_rgb: &wgpu::Buffer,
         v_inv_depth: &wgpu::Buffer,
     ) {
-        encoder.clear_buffer(&self.v_splat, 0, None);
+        encoder.encoder().clear_buffer(&self.v_splat, 0, None);
         k.tile_backward.dispatch(
             ctx,
             encoder,
@@ -68,7 +69,7 @@ impl GpuRaster {
         &self,
         ctx: &GpuContext,
         k: &RasterKernels,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         g: &GpuGaussians,
         grads: &GpuGrads,
     ) {

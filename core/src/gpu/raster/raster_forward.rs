@@ -10,6 +10,7 @@
 //! capacity; [`GpuRaster::pairs`] reads the number a pass needed (with the
 //! step's scalars, say) so that the caller can grow the workspace.
 
+use super::Commands;
 use super::raster_kernels::RasterKernels;
 use super::raster_project::{RasterUniform, WORKGROUP};
 use super::scan::GpuScan;
@@ -182,7 +183,7 @@ impl GpuRaster {
         &self,
         ctx: &GpuContext,
         k: &RasterKernels,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         g: &GpuGaussians,
         cam: &Camera,
         opts: &RenderOptions,
@@ -209,7 +210,7 @@ impl GpuRaster {
         &self,
         ctx: &GpuContext,
         k: &RasterKernels,
-        encoder: &mut wgpu::CommandEncoder,
+        encoder: &mut dyn Commands,
         g: &GpuGaussians,
         stage: Stage,
     ) {
@@ -250,7 +251,7 @@ impl GpuRaster {
             Stage::TileSort => {
                 let bits = bits_for(tiles_x * tiles_y);
                 self.tile_sort.record(ctx, &k.sort, encoder, total, &self.pair_keys, &self.pair_values, bits);
-                encoder.clear_buffer(&self.ranges, 0, None);
+                encoder.encoder().clear_buffer(&self.ranges, 0, None);
                 k.ranges.dispatch(
                     ctx,
                     encoder,

@@ -5,6 +5,7 @@
 
 use std::time::Instant;
 
+use super::Commands;
 use super::raster_forward::Stage;
 use super::{GpuContext, GpuError, GpuGaussians, GpuGrads, GpuRaster, RasterKernels};
 use crate::camera::Camera;
@@ -81,7 +82,7 @@ pub fn bench_raster(ctx: &GpuContext, g: &Gaussians, cam: &Camera) -> Result<Vec
     let npx = cam.width as usize * cam.height as usize;
     let vr = ctx.upload("v_rgb", &vec![1.0f32; 3 * npx]);
     let vd = ctx.upload("v_inv_depth", &vec![0.1f32; npx]);
-    let time = |record: &dyn Fn(&mut wgpu::CommandEncoder)| -> Result<f64, GpuError> {
+    let time = |record: &dyn Fn(&mut dyn Commands)| -> Result<f64, GpuError> {
         let mut ms = Vec::with_capacity(RUNS);
         for run in 0..=RUNS {
             let mut enc = ctx.encoder("bench.raster");
