@@ -62,8 +62,9 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
 
 /// The report's side-by-side figures from a baseline build's and this build's
 /// bench logs (`ab_RES_ARMROUND`, as `run` writes them when a baseline is
-/// packed), from the GEMM tilings' (`tile_RES_ARMROUND`) and from the
-/// assignment pairing's blocks (`blk_RES_ARMROUND`): the step
+/// packed), from the GEMM tilings' (`tile_RES_ARMROUND`), from the
+/// assignment pairing's blocks (`blk_RES_ARMROUND`) and from the compute
+/// passes' (`pass_RES_ARMROUND`): the step
 /// medians' ratio and each GPU part's. The runs themselves
 /// are `gast bench step`, which the dry run above takes; at the dry run's
 /// sizes on lavapipe two more would double its time, so the report is given
@@ -91,12 +92,16 @@ fn the_gpu_check_report_gives_this_build_against_the_baseline() {
     let wide = runs.iter().filter(|r| r.0 == "new").map(|&(_, round, c, g, e, b)| ("t128", round, c, g, e, b));
     // And as the pairing's arms: one block of 512 rows first, blocks of 256 second.
     let blocks = runs.map(|(arm, round, c, g, e, b)| (if arm == "base" { "one" } else { "two" }, round, c, g, e, b));
+    // And as the compute passes' arms: a pass per dispatch first, shared passes second.
+    let passes =
+        runs.map(|(arm, round, c, g, e, b)| (if arm == "base" { "each" } else { "shared" }, round, c, g, e, b));
     let named = runs
         .iter()
         .map(|r| ("ab", *r))
         .chain(tiles.iter().map(|r| ("tile", *r)))
         .chain(wide.map(|r| ("tile", r)))
-        .chain(blocks.iter().map(|r| ("blk", *r)));
+        .chain(blocks.iter().map(|r| ("blk", *r)))
+        .chain(passes.iter().map(|r| ("pass", *r)));
     for (prefix, (arm, round, colour, geometry, edge, backward)) in named {
         let name = format!("{prefix}_256_{arm}{round}");
         write(&format!("{name}.rc.json"), format!(r#"{{"name":"{name}","rc":0,"wall_s":9.5}}"#));
@@ -153,6 +158,9 @@ fn the_gpu_check_report_gives_this_build_against_the_baseline() {
     let paired = figure("guitar geometry step at 256 px, pairing in blocks of 256 / one block");
     assert!((paired["value"].as_f64().expect("ratio") - 24.0 / 45.0).abs() < 1e-9, "{paired}");
     assert!(paired["note"].as_str().is_some_and(|n| n.contains("--assign-block 512: 44.00, 46.00")), "{paired}");
+    let shared = figure("guitar colour step at 256 px, shared passes / a pass per dispatch");
+    assert!((shared["value"].as_f64().expect("ratio") - 21.0 / 41.0).abs() < 1e-9, "{shared}");
+    assert!(shared["note"].as_str().is_some_and(|n| n.contains("GAST_GPU_PASSES=each: 40.00, 42.00")), "{shared}");
     let wide = figure("guitar geometry step at 256 px, GEMM tiles 128² / 64²");
     assert!((wide["value"].as_f64().expect("ratio") - 24.0 / 45.0).abs() < 1e-9, "{wide}");
     let fern = figure("fern step at 1008 px on the longer side (its LLFF cameras, frame recipe)");
