@@ -231,15 +231,6 @@ fn a_bad_camera_file_fails_before_the_depth_model_is_looked_for() {
     std::fs::remove_dir_all(&out).ok();
 }
 
-#[test]
-fn a_cpu_only_setting_on_the_gpu_fails_before_the_depth_model_is_looked_for() {
-    let out = temp("cpuonly");
-    if let Some(err) = stylize_fails_before_the_depth_model(&out, &["--device", "gpu", "--depth-relief", "8"]) {
-        assert!(err.contains("--device gpu") && err.contains("depth relief") && err.contains("--device cpu"), "{err}");
-    }
-    std::fs::remove_dir_all(&out).ok();
-}
-
 /// Ctrl-C during `stylize`: the run stops after its step and still writes the
 /// scene, the renders and a report that says where it stopped.
 #[cfg(unix)]

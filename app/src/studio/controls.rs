@@ -178,7 +178,7 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>) ->
         .add(egui::Slider::new(&mut c.depth_relief_px, 0..=64).text("depth relief (px)"))
         .on_hover_text(
             "above 0, VGG sees both depth maps minus their blur of this radius: relief compared with relief, \
-             not the scene's layout; 0 is the paper's min-max depth (CPU device only so far)",
+             not the scene's layout; 0 is the paper's min-max depth",
         )
         .changed();
 

@@ -23,8 +23,8 @@ use super::adam::AdamKernel;
 use super::assignment::GpuAssignment;
 use super::step_loss::{StepInputs, StepLossKernels, StepLossPlan, slot};
 use super::{
-    GcfmSubset, GpuAdam, GpuContext, GpuError, GpuFocus, GpuGaussians, GpuGrads, GpuRaster, GpuStyle, RasterKernels,
-    RefLoss, Search,
+    GcfmSubset, GpuAdam, GpuContext, GpuError, GpuFocus, GpuGaussians, GpuGrads, GpuLeak, GpuRaster, GpuStyle,
+    RasterKernels, RefLoss, Search,
 };
 use crate::camera::Camera;
 use crate::eval::stability::CoveredColour;
@@ -126,6 +126,8 @@ pub struct GpuEngine {
     subset_scratch: Option<wgpu::Buffer>,
     /// The assignment terms' workspace, made at the first step with λ_as or λ_asc on.
     assign: Option<GpuAssignment>,
+    /// The phase leak's sums ([`StyleConfig::phase_leak`]), made at the first step that leaks.
+    leak: Option<GpuLeak>,
     /// The host's share of the last step ([`GpuEngine::host_times`]).
     host: HostTimes,
 }
@@ -217,6 +219,7 @@ impl GpuEngine {
             warnings: Vec::new(),
             subset_scratch: None,
             assign: None,
+            leak: None,
             host: HostTimes::default(),
         };
         engine.bytes = ctx.allocated_bytes().saturating_sub(before);
@@ -268,6 +271,11 @@ impl GpuEngine {
         for t in self.targets.iter_mut().flatten() {
             t.kept = None;
         }
+    }
+
+    /// Empties the phase leak's sums (the leak was turned on or off).
+    pub fn reset_leak(&mut self) {
+        self.leak = None;
     }
 
     /// New cameras (a new working resolution or background): per-view targets are recomputed.
@@ -338,9 +346,19 @@ impl GpuEngine {
         let Some(Some(target)) = self.targets.get(view) else {
             return Err(GpuError::TooLarge(format!("no target for view {view}")));
         };
-        let Some(plan) = self.plans.get(&size) else {
+        let Some(plan) = self.plans.get_mut(&size) else {
             return Err(GpuError::TooLarge(format!("no plan for {}×{}", size.0, size.1)));
         };
+        plan.loss.set_relief(&self.ctx, &self.k.loss, config.depth_relief_px as usize)?;
+        let plan = &*plan;
+        // The phase leak: a colour step then takes the depth map's gradient
+        // too, which reaches the geometry, whose next step applies it.
+        let leaking = config.leaks_between_phases();
+        if !leaking {
+            self.leak = None;
+        } else if self.leak.is_none() {
+            self.leak = Some(GpuLeak::new(&self.ctx, &self.grads));
+        }
         let (ctx, k) = (&self.ctx, &self.k);
         let allocated = ctx.allocated_bytes();
         let (started, binds, passes) = (std::time::Instant::now(), ctx.bind_groups_made(), ctx.passes_begun());
@@ -365,7 +383,7 @@ impl GpuEngine {
             depth_ref: geometry.then_some(&target.inv_depth),
             // The hold acts with the object focus only, as on the CPU.
             hold: if self.object_focus { target.hold.as_ref() } else { None },
-            depth_grad: geometry,
+            depth_grad: geometry || (leaking && phase == Phase::Color),
             focus,
             window: focus.and(target.window).filter(|_| config.vgg_window),
             scalars: &self.scalars,
@@ -439,6 +457,9 @@ impl GpuEngine {
         // The phase's parameters: regularisers on the raw geometry, then Adam.
         let lr = &config.lr;
         if phase.updates_color() {
+            if let Some(leak) = &self.leak {
+                leak.take_color(ctx, &mut enc, &self.grads);
+            }
             self.opt.color.set_floor(config.color_floor.then_some(crate::style::DC_FLOOR));
             self.opt.color.step(ctx, &k.adam, &mut enc, &self.g.sh, &self.grads.v_sh, lr.color);
         }
@@ -454,10 +475,21 @@ impl GpuEngine {
             );
             self.regs[1].record(ctx, &mut enc, &g.log_scales, &r.log_scales, &v.v_log_scales, &self.scalars);
             self.regs[2].record(ctx, &mut enc, &g.quats, &r.quats, &v.v_quats, &self.scalars);
+            if let Some(leak) = &self.leak {
+                leak.take_geometry(ctx, &mut enc, v);
+            }
             self.opt.means.step(ctx, &k.adam, &mut enc, &g.means, &v.v_means, lr.means_per_extent * extent);
             self.opt.scales.step(ctx, &k.adam, &mut enc, &g.log_scales, &v.v_log_scales, lr.scales);
             self.opt.quats.step(ctx, &k.adam, &mut enc, &g.quats, &v.v_quats, lr.quats);
             self.opt.opacity.step(ctx, &k.adam, &mut enc, &g.opacity_logits, &v.v_opacity_logits, lr.opacity);
+        }
+        if let Some(leak) = &self.leak {
+            // What this step's backward left on the other phase's parameters.
+            match phase {
+                Phase::Color => leak.add_geometry(ctx, &mut enc, &self.grads),
+                Phase::Geometry => leak.add_color(ctx, &mut enc, &self.grads),
+                Phase::Joint => {}
+            }
         }
         enc.copy_buffer_to_buffer(plan.raster.pair_count(), 0, &self.scalars, (slot::PAIRS * 4) as u64, 4);
         // The pull's gradient is uploaded before this submission runs: the

@@ -27,11 +27,13 @@ mod kernel;
 #[path = "device/live.rs"]
 mod live;
 
-// General kernels: Adam, reductions, scans, sorting, GEMM, resizing (`ops/`).
+// General kernels: Adam (and the phase leak's sums), reductions, scans, sorting, GEMM, resizing (`ops/`).
 #[path = "ops/adam.rs"]
 mod adam;
 #[path = "ops/gemm.rs"]
 mod gemm;
+#[path = "ops/leak.rs"]
+mod leak;
 #[path = "ops/ops_bench.rs"]
 mod ops_bench;
 #[cfg(test)]
@@ -96,6 +98,8 @@ mod losses;
 mod nearest;
 #[path = "losses/palette.rs"]
 mod palette;
+#[path = "losses/relief.rs"]
+mod relief;
 #[path = "losses/sliced.rs"]
 mod sliced;
 #[path = "losses/step_loss.rs"]
@@ -119,6 +123,7 @@ pub use gaussians::{GpuGaussians, GpuGrads};
 pub use gcfm::{GcfmSubset, GcfmWorkspace, GpuGcfm, GpuStyle, Search, bench_gcfm};
 pub use gemm::{Gemm, GemmPlan, GemmSpec, GemmTile, Strided, WIDE_MIN_GROUPS, bench_gemm};
 pub use kernel::{Bind, Kernel};
+pub use leak::GpuLeak;
 pub use live::LiveGaussians;
 pub use losses::{LossKernels, RefLoss, TvLoss};
 pub use nearest::GpuNearest;
@@ -128,6 +133,7 @@ pub use raster_forward::GpuRaster;
 pub use raster_kernels::{Accumulation, RasterKernels};
 pub use raster_run::{bench_raster, render_and_backward_gpu, render_gpu};
 pub use reduce::{ReduceKernels, ReduceOp, ReduceSpec, Reduction};
+pub use relief::{DepthRelief, DepthReliefKernels};
 pub use resize::{Clamp01, Downscale, ResizeKernels};
 pub use scan::{GpuScan, ScanKernels};
 pub use sliced::{GpuSlicedTarget, SlicedKernels, SlicedLoss};

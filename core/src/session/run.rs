@@ -84,7 +84,8 @@ struct Optimisers {
 
 /// Gradients one phase's steps leave on the other phase's parameters
 /// ([`StyleConfig::phase_leak`]), summed until that phase's next step adds
-/// them to its own. Empty when the leak is off.
+/// them to its own. Empty when the leak is off, and when the steps run on the
+/// GPU engine, which keeps its own sums ([`crate::gpu::GpuLeak`]).
 #[derive(Default)]
 struct Leak {
     color: Vec<f32>,
@@ -96,13 +97,10 @@ struct Leak {
 
 impl Leak {
     /// The empty sums for `n` Gaussians when `config` asks for the leak (in
-    /// decoupled mode: the ablations have no phases to leak between), else none.
-    fn for_config(config: &StyleConfig, n: usize) -> Self {
-        if Self::wanted(config) { Self::new(n) } else { Self::default() }
-    }
-
-    fn wanted(config: &StyleConfig) -> bool {
-        config.phase_leak && config.mode == crate::style::Mode::Decoupled
+    /// decoupled mode: the ablations have no phases to leak between) and the
+    /// CPU engine runs the steps (`on_gpu` false), else none.
+    fn for_config(config: &StyleConfig, n: usize, on_gpu: bool) -> Self {
+        if config.leaks_between_phases() && !on_gpu { Self::new(n) } else { Self::default() }
     }
 
     /// Whether the sums are kept (the leak is on).
@@ -307,7 +305,7 @@ impl Session {
             style_depth,
             vgg,
             opt,
-            leak: Leak::for_config(&config, n),
+            leak: Leak::for_config(&config, n, engine.is_some()),
             sampler,
             step: 0,
             elapsed_s: 0.0,
@@ -487,8 +485,12 @@ impl Session {
             }
             self.view_matches.iter_mut().for_each(|m| *m = None);
         }
-        if Leak::wanted(&config) != self.leak.is_on() {
-            self.leak = Leak::for_config(&config, self.g.len());
+        if config.leaks_between_phases() != self.config.leaks_between_phases() {
+            // Turned on or off: the sums start empty (the GPU engine's too).
+            self.leak = Leak::for_config(&config, self.g.len(), self.engine.is_some());
+            if let Some(e) = &mut self.engine {
+                e.reset_leak();
+            }
         }
         self.config = config;
         Ok(())

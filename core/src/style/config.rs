@@ -273,33 +273,22 @@ impl StyleConfig {
     }
 
     /// What this configuration asks that the GPU engine does not compute yet
-    /// (a term whose row says `gpu: false`, the phase leak): the session's
+    /// (a term whose row says `gpu: false`; none today): the session's
     /// GPU refusal and `gast stylize --device auto`'s choice of the CPU read it.
     pub fn cpu_only(&self) -> Vec<CpuOnly> {
-        let mut out: Vec<CpuOnly> = self
-            .weights
-            .cpu_only()
+        (self.weights.cpu_only())
             .map(|(t, v)| CpuOnly {
                 name: t.symbol.into(),
                 detail: format!("{} = {v} ({})", t.symbol, t.name()),
                 off: "set it to 0",
             })
-            .collect();
-        if self.depth_relief_px > 0 {
-            out.push(CpuOnly {
-                name: "the depth relief".into(),
-                detail: format!("the depth relief (depth_relief_px = {})", self.depth_relief_px),
-                off: "set it to 0",
-            });
-        }
-        if self.phase_leak {
-            out.push(CpuOnly {
-                name: "the phase leak".into(),
-                detail: "the phase leak (phase_leak)".into(),
-                off: "turn it off",
-            });
-        }
-        out
+            .collect()
+    }
+
+    /// Whether the phases leak gradients into each other: the phase leak in
+    /// decoupled mode (the ablations have no phases to leak between).
+    pub fn leaks_between_phases(&self) -> bool {
+        self.phase_leak && self.mode == Mode::Decoupled
     }
 
     /// The step plan this configuration implies.
@@ -454,15 +443,19 @@ mod tests {
     }
 
     #[test]
-    fn cpu_only_names_each_setting_the_gpu_engine_lacks() {
+    fn every_setting_runs_on_both_engines_and_the_leak_needs_phases() {
         assert!(StyleConfig::default().cpu_only().is_empty());
-        let mut c = StyleConfig { phase_leak: true, ..StyleConfig::default() };
+        let mut c = StyleConfig { phase_leak: true, depth_relief_px: 8, ..StyleConfig::default() };
         c.weights.sliced = 2.0;
-        let names: Vec<String> = c.cpu_only().into_iter().map(|x| x.name).collect();
-        assert_eq!(names, ["the phase leak"], "λ_sw runs on both engines");
-        assert_eq!(c.cpu_only()[0].off, "turn it off");
-        let relief = StyleConfig { depth_relief_px: 8, ..StyleConfig::default() };
-        assert_eq!(relief.cpu_only()[0].name, "the depth relief");
+        c.weights.assignment_cosine = 10.0;
+        assert!(c.cpu_only().is_empty(), "{:?}", c.cpu_only().into_iter().map(|x| x.name).collect::<Vec<_>>());
+        assert!(c.leaks_between_phases());
+        for mode in [Mode::Joint, Mode::ColorOnly, Mode::GeometryOnly] {
+            assert!(
+                !StyleConfig { mode, ..c.clone() }.leaks_between_phases(),
+                "{mode:?} has no phases to leak between"
+            );
+        }
         assert!(
             StyleConfig { depth_relief_px: 5000, ..StyleConfig::default() }.problems()[0].contains("depth_relief_px")
         );

@@ -83,16 +83,20 @@ pub fn centred(rel: &[f32], mask: Option<&[bool]>) -> Vec<f32> {
 
 /// `max |rel| + 1e-8` over `mask`.
 fn peak(rel: &[f32], mask: Option<&[bool]>) -> f32 {
+    largest(rel, mask) + 1e-8
+}
+
+/// `max |rel|` over `mask`.
+fn largest(rel: &[f32], mask: Option<&[bool]>) -> f32 {
     let inside = |k: usize| mask.is_none_or(|m| m[k]);
-    (0..rel.len()).filter(|&k| inside(k)).fold(0.0f32, |a, k| a.max(rel[k].abs())) + 1e-8
+    (0..rel.len()).filter(|&k| inside(k)).fold(0.0f32, |a, k| a.max(rel[k].abs()))
 }
 
 /// The adjoint of [`centred`] at `rel`: `v / (2M)` inside the mask, plus the
 /// peak's share `−sign · Σ v·rel / (2M²)` (ties at the peak share it).
 pub fn centred_backward(rel: &[f32], v: &[f32], mask: Option<&[bool]>) -> Vec<f32> {
     let inside = |k: usize| mask.is_none_or(|m| m[k]);
-    let m = peak(rel, mask);
-    let top = m - 1e-8;
+    let (top, m) = (largest(rel, mask), peak(rel, mask));
     let at_peak = |k: usize| inside(k) && rel[k].abs() == top;
     let ties = (0..rel.len()).filter(|&k| at_peak(k)).count().max(1) as f64;
     let dot: f64 = rel.iter().zip(v).map(|(a, b)| f64::from(a * b)).sum();

@@ -171,8 +171,8 @@ pub struct StylizeArgs {
     pub split_px: Option<f32>,
     /// Compare the depth's relief with the style depth's: both depth maps
     /// minus their blur of this radius (px), centred on 0.5, before VGG, so
-    /// an object's layout and silhouette do not take the 0–1 range. CPU only;
-    /// 0 is the paper's min-max normalised depth [default: 0].
+    /// an object's layout and silhouette do not take the 0–1 range. 0 is the
+    /// paper's min-max normalised depth [default: 0].
     #[arg(long, value_name = "PX")]
     pub depth_relief: Option<u32>,
     /// Views rendered before/after into the output folder.

@@ -3,7 +3,8 @@
 //! one command encoder.
 //!
 //! [`StepLossPlan`] holds the scratch buffers and planned launches for one
-//! image size: the clamp, the 0.5× downscale, the depth map, the edge map,
+//! image size: the clamp, the 0.5× downscale, the depth map (and its relief,
+//! [`DepthRelief`], while one is asked), the edge map,
 //! three VGG forwards, GCFM, content, the feature-mean and sliced terms where
 //! their weights are on, the two VGG backwards and the image-space adjoints,
 //! TV and the depth regulariser. The engine ([`super::GpuEngine`])
@@ -22,10 +23,10 @@ use super::content::ContentLoss;
 use super::feature_mean::FeatureMeanLoss;
 use super::palette::PaletteLoss;
 use super::{
-    CannyKernels, Clamp01, DepthMap, DepthMapKernels, Downscale, EdgeMap, FocusKernels, GcfmSubset, GcfmWorkspace,
-    GpuContext, GpuError, GpuFocus, GpuGcfm, GpuStyle, GpuVgg, GpuVggState, GpuVggWorkspace, LossKernels,
-    ReduceKernels, RefLoss, ResizeKernels, Search, SlicedKernels, SlicedLoss, TvLoss, VggWindow, WindowKernel,
-    WindowSize,
+    CannyKernels, Clamp01, DepthMap, DepthMapKernels, DepthRelief, DepthReliefKernels, Downscale, EdgeMap,
+    FocusKernels, GcfmSubset, GcfmWorkspace, GpuContext, GpuError, GpuFocus, GpuGcfm, GpuStyle, GpuVgg, GpuVggState,
+    GpuVggWorkspace, LossKernels, ReduceKernels, RefLoss, ResizeKernels, Search, SlicedKernels, SlicedLoss, TvLoss,
+    VggWindow, WindowKernel, WindowSize,
 };
 use crate::style::config::LossWeights;
 use crate::style::gcfm::Matches;
@@ -73,6 +74,8 @@ pub mod slot {
 pub struct StepLossKernels {
     pub(crate) resize: Arc<ResizeKernels>,
     pub(crate) depth: Arc<DepthMapKernels>,
+    /// The depth relief's, compiled when a plan first needs them.
+    relief: std::sync::OnceLock<Arc<DepthReliefKernels>>,
     pub(crate) canny: Arc<CannyKernels>,
     pub(crate) losses: Arc<LossKernels>,
     pub(crate) reduce: Arc<ReduceKernels>,
@@ -89,6 +92,7 @@ impl StepLossKernels {
         Self {
             resize: ResizeKernels::new(ctx),
             depth: DepthMapKernels::new(ctx),
+            relief: std::sync::OnceLock::new(),
             canny: CannyKernels::new(ctx),
             losses: LossKernels::new(ctx),
             reduce: ReduceKernels::new(ctx),
@@ -101,12 +105,21 @@ impl StepLossKernels {
     }
 }
 
+impl StepLossKernels {
+    /// The depth relief's kernels, compiled on the first call.
+    fn relief(&self, ctx: &GpuContext) -> &Arc<DepthReliefKernels> {
+        self.relief.get_or_init(|| DepthReliefKernels::new(ctx))
+    }
+}
+
 /// Scratch buffers and planned launches of the loss for `h × w` renders.
 #[derive(Debug)]
 pub struct StepLossPlan {
     clamp: Clamp01,
     down: Downscale,
     depth_map: DepthMap,
+    /// The depth map's relief ([`StepLossPlan::set_relief`]), planned only while it is on.
+    relief: Option<DepthRelief>,
     edges: EdgeMap,
     tv: TvLoss,
     depth_l1: RefLoss,
@@ -176,6 +189,7 @@ impl StepLossPlan {
             clamp: Clamp01::new(ctx, &k.resize, h * w * 3),
             down: Downscale::new(ctx, &k.resize, h, w, 3),
             depth_map: DepthMap::new(ctx, &k.depth, &k.reduce, h, w)?,
+            relief: None,
             edges: EdgeMap::new(ctx, &k.canny, &k.reduce, h, w)?,
             tv: TvLoss::new(ctx, &k.losses, &k.reduce, h, w, 3, weights.tv, slot::TV)?,
             depth_l1: RefLoss::depth_l1(ctx, &k.losses, &k.reduce, h * w, weights.depth, slot::DEPTH)?,
@@ -305,6 +319,20 @@ impl StepLossPlan {
             Some(win) => win.backward(ctx, &k.window, &k.vgg, enc, m, &self.v_feat[m], &self.v_small[m]),
             None => k.vgg.backward(ctx, enc, &self.vgg_ws, &self.states[m], &self.v_feat[m], &self.v_small[m]),
         }
+    }
+
+    /// Makes VGG see the depth map's relief at `radius` pixels instead of the
+    /// normalised depth ([`crate::style::relief`]; 0: the depth, as the
+    /// paper), from the next recording on. Its workspace is planned when it
+    /// turns on or its radius changes, and dropped when it turns off.
+    pub fn set_relief(&mut self, ctx: &GpuContext, k: &StepLossKernels, radius: usize) -> Result<(), GpuError> {
+        if radius == 0 {
+            self.relief = None;
+        } else if self.relief.as_ref().is_none_or(|r| r.radius() != radius) {
+            let (h, w) = self.sizes[0];
+            self.relief = Some(DepthRelief::new(ctx, k.relief(ctx), &k.reduce, h, w, radius)?);
+        }
+        Ok(())
     }
 
     /// Whether this plan serves `w`: the λ_GC it was made with (baked into
@@ -468,6 +496,9 @@ impl StepLossPlan {
     ) {
         let focus = inputs.focus.unwrap_or(&self.frame);
         self.depth_map.forward(ctx, enc, inputs.inv_depth, focus.pixels(), &self.depth3);
+        if let Some(relief) = &self.relief {
+            relief.forward(ctx, enc, focus.pixels(), &self.depth3);
+        }
         self.down.forward(ctx, enc, &self.depth3, &self.small[1]);
         match inputs.edge {
             Some(e) => self.down.forward(ctx, enc, e, &self.small[2]),
@@ -576,6 +607,9 @@ impl StepLossPlan {
             self.vgg_backward(ctx, k, enc, self.window_for(ctx, inputs), 1);
             self.down.backward(ctx, enc, &self.v_small[1], &self.v_depth3, false);
             let pixels = focus.pixels();
+            if let Some(relief) = &self.relief {
+                relief.backward(ctx, enc, pixels, &self.v_depth3);
+            }
             self.depth_map.backward(ctx, enc, inputs.inv_depth, pixels, &self.v_depth3, &self.v_inv_depth, false);
         } else {
             enc.encoder().clear_buffer(&self.v_inv_depth, 0, None);
