@@ -13,7 +13,7 @@ use std::path::Path;
 use gast_core::io::{depth_to_gray, depth_to_jet};
 use gast_core::raster::{self, Render, RenderOptions};
 use gast_core::session::Session;
-use gast_core::style::config::LossWeights;
+use gast_core::style::config::{LossWeights, ParamRegulariser};
 use gast_core::style::{StyleConfig, StyleMaps};
 use gast_core::{Camera, Gaussians};
 use image::{Rgb, RgbImage};
@@ -148,8 +148,22 @@ pub fn settings_line(config: &StyleConfig, steps: u32, seconds: f64, focus_on_ob
         .filter(|(t, v)| *v != t.get(&defaults))
         .map(|(t, v)| format!(", {} {v}", t.symbol))
         .collect();
+    // The geometry options that are off by default, when on.
+    let mut options = String::new();
+    if config.depth_relief_px > 0 {
+        options += &format!(", depth relief {} px", config.depth_relief_px);
+    }
+    if config.param_regulariser == ParamRegulariser::MeanSquare {
+        options += ", mean-square regulariser";
+    }
+    if config.split_px > 0.0 {
+        options += &format!(", split {} px", config.split_px);
+    }
+    if config.leaks_between_phases() {
+        options += ", phase leak";
+    }
     format!(
-        "{} {} steps ({} cycles x {}), {} px, texture {} px, focus {focus} (asked {:?}, coverage {:.0}%), lr colour {}, means {:e} x extent, colour floor {}{weights}; {:.0} s ({:.2} s/step)",
+        "{} {} steps ({} cycles x {}), {} px, texture {} px, focus {focus} (asked {:?}, coverage {:.0}%), lr colour {}, means {:e} x extent, colour floor {}{weights}{options}; {:.0} s ({:.2} s/step)",
         config.mode.name(),
         steps,
         config.cycles,
@@ -277,6 +291,12 @@ mod tests {
         config.weights.outside = 100000.0;
         let line = settings_line(&config, 3000, 1733.0, true, 0.2);
         assert!(line.contains("colour floor off, λ_out 100000, λ_as 0.003, λ_asc 10;"), "{line}");
+        // The geometry options that are off by default, when on.
+        config.depth_relief_px = 8;
+        config.phase_leak = true;
+        config.split_px = 2.0;
+        let line = settings_line(&config, 3000, 1733.0, true, 0.2);
+        assert!(line.contains("λ_asc 10, depth relief 8 px, split 2 px, phase leak;"), "{line}");
         let width = shape_text(&line, 13.0, None);
         let sheet = f64::from(COLUMNS * TILE + (COLUMNS + 1) * GAP);
         assert!(width + f64::from(GAP) < sheet, "{width} px of {sheet}: {line}");
