@@ -49,13 +49,8 @@ fn rows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     dst[p] = s;
 }
 
-// dst[p] = weight[p]·Σ over the column's neighbours q within r of src[q].
-@compute @workgroup_size(256)
-fn cols(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
-    let p = flat_index(gid, nwg);
-    if p >= u.h * u.w {
-        return;
-    }
+// Σ over the column's neighbours q of pixel p within r of src[q].
+fn column_sum(p: u32) -> f32 {
     let x = p % u.w;
     let y = p / u.w;
     let y_lo = select(0u, y - u.r, y > u.r);
@@ -64,7 +59,17 @@ fn cols(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     for (var yy = y_lo; yy <= y_hi; yy++) {
         s += src[yy * u.w + x];
     }
-    dst[p] = weight[p] * s;
+    return s;
+}
+
+// dst[p] = weight[p]·Σ over the column's neighbours q within r of src[q].
+@compute @workgroup_size(256)
+fn cols(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let p = flat_index(gid, nwg);
+    if p >= u.h * u.w {
+        return;
+    }
+    dst[p] = weight[p] * column_sum(p);
 }
 
 // dst[p] = 1 / Σ over the column's neighbours of src (the rows' box sums of
@@ -75,14 +80,7 @@ fn count_inverse(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_wor
     if p >= u.h * u.w {
         return;
     }
-    let x = p % u.w;
-    let y = p / u.w;
-    let y_lo = select(0u, y - u.r, y > u.r);
-    let y_hi = min(y + u.r, u.h - 1u);
-    var s = 0.0;
-    for (var yy = y_lo; yy <= y_hi; yy++) {
-        s += src[yy * u.w + x];
-    }
+    let s = column_sum(p);
     dst[p] = select(0.0, 1.0 / s, s > 0.0);
 }
 

@@ -103,9 +103,7 @@ impl StepLossKernels {
             window: WindowKernel::new(ctx),
         }
     }
-}
 
-impl StepLossKernels {
     /// The depth relief's kernels, compiled on the first call.
     fn relief(&self, ctx: &GpuContext) -> &Arc<DepthReliefKernels> {
         self.relief.get_or_init(|| DepthReliefKernels::new(ctx))
