@@ -124,6 +124,16 @@ def with_without(step, what, short, extra=lambda j: ""):
         a, b = j["runs"]
         figure(f"{what}, step time with / without", b["ms_per_step"] / max(a["ms_per_step"], 1e-9), "×",
                None, None, f"{a['ms_per_step']:.2f} ms without, {b['ms_per_step']:.2f} ms with{extra(j)}")
+    elif j and len(j["runs"]) > 2:
+        # More arms than one (`--compare-relief`: the relief, then the relief and the leak),
+        # each against the first, with its phases' medians.
+        a, ms = j["runs"][0], lambda v: "–" if v is None else f"{v:.2f}"
+        for b in j["runs"][1:]:
+            phases = ", ".join(f"{p} {ms(b.get(f'{p}_step_median_ms'))} / {ms(a.get(f'{p}_step_median_ms'))} ms"
+                               for p in ("colour", "geometry"))
+            figure(f"{b['label']}, step time with / without", b["ms_per_step"] / max(a["ms_per_step"], 1e-9), "×",
+                   None, None, f"{a['ms_per_step']:.2f} ms without, {b['ms_per_step']:.2f} ms with; medians with / "
+                   f"without: {phases}{extra(j)}")
     else:
         figure(f"{short}, with / without", None, "×", None, False, status(step))
 
@@ -132,6 +142,10 @@ def with_without(step, what, short, extra=lambda j: ""):
 with_without("compare_assign", "assignment terms (λ_asc 10 + λ_as 0.015)", "assignment terms")
 # The palette hold's kernels (λ_pal 100 with the object focus).
 with_without("compare_palette", "palette hold (λ_pal 100)", "palette hold")
+# The depth relief (8 px) and the phase leak beside it: both geometry options, on the GPU since
+# 2026-11-30.
+with_without("compare_relief", "depth relief", "depth relief",
+             lambda j: f"; guitar × block2 at {j['resolution']} px")
 # The host pairing itself (`gast bench pairing`): in blocks (since 2026-11-30) and in one block,
 # Jonker–Volgenant's start against the plain paths.
 j = load("pairing.json")

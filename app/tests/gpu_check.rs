@@ -40,6 +40,7 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
         "guitar_64",
         "compare_assign",
         "compare_palette",
+        "compare_relief",
         "pairing",
         "compare_sliced_depth",
         "playbot_32",
@@ -50,6 +51,12 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
     let figures = doc["figures"].as_array().expect("figures");
     let golden = figures.iter().find(|f| f["what"] == "golden files, GPU engine").expect("golden figure");
     assert_eq!(golden["ok"], true, "{golden}");
+    // The relief's arms, each against the run without it.
+    for arm in ["relief 8 px", "relief 8 px + phase leak"] {
+        let what = format!("{arm}, step time with / without");
+        let f = figures.iter().find(|f| f["what"] == what.as_str()).unwrap_or_else(|| panic!("{what}\n{tail}"));
+        assert!(f["value"].as_f64().is_some_and(|r| r > 0.0), "{f}");
+    }
     let step = figures.iter().find(|f| f["what"] == "guitar step at 48 px").expect("step figure");
     assert!(step["value"].as_f64().is_some_and(|ms| ms > 0.0), "{step}");
     // The studio drawn headless (`gast studio --headless`), at the window size the step asks for.

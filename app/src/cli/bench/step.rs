@@ -1,8 +1,8 @@
 //! `gast bench step`: one optimisation step part by part on a device (or two,
 //! `--compare`), the focus's cost (`--compare-focus`), the assignment terms'
-//! (`--compare-assign`), the palette hold's (`--compare-palette`), what
-//! re-used matches buy
-//! on a GPU (`--matching-reuse N` alone with a GPU device), the whole
+//! (`--compare-assign`), the palette hold's (`--compare-palette`), the depth
+//! relief's and the phase leak's (`--compare-relief PX`), what re-used
+//! matches buy on a GPU (`--matching-reuse N` alone with a GPU device), the whole
 //! schedule's time and memory.
 
 use std::path::PathBuf;
@@ -84,6 +84,15 @@ pub struct StepArgs {
         "compare", "compare_focus", "compare_assign", "compare_sliced_depth", "compare_palette"
     ])]
     pub compare_assign_block: bool,
+    /// Run the same steps on --device three times in this process: without the depth relief,
+    /// with it at this radius (`gast stylize --depth-relief PX`), and with it and the phase
+    /// leak (`--phase-leak true`), and print what each costs against the first. Give --steps
+    /// past the first cycle's 10 colour steps (30: 20 geometry steps) to time both phases.
+    #[arg(long, value_name = "PX", conflicts_with_all = [
+        "compare", "compare_focus", "compare_assign", "compare_sliced_depth", "compare_palette",
+        "compare_assign_block"
+    ])]
+    pub compare_relief: Option<u32>,
     /// Depth Anything V2 checkpoint for the style depth line (else $GAST_DEPTH_MODEL or the
     /// caches; never downloaded here).
     #[arg(long)]
@@ -244,7 +253,8 @@ pub(super) fn reuse_on_gpu(args: &StepArgs) -> anyhow::Result<Option<ExitCode>> 
             || args.compare_assign
             || args.compare_sliced_depth
             || args.compare_palette
-            || args.compare_assign_block,
+            || args.compare_assign_block
+            || args.compare_relief.is_some(),
     ) && let Some(ctx) = args.device.resolve().with_context(|| format!("--device {}", args.device))?
     {
         return compare_reuse_gpu(args, ctx, reuse).map(Some);
@@ -301,7 +311,7 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         let mut on = off.clone();
         (on.weights.assignment_cosine, on.weights.assignment) =
             (gast_core::style::config::OBJECT_RECIPE_ASSIGN_COS, gast_core::style::config::OBJECT_RECIPE_ASSIGN);
-        return compare_arms(&args, &inputs, [("without", off), ("λ_asc 10 + λ_as 0.015", on)], gpu, budget);
+        return compare_arms(&args, &inputs, &[("without", off), ("λ_asc 10 + λ_as 0.015", on)], gpu, budget);
     }
     if args.compare_assign_block {
         let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
@@ -310,14 +320,14 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
             (gast_core::style::config::OBJECT_RECIPE_ASSIGN_COS, gast_core::style::config::OBJECT_RECIPE_ASSIGN);
         let one = StyleConfig { assign_block: gast_core::style::assignment::ASSIGN_MAX as u32, ..blocks.clone() };
         let label = format!("blocks of {}", blocks.assign_block);
-        return compare_arms(&args, &inputs, [("one block", one), (label.as_str(), blocks)], gpu, budget);
+        return compare_arms(&args, &inputs, &[("one block", one), (label.as_str(), blocks)], gpu, budget);
     }
     if args.compare_sliced_depth {
         let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
         let off = StyleConfig { frame_recipe: false, ..config.clone() };
         let mut on = off.clone();
         on.weights.sliced_depth = gast_core::style::config::FRAME_RECIPE_SLICED_DEPTH;
-        return compare_arms(&args, &inputs, [("without", off), ("λ_swd 1", on)], gpu, budget);
+        return compare_arms(&args, &inputs, &[("without", off), ("λ_swd 1", on)], gpu, budget);
     }
     if args.compare_palette {
         let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
@@ -327,7 +337,15 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
         (off.weights.assignment_cosine, off.weights.assignment) = (OBJECT_RECIPE_ASSIGN_COS, OBJECT_RECIPE_ASSIGN);
         let mut on = off.clone();
         on.weights.palette = OBJECT_RECIPE_PALETTE;
-        return compare_arms(&args, &inputs, [("without", off), ("λ_pal 100", on)], gpu, budget);
+        return compare_arms(&args, &inputs, &[("without", off), ("λ_pal 100", on)], gpu, budget);
+    }
+    if let Some(px) = args.compare_relief {
+        let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
+        let relief = crate::cli::checked(StyleConfig { depth_relief_px: px, ..config.clone() })?;
+        let leak = StyleConfig { phase_leak: true, ..relief.clone() };
+        let (with, with_leak) = (format!("relief {px} px"), format!("relief {px} px + phase leak"));
+        let arms = [("without", config.clone()), (with.as_str(), relief), (with_leak.as_str(), leak)];
+        return compare_arms(&args, &inputs, &arms, gpu, budget);
     }
     let devices: Vec<DeviceChoice> =
         if args.compare { vec![DeviceChoice::Cpu, DeviceChoice::Gpu] } else { vec![args.device] };
@@ -428,43 +446,47 @@ fn compare_focus(
         ("frame", StyleConfig { focus: Focus::Frame, ..config.clone() }),
         ("object", StyleConfig { focus: Focus::Object, ..config.clone() }),
     ];
-    compare_arms(args, inputs, arms, gpu, budget)
+    compare_arms(args, inputs, &arms, gpu, budget)
 }
 
-/// The same steps on one device with two configurations (`arms`, the
-/// reference first), and the ratio of their per-phase medians.
+/// The same steps on one device with two or more configurations (`arms`, the
+/// reference first), and the ratio of each one's per-phase medians to the
+/// reference's.
 fn compare_arms(
     args: &StepArgs,
     inputs: &StepInputs,
-    arms: [(&str, gast_core::style::StyleConfig); 2],
+    arms: &[(&str, gast_core::style::StyleConfig)],
     gpu: Option<gast_core::gpu::GpuContext>,
     budget: u32,
 ) -> anyhow::Result<ExitCode> {
     let mut runs = Vec::new();
-    for (label, config) in &arms {
+    for (label, config) in arms {
         println!("\n{label}:");
         runs.push(time_steps(inputs, config, gpu.clone(), budget)?);
     }
-    let ([a, b], [(la, _), (lb, _)]) = (&runs[..], &arms) else { return Ok(ExitCode::FAILURE) };
-    println!("\n{la} against {lb} on {}, the same {} steps in one process:", a.device, a.steps);
-    for (phase, a_ms) in &a.per_phase {
-        if let Some((_, b_ms)) = b.per_phase.iter().find(|p| p.0 == *phase) {
-            println!(
-                "  {:<9} step median: {la} {:>9.2} ms, {lb} {:>9.2} ms, {lb}/{la} {:.3}",
-                format!("{phase:?}").to_lowercase(),
-                a_ms,
-                b_ms,
-                b_ms / a_ms.max(1e-9)
-            );
+    let (Some(a), Some((la, _))) = (runs.first(), arms.first()) else { return Ok(ExitCode::FAILURE) };
+    for (b, (lb, _)) in runs.iter().zip(arms).skip(1) {
+        println!("\n{la} against {lb} on {}, the same {} steps in one process:", a.device, a.steps);
+        for (phase, a_ms) in &a.per_phase {
+            if let Some((_, b_ms)) = b.per_phase.iter().find(|p| p.0 == *phase) {
+                println!(
+                    "  {:<9} step median: {la} {:>9.2} ms, {lb} {:>9.2} ms, {lb}/{la} {:.3}",
+                    format!("{phase:?}").to_lowercase(),
+                    a_ms,
+                    b_ms,
+                    b_ms / a_ms.max(1e-9)
+                );
+            }
         }
+        println!(
+            "  whole run: {la} {:.2} s, {lb} {:.2} s, {lb}/{la} {:.3}",
+            a.wall_s,
+            b.wall_s,
+            b.wall_s / a.wall_s.max(1e-9)
+        );
     }
-    println!(
-        "  whole run: {la} {:.2} s, {lb} {:.2} s, {lb}/{la} {:.3}",
-        a.wall_s,
-        b.wall_s,
-        b.wall_s / a.wall_s.max(1e-9)
-    );
-    write_json(args, &[(la, a), (lb, b)])?;
+    let labelled: Vec<(&str, &StepRun)> = arms.iter().map(|(l, _)| *l).zip(&runs).collect();
+    write_json(args, &labelled)?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -478,7 +500,7 @@ fn compare_reuse_gpu(args: &StepArgs, ctx: gast_core::gpu::GpuContext, reuse: u3
     let budget = args.steps.unwrap_or(schedule.color_steps + args.geometry_steps);
     let kept = StyleConfig { matching: MatchingConfig { reuse, ..MatchingConfig::default() }, ..config.clone() };
     let label = format!("reuse {reuse}");
-    compare_arms(args, &inputs, [("reuse 1", config), (label.as_str(), kept)], Some(ctx), budget)
+    compare_arms(args, &inputs, &[("reuse 1", config), (label.as_str(), kept)], Some(ctx), budget)
 }
 
 /// Runs `budget` steps of a fresh session on `gpu` (the CPU when `None`) and
