@@ -146,6 +146,16 @@ with_without("compare_palette", "palette hold (λ_pal 100)", "palette hold")
 # 2026-11-30.
 with_without("compare_relief", "depth relief", "depth relief",
              lambda j: f"; guitar × block2 at {j['resolution']} px")
+# The relief and the leak against the CPU engine on this machine: the first step's losses.
+m = re.search(r"first step's losses, relative difference: total (\S+), GCFM (\S+), content (\S+), TV (\S+), depth (\S+)",
+              log("relief_check"))
+if m:
+    total, gcfm, content, tv, depth = (float(x) for x in m.groups())
+    figure("depth relief 8 px + phase leak, GPU against the CPU engine: first step's GCFM, relative difference", gcfm, "",
+           "≤ 1e-3", gcfm <= 1e-3, f"total {total:.1e} (the assignment terms' draws differ between engines), content "
+           f"{content:.1e}, TV {tv:.1e}, depth {depth:.1e}; guitar × wave")
+else:
+    figure("depth relief 8 px + phase leak, GPU against the CPU engine", None, "", "≤ 1e-3", False, status("relief_check"))
 # The host pairing itself (`gast bench pairing`): in blocks (since 2026-11-30) and in one block,
 # Jonker–Volgenant's start against the plain paths.
 j = load("pairing.json")

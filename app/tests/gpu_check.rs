@@ -41,6 +41,7 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
         "compare_assign",
         "compare_palette",
         "compare_relief",
+        "relief_check",
         "pairing",
         "compare_sliced_depth",
         "playbot_32",
@@ -57,6 +58,10 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
         let f = figures.iter().find(|f| f["what"] == what.as_str()).unwrap_or_else(|| panic!("{what}\n{tail}"));
         assert!(f["value"].as_f64().is_some_and(|r| r > 0.0), "{f}");
     }
+    // The relief's forward on this adapter against the CPU engine's.
+    let what = "depth relief 8 px + phase leak, GPU against the CPU engine: first step's GCFM, relative difference";
+    let agree = figures.iter().find(|f| f["what"] == what).unwrap_or_else(|| panic!("{what}\n{tail}"));
+    assert_eq!(agree["ok"], true, "{agree}");
     let step = figures.iter().find(|f| f["what"] == "guitar step at 48 px").expect("step figure");
     assert!(step["value"].as_f64().is_some_and(|ms| ms > 0.0), "{step}");
     // The studio drawn headless (`gast studio --headless`), at the window size the step asks for.

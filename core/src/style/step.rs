@@ -319,15 +319,22 @@ pub fn step_loss_with<N: FeatureNet>(
     focus: LossFocus<'_>,
     matcher: &mut dyn FnMut([&[f32]; 3], usize) -> Matches,
 ) -> StepLoss {
-    let mask = focus.mask;
     use rayon::prelude::*;
     let (h, w) = (maps.height, maps.width);
     assert_eq!(maps.rgb.len(), h * w * 3, "step_loss: rgb size");
     assert_eq!(maps.inv_depth.len(), h * w, "step_loss: inverse depth size");
     assert_eq!(maps.edge.len(), h * w, "step_loss: edge size");
-    if let Some(m) = mask {
+    if let Some(m) = focus.mask {
         assert_eq!(m.len(), h * w, "step_loss: mask size");
     }
+    // The feature grid (VGG's input is the render halved, then two
+    // floor-halving pools) and the covered positions on it. A mask that covers
+    // none of them is dropped whole, the depth map's normalisation included,
+    // as the GPU engine does: before, the depth was normalised over the mask
+    // and its backward pass over the frame.
+    let (fh, fw) = (h / 2 / 4, w / 2 / 4);
+    let fmask = focus.mask.map(|m| feature_mask(m, h, w, fh, fw)).filter(|f| f.contains(&true));
+    let mask = focus.mask.filter(|_| fmask.is_some());
     let mut timings = StepLossTimings::default();
     let t = std::time::Instant::now();
 
@@ -349,11 +356,9 @@ pub fn step_loss_with<N: FeatureNet>(
     let images = [maps.rgb.to_vec(), replicate3(&depth_n), replicate3(maps.edge)];
     let downs: Vec<(Vec<f32>, usize, usize)> = images.iter().map(|im| downscale_half(im, h, w, 3)).collect();
     let (sh, sw) = (downs[0].1, downs[0].2);
-    // The feature grid (two floor-halving pools), the covered positions on
-    // it, and the window of the input VGG needs for them.
-    let (fh, fw) = (sh / 4, sw / 4);
+    debug_assert_eq!((fh, fw), (sh / 4, sw / 4), "step_loss: the feature grid");
     let n = fh * fw;
-    let fmask = mask.map(|m| feature_mask(m, h, w, fh, fw)).filter(|f| f.contains(&true));
+    // The window of the input VGG needs for the covered positions.
     let cells = fmask.as_deref().filter(|_| focus.window).and_then(|f| covered_box(f, fh, fw));
     let window = cells.and_then(|b| FeatureWindow::around(b, fh, fw));
 
@@ -470,7 +475,6 @@ pub fn step_loss_with<N: FeatureNet>(
         Some(v) => {
             let v_depth3 = downscale_half_backward(&v, h, w, 3);
             let v_depth_n: Vec<f32> = v_depth3.chunks_exact(3).map(|p| p[0] + p[1] + p[2]).collect();
-            let pmask = fmask.is_some().then_some(mask).flatten();
             let v_depth_n = match &depth_rel {
                 Some(rel) => {
                     let v_rel = super::relief::centred_backward(rel, &v_depth_n, mask);
@@ -478,13 +482,13 @@ pub fn step_loss_with<N: FeatureNet>(
                 }
                 None => v_depth_n,
             };
-            min_max_backward(maps.inv_depth, &v_depth_n, pmask)
+            min_max_backward(maps.inv_depth, &v_depth_n, mask)
         }
         None => vec![0.0; h * w],
     };
     timings.backward_ms = t.elapsed().as_secs_f32() * 1e3;
 
-    let (tv, v_tv) = tv_loss_masked(maps.rgb, h, w, 3, fmask.is_some().then_some(mask).flatten());
+    let (tv, v_tv) = tv_loss_masked(maps.rgb, h, w, 3, mask);
     for (a, b) in v_rgb.iter_mut().zip(v_tv) {
         *a += weights.tv * b;
     }
@@ -499,7 +503,7 @@ pub fn step_loss_with<N: FeatureNet>(
     let mut palette_value = 0.0;
     // On the covered pixels, when some feature position is covered (else the
     // losses look at the whole frame, and the hold sits out, as on the GPU).
-    let covered = fmask.is_some().then_some(mask).flatten();
+    let covered = mask;
     if let (Some(reference), Some(mask)) = (focus.palette.filter(|_| weights.palette > 0.0), covered) {
         let (l, g) = palette_loss(maps.rgb, mask, &reference);
         palette_value = l;

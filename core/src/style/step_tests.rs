@@ -203,6 +203,33 @@ fn an_all_ones_mask_equals_the_unmasked_loss() {
     }
 }
 
+/// A mask too small to cover half of any feature cell is dropped whole, the
+/// depth map's normalisation with it, as the GPU engine does (before, the
+/// depth was normalised over the mask and its backward pass ran over the
+/// frame): the loss and gradients are the unmasked ones, with and without
+/// the depth relief.
+#[test]
+fn a_mask_that_covers_no_feature_cell_is_the_whole_frame() {
+    let (h, w) = (16, 24);
+    let (net, st, rgb, inv_depth, content, dref) = focus_inputs();
+    let edge = vec![0.0f32; h * w];
+    let weights = LossWeights { gcfm: 2.0, content: 0.5, tv: 0.02, depth: 0.1, ..LossWeights::default() };
+    let maps = RenderedMaps { rgb: &rgb, inv_depth: &inv_depth, edge: &edge, height: h, width: w };
+    // A 5 × 5 patch: 25 of a cell's 64 pixels, under half of any cell.
+    let mask: Vec<bool> = (0..h * w).map(|k| (k / w) < 5 && (k % w) < 5).collect();
+    for relief_px in [0, 3] {
+        let run = |mask: Option<&[bool]>| {
+            let exact = &mut |r: [&[f32]; 3], n: usize| match_features(&st.features, r, n);
+            let focus = LossFocus { mask, window: true, relief_px, ..LossFocus::default() };
+            step_loss_with(&net, &st, maps, Some(&content), Some(&dref), &weights, true, focus, exact)
+        };
+        let (a, b) = (run(None), run(Some(&mask)));
+        assert_eq!(a.terms, b.terms, "relief {relief_px}");
+        assert_eq!(a.v_rgb, b.v_rgb, "relief {relief_px}");
+        assert_eq!(a.v_inv_depth, b.v_inv_depth, "relief {relief_px}");
+    }
+}
+
 #[test]
 fn a_mask_ignores_uncovered_positions_with_exactly_zero_gradient() {
     let (h, w) = (16, 24);

@@ -84,6 +84,13 @@ pub struct StepArgs {
         "compare", "compare_focus", "compare_assign", "compare_sliced_depth", "compare_palette"
     ])]
     pub compare_assign_block: bool,
+    /// The depth relief's radius for every run (`gast stylize --depth-relief PX`; 0, the
+    /// default, is off): with --compare, the first step's losses of both engines with it.
+    #[arg(long, value_name = "PX", conflicts_with = "compare_relief")]
+    pub depth_relief: Option<u32>,
+    /// The reference's gradient leak between phases for every run (`gast stylize --phase-leak`).
+    #[arg(long, conflicts_with = "compare_relief")]
+    pub phase_leak: Option<bool>,
     /// Run the same steps on --device three times in this process: without the depth relief,
     /// with it at this radius (`gast stylize --depth-relief PX`), and with it and the phase
     /// leak (`--phase-leak true`), and print what each costs against the first. Give --steps
@@ -275,7 +282,7 @@ pub(super) fn asks_fast(args: &StepArgs) -> bool {
 
 /// The default settings at `--resolution` and `--focus`, with `--assign-block`
 /// (the one choice of [`super::super::stylize::FastArgs`] these runs take: the
-/// others go to `step_fast`), checked.
+/// others go to `step_fast`), `--depth-relief` and `--phase-leak`, checked.
 fn step_config(args: &StepArgs) -> anyhow::Result<gast_core::style::StyleConfig> {
     let mut config = gast_core::style::StyleConfig {
         resolution: args.resolution,
@@ -283,6 +290,8 @@ fn step_config(args: &StepArgs) -> anyhow::Result<gast_core::style::StyleConfig>
         ..gast_core::style::StyleConfig::default()
     };
     config.assign_block = args.fast.assign_block.unwrap_or(config.assign_block);
+    config.depth_relief_px = args.depth_relief.unwrap_or(config.depth_relief_px);
+    config.phase_leak = args.phase_leak.unwrap_or(config.phase_leak);
     crate::cli::checked(config)
 }
 
@@ -375,13 +384,16 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
             cpu.wall_s / gpu.wall_s.max(1e-9)
         );
         if let (Some(a), Some(b)) = (cpu.first_losses, gpu.first_losses) {
-            let rel = |x: f32, y: f32| f64::from((x - y).abs()) / f64::from(x.abs().max(1e-12));
+            // Relative to the larger of the two, and to at least 1e-6: a term both engines
+            // leave at rounding noise (content 2e-10 against 0 on the first step) reads ~0.
+            let rel = |x: f32, y: f32| f64::from((x - y).abs()) / f64::from(x.abs().max(y.abs()).max(1e-6));
             println!(
-                "  first step's losses, relative difference: total {:.1e}, GCFM {:.1e}, content {:.1e}, TV {:.1e} ({} on the GPU)",
+                "  first step's losses, relative difference: total {:.1e}, GCFM {:.1e}, content {:.1e}, TV {:.1e}, depth {:.1e} ({} on the GPU)",
                 rel(a.total, b.total),
                 rel(a.gcfm, b.gcfm),
                 rel(a.content, b.content),
                 rel(a.tv, b.tv),
+                rel(a.depth, b.depth),
                 gpu.device
             );
         }
