@@ -181,6 +181,13 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>) ->
              not the scene's layout; 0 is the paper's min-max depth",
         )
         .changed();
+    changed |= ui
+        .checkbox(&mut c.phase_leak, "phase leak (reference)")
+        .on_hover_text(
+            "as the reference's code does (decoupled mode): a colour step's gradient on the geometry, and a \
+             geometry step's on the colour, are summed and applied at the other phase's next step",
+        )
+        .changed();
 
     ui.separator();
     egui::CollapsingHeader::new("Learning rates").default_open(false).show(ui, |ui| {
