@@ -366,23 +366,7 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     }
     if let [cpu, gpu] = &runs[..] {
         println!("\nCPU against GPU, the same {} steps in one process:", cpu.steps.min(gpu.steps));
-        for (phase, cpu_ms) in &cpu.per_phase {
-            if let Some((_, gpu_ms)) = gpu.per_phase.iter().find(|p| p.0 == *phase) {
-                println!(
-                    "  {:<9} step median: CPU {:>9.1} ms, GPU {:>8.2} ms, ratio {:>7.1}x",
-                    format!("{phase:?}").to_lowercase(),
-                    cpu_ms,
-                    gpu_ms,
-                    cpu_ms / gpu_ms.max(1e-9)
-                );
-            }
-        }
-        println!(
-            "  whole run: CPU {:.1} s, GPU {:.2} s, ratio {:.1}x",
-            cpu.wall_s,
-            gpu.wall_s,
-            cpu.wall_s / gpu.wall_s.max(1e-9)
-        );
+        print_against(("GPU", gpu), ("CPU", cpu));
         if let (Some(a), Some(b)) = (cpu.first_losses, gpu.first_losses) {
             // Relative to the larger of the two, and to at least 1e-6: a term both engines
             // leave at rounding noise (content 2e-10 against 0 on the first step) reads ~0.
@@ -479,27 +463,33 @@ fn compare_arms(
     let (Some(a), Some((la, _))) = (runs.first(), arms.first()) else { return Ok(ExitCode::FAILURE) };
     for (b, (lb, _)) in runs.iter().zip(arms).skip(1) {
         println!("\n{la} against {lb} on {}, the same {} steps in one process:", a.device, a.steps);
-        for (phase, a_ms) in &a.per_phase {
-            if let Some((_, b_ms)) = b.per_phase.iter().find(|p| p.0 == *phase) {
-                println!(
-                    "  {:<9} step median: {la} {:>9.2} ms, {lb} {:>9.2} ms, {lb}/{la} {:.3}",
-                    format!("{phase:?}").to_lowercase(),
-                    a_ms,
-                    b_ms,
-                    b_ms / a_ms.max(1e-9)
-                );
-            }
-        }
-        println!(
-            "  whole run: {la} {:.2} s, {lb} {:.2} s, {lb}/{la} {:.3}",
-            a.wall_s,
-            b.wall_s,
-            b.wall_s / a.wall_s.max(1e-9)
-        );
+        print_against((la, a), (lb, b));
     }
     let labelled: Vec<(&str, &StepRun)> = arms.iter().map(|(l, _)| *l).zip(&runs).collect();
     write_json(args, &labelled)?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// Two runs of the same steps side by side: each phase's step median and the
+/// whole run's time, and the ratio `other / reference`.
+fn print_against((la, a): (&str, &StepRun), (lb, b): (&str, &StepRun)) {
+    for (phase, a_ms) in &a.per_phase {
+        if let Some((_, b_ms)) = b.per_phase.iter().find(|p| p.0 == *phase) {
+            println!(
+                "  {:<9} step median: {la} {:>9.2} ms, {lb} {:>9.2} ms, {lb}/{la} {:.3}",
+                format!("{phase:?}").to_lowercase(),
+                a_ms,
+                b_ms,
+                b_ms / a_ms.max(1e-9)
+            );
+        }
+    }
+    println!(
+        "  whole run: {la} {:.2} s, {lb} {:.2} s, {lb}/{la} {:.3}",
+        a.wall_s,
+        b.wall_s,
+        b.wall_s / a.wall_s.max(1e-9)
+    );
 }
 
 /// `gast bench step --matching-reuse N` on a GPU: the GPU engine's steps
