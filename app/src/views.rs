@@ -16,14 +16,14 @@ pub struct ViewArgs {
     /// Without it, views are generated on an orbit around the scene.
     #[arg(long)]
     pub cameras: Option<PathBuf>,
-    /// Number of generated orbit views (ignored with --cameras).
-    #[arg(long, default_value_t = 8)]
+    /// Number of generated orbit views, 1 to 3,600 (ignored with --cameras).
+    #[arg(long, default_value_t = 8, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=3600))]
     pub views: usize,
-    /// Longer side of the rendered images in pixels (camera intrinsics are rescaled).
-    #[arg(long, default_value_t = 512)]
+    /// Longer side of the rendered images in pixels, 16 to 8,192 (camera intrinsics are rescaled).
+    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(16..=8192))]
     pub size: u32,
-    /// Vertical field of view of generated views, in degrees.
-    #[arg(long, default_value_t = 50.0)]
+    /// Vertical field of view of generated views, in degrees (1 to 170).
+    #[arg(long, default_value_t = 50.0, value_parser = fov_degrees)]
     pub fov: f32,
     /// How generated views frame the scene: `full` is the plain orbit that
     /// fits the object's bounding sphere (square images); `object` fits each
@@ -34,6 +34,13 @@ pub struct ViewArgs {
     /// With --cameras: crop each view to the region the scene's object covers.
     #[arg(long)]
     pub crop: bool,
+}
+
+/// `--fov`: a vertical field of view in degrees, 1 to 170 (a pinhole camera
+/// has none at 0 and wraps past 180).
+pub(crate) fn fov_degrees(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|e| format!("expected degrees (a number), found {s:?}: {e}"))?;
+    if (1.0..=170.0).contains(&v) { Ok(v) } else { Err(format!("expected 1 to 170 degrees, found {v}")) }
 }
 
 /// How generated views frame the scene (see [`ViewArgs::framing`]).

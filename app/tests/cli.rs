@@ -419,3 +419,27 @@ fn bench_step_refuses_a_bad_block_before_loading_the_scene() {
         assert!(!err.contains("nonexistent"), "{args:?} loaded the scene first: {err}");
     }
 }
+
+/// Out-of-range view settings are refused with the value and the range
+/// before anything loads: `--size 100000` used to abort on a 240 GB
+/// allocation, `--size 0` and `--views 0` to write 1×1 images and one view,
+/// `--fov 0` and `--fov 400` degenerate cameras.
+#[test]
+fn view_settings_out_of_range_are_refused_before_loading() {
+    let scene = "/nonexistent/scene.ply";
+    for (args, said) in [
+        (&["render", scene, "--out", "/nonexistent/out", "--size", "100000"][..], "100000"),
+        (&["render", scene, "--out", "/nonexistent/out", "--size", "0"][..], "16..=8192"),
+        (&["render", scene, "--out", "/nonexistent/out", "--views", "0"][..], "1..=3600"),
+        (&["render", scene, "--out", "/nonexistent/out", "--fov", "0"][..], "expected 1 to 170 degrees, found 0"),
+        (&["stylize", scene, "/nonexistent/style.jpg", "--fov", "400"][..], "expected 1 to 170 degrees, found 400"),
+        (&["stylize", scene, "/nonexistent/style.jpg", "--views", "0"][..], "1..=3600"),
+        (&["bench", "raster", "--sizes", "256,0"][..], "16..=8192"),
+    ] {
+        let o = gast(args);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(err.contains(said), "{args:?}: {err}");
+        assert!(!err.contains("nonexistent"), "{args:?} looked for a file first: {err}");
+    }
+}

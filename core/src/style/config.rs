@@ -129,7 +129,7 @@ pub struct StyleConfig {
     /// style's) minus their blur of this radius in pixels, centred on 0.5,
     /// before VGG (`style::relief`): relief compared with
     /// relief where the layout would take the render's 0–1 range. 0 (the
-    /// default, the paper): the min-max normalised depth. CPU engine only.
+    /// default, the paper): the min-max normalised depth. Both engines.
     pub depth_relief_px: u32,
     /// Most rows of one least-cost block of the assignment terms' pairing
     /// (`style::assignment`): a step's up to 512 drawn rows are dealt into

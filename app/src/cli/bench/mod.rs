@@ -27,8 +27,8 @@ pub struct RasterArgs {
     /// Scenes to measure (default: playbot-sog and guitar from the shared data folder,
     /// `$GAST_SHARED` or `../shared`).
     pub scenes: Vec<PathBuf>,
-    /// Image sizes (longer side, pixels).
-    #[arg(long, value_delimiter = ',', default_values_t = [256u32, 512])]
+    /// Image sizes (longer side, pixels, 16 to 8,192).
+    #[arg(long, value_delimiter = ',', default_values_t = [256u32, 512], value_parser = clap::value_parser!(u32).range(16..=8192))]
     pub sizes: Vec<u32>,
     /// Orbit views per scene and size (each timed once after a warm-up).
     #[arg(long, default_value_t = 8)]

@@ -38,11 +38,11 @@ pub struct StylizeArgs {
     /// without it, `--views` orbit views are generated around the scene.
     #[arg(long)]
     pub cameras: Option<PathBuf>,
-    /// Number of generated orbit views (without --cameras).
-    #[arg(long, default_value_t = 36)]
+    /// Number of generated orbit views, 1 to 3,600 (without --cameras).
+    #[arg(long, default_value_t = 36, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=3600))]
     pub views: usize,
-    /// Vertical field of view of generated views, degrees.
-    #[arg(long, default_value_t = 50.0)]
+    /// Vertical field of view of generated views, degrees (1 to 170).
+    #[arg(long, default_value_t = 50.0, value_parser = crate::views::fov_degrees)]
     pub fov: f32,
     /// Generated views: `object` fits each view to the object (it spans 90% of
     /// the longer side), `full` is the plain orbit around its bounding sphere.
