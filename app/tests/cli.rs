@@ -423,7 +423,8 @@ fn bench_step_refuses_a_bad_block_before_loading_the_scene() {
 /// Out-of-range view settings are refused with the value and the range
 /// before anything loads: `--size 100000` used to abort on a 240 GB
 /// allocation, `--size 0` and `--views 0` to write 1×1 images and one view,
-/// `--fov 0` and `--fov 400` degenerate cameras.
+/// `--fov 0` and `--fov 400` degenerate cameras, `gast fit --resolution 0`
+/// to fit on 1-pixel photos.
 #[test]
 fn view_settings_out_of_range_are_refused_before_loading() {
     let scene = "/nonexistent/scene.ply";
@@ -435,6 +436,7 @@ fn view_settings_out_of_range_are_refused_before_loading() {
         (&["stylize", scene, "/nonexistent/style.jpg", "--fov", "400"][..], "expected 1 to 170 degrees, found 400"),
         (&["stylize", scene, "/nonexistent/style.jpg", "--views", "0"][..], "1..=3600"),
         (&["bench", "raster", "--sizes", "256,0"][..], "16..=8192"),
+        (&["fit", "/nonexistent/photos", "--out", "/nonexistent/f.ply", "--resolution", "0"][..], "16..=8192"),
     ] {
         let o = gast(args);
         let err = stderr(&o);

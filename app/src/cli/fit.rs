@@ -38,8 +38,8 @@ pub struct FitArgs {
     /// Optimisation steps (one view each).
     #[arg(long)]
     pub iterations: Option<u32>,
-    /// Working resolution: longer image side in pixels.
-    #[arg(long)]
+    /// Working resolution: longer image side in pixels, 16 to 8,192 (never above the photos' own).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(16..=8192))]
     pub resolution: Option<u32>,
     /// Initial number of Gaussians.
     #[arg(long)]
@@ -84,7 +84,7 @@ impl FitArgs {
             c.iterations = v;
         }
         if let Some(v) = self.resolution {
-            c.resolution = v.max(1);
+            c.resolution = v;
         }
         if let Some(v) = self.gaussians {
             c.initial_gaussians = v.max(1);
