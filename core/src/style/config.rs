@@ -153,6 +153,10 @@ pub struct CpuOnly {
 
 /// The most Gaussians [`StyleConfig::split_px`] may make, as a multiple of the scene's.
 pub const SPLIT_MAX_FACTOR: usize = 8;
+/// Most steps a run may take (`cycles × steps_per_cycle`): 1,000 times the
+/// default schedule, far below the 4.3 billion where the u32 step count
+/// overflows.
+pub const MAX_STEPS: u64 = 3_000_000;
 
 /// λ_swd of the frame recipe ([`StyleConfig::frame_recipe`]).
 pub const FRAME_RECIPE_SLICED_DEPTH: f32 = 1.0;
@@ -306,9 +310,24 @@ impl StyleConfig {
         w
     }
 
-    /// Reads a preset (JSON; missing fields take their defaults).
+    /// Reads a preset: a JSON object of the settings' keys, the missing ones
+    /// taking their defaults. A key the settings do not have (a typo such as
+    /// `"weights": {"gcmf": 3}`) is refused, naming it, as is anything but an
+    /// object (serde would read an array as the fields in order).
     pub fn from_json(text: &str) -> Result<Self, serde_json::Error> {
-        serde_json::from_str(text)
+        use serde::de::Error;
+        let value: serde_json::Value = serde_json::from_str(text)?;
+        if !value.is_object() {
+            let found = match &value {
+                serde_json::Value::Array(_) => "an array",
+                serde_json::Value::String(_) => "a string",
+                serde_json::Value::Number(_) => "a number",
+                serde_json::Value::Bool(_) => "a boolean",
+                _ => "null",
+            };
+            return Err(serde_json::Error::custom(format!("expected a JSON object of settings, found {found}")));
+        }
+        Self::default().patched(&value).map_err(serde_json::Error::custom)
     }
 
     /// This configuration with a partial one merged over it: `patch` is a
@@ -353,6 +372,13 @@ impl StyleConfig {
         if self.steps_per_cycle == 0 || self.cycles == 0 {
             out.push(format!(
                 "cycles and steps per cycle must be positive (found {} and {})",
+                self.cycles, self.steps_per_cycle
+            ));
+        }
+        let steps = u64::from(self.cycles) * u64::from(self.steps_per_cycle);
+        if steps > MAX_STEPS {
+            out.push(format!(
+                "cycles × steps per cycle must be at most {MAX_STEPS} steps, found {} × {} = {steps}",
                 self.cycles, self.steps_per_cycle
             ));
         }
@@ -557,6 +583,15 @@ mod tests {
         assert_eq!(partial.weights.gcfm, 1.5);
         assert_eq!(partial.weights.depth, 10.0);
         assert!(StyleConfig::from_json(r#"{"mode": "sideways"}"#).is_err());
+        let typo = StyleConfig::from_json(r#"{"weights": {"gcmf": 3}}"#).expect_err("a typo");
+        assert!(typo.to_string().contains("unknown setting \"weights.gcmf\""), "{typo}");
+        let array = StyleConfig::from_json("[1, 2]").expect_err("an array");
+        assert!(array.to_string().contains("expected a JSON object of settings, found an array"), "{array}");
+        let long = StyleConfig::from_json(r#"{"steps_per_cycle": 4000000000}"#).expect("a preset");
+        assert_eq!(
+            long.problems(),
+            ["cycles × steps per cycle must be at most 3000000 steps, found 30 × 4000000000 = 120000000000"]
+        );
         let bad = StyleConfig { ratio_geo: 2.0, ..StyleConfig::default() };
         assert_eq!(bad.problems().len(), 1);
     }

@@ -98,7 +98,7 @@ impl Schedule {
 
     /// The whole budget `K · (N_c + N_g)`.
     pub fn total_steps(&self) -> u32 {
-        self.cycles * self.steps_per_cycle()
+        self.cycles.saturating_mul(self.steps_per_cycle())
     }
 
     /// The cycle (from 0) and phase of step `step` (from 0), or `None` past the end.
