@@ -2,8 +2,8 @@
 //!
 //! Geometry-aware style transfer on 3D Gaussian Splatting scenes, as described
 //! in `ALGORITHM.md` of the shared data: scenes and cameras in the formats users
-//! bring, a differentiable tile-based CPU rasterizer, and (later) VGG features,
-//! the losses and the decoupled colour/geometry optimisation.
+//! bring, differentiable tile-based rasterizers, VGG features, the losses and
+//! the decoupled colour/geometry optimisation, on the CPU and (`gpu`) on wgpu.
 
 pub mod camera;
 pub mod eval;
@@ -15,6 +15,7 @@ pub mod raster;
 pub(crate) mod rng;
 pub mod scene;
 pub mod session;
+pub mod settings;
 pub mod style;
 pub mod vision;
 

@@ -75,7 +75,7 @@ impl FitArgs {
             Some(p) => {
                 let text =
                     std::fs::read_to_string(p).with_context(|| format!("could not read the preset {}", p.display()))?;
-                serde_json::from_str(&text)
+                FitConfig::from_json(&text)
                     .with_context(|| format!("{}: expected a FitConfig JSON preset", p.display()))?
             }
             None => FitConfig::default(),
@@ -97,6 +97,11 @@ impl FitArgs {
         }
         if self.no_densify {
             c.densify.enabled = false;
+        }
+        let problems = c.problems();
+        if !problems.is_empty() {
+            let from = self.preset.as_ref().map(|p| format!("{} with the flags: ", p.display())).unwrap_or_default();
+            anyhow::bail!("{from}invalid fit settings: {}", problems.join("; "));
         }
         Ok(c)
     }

@@ -94,6 +94,61 @@ impl Default for FitConfig {
     }
 }
 
+impl FitConfig {
+    /// Reads a preset: a JSON object of the settings' keys, the missing ones
+    /// taking their defaults; an unknown key or anything but an object is
+    /// refused ([`crate::settings::from_json`]).
+    pub fn from_json(text: &str) -> Result<Self, serde_json::Error> {
+        crate::settings::from_json(text)
+    }
+
+    /// Problems that make the configuration unusable, as sentences (empty when fine).
+    pub fn problems(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if !(16..=8192).contains(&self.resolution) {
+            out.push(format!("resolution must lie in 16..=8192 pixels, found {}", self.resolution));
+        }
+        if !(1..=20_000_000).contains(&self.initial_gaussians) {
+            out.push(format!("initial_gaussians must lie in 1..=20000000, found {}", self.initial_gaussians));
+        }
+        if self.sh_degree > 3 {
+            out.push(format!("sh_degree must be 0 to 3, found {}", self.sh_degree));
+        }
+        if !(self.initial_opacity > 0.0 && self.initial_opacity < 1.0) {
+            out.push(format!("initial_opacity must lie strictly between 0 and 1, found {}", self.initial_opacity));
+        }
+        if !self.background.iter().all(|c| (0.0..=1.0).contains(c)) {
+            out.push(format!("background must be three values in [0, 1], found {:?}", self.background));
+        }
+        let d = &self.densify;
+        for (name, v) in [
+            ("lr_means_init", self.lr_means_init),
+            ("lr_means_final", self.lr_means_final),
+            ("lr_sh_dc", self.lr_sh_dc),
+            ("lr_opacity", self.lr_opacity),
+            ("lr_scales", self.lr_scales),
+            ("lr_quats", self.lr_quats),
+            ("densify.grad_threshold", d.grad_threshold),
+            ("densify.percent_dense", d.percent_dense),
+            ("densify.min_opacity", d.min_opacity),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                out.push(format!("{name} must be a finite non-negative number, found {v}"));
+            }
+        }
+        if !(0.0..=1.0).contains(&d.until_fraction) {
+            out.push(format!("densify.until_fraction must lie in [0, 1], found {}", d.until_fraction));
+        }
+        if d.enabled && (d.interval == 0 || d.max_gaussians == 0) {
+            out.push(format!(
+                "densify.interval and densify.max_gaussians must be positive, found {} and {}",
+                d.interval, d.max_gaussians
+            ));
+        }
+        out
+    }
+}
+
 /// When and how Gaussians are cloned, split and pruned (the trainer's rules).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]

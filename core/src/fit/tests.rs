@@ -67,3 +67,25 @@ fn fits_a_synthetic_scene() {
     // learns colours or stops early (23.4 dB at 100 iterations).
     assert!(after > 26.0 && after > before + 15.0, "PSNR {before:.2} → {after:.2} dB");
 }
+
+#[test]
+fn fit_presets_refuse_unknown_keys_and_unusable_values() {
+    let partial = FitConfig::from_json(r#"{"iterations": 5, "densify": {"interval": 7}}"#).expect("a preset");
+    assert_eq!((partial.iterations, partial.densify.interval, partial.resolution), (5, 7, 200));
+    assert!(partial.problems().is_empty() && FitConfig::default().problems().is_empty());
+    let typo = FitConfig::from_json(r#"{"densify": {"intervall": 7}}"#).expect_err("a typo");
+    assert!(typo.to_string().contains("unknown setting \"densify.intervall\""), "{typo}");
+    assert!(FitConfig::from_json("[3000]").is_err(), "an array is no preset");
+    let bad = FitConfig::from_json(r#"{"resolution": 0, "sh_degree": 9, "lr_sh_dc": -5, "densify": {"interval": 0}}"#)
+        .expect("well-formed");
+    let problems = bad.problems();
+    for said in [
+        "resolution must lie in 16..=8192",
+        "sh_degree must be 0 to 3, found 9",
+        "lr_sh_dc must be",
+        "densify.interval",
+    ] {
+        assert!(problems.iter().any(|p| p.contains(said)), "{said}: {problems:?}");
+    }
+    assert_eq!(problems.len(), 4, "{problems:?}");
+}

@@ -311,23 +311,11 @@ impl StyleConfig {
     }
 
     /// Reads a preset: a JSON object of the settings' keys, the missing ones
-    /// taking their defaults. A key the settings do not have (a typo such as
-    /// `"weights": {"gcmf": 3}`) is refused, naming it, as is anything but an
-    /// object (serde would read an array as the fields in order).
+    /// taking their defaults; an unknown key (a typo such as `"weights":
+    /// {"gcmf": 3}`) or anything but an object is refused
+    /// ([`crate::settings::from_json`]).
     pub fn from_json(text: &str) -> Result<Self, serde_json::Error> {
-        use serde::de::Error;
-        let value: serde_json::Value = serde_json::from_str(text)?;
-        if !value.is_object() {
-            let found = match &value {
-                serde_json::Value::Array(_) => "an array",
-                serde_json::Value::String(_) => "a string",
-                serde_json::Value::Number(_) => "a number",
-                serde_json::Value::Bool(_) => "a boolean",
-                _ => "null",
-            };
-            return Err(serde_json::Error::custom(format!("expected a JSON object of settings, found {found}")));
-        }
-        Self::default().patched(&value).map_err(serde_json::Error::custom)
+        crate::settings::from_json(text)
     }
 
     /// This configuration with a partial one merged over it: `patch` is a
@@ -335,30 +323,7 @@ impl StyleConfig {
     /// e.g. `{"focus": "object", "weights": {"assignment_cosine": 10}}`).
     /// A key the preset does not have is refused, naming it.
     pub fn patched(&self, patch: &serde_json::Value) -> Result<Self, String> {
-        fn merge(base: &mut serde_json::Value, patch: &serde_json::Value, at: &str) -> Result<(), String> {
-            match (base, patch) {
-                (serde_json::Value::Object(b), serde_json::Value::Object(p)) => {
-                    for (k, v) in p {
-                        let path = if at.is_empty() { k.clone() } else { format!("{at}.{k}") };
-                        let slot = b.get_mut(k).ok_or_else(|| format!("unknown setting {path:?}"))?;
-                        merge(slot, v, &path)?;
-                    }
-                    Ok(())
-                }
-                (b, p) => {
-                    *b = p.clone();
-                    Ok(())
-                }
-            }
-        }
-        if !patch.is_object() && !patch.is_null() {
-            return Err(format!("a settings patch is a JSON object, found {patch}"));
-        }
-        let mut value = serde_json::to_value(self).map_err(|e| e.to_string())?;
-        if patch.is_object() {
-            merge(&mut value, patch, "")?;
-        }
-        serde_json::from_value(value).map_err(|e| format!("not valid settings: {e}"))
+        crate::settings::patched(self, patch)
     }
 
     /// The preset as pretty JSON.
