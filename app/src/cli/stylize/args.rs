@@ -34,7 +34,7 @@ pub struct StylizeArgs {
     /// scene, written beside it as colour_matched.ply, is 0%).
     #[command(flatten)]
     pub strength: super::super::convert::StrengthArgs,
-    /// Optimisation cameras (COLMAP sparse/0, cameras.json, transforms.json);
+    /// Optimisation cameras (COLMAP sparse/0, an LLFF poses_bounds.npy or its folder, cameras.json, transforms.json);
     /// without it, `--views` orbit views are generated around the scene.
     #[arg(long)]
     pub cameras: Option<PathBuf>,
