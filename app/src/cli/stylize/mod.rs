@@ -246,6 +246,9 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let config = args.config()?;
     super::convert::check_output_name(&args.scene_name)?;
     let scene = load_scene(&args.scene)?;
+    if scene.is_empty() {
+        anyhow::bail!("{}: expected a scene with Gaussians to stylize, found none", args.scene.display());
+    }
     let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
     let gpu = match args.device {
         // A setting the GPU engine does not compute (`StyleConfig::cpu_only`):
