@@ -118,6 +118,44 @@ fn the_headless_studio_draws_the_window_with_no_display() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A scripted run whose scene cannot open (a `.ply` with no Gaussians) ends
+/// the headless studio with an error and the reason, instead of waiting for
+/// ever for a scene to start from (as it did before).
+#[test]
+fn a_scripted_run_that_cannot_start_ends_the_headless_studio_with_an_error() {
+    if !Path::new("/usr/share/vulkan/icd.d").exists() {
+        return skip_or_fail("no Vulkan driver (apt-get install mesa-vulkan-drivers libvulkan1)");
+    }
+    let dir = std::env::temp_dir().join(format!("gast-studio-nostart-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let empty = dir.join("empty.ply");
+    let props: String = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2"]
+        .into_iter()
+        .chain(["rot_0", "rot_1", "rot_2", "rot_3"])
+        .map(|p| format!("property float {p}\n"))
+        .collect();
+    std::fs::write(&empty, format!("ply\nformat binary_little_endian 1.0\nelement vertex 0\n{props}end_header\n"))
+        .expect("write");
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_gast"));
+    for var in ["DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"] {
+        cmd.env_remove(var);
+    }
+    let out = cmd
+        .args(["studio", "--headless", "--device", "cpu"])
+        .arg(&empty)
+        .env("GAST_STUDIO_WINDOW", "640x400")
+        .env("GAST_STUDIO_RUN_STEPS", "3")
+        .env("GAST_STUDIO_EXIT_AFTER_FRAMES", "3")
+        .env("XDG_RUNTIME_DIR", &dir)
+        .output()
+        .expect("run gast studio --headless");
+    let log = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    println!("{log}");
+    assert!(!out.status.success(), "the studio succeeded without a run");
+    assert!(log.contains("the scripted run could not start: ") && log.contains("empty.ply"), "{log}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// A scripted studio run on the guitar: Start, 12 steps, pause, export, a
 /// screenshot; with `strength` the strength sliders' switch. Returns the
 /// guitar, the export and the screenshot (`None` where the machine cannot run

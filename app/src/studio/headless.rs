@@ -68,6 +68,9 @@ pub fn run(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Result<
             }
             // The run's thread ends before the device and the process do.
             app.run.shut_down();
+            if app.script.as_ref().is_some_and(|s| s.failed) {
+                anyhow::bail!("the scripted run (GAST_STUDIO_RUN_STEPS) could not start");
+            }
             return Ok(());
         }
         // A window's frames come at the display's pace; here the workers

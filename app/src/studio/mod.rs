@@ -156,6 +156,8 @@ struct ScriptedRun {
     /// Pause was sent; the export waits for the paused state's snapshot.
     pausing: bool,
     done: bool,
+    /// The run could not start (no scene or style loaded, or refused).
+    failed: bool,
 }
 
 /// Opens the studio window with `starter` connected to the Start button.
@@ -332,6 +334,7 @@ impl StudioApp {
                 started: false,
                 pausing: false,
                 done: false,
+                failed: false,
             }),
         };
         if let Some(p) = std::env::var_os("GAST_STUDIO_PRESET") {

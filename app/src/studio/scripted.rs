@@ -13,9 +13,23 @@ impl StudioApp {
         }
         ctx.request_repaint();
         if !script.started {
-            if self.scene.is_some() && self.style.is_some() && self.starter.is_some() {
+            let ready = self.scene.is_some() && self.style.is_some() && self.starter.is_some();
+            if ready {
                 script.started = true;
                 self.start_run();
+            }
+            // A scene or style that failed to load, or a run refused at its
+            // start, ends the script (it waited for ever) with what the window shows.
+            if (ready && self.run.link.is_none()) || (!ready && self.jobs.running == 0 && self.frames > 2) {
+                if let Some(script) = &mut self.script {
+                    (script.done, script.failed) = (true, true);
+                }
+                let why = self.errors.last().map_or("no scene, style or run to start", String::as_str);
+                eprintln!("studio: the scripted run could not start: {why}");
+                if let Some(n) = self.exit_after {
+                    self.exit_after = Some(self.frames + n);
+                }
+                return true;
             }
             return false;
         }
