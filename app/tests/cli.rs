@@ -69,12 +69,23 @@ fn check_golden_passes_on_the_shared_files_and_fails_on_others() {
         return;
     }
     files.sort();
-    let mut args = vec!["check", "golden", "--weights", s(&weights)];
-    args.extend(files.iter().map(String::as_str));
-    let o = gast(&args);
+    // The folder stands for every golden file under it, depth/ included.
+    let o = gast(&["check", "golden", "--weights", s(&weights), s(&dir)]);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{text}\n{}", stderr(&o));
     assert!(text.contains(" 0 failed"), "{text}");
+    for f in &files {
+        assert!(text.lines().any(|l| l == f), "{f} not checked:\n{text}");
+    }
+    // A folder without golden files fails, saying so.
+    let empty = temp("golden-empty");
+    std::fs::create_dir_all(&empty).expect("dir");
+    let o = gast(&["check", "golden", s(&empty)]);
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("expected golden files (.safetensors) in this folder, found none")
+    );
+    std::fs::remove_dir_all(&empty).ok();
     // A file that is not a golden file: non-zero exit, the file named.
     let o = gast(&["check", "golden", s(&weights)]);
     assert!(!o.status.success());

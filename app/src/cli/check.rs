@@ -1,6 +1,6 @@
 //! `gast check golden`: the project's numerics against reference files.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::Args;
@@ -10,7 +10,8 @@ use gast_core::vision::ConvAlgo;
 /// Arguments of `gast check golden`.
 #[derive(Args, Debug)]
 pub struct GoldenArgs {
-    /// Golden files (safetensors, float64): raster_*, losses_*, color_*, depth/depth_*.
+    /// Golden files (safetensors, float64): raster_*, losses_*, color_*,
+    /// depth/depth_*; a folder stands for every .safetensors file under it.
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
     /// VGG weights for losses_* files (else $GAST_WEIGHTS, the caches, or a download).
@@ -33,8 +34,13 @@ pub fn run_golden(args: GoldenArgs) -> anyhow::Result<ExitCode> {
     let ctx = CheckContext { weights: args.weights.clone(), gpu, conv: args.conv };
     let mut failed = 0usize;
     let mut total = 0usize;
-    for file in &args.files {
+    for file in &expand_folders(&args.files) {
         println!("{}", file.display());
+        if file.is_dir() {
+            failed += 1;
+            println!("  error: {}: expected golden files (.safetensors) in this folder, found none", file.display());
+            continue;
+        }
         match check_file(file, &ctx) {
             Ok(checks) => {
                 for c in checks {
@@ -61,4 +67,33 @@ pub fn run_golden(args: GoldenArgs) -> anyhow::Result<ExitCode> {
     }
     println!("{} passed, {} failed", total.saturating_sub(failed), failed);
     Ok(if failed == 0 { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+}
+
+/// `paths` with each folder replaced by the `.safetensors` files under it
+/// (sorted, subfolders included); a folder with none stays, so its error is
+/// printed.
+fn expand_folders(paths: &[PathBuf]) -> Vec<PathBuf> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        let Ok(entries) = std::fs::read_dir(dir) else { return };
+        let mut entries: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).collect();
+        entries.sort();
+        for p in entries {
+            if p.is_dir() {
+                walk(&p, out);
+            } else if p.extension().is_some_and(|e| e == "safetensors") {
+                out.push(p);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for p in paths {
+        let before = out.len();
+        if p.is_dir() {
+            walk(p, &mut out);
+        }
+        if out.len() == before {
+            out.push(p.clone());
+        }
+    }
+    out
 }
