@@ -468,3 +468,26 @@ fn view_settings_out_of_range_are_refused_before_loading() {
         assert!(!err.contains("nonexistent"), "{args:?} looked for a file first: {err}");
     }
 }
+
+/// `gast fit` on fern says what it lacks: a missing `--images` folder by
+/// name, and a hold-out that leaves no view to fit (it said "no views to fit").
+#[test]
+fn fit_names_a_missing_images_folder_and_an_empty_training_set() {
+    let Some(fern) = shared_file("data/datasets/fern") else { return };
+    let out = temp("fit-lacks");
+    let o = gast(&["fit", s(&fern), "--images", "images_99", "--out", s(&out.join("f.ply"))]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("images_99: expected the images folder asked for, found no such folder"),
+        "{}",
+        stderr(&o)
+    );
+    let o = gast(&["fit", s(&fern), "--holdout-every", "1", "--iterations", "1", "--out", s(&out.join("f.ply"))]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("expected at least one view to fit, found 20 view(s), all held out by --holdout-every 1"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out.join("f.ply").exists());
+}

@@ -133,7 +133,13 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     let (held, views): (Vec<_>, Vec<_>) = data.views.into_iter().enumerate().partition(|(i, _)| k > 0 && i % k == 0);
     let (held, views): (Vec<_>, Vec<_>) =
         (held.into_iter().map(|v| v.1).collect(), views.into_iter().map(|v| v.1).collect());
-    let Some((first, _)) = views.first() else { anyhow::bail!("{}: no views to fit", args.dataset.display()) };
+    let Some((first, _)) = views.first() else {
+        let found = match held.len() {
+            0 => "none".to_owned(),
+            n => format!("{n} view(s), all held out by --holdout-every {k}"),
+        };
+        anyhow::bail!("{}: expected at least one view to fit, found {found}", args.dataset.display())
+    };
     let initial = initial_scene(&args, &views, &cfg)?;
     eprintln!(
         "loaded {} views ({} held out) of {} at {}×{} in {:.1} s; fitting {} iterations from {} Gaussians",

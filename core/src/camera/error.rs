@@ -15,6 +15,14 @@ pub enum CameraError {
         /// The underlying I/O error.
         source: std::io::Error,
     },
+    /// A folder that was asked for does not exist.
+    #[error("{path}: expected {expected}, found no such folder")]
+    NoFolder {
+        /// The folder looked for.
+        path: PathBuf,
+        /// What it was to hold.
+        expected: String,
+    },
     /// No camera file was found where one was looked for.
     #[error("{path}: no camera file found: expected {expected}")]
     NotFound {

@@ -120,7 +120,7 @@ fn images_folder(root: &Path, images: Option<&str>) -> Result<PathBuf, CameraErr
             if dir.is_dir() {
                 Ok(dir)
             } else {
-                Err(CameraError::NotFound { path: dir, expected: "the images folder asked for".into() })
+                Err(CameraError::NoFolder { path: dir, expected: "the images folder asked for".into() })
             }
         }
         None => {
