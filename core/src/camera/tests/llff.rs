@@ -95,7 +95,7 @@ fn fern_focal_scales_with_the_images_folder() {
         assert_eq!((a.rotation, a.translation), (b.rotation, b.translation));
     }
     let err = load_llff(&dir, Some("images_2")).expect_err("no images_2 in fern");
-    assert!(matches!(err, CameraError::NotFound { .. }) && err.to_string().contains("images_2"), "{err}");
+    assert!(matches!(err, CameraError::NoFolder { .. }) && err.to_string().contains("images_2"), "{err}");
 }
 
 #[test]
