@@ -208,6 +208,14 @@ fn bad_inputs_fail_with_the_file_named_and_keep_existing_outputs() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("ratio_geo"), "{}", stderr(&o));
     assert_eq!(std::fs::read(&bogus).expect("kept"), b"not a jpeg");
+    // An output folder that is a file is refused as such (it said "File exists").
+    let style = shared_file("data/styles/wave.jpg").expect("the shared styles beside the scenes");
+    for args in [&["render", s(&scene), "--out", s(&bogus)][..], &["stylize", s(&scene), s(&style), "--out", s(&bogus)]]
+    {
+        let o = gast(args);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains("style.jpg: expected an output folder, found a file"), "{args:?}: {}", stderr(&o));
+    }
     // A scene without Gaussians is named (it was "the scene has no Gaussians").
     let empty = out.join("empty.ply");
     let header = "ply\nformat binary_little_endian 1.0\nelement vertex 0\n";
@@ -470,7 +478,9 @@ fn view_settings_out_of_range_are_refused_before_loading() {
 }
 
 /// `gast fit` on fern says what it lacks: a missing `--images` folder by
-/// name, and a hold-out that leaves no view to fit (it said "no views to fit").
+/// name, a hold-out that leaves no view to fit (it said "no views to fit"),
+/// and an output name it cannot write, before fitting (it fitted, then
+/// failed on a folder, and wrote a PLY named `f.txt`).
 #[test]
 fn fit_names_a_missing_images_folder_and_an_empty_training_set() {
     let Some(fern) = shared_file("data/datasets/fern") else { return };
@@ -490,4 +500,16 @@ fn fit_names_a_missing_images_folder_and_an_empty_training_set() {
         stderr(&o)
     );
     assert!(!out.join("f.ply").exists());
+    // The output's name is checked before the fit: a folder, or a name that picks no format.
+    std::fs::create_dir_all(&out).expect("dir");
+    let o = gast(&["fit", s(&fern), "--out", s(&out)]);
+    assert!(
+        stderr(&o).contains("expected the fitted scene's file name (e.g. fit.ply), found a folder"),
+        "{}",
+        stderr(&o)
+    );
+    let o = gast(&["fit", s(&fern), "--out", s(&out.join("f.txt"))]);
+    assert!(stderr(&o).contains("found the extension .txt"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("fitting"), "it fitted first: {}", stderr(&o));
+    std::fs::remove_dir_all(&out).ok();
 }

@@ -32,7 +32,8 @@ pub struct FitArgs {
     /// (sparse/0/points3D.bin or .txt).
     #[arg(long)]
     pub random_init: bool,
-    /// The fitted scene (INRIA .ply, written atomically).
+    /// The fitted scene, written atomically; its name picks the format: .ply
+    /// (INRIA), .compressed.ply, .spz or .sog.
     #[arg(long)]
     pub out: PathBuf,
     /// Optimisation steps (one view each).
@@ -114,6 +115,13 @@ const LLFF_RESOLUTION: u32 = 504;
 /// Loads the dataset, fits, writes the scene and the previews.
 pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     let mut cfg = args.config()?;
+    // The output's name is checked before the fit, not after it.
+    anyhow::ensure!(
+        !args.out.is_dir(),
+        "{}: expected the fitted scene's file name (e.g. fit.ply), found a folder",
+        args.out.display()
+    );
+    super::convert::check_output_name(&args.out)?;
     // An LLFF capture's own small images (images_8, 504 px for fern) are what
     // its evaluations use: fit at their size unless told otherwise (fern: 25.3
     // dB held out in about 5 min on 2 cores, against the default 200 px).
@@ -170,7 +178,8 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).with_context(|| format!("could not create the folder {}", parent.display()))?;
     }
-    gast_core::scene::save_ply(&args.out, &scene).with_context(|| format!("could not write {}", args.out.display()))?;
+    gast_core::scene::save(&args.out, &scene, &Default::default())
+        .with_context(|| format!("could not write {}", args.out.display()))?;
     let psnr_all = mean_psnr(&scene, &views, cfg.background);
     eprintln!(
         "wrote {} ({} Gaussians) after fitting for {:.1} s; mean PSNR over the {} training views {:.2} dB",

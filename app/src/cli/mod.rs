@@ -189,3 +189,17 @@ fn checked(config: gast_core::style::StyleConfig) -> anyhow::Result<gast_core::s
     anyhow::ensure!(problems.is_empty(), "invalid parameters: {}", problems.join("; "));
     Ok(config)
 }
+
+/// Makes `dir` an output folder (with its parents) unless it is one; a file
+/// of that name is refused, saying so (creating the folder said only "File
+/// exists").
+pub(crate) fn output_folder(dir: &std::path::Path) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        !dir.exists() || dir.is_dir(),
+        "{}: expected an output folder, found a file; give --out a folder",
+        dir.display()
+    );
+    anyhow::Context::with_context(std::fs::create_dir_all(dir), || {
+        format!("could not create the output folder {}", dir.display())
+    })
+}

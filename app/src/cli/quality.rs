@@ -8,7 +8,6 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 
-use anyhow::Context;
 use clap::Args;
 
 use super::bench::shared_dir;
@@ -91,7 +90,7 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
         _ => Sizes::full(),
     };
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("gast-quality-{}", crate::report::utc_stamp())));
-    std::fs::create_dir_all(&out).with_context(|| format!("could not create the output folder {}", out.display()))?;
+    super::output_folder(&out)?;
     let weights = args.weights.clone().or_else(super::bench::shared_weights);
     let vgg = Arc::new(super::stylize::load_vgg(weights.as_deref())?);
     if studies.contains(&Study::Geometry) {

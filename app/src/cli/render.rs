@@ -40,6 +40,7 @@ pub struct RenderArgs {
 
 /// Renders every view and writes `NAME.png`, `NAME_depth.png` and `NAME_depth.exr`.
 pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
+    super::output_folder(&args.out)?;
     let scene = load_scene(&args.scene)?;
     let background = [args.background[0], args.background[1], args.background[2]];
     if let Some(frames) = args.turntable {

@@ -275,7 +275,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let preview_gpu = depth_gpu.cloned();
     // Everything that can fail fast is checked before the slow work (the depth
     // model's download, the run): the output folder, the cameras, the weights.
-    std::fs::create_dir_all(&args.out).with_context(|| format!("could not create {}", args.out.display()))?;
+    super::output_folder(&args.out)?;
     let cameras = views_for(
         &scene,
         &ViewArgs {
