@@ -1,5 +1,5 @@
 //! Shared helpers for the workspace-level integration tests: where the shared
-//! data lives, and loading golden files.
+//! data lives, loading golden files, and a scene file with no Gaussians.
 //!
 //! The data stays in `../shared` beside the checkout (never copied into the
 //! repo); `GAST_SHARED` overrides the location. A test whose file is truly
@@ -27,4 +27,17 @@ pub fn shared_file(rel: &str) -> Option<PathBuf> {
         );
         None
     }
+}
+
+/// Writes an INRIA `.ply` header that declares no Gaussians (every property
+/// of an SH-degree-0 scene, 0 vertices): a well-formed scene with nothing to
+/// draw or stylize.
+pub fn write_empty_ply(path: &std::path::Path) {
+    let props: String = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2"]
+        .into_iter()
+        .chain(["rot_0", "rot_1", "rot_2", "rot_3"])
+        .map(|p| format!("property float {p}\n"))
+        .collect();
+    let header = format!("ply\nformat binary_little_endian 1.0\nelement vertex 0\n{props}end_header\n");
+    std::fs::write(path, header).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
 }

@@ -218,13 +218,7 @@ fn bad_inputs_fail_with_the_file_named_and_keep_existing_outputs() {
     }
     // A scene without Gaussians is named (it was "the scene has no Gaussians").
     let empty = out.join("empty.ply");
-    let header = "ply\nformat binary_little_endian 1.0\nelement vertex 0\n";
-    let props: String = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2"]
-        .into_iter()
-        .chain(["rot_0", "rot_1", "rot_2", "rot_3"])
-        .map(|p| format!("property float {p}\n"))
-        .collect();
-    std::fs::write(&empty, format!("{header}{props}end_header\n")).expect("write");
+    gast_tests::write_empty_ply(&empty);
     let o = gast(&["stylize", s(&empty), s(&bogus), "--out", s(&out)]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("empty.ply: expected a scene with Gaussians to stylize, found none"), "{}", stderr(&o));

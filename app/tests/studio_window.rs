@@ -78,21 +78,30 @@ fn studio_opens_a_scene_in_a_real_window() {
     std::fs::remove_dir_all(&xdg).ok();
 }
 
+/// A temporary folder `gast-studio-NAME-PID` and a `gast` command with no
+/// display variables, for the headless studio; `None` (after skipping, or
+/// failing in CI) without a Vulkan driver.
+fn headless_gast(name: &str) -> Option<(PathBuf, Command)> {
+    if !Path::new("/usr/share/vulkan/icd.d").exists() {
+        skip_or_fail("no Vulkan driver (apt-get install mesa-vulkan-drivers libvulkan1)");
+        return None;
+    }
+    let dir = std::env::temp_dir().join(format!("gast-studio-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_gast"));
+    for var in ["DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"] {
+        cmd.env_remove(var);
+    }
+    Some((dir, cmd))
+}
+
 /// `gast studio --headless`: the same window drawn offscreen with no display
 /// at all (no DISPLAY or Wayland variable), its screenshot taken by the app's
 /// own switches: the whole window at its size, the scene in the viewport.
 #[test]
 fn the_headless_studio_draws_the_window_with_no_display() {
-    if !Path::new("/usr/share/vulkan/icd.d").exists() {
-        return skip_or_fail("no Vulkan driver (apt-get install mesa-vulkan-drivers libvulkan1)");
-    }
-    let dir = std::env::temp_dir().join(format!("gast-studio-headless-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
+    let Some((dir, mut cmd)) = headless_gast("headless") else { return };
     let shot = dir.join("shot.png");
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_gast"));
-    for var in ["DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"] {
-        cmd.env_remove(var);
-    }
     let guitar = gast_tests::shared_dir().join("data/scenes/guitar.compressed.ply");
     cmd.args(["studio", "--headless"]);
     if guitar.exists() {
@@ -123,23 +132,9 @@ fn the_headless_studio_draws_the_window_with_no_display() {
 /// ever for a scene to start from (as it did before).
 #[test]
 fn a_scripted_run_that_cannot_start_ends_the_headless_studio_with_an_error() {
-    if !Path::new("/usr/share/vulkan/icd.d").exists() {
-        return skip_or_fail("no Vulkan driver (apt-get install mesa-vulkan-drivers libvulkan1)");
-    }
-    let dir = std::env::temp_dir().join(format!("gast-studio-nostart-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
+    let Some((dir, mut cmd)) = headless_gast("nostart") else { return };
     let empty = dir.join("empty.ply");
-    let props: String = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2"]
-        .into_iter()
-        .chain(["rot_0", "rot_1", "rot_2", "rot_3"])
-        .map(|p| format!("property float {p}\n"))
-        .collect();
-    std::fs::write(&empty, format!("ply\nformat binary_little_endian 1.0\nelement vertex 0\n{props}end_header\n"))
-        .expect("write");
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_gast"));
-    for var in ["DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"] {
-        cmd.env_remove(var);
-    }
+    gast_tests::write_empty_ply(&empty);
     let out = cmd
         .args(["studio", "--headless", "--device", "cpu"])
         .arg(&empty)
