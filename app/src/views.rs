@@ -17,10 +17,10 @@ pub struct ViewArgs {
     #[arg(long)]
     pub cameras: Option<PathBuf>,
     /// Number of generated orbit views, 1 to 3,600 (ignored with --cameras).
-    #[arg(long, default_value_t = 8, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=3600))]
+    #[arg(long, default_value_t = 8, value_parser = view_count::<usize>())]
     pub views: usize,
     /// Longer side of the rendered images in pixels, 16 to 8,192 (camera intrinsics are rescaled).
-    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(16..=8192))]
+    #[arg(long, default_value_t = 512, value_parser = image_side())]
     pub size: u32,
     /// Vertical field of view of generated views, in degrees (1 to 170).
     #[arg(long, default_value_t = 50.0, value_parser = fov_degrees)]
@@ -34,6 +34,25 @@ pub struct ViewArgs {
     /// With --cameras: crop each view to the region the scene's object covers.
     #[arg(long)]
     pub crop: bool,
+}
+
+/// The number of views a command generates: 1 to 3,600 (`--views`, `--turntable`).
+pub const VIEW_COUNTS: std::ops::RangeInclusive<u32> = 1..=3600;
+
+/// A `--views` or `--turntable` count, refused outside [`VIEW_COUNTS`].
+pub(crate) fn view_count<T>() -> clap::builder::RangedU64ValueParser<T>
+where
+    T: TryFrom<u64> + Clone + Send + Sync + 'static,
+    <T as TryFrom<u64>>::Error: std::error::Error + Send + Sync + 'static,
+{
+    clap::builder::RangedU64ValueParser::new().range(u64::from(*VIEW_COUNTS.start())..=u64::from(*VIEW_COUNTS.end()))
+}
+
+/// An image's longer side in pixels (`--size`, `--resolution`, `--sizes`),
+/// refused outside [`gast_core::camera::IMAGE_SIDES`].
+pub(crate) fn image_side() -> clap::builder::RangedU64ValueParser<u32> {
+    let sides = gast_core::camera::IMAGE_SIDES;
+    clap::builder::RangedU64ValueParser::new().range(u64::from(*sides.start())..=u64::from(*sides.end()))
 }
 
 /// `--fov`: a vertical field of view in degrees, 1 to 170 (a pinhole camera

@@ -462,6 +462,9 @@ fn view_settings_out_of_range_are_refused_before_loading() {
         (&["stylize", scene, "/nonexistent/style.jpg", "--views", "0"][..], "1..=3600"),
         (&["bench", "raster", "--sizes", "256,0"][..], "16..=8192"),
         (&["fit", "/nonexistent/photos", "--out", "/nonexistent/f.ply", "--resolution", "0"][..], "16..=8192"),
+        (&["fit", "/nonexistent/photos", "--out", "/nonexistent/f.ply", "--sh-degree", "9"][..], "0..=3"),
+        (&["fit", "/nonexistent/photos", "--out", "/nonexistent/f.ply", "--gaussians", "0"][..], "1..=20000000"),
+        (&["render", scene, "--out", "/nonexistent/out", "--turntable", "0"][..], "1..=3600"),
     ] {
         let o = gast(args);
         let err = stderr(&o);

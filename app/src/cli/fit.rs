@@ -40,13 +40,13 @@ pub struct FitArgs {
     #[arg(long)]
     pub iterations: Option<u32>,
     /// Working resolution: longer image side in pixels, 16 to 8,192 (never above the photos' own).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(16..=8192))]
+    #[arg(long, value_parser = crate::views::image_side())]
     pub resolution: Option<u32>,
-    /// Initial number of Gaussians.
-    #[arg(long)]
+    /// Initial number of Gaussians (1 to 20,000,000).
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(initial_gaussians()))]
     pub gaussians: Option<usize>,
     /// SH degree of the result (0 to 3).
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=3))]
     pub sh_degree: Option<u32>,
     /// Use at most this many views, evenly spread (0: all).
     #[arg(long, default_value_t = 0)]
@@ -69,6 +69,12 @@ pub struct FitArgs {
     pub preview: Option<PathBuf>,
 }
 
+/// `--gaussians`' range, [`gast_core::fit::INITIAL_GAUSSIANS`], as clap takes it.
+fn initial_gaussians() -> std::ops::RangeInclusive<u64> {
+    let r = gast_core::fit::INITIAL_GAUSSIANS;
+    *r.start() as u64..=*r.end() as u64
+}
+
 impl FitArgs {
     /// The preset (or the defaults) with the flags applied.
     pub fn config(&self) -> anyhow::Result<FitConfig> {
@@ -88,10 +94,10 @@ impl FitArgs {
             c.resolution = v;
         }
         if let Some(v) = self.gaussians {
-            c.initial_gaussians = v.max(1);
+            c.initial_gaussians = v;
         }
         if let Some(v) = self.sh_degree {
-            c.sh_degree = v.min(3);
+            c.sh_degree = v;
         }
         if let Some(v) = self.seed {
             c.seed = v;

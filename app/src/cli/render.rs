@@ -30,7 +30,7 @@ pub struct RenderArgs {
     pub background: Vec<f32>,
     /// Instead of the views, N frames on a ring around the scene (`turntable_NNN.png`)
     /// and a looping animated `turntable.gif`, `--size` pixels square.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=3600))]
+    #[arg(long, value_name = "N", value_parser = crate::views::view_count::<u32>())]
     pub turntable: Option<u32>,
     /// A second scene (e.g. the stylized one) shown beside SCENE in every
     /// turntable frame, from the same cameras: before | after.

@@ -94,6 +94,10 @@ impl Default for FitConfig {
     }
 }
 
+/// The initial Gaussian counts a fit accepts (20 million is about 5 GB of
+/// parameters and Adam moments).
+pub const INITIAL_GAUSSIANS: std::ops::RangeInclusive<usize> = 1..=20_000_000;
+
 impl FitConfig {
     /// Reads a preset: a JSON object of the settings' keys, the missing ones
     /// taking their defaults; an unknown key or anything but an object is
@@ -105,11 +109,12 @@ impl FitConfig {
     /// Problems that make the configuration unusable, as sentences (empty when fine).
     pub fn problems(&self) -> Vec<String> {
         let mut out = Vec::new();
-        if !(16..=8192).contains(&self.resolution) {
-            out.push(format!("resolution must lie in 16..=8192 pixels, found {}", self.resolution));
+        let sides = crate::camera::IMAGE_SIDES;
+        if !sides.contains(&self.resolution) {
+            out.push(format!("resolution must lie in {sides:?} pixels, found {}", self.resolution));
         }
-        if !(1..=20_000_000).contains(&self.initial_gaussians) {
-            out.push(format!("initial_gaussians must lie in 1..=20000000, found {}", self.initial_gaussians));
+        if !INITIAL_GAUSSIANS.contains(&self.initial_gaussians) {
+            out.push(format!("initial_gaussians must lie in {INITIAL_GAUSSIANS:?}, found {}", self.initial_gaussians));
         }
         if self.sh_degree > 3 {
             out.push(format!("sh_degree must be 0 to 3, found {}", self.sh_degree));

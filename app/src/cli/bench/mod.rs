@@ -28,7 +28,7 @@ pub struct RasterArgs {
     /// `$GAST_SHARED` or `../shared`).
     pub scenes: Vec<PathBuf>,
     /// Image sizes (longer side, pixels, 16 to 8,192).
-    #[arg(long, value_delimiter = ',', default_values_t = [256u32, 512], value_parser = clap::value_parser!(u32).range(16..=8192))]
+    #[arg(long, value_delimiter = ',', default_values_t = [256u32, 512], value_parser = crate::views::image_side())]
     pub sizes: Vec<u32>,
     /// Orbit views per scene and size (each timed once after a warm-up).
     #[arg(long, default_value_t = 8)]

@@ -39,7 +39,7 @@ pub struct StylizeArgs {
     #[arg(long)]
     pub cameras: Option<PathBuf>,
     /// Number of generated orbit views, 1 to 3,600 (without --cameras).
-    #[arg(long, default_value_t = 36, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=3600))]
+    #[arg(long, default_value_t = 36, value_parser = crate::views::view_count::<usize>())]
     pub views: usize,
     /// Vertical field of view of generated views, degrees (1 to 170).
     #[arg(long, default_value_t = 50.0, value_parser = crate::views::fov_degrees)]
