@@ -474,6 +474,23 @@ fn view_settings_out_of_range_are_refused_before_loading() {
     }
 }
 
+/// `--scene-name` names a file inside `--out`: a path that climbs out of it
+/// or starts from the root is refused before the scene is read (`../x.ply`
+/// was written beside the output folder).
+#[test]
+fn a_scene_name_that_leaves_the_output_folder_is_refused() {
+    for name in ["../x.ply", "/tmp/x.ply", "sub/../../x.ply"] {
+        let o = gast(&["stylize", "/nonexistent/scene.ply", "/nonexistent/style.jpg", "--scene-name", name]);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{name} succeeded");
+        assert!(
+            err.contains(&format!("--scene-name {name}: expected a file name inside the output folder")),
+            "{name}: {err}"
+        );
+        assert!(!err.contains("nonexistent"), "{name}: looked for the scene first: {err}");
+    }
+}
+
 /// `gast fit` on fern says what it lacks: a missing `--images` folder by
 /// name, a hold-out that leaves no view to fit (it said "no views to fit"),
 /// and an output name it cannot write, before fitting (it fitted, then

@@ -24,8 +24,9 @@ pub struct StylizeArgs {
     /// Output folder.
     #[arg(long, default_value = "out/stylize")]
     pub out: PathBuf,
-    /// Name of the stylized scene in the output folder; its ending picks the
-    /// format: .ply, .compressed.ply, .spz, .sog, or a SOG folder (ending in /).
+    /// File name of the stylized scene inside the output folder (a name, not a
+    /// path); its ending picks the format: .ply, .compressed.ply, .spz, .sog,
+    /// or a SOG folder (ending in /).
     #[arg(long, default_value = "stylized.ply")]
     pub scene_name: PathBuf,
     #[command(flatten)]

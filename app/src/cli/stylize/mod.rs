@@ -239,12 +239,25 @@ struct Summary {
     colour_collapse: Option<Degeneration>,
 }
 
+/// `--scene-name` is a name inside the output folder with a format's ending:
+/// `../x.ply` or `/tmp/x.ply` would write outside `--out`.
+fn check_scene_name(name: &std::path::Path) -> anyhow::Result<()> {
+    let mut parts = name.components();
+    let one_name = matches!(parts.next(), Some(std::path::Component::Normal(_))) && parts.next().is_none();
+    anyhow::ensure!(
+        one_name,
+        "--scene-name {}: expected a file name inside the output folder (e.g. stylized.ply), found a path",
+        name.display()
+    );
+    super::convert::check_output_name(name)
+}
+
 /// Runs the stylization and writes the outputs.
 pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let t_all = Instant::now();
     let interrupt = interrupt();
     let config = args.config()?;
-    super::convert::check_output_name(&args.scene_name)?;
+    check_scene_name(&args.scene_name)?;
     let scene = load_scene(&args.scene)?;
     if scene.is_empty() {
         anyhow::bail!("{}: expected a scene with Gaussians to stylize, found none", args.scene.display());
