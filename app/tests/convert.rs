@@ -75,6 +75,68 @@ fn converts_guitar_to_every_format_and_refuses_bad_outputs() {
     std::fs::remove_dir_all(&out).ok();
 }
 
+/// The originals are kept: converting a scene onto itself (or stylizing into
+/// its own name) is refused, and so is replacing a read-only file, which the
+/// rename of an atomic write would have passed over (`gast convert
+/// guitar.compressed.ply guitar.compressed.ply` re-encoded the shared,
+/// read-only original in place). The files stay byte for byte.
+#[test]
+fn the_input_and_read_only_files_are_not_replaced() {
+    let Some(scene) = shared_file("data/scenes/guitar.compressed.ply") else { return };
+    let out = temp("keep");
+    let original = out.join("g.compressed.ply");
+    std::fs::copy(&scene, &original).expect("copy");
+    let bytes = std::fs::read(&original).expect("read");
+    for args in [
+        &["convert", s(&original), s(&original)][..],
+        &["stylize", s(&original), s(&original), "--out", s(&out), "--scene-name", "g.compressed.ply"],
+    ] {
+        let o = gast(args);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(
+            stderr(&o).contains("expected an output other than the input scene, found the input itself"),
+            "{}",
+            stderr(&o)
+        );
+    }
+    let locked = out.join("locked.ply");
+    let o = gast(&["convert", s(&original), s(&locked)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let kept = std::fs::read(&locked).expect("read");
+    let mut perms = std::fs::metadata(&locked).expect("stat").permissions();
+    perms.set_readonly(true);
+    std::fs::set_permissions(&locked, perms).expect("chmod");
+    let o = gast(&["convert", s(&original), s(&locked)]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("locked.ply: expected a file that may be replaced, found a read-only one"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(std::fs::read(&original).expect("read"), bytes);
+    assert_eq!(std::fs::read(&locked).expect("read"), kept);
+    // A SOG folder with one read-only texture is refused before any file is replaced.
+    let sog = out.join("sog/");
+    let o = gast(&["convert", s(&original), s(&sog)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let texture = sog.join("quats.webp");
+    let mut perms = std::fs::metadata(&texture).expect("a SOG folder holds quats.webp").permissions();
+    perms.set_readonly(true);
+    std::fs::set_permissions(&texture, perms).expect("chmod");
+    let folder: Vec<_> = listing(&sog).iter().map(|f| (f.clone(), std::fs::read(sog.join(f)).expect("read"))).collect();
+    let o = gast(&["convert", s(&locked), s(&sog)]);
+    assert!(
+        stderr(&o).contains("quats.webp: expected a file that may be replaced, found a read-only one"),
+        "{}",
+        stderr(&o)
+    );
+    for (f, bytes) in &folder {
+        assert!(std::fs::read(sog.join(f)).expect("read") == *bytes, "{f} was replaced");
+    }
+    assert_eq!(listing(&out), ["g.compressed.ply", "locked.ply", "sog"], "a refused write left files behind");
+    std::fs::remove_dir_all(&out).ok();
+}
+
 /// An INRIA `.ply` written by `gast`, with some opacities patched to +inf and
 /// −inf as splat-transform writes them: it converts with one warning that
 /// counts them, and the Gaussians come out fully opaque and fully transparent.

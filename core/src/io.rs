@@ -101,6 +101,32 @@ where
     } else {
         remove_stale_temps(Path::new("."));
     }
+    replace_with(path, write).map_err(io_err)
+}
+
+/// An error when `path` is a file whose permissions make it read-only
+/// (see [`replace_with`]).
+pub(crate) fn refuse_read_only(path: &Path) -> std::io::Result<()> {
+    if std::fs::metadata(path).is_ok_and(|m| m.is_file() && m.permissions().readonly()) {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::PermissionDenied,
+            "expected a file that may be replaced, found a read-only one (left as it is: make it writable or choose another name)",
+        ));
+    }
+    Ok(())
+}
+
+/// The one way every writer here replaces a file: `write` fills a buffered
+/// [`temp_path`] sibling, which is flushed, synced and renamed over `path`; on
+/// any error the temporary file is removed and `path` is untouched. A `path`
+/// whose permissions make it read-only is refused, not replaced: the rename
+/// would pass over the protection an in-place write meets (as root, or in a
+/// writable folder), and a protected file is usually someone's original.
+pub(crate) fn replace_with<F>(path: &Path, write: F) -> std::io::Result<()>
+where
+    F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+{
+    refuse_read_only(path)?;
     let tmp = temp_path(path);
     let result = (|| {
         let file = File::create(&tmp)?;
@@ -114,7 +140,7 @@ where
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
-    result.map_err(io_err)
+    result
 }
 
 /// Writes `bytes` as the whole file, atomically ([`atomic_write`]).
@@ -291,6 +317,22 @@ mod tests {
         assert_eq!(leftovers.len(), 1, "temporary file left behind: {leftovers:?}");
         atomic_write(&path, |w| w.write_all(b"new")).expect("write");
         assert_eq!(std::fs::read(&path).expect("read back"), b"new");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_read_only_file_is_refused_not_replaced() {
+        let dir = std::env::temp_dir().join(format!("gast-io-ro-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let path = dir.join("original.bin");
+        std::fs::write(&path, b"original").expect("seed file");
+        let mut perms = std::fs::metadata(&path).expect("stat").permissions();
+        perms.set_readonly(true);
+        std::fs::set_permissions(&path, perms).expect("chmod");
+        let err = write_bytes(&path, b"new").expect_err("a read-only file is kept").to_string();
+        assert!(err.contains("original.bin: expected a file that may be replaced, found a read-only one"), "{err}");
+        assert_eq!(std::fs::read(&path).expect("read back"), b"original");
+        assert_eq!(std::fs::read_dir(&dir).expect("list").count(), 1, "a temporary file was left");
         std::fs::remove_dir_all(&dir).ok();
     }
 

@@ -111,6 +111,21 @@ pub fn check_output_name(path: &Path) -> anyhow::Result<()> {
     SceneFormat::from_output(path).map(|_| ()).context("cannot choose a scene format from the output's name")
 }
 
+/// Refuses an output that is the input scene itself (the same file, or the
+/// SOG folder of its `meta.json`): writing it would replace the original with
+/// a re-encoding of itself, lossy for the compressed formats.
+pub fn check_not_the_input(input: &Path, output: &Path) -> anyhow::Result<()> {
+    let Ok(out) = output.canonicalize() else { return Ok(()) };
+    let Ok(inp) = input.canonicalize() else { return Ok(()) };
+    let folder = inp.file_name().is_some_and(|n| n == "meta.json").then(|| inp.parent()).flatten();
+    anyhow::ensure!(
+        out != inp && Some(out.as_path()) != folder,
+        "{}: expected an output other than the input scene, found the input itself (it would be replaced by a re-encoding of itself; choose another name)",
+        output.display()
+    );
+    Ok(())
+}
+
 /// Writes `scene` to `path` in the format its name asks for, with a progress bar.
 pub fn save_scene(path: &Path, scene: &Gaussians, save: &SaveArgs) -> anyhow::Result<()> {
     let pb = progress::bar(1000, "write");
@@ -125,6 +140,7 @@ pub fn save_scene(path: &Path, scene: &Gaussians, save: &SaveArgs) -> anyhow::Re
 /// Runs the conversion.
 pub fn run(args: ConvertArgs) -> anyhow::Result<ExitCode> {
     check_output_name(&args.output)?;
+    check_not_the_input(&args.input, &args.output)?;
     let start = Instant::now();
     let mut scene = load_scene(&args.input)?;
     match (&args.blend, args.strength.strength()) {

@@ -33,8 +33,7 @@ mod tests;
 #[cfg(test)]
 mod tests_write;
 
-use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 pub use blend::{BlendError, Strength, blend};
 pub use error::SceneError;
@@ -254,35 +253,23 @@ pub(crate) fn validate(path: &Path, g: &Gaussians) -> Result<(), SceneError> {
 }
 
 /// Writes a file through `write` into a temporary file beside `path`, then
-/// renames it over `path`. On any error the temporary file is removed and an
-/// existing `path` is untouched.
+/// renames it over `path` ([`crate::io::replace_with`]: a read-only `path` is
+/// refused). On any error the temporary file is removed and an existing
+/// `path` is untouched.
 pub(crate) fn atomic_write(
     path: &Path,
     write: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
 ) -> Result<(), SceneError> {
-    let name = path
-        .file_name()
-        .ok_or_else(|| SceneError::io(path, std::io::Error::new(std::io::ErrorKind::InvalidInput, "no file name")))?;
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    crate::io::remove_stale_temps(&dir);
-    let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), std::process::id()));
-    let result = (|| {
-        let file = std::fs::File::create(&tmp)?;
-        let mut w = std::io::BufWriter::new(file);
-        write(&mut w)?;
-        w.flush()?;
-        w.get_ref().sync_all()?;
-        drop(w);
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
+    if path.file_name().is_none() {
+        let e = std::io::Error::new(std::io::ErrorKind::InvalidInput, "no file name");
         return Err(SceneError::io(path, e));
     }
-    Ok(())
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    crate::io::remove_stale_temps(dir);
+    crate::io::replace_with(path, write).map_err(|e| SceneError::io(path, e))
 }
 
 /// Index of the component of `q` with the largest magnitude (the first on ties).

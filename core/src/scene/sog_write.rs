@@ -167,6 +167,11 @@ pub(crate) fn encode(
 /// textures.
 pub(crate) fn write_folder(dir: &Path, files: &SogFiles) -> Result<(), SceneError> {
     if dir.is_dir() {
+        // All or none: a read-only file found midway would leave old and new textures mixed.
+        for (name, _) in files {
+            let path = dir.join(name);
+            crate::io::refuse_read_only(&path).map_err(|e| SceneError::io(&path, e))?;
+        }
         for (name, bytes) in files {
             super::atomic_write(&dir.join(name), |w| w.write_all(bytes))?;
         }

@@ -258,6 +258,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let interrupt = interrupt();
     let config = args.config()?;
     check_scene_name(&args.scene_name)?;
+    super::convert::check_not_the_input(&args.scene, &args.out.join(&args.scene_name))?;
     let scene = load_scene(&args.scene)?;
     if scene.is_empty() {
         anyhow::bail!("{}: expected a scene with Gaussians to stylize, found none", args.scene.display());
