@@ -104,6 +104,13 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
             _ => image_size(path, &base_dir, &record, frame.file_path.as_deref())?,
         };
         let (w, h) = (f64::from(width), f64::from(height));
+        // A field of view in radians: 0 or past π has no pinhole focal length.
+        for (f, a) in [("camera_angle_x", intr.camera_angle_x), ("camera_angle_y", intr.camera_angle_y)] {
+            if let Some(a) = a.filter(|a| !(*a > 0.0 && *a < std::f64::consts::PI)) {
+                let expected = "a field of view in radians between 0 and π (exclusive)";
+                return Err(CameraError::format(path, format!("{record}.{f}"), expected, a.to_string()));
+            }
+        }
         let from_angle = |angle: f64, side: f64| 0.5 * side / (0.5 * angle).tan();
         let fx = intr
             .fl_x

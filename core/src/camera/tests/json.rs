@@ -145,3 +145,17 @@ fn a_mirrored_pose_is_refused_with_its_rows_and_determinant() {
     assert!(err.contains("found rows [1, 0, 0], [0, -1, 0], [0, 0, 1] (determinant -1)"), "{err}");
     assert!(!err.contains("DVec3"), "{err}");
 }
+
+/// A field of view of 0 or past π is named as such (0 read as "fl_x: found inf").
+#[test]
+fn a_field_of_view_outside_zero_to_pi_is_named() {
+    let d = temp_dir("json-angle");
+    for (angle, found) in [(0.0, "found 0"), (4.0, "found 4"), (-1.0, "found -1")] {
+        let doc = json!({"camera_angle_x": angle, "w": 4, "h": 4,
+            "frames": [{"transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 0, 1]]}]});
+        std::fs::write(d.join("transforms.json"), doc.to_string()).expect("write");
+        let err = load(&d).expect_err("no focal length").to_string();
+        assert!(err.contains("frames[0].camera_angle_x: expected a field of view in radians between 0 and π"), "{err}");
+        assert!(err.contains(found), "{err}");
+    }
+}
