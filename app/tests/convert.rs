@@ -99,6 +99,14 @@ fn the_input_and_read_only_files_are_not_replaced() {
             stderr(&o)
         );
     }
+    // Nor is the colour-matched scene stylize writes beside its result the input, or the result's name.
+    let matched = out.join("colour_matched.ply");
+    std::fs::rename(&original, &matched).expect("rename");
+    let o = gast(&["stylize", s(&matched), s(&matched), "--out", s(&out)]);
+    assert!(stderr(&o).contains("colour_matched.ply: expected an output other than the input scene"), "{}", stderr(&o));
+    std::fs::rename(&matched, &original).expect("rename");
+    let o = gast(&["stylize", s(&original), s(&original), "--out", s(&out), "--scene-name", "colour_matched.ply"]);
+    assert!(stderr(&o).contains("--scene-name colour_matched.ply: expected another name"), "{}", stderr(&o));
     let locked = out.join("locked.ply");
     let o = gast(&["convert", s(&original), s(&locked)]);
     assert!(o.status.success(), "{}", stderr(&o));

@@ -239,8 +239,12 @@ struct Summary {
     colour_collapse: Option<Degeneration>,
 }
 
+/// The colour-matched scene's name in the output folder (for `gast convert --blend`).
+const MATCHED_NAME: &str = "colour_matched.ply";
+
 /// `--scene-name` is a name inside the output folder with a format's ending:
-/// `../x.ply` or `/tmp/x.ply` would write outside `--out`.
+/// `../x.ply` or `/tmp/x.ply` would write outside `--out`, and
+/// [`MATCHED_NAME`] would replace the colour-matched scene.
 fn check_scene_name(name: &std::path::Path) -> anyhow::Result<()> {
     let mut parts = name.components();
     let one_name = matches!(parts.next(), Some(std::path::Component::Normal(_))) && parts.next().is_none();
@@ -248,6 +252,10 @@ fn check_scene_name(name: &std::path::Path) -> anyhow::Result<()> {
         one_name,
         "--scene-name {}: expected a file name inside the output folder (e.g. stylized.ply), found a path",
         name.display()
+    );
+    anyhow::ensure!(
+        name != std::path::Path::new(MATCHED_NAME),
+        "--scene-name {MATCHED_NAME}: expected another name, found the one the colour-matched scene is written under"
     );
     super::convert::check_output_name(name)
 }
@@ -258,7 +266,9 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let interrupt = interrupt();
     let config = args.config()?;
     check_scene_name(&args.scene_name)?;
-    super::convert::check_not_the_input(&args.scene, &args.out.join(&args.scene_name))?;
+    for written in [args.out.join(&args.scene_name), args.out.join(MATCHED_NAME)] {
+        super::convert::check_not_the_input(&args.scene, &written)?;
+    }
     let scene = load_scene(&args.scene)?;
     if scene.is_empty() {
         anyhow::bail!("{}: expected a scene with Gaussians to stylize, found none", args.scene.display());
@@ -456,7 +466,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     };
     let result = session.result();
     // The colour-matched scene, for `gast convert --blend` to set a strength later.
-    let matched_path = args.out.join("colour_matched.ply");
+    let matched_path = args.out.join(MATCHED_NAME);
     super::convert::save_scene(&matched_path, session.colour_matched(), &super::convert::SaveArgs::default())?;
     match args.strength.strength().filter(|s| !s.is_full()) {
         Some(strength) => {
