@@ -107,6 +107,23 @@ fn the_input_and_read_only_files_are_not_replaced() {
     std::fs::rename(&matched, &original).expect("rename");
     let o = gast(&["stylize", s(&original), s(&original), "--out", s(&out), "--scene-name", "colour_matched.ply"]);
     assert!(stderr(&o).contains("--scene-name colour_matched.ply: expected another name"), "{}", stderr(&o));
+    // A style or preset taken from an earlier run's folder, which the run would write over.
+    let style = shared_file("data/styles/wave.jpg").expect("the shared styles beside the scenes");
+    for (name, flag) in [("style.png", None), ("view0_after.png", None), ("report.json", Some("--preset"))] {
+        let input = out.join(name);
+        std::fs::write(&input, b"an earlier run's output").expect("write");
+        let mut args =
+            vec!["stylize", s(&original), if flag.is_none() { s(&input) } else { s(&style) }, "--out", s(&out)];
+        if let Some(flag) = flag {
+            args.extend([flag, s(&input)]);
+        }
+        let o = gast(&args);
+        assert!(!o.status.success(), "{args:?}");
+        let said = format!("{}: expected an input outside what the run writes into", input.display());
+        assert!(stderr(&o).contains(&said), "{}", stderr(&o));
+        assert_eq!(std::fs::read(&input).expect("kept"), b"an earlier run's output");
+        std::fs::remove_file(&input).expect("remove");
+    }
     let locked = out.join("locked.ply");
     let o = gast(&["convert", s(&original), s(&locked)]);
     assert!(o.status.success(), "{}", stderr(&o));

@@ -241,6 +241,11 @@ struct Summary {
 
 /// The colour-matched scene's name in the output folder (for `gast convert --blend`).
 const MATCHED_NAME: &str = "colour_matched.ply";
+/// The other files of fixed name a run writes into its output folder.
+const SHEET_NAME: &str = "sheet.png";
+const REPORT_NAME: &str = "report.json";
+/// The style, its depth and its edges at texture scale.
+const STYLE_NAMES: [&str; 3] = ["style.png", "style_depth.png", "style_edge.png"];
 
 /// `--scene-name` is a name inside the output folder with a format's ending:
 /// `../x.ply` or `/tmp/x.ply` would write outside `--out`, and
@@ -260,15 +265,48 @@ fn check_scene_name(name: &std::path::Path) -> anyhow::Result<()> {
     super::convert::check_output_name(name)
 }
 
+/// Whether a run writes a file of this name into its output folder: the
+/// scenes, the sheet, the report, the style's maps and every preview view's
+/// files (`view{k}_{tag}….png|exr`).
+fn written_by_a_run(name: &std::path::Path, scene_name: &std::path::Path) -> bool {
+    let fixed = [MATCHED_NAME, SHEET_NAME, REPORT_NAME].into_iter().chain(STYLE_NAMES);
+    let text = name.to_string_lossy();
+    let view = text.strip_prefix("view").is_some_and(|rest| rest.starts_with(|c: char| c.is_ascii_digit()))
+        && (text.ends_with(".png") || text.ends_with(".exr"));
+    name == scene_name || fixed.into_iter().any(|f| name == std::path::Path::new(f)) || view
+}
+
+/// The run's inputs (scene, style, style depth, preset) are not among the
+/// files it writes into `--out`: a style taken from an earlier run's folder
+/// (`out/stylize/style.png`) was replaced by this run's copy at texture scale.
+fn check_inputs_are_not_outputs(args: &StylizeArgs) -> anyhow::Result<()> {
+    let Ok(out) = args.out.canonicalize() else { return Ok(()) };
+    let inputs = [Some(&args.scene), Some(&args.style), args.style_depth.as_ref(), args.preset.as_ref()];
+    for input in inputs.into_iter().flatten() {
+        let Ok(file) = input.canonicalize() else { continue };
+        let Some(name) = file.file_name().map(std::path::Path::new) else { continue };
+        if file.parent() == Some(out.as_path()) && written_by_a_run(name, &args.scene_name) {
+            anyhow::bail!(
+                "{}: expected an input outside what the run writes into {}, found one of its outputs ({}), which it would replace; copy it elsewhere or choose another --out",
+                input.display(),
+                args.out.display(),
+                name.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Runs the stylization and writes the outputs.
 pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let t_all = Instant::now();
     let interrupt = interrupt();
-    let config = args.config()?;
     check_scene_name(&args.scene_name)?;
     for written in [args.out.join(&args.scene_name), args.out.join(MATCHED_NAME)] {
         super::convert::check_not_the_input(&args.scene, &written)?;
     }
+    check_inputs_are_not_outputs(&args)?;
+    let config = args.config()?;
     let scene = load_scene(&args.scene)?;
     if scene.is_empty() {
         anyhow::bail!("{}: expected a scene with Gaussians to stylize, found none", args.scene.display());
@@ -496,7 +534,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     }
     t_part = Instant::now();
     let preview = previews.metrics;
-    let sheet_path = args.out.join("sheet.png");
+    let sheet_path = args.out.join(SHEET_NAME);
     let settings = sheet::settings_line(&config, done, optimisation_s, session.focus_on_object(), session.coverage());
     let title = format!(
         "{} x {}",
@@ -565,7 +603,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         summary,
     };
     let json = serde_json::to_string_pretty(&report)?;
-    write_bytes(&args.out.join("report.json"), json.as_bytes())?;
+    write_bytes(&args.out.join(REPORT_NAME), json.as_bytes())?;
     eprintln!("wrote {} in {:.1} s", args.out.display(), t_all.elapsed().as_secs_f64());
     Ok(ExitCode::SUCCESS)
 }
@@ -625,9 +663,9 @@ fn write_previews<N: FeatureNet>(
     lap(1, &mut parts);
     let mut metrics = Vec::new();
     let mut renders = Vec::new();
-    write_png_rgb(&out.join("style.png"), style.width as u32, style.height as u32, &style.rgb)?;
-    write_png_gray_normalized(&out.join("style_depth.png"), style.width as u32, style.height as u32, &style.depth)?;
-    write_png_gray_normalized(&out.join("style_edge.png"), style.width as u32, style.height as u32, &style.edge)?;
+    write_png_rgb(&out.join(STYLE_NAMES[0]), style.width as u32, style.height as u32, &style.rgb)?;
+    write_png_gray_normalized(&out.join(STYLE_NAMES[1]), style.width as u32, style.height as u32, &style.depth)?;
+    write_png_gray_normalized(&out.join(STYLE_NAMES[2]), style.width as u32, style.height as u32, &style.edge)?;
     lap(3, &mut parts);
     let views: Vec<&Camera> = sheet::spread(cameras, count).collect();
     for (k, cam) in views.iter().copied().enumerate() {
