@@ -184,8 +184,7 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).with_context(|| format!("could not create the folder {}", parent.display()))?;
     }
-    gast_core::scene::save(&args.out, &scene, &Default::default())
-        .with_context(|| format!("could not write {}", args.out.display()))?;
+    super::convert::save_scene(&args.out, &scene, &super::convert::SaveArgs::default())?;
     let psnr_all = mean_psnr(&scene, &views, cfg.background);
     eprintln!(
         "wrote {} ({} Gaussians) after fitting for {:.1} s; mean PSNR over the {} training views {:.2} dB",

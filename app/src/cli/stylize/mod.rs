@@ -279,7 +279,12 @@ fn written_by_a_run(name: &std::path::Path, scene_name: &std::path::Path) -> boo
 /// The run's inputs (scene, style, style depth, preset) are not among the
 /// files it writes into `--out`: a style taken from an earlier run's folder
 /// (`out/stylize/style.png`) was replaced by this run's copy at texture scale.
+/// The scene is held against the two scenes the run writes as `convert` holds
+/// its input against its output (a SOG `meta.json` guards its folder too).
 fn check_inputs_are_not_outputs(args: &StylizeArgs) -> anyhow::Result<()> {
+    for written in [args.out.join(&args.scene_name), args.out.join(MATCHED_NAME)] {
+        super::convert::check_not_the_input(&args.scene, &written)?;
+    }
     let Ok(out) = args.out.canonicalize() else { return Ok(()) };
     let inputs = [Some(&args.scene), Some(&args.style), args.style_depth.as_ref(), args.preset.as_ref()];
     for input in inputs.into_iter().flatten() {
@@ -302,9 +307,6 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let t_all = Instant::now();
     let interrupt = interrupt();
     check_scene_name(&args.scene_name)?;
-    for written in [args.out.join(&args.scene_name), args.out.join(MATCHED_NAME)] {
-        super::convert::check_not_the_input(&args.scene, &written)?;
-    }
     check_inputs_are_not_outputs(&args)?;
     let config = args.config()?;
     let scene = load_scene(&args.scene)?;
