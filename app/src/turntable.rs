@@ -102,7 +102,7 @@ pub fn write(
         "a GIF frame is at most {} pixels wide, the turntable's would be {width}",
         u16::MAX
     );
-    std::fs::create_dir_all(out).with_context(|| format!("could not create the folder {}", out.display()))?;
+    gast_core::io::create_folder(out).with_context(|| format!("could not create the folder {}", out.display()))?;
     let render_opts = RenderOptions { background: opts.background };
     let cams = cameras(scene, opts);
     let delay = Delay::from_numer_denom_ms(frame_delay_ms(cams.len()), 1);

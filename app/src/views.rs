@@ -51,8 +51,29 @@ where
 /// An image's longer side in pixels (`--size`, `--resolution`, `--sizes`),
 /// refused outside [`gast_core::camera::IMAGE_SIDES`].
 pub(crate) fn image_side() -> clap::builder::RangedU64ValueParser<u32> {
-    let sides = gast_core::camera::IMAGE_SIDES;
-    clap::builder::RangedU64ValueParser::new().range(u64::from(*sides.start())..=u64::from(*sides.end()))
+    pixels(gast_core::camera::IMAGE_SIDES)
+}
+
+/// A count that must be at least one (`--reps`, `--draws`, `--frames`,
+/// `--steps`, …): zero would time or draw nothing and print a median of nothing.
+pub(crate) fn at_least_one<T>(s: &str) -> Result<T, String>
+where
+    T: std::str::FromStr + From<u8> + PartialOrd,
+    T::Err: std::fmt::Display,
+{
+    let v: T = s.parse().map_err(|e| format!("expected a whole number of at least 1, found {s:?}: {e}"))?;
+    if v >= T::from(1) { Ok(v) } else { Err(format!("expected at least 1, found {s}")) }
+}
+
+/// A value in pixels refused outside `range` (`--texture-scale`, a run's `--resolution`).
+pub(crate) fn pixels(range: std::ops::RangeInclusive<u32>) -> clap::builder::RangedU64ValueParser<u32> {
+    clap::builder::RangedU64ValueParser::new().range(u64::from(*range.start())..=u64::from(*range.end()))
+}
+
+/// A colour channel from 0 to 1 (`--background r,g,b`).
+pub(crate) fn unit_channel(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|e| format!("expected a number from 0 to 1, found {s:?}: {e}"))?;
+    if (0.0..=1.0).contains(&v) { Ok(v) } else { Err(format!("expected a number from 0 to 1, found {v}")) }
 }
 
 /// `--fov`: a vertical field of view in degrees, 1 to 170 (a pinhole camera

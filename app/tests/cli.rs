@@ -465,6 +465,18 @@ fn view_settings_out_of_range_are_refused_before_loading() {
         (&["fit", "/nonexistent/photos", "--out", "/nonexistent/f.ply", "--sh-degree", "9"][..], "0..=3"),
         (&["fit", "/nonexistent/photos", "--out", "/nonexistent/f.ply", "--gaussians", "0"][..], "1..=20000000"),
         (&["render", scene, "--out", "/nonexistent/out", "--turntable", "0"][..], "1..=3600"),
+        (&["render", scene, "--out", "/nonexistent/out", "--background", "2,0,0"][..], "from 0 to 1, found 2"),
+        (&["render", scene, "--out", "/nonexistent/out", "--background", "nan", "0", "0"][..], "found NaN"),
+        (&["render", scene, "--out", "/nonexistent/out", "--background", "0.5,0.5"][..], "expected three values"),
+        (&["bench", "raster", scene, "--views", "0"][..], "1..=3600"),
+        (&["bench", "step", "--scene", scene, "--steps", "0"][..], "expected at least 1, found 0"),
+        (&["bench", "depth", "--style", "/nonexistent/style.jpg", "--reps", "0"][..], "expected at least 1"),
+        (&["bench", "pairing", "--scene", scene, "--draws", "0"][..], "expected at least 1, found 0"),
+        (&["bench", "pairing", "--scene", scene, "--texture-scale", "100000"][..], "16..=4096"),
+        (&["bench", "pairing", "--scene", scene, "--assign-block", "5"][..], "16..=512"),
+        (&["bench", "viewport-live", "--scene", scene, "--reps", "0"][..], "expected at least 1"),
+        (&["bench", "viewport", scene, "--frames", "0"][..], "expected at least 1"),
+        (&["bench", "viewport", scene, "--width", "0"][..], "16..=8192"),
     ] {
         let o = gast(args);
         let err = stderr(&o);
@@ -526,4 +538,39 @@ fn fit_names_a_missing_images_folder_and_an_empty_training_set() {
     assert!(stderr(&o).contains("found the extension .txt"), "{}", stderr(&o));
     assert!(!stderr(&o).contains("fitting"), "it fitted first: {}", stderr(&o));
     std::fs::remove_dir_all(&out).ok();
+}
+
+/// `gast fit --preview` into the folder the photos are read from is refused
+/// before the fit: its `view0_truth.png`, … and `sheet.png` mixed with the
+/// photos (and an LLFF folder pairs its images with the poses by count).
+#[test]
+fn fit_previews_are_not_written_among_the_photos() {
+    let Some(fern) = shared_file("data/datasets/fern") else { return };
+    let copy = temp("fit-preview");
+    let photos = copy.join("images_8");
+    std::fs::create_dir_all(&photos).expect("dir");
+    std::fs::copy(fern.join("poses_bounds.npy"), copy.join("poses_bounds.npy")).expect("copy");
+    for e in std::fs::read_dir(fern.join("images_8")).expect("fern's images_8") {
+        let e = e.expect("entry");
+        std::fs::copy(e.path(), photos.join(e.file_name())).expect("copy");
+    }
+    let before = std::fs::read_dir(&photos).expect("list").count();
+    let fitted = copy.join("f.ply");
+    let args =
+        ["fit", s(&copy), "--images", "images_8", "--resolution", "16", "--iterations", "1", "--out", s(&fitted)];
+    let o = gast(&[&args[..], &["--preview", s(&photos)]].concat());
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("expected a folder apart from the photos, found the folder the photos are read from"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!stderr(&o).contains("fitting"), "it fitted first: {}", stderr(&o));
+    assert_eq!(std::fs::read_dir(&photos).expect("list").count(), before, "a preview was written among the photos");
+    assert!(!fitted.exists());
+    // Beside the photos is fine.
+    let o = gast(&[&args[..], &["--preview", s(&copy.join("previews"))]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(copy.join("previews/sheet.png").is_file() && fitted.is_file());
+    std::fs::remove_dir_all(&copy).ok();
 }

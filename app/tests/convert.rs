@@ -162,6 +162,45 @@ fn the_input_and_read_only_files_are_not_replaced() {
     std::fs::remove_dir_all(&out).ok();
 }
 
+/// No command adds to a read-only folder, as root or not (root's writes pass
+/// over its permissions: a `--preview` folder among the shared, read-only
+/// photos was written in). A file, a new folder inside it and a SOG folder
+/// are refused, each naming the read-only folder, and it stays as it was.
+#[test]
+fn nothing_is_written_in_a_read_only_folder() {
+    let Some(scene) = shared_file("data/scenes/guitar.compressed.ply") else { return };
+    let out = temp("ro-folder");
+    let locked = out.join("locked");
+    std::fs::create_dir_all(&locked).expect("dir");
+    std::fs::copy(&scene, locked.join("g.compressed.ply")).expect("copy");
+    let mut perms = std::fs::metadata(&locked).expect("stat").permissions();
+    perms.set_readonly(true);
+    std::fs::set_permissions(&locked, perms).expect("chmod");
+    let input = locked.join("g.compressed.ply");
+    let style = shared_file("data/styles/wave.jpg").expect("the shared styles beside the scenes");
+    for target in [locked.join("g.ply"), locked.join("g.sog"), locked.join("sog/")] {
+        let o = gast(&["convert", s(&input), s(&target)]);
+        assert!(!o.status.success(), "{}", target.display());
+        let said = format!("expected a folder that may be written in, found a read-only one, {}", locked.display());
+        assert!(stderr(&o).contains(&said), "{}: {}", target.display(), stderr(&o));
+    }
+    for args in [
+        &["render", s(&input), "--out", s(&locked.join("renders")), "--views", "1", "--size", "16"][..],
+        &["stylize", s(&input), s(&style), "--out", s(&locked.join("run"))],
+        &["assets", "--out", s(&locked.join("assets"))],
+    ] {
+        let o = gast(args);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(stderr(&o).contains("found a read-only one"), "{args:?}: {}", stderr(&o));
+    }
+    assert_eq!(listing(&locked), ["g.compressed.ply"], "a refused write added to the read-only folder");
+    let mut perms = std::fs::metadata(&locked).expect("stat").permissions();
+    #[allow(clippy::permissions_set_readonly_false)]
+    perms.set_readonly(false);
+    std::fs::set_permissions(&locked, perms).expect("chmod");
+    std::fs::remove_dir_all(&out).ok();
+}
+
 /// An INRIA `.ply` written by `gast`, with some opacities patched to +inf and
 /// −inf as splat-transform writes them: it converts with one warning that
 /// counts them, and the Gaussians come out fully opaque and fully transparent.

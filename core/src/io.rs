@@ -96,7 +96,7 @@ where
 {
     let io_err = |source| OutputError::Io { path: path.to_path_buf(), source };
     if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).map_err(io_err)?;
+        create_folder(parent).map_err(io_err)?;
         remove_stale_temps(parent);
     } else {
         remove_stale_temps(Path::new("."));
@@ -104,16 +104,54 @@ where
     replace_with(path, write).map_err(io_err)
 }
 
-/// An error when `path` is a file whose permissions make it read-only
-/// (see [`replace_with`]).
-pub(crate) fn refuse_read_only(path: &Path) -> std::io::Result<()> {
+/// An error when `path` is a file whose permissions make it read-only, or
+/// its folder is read-only ([`refuse_read_only_folder`]; see [`replace_with`]).
+pub fn refuse_read_only(path: &Path) -> std::io::Result<()> {
     if std::fs::metadata(path).is_ok_and(|m| m.is_file() && m.permissions().readonly()) {
         return Err(std::io::Error::new(
             std::io::ErrorKind::PermissionDenied,
             "expected a file that may be replaced, found a read-only one (left as it is: make it writable or choose another name)",
         ));
     }
-    Ok(())
+    refuse_read_only_folder(path.parent().unwrap_or(Path::new("")))
+}
+
+/// An error when the folder `dir`, or the nearest folder above it that
+/// exists, is read-only by its permissions (no write bit for anyone): the one
+/// a file would be added to or a folder made in. Root passes over such
+/// permissions, and a read-only folder usually holds someone's originals (a
+/// dataset, shared data), so no writer here adds to one, as root or not.
+pub fn refuse_read_only_folder(dir: &Path) -> std::io::Result<()> {
+    let mut at = dir;
+    loop {
+        let here = if at.as_os_str().is_empty() { Path::new(".") } else { at };
+        match std::fs::metadata(here) {
+            Ok(m) if m.is_dir() && m.permissions().readonly() => {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::PermissionDenied,
+                    format!(
+                        "expected a folder that may be written in, found a read-only one, {} (left as it is: make it \
+                         writable or choose another folder)",
+                        here.display()
+                    ),
+                ));
+            }
+            Ok(_) => return Ok(()),
+            Err(_) => match at.parent() {
+                Some(up) if !at.as_os_str().is_empty() => at = up,
+                _ => return Ok(()),
+            },
+        }
+    }
+}
+
+/// Makes the output folder `dir` with its parents, refusing one inside a
+/// read-only folder ([`refuse_read_only_folder`]): every output folder of the
+/// commands, the studies and the demo is made here.
+pub fn create_folder(dir: impl AsRef<Path>) -> std::io::Result<()> {
+    let dir = dir.as_ref();
+    refuse_read_only_folder(dir)?;
+    std::fs::create_dir_all(dir)
 }
 
 /// The one way every writer here replaces a file: `write` fills a buffered
@@ -333,6 +371,31 @@ mod tests {
         assert!(err.contains("original.bin: expected a file that may be replaced, found a read-only one"), "{err}");
         assert_eq!(std::fs::read(&path).expect("read back"), b"original");
         assert_eq!(std::fs::read_dir(&dir).expect("list").count(), 1, "a temporary file was left");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_read_only_folder_is_not_written_in() {
+        let dir = std::env::temp_dir().join(format!("gast-io-ro-dir-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let set_readonly = |on: bool| {
+            let mut perms = std::fs::metadata(&dir).expect("stat").permissions();
+            #[allow(clippy::permissions_set_readonly_false)]
+            perms.set_readonly(on);
+            std::fs::set_permissions(&dir, perms).expect("chmod");
+        };
+        set_readonly(true);
+        let said = format!("expected a folder that may be written in, found a read-only one, {}", dir.display());
+        let err = write_bytes(&dir.join("new.bin"), b"new").expect_err("a read-only folder").to_string();
+        assert!(err.contains(&said), "{err}");
+        // A folder made inside it, however deep, is refused at the read-only one.
+        let err = create_folder(dir.join("a/b")).expect_err("a read-only folder").to_string();
+        assert!(err.contains(&said), "{err}");
+        let err = write_bytes(&dir.join("a/b/new.bin"), b"new").expect_err("a read-only folder").to_string();
+        assert!(err.contains(&said), "{err}");
+        assert_eq!(std::fs::read_dir(&dir).expect("list").count(), 0, "something was written in the folder");
+        set_readonly(false);
+        write_bytes(&dir.join("a/new.bin"), b"new").expect("a writable folder");
         std::fs::remove_dir_all(&dir).ok();
     }
 

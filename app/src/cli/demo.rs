@@ -91,12 +91,13 @@ fn output_folder() -> anyhow::Result<PathBuf> {
     let name = format!("gast-demo-{}", crate::report::utc_stamp());
     let here = std::env::current_dir().map(|d| d.join(&name));
     if let Ok(dir) = &here
-        && std::fs::create_dir_all(dir).is_ok()
+        && gast_core::io::create_folder(dir).is_ok()
     {
         return Ok(dir.clone());
     }
     let dir = std::env::temp_dir().join(&name);
-    std::fs::create_dir_all(&dir).with_context(|| format!("could not create the demo's folder {}", dir.display()))?;
+    gast_core::io::create_folder(&dir)
+        .with_context(|| format!("could not create the demo's folder {}", dir.display()))?;
     Ok(dir)
 }
 

@@ -128,6 +128,7 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         args.out.display()
     );
     super::convert::check_output_name(&args.out)?;
+    gast_core::io::refuse_read_only(&args.out).with_context(|| args.out.display().to_string())?;
     // An LLFF capture's own small images (images_8, 504 px for fern) are what
     // its evaluations use: fit at their size unless told otherwise (fern: 25.3
     // dB held out in about 5 min on 2 cores, against the default 200 px).
@@ -142,6 +143,9 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("could not load the posed images of {}", args.dataset.display()))?;
     for w in &data.warnings {
         eprintln!("warning: {w}");
+    }
+    if let Some(dir) = &args.preview {
+        check_preview_folder(dir, &data.image_folders)?;
     }
     let k = args.holdout_every;
     let (held, views): (Vec<_>, Vec<_>) = data.views.into_iter().enumerate().partition(|(i, _)| k > 0 && i % k == 0);
@@ -182,7 +186,8 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     let fit_s = t_fit.elapsed().as_secs_f64();
 
     if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).with_context(|| format!("could not create the folder {}", parent.display()))?;
+        gast_core::io::create_folder(parent)
+            .with_context(|| format!("could not create the folder {}", parent.display()))?;
     }
     super::convert::save_scene(&args.out, &scene, &super::convert::SaveArgs::default())?;
     let psnr_all = mean_psnr(&scene, &views, cfg.background);
@@ -229,6 +234,22 @@ fn initial_scene(
     eprintln!("initialisation: {} random Gaussians in the cameras' common view ({why})", cfg.initial_gaussians.max(1));
     let cameras: Vec<_> = views.iter().map(|(c, _)| c.clone()).collect();
     Ok(fit::initial_scene(&cameras, cfg))
+}
+
+/// Refuses, before the fit, a `--preview` folder the photos are read from
+/// (its `view0_truth.png`, … and `sheet.png` would mix with them, and an
+/// LLFF folder pairs its images with the poses by count) or one that cannot
+/// be made or written in; makes it otherwise.
+fn check_preview_folder(dir: &std::path::Path, image_folders: &[std::path::PathBuf]) -> anyhow::Result<()> {
+    if let Ok(canonical) = std::fs::canonicalize(dir) {
+        anyhow::ensure!(
+            !image_folders.contains(&canonical),
+            "--preview {}: expected a folder apart from the photos, found the folder the photos are read from \
+             (the previews would mix with them; choose another folder)",
+            dir.display()
+        );
+    }
+    super::output_folder(dir, "--preview")
 }
 
 /// Renders four views spread over the dataset, writes each render and its

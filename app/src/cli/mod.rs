@@ -110,25 +110,25 @@ pub enum BenchCommand {
     ViewportLive {
         #[command(flatten)]
         data: bench::BenchData,
-        /// Updates to time (one optimiser step before each).
-        #[arg(long, default_value_t = 5)]
+        /// Updates to time, at least one (one optimiser step before each).
+        #[arg(long, default_value_t = 5, value_parser = crate::views::at_least_one::<u32>)]
         reps: u32,
     },
     /// The studio viewport's frame time on the first GPU adapter (headless).
     Viewport {
         /// A scene; a synthetic scene of `--count` Gaussians when absent.
         scene: Option<PathBuf>,
-        /// Gaussians in the synthetic scene.
-        #[arg(long, default_value_t = 500_000)]
+        /// Gaussians in the synthetic scene, at least one.
+        #[arg(long, default_value_t = 500_000, value_parser = crate::views::at_least_one::<usize>)]
         count: usize,
-        /// Frames to time.
-        #[arg(long, default_value_t = 10)]
+        /// Frames to time, at least one.
+        #[arg(long, default_value_t = 10, value_parser = crate::views::at_least_one::<u32>)]
         frames: u32,
-        /// Frame width in pixels.
-        #[arg(long, default_value_t = 1280)]
+        /// Frame width in pixels (16 to 8,192).
+        #[arg(long, default_value_t = 1280, value_parser = crate::views::image_side())]
         width: u32,
-        /// Frame height in pixels.
-        #[arg(long, default_value_t = 720)]
+        /// Frame height in pixels (16 to 8,192).
+        #[arg(long, default_value_t = 720, value_parser = crate::views::image_side())]
         height: u32,
     },
 }
@@ -190,16 +190,17 @@ fn checked(config: gast_core::style::StyleConfig) -> anyhow::Result<gast_core::s
     Ok(config)
 }
 
-/// Makes `dir` an output folder (with its parents) unless it is one; a file
-/// of that name is refused, saying so (creating the folder said only "File
-/// exists").
-pub(crate) fn output_folder(dir: &std::path::Path) -> anyhow::Result<()> {
+/// Makes `dir`, the folder the option `flag` names, an output folder (with
+/// its parents) unless it is one; a file of that name is refused, saying so
+/// (creating the folder said only "File exists"), and so is a folder inside a
+/// read-only one ([`gast_core::io::create_folder`]).
+pub(crate) fn output_folder(dir: &std::path::Path, flag: &str) -> anyhow::Result<()> {
     anyhow::ensure!(
         !dir.exists() || dir.is_dir(),
-        "{}: expected an output folder, found a file; give --out a folder",
+        "{}: expected an output folder, found a file; give {flag} a folder",
         dir.display()
     );
-    anyhow::Context::with_context(std::fs::create_dir_all(dir), || {
+    anyhow::Context::with_context(gast_core::io::create_folder(dir), || {
         format!("could not create the output folder {}", dir.display())
     })
 }

@@ -90,7 +90,7 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
         _ => Sizes::full(),
     };
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("gast-quality-{}", crate::report::utc_stamp())));
-    super::output_folder(&out)?;
+    super::output_folder(&out, "--out")?;
     let weights = args.weights.clone().or_else(super::bench::shared_weights);
     let vgg = Arc::new(super::stylize::load_vgg(weights.as_deref())?);
     if studies.contains(&Study::Geometry) {

@@ -25,8 +25,9 @@ pub struct RenderArgs {
     pub out: PathBuf,
     #[command(flatten)]
     pub views: ViewArgs,
-    /// Background colour as r,g,b in [0, 1].
-    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [0.0, 0.0, 0.0])]
+    /// Background colour as r,g,b in [0, 1] (`0.5,0.5,0.5` or `0.5 0.5 0.5`).
+    #[arg(long, value_delimiter = ',', num_args = 1..=3, default_values_t = [0.0, 0.0, 0.0],
+          value_parser = crate::views::unit_channel)]
     pub background: Vec<f32>,
     /// Instead of the views, N frames on a ring around the scene (`turntable_NNN.png`)
     /// and a looping animated `turntable.gif`, `--size` pixels square.
@@ -40,9 +41,14 @@ pub struct RenderArgs {
 
 /// Renders every view and writes `NAME.png`, `NAME_depth.png` and `NAME_depth.exr`.
 pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
-    super::output_folder(&args.out)?;
+    // clap counts `0.5,0.5,0.5` as one value before it splits it, so the
+    // three channels are counted here.
+    let &[r, g, b] = args.background.as_slice() else {
+        anyhow::bail!("--background: expected three values r,g,b, found {:?}", args.background)
+    };
+    super::output_folder(&args.out, "--out")?;
     let scene = load_scene(&args.scene)?;
-    let background = [args.background[0], args.background[1], args.background[2]];
+    let background = [r, g, b];
     if let Some(frames) = args.turntable {
         return run_turntable(&args, &scene, frames as usize, background);
     }

@@ -255,7 +255,7 @@ where
 
 /// Writes every asset into `dir` (each file atomically); returns the paths.
 pub fn generate(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    gast_core::io::create_folder(dir).with_context(|| format!("creating {}", dir.display()))?;
     let scene = dir.join(DEMO_SCENE);
     gast_core::scene::save_ply(&scene, &demo_scene())?;
     let mut paths = vec![scene];

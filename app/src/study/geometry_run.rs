@@ -37,7 +37,7 @@ pub fn run(
     out: &Path,
     fit: &dyn Fn(&Path, &Path, u32) -> anyhow::Result<()>,
 ) -> anyhow::Result<GeometryRun> {
-    std::fs::create_dir_all(out).with_context(|| format!("could not create {}", out.display()))?;
+    gast_core::io::create_folder(out).with_context(|| format!("could not create {}", out.display()))?;
     let cameras_path = shared.join(&sizes.cameras);
     let scene_path = match &sizes.scene {
         Some(p) => p.clone(),

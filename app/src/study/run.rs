@@ -232,7 +232,7 @@ fn copy_sample(from: &Path, other_id: &str, out: &Path, id: &str) -> anyhow::Res
     }
     let bytes = std::fs::read(&src).with_context(|| format!("could not read {}", src.display()))?;
     let dir = out.join("renders");
-    std::fs::create_dir_all(&dir).with_context(|| format!("could not create {}", dir.display()))?;
+    gast_core::io::create_folder(&dir).with_context(|| format!("could not create {}", dir.display()))?;
     Ok(gast_core::io::write_bytes(&dir.join(format!("{id}.png")), &bytes)?)
 }
 

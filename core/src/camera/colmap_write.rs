@@ -22,7 +22,7 @@ fn qvec(c: &Camera) -> [f64; 4] {
 }
 
 fn create(dir: &Path, name: &str) -> Result<(BufWriter<File>, std::path::PathBuf), CameraError> {
-    std::fs::create_dir_all(dir).map_err(|e| CameraError::io(dir, e))?;
+    crate::io::create_folder(dir).map_err(|e| CameraError::io(dir, e))?;
     let path = dir.join(name);
     let f = File::create(&path).map_err(|e| CameraError::io(&path, e))?;
     Ok((BufWriter::new(f), path))

@@ -42,6 +42,9 @@ pub struct PosedImages {
     pub views: Vec<(Camera, Vec<f32>)>,
     /// Things the camera reader had to approximate, one line each.
     pub warnings: Vec<String>,
+    /// The folders the images were read from (canonical, each once), so that
+    /// no output is written among the photos.
+    pub image_folders: Vec<PathBuf>,
 }
 
 /// Extensions tried when a camera's name has none (NeRF-synthetic `./train/r_0`).
@@ -123,6 +126,7 @@ pub fn load_posed_images(
                 });
             };
             let (w, h, rgb) = read_rgb(path, background)?;
+            let folder = path.parent().and_then(|d| std::fs::canonicalize(d).ok());
             let full = if (w, h) == (cam.width, cam.height) { cam.clone() } else { cam.scaled_to(w, h) };
             let work = full.downscaled_to_max_side(resolution.max(1));
             let img = if (work.width, work.height) == (w, h) {
@@ -130,8 +134,12 @@ pub fn load_posed_images(
             } else {
                 resize_area(&rgb, h as usize, w as usize, 3, work.height as usize, work.width as usize)
             };
-            Ok((work, img))
+            Ok(((work, img), folder))
         })
         .collect::<Result<Vec<_>, _>>()?;
-    Ok(PosedImages { views, warnings: set.warnings })
+    let mut image_folders: Vec<PathBuf> = views.iter().filter_map(|(_, f)| f.clone()).collect();
+    image_folders.sort();
+    image_folders.dedup();
+    let views = views.into_iter().map(|(v, _)| v).collect();
+    Ok(PosedImages { views, warnings: set.warnings, image_folders })
 }

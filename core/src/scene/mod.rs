@@ -268,6 +268,7 @@ pub(crate) fn atomic_write(
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
+    crate::io::refuse_read_only(path).map_err(|e| SceneError::io(path, e))?;
     crate::io::remove_stale_temps(dir);
     crate::io::replace_with(path, write).map_err(|e| SceneError::io(path, e))
 }

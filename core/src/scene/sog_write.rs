@@ -179,6 +179,7 @@ pub(crate) fn write_folder(dir: &Path, files: &SogFiles) -> Result<(), SceneErro
     }
     let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "sog".into());
     if let Some(parent) = dir.parent() {
+        crate::io::refuse_read_only_folder(parent).map_err(|e| SceneError::io(dir, e))?;
         crate::io::remove_stale_temps(if parent.as_os_str().is_empty() { Path::new(".") } else { parent });
     }
     let tmp = dir.with_file_name(format!(".{name}.tmp-{}", std::process::id()));

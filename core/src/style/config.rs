@@ -158,6 +158,12 @@ pub const SPLIT_MAX_FACTOR: usize = 8;
 /// overflows.
 pub const MAX_STEPS: u64 = 3_000_000;
 
+/// The style's texture scales a run takes (its height in pixels, `texture_scale`).
+pub const TEXTURE_SCALES: std::ops::RangeInclusive<u32> = 16..=4096;
+
+/// The working resolutions a run takes (the views' longer side in pixels, `resolution`).
+pub const RESOLUTIONS: std::ops::RangeInclusive<u32> = 16..=4096;
+
 /// λ_swd of the frame recipe ([`StyleConfig::frame_recipe`]).
 pub const FRAME_RECIPE_SLICED_DEPTH: f32 = 1.0;
 
@@ -350,11 +356,11 @@ impl StyleConfig {
         if !(0.0..=1.0).contains(&self.ratio_geo) {
             out.push(format!("ratio_geo must lie in [0, 1], found {}", self.ratio_geo));
         }
-        if !(16..=4096).contains(&self.texture_scale) {
-            out.push(format!("texture_scale must lie in 16..=4096 pixels, found {}", self.texture_scale));
+        if !TEXTURE_SCALES.contains(&self.texture_scale) {
+            out.push(format!("texture_scale must lie in {TEXTURE_SCALES:?} pixels, found {}", self.texture_scale));
         }
-        if !(16..=4096).contains(&self.resolution) {
-            out.push(format!("resolution must lie in 16..=4096 pixels, found {}", self.resolution));
+        if !RESOLUTIONS.contains(&self.resolution) {
+            out.push(format!("resolution must lie in {RESOLUTIONS:?} pixels, found {}", self.resolution));
         }
         let mc = self.matching;
         if mc.dims == 0 || mc.candidates == 0 || mc.reuse == 0 {

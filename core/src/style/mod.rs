@@ -31,7 +31,7 @@ pub mod tv;
 pub mod window;
 
 pub use color_transfer::ColorTransfer;
-pub use config::{DC_FLOOR, StyleConfig};
+pub use config::{DC_FLOOR, RESOLUTIONS, StyleConfig, TEXTURE_SCALES};
 pub use feature_mean::MeanSteps;
 pub use focus::Focus;
 pub use gcfm::{GcfmOutput, Matches, StyleFeatures};

@@ -21,8 +21,8 @@ pub struct DepthArgs {
     /// Depth Anything V2 checkpoint (else $GAST_DEPTH_MODEL or the caches; never downloaded here).
     #[arg(long)]
     pub depth_model: Option<PathBuf>,
-    /// Forward passes at 518×518 to time (the median is printed).
-    #[arg(long, default_value_t = 3)]
+    /// Forward passes at 518×518 to time, at least one (the median is printed).
+    #[arg(long, default_value_t = 3, value_parser = crate::views::at_least_one::<usize>)]
     pub reps: usize,
     /// Also print the wall time of each stage of one forward at 518×518 and
     /// one at the style's input size.
@@ -51,9 +51,9 @@ pub fn run_depth(args: DepthArgs) -> anyhow::Result<ExitCode> {
     let style = gast_core::session::StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
     println!("depth benchmark: style {}, {} threads", style_path.display(), rayon::current_num_threads());
     let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
-    let (model, cpu_forward) = time_style_depth(&style, args.depth_model.as_deref(), args.reps.max(1), args.stages)?;
+    let (model, cpu_forward) = time_style_depth(&style, args.depth_model.as_deref(), args.reps, args.stages)?;
     if let Some(ctx) = gpu {
-        time_gpu_depth(&ctx, model, &style, args.reps.max(1), cpu_forward)?;
+        time_gpu_depth(&ctx, model, &style, args.reps, cpu_forward)?;
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -30,8 +30,8 @@ pub struct RasterArgs {
     /// Image sizes (longer side, pixels, 16 to 8,192).
     #[arg(long, value_delimiter = ',', default_values_t = [256u32, 512], value_parser = crate::views::image_side())]
     pub sizes: Vec<u32>,
-    /// Orbit views per scene and size (each timed once after a warm-up).
-    #[arg(long, default_value_t = 8)]
+    /// Orbit views per scene and size, 1 to 3,600 (each timed once after a warm-up).
+    #[arg(long, default_value_t = 8, value_parser = crate::views::view_count::<usize>())]
     pub views: usize,
 }
 

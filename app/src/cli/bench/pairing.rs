@@ -21,24 +21,25 @@ use crate::views::{Framing, ViewArgs, load_scene, views_for};
 pub struct PairingArgs {
     #[command(flatten)]
     pub data: super::BenchData,
-    /// Working resolution (longer side, pixels): the render VGG sees is half of it.
-    #[arg(long, default_value_t = 512)]
+    /// Working resolution (longer side, pixels, 16 to 4,096): the render VGG sees is half of it.
+    #[arg(long, default_value_t = 512, value_parser = crate::views::pixels(gast_core::style::RESOLUTIONS))]
     pub resolution: u32,
-    /// Orbit views, each fitted to the object; one pairing problem drawn per view and repeat.
-    #[arg(long, default_value_t = 4)]
+    /// Orbit views, each fitted to the object; one pairing problem drawn per view and repeat (1 to 3,600).
+    #[arg(long, default_value_t = 4, value_parser = crate::views::view_count::<usize>())]
     pub views: usize,
-    /// Draws per view (each a fresh set of rendered and style positions).
-    #[arg(long, default_value_t = 3)]
+    /// Draws per view, at least one (each a fresh set of rendered and style positions).
+    #[arg(long, default_value_t = 3, value_parser = crate::views::at_least_one::<usize>)]
     pub draws: usize,
-    /// The style's texture scale (its height in pixels, as `gast stylize --texture-scale`).
-    #[arg(long, default_value_t = 256)]
+    /// The style's texture scale (its height in pixels, 16 to 4,096, as `gast stylize --texture-scale`).
+    #[arg(long, default_value_t = 256, value_parser = crate::views::pixels(gast_core::style::TEXTURE_SCALES))]
     pub texture_scale: u32,
     /// Pair by squared distance (λ_as alone) instead of by cosine (λ_asc on, the default recipe).
     #[arg(long)]
     pub squared: bool,
     /// Most rows of one least-cost block, as `gast stylize --assign-block` (the pairing is also
     /// timed in one block of every row, the way it was made before 2026-11-30, on the same draws).
-    #[arg(long, default_value_t = ASSIGN_BLOCK)]
+    #[arg(long, default_value_t = ASSIGN_BLOCK,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(16..=ASSIGN_MAX as u64))]
     pub assign_block: usize,
     /// Also write the medians to this JSON file (for `tools/gpu-check`).
     #[arg(long)]
@@ -57,7 +58,7 @@ pub fn run_pairing(args: PairingArgs) -> anyhow::Result<ExitCode> {
         &scene,
         &ViewArgs {
             cameras: None,
-            views: args.views.max(1),
+            views: args.views,
             size: args.resolution,
             fov: 50.0,
             framing: Framing::Object,
@@ -68,7 +69,7 @@ pub fn run_pairing(args: PairingArgs) -> anyhow::Result<ExitCode> {
         &style.rgb,
         style.height,
         style.width,
-        args.texture_scale.max(16) as usize,
+        args.texture_scale as usize,
         &gast_core::vision::relief_depth::ReliefDepth::default(),
         Default::default(),
     );
@@ -107,7 +108,7 @@ pub fn run_pairing(args: PairingArgs) -> anyhow::Result<ExitCode> {
         let object: Vec<bool> = render.alpha.iter().map(|&a| a >= 0.5).collect();
         let cells = feature_mask(&object, h, w, f.height, f.width);
         let covered: Vec<usize> = (0..n).filter(|&i| cells[i]).collect();
-        for d in 0..args.draws.max(1) {
+        for d in 0..args.draws {
             let (rows, targets) = draw_pairs_seeded((v * 1000 + d) as u64, covered.clone(), m);
             let x = gather_positions(&f.data, channels, n, &rows);
             let s = gather_positions(&style_f.data, channels, m, &targets);
@@ -126,7 +127,7 @@ pub fn run_pairing(args: PairingArgs) -> anyhow::Result<ExitCode> {
                 }
                 (costs, sigma)
             };
-            let (costs, sigma) = timed(args.assign_block.max(1), &mut parts);
+            let (costs, sigma) = timed(args.assign_block, &mut parts);
             let (one, best) = timed(r.max(1), &mut whole);
             let r_f = r.max(1) as f64;
             pair_cost.push(costs.total(&sigma) / r_f);

@@ -26,8 +26,8 @@ pub struct StepArgs {
     /// Working resolution (longer side, pixels).
     #[arg(long, default_value_t = 256)]
     pub resolution: u32,
-    /// Orbit views.
-    #[arg(long, default_value_t = 36)]
+    /// Orbit views (1 to 3,600).
+    #[arg(long, default_value_t = 36, value_parser = crate::views::view_count::<usize>())]
     pub views: usize,
     /// The scene's own cameras instead of an orbit (a camera file or folder as
     /// `gast stylize --cameras` takes: COLMAP sparse/0, poses_bounds.npy, ...),
@@ -45,8 +45,8 @@ pub struct StepArgs {
     #[arg(long)]
     pub full: bool,
     /// Run exactly this many steps of the default schedule and report their measured time
-    /// (overrides --geometry-steps and --full).
-    #[arg(long)]
+    /// (overrides --geometry-steps and --full), at least one.
+    #[arg(long, value_parser = crate::views::at_least_one::<u32>)]
     pub steps: Option<u32>,
     /// Where the steps run: auto (a hardware GPU when there is one, else the CPU), cpu, or gpu
     /// (any adapter, lavapipe included).

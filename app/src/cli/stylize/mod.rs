@@ -339,7 +339,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let preview_gpu = depth_gpu.cloned();
     // Everything that can fail fast is checked before the slow work (the depth
     // model's download, the run): the output folder, the cameras, the weights.
-    super::output_folder(&args.out)?;
+    super::output_folder(&args.out, "--out")?;
     let cameras = views_for(
         &scene,
         &ViewArgs {

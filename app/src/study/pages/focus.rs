@@ -582,7 +582,7 @@ fn comparison_page(out: &Path, run: &RunSummary, c: &Comparison) -> anyhow::Resu
     let (b, o) = (c.base, c.candidate);
     if !margins.is_empty() {
         let dir = out.join("charts");
-        std::fs::create_dir_all(&dir).with_context(|| format!("could not create {}", dir.display()))?;
+        gast_core::io::create_folder(&dir).with_context(|| format!("could not create {}", dir.display()))?;
         // One chart per scene when there are several: each has its own seed
         // floors, and 27 pairs overflow one legend.
         let mut scenes: Vec<&str> = Vec::new();

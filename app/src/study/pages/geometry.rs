@@ -26,7 +26,7 @@ pub fn read(dir: &Path) -> anyhow::Result<GeometryRun> {
 pub fn write(dir: &Path, run: &GeometryRun) -> anyhow::Result<(PathBuf, String)> {
     let json = serde_json::to_string_pretty(run)?;
     gast_core::io::write_bytes(&dir.join("results.json"), json.as_bytes())?;
-    std::fs::create_dir_all(dir.join("charts"))
+    gast_core::io::create_folder(dir.join("charts"))
         .with_context(|| format!("could not create {}", dir.join("charts").display()))?;
     let charts = write_charts(dir, run)?;
     let (text, verdict) = markdown(run, &charts);

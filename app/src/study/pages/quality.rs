@@ -39,7 +39,7 @@ impl Record {
 /// finished, [`write_sample`]); returns the index's path.
 pub fn write_report(out: &Path, run: &RunSummary, styles: &[(String, StyleImage)]) -> anyhow::Result<PathBuf> {
     for dir in ["charts", "renders", "styles"] {
-        std::fs::create_dir_all(out.join(dir))
+        gast_core::io::create_folder(out.join(dir))
             .with_context(|| format!("could not create {}", out.join(dir).display()))?;
     }
     write_text(&out.join("results.json"), &serde_json::to_string_pretty(run)?)?;
@@ -56,7 +56,7 @@ pub fn write_report(out: &Path, run: &RunSummary, styles: &[(String, StyleImage)
 /// `out/renders/<id>.png`.
 pub fn write_sample(out: &Path, r: &Record) -> anyhow::Result<()> {
     let dir = out.join("renders");
-    std::fs::create_dir_all(&dir).with_context(|| format!("could not create {}", dir.display()))?;
+    gast_core::io::create_folder(&dir).with_context(|| format!("could not create {}", dir.display()))?;
     let (w, h, rgb) = &r.sample;
     Ok(write_png_rgb(&dir.join(format!("{}.png", r.id)), *w, *h, rgb)?)
 }
@@ -64,7 +64,7 @@ pub fn write_sample(out: &Path, r: &Record) -> anyhow::Result<()> {
 /// Writes `results.csv`, the charts and `index.md` of `run` under `out`
 /// (also used to redraw an earlier run's report from its `results.json`).
 pub fn rewrite_report(out: &Path, run: &RunSummary) -> anyhow::Result<PathBuf> {
-    std::fs::create_dir_all(out.join("charts"))
+    gast_core::io::create_folder(out.join("charts"))
         .with_context(|| format!("could not create {}", out.join("charts").display()))?;
     write_text(&out.join("results.csv"), &csv(&run.trials))?;
     let charts = write_charts(out, &run.rows, &run.trials)?;
