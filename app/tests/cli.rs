@@ -477,6 +477,8 @@ fn view_settings_out_of_range_are_refused_before_loading() {
         (&["bench", "viewport-live", "--scene", scene, "--reps", "0"][..], "expected at least 1"),
         (&["bench", "viewport", scene, "--frames", "0"][..], "expected at least 1"),
         (&["bench", "viewport", scene, "--width", "0"][..], "16..=8192"),
+        (&["convert", scene, "/nonexistent/out.spz", "--spz-version", "7"][..], "3..=4"),
+        (&["stylize", scene, "/nonexistent/style.jpg", "--sog-palette", "0"][..], "1..=65536"),
     ] {
         let o = gast(args);
         let err = stderr(&o);

@@ -14,20 +14,27 @@ use gast_core::scene::{SaveOptions, SceneFormat, Strength};
 use crate::progress;
 use crate::views::load_scene;
 
-/// Options of the lossy writers, shared by `convert` and `stylize`.
+/// Options of the lossy writers, shared by `convert` and `stylize`; refused
+/// outside their ranges as they are parsed, before a run (the writer checks
+/// them again, after the run).
 #[derive(Args, Debug, Clone)]
 pub struct SaveArgs {
     /// Version of a .spz output: 3 (gzip) or 4 (zstd).
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = SaveOptions::default().spz_version,
+          value_parser = clap::builder::RangedU64ValueParser::<u32>::new().range(
+              u64::from(*gast_core::scene::SPZ_VERSIONS.start())..=u64::from(*gast_core::scene::SPZ_VERSIONS.end())))]
     pub spz_version: u32,
     /// Largest palette of a SOG output's higher SH bands (k-means beyond it), 1 to 65536.
-    #[arg(long, default_value_t = 65_536)]
+    #[arg(long, default_value_t = SaveOptions::default().sog_palette,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(
+              *gast_core::scene::SOG_PALETTES.start() as u64..=*gast_core::scene::SOG_PALETTES.end() as u64))]
     pub sog_palette: usize,
 }
 
 impl Default for SaveArgs {
     fn default() -> Self {
-        Self { spz_version: 4, sog_palette: 65_536 }
+        let o = SaveOptions::default();
+        Self { spz_version: o.spz_version, sog_palette: o.sog_palette }
     }
 }
 

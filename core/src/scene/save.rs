@@ -64,18 +64,24 @@ impl SceneFormat {
     }
 }
 
+/// The `.spz` versions written: 3 (gzip) and 4 (zstd streams, the current one).
+pub const SPZ_VERSIONS: std::ops::RangeInclusive<u32> = 3..=4;
+
+/// The sizes a SOG palette of the higher SH bands may take, in entries.
+pub const SOG_PALETTES: std::ops::RangeInclusive<usize> = 1..=65_536;
+
 /// Choices of the lossy writers.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct SaveOptions {
-    /// `.spz` version: 3 (gzip) or 4 (zstd streams, the current one).
+    /// `.spz` version, one of [`SPZ_VERSIONS`].
     pub spz_version: u32,
-    /// Largest SOG palette for the higher SH bands (1 to 65536 entries).
+    /// Largest SOG palette for the higher SH bands, in [`SOG_PALETTES`].
     pub sog_palette: usize,
 }
 
 impl Default for SaveOptions {
     fn default() -> Self {
-        Self { spz_version: 4, sog_palette: 65_536 }
+        Self { spz_version: *SPZ_VERSIONS.end(), sog_palette: *SOG_PALETTES.end() }
     }
 }
 
@@ -95,10 +101,10 @@ pub fn save_with_progress(
     let path = path.as_ref();
     let format = SceneFormat::from_output(path)?;
     validate(path, g)?;
-    if !matches!(opts.spz_version, 3 | 4) {
+    if !SPZ_VERSIONS.contains(&opts.spz_version) {
         return Err(SceneError::format(path, "spz version", "3 or 4", opts.spz_version.to_string()));
     }
-    if !(1..=65_536).contains(&opts.sog_palette) {
+    if !SOG_PALETTES.contains(&opts.sog_palette) {
         return Err(SceneError::format(path, "SOG palette size", "1 to 65536 entries", opts.sog_palette.to_string()));
     }
     let target = match &format {
