@@ -313,11 +313,17 @@ pub fn finite_range(values: &[f32]) -> (f32, f32) {
 mod tests {
     use super::*;
 
+    /// An empty scratch folder of this test process, `gast-io-NAME-PID`.
+    fn scratch(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("gast-io-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("a scratch folder");
+        dir
+    }
+
     #[test]
     fn stale_temporaries_of_dead_processes_are_removed_and_live_ones_kept() {
-        let dir = std::env::temp_dir().join(format!("gast-io-stale-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("a temporary file");
+        let dir = scratch("stale");
         // Beyond Linux's largest pid (2^22): no such process can run.
         let dead_file = dir.join(".scene.ply.tmp-99999999");
         let dead_dir = dir.join(".out-sog.tmp-99999998");
@@ -340,8 +346,7 @@ mod tests {
 
     #[test]
     fn atomic_write_keeps_old_file_on_error() {
-        let dir = std::env::temp_dir().join(format!("gast-io-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("temp dir");
+        let dir = scratch("keep");
         let path = dir.join("keep.txt");
         std::fs::write(&path, b"old contents").expect("seed file");
         let err = atomic_write(&path, |w| {
@@ -360,8 +365,7 @@ mod tests {
 
     #[test]
     fn a_read_only_file_is_refused_not_replaced() {
-        let dir = std::env::temp_dir().join(format!("gast-io-ro-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("temp dir");
+        let dir = scratch("ro");
         let path = dir.join("original.bin");
         std::fs::write(&path, b"original").expect("seed file");
         let mut perms = std::fs::metadata(&path).expect("stat").permissions();
@@ -376,8 +380,7 @@ mod tests {
 
     #[test]
     fn a_read_only_folder_is_not_written_in() {
-        let dir = std::env::temp_dir().join(format!("gast-io-ro-dir-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("temp dir");
+        let dir = scratch("ro-dir");
         let set_readonly = |on: bool| {
             let mut perms = std::fs::metadata(&dir).expect("stat").permissions();
             #[allow(clippy::permissions_set_readonly_false)]
@@ -401,7 +404,7 @@ mod tests {
 
     #[test]
     fn png_and_exr_round_trip() {
-        let dir = std::env::temp_dir().join(format!("gast-io-img-{}", std::process::id()));
+        let dir = scratch("img");
         let (w, h) = (5u32, 3u32);
         let rgb: Vec<f32> = (0..w * h * 3).map(|i| i as f32 / 45.0).collect();
         write_png_rgb(&dir.join("a.png"), w, h, &rgb).expect("png");
