@@ -542,6 +542,52 @@ fn fit_names_a_missing_images_folder_and_an_empty_training_set() {
     std::fs::remove_dir_all(&out).ok();
 }
 
+/// A `--depth-model` the user named that cannot be used (missing, or not a
+/// checkpoint) stops the run before it starts, naming the file and why; it
+/// went ahead on the built-in relief estimate with a warning.
+#[test]
+fn a_named_depth_model_that_cannot_be_used_is_an_error() {
+    let (Some(scene), Some(style), Some(weights)) = (
+        shared_file("data/scenes/guitar.compressed.ply"),
+        shared_file("data/styles/wave.jpg"),
+        shared_file("data/weights/vgg19-conv3.safetensors"),
+    ) else {
+        return;
+    };
+    let out = temp("depth-model");
+    std::fs::create_dir_all(&out).expect("dir");
+    let broken = out.join("broken.safetensors");
+    std::fs::write(&broken, b"not a checkpoint").expect("write");
+    for (model, said) in [
+        (out.join("missing.safetensors"), "no Depth Anything V2 checkpoint found".to_owned()),
+        (broken.clone(), format!("could not use it: {}: expected a safetensors file", broken.display())),
+    ] {
+        let run = out.join("run");
+        let o = gast(&[
+            "stylize",
+            s(&scene),
+            s(&style),
+            "--weights",
+            s(&weights),
+            "--out",
+            s(&run),
+            "--resolution",
+            "32",
+            "--depth-model",
+            s(&model),
+        ]);
+        assert!(!o.status.success(), "{}", model.display());
+        let err = stderr(&o);
+        assert!(
+            err.contains(&format!("--depth-model {}: expected a Depth Anything V2 checkpoint", model.display())),
+            "{err}"
+        );
+        assert!(err.contains(&said), "{err}");
+        assert!(!err.contains("colour matching"), "the run started: {err}");
+    }
+    std::fs::remove_dir_all(&out).ok();
+}
+
 /// `gast fit --preview` into the folder the photos are read from is refused
 /// before the fit: its `view0_truth.png`, … and `sheet.png` mixed with the
 /// photos (and an LLFF folder pairs its images with the poses by count).
