@@ -145,6 +145,29 @@ fn a_bad_configuration_fails_with_a_message() {
     assert!(handle.stop_and_join().is_none());
 }
 
+/// Cameras that see nothing of the scene stop the run before it starts,
+/// saying so: Gaussians too faint to draw, and Gaussians seen only faintly
+/// (no pixel half opaque, nothing to match colours on).
+#[test]
+fn cameras_that_do_not_see_the_scene_fail_with_a_message() {
+    let Some(full) = inputs(StyleConfig::default()) else { return };
+    let mut unseen = full.scene.clone();
+    unseen.opacity_logits.iter_mut().for_each(|o| *o = -20.0); // below the rasterizer's 1/255
+    let mut faint =
+        gast_core::session::subset(&full.scene, &(0..full.scene.len() as u32).step_by(2000).collect::<Vec<_>>());
+    faint.opacity_logits.iter_mut().for_each(|o| *o = -4.0); // alpha 0.018 each
+    for (scene, said) in [
+        (unseen, "Gaussians is visible from the 6 optimisation cameras"),
+        (faint, "the scene covers no pixel of the 6 optimisation views"),
+    ] {
+        let err = gast_core::session::Session::prepare(SessionInputs { scene, ..full.clone() }, &mut |_| {})
+            .err()
+            .unwrap_or_else(|| panic!("a run on nothing went ahead: {said}"))
+            .to_string();
+        assert!(err.contains(said), "{err}");
+    }
+}
+
 /// The GPU engine (on lavapipe in CI) against the CPU engine: the same
 /// session, the same views, step by step. The first step starts from the same
 /// Gaussians, so its losses agree to float rounding; the second follows one

@@ -217,6 +217,23 @@ impl Session {
         let survey = survey_views(&scene, &work_cams, &opts);
         let pixels: usize = work_cams.iter().map(|c| c.width as usize * c.height as usize).sum();
         let coverage = survey.covered_rgb.len() as f32 / 3.0 / pixels.max(1) as f32;
+        let keep: Vec<u32> = survey.seen.iter().enumerate().filter(|(_, s)| **s).map(|(i, _)| i as u32).collect();
+        if keep.is_empty() {
+            return Err(SessionError::Input(format!(
+                "none of the {} Gaussians is visible from the {} optimisation cameras",
+                scene.len(),
+                work_cams.len()
+            )));
+        }
+        if survey.covered_rgb.is_empty() {
+            // Nothing to match colours on or to stylize: Gaussians seen only
+            // faintly, none making a pixel at least half opaque.
+            return Err(SessionError::Input(format!(
+                "the scene covers no pixel of the {} optimisation views (none is at least half opaque): \
+                 expected cameras that look at this scene",
+                work_cams.len()
+            )));
+        }
         let config = config.resolved(coverage);
         let ct = ColorTransfer::fit(&survey.covered_rgb, &style.to_f32());
         let mut full = scene;
@@ -224,14 +241,6 @@ impl Session {
         on_event(Event::Stage { name: "colour matching".into(), seconds: t.elapsed().as_secs_f64() });
 
         let t = Instant::now();
-        let keep: Vec<u32> = survey.seen.iter().enumerate().filter(|(_, s)| **s).map(|(i, _)| i as u32).collect();
-        if keep.is_empty() {
-            return Err(SessionError::Input(format!(
-                "none of the {} Gaussians is visible from the {} optimisation cameras",
-                full.len(),
-                work_cams.len()
-            )));
-        }
         let g_ref = subset(&full, &keep);
         on_event(Event::Culled { total: full.len(), kept: keep.len() });
         on_event(Event::Stage { name: "visibility culling".into(), seconds: t.elapsed().as_secs_f64() });
