@@ -43,7 +43,8 @@ pub fn source_for(
     }
     let resolved = match image.as_deref().map(DepthImage::from_file) {
         Some(Err(e)) => {
-            (StyleDepthSource::Heuristic, Some(format!("{e}; using the built-in relief estimate (luminance detail)")))
+            let why = format!("depth image unreadable; using the built-in relief estimate (luminance detail): {e}");
+            (StyleDepthSource::Heuristic, Some(why))
         }
         read => {
             let cache = Stage1Cache::from_env();

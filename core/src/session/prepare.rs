@@ -101,7 +101,7 @@ impl StyleDepthSource {
                     Err(e) => plain(
                         Self::Heuristic,
                         Some(&format!(
-                            "learned style depth unavailable ({e}); using the built-in relief estimate (luminance detail)"
+                            "learned style depth unavailable; using the built-in relief estimate (luminance detail): {e}"
                         )),
                     ),
                 }
