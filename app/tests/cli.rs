@@ -542,6 +542,33 @@ fn fit_names_a_missing_images_folder_and_an_empty_training_set() {
     std::fs::remove_dir_all(&out).ok();
 }
 
+/// A benchmark's default input missing from the shared data folder is named
+/// with the folder it was looked for in and how to point elsewhere (it said
+/// only "../shared/…: No such file or directory" from another folder).
+#[test]
+fn bench_defaults_say_where_the_shared_data_was_looked_for() {
+    for args in [
+        &["bench", "step", "--steps", "1", "--device", "cpu"][..],
+        &["bench", "pairing"],
+        &["bench", "depth"],
+        &["bench", "raster"],
+        &["bench", "viewport-live"],
+    ] {
+        let o = Command::new(env!("CARGO_BIN_EXE_gast"))
+            .args(args)
+            .env("GAST_SHARED", "/nonexistent/shared")
+            .output()
+            .expect("run gast");
+        assert!(!o.status.success(), "{args:?}");
+        let err = stderr(&o);
+        assert!(err.contains("/nonexistent/shared/data/"), "{args:?}: {err}");
+        assert!(
+            err.contains("the default input, found no such file") && err.contains("set GAST_SHARED"),
+            "{args:?}: {err}"
+        );
+    }
+}
+
 /// A `--depth-model` the user named that cannot be used (missing, or not a
 /// checkpoint) stops the run before it starts, naming the file and why; it
 /// went ahead on the built-in relief estimate with a warning.

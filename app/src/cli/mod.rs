@@ -165,7 +165,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Bench(BenchCommand::Pairing(args)) => return bench::run_pairing(args),
         Command::Bench(BenchCommand::Quality(args)) => return quality::run(args),
         Command::Bench(BenchCommand::ViewportLive { data, reps }) => {
-            let (scene, style, weights) = data.paths();
+            let (scene, style, weights) = data.paths()?;
             let g = load_scene(&scene)?;
             let style = gast_core::session::StyleImage::open(&style).map_err(anyhow::Error::msg)?;
             let vgg = std::sync::Arc::new(stylize::load_vgg(weights.as_deref())?);

@@ -9,7 +9,7 @@ use clap::Args;
 use gast_core::gpu::{DeviceChoice, GpuContext, GpuDepthNet};
 use gast_core::vision::depth::{DepthAnything, INPUT_SIZE, input_size};
 
-use super::{median, shared_dir};
+use super::median;
 use std::path::PathBuf;
 
 /// Arguments of `gast bench depth`.
@@ -47,7 +47,10 @@ fn cpu_seconds() -> f64 {
 
 /// The style depth network's time per style, and its forward at 518×518.
 pub fn run_depth(args: DepthArgs) -> anyhow::Result<ExitCode> {
-    let style_path = args.style.clone().unwrap_or_else(|| shared_dir().join("data/styles/wave.jpg"));
+    let style_path = match &args.style {
+        Some(p) => p.clone(),
+        None => super::shared_input("data/styles/wave.jpg", "--style")?,
+    };
     let style = gast_core::session::StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
     println!("depth benchmark: style {}, {} threads", style_path.display(), rayon::current_num_threads());
     let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;

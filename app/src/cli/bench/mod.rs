@@ -53,12 +53,32 @@ pub struct BenchData {
 impl BenchData {
     /// The scene's and the style's paths and the weights' (when given or
     /// in the shared data folder), the shared data's guitar and wave by default.
-    pub fn paths(&self) -> (PathBuf, PathBuf, Option<PathBuf>) {
-        let shared = shared_dir();
-        let scene = self.scene.clone().unwrap_or_else(|| shared.join("data/scenes/guitar.compressed.ply"));
-        let style = self.style.clone().unwrap_or_else(|| shared.join("data/styles/wave.jpg"));
-        (scene, style, self.weights.clone().or_else(shared_weights))
+    pub fn paths(&self) -> anyhow::Result<(PathBuf, PathBuf, Option<PathBuf>)> {
+        let scene = match &self.scene {
+            Some(p) => p.clone(),
+            None => shared_input("data/scenes/guitar.compressed.ply", "--scene")?,
+        };
+        let style = match &self.style {
+            Some(p) => p.clone(),
+            None => shared_input("data/styles/wave.jpg", "--style")?,
+        };
+        Ok((scene, style, self.weights.clone().or_else(shared_weights)))
     }
+}
+
+/// `rel` in the shared data folder, a benchmark's default input: an error
+/// that says where it was looked for and how to point elsewhere (`flag`, or
+/// `$GAST_SHARED`) when it is not there.
+pub(super) fn shared_input(rel: &str, flag: &str) -> anyhow::Result<PathBuf> {
+    let dir = shared_dir();
+    let path = dir.join(rel);
+    anyhow::ensure!(
+        path.exists(),
+        "{}: expected the shared data's {rel}, the default input, found no such file; give {flag}, or set \
+         GAST_SHARED to the shared data folder (without it, ../shared from the current folder)",
+        path.display()
+    );
+    Ok(path)
 }
 
 /// The shared data's small VGG file, when the checkout has one beside it.
@@ -111,8 +131,10 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// Times forward and backward on every scene and size, then the dense reference.
 pub fn run_raster(args: RasterArgs) -> anyhow::Result<ExitCode> {
     let scenes = if args.scenes.is_empty() {
-        let d = shared_dir().join("data/scenes");
-        vec![d.join("playbot-sog"), d.join("guitar.compressed.ply")]
+        vec![
+            shared_input("data/scenes/playbot-sog", "scenes as arguments")?,
+            shared_input("data/scenes/guitar.compressed.ply", "scenes as arguments")?,
+        ]
     } else {
         args.scenes.clone()
     };

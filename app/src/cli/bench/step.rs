@@ -210,7 +210,7 @@ pub(super) struct StepInputs {
 /// VGG file by default), after resetting the peak-memory mark, makes the
 /// orbit views and prints the benchmark's first line.
 pub(super) fn step_inputs(args: &StepArgs) -> anyhow::Result<StepInputs> {
-    let (scene_path, style_path, weights) = args.data.paths();
+    let (scene_path, style_path, weights) = args.data.paths()?;
     reset_peak_memory();
     let scene = load_scene(&scene_path)?;
     let style = gast_core::session::StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
