@@ -61,6 +61,10 @@ impl WeightsLocations {
     /// The first weights file already on disk, without downloading.
     pub fn find(&self) -> Result<PathBuf, WeightsError> {
         if let Some(p) = &self.explicit {
+            if p.is_dir() {
+                let expected = "a VGG weights file (.pth or .safetensors)";
+                return Err(WeightsError::format(p, expected, "a folder"));
+            }
             return if p.is_file() { Ok(p.clone()) } else { Err(WeightsError::NotFound { searched: vec![p.clone()] }) };
         }
         let first = file_name(&self.url);

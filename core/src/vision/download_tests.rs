@@ -214,6 +214,10 @@ fn lookup_order_and_explicit_paths() -> Result<(), Box<dyn std::error::Error>> {
     let err = loc.resolve(&mut |_, _| {}).err().map(|e| e.to_string()).unwrap_or_default();
     println!("explicit missing: {err}");
     assert!(err.contains("nope.pth") && err.contains("GAST_WEIGHTS"), "{err}");
+    // A folder named as the weights is said to be one.
+    loc.explicit = Some(hub.clone());
+    let err = loc.resolve(&mut |_, _| {}).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(err.ends_with("expected a VGG weights file (.pth or .safetensors), found a folder"), "{err}");
     loc.explicit = None;
     loc.cache_dir = None;
     loc.torch_hub_dir = None;
