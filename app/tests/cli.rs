@@ -16,6 +16,17 @@ fn temp(name: &str) -> PathBuf {
     d
 }
 
+/// Guitar, the style `style` (a file name under `styles/`) and the VGG
+/// weights from the shared data; `None` when one is absent (the test then
+/// returns, and `shared_file` has said which file it lacked).
+fn guitar_with(style: &str) -> Option<(PathBuf, PathBuf, PathBuf)> {
+    Some((
+        shared_file("data/scenes/guitar.compressed.ply")?,
+        shared_file(&format!("data/styles/{style}"))?,
+        shared_file("data/weights/vgg19-conv3.safetensors")?,
+    ))
+}
+
 fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8 path")
 }
@@ -94,13 +105,7 @@ fn check_golden_passes_on_the_shared_files_and_fails_on_others() {
 
 #[test]
 fn stylize_writes_a_scene_renders_and_a_report() {
-    let (Some(scene), Some(style), Some(weights)) = (
-        shared_file("data/scenes/guitar.compressed.ply"),
-        shared_file("data/styles/block2.jpg"),
-        shared_file("data/weights/vgg19-conv3.safetensors"),
-    ) else {
-        return;
-    };
+    let Some((scene, style, weights)) = guitar_with("block2.jpg") else { return };
     let out = temp("stylize");
     let o = gast(&[
         "stylize",
@@ -262,13 +267,7 @@ fn a_bad_camera_file_fails_before_the_depth_model_is_looked_for() {
 #[test]
 fn ctrl_c_stops_a_run_and_keeps_what_it_has() {
     use std::io::{BufRead, BufReader};
-    let (Some(scene), Some(style), Some(weights)) = (
-        shared_file("data/scenes/guitar.compressed.ply"),
-        shared_file("data/styles/block2.jpg"),
-        shared_file("data/weights/vgg19-conv3.safetensors"),
-    ) else {
-        return;
-    };
+    let Some((scene, style, weights)) = guitar_with("block2.jpg") else { return };
     let out = temp("ctrlc");
     let mut child = Command::new(env!("CARGO_BIN_EXE_gast"))
         .args([
@@ -574,13 +573,7 @@ fn bench_defaults_say_where_the_shared_data_was_looked_for() {
 /// went ahead on the built-in relief estimate with a warning.
 #[test]
 fn a_named_depth_model_that_cannot_be_used_is_an_error() {
-    let (Some(scene), Some(style), Some(weights)) = (
-        shared_file("data/scenes/guitar.compressed.ply"),
-        shared_file("data/styles/wave.jpg"),
-        shared_file("data/weights/vgg19-conv3.safetensors"),
-    ) else {
-        return;
-    };
+    let Some((scene, style, weights)) = guitar_with("wave.jpg") else { return };
     let out = temp("depth-model");
     std::fs::create_dir_all(&out).expect("dir");
     let broken = out.join("broken.safetensors");
