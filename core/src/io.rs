@@ -95,12 +95,13 @@ where
     F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 {
     let io_err = |source| OutputError::Io { path: path.to_path_buf(), source };
-    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty());
+    if let Some(parent) = parent {
         create_folder(parent).map_err(io_err)?;
-        remove_stale_temps(parent);
-    } else {
-        remove_stale_temps(Path::new("."));
     }
+    // Refused before anything in the folder is touched, stale temporaries included.
+    refuse_read_only(path).map_err(io_err)?;
+    remove_stale_temps(parent.unwrap_or(Path::new(".")));
     replace_with(path, write).map_err(io_err)
 }
 
@@ -381,6 +382,9 @@ mod tests {
     #[test]
     fn a_read_only_folder_is_not_written_in() {
         let dir = scratch("ro-dir");
+        // A dead process's temporary (pid beyond Linux's 2^22): a refused write sweeps nothing either.
+        let stale = dir.join(".old.bin.tmp-99999999");
+        std::fs::write(&stale, b"left by a killed run").expect("a stale temporary");
         let set_readonly = |on: bool| {
             let mut perms = std::fs::metadata(&dir).expect("stat").permissions();
             #[allow(clippy::permissions_set_readonly_false)]
@@ -396,7 +400,8 @@ mod tests {
         assert!(err.contains(&said), "{err}");
         let err = write_bytes(&dir.join("a/b/new.bin"), b"new").expect_err("a read-only folder").to_string();
         assert!(err.contains(&said), "{err}");
-        assert_eq!(std::fs::read_dir(&dir).expect("list").count(), 0, "something was written in the folder");
+        assert_eq!(std::fs::read_dir(&dir).expect("list").count(), 1, "something was written in the folder");
+        assert!(stale.exists(), "a refused write swept the read-only folder");
         set_readonly(false);
         write_bytes(&dir.join("a/new.bin"), b"new").expect("a writable folder");
         std::fs::remove_dir_all(&dir).ok();
