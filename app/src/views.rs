@@ -39,19 +39,41 @@ pub struct ViewArgs {
 /// The number of views a command generates: 1 to 3,600 (`--views`, `--turntable`).
 pub const VIEW_COUNTS: std::ops::RangeInclusive<u32> = 1..=3600;
 
+/// A whole-number flag of type `T` refused outside `range` (one of the
+/// core's ranges, of u32 or usize): every ranged flag of the command line is
+/// made here or by [`within`] ("N is not in A..=B").
+pub(crate) fn within_as<T, R>(range: std::ops::RangeInclusive<R>) -> clap::builder::RangedU64ValueParser<T>
+where
+    R: Copy + TryInto<u64>,
+    T: TryFrom<u64> + Clone + Send + Sync + 'static,
+    <T as TryFrom<u64>>::Error: std::error::Error + Send + Sync + 'static,
+{
+    let bound = |v: R| v.try_into().unwrap_or(u64::MAX);
+    clap::builder::RangedU64ValueParser::new().range(bound(*range.start())..=bound(*range.end()))
+}
+
+/// [`within_as`] for a flag of the range's own type.
+pub(crate) fn within<T>(range: std::ops::RangeInclusive<T>) -> clap::builder::RangedU64ValueParser<T>
+where
+    T: Copy + TryInto<u64> + TryFrom<u64> + Send + Sync + 'static,
+    <T as TryFrom<u64>>::Error: std::error::Error + Send + Sync + 'static,
+{
+    within_as(range)
+}
+
 /// A `--views` or `--turntable` count, refused outside [`VIEW_COUNTS`].
 pub(crate) fn view_count<T>() -> clap::builder::RangedU64ValueParser<T>
 where
     T: TryFrom<u64> + Clone + Send + Sync + 'static,
     <T as TryFrom<u64>>::Error: std::error::Error + Send + Sync + 'static,
 {
-    clap::builder::RangedU64ValueParser::new().range(u64::from(*VIEW_COUNTS.start())..=u64::from(*VIEW_COUNTS.end()))
+    within_as(VIEW_COUNTS)
 }
 
 /// An image's longer side in pixels (`--size`, `--resolution`, `--sizes`),
 /// refused outside [`gast_core::camera::IMAGE_SIDES`].
 pub(crate) fn image_side() -> clap::builder::RangedU64ValueParser<u32> {
-    pixels(gast_core::camera::IMAGE_SIDES)
+    within(gast_core::camera::IMAGE_SIDES)
 }
 
 /// A count that must be at least one (`--reps`, `--draws`, `--frames`,
@@ -63,11 +85,6 @@ where
 {
     let v: T = s.parse().map_err(|e| format!("expected a whole number of at least 1, found {s:?}: {e}"))?;
     if v >= T::from(1) { Ok(v) } else { Err(format!("expected at least 1, found {s}")) }
-}
-
-/// A value in pixels refused outside `range` (`--texture-scale`, a run's `--resolution`).
-pub(crate) fn pixels(range: std::ops::RangeInclusive<u32>) -> clap::builder::RangedU64ValueParser<u32> {
-    clap::builder::RangedU64ValueParser::new().range(u64::from(*range.start())..=u64::from(*range.end()))
 }
 
 /// A colour channel from 0 to 1 (`--background r,g,b`).

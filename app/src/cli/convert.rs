@@ -21,13 +21,11 @@ use crate::views::load_scene;
 pub struct SaveArgs {
     /// Version of a .spz output: 3 (gzip) or 4 (zstd).
     #[arg(long, default_value_t = SaveOptions::default().spz_version,
-          value_parser = clap::builder::RangedU64ValueParser::<u32>::new().range(
-              u64::from(*gast_core::scene::SPZ_VERSIONS.start())..=u64::from(*gast_core::scene::SPZ_VERSIONS.end())))]
+          value_parser = crate::views::within(gast_core::scene::SPZ_VERSIONS))]
     pub spz_version: u32,
     /// Largest palette of a SOG output's higher SH bands (k-means beyond it), 1 to 65536.
     #[arg(long, default_value_t = SaveOptions::default().sog_palette,
-          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(
-              *gast_core::scene::SOG_PALETTES.start() as u64..=*gast_core::scene::SOG_PALETTES.end() as u64))]
+          value_parser = crate::views::within(gast_core::scene::SOG_PALETTES))]
     pub sog_palette: usize,
 }
 

@@ -43,7 +43,7 @@ pub struct FitArgs {
     #[arg(long, value_parser = crate::views::image_side())]
     pub resolution: Option<u32>,
     /// Initial number of Gaussians (1 to 20,000,000).
-    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(initial_gaussians()))]
+    #[arg(long, value_parser = crate::views::within(gast_core::fit::INITIAL_GAUSSIANS))]
     pub gaussians: Option<usize>,
     /// SH degree of the result (0 to 3).
     #[arg(long, value_parser = clap::value_parser!(u32).range(0..=3))]
@@ -67,12 +67,6 @@ pub struct FitArgs {
     /// Write a few renders beside their ground truth into this folder.
     #[arg(long)]
     pub preview: Option<PathBuf>,
-}
-
-/// `--gaussians`' range, [`gast_core::fit::INITIAL_GAUSSIANS`], as clap takes it.
-fn initial_gaussians() -> std::ops::RangeInclusive<u64> {
-    let r = gast_core::fit::INITIAL_GAUSSIANS;
-    *r.start() as u64..=*r.end() as u64
 }
 
 impl FitArgs {

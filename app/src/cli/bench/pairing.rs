@@ -22,7 +22,7 @@ pub struct PairingArgs {
     #[command(flatten)]
     pub data: super::BenchData,
     /// Working resolution (longer side, pixels, 16 to 4,096): the render VGG sees is half of it.
-    #[arg(long, default_value_t = 512, value_parser = crate::views::pixels(gast_core::style::RESOLUTIONS))]
+    #[arg(long, default_value_t = 512, value_parser = crate::views::within(gast_core::style::RESOLUTIONS))]
     pub resolution: u32,
     /// Orbit views, each fitted to the object; one pairing problem drawn per view and repeat (1 to 3,600).
     #[arg(long, default_value_t = 4, value_parser = crate::views::view_count::<usize>())]
@@ -31,15 +31,14 @@ pub struct PairingArgs {
     #[arg(long, default_value_t = 3, value_parser = crate::views::at_least_one::<usize>)]
     pub draws: usize,
     /// The style's texture scale (its height in pixels, 16 to 4,096, as `gast stylize --texture-scale`).
-    #[arg(long, default_value_t = 256, value_parser = crate::views::pixels(gast_core::style::TEXTURE_SCALES))]
+    #[arg(long, default_value_t = 256, value_parser = crate::views::within(gast_core::style::TEXTURE_SCALES))]
     pub texture_scale: u32,
     /// Pair by squared distance (λ_as alone) instead of by cosine (λ_asc on, the default recipe).
     #[arg(long)]
     pub squared: bool,
     /// Most rows of one least-cost block, as `gast stylize --assign-block` (the pairing is also
     /// timed in one block of every row, the way it was made before 2026-11-30, on the same draws).
-    #[arg(long, default_value_t = ASSIGN_BLOCK,
-          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(16..=ASSIGN_MAX as u64))]
+    #[arg(long, default_value_t = ASSIGN_BLOCK, value_parser = crate::views::within(16..=ASSIGN_MAX))]
     pub assign_block: usize,
     /// Also write the medians to this JSON file (for `tools/gpu-check`).
     #[arg(long)]
