@@ -39,6 +39,10 @@ pub struct ResolvedDepth {
     pub warning: Option<String>,
     /// The Stage-1 cache file the learned depth was read from, when it was.
     pub cached: Option<PathBuf>,
+    /// Why the learned network could not be used, when the heuristic stands
+    /// in for it (the reason inside `warning`): `gast stylize` refuses a
+    /// checkpoint named on its command line that fails so.
+    pub learned_failure: Option<String>,
 }
 
 impl StyleDepthSource {
@@ -75,6 +79,7 @@ impl StyleDepthSource {
             source,
             warning: warning.map(str::to_string),
             cached: None,
+            learned_failure: None,
         };
         match provider {
             DepthProvider::Heuristic => plain(Self::Heuristic, None),
@@ -97,13 +102,17 @@ impl StyleDepthSource {
                             CacheOutcome::Hit(p) => Some(p),
                             CacheOutcome::Computed => None,
                         },
+                        learned_failure: None,
                     },
-                    Err(e) => plain(
-                        Self::Heuristic,
-                        Some(&format!(
-                            "learned style depth unavailable; using the built-in relief estimate (luminance detail): {e}"
-                        )),
-                    ),
+                    Err(e) => ResolvedDepth {
+                        learned_failure: Some(e.to_string()),
+                        ..plain(
+                            Self::Heuristic,
+                            Some(&format!(
+                                "learned style depth unavailable; using the built-in relief estimate (luminance detail): {e}"
+                            )),
+                        )
+                    },
                 }
             }
         }

@@ -66,15 +66,8 @@ pub fn resolve_style_depth(
     );
     pb.finish_and_clear();
     // A checkpoint the user named that cannot be used is an error, not the
-    // built-in estimate with a warning: its reason, found again (a missing or
-    // broken file fails at once), before the run.
-    if let (Some(m), DepthProvider::Learned, StyleDepthSource::Heuristic) =
-        (model, config.depth_provider, &resolved.source)
-    {
-        let why = gast_core::vision::depth::resolve_depth_model(Some(m), &mut |_, _| {})
-            .and_then(|path| gast_core::vision::depth::DepthAnything::load_path(&path).map(drop))
-            .err()
-            .map_or_else(|| resolved.warning.clone().unwrap_or_default(), |e| e.to_string());
+    // built-in estimate with a warning, before the run.
+    if let (Some(m), Some(why)) = (model, &resolved.learned_failure) {
         anyhow::bail!(
             "--depth-model {}: expected a Depth Anything V2 checkpoint (a folder with model.safetensors and \
              config.json, or the file), could not use it: {why}",
