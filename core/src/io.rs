@@ -95,13 +95,9 @@ where
     F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 {
     let io_err = |source| OutputError::Io { path: path.to_path_buf(), source };
-    let parent = path.parent().filter(|p| !p.as_os_str().is_empty());
-    if let Some(parent) = parent {
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
         create_folder(parent).map_err(io_err)?;
     }
-    // Refused before anything in the folder is touched, stale temporaries included.
-    refuse_read_only(path).map_err(io_err)?;
-    remove_stale_temps(parent.unwrap_or(Path::new(".")));
     replace_with(path, write).map_err(io_err)
 }
 
@@ -161,11 +157,14 @@ pub fn create_folder(dir: impl AsRef<Path>) -> std::io::Result<()> {
 /// whose permissions make it read-only is refused, not replaced: the rename
 /// would pass over the protection an in-place write meets (as root, or in a
 /// writable folder), and a protected file is usually someone's original.
+/// The folder's stale temporaries ([`remove_stale_temps`]) are swept only
+/// once the write is allowed.
 pub(crate) fn replace_with<F>(path: &Path, write: F) -> std::io::Result<()>
 where
     F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 {
     refuse_read_only(path)?;
+    remove_stale_temps(path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")));
     let tmp = temp_path(path);
     let result = (|| {
         let file = File::create(&tmp)?;

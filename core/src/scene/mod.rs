@@ -264,12 +264,6 @@ pub(crate) fn atomic_write(
         let e = std::io::Error::new(std::io::ErrorKind::InvalidInput, "no file name");
         return Err(SceneError::io(path, e));
     }
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    crate::io::refuse_read_only(path).map_err(|e| SceneError::io(path, e))?;
-    crate::io::remove_stale_temps(dir);
     crate::io::replace_with(path, write).map_err(|e| SceneError::io(path, e))
 }
 
