@@ -26,6 +26,14 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// Makes `path` (a file or a folder) read-only, or writable again.
+fn set_readonly(path: &Path, on: bool) {
+    let mut perms = std::fs::metadata(path).expect("stat").permissions();
+    #[allow(clippy::permissions_set_readonly_false)]
+    perms.set_readonly(on);
+    std::fs::set_permissions(path, perms).expect("chmod");
+}
+
 fn listing(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir)
         .expect("list")
@@ -128,9 +136,7 @@ fn the_input_and_read_only_files_are_not_replaced() {
     let o = gast(&["convert", s(&original), s(&locked)]);
     assert!(o.status.success(), "{}", stderr(&o));
     let kept = std::fs::read(&locked).expect("read");
-    let mut perms = std::fs::metadata(&locked).expect("stat").permissions();
-    perms.set_readonly(true);
-    std::fs::set_permissions(&locked, perms).expect("chmod");
+    set_readonly(&locked, true);
     let o = gast(&["convert", s(&original), s(&locked)]);
     assert!(!o.status.success());
     assert!(
@@ -145,9 +151,8 @@ fn the_input_and_read_only_files_are_not_replaced() {
     let o = gast(&["convert", s(&original), s(&sog)]);
     assert!(o.status.success(), "{}", stderr(&o));
     let texture = sog.join("quats.webp");
-    let mut perms = std::fs::metadata(&texture).expect("a SOG folder holds quats.webp").permissions();
-    perms.set_readonly(true);
-    std::fs::set_permissions(&texture, perms).expect("chmod");
+    assert!(texture.is_file(), "a SOG folder holds quats.webp");
+    set_readonly(&texture, true);
     let folder: Vec<_> = listing(&sog).iter().map(|f| (f.clone(), std::fs::read(sog.join(f)).expect("read"))).collect();
     let o = gast(&["convert", s(&locked), s(&sog)]);
     assert!(
@@ -173,9 +178,7 @@ fn nothing_is_written_in_a_read_only_folder() {
     let locked = out.join("locked");
     std::fs::create_dir_all(&locked).expect("dir");
     std::fs::copy(&scene, locked.join("g.compressed.ply")).expect("copy");
-    let mut perms = std::fs::metadata(&locked).expect("stat").permissions();
-    perms.set_readonly(true);
-    std::fs::set_permissions(&locked, perms).expect("chmod");
+    set_readonly(&locked, true);
     let input = locked.join("g.compressed.ply");
     let style = shared_file("data/styles/wave.jpg").expect("the shared styles beside the scenes");
     for target in [locked.join("g.ply"), locked.join("g.sog"), locked.join("sog/")] {
@@ -194,10 +197,7 @@ fn nothing_is_written_in_a_read_only_folder() {
         assert!(stderr(&o).contains("found a read-only one"), "{args:?}: {}", stderr(&o));
     }
     assert_eq!(listing(&locked), ["g.compressed.ply"], "a refused write added to the read-only folder");
-    let mut perms = std::fs::metadata(&locked).expect("stat").permissions();
-    #[allow(clippy::permissions_set_readonly_false)]
-    perms.set_readonly(false);
-    std::fs::set_permissions(&locked, perms).expect("chmod");
+    set_readonly(&locked, false);
     std::fs::remove_dir_all(&out).ok();
 }
 

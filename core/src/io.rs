@@ -313,6 +313,14 @@ pub fn finite_range(values: &[f32]) -> (f32, f32) {
 mod tests {
     use super::*;
 
+    /// Makes `path` (a file or a folder) read-only, or writable again.
+    fn set_readonly(path: &Path, on: bool) {
+        let mut perms = std::fs::metadata(path).expect("stat").permissions();
+        #[allow(clippy::permissions_set_readonly_false)]
+        perms.set_readonly(on);
+        std::fs::set_permissions(path, perms).expect("chmod");
+    }
+
     /// An empty scratch folder of this test process, `gast-io-NAME-PID`.
     fn scratch(name: &str) -> PathBuf {
         let dir = std::env::temp_dir().join(format!("gast-io-{name}-{}", std::process::id()));
@@ -368,9 +376,7 @@ mod tests {
         let dir = scratch("ro");
         let path = dir.join("original.bin");
         std::fs::write(&path, b"original").expect("seed file");
-        let mut perms = std::fs::metadata(&path).expect("stat").permissions();
-        perms.set_readonly(true);
-        std::fs::set_permissions(&path, perms).expect("chmod");
+        set_readonly(&path, true);
         let err = write_bytes(&path, b"new").expect_err("a read-only file is kept").to_string();
         assert!(err.contains("original.bin: expected a file that may be replaced, found a read-only one"), "{err}");
         assert_eq!(std::fs::read(&path).expect("read back"), b"original");
@@ -384,13 +390,7 @@ mod tests {
         // A dead process's temporary (pid beyond Linux's 2^22): a refused write sweeps nothing either.
         let stale = dir.join(".old.bin.tmp-99999999");
         std::fs::write(&stale, b"left by a killed run").expect("a stale temporary");
-        let set_readonly = |on: bool| {
-            let mut perms = std::fs::metadata(&dir).expect("stat").permissions();
-            #[allow(clippy::permissions_set_readonly_false)]
-            perms.set_readonly(on);
-            std::fs::set_permissions(&dir, perms).expect("chmod");
-        };
-        set_readonly(true);
+        set_readonly(&dir, true);
         let said = format!("expected a folder that may be written in, found a read-only one, {}", dir.display());
         let err = write_bytes(&dir.join("new.bin"), b"new").expect_err("a read-only folder").to_string();
         assert!(err.contains(&said), "{err}");
@@ -401,7 +401,7 @@ mod tests {
         assert!(err.contains(&said), "{err}");
         assert_eq!(std::fs::read_dir(&dir).expect("list").count(), 1, "something was written in the folder");
         assert!(stale.exists(), "a refused write swept the read-only folder");
-        set_readonly(false);
+        set_readonly(&dir, false);
         write_bytes(&dir.join("a/new.bin"), b"new").expect("a writable folder");
         std::fs::remove_dir_all(&dir).ok();
     }
