@@ -120,6 +120,29 @@ pub fn load_scene(path: &Path) -> anyhow::Result<Gaussians> {
     Ok(scene)
 }
 
+/// Refuses `out`, the folder the option `flag` names, when it holds the
+/// photos of the `cameras` read from `camera_source` (a COLMAP, NeRF or
+/// LLFF dataset, [`gast_core::fit::photo_folders`]): a view's `image000.png`
+/// would replace the photo of that name, and an LLFF folder pairs its images
+/// with the poses by count. A folder that does not exist yet holds none.
+pub fn refuse_photo_folder(
+    out: &Path,
+    flag: &str,
+    camera_source: Option<&Path>,
+    cameras: &[Camera],
+) -> anyhow::Result<()> {
+    let (Some(source), Ok(out_canonical)) = (camera_source, std::fs::canonicalize(out)) else { return Ok(()) };
+    let photos = gast_core::fit::photo_folders(source, cameras.iter().map(|c| c.name.as_str()));
+    anyhow::ensure!(
+        !photos.contains(&out_canonical),
+        "{flag} {}: expected a folder apart from the photos, found the folder of the photos of {} (the outputs \
+         would replace or mix with them; choose another folder)",
+        out.display(),
+        source.display()
+    );
+    Ok(())
+}
+
 /// The views of `args` for `scene`: the camera file (cropped to the object with
 /// `--crop`) rescaled to `--size`, or an orbit framed as `--framing` says.
 pub fn views_for(scene: &Gaussians, args: &ViewArgs) -> anyhow::Result<Vec<Camera>> {

@@ -208,6 +208,19 @@ fn bad_inputs_fail_with_the_file_named_and_keep_existing_outputs() {
     let o = gast(&["render", s(&bogus), "--out", s(&out)]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("style.jpg") && stderr(&o).contains("expected"), "{}", stderr(&o));
+    // Inputs that fail leave no output folder behind: the folder is made
+    // only once they are read.
+    let missing = out.join("missing.ply");
+    let fresh = out.join("fresh");
+    for args in [
+        &["render", s(&bogus), "--out", s(&fresh)][..],
+        &["render", s(&scene), "--out", s(&fresh), "--cameras", s(&missing)],
+        &["render", s(&scene), "--out", s(&fresh), "--turntable", "4", "--compare", s(&missing)],
+    ] {
+        let o = gast(args);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(!fresh.exists(), "{args:?} failed and left {}", fresh.display());
+    }
     // Invalid parameters are refused before any work.
     let o = gast(&["stylize", s(&scene), s(&bogus), "--ratio-geo", "1.5", "--out", s(&out)]);
     assert!(!o.status.success());
@@ -257,6 +270,7 @@ fn a_bad_camera_file_fails_before_the_depth_model_is_looked_for() {
     std::fs::write(&cams, b"{ not json").expect("write");
     if let Some(err) = stylize_fails_before_the_depth_model(&out, &["--cameras", s(&cams)]) {
         assert!(err.contains("cams.json"), "{err}");
+        assert!(!out.join("run").exists(), "a run that failed on its cameras left its output folder");
     }
     std::fs::remove_dir_all(&out).ok();
 }
@@ -629,7 +643,7 @@ fn fit_previews_are_not_written_among_the_photos() {
     let o = gast(&[&args[..], &["--preview", s(&photos)]].concat());
     assert!(!o.status.success());
     assert!(
-        stderr(&o).contains("expected a folder apart from the photos, found the folder the photos are read from"),
+        stderr(&o).contains("expected a folder apart from the photos, found a folder of the dataset's photos"),
         "{}",
         stderr(&o)
     );
@@ -640,5 +654,63 @@ fn fit_previews_are_not_written_among_the_photos() {
     let o = gast(&[&args[..], &["--preview", s(&copy.join("previews"))]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(copy.join("previews/sheet.png").is_file() && fitted.is_file());
+    std::fs::remove_dir_all(&copy).ok();
+}
+
+/// `gast render` and `gast stylize` with a dataset's cameras refuse an
+/// output folder holding its photos, before they write: a view of lego's
+/// `./train/r_0` is `r_0.png`, which replaced the photo, and an LLFF
+/// dataset's `images_4` holds the same names as the `images_8` its cameras
+/// are read with.
+#[test]
+fn views_are_not_written_among_a_datasets_photos() {
+    let (Some(lego), Some(fern), Some((scene, style, _))) =
+        (shared_file("data/datasets/lego"), shared_file("data/datasets/fern"), guitar_with("wave.jpg"))
+    else {
+        return;
+    };
+    let copy = temp("photo-folders");
+    let train = copy.join("lego/train");
+    std::fs::create_dir_all(&train).expect("dir");
+    // Lego's first frame alone, with the image size given (the file would
+    // need every photo to read the sizes from).
+    let frame = r#"{"file_path": "./train/r_0", "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]]}"#;
+    let json = format!(r#"{{"camera_angle_x": 0.69, "w": 800, "h": 800, "frames": [{frame}]}}"#);
+    std::fs::write(copy.join("lego/transforms_train.json"), json).expect("write");
+    std::fs::copy(lego.join("train/r_0.png"), train.join("r_0.png")).expect("copy");
+    let llff = copy.join("fern");
+    // The cameras read images_8 (one photo a row); images_4 holds one photo.
+    std::fs::create_dir_all(llff.join("images_4")).expect("dir");
+    std::fs::copy(fern.join("images_4/image000.png"), llff.join("images_4/image000.png")).expect("copy");
+    std::fs::create_dir_all(llff.join("images_8")).expect("dir");
+    for e in std::fs::read_dir(fern.join("images_8")).expect("fern's images_8") {
+        let e = e.expect("entry");
+        std::fs::copy(e.path(), llff.join("images_8").join(e.file_name())).expect("copy");
+    }
+    std::fs::copy(fern.join("poses_bounds.npy"), llff.join("poses_bounds.npy")).expect("copy");
+    let photo = std::fs::read(train.join("r_0.png")).expect("read");
+    for (cameras, out) in
+        [(copy.join("lego/transforms_train.json"), train.clone()), (llff.clone(), llff.join("images_4"))]
+    {
+        let before = std::fs::read_dir(&out).expect("list").count();
+        for args in [
+            &["render", s(&scene), "--cameras", s(&cameras), "--out", s(&out), "--size", "16"][..],
+            &["stylize", s(&scene), s(&style), "--cameras", s(&cameras), "--out", s(&out), "--cycles", "1"],
+        ] {
+            let o = gast(args);
+            assert!(!o.status.success(), "{args:?}");
+            assert!(
+                stderr(&o).contains("expected a folder apart from the photos, found the folder of the photos of"),
+                "{args:?}: {}",
+                stderr(&o)
+            );
+            assert_eq!(std::fs::read_dir(&out).expect("list").count(), before, "{args:?} wrote among the photos");
+        }
+    }
+    assert_eq!(std::fs::read(train.join("r_0.png")).expect("read"), photo, "the photo was replaced");
+    // Beside the photos is fine.
+    let o = gast(&["render", s(&scene), "--cameras", s(&llff), "--out", s(&copy.join("views")), "--size", "16"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(copy.join("views/image000.png").is_file());
     std::fs::remove_dir_all(&copy).ok();
 }

@@ -230,20 +230,20 @@ fn initial_scene(
     Ok(fit::initial_scene(&cameras, cfg))
 }
 
-/// Refuses, before the fit, a `--preview` folder the photos are read from
-/// (its `view0_truth.png`, … and `sheet.png` would mix with them, and an
+/// Refuses, before the fit, a `--preview` folder the photos are read from,
+/// or another image folder of an LLFF dataset (its `view0_truth.png`, … and `sheet.png` would mix with them, and an
 /// LLFF folder pairs its images with the poses by count) or one that cannot
-/// be made or written in; makes it otherwise.
+/// be made or written in. The folder is made when the previews are written.
 fn check_preview_folder(dir: &std::path::Path, image_folders: &[std::path::PathBuf]) -> anyhow::Result<()> {
     if let Ok(canonical) = std::fs::canonicalize(dir) {
         anyhow::ensure!(
             !image_folders.contains(&canonical),
-            "--preview {}: expected a folder apart from the photos, found the folder the photos are read from \
+            "--preview {}: expected a folder apart from the photos, found a folder of the dataset's photos \
              (the previews would mix with them; choose another folder)",
             dir.display()
         );
     }
-    super::output_folder(dir, "--preview")
+    super::check_output_folder(dir, "--preview")
 }
 
 /// Renders four views spread over the dataset, writes each render and its
@@ -254,6 +254,7 @@ fn write_previews(
     views: &[(gast_core::Camera, Vec<f32>)],
     background: [f32; 3],
 ) -> anyhow::Result<()> {
+    super::output_folder(dir, "--preview")?;
     let opts = RenderOptions { background };
     let n = views.len().min(4);
     let (w, h) = (views[0].0.width as usize, views[0].0.height as usize);

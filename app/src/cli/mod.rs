@@ -190,16 +190,28 @@ fn checked(config: gast_core::style::StyleConfig) -> anyhow::Result<gast_core::s
     Ok(config)
 }
 
-/// Makes `dir`, the folder the option `flag` names, an output folder (with
-/// its parents) unless it is one; a file of that name is refused, saying so
-/// (creating the folder said only "File exists"), and so is a folder inside a
-/// read-only one ([`gast_core::io::create_folder`]).
-pub(crate) fn output_folder(dir: &std::path::Path, flag: &str) -> anyhow::Result<()> {
+/// Checks that `dir`, the folder the option `flag` names, can become an
+/// output folder, without making it: a file of that name is refused, saying
+/// so (creating the folder said only "File exists"), and so is a folder
+/// inside a read-only one ([`gast_core::io::refuse_read_only_folder`]). A
+/// command checks this before its slow or fallible work and makes the folder
+/// ([`output_folder`]) only before its first write, so a run that fails on
+/// its inputs leaves no empty folder behind.
+pub(crate) fn check_output_folder(dir: &std::path::Path, flag: &str) -> anyhow::Result<()> {
     anyhow::ensure!(
         !dir.exists() || dir.is_dir(),
         "{}: expected an output folder, found a file; give {flag} a folder",
         dir.display()
     );
+    anyhow::Context::with_context(gast_core::io::refuse_read_only_folder(dir), || {
+        format!("could not use the output folder {}", dir.display())
+    })
+}
+
+/// Makes `dir` (with its parents) unless it is a folder already, after
+/// [`check_output_folder`]'s checks.
+pub(crate) fn output_folder(dir: &std::path::Path, flag: &str) -> anyhow::Result<()> {
+    check_output_folder(dir, flag)?;
     anyhow::Context::with_context(gast_core::io::create_folder(dir), || {
         format!("could not create the output folder {}", dir.display())
     })

@@ -90,9 +90,10 @@ pub fn run(args: QualityArgs) -> anyhow::Result<ExitCode> {
         _ => Sizes::full(),
     };
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("gast-quality-{}", crate::report::utc_stamp())));
-    super::output_folder(&out, "--out")?;
+    super::check_output_folder(&out, "--out")?;
     let weights = args.weights.clone().or_else(super::bench::shared_weights);
     let vgg = Arc::new(super::stylize::load_vgg(weights.as_deref())?);
+    super::output_folder(&out, "--out")?;
     if studies.contains(&Study::Geometry) {
         let mut g = match &args.sizes {
             Some(path) if geometry_only => GeometrySizes::from_file(path)?,

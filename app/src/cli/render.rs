@@ -13,7 +13,7 @@ use gast_core::raster::{self, RenderOptions};
 
 use crate::progress;
 use crate::turntable::{self, TurntableOptions};
-use crate::views::{ViewArgs, load_scene, views_for};
+use crate::views::{ViewArgs, load_scene, refuse_photo_folder, views_for};
 
 /// Arguments of `gast render`.
 #[derive(Args, Debug)]
@@ -46,13 +46,16 @@ pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
     let &[r, g, b] = args.background.as_slice() else {
         anyhow::bail!("--background: expected three values r,g,b, found {:?}", args.background)
     };
-    super::output_folder(&args.out, "--out")?;
+    // The inputs are read before the folder is made, so a missing one leaves none.
+    super::check_output_folder(&args.out, "--out")?;
     let scene = load_scene(&args.scene)?;
     let background = [r, g, b];
     if let Some(frames) = args.turntable {
         return run_turntable(&args, &scene, frames as usize, background);
     }
     let cameras = views_for(&scene, &args.views)?;
+    refuse_photo_folder(&args.out, "--out", args.views.cameras.as_deref(), &cameras)?;
+    super::output_folder(&args.out, "--out")?;
     let opts = RenderOptions { background };
     let pb = progress::bar(cameras.len() as u64, "render");
     let start = std::time::Instant::now();

@@ -42,8 +42,9 @@ pub struct PosedImages {
     pub views: Vec<(Camera, Vec<f32>)>,
     /// Things the camera reader had to approximate, one line each.
     pub warnings: Vec<String>,
-    /// The folders the images were read from (canonical, each once), so that
-    /// no output is written among the photos.
+    /// The folders the images were read from, and an LLFF dataset's other
+    /// image folders (canonical, each once: [`photo_folders`]), so that no
+    /// output is written among the photos.
     pub image_folders: Vec<PathBuf>,
 }
 
@@ -73,6 +74,42 @@ pub fn image_candidates(dataset: &Path, images: Option<&str>, name: &str) -> Vec
         }
     }
     out
+}
+
+/// The image of the camera named `name`: the first of its
+/// [`image_candidates`] that is a file.
+pub fn find_image(dataset: &Path, images: Option<&str>, name: &str) -> Result<PathBuf, FitDataError> {
+    let candidates = image_candidates(dataset, images, name);
+    candidates.iter().find(|p| p.is_file()).cloned().ok_or_else(|| FitDataError::MissingImage {
+        dataset: dataset.to_path_buf(),
+        camera: name.to_string(),
+        tried: candidates.iter().take(4).map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ") + ", …",
+    })
+}
+
+/// The folders (canonical, each once) that hold the photos of the cameras
+/// named `names` in `dataset`, for the cameras whose photo is there, and
+/// every LLFF image folder (`images_8`, `images_4`, `images`: the same
+/// photos at other sizes, under the same names) of an LLFF dataset: what no
+/// command should write its outputs among.
+pub fn photo_folders<'a>(dataset: &Path, names: impl IntoIterator<Item = &'a str>) -> Vec<PathBuf> {
+    let found = (names.into_iter()).filter_map(|name| find_image(dataset, None, name).ok());
+    canonical_folders(dataset, found.filter_map(|path| path.parent().map(Path::to_path_buf)))
+}
+
+/// `folders` and, for an LLFF dataset, its image folders that exist, made
+/// canonical, sorted and each kept once.
+fn canonical_folders(dataset: &Path, folders: impl Iterator<Item = PathBuf>) -> Vec<PathBuf> {
+    let root = if dataset.is_dir() { dataset } else { dataset.parent().unwrap_or(Path::new(".")) };
+    let llff: Vec<PathBuf> = if root.join(camera::POSES_BOUNDS).is_file() {
+        camera::LLFF_IMAGE_FOLDERS.iter().map(|f| root.join(f)).collect()
+    } else {
+        Vec::new()
+    };
+    let mut folders: Vec<PathBuf> = folders.chain(llff).filter_map(|d| std::fs::canonicalize(d).ok()).collect();
+    folders.sort();
+    folders.dedup();
+    folders
 }
 
 /// Reads an image as RGB in `[0, 1]`, compositing any alpha channel on `background`.
@@ -116,17 +153,9 @@ pub fn load_posed_images(
         .par_iter()
         .map(|&i| {
             let cam = &set.cameras[i];
-            let candidates = image_candidates(dataset, images, &cam.name);
-            let Some(path) = candidates.iter().find(|p| p.is_file()) else {
-                return Err(FitDataError::MissingImage {
-                    dataset: dataset.to_path_buf(),
-                    camera: cam.name.clone(),
-                    tried: candidates.iter().take(4).map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
-                        + ", …",
-                });
-            };
-            let (w, h, rgb) = read_rgb(path, background)?;
-            let folder = path.parent().and_then(|d| std::fs::canonicalize(d).ok());
+            let path = find_image(dataset, images, &cam.name)?;
+            let (w, h, rgb) = read_rgb(&path, background)?;
+            let folder = path.parent().map(Path::to_path_buf);
             let full = if (w, h) == (cam.width, cam.height) { cam.clone() } else { cam.scaled_to(w, h) };
             let work = full.downscaled_to_max_side(resolution.max(1));
             let img = if (work.width, work.height) == (w, h) {
@@ -136,10 +165,8 @@ pub fn load_posed_images(
             };
             Ok(((work, img), folder))
         })
-        .collect::<Result<Vec<_>, _>>()?;
-    let mut image_folders: Vec<PathBuf> = views.iter().filter_map(|(_, f)| f.clone()).collect();
-    image_folders.sort();
-    image_folders.dedup();
+        .collect::<Result<Vec<_>, FitDataError>>()?;
+    let image_folders = canonical_folders(dataset, views.iter().filter_map(|(_, f)| f.clone()));
     let views = views.into_iter().map(|(v, _)| v).collect();
     Ok(PosedImages { views, warnings: set.warnings, image_folders })
 }

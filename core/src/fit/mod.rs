@@ -35,7 +35,7 @@ use crate::scene::Gaussians;
 use crate::session::subset;
 use crate::style::adam::{Adam, AdamConfig};
 
-pub use data::{FitDataError, PosedImages, image_candidates, load_posed_images, read_rgb};
+pub use data::{FitDataError, PosedImages, find_image, image_candidates, load_posed_images, photo_folders, read_rgb};
 pub use init::look_at_region;
 use init::{Rng, random_gaussians, sfm_gaussians};
 

@@ -28,7 +28,7 @@ use serde::Serialize;
 
 use crate::progress;
 use crate::report::sheet;
-use crate::views::{ViewArgs, load_scene, views_for};
+use crate::views::{ViewArgs, load_scene, refuse_photo_folder, views_for};
 
 mod args;
 pub use args::{FastArgs, StylizeArgs};
@@ -348,7 +348,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let preview_gpu = depth_gpu.cloned();
     // Everything that can fail fast is checked before the slow work (the depth
     // model's download, the run): the output folder, the cameras, the weights.
-    super::output_folder(&args.out, "--out")?;
+    // The folder is made only before the first write, after the run.
+    super::check_output_folder(&args.out, "--out")?;
     let cameras = views_for(
         &scene,
         &ViewArgs {
@@ -360,6 +361,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             crop: args.crop,
         },
     )?;
+    refuse_photo_folder(&args.out, "--out", args.cameras.as_deref(), &cameras)?;
     let mut config = config;
     if args.resolution.is_none() && args.preset.is_none() {
         let ViewsSurvey { span, object } = survey(&scene, &cameras, config.focus, config.background);
@@ -514,6 +516,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         *t = Instant::now();
     };
     let result = session.result();
+    super::output_folder(&args.out, "--out")?;
     // The colour-matched scene, for `gast convert --blend` to set a strength later.
     let matched_path = args.out.join(MATCHED_NAME);
     super::convert::save_scene(&matched_path, session.colour_matched(), &super::convert::SaveArgs::default())?;
