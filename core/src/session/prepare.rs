@@ -206,6 +206,8 @@ pub struct ViewSurvey {
     /// content statistics of the colour transfer. The background is not scene
     /// content, and with a black background it would pull the mean towards black.
     pub covered_rgb: Vec<f32>,
+    /// Per camera, how many of its pixels the scene covers (alpha ≥ 0.5).
+    pub covered: Vec<usize>,
     /// For each Gaussian, whether some camera composites it with α ≥ 1/255
     /// before the pixel's transmittance runs out.
     pub seen: Vec<bool>,
@@ -230,11 +232,13 @@ pub fn survey_views(g: &Gaussians, cameras: &[Camera], opts: &RenderOptions) -> 
         .collect();
     let mut seen = vec![false; g.len()];
     let mut covered_rgb = Vec::new();
+    let mut covered = Vec::with_capacity(per_view.len());
     for (px, s) in per_view {
+        covered.push(px.len() / 3);
         covered_rgb.extend(px);
         seen.iter_mut().zip(s).for_each(|(x, y)| *x |= y);
     }
-    ViewSurvey { covered_rgb, seen }
+    ViewSurvey { covered_rgb, covered, seen }
 }
 
 /// The Gaussians at `keep` (in order), a new set.

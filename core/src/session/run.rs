@@ -234,6 +234,16 @@ impl Session {
                 work_cams.len()
             )));
         }
+        let blind = survey.covered.iter().filter(|&&n| n == 0).count();
+        if blind > 0 {
+            on_event(Event::Warning(format!(
+                "{blind} of the {} views show none of the scene (no pixel at least half opaque; the scene covers \
+                 {:.1}% of all the views' pixels): their steps have next to nothing to stylize; expected cameras that look at this \
+                 scene",
+                work_cams.len(),
+                100.0 * coverage
+            )));
+        }
         let config = config.resolved(coverage);
         let ct = ColorTransfer::fit(&survey.covered_rgb, &style.to_f32());
         let mut full = scene;

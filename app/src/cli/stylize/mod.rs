@@ -432,6 +432,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             eprintln!("  optimising {kept} of {total} Gaussians ({} never visible from the cameras)", total - kept);
             culled = (total, kept);
         }
+        Event::Warning(w) => eprintln!("warning: {w}"),
         _ => {}
     })?;
 
