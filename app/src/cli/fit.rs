@@ -46,7 +46,7 @@ pub struct FitArgs {
     #[arg(long, value_parser = crate::views::within(gast_core::fit::INITIAL_GAUSSIANS))]
     pub gaussians: Option<usize>,
     /// SH degree of the result (0 to 3).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=3))]
+    #[arg(long, value_parser = crate::views::within(gast_core::scene::SH_DEGREES))]
     pub sh_degree: Option<u32>,
     /// Use at most this many views, evenly spread (0: all).
     #[arg(long, default_value_t = 0)]

@@ -43,6 +43,9 @@ pub use save::{OUTPUT_NAMES, SOG_PALETTES, SPZ_VERSIONS, SaveOptions, SceneForma
 /// SH basis constant of band 0: rendered colour is `0.5 + C0 · c_0 + …`.
 pub const SH_C0: f32 = 0.282_094_8;
 
+/// The SH degrees a scene may have (the formats' 0 to 3).
+pub const SH_DEGREES: std::ops::RangeInclusive<u32> = 0..=3;
+
 /// Number of SH coefficients per colour channel for a degree (1, 4, 9, 16).
 pub const fn sh_coeffs_for_degree(degree: u32) -> usize {
     ((degree + 1) * (degree + 1)) as usize
@@ -110,7 +113,7 @@ impl Gaussians {
             || self.quats.len() != n
             || self.opacity_logits.len() != n
             || self.sh.len() != want_sh
-            || self.sh_degree > 3
+            || !SH_DEGREES.contains(&self.sh_degree)
         {
             return Err(format!(
                 "inconsistent arrays: {n} means, {} scales, {} quats, {} opacities, {} SH floats (want {want_sh}), degree {}",
