@@ -234,6 +234,15 @@ fn bad_inputs_fail_with_the_file_named_and_keep_existing_outputs() {
         assert!(!o.status.success());
         assert!(stderr(&o).contains("style.jpg: expected an output folder, found a file"), "{args:?}: {}", stderr(&o));
     }
+    // A long, narrow style is refused as it is read (a 4000x8 one ran the
+    // machine out of memory), before any folder is made.
+    let strip = out.join("strip.png");
+    image::RgbImage::new(400, 8).save(&strip).expect("write a strip");
+    let fresh = out.join("strip-run");
+    let o = gast(&["stylize", s(&scene), s(&strip), "--out", s(&fresh)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("strip.png: expected a style image at most 8 times as long"), "{}", stderr(&o));
+    assert!(!fresh.exists());
     // A scene without Gaussians is named (it was "the scene has no Gaussians").
     let empty = out.join("empty.ply");
     gast_tests::write_empty_ply(&empty);

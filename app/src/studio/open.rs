@@ -67,13 +67,22 @@ impl StudioApp {
         }
     }
 
+    /// Adds a decoded style image and selects it; one the runs cannot use
+    /// (smaller than 4×4, or too long and narrow) is refused with the error
+    /// shown, and the previous style stays.
     pub(super) fn add_style(&mut self, path: PathBuf, img: image::RgbImage) {
         let thumb = image::imageops::thumbnail(&img, 96, (96 * img.height() / img.width().max(1)).max(1));
+        let image = match gast_core::session::StyleImage::from_rgb(&path, img) {
+            Ok(style) => Arc::new(style),
+            Err(e) => {
+                let keep = if self.styles.is_empty() { "no style is open" } else { "keeping the previous style" };
+                return self.report(anyhow::anyhow!("{e}; {keep}"));
+            }
+        };
         let color = egui::ColorImage::from_rgb([thumb.width() as usize, thumb.height() as usize], thumb.as_raw());
         let texture =
             self.ctx.load_texture(format!("style {}", path.display()), color.clone(), egui::TextureOptions::LINEAR);
-        let size = [img.width() as usize, img.height() as usize];
-        let image = Arc::new(gast_core::session::StyleImage { width: size[0], height: size[1], rgb: img.into_raw() });
+        let size = [image.width, image.height];
         self.styles.retain(|s| s.path != path);
         self.styles.insert(0, LoadedStyle { path, image, thumb: color, texture, size });
         self.styles.truncate(8);

@@ -200,6 +200,16 @@ fn a_bad_scene_file_shows_an_error_and_keeps_the_scene() {
     );
     app.open_any(&dir.join("missing.png"));
     assert_eq!(app.errors.len(), 2);
+    // A style too long and narrow for a run is refused as it opens, and the
+    // one chosen before stays.
+    let strip = dir.join("strip.png");
+    image::RgbImage::new(400, 8).save(&strip).expect("write a strip");
+    let chosen = app.style.map(|i| app.styles[i].path.clone());
+    app.open_any(&strip);
+    assert_eq!(app.style.map(|i| app.styles[i].path.clone()), chosen);
+    assert!(app.errors[2].contains("strip.png: expected a style image at most 8 times"), "{}", app.errors[2]);
+    assert!(app.errors[2].contains("keeping the previous style"), "{}", app.errors[2]);
+    app.errors.pop();
 
     // The error is on screen, in the bottom panel.
     let mut harness = egui_kittest::Harness::builder()

@@ -194,6 +194,9 @@ impl Session {
         if cameras.is_empty() {
             return Err(SessionError::Input("no optimisation cameras".into()));
         }
+        if let Some(problem) = style.problem_at_scale(config.texture_scale) {
+            return Err(SessionError::Input(problem));
+        }
         let opts = RenderOptions { background: config.background };
         let work_cams: Vec<Camera> = cameras.iter().map(|c| c.with_longer_side(config.resolution)).collect();
 
@@ -459,7 +462,8 @@ impl Session {
     /// value takes effect on the next run.
     pub fn set_config(&mut self, config: StyleConfig) -> Result<(), SessionError> {
         let config = config.resolved(self.coverage);
-        let problems = engine_problems(&config, self.engine.is_some());
+        let mut problems = engine_problems(&config, self.engine.is_some());
+        problems.extend(self.inputs_style.problem_at_scale(config.texture_scale));
         if !problems.is_empty() {
             return Err(SessionError::Config(problems));
         }

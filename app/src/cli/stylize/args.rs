@@ -19,7 +19,7 @@ use crate::views::Framing;
 pub struct StylizeArgs {
     /// The scene: INRIA .ply, .compressed.ply, .spz, or a SOG folder.
     pub scene: PathBuf,
-    /// The style image (PNG, JPEG, WebP).
+    /// The style image (PNG, JPEG, WebP): at least 4×4 pixels, no side more than 8 times the other.
     pub style: PathBuf,
     /// Output folder.
     #[arg(long, default_value = "out/stylize")]

@@ -323,6 +323,9 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         anyhow::bail!("{}: expected a scene with Gaussians to stylize, found none", args.scene.display());
     }
     let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
+    if let Some(problem) = style.problem_at_scale(config.texture_scale) {
+        anyhow::bail!("{}: {problem} (--texture-scale)", args.style.display());
+    }
     let gpu = match args.device {
         // A setting the GPU engine does not compute (`StyleConfig::cpu_only`):
         // `auto` picks the CPU for it rather than failing (`gpu` still says why).
