@@ -234,13 +234,43 @@ pub fn load(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
 /// and sizes. The other formats name their images themselves and ignore it.
 pub fn load_with_images(path: impl AsRef<Path>, images: Option<&str>) -> Result<CameraSet, CameraError> {
     let path = path.as_ref();
+    let (set, source) = load_any(path, images)?;
+    single_precision(&source, &set)?;
+    Ok(set)
+}
+
+/// The readers check the file's numbers as read (f64); a finite one past
+/// f32's range (a position of 1e39) became infinite in the camera, which
+/// rendered nothing and said nothing.
+fn single_precision(path: &Path, set: &CameraSet) -> Result<(), CameraError> {
+    for (i, c) in set.cameras.iter().enumerate() {
+        let parts = [
+            ("focal length", c.fx.is_finite() && c.fy.is_finite()),
+            ("principal point", c.cx.is_finite() && c.cy.is_finite()),
+            ("rotation", c.rotation.is_finite()),
+            ("position", c.translation.is_finite()),
+        ];
+        if let Some((what, _)) = parts.iter().find(|(_, ok)| !ok) {
+            return Err(CameraError::format(
+                path,
+                format!("camera {i} ({})", c.name),
+                format!("a {what} within single precision (magnitudes below 3.4e38)"),
+                "one that overflows it",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The cameras, and the file (or COLMAP folder) they were read from.
+fn load_any(path: &Path, images: Option<&str>) -> Result<(CameraSet, PathBuf), CameraError> {
     if path.is_dir() {
         return load_dir(path, images);
     }
     if !path.exists() {
         return Err(CameraError::NotFound { path: path.to_path_buf(), expected: EXPECTED.into() });
     }
-    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+    let set = match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
         Some("json") => load_json(path),
         Some("bin" | "txt") => load_colmap(path),
         Some("npy") => load_llff(path, images),
@@ -250,26 +280,27 @@ pub fn load_with_images(path: impl AsRef<Path>, images: Option<&str>) -> Result<
             "a .json, .bin, .txt or .npy camera file",
             other.map_or("no extension".to_string(), |e| format!("a .{e} file")),
         )),
-    }
+    }?;
+    Ok((set, path.to_path_buf()))
 }
 
 const EXPECTED: &str = "sparse/0/{cameras,images}.{bin,txt}, poses_bounds.npy, cameras.json or transforms*.json";
 
-fn load_dir(dir: &Path, images: Option<&str>) -> Result<CameraSet, CameraError> {
+fn load_dir(dir: &Path, images: Option<&str>) -> Result<(CameraSet, PathBuf), CameraError> {
     for d in [dir.join("sparse/0"), dir.join("sparse"), dir.to_path_buf()] {
         if colmap::has_colmap_files(&d) {
-            return load_colmap(&d);
+            return Ok((load_colmap(&d)?, d));
         }
     }
     if dir.join(POSES_BOUNDS).is_file() {
-        return load_llff(dir, images);
+        return Ok((load_llff(dir, images)?, dir.join(POSES_BOUNDS)));
     }
     let inria = dir.join("cameras.json");
     if inria.is_file() {
-        return load_inria(&inria);
+        return Ok((load_inria(&inria)?, inria));
     }
     if let Some(t) = find_transforms(dir) {
-        return load_transforms(&t);
+        return Ok((load_transforms(&t)?, t));
     }
     Err(CameraError::NotFound { path: dir.to_path_buf(), expected: EXPECTED.into() })
 }

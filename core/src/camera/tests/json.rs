@@ -159,3 +159,29 @@ fn a_field_of_view_outside_zero_to_pi_is_named() {
         assert!(err.contains(found), "{err}");
     }
 }
+
+/// A number finite as read but past f32's range (1e39) became an infinite
+/// camera that rendered nothing, silently; every format's cameras are
+/// checked once converted.
+#[test]
+fn numbers_past_single_precision_are_named() {
+    let d = temp_dir("json-overflow");
+    let cases = [
+        (
+            json!({"camera_angle_x": 0.7, "w": 4, "h": 4, "frames": [{"file_path": "a",
+            "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1e39], [0, 0, 0, 1]]}]}),
+            "a position",
+        ),
+        (
+            json!({"fl_x": 1e39, "w": 4, "h": 4, "frames": [{"file_path": "a",
+            "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 0, 1]]}]}),
+            "a focal length",
+        ),
+    ];
+    for (doc, what) in cases {
+        std::fs::write(d.join("transforms.json"), doc.to_string()).expect("write");
+        let err = load(&d).expect_err("an infinite camera").to_string();
+        assert!(err.contains("transforms.json: camera 0 (a)"), "{err}");
+        assert!(err.contains(&format!("expected {what} within single precision")), "{err}");
+    }
+}
