@@ -68,7 +68,8 @@ pub struct StylizeArgs {
     /// uses λ_swd 1: the style's relief in the depth, docs/geometry.md).
     #[arg(long)]
     pub no_frame_recipe: bool,
-    /// Write the effective configuration to this preset file and continue.
+    /// Write the effective configuration to this preset file and continue
+    /// (an existing file is replaced only if it is a preset).
     #[arg(long)]
     pub save_preset: Option<PathBuf>,
     /// VGG weights (.safetensors or .pth); else $GAST_WEIGHTS, the caches, or a download.
