@@ -230,7 +230,7 @@ fn bad_inputs_fail_with_the_file_named_and_keep_existing_outputs() {
     let style = shared_file("data/styles/wave.jpg").expect("the shared styles beside the scenes");
     let o = gast(&["stylize", s(&scene), s(&style), "--save-preset", s(&bogus), "--out", s(&out.join("run"))]);
     assert!(!o.status.success());
-    assert!(stderr(&o).contains("style.jpg: expected a new file or a preset"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("style.jpg: expected a new file or a JSON file"), "{}", stderr(&o));
     assert_eq!(std::fs::read(&bogus).expect("kept"), b"not a jpeg");
     // An output folder that is a file is refused as such (it said "File exists").
     for args in [&["render", s(&scene), "--out", s(&bogus)][..], &["stylize", s(&scene), s(&style), "--out", s(&bogus)]]

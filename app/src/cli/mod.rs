@@ -190,6 +190,26 @@ fn checked(config: gast_core::style::StyleConfig) -> anyhow::Result<gast_core::s
     Ok(config)
 }
 
+/// Refuses `path`, the JSON file the option `flag` writes (a preset, a
+/// benchmark's record), when it exists and is not JSON: `--save-preset
+/// wave.jpg` replaced the style image with JSON. Checked before any work.
+pub(crate) fn replaceable_json(path: &std::path::Path, flag: &str) -> anyhow::Result<()> {
+    if !path.exists() {
+        return Ok(());
+    }
+    let is_json = std::fs::read(path)
+        .ok()
+        .and_then(|bytes| serde_json::from_slice::<serde_json::Value>(&bytes).ok())
+        .is_some_and(|v| v.is_object());
+    anyhow::ensure!(
+        is_json,
+        "{flag} {}: expected a new file or a JSON file (an object) to replace, found a file that is not one; \
+         it is left as it is: choose another name",
+        path.display()
+    );
+    Ok(())
+}
+
 /// Checks that `dir`, the folder the option `flag` names, can become an
 /// output folder, without making it: a file of that name is refused, saying
 /// so (creating the folder said only "File exists"), and so is a folder

@@ -49,6 +49,9 @@ pub struct PairingArgs {
 /// covered positions, as the object focus draws them) and times the pairing's
 /// parts on each draw; prints the medians.
 pub fn run_pairing(args: PairingArgs) -> anyhow::Result<ExitCode> {
+    if let Some(path) = &args.json {
+        crate::cli::replaceable_json(path, "--json")?;
+    }
     let (scene_path, style_path, weights) = args.data.paths()?;
     let scene = load_scene(&scene_path)?;
     let style = gast_core::session::StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;

@@ -302,6 +302,9 @@ pub(super) fn run_step(args: StepArgs) -> anyhow::Result<ExitCode> {
     use gast_core::style::{Phase, StyleConfig};
 
     // Checked before the scene, the style and VGG are loaded.
+    if let Some(path) = &args.json {
+        crate::cli::replaceable_json(path, "--json")?;
+    }
     let config = step_config(&args)?;
     let inputs = step_inputs(&args)?;
     let schedule = config.schedule();

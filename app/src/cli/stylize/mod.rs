@@ -285,26 +285,6 @@ fn written_by_a_run(name: &std::path::Path, scene_name: &std::path::Path) -> boo
     name == scene_name || fixed.into_iter().any(|f| name == std::path::Path::new(f)) || view
 }
 
-/// `--save-preset FILE` replaces an existing file only when it is a preset
-/// (a JSON object): `--save-preset wave.jpg` replaced the style image with
-/// JSON.
-fn check_preset_target(path: &std::path::Path) -> anyhow::Result<()> {
-    if !path.exists() {
-        return Ok(());
-    }
-    let is_preset = std::fs::read(path)
-        .ok()
-        .and_then(|bytes| serde_json::from_slice::<serde_json::Value>(&bytes).ok())
-        .is_some_and(|v| v.is_object());
-    anyhow::ensure!(
-        is_preset,
-        "--save-preset {}: expected a new file or a preset (a JSON object) to replace, found a file that is not \
-         one; it is left as it is: choose another name",
-        path.display()
-    );
-    Ok(())
-}
-
 /// The run's inputs (scene, style, style depth, preset) are not among the
 /// files it writes into `--out`: a style taken from an earlier run's folder
 /// (`out/stylize/style.png`) was replaced by this run's copy at texture scale.
@@ -338,7 +318,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     check_scene_name(&args.scene_name)?;
     check_inputs_are_not_outputs(&args)?;
     if let Some(p) = &args.save_preset {
-        check_preset_target(p)?;
+        super::replaceable_json(p, "--save-preset")?;
     }
     let config = args.config()?;
     let scene = load_scene(&args.scene)?;
