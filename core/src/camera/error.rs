@@ -23,8 +23,9 @@ pub enum CameraError {
         /// What it was to hold.
         expected: String,
     },
-    /// No camera file was found where one was looked for.
-    #[error("{path}: no camera file found: expected {expected}")]
+    /// No file was found where one was looked for: a camera file, an
+    /// image a camera names, an images or points file.
+    #[error("{path}: expected {expected}, found none")]
     NotFound {
         /// The file or folder given.
         path: PathBuf,

@@ -213,7 +213,7 @@ fn image_size(path: &Path, base: &Path, record: &str, file: Option<&str>) -> Res
     let file = file.ok_or_else(|| {
         CameraError::format(path, record, "an image size (w and h) or a file_path to read it from", "neither")
     })?;
-    let direct = base.join(file);
+    let direct = base.join(file.strip_prefix("./").unwrap_or(file));
     let mut candidates = std::iter::once(direct.clone()).chain(
         ["png", "jpg", "jpeg", "webp", "PNG", "JPG", "JPEG"]
             .iter()
