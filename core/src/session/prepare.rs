@@ -84,7 +84,10 @@ impl StyleDepthSource {
         match provider {
             DepthProvider::Heuristic => plain(Self::Heuristic, None),
             DepthProvider::Image => match image {
-                Some(img) => plain(Self::Image(img), None),
+                Some(img) => {
+                    let doubts = img.doubts(style.width, style.height);
+                    plain(Self::Image(img), doubts.as_deref())
+                }
                 None => plain(
                     Self::Heuristic,
                     Some(

@@ -16,7 +16,7 @@ use super::resize::resize_bilinear;
 #[derive(Debug, thiserror::Error)]
 pub enum StyleDepthError {
     /// The PNG (or other raster image) could not be read.
-    #[error("cannot read depth image {path}: {source}")]
+    #[error("{path}: expected a depth image (PNG 8- or 16-bit grey, or EXR), found: {source}")]
     Image {
         /// The file.
         path: String,
@@ -24,7 +24,7 @@ pub enum StyleDepthError {
         source: image::ImageError,
     },
     /// The EXR file could not be read.
-    #[error("cannot read EXR depth {path}: {source}")]
+    #[error("{path}: expected an EXR depth image, found: {source}")]
     Exr {
         /// The file.
         path: String,
@@ -32,7 +32,7 @@ pub enum StyleDepthError {
         source: exr::error::Error,
     },
     /// The file holds no usable channel.
-    #[error("depth image {path}: expected at least one channel and a non-empty image, found {found}")]
+    #[error("{path}: expected a depth image with at least one channel and a pixel, found {found}")]
     Empty {
         /// The file.
         path: String,
@@ -139,6 +139,32 @@ pub struct DepthImage {
 }
 
 impl DepthImage {
+    /// What a run should be told about this depth image for a `style_w ×
+    /// style_h` style, if anything: one value everywhere (min-max
+    /// normalised, it leaves the geometry no relief to take), or a shape
+    /// more than 5 % off the style's (it is stretched onto the style).
+    pub fn doubts(&self, style_w: usize, style_h: usize) -> Option<String> {
+        let (lo, hi) = self.values.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        let mut said = Vec::new();
+        if (hi - lo).is_nan() || hi - lo <= 1e-6 {
+            said.push(format!(
+                "the style depth image ({}x{}) holds one value everywhere ({lo}): it gives the geometry no relief to take",
+                self.width, self.height
+            ));
+        }
+        let ratio = (self.width as f64 / self.height as f64) / (style_w as f64 / style_h.max(1) as f64);
+        if (ratio - 1.0).abs() > 0.05 {
+            said.push(format!(
+                "the style depth image is {}x{} and the style {style_w}x{style_h}: it is stretched onto the style's \
+                 shape ({:+.0} % in width); a depth map made from the style image itself fits it",
+                self.width,
+                self.height,
+                100.0 * (1.0 / ratio - 1.0)
+            ));
+        }
+        (!said.is_empty()).then(|| said.join("; "))
+    }
+
     /// Reads a grey PNG (8 or 16 bit; colour images are converted to luma) or an
     /// EXR (channel `Z`, `depth`, `Y` or `R`, else the first). PNGs are taken as
     /// near = bright, EXRs as metric depth (near = small); change
@@ -298,6 +324,24 @@ pub(crate) fn box_blur(src: &[f32], h: usize, w: usize, r: usize) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A flat depth image or one of another shape than the style is said;
+    /// a graded one of the style's shape is not.
+    #[test]
+    fn flat_or_misshapen_depth_images_are_doubted() {
+        let image = |w: usize, h: usize, f: &dyn Fn(usize) -> f32| DepthImage {
+            values: (0..w * h).map(f).collect(),
+            height: h,
+            width: w,
+            near_is_larger: true,
+        };
+        let graded = |i: usize| (i % 7) as f32;
+        assert_eq!(image(420, 200, &graded).doubts(4200, 2000), None);
+        let flat = image(420, 200, &|_| 0.5).doubts(4200, 2000).expect("flat");
+        assert!(flat.contains("holds one value everywhere (0.5)") && !flat.contains("stretched"), "{flat}");
+        let narrow = image(37, 11, &graded).doubts(4200, 2000).expect("another shape");
+        assert!(narrow.contains("is 37x11 and the style 4200x2000") && narrow.contains("-38 % in width"), "{narrow}");
+    }
 
     #[test]
     fn normalised_and_polarity() {
