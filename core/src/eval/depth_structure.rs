@@ -56,7 +56,7 @@ pub fn depth_input(render: &Render) -> (Vec<f32>, usize, usize) {
 /// CPU's or the GPU's), as a reference.
 pub fn style_depth_reference<N: FeatureNet>(vgg: &N, depth: &[f32], h: usize, w: usize) -> Option<StyleReference> {
     let d3: Vec<f32> = depth.iter().flat_map(|&v| [v; 3]).collect();
-    let f = vgg.features(&d3, h, w);
+    let f = vgg.features_banded(&d3, h, w);
     StyleReference::new(&f.data, f.channels, DEPTH_PROJECTIONS)
 }
 

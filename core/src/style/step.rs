@@ -95,6 +95,12 @@ pub trait FeatureNet: Sync {
         let _ = cells;
         self.features(rgb, h, w)
     }
+    /// As [`FeatureNet::features`] for a large image (the style at its
+    /// texture scale): a network may compute it in bands so as to hold one
+    /// band's activations at a time. The default runs the whole forward.
+    fn features_banded(&self, rgb: &[f32], h: usize, w: usize) -> FeatureMap {
+        self.features(rgb, h, w)
+    }
 }
 
 /// The studio's network: VGG relu3_1..3 ([`crate::vision::Vgg`]).
@@ -119,6 +125,10 @@ impl FeatureNet for crate::vision::Vgg {
         let f = crate::vision::Vgg::features_within(self, rgb, h, w, cells);
         FeatureMap { channels: f.c, height: f.h, width: f.w, data: f.data }
     }
+    fn features_banded(&self, rgb: &[f32], h: usize, w: usize) -> FeatureMap {
+        let f = crate::vision::Vgg::features_banded(self, rgb, h, w);
+        FeatureMap { channels: f.c, height: f.h, width: f.w, data: f.data }
+    }
 }
 
 /// Everything about the style the per-step loss needs, computed once per
@@ -141,7 +151,7 @@ impl StyleTargets {
         let inputs = [rgb.to_vec(), replicate3(depth), replicate3(edge)];
         let maps: Vec<FeatureMap> = {
             use rayon::prelude::*;
-            inputs.par_iter().map(|img| net.features(img, h, w)).collect()
+            inputs.par_iter().map(|img| net.features_banded(img, h, w)).collect()
         };
         let (c, fh, fw) = (maps[0].channels, maps[0].height, maps[0].width);
         let mut it = maps.into_iter().map(|m| m.data);

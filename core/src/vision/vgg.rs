@@ -30,6 +30,10 @@ pub const IMAGENET_STD: [f32; 3] = [0.229, 0.224, 0.225];
 /// Channels of the feature map: relu3_1, relu3_2, relu3_3 concatenated.
 pub const FEATURE_CHANNELS: usize = 768;
 
+/// Rows of relu3 positions [`Vgg::features_banded`] computes at once (256
+/// pixel rows: the style at the default texture scale, 256, is one band).
+pub const BAND_ROWS: usize = 64;
+
 /// A CHW feature map.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Features {
@@ -240,7 +244,62 @@ impl Vgg {
         self.run(rgb, h, w, Some(cells), None)
     }
 
-    fn run(&self, rgb: &[f32], h: usize, w: usize, cells: Option<Region>, mut save: Option<&mut VggState>) -> Features {
+    /// As [`Vgg::features`], computed in bands of [`BAND_ROWS`] rows of
+    /// relu3 positions, each band's cone apart ([`super::vgg_cone`]): the
+    /// activations held at once are a band's, not the whole image's (the
+    /// style at a large texture scale: wave at 1,024 px high held about 3 GB
+    /// of them). The features equal the whole pass's to rounding (a band's
+    /// convolutions tile from its own origin); an image of one band is the
+    /// whole pass, bit for bit.
+    pub fn features_banded(&self, rgb: &[f32], h: usize, w: usize) -> Features {
+        let (fh, fw) = (h / 4, w / 4);
+        if fh <= BAND_ROWS || fw == 0 {
+            return self.features(rgb, h, w);
+        }
+        let n3 = fh * fw;
+        let mut data = vec![0.0; FEATURE_CHANNELS * n3];
+        for y0 in (0..fh).step_by(BAND_ROWS) {
+            let cells = Region { y0, y1: (y0 + BAND_ROWS).min(fh), x0: 0, x1: fw };
+            let rows = cells.height() * fw;
+            self.pass(rgb, h, w, Some(cells), None, &mut |k, part| {
+                for (c, plane) in part.chunks_exact(rows).enumerate() {
+                    let at = (k * 256 + c) * n3 + y0 * fw;
+                    data[at..at + rows].copy_from_slice(plane);
+                }
+            });
+        }
+        Features { c: FEATURE_CHANNELS, h: fh, w: fw, data }
+    }
+
+    fn run(&self, rgb: &[f32], h: usize, w: usize, cells: Option<Region>, save: Option<&mut VggState>) -> Features {
+        let (fh, fw) = (h / 4, w / 4);
+        let n3 = fh * fw;
+        let mut feats = vec![0.0; FEATURE_CHANNELS * n3];
+        if n3 == 0 {
+            self.pass(rgb, h, w, cells, save, &mut |_, _| {});
+            return Features { c: FEATURE_CHANNELS, h: fh, w: fw, data: feats };
+        }
+        let grid = Region::full(fh, fw);
+        let out = ConePlan::new(cells.unwrap_or(grid), (h, w)).output[6];
+        self.pass(rgb, h, w, cells, save, &mut |k, part| {
+            let full = embed_planes(part, 256, grid, out);
+            feats[k * 256 * n3..(k + 1) * 256 * n3].copy_from_slice(&full);
+        });
+        Features { c: FEATURE_CHANNELS, h: fh, w: fw, data: feats }
+    }
+
+    /// The forward pass over the cone of `cells` (the whole grid when
+    /// `None`), handing `emit(k, part)` relu3_{k+1}'s features on the cells
+    /// (256 planes over the cells, CHW) as each is computed.
+    fn pass(
+        &self,
+        rgb: &[f32],
+        h: usize,
+        w: usize,
+        cells: Option<Region>,
+        mut save: Option<&mut VggState>,
+        emit: &mut dyn FnMut(usize, &[f32]),
+    ) {
         assert_eq!(rgb.len(), h * w * 3, "VGG input must be h·w·3 RGB values");
         let (fh, fw) = (h / 4, w / 4);
         if let Some(s) = save.as_deref_mut() {
@@ -249,7 +308,7 @@ impl Vgg {
             s.plan = None;
         }
         if fh == 0 || fw == 0 {
-            return Features { c: FEATURE_CHANNELS, h: fh, w: fw, data: Vec::new() };
+            return;
         }
         let grid = Region::full(fh, fw);
         let plan = ConePlan::new(cells.unwrap_or(grid), (h, w));
@@ -266,8 +325,6 @@ impl Vgg {
         let convs = &self.weights.convs;
         let mut scratch = Vec::new();
         let mut y = Vec::new();
-        let n3 = fh * fw;
-        let mut feats = vec![0.0; FEATURE_CHANNELS * n3];
         for (layer, c) in convs.iter().enumerate().take(7) {
             let (inr, outr) = (plan.input[layer], plan.output[layer]);
             y.resize(c.c_out * inr.area(), 0.0);
@@ -282,10 +339,8 @@ impl Vgg {
                 s.relu_open.push(x.par_iter().map(|&v| v > 0.0).collect());
             }
             if layer >= 4 {
-                // relu3_1..3 on the cells, into the concatenated feature map.
-                let part = crop_planes(&x, 256, outr, plan.output[6]);
-                let full = embed_planes(&part, 256, grid, plan.output[6]);
-                feats[(layer - 4) * 256 * n3..(layer - 3) * 256 * n3].copy_from_slice(&full);
+                // relu3_1..3 on the cells.
+                emit(layer - 4, &crop_planes(&x, 256, outr, plan.output[6]));
             }
             if layer == 1 || layer == 3 {
                 let next = plan.input[layer + 1];
@@ -303,7 +358,6 @@ impl Vgg {
         if let Some(s) = save {
             s.plan = Some(plan);
         }
-        Features { c: FEATURE_CHANNELS, h: fh, w: fw, data: feats }
     }
 
     /// Floating-point operations of one forward pass at `h × w` (multiply and add counted apart).

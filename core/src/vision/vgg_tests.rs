@@ -235,3 +235,26 @@ fn the_cone_of_a_box_equals_the_whole_pass() {
         }
     }
 }
+
+/// The banded pass gives the whole pass's features (to rounding; Winograd's
+/// tiles sit elsewhere on a band) on an image of three bands, the last one
+/// short, and is the whole pass, bit for bit, on an image of one band.
+#[test]
+fn the_banded_pass_equals_the_whole_pass() {
+    use super::BAND_ROWS;
+    for conv in ConvAlgo::ALL {
+        let vgg = random_vgg(13).with_conv(conv);
+        for (h, w) in [(4 * (2 * BAND_ROWS + 5) + 3, 22), (4 * BAND_ROWS, 30)] {
+            let rgb: Vec<f32> = noise(h * w * 3, 47).iter().map(|v| 0.5 + 0.4 * v).collect();
+            let (whole, banded) = (vgg.features(&rgb, h, w), vgg.features_banded(&rgb, h, w));
+            assert_eq!((banded.c, banded.h, banded.w), (whole.c, whole.h, whole.w));
+            if h / 4 <= BAND_ROWS {
+                assert_eq!(banded, whole, "{conv} {h}×{w}: one band is the whole pass");
+                continue;
+            }
+            let scale = whole.data.iter().fold(0f32, |m, v| m.max(v.abs()));
+            let worst = whole.data.iter().zip(&banded.data).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+            assert!(scale > 0.0 && worst <= 1e-5 * scale, "{conv} {h}×{w}: worst {worst:.2e} of {scale:.2e}");
+        }
+    }
+}

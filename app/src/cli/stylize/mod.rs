@@ -676,7 +676,7 @@ fn write_previews<N: FeatureNet>(
     };
     // The style side of each distance once (its features, statistics and unit
     // features), not once per render.
-    let style_feats = net.features(&style.rgb, style.height, style.width);
+    let style_feats = net.features_banded(&style.rgb, style.height, style.width);
     let rgb_ref =
         StyleReference::new(&style_feats.data, style_feats.channels, 0).context("the style image has no features")?;
     let depth_ref = depth_structure::style_depth_reference(net, &style.depth, style.height, style.width)
