@@ -56,22 +56,55 @@ impl StyleImage {
     }
 
     /// Why the style cannot be used at texture scale `scale` (its height
-    /// there, in pixels), if it cannot: a side under [`MIN_SCALED_SIDE`].
+    /// there, in pixels), if it cannot: a side under [`MIN_SCALED_SIDE`], or
+    /// style features that need more memory than the machine has available
+    /// (MemAvailable on Linux; not checked elsewhere). A run holds the three
+    /// maps' relu3 features (768 floats a position) about twice over at its
+    /// peak, the session's and the preview measures' (wave at 1,024 px high:
+    /// 1.27 GB of features, 3.29 GB peak resident): wave at 4,096 px high
+    /// would need about 37.8 GiB.
     pub fn problem_at_scale(&self, scale: u32) -> Option<String> {
+        self.problem_at_scale_with(scale, available_memory())
+    }
+
+    /// [`StyleImage::problem_at_scale`] with `available` bytes of memory.
+    pub fn problem_at_scale_with(&self, scale: u32, available: Option<u64>) -> Option<String> {
         let (h, w) = crate::vision::resize::size_for_height(self.height, self.width, scale as usize);
-        (h.min(w) < MIN_SCALED_SIDE).then(|| {
-            format!(
+        if h.min(w) < MIN_SCALED_SIDE {
+            return Some(format!(
                 "the style ({}x{}) at texture scale {scale} px would be {w}x{h} pixels; expected at least \
                  {MIN_SCALED_SIDE} on each side: raise the texture scale",
                 self.width, self.height
-            )
-        })
+            ));
+        }
+        let need = 2 * (3 * crate::vision::vgg::FEATURE_CHANNELS * 4 * (h / 4) * (w / 4)) as u64;
+        let gib = |b: u64| b as f64 / f64::from(1u32 << 30);
+        match available {
+            Some(have) if need > have => Some(format!(
+                "the style at texture scale {scale} px ({w}x{h}) has {} feature positions, whose features a run \
+                 holds need about {:.1} GiB, and {:.1} GiB of memory is available: lower the texture scale (256 is \
+                 the paper's)",
+                (h / 4) * (w / 4),
+                gib(need),
+                gib(have)
+            )),
+            _ => None,
+        }
     }
 
     /// The pixels as floats in [0, 1].
     pub fn to_f32(&self) -> Vec<f32> {
         self.rgb.iter().map(|&v| f32::from(v) / 255.0).collect()
     }
+}
+
+/// The memory the system can give without swapping (Linux's MemAvailable),
+/// or `None` where it cannot be read.
+fn available_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
 }
 
 #[cfg(test)]
@@ -104,7 +137,20 @@ mod tests {
         let tall = strip(32, 256).expect("8:1");
         let problem = tall.problem_at_scale(16).expect("2 pixels wide");
         assert!(problem.contains("would be 2x16 pixels"), "{problem}");
-        assert_eq!(tall.problem_at_scale(256), None);
-        assert_eq!(strip(40, 40).expect("square").problem_at_scale(16), None);
+        assert_eq!(tall.problem_at_scale_with(256, None), None);
+        assert_eq!(strip(40, 40).expect("square").problem_at_scale_with(16, None), None);
+    }
+
+    /// Wave's shape at 4,096 px high: 2,150 × 1,024 feature positions,
+    /// about 37.8 GiB of features over a run, refused with 32 GiB available
+    /// and taken with 64.
+    #[test]
+    fn a_texture_scale_whose_features_exceed_the_memory_is_named() {
+        let wave = strip(4200, 2000).expect("wave's shape");
+        let problem = wave.problem_at_scale_with(4096, Some(32 << 30)).expect("too large");
+        assert!(problem.contains("(8601x4096) has 2201600 feature positions"), "{problem}");
+        assert!(problem.contains("need about 37.8 GiB, and 32.0 GiB of memory is available"), "{problem}");
+        assert_eq!(wave.problem_at_scale_with(4096, Some(64 << 30)), None);
+        assert_eq!(wave.problem_at_scale_with(256, Some(1 << 30)), None);
     }
 }
