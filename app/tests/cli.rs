@@ -636,6 +636,16 @@ fn a_named_depth_model_that_cannot_be_used_is_an_error() {
     std::fs::remove_dir_all(&out).ok();
 }
 
+/// A writable copy of fern's poses and `images_8` photos in `to`.
+fn copy_fern_poses_and_images_8(fern: &Path, to: &Path) {
+    std::fs::create_dir_all(to.join("images_8")).expect("dir");
+    std::fs::copy(fern.join("poses_bounds.npy"), to.join("poses_bounds.npy")).expect("copy");
+    for e in std::fs::read_dir(fern.join("images_8")).expect("fern's images_8") {
+        let e = e.expect("entry");
+        std::fs::copy(e.path(), to.join("images_8").join(e.file_name())).expect("copy");
+    }
+}
+
 /// `gast fit --preview` into the folder the photos are read from is refused
 /// before the fit: its `view0_truth.png`, … and `sheet.png` mixed with the
 /// photos (and an LLFF folder pairs its images with the poses by count).
@@ -644,12 +654,7 @@ fn fit_previews_are_not_written_among_the_photos() {
     let Some(fern) = shared_file("data/datasets/fern") else { return };
     let copy = temp("fit-preview");
     let photos = copy.join("images_8");
-    std::fs::create_dir_all(&photos).expect("dir");
-    std::fs::copy(fern.join("poses_bounds.npy"), copy.join("poses_bounds.npy")).expect("copy");
-    for e in std::fs::read_dir(fern.join("images_8")).expect("fern's images_8") {
-        let e = e.expect("entry");
-        std::fs::copy(e.path(), photos.join(e.file_name())).expect("copy");
-    }
+    copy_fern_poses_and_images_8(&fern, &copy);
     let before = std::fs::read_dir(&photos).expect("list").count();
     let fitted = copy.join("f.ply");
     let args =
@@ -696,12 +701,7 @@ fn views_are_not_written_among_a_datasets_photos() {
     // The cameras read images_8 (one photo a row); images_4 holds one photo.
     std::fs::create_dir_all(llff.join("images_4")).expect("dir");
     std::fs::copy(fern.join("images_4/image000.png"), llff.join("images_4/image000.png")).expect("copy");
-    std::fs::create_dir_all(llff.join("images_8")).expect("dir");
-    for e in std::fs::read_dir(fern.join("images_8")).expect("fern's images_8") {
-        let e = e.expect("entry");
-        std::fs::copy(e.path(), llff.join("images_8").join(e.file_name())).expect("copy");
-    }
-    std::fs::copy(fern.join("poses_bounds.npy"), llff.join("poses_bounds.npy")).expect("copy");
+    copy_fern_poses_and_images_8(&fern, &llff);
     let photo = std::fs::read(train.join("r_0.png")).expect("read");
     for (cameras, out) in
         [(copy.join("lego/transforms_train.json"), train.clone()), (llff.clone(), llff.join("images_4"))]
