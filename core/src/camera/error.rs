@@ -39,7 +39,8 @@ pub enum CameraError {
         path: PathBuf,
         /// The record at fault (`document`, `frames[3]`, …).
         record: String,
-        /// The parser's message (it names the field and the expected type).
+        /// The parser's message (it names a missing field; one of the wrong
+        /// type is named before, by `check_fields`).
         source: serde_json::Error,
     },
     /// A value that is present but not acceptable.

@@ -344,13 +344,90 @@ fn load_json(path: &Path) -> Result<CameraSet, CameraError> {
 /// A short description of a JSON value's kind, for error messages.
 pub(crate) fn json_kind(v: &serde_json::Value) -> &'static str {
     match v {
+        serde_json::Value::Object(_) => "an object without `frames`",
+        other => json_type(other),
+    }
+}
+
+/// What a JSON value is, for error messages: "a string", "a list", ….
+fn json_type(v: &serde_json::Value) -> &'static str {
+    match v {
         serde_json::Value::Null => "null",
         serde_json::Value::Bool(_) => "a boolean",
         serde_json::Value::Number(_) => "a number",
         serde_json::Value::String(_) => "a string",
         serde_json::Value::Array(_) => "a list",
-        serde_json::Value::Object(_) => "an object without `frames`",
+        serde_json::Value::Object(_) => "an object",
     }
+}
+
+/// What a field of a JSON camera record holds.
+#[derive(Clone, Copy)]
+pub(crate) enum Field {
+    /// Any number.
+    Number,
+    /// A whole number from 0 up.
+    Count,
+    /// A string.
+    Text,
+    /// A list of this many numbers.
+    Numbers(usize),
+    /// A list of lists of numbers (a pose matrix whose shape its reader checks).
+    Rows,
+    /// A list of this many rows of this many numbers.
+    Matrix(usize, usize),
+}
+
+/// Checks the `fields` present in the record `value` (an object; null reads
+/// as absent) before serde reads it, so that a wrong type names its field:
+/// serde_json's `from_value` names none ("invalid type: string, expected
+/// f64"), and through `#[serde(flatten)]` not even the record's. A missing
+/// field, and a value that is not an object, are left to serde, which names both.
+pub(crate) fn check_fields(
+    path: &Path,
+    record: &str,
+    value: &serde_json::Value,
+    fields: &[(&str, Field)],
+) -> Result<(), CameraError> {
+    let Some(object) = value.as_object() else { return Ok(()) };
+    let numbers = |v: &serde_json::Value, n: Option<usize>| {
+        v.as_array().is_some_and(|a| n.is_none_or(|n| a.len() == n) && a.iter().all(serde_json::Value::is_number))
+    };
+    for &(name, field) in fields {
+        let Some(v) = object.get(name).filter(|v| !v.is_null()) else { continue };
+        let (fits, expected) = match field {
+            Field::Number => (v.is_number(), "a number".to_string()),
+            Field::Count => {
+                (v.is_u64() && v.as_u64().is_some_and(|n| n <= u64::from(u32::MAX)), "a whole number of pixels".into())
+            }
+            Field::Text => (v.is_string(), "a string".into()),
+            Field::Numbers(n) => (numbers(v, Some(n)), format!("a list of {n} numbers")),
+            Field::Rows => (
+                v.as_array().is_some_and(|rows| rows.iter().all(|r| numbers(r, None))),
+                "a list of rows of numbers".into(),
+            ),
+            Field::Matrix(r, c) => (
+                v.as_array().is_some_and(|rows| rows.len() == r && rows.iter().all(|row| numbers(row, Some(c)))),
+                format!("a {r}x{c} matrix ({r} lists of {c} numbers)"),
+            ),
+        };
+        if !fits {
+            let found = match v {
+                serde_json::Value::Array(_) => {
+                    let text = v.to_string();
+                    if text.chars().count() > 60 {
+                        format!("{}…", text.chars().take(60).collect::<String>())
+                    } else {
+                        text
+                    }
+                }
+                serde_json::Value::Number(n) => n.to_string(),
+                other => json_type(other).to_string(),
+            };
+            return Err(CameraError::format(path, format!("{record}.{name}"), expected, found));
+        }
+    }
+    Ok(())
 }
 
 /// A rotation made (Gram–Schmidt on the columns) from a pose matrix read

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use glam::{DMat3, DVec3};
 use serde::Deserialize;
 
-use super::{CameraError, CameraSet, ORTHONORMAL_TOLERANCE, orthonormal_warning, rotation_from};
+use super::{CameraError, CameraSet, Field, ORTHONORMAL_TOLERANCE, check_fields, orthonormal_warning, rotation_from};
 use crate::Camera;
 
 /// Intrinsics that may appear at the top level or in a frame.
@@ -71,8 +71,27 @@ pub fn load_transforms(path: impl AsRef<Path>) -> Result<CameraSet, CameraError>
     from_value(path, super::read_json(path)?)
 }
 
+/// The fields of [`Intrinsics`], which a frame or the document may hold.
+const INTRINSIC_FIELDS: [(&str, Field); 14] = [
+    ("camera_angle_x", Field::Number),
+    ("camera_angle_y", Field::Number),
+    ("fl_x", Field::Number),
+    ("fl_y", Field::Number),
+    ("cx", Field::Number),
+    ("cy", Field::Number),
+    ("w", Field::Number),
+    ("h", Field::Number),
+    ("k1", Field::Number),
+    ("k2", Field::Number),
+    ("k3", Field::Number),
+    ("k4", Field::Number),
+    ("p1", Field::Number),
+    ("p2", Field::Number),
+];
+
 /// Reads a parsed `transforms.json` document.
 pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<CameraSet, CameraError> {
+    check_fields(path, "document", &value, &INTRINSIC_FIELDS)?;
     let doc: Document = serde_json::from_value(value).map_err(|source| CameraError::Json {
         path: path.to_path_buf(),
         record: "document".into(),
@@ -86,6 +105,8 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
     let mut cameras = Vec::with_capacity(doc.frames.len());
     for (i, item) in doc.frames.into_iter().enumerate() {
         let record = format!("frames[{i}]");
+        check_fields(path, &record, &item, &INTRINSIC_FIELDS)?;
+        check_fields(path, &record, &item, &[("file_path", Field::Text), ("transform_matrix", Field::Rows)])?;
         let frame: Frame = serde_json::from_value(item).map_err(|source| CameraError::Json {
             path: path.to_path_buf(),
             record: record.clone(),

@@ -92,6 +92,8 @@ fn transforms_reads_missing_sizes_from_image_headers() {
     assert!(matches!(e, CameraError::NotFound { .. }) && e.to_string().contains("frames[0]"), "{e}");
 }
 
+/// Each message names the field: serde_json's own messages for a wrong type
+/// ("invalid type: string \"wide\", expected f64") named none.
 #[test]
 fn malformed_json_gives_errors_naming_the_field() {
     let d = temp_dir("json-bad");
@@ -104,7 +106,16 @@ fn malformed_json_gives_errors_naming_the_field() {
         (json!({"camera_angle_x": 1, "w": 4, "h": 4, "frames": [{"transform_matrix": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}]}).to_string(), "4x4"),
         (json!({"camera_angle_x": 1, "w": 4.5, "h": 4, "frames": [{"transform_matrix": m}]}).to_string(), "frames[0].w"),
         (json!({"camera_angle_x": 1, "w": 4, "h": 4, "frames": [{"transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 4]]}]}).to_string(), "rotation"),
-        (json!({"camera_angle_x": "wide", "w": 4, "h": 4, "frames": [{"transform_matrix": m}]}).to_string(), "invalid type"),
+        (json!({"camera_angle_x": "wide", "w": 4, "h": 4, "frames": [{"transform_matrix": m}]}).to_string(), "document.camera_angle_x: expected a number, found a string"),
+        (json!({"camera_angle_x": 1, "w": 4, "h": 4, "frames": [{"transform_matrix": m, "fl_x": [2]}]}).to_string(), "frames[0].fl_x: expected a number, found [2]"),
+        (json!({"camera_angle_x": 1, "w": 4, "h": 4, "frames": [{"transform_matrix": "I"}]}).to_string(), "frames[0].transform_matrix: expected a list of rows of numbers, found a string"),
+        (json!({"camera_angle_x": 1, "w": 4, "h": 4, "frames": [{"transform_matrix": [[1, 0, 0, 0], [0, 1, "x", 0], [0, 0, 1, 4]]}]}).to_string(), "frames[0].transform_matrix: expected a list of rows of numbers, found [[1,0,0,0],[0,1,\"x\",0],"),
+        (json!({"camera_angle_x": 1, "w": 4, "h": 4, "frames": [{"transform_matrix": m, "file_path": 3}]}).to_string(), "frames[0].file_path: expected a string, found 3"),
+        (json!([{"id": 0, "img_name": "a", "width": "4", "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": 2, "fy": 2}]).to_string(), "cameras[0].width: expected a whole number of pixels, found a string"),
+        (json!([{"id": 0, "img_name": "a", "width": 4, "height": -4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": 2, "fy": 2}]).to_string(), "cameras[0].height: expected a whole number of pixels, found -4"),
+        (json!([{"id": 0, "img_name": "a", "width": 4, "height": 4, "position": [0, 0], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": 2, "fy": 2}]).to_string(), "cameras[0].position: expected a list of 3 numbers, found [0,0]"),
+        (json!([{"id": 0, "img_name": "a", "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0]], "fx": 2, "fy": 2}]).to_string(), "cameras[0].rotation: expected a 3x3 matrix (3 lists of 3 numbers), found [[1,0,0],[0,1,0]]"),
+        (json!([{"id": 0, "img_name": 5, "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": 2, "fy": 2}]).to_string(), "cameras[0].img_name: expected a string, found 5"),
         (json!([{"id": 0, "img_name": "a", "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": 2}]).to_string(), "`fy`"),
         (json!([{"id": 0, "img_name": "a", "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0]], "fx": 2, "fy": 2}]).to_string(), "cameras[0]"),
         (json!([{"id": 0, "img_name": "a", "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": -2, "fy": 2}]).to_string(), "a).fx"),
