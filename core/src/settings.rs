@@ -30,11 +30,39 @@ pub fn patched<T: Serialize + DeserializeOwned>(base: &T, patch: &Value) -> Resu
     if !patch.is_object() && !patch.is_null() {
         return Err(format!("a settings patch is a JSON object, found {patch}"));
     }
-    let mut value = serde_json::to_value(base).map_err(|e| e.to_string())?;
+    let base = serde_json::to_value(base).map_err(|e| e.to_string())?;
+    let mut value = base.clone();
     if patch.is_object() {
         merge(&mut value, patch, "")?;
     }
-    serde_json::from_value(value).map_err(|e| format!("not valid settings: {e}"))
+    serde_json::from_value(value).map_err(|e| {
+        // serde names no field in a wrong value ("invalid type: string
+        // \"ten\", expected u32"): the first key that fails alone is named.
+        let mut leaves = Vec::new();
+        leaves_of(patch, "", &mut leaves);
+        let at_fault = leaves.into_iter().find_map(|(path, leaf)| {
+            let mut one = base.clone();
+            merge(&mut one, &leaf, "").ok()?;
+            serde_json::from_value::<T>(one).err().map(|e| format!("not valid settings: {path:?}: {e}"))
+        });
+        at_fault.unwrap_or_else(|| format!("not valid settings: {e}"))
+    })
+}
+
+/// Each leaf of the object `patch` (a value that is not an object), with its
+/// dotted path and a patch that holds it alone, where it stood.
+fn leaves_of(patch: &Value, at: &str, out: &mut Vec<(String, Value)>) {
+    let Value::Object(map) = patch else { return };
+    for (k, v) in map {
+        let path = if at.is_empty() { k.clone() } else { format!("{at}.{k}") };
+        let mut inner = Vec::new();
+        match v {
+            Value::Object(_) => leaves_of(v, &path, &mut inner),
+            _ => inner.push((path, v.clone())),
+        }
+        let wrap = |leaf: Value| Value::Object([(k.clone(), leaf)].into_iter().collect());
+        out.extend(inner.into_iter().map(|(p, leaf)| (p, wrap(leaf))));
+    }
 }
 
 /// Settings read from `text`: a JSON object of some of the keys, merged over

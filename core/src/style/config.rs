@@ -553,7 +553,19 @@ mod tests {
         assert_eq!(partial.cycles, 3);
         assert_eq!(partial.weights.gcfm, 1.5);
         assert_eq!(partial.weights.depth, 10.0);
-        assert!(StyleConfig::from_json(r#"{"mode": "sideways"}"#).is_err());
+        // A wrong value names its setting (serde's message alone names none).
+        for (text, said) in [
+            (r#"{"mode": "sideways"}"#, r#"not valid settings: "mode": unknown variant `sideways`"#),
+            (
+                r#"{"cycles": 3, "steps_per_cycle": "ten"}"#,
+                r#""steps_per_cycle": invalid type: string "ten", expected u32"#,
+            ),
+            (r#"{"weights": {"gcfm": 1, "depth": [1]}}"#, r#""weights.depth": invalid type: sequence, expected f32"#),
+            (r#"{"background": [0, 0]}"#, r#""background": invalid length 2"#),
+        ] {
+            let e = StyleConfig::from_json(text).expect_err(text).to_string();
+            assert!(e.contains(said), "{text} → {e}");
+        }
         let typo = StyleConfig::from_json(r#"{"weights": {"gcmf": 3}}"#).expect_err("a typo");
         assert!(typo.to_string().contains("unknown setting \"weights.gcmf\""), "{typo}");
         let array = StyleConfig::from_json("[1, 2]").expect_err("an array");
