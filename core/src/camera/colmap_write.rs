@@ -6,8 +6,7 @@
 //! `k + 1`) without 2D points. Values are written as `f64` converted from the
 //! stored `f32`, so the text form reads back bit-exact.
 
-use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::Write;
 use std::path::Path;
 
 use glam::DQuat;
@@ -21,17 +20,17 @@ fn qvec(c: &Camera) -> [f64; 4] {
     [q.w, q.x, q.y, q.z]
 }
 
-fn create(dir: &Path, name: &str) -> Result<(BufWriter<File>, std::path::PathBuf), CameraError> {
+/// Writes `bytes` as `dir/name`, `dir` made if needed, through a temporary
+/// file renamed over it ([`crate::io::replace_with`]).
+fn write(dir: &Path, name: &str, bytes: &[u8]) -> Result<(), CameraError> {
     crate::io::create_folder(dir).map_err(|e| CameraError::io(dir, e))?;
     let path = dir.join(name);
-    let f = File::create(&path).map_err(|e| CameraError::io(&path, e))?;
-    Ok((BufWriter::new(f), path))
+    crate::io::replace_with(&path, |w| w.write_all(bytes)).map_err(|e| CameraError::io(&path, e))
 }
 
 /// Writes `cameras.txt` and `images.txt` into `dir` (created if needed).
 pub fn write_colmap_text(dir: impl AsRef<Path>, cameras: &[Camera]) -> Result<(), CameraError> {
     let dir = dir.as_ref();
-    let (mut w, path) = create(dir, "cameras.txt")?;
     let mut out = String::from(
         "# Camera list with one line of data per camera:\n#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n",
     );
@@ -48,9 +47,8 @@ pub fn write_colmap_text(dir: impl AsRef<Path>, cameras: &[Camera]) -> Result<()
             f64::from(c.cy)
         );
     }
-    w.write_all(out.as_bytes()).and_then(|_| w.flush()).map_err(|e| CameraError::io(&path, e))?;
+    write(dir, "cameras.txt", out.as_bytes())?;
 
-    let (mut w, path) = create(dir, "images.txt")?;
     let mut out = String::from(
         "# Image list with two lines of data per image:\n#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n#   POINTS2D[] as (X, Y, POINT3D_ID)\n",
     );
@@ -60,7 +58,7 @@ pub fn write_colmap_text(dir: impl AsRef<Path>, cameras: &[Camera]) -> Result<()
         let t = c.translation.as_dvec3();
         out += &format!("{} {qw} {qx} {qy} {qz} {} {} {} {} {}\n\n", k + 1, t.x, t.y, t.z, k + 1, c.name);
     }
-    w.write_all(out.as_bytes()).and_then(|_| w.flush()).map_err(|e| CameraError::io(&path, e))
+    write(dir, "images.txt", out.as_bytes())
 }
 
 /// Writes `cameras.bin` and `images.bin` into `dir` (created if needed).
@@ -91,8 +89,7 @@ pub fn write_colmap_binary(dir: impl AsRef<Path>, cameras: &[Camera]) -> Result<
         ims.extend_from_slice(&0u64.to_le_bytes());
     }
     for (name, bytes) in [("cameras.bin", cams), ("images.bin", ims)] {
-        let (mut w, path) = create(dir, name)?;
-        w.write_all(&bytes).and_then(|_| w.flush()).map_err(|e| CameraError::io(&path, e))?;
+        write(dir, name, &bytes)?;
     }
     Ok(())
 }
