@@ -156,6 +156,7 @@ pub fn load_posed_images(
             let path = find_image(dataset, images, &cam.name)?;
             let (w, h, rgb) = read_rgb(&path, background)?;
             let folder = path.parent().map(Path::to_path_buf);
+            let stretched = stretch_warning(&path, cam, w, h);
             let full = if (w, h) == (cam.width, cam.height) { cam.clone() } else { cam.scaled_to(w, h) };
             let work = full.downscaled_to_max_side(resolution.max(1));
             let img = if (work.width, work.height) == (w, h) {
@@ -163,10 +164,35 @@ pub fn load_posed_images(
             } else {
                 resize_area(&rgb, h as usize, w as usize, 3, work.height as usize, work.width as usize)
             };
-            Ok(((work, img), folder))
+            Ok(((work, img), folder, stretched))
         })
         .collect::<Result<Vec<_>, FitDataError>>()?;
-    let image_folders = canonical_folders(dataset, views.iter().filter_map(|(_, f)| f.clone()));
-    let views = views.into_iter().map(|(v, _)| v).collect();
-    Ok(PosedImages { views, warnings: set.warnings, image_folders })
+    let image_folders = canonical_folders(dataset, views.iter().filter_map(|(_, f, _)| f.clone()));
+    let mut warnings = set.warnings;
+    let stretched: Vec<String> = views.iter().filter_map(|(_, _, s)| s.clone()).collect();
+    if let Some(first) = stretched.first() {
+        let more = stretched.len() - 1;
+        warnings.push(if more == 0 { first.clone() } else { format!("{first}; and {more} more image(s) like it") });
+    }
+    let views = views.into_iter().map(|(v, _, _)| v).collect();
+    Ok(PosedImages { views, warnings, image_folders })
+}
+
+/// A warning when the image at `path` (`w × h`) has another shape than its
+/// camera says, by more than 1 % in aspect: rescaling the camera to it then
+/// stretches its focal lengths unequally, right only if the image itself was
+/// stretched, and usually a sign of a cropped or wrong image. Another size
+/// of the same shape (a downscaled images folder) is the normal case.
+fn stretch_warning(path: &Path, cam: &Camera, w: u32, h: u32) -> Option<String> {
+    let (sx, sy) = (f64::from(w) / f64::from(cam.width), f64::from(h) / f64::from(cam.height));
+    ((sx / sy - 1.0).abs() > 0.01).then(|| {
+        format!(
+            "{}: expected an image of its camera's shape ({}x{}, {}), found {w}x{h}: the camera is stretched to it \
+             (width ×{sx:.3}, height ×{sy:.3}), right only if the image was stretched too",
+            path.display(),
+            cam.width,
+            cam.height,
+            cam.name
+        )
+    })
 }

@@ -89,3 +89,33 @@ fn fit_presets_refuse_unknown_keys_and_unusable_values() {
     }
     assert_eq!(problems.len(), 4, "{problems:?}");
 }
+
+/// An image of another shape than its camera is fitted (the camera rescaled
+/// to it) with a warning naming it; a downscaled image of the same shape, the
+/// normal case of an `images_2` folder, is not warned of.
+#[test]
+fn an_image_of_another_shape_than_its_camera_is_warned_of() {
+    let d = std::env::temp_dir().join(format!("gast-fit-stretch-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("mkdir");
+    let m = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 0, 1]];
+    let doc = serde_json::json!({"camera_angle_x": 0.6, "w": 64, "h": 48, "frames": [
+        {"file_path": "a.png", "transform_matrix": m},
+        {"file_path": "b.png", "transform_matrix": m},
+        {"file_path": "c.png", "transform_matrix": m}]});
+    std::fs::write(d.join("transforms.json"), doc.to_string()).expect("write");
+    for (name, w, h) in [("a.png", 64, 48), ("b.png", 32, 24), ("c.png", 48, 48)] {
+        image::RgbImage::new(w, h).save(d.join(name)).expect("png");
+    }
+    let data = load_posed_images(&d, None, 256, 0, [0.0; 3]).expect("loads");
+    let sizes: Vec<_> = data.views.iter().map(|(c, _)| (c.width, c.height)).collect();
+    assert_eq!(sizes, [(64, 48), (32, 24), (48, 48)]);
+    assert_eq!(data.warnings.len(), 1, "{:?}", data.warnings);
+    let said = &data.warnings[0];
+    assert!(
+        said.contains("c.png: expected an image of its camera's shape (64x48, c.png), found 48x48")
+            && said.contains("width ×0.750, height ×1.000"),
+        "{said}"
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
