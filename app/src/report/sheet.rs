@@ -12,7 +12,6 @@ use std::path::Path;
 
 use gast_core::io::{depth_to_gray, depth_to_jet};
 use gast_core::raster::{self, Render, RenderOptions};
-use gast_core::session::Session;
 use gast_core::style::config::{LossWeights, ParamRegulariser};
 use gast_core::style::{StyleConfig, StyleMaps};
 use gast_core::{Camera, Gaussians};
@@ -123,11 +122,6 @@ impl RunViews<'_> {
 pub fn spread(cameras: &[Camera], count: usize) -> impl Iterator<Item = &Camera> {
     let step = (cameras.len() / count.max(1)).max(1);
     cameras.iter().step_by(step).take(count)
-}
-
-/// The style's three maps of a session as tiles.
-pub fn style_tiles(session: &Session) -> [Tile; 3] {
-    maps_tiles(&session.style().maps)
 }
 
 /// Style maps (RGB, depth, edges) as tiles.
