@@ -239,6 +239,16 @@ fn bad_inputs_fail_with_the_file_named_and_keep_existing_outputs() {
         assert!(!o.status.success());
         assert!(stderr(&o).contains("style.jpg: expected an output folder, found a file"), "{args:?}: {}", stderr(&o));
     }
+    // A file further up the folder's path is named too (it said "Not a directory").
+    let under = bogus.join("run");
+    let o = gast(&["render", s(&scene), "--out", s(&under)]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("run: expected an output folder to make, found the file")
+            && stderr(&o).contains("style.jpg in its path"),
+        "{}",
+        stderr(&o)
+    );
     // A long, narrow style is refused as it is read (a 4000x8 one ran the
     // machine out of memory), before any folder is made.
     let strip = out.join("strip.png");
@@ -566,6 +576,16 @@ fn fit_names_a_missing_images_folder_and_an_empty_training_set() {
     let o = gast(&["fit", s(&fern), "--out", s(&out.join("f.txt"))]);
     assert!(stderr(&o).contains("found the extension .txt"), "{}", stderr(&o));
     assert!(!stderr(&o).contains("fitting"), "it fitted first: {}", stderr(&o));
+    // So is a file where its folder should be (it fitted, then said "File exists").
+    std::fs::write(out.join("taken"), b"kept").expect("a file");
+    let o = gast(&["fit", s(&fern), "--iterations", "1", "--out", s(&out.join("taken/f.ply"))]);
+    assert!(
+        stderr(&o).contains("taken: expected an output folder, found a file; choose another --out"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!stderr(&o).contains("fitting"), "it fitted first: {}", stderr(&o));
+    assert_eq!(std::fs::read(out.join("taken")).expect("kept"), b"kept");
     std::fs::remove_dir_all(&out).ok();
 }
 

@@ -123,6 +123,9 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     );
     super::convert::check_output_name(&args.out)?;
     gast_core::io::refuse_read_only(&args.out).with_context(|| args.out.display().to_string())?;
+    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        super::check_output_folder(parent, "--out")?;
+    }
     // An LLFF capture's own small images (images_8, 504 px for fern) are what
     // its evaluations use: fit at their size unless told otherwise (fern: 25.3
     // dB held out in about 5 min on 2 cores, against the default 200 px).
@@ -180,8 +183,7 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     let fit_s = t_fit.elapsed().as_secs_f64();
 
     if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        gast_core::io::create_folder(parent)
-            .with_context(|| format!("could not create the folder {}", parent.display()))?;
+        super::output_folder(parent, "--out")?;
     }
     super::convert::save_scene(&args.out, &scene, &super::convert::SaveArgs::default())?;
     let psnr_all = mean_psnr(&scene, &views, cfg.background);

@@ -220,9 +220,19 @@ pub(crate) fn replaceable_json(path: &std::path::Path, flag: &str) -> anyhow::Re
 pub(crate) fn check_output_folder(dir: &std::path::Path, flag: &str) -> anyhow::Result<()> {
     anyhow::ensure!(
         !dir.exists() || dir.is_dir(),
-        "{}: expected an output folder, found a file; give {flag} a folder",
+        "{}: expected an output folder, found a file; choose another {flag}",
         dir.display()
     );
+    // A folder yet to be made needs its nearest existing ancestor to be one.
+    if let Some(file) =
+        dir.ancestors().skip(1).filter(|a| !a.as_os_str().is_empty()).find(|a| a.exists()).filter(|a| !a.is_dir())
+    {
+        anyhow::bail!(
+            "{}: expected an output folder to make, found the file {} in its path; choose another {flag}",
+            dir.display(),
+            file.display()
+        );
+    }
     anyhow::Context::with_context(gast_core::io::refuse_read_only_folder(dir), || {
         format!("could not use the output folder {}", dir.display())
     })
