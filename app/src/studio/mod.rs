@@ -111,6 +111,8 @@ pub struct StudioApp {
     dragging_split: bool,
     /// Runs on the CPU fit about ten minutes ([`session_link::StartRequest::fit_budget`]).
     fit_budget: bool,
+    /// The run start whose planned settings the editor has taken ([`Self::adopt_plan`]).
+    adopted: Option<std::sync::Weak<gast_core::session::RunStart>>,
     background: [f32; 3],
     /// Messages shown in the bottom panel, newest last.
     pub errors: Vec<String>,
@@ -302,6 +304,7 @@ impl StudioApp {
             compare: true,
             dragging_split: false,
             fit_budget: true,
+            adopted: None,
             background: [0.0; 3],
             errors: Vec::new(),
             notice: String::new(),
@@ -420,6 +423,23 @@ impl StudioApp {
         self.view.camera(self.viewport_px[0], self.viewport_px[1])
     }
 
+    /// Takes into the editor what the run's plan set (`worker::plan_for_cpu`:
+    /// the working resolution, the cycles, the texture scale) once per run
+    /// start, so that a slider moved during the run sends them back rather
+    /// than the settings the plan replaced (it sent the unplanned 30 cycles
+    /// and the run outgrew its ten minutes). The other settings stay as the
+    /// user has them.
+    fn adopt_plan(&mut self) {
+        let Some(start) = self.run.start() else { return };
+        if self.adopted.as_ref().is_some_and(|a| std::ptr::eq(a.as_ptr(), Arc::as_ptr(&start))) {
+            return;
+        }
+        let planned = &start.config;
+        (self.config.resolution, self.config.cycles, self.config.texture_scale) =
+            (planned.resolution, planned.cycles, planned.texture_scale);
+        self.adopted = Some(Arc::downgrade(&start));
+    }
+
     fn poll_workers(&mut self) {
         if let Ok(mut notes) = self.viewport_notes.lock() {
             self.errors.append(&mut notes.errors);
@@ -429,6 +449,7 @@ impl StudioApp {
             self.snapshot = Some(SceneRef { version: self.next_version, gaussians: SharedGaussians::Snapshot(snap) });
             self.next_version += 1;
         }
+        self.adopt_plan();
         // While the run is live its GPU buffers are drawn; once it ends, its final snapshot.
         match self.run.live() {
             Some(l) if self.live.as_ref().is_some_and(|r| r.live.same_run(&l)) => {}

@@ -896,3 +896,64 @@ fn a_cpu_run_is_planned_to_about_ten_minutes() {
     assert!(seconds <= AUTO_RUN_BUDGET_S * 1.05, "{seconds:.0} s planned: {said}");
     assert!(config.schedule().total_steps() <= asked && config.resolution >= 256, "{said}");
 }
+
+/// A whole frame planned at the default texture scale takes the reference's
+/// ratio of style to frame, as `gast stylize` does; a scale the user moved is kept.
+#[test]
+fn a_planned_whole_frame_run_keeps_the_references_style_to_frame_ratio() {
+    use gast_core::camera::{OrbitOptions, framed_orbit};
+    use gast_core::style::Focus;
+    let scene = assets::demo_scene();
+    let cameras = framed_orbit(&scene, &OrbitOptions { count: 12, width: 256, height: 256, ..OrbitOptions::default() });
+    let mut frame = StyleConfig { focus: Focus::Frame, ..StyleConfig::default() };
+    let said = super::worker::plan_for_cpu(&scene, &cameras, &mut frame);
+    let expected = gast_core::session::plan::frame_texture_scale(frame.resolution, 256);
+    assert!(expected < 256 && frame.texture_scale == expected, "{said}");
+    assert!(said.contains(&format!("texture scale {expected} px")), "{said}");
+    let mut moved = StyleConfig { focus: Focus::Frame, texture_scale: 384, ..StyleConfig::default() };
+    super::worker::plan_for_cpu(&scene, &cameras, &mut moved);
+    assert_eq!(moved.texture_scale, 384);
+    let mut object = StyleConfig { focus: Focus::Object, ..StyleConfig::default() };
+    super::worker::plan_for_cpu(&scene, &cameras, &mut object);
+    assert_eq!(object.texture_scale, 256, "an object keeps the style at 256");
+}
+
+/// The editor takes what the run's plan set (resolution, cycles, texture
+/// scale) when the run starts, and keeps the rest as the user has it: a
+/// slider moved during a planned run sent the unplanned 30 cycles back.
+#[test]
+fn the_editor_takes_the_planned_settings_when_the_run_starts() {
+    let Some(weights) = shared_file("data/weights/vgg19-conv3.safetensors") else {
+        assert!(!in_ci(), "the shared VGG weights are missing (CI=true, so this is a failure)");
+        eprintln!("SKIPPED the_editor_takes_the_planned_settings_when_the_run_starts: no shared VGG weights");
+        return;
+    };
+    let vgg = Arc::new(gast_core::vision::Vgg::load(&weights).expect("weights"));
+    let mut app = test_app();
+    app.set_session_starter(Box::new(move |req: session_link::StartRequest| {
+        let scene = Arc::unwrap_or_clone(req.scene);
+        // The plan's part: other values than the editor's.
+        let config = StyleConfig { resolution: 64, cycles: 1, texture_scale: 32, ..req.config };
+        let opts = gast_core::camera::OrbitOptions { count: 4, width: 64, height: 64, ..Default::default() };
+        let cameras = gast_core::camera::framed_orbit(&scene, &opts);
+        let inputs = gast_core::session::SessionInputs {
+            scene,
+            cameras,
+            style: (*req.style).clone(),
+            style_depth: gast_core::session::StyleDepthSource::Heuristic,
+            vgg: vgg.clone(),
+            config,
+            gpu: None,
+        };
+        Ok(session_link::SessionLink::of(gast_core::session::spawn(inputs, req.waker)))
+    }));
+    app.config =
+        StyleConfig { resolution: 96, cycles: 3, steps_per_cycle: 2, texture_scale: 48, ..StyleConfig::default() };
+    app.config.weights.tv = 0.5;
+    app.start_run();
+    poll_until(&mut app, 600, "the run", |a| matches!(a.run.status, RunStatus::Finished { .. } | RunStatus::Failed(_)));
+    assert_eq!(app.run.status, RunStatus::Finished { completed: true }, "{:?}", app.errors);
+    let c = &app.config;
+    assert_eq!((c.resolution, c.cycles, c.texture_scale), (64, 1, 32), "the plan's settings");
+    assert_eq!((c.steps_per_cycle, c.weights.tv), (2, 0.5), "the user's other settings");
+}

@@ -18,7 +18,9 @@ const ORBIT_VIEWS: usize = 36;
 
 /// Fits `config`'s run to about ten minutes on this CPU, as `gast stylize`
 /// does without `--resolution`: never above the resolution and cycles set
-/// (a small preset stays small), lower where the budget needs it. Says what
+/// (a small preset stays small), lower where the budget needs it; a whole
+/// frame at the default texture scale takes the reference's ratio of style
+/// to frame ([`gast_core::session::plan::frame_texture_scale`]). Says what
 /// it chose.
 pub(super) fn plan_for_cpu(
     scene: &gast_core::Gaussians,
@@ -35,12 +37,27 @@ pub(super) fn plan_for_cpu(
         fit_cycles(model, config.resolution, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
     config.cycles = cycles;
     let minutes = seconds / 60.0;
+    // A whole frame keeps the reference's ratio of the style to the frame, as
+    // in `gast stylize`, unless the texture scale was moved off its default.
+    let texture = if !object && config.texture_scale == StyleConfig::default().texture_scale {
+        let scale = gast_core::session::plan::frame_texture_scale(config.resolution, config.texture_scale);
+        let said = (scale != config.texture_scale).then(|| {
+            format!(
+                "; texture scale {scale} px, the reference's ratio of the style to a whole frame at {} px (asked {})",
+                config.resolution, config.texture_scale
+            )
+        });
+        config.texture_scale = scale;
+        said.unwrap_or_default()
+    } else {
+        String::new()
+    };
     if (config.resolution, config.cycles) == asked {
-        format!("about {minutes:.0} min on this CPU as set: {} px, {} cycles", asked.0, asked.1)
+        format!("about {minutes:.0} min on this CPU as set: {} px, {} cycles{texture}", asked.0, asked.1)
     } else {
         format!(
             "planned for about {minutes:.0} min on this CPU: {} px, {} cycles (asked {} px, {} cycles; untick \"fit \
-             the run\" to keep them)",
+             the run\" to keep them){texture}",
             config.resolution, config.cycles, asked.0, asked.1
         )
     }

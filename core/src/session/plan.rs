@@ -73,6 +73,25 @@ pub fn auto_resolution(span: f32, model: StepModel) -> (u32, u32) {
     resolution_for(span, model.largest_within(AUTO_STEP_BUDGET_S))
 }
 
+/// The working resolution at which the reference runs a whole-frame scene:
+/// an LLFF capture's photos, about 1,008 px wide, with the style at texture
+/// scale 256.
+pub const REFERENCE_FRAME_RESOLUTION: u32 = 1008;
+
+/// The texture scale at which a whole-frame run at `resolution` keeps the
+/// reference's ratio of the style's height to the frame (`texture_scale`
+/// at [`REFERENCE_FRAME_RESOLUTION`], scaled down with the frame): 64 px at
+/// 256 px, 128 px at 504. Rounded to a multiple of 8, at least 32, never
+/// above `texture_scale`. At 256 px with the style at 256 one of its
+/// patterns spans four times the share of the frame it does in the
+/// reference, and fern × block2's 300 steps showed no blocks in the depth
+/// where texture scale 64 showed them (`docs/geometry.md`).
+pub fn frame_texture_scale(resolution: u32, texture_scale: u32) -> u32 {
+    let scaled = u64::from(texture_scale) * u64::from(resolution) / u64::from(REFERENCE_FRAME_RESOLUTION);
+    let rounded = ((scaled + 4) / 8 * 8).max(32) as u32;
+    rounded.min(texture_scale)
+}
+
 /// The whole run the automatic plan aims at on a CPU: ten minutes.
 pub const AUTO_RUN_BUDGET_S: f64 = 600.0;
 /// The smallest working resolution the run budget may bring the plan down to.
@@ -171,6 +190,18 @@ pub fn resolution_for(span: f32, cap: u32) -> (u32, u32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_whole_frame_run_keeps_the_references_ratio_of_style_to_frame() {
+        assert_eq!(frame_texture_scale(256, 256), 64);
+        assert_eq!(frame_texture_scale(252, 256), 64);
+        assert_eq!(frame_texture_scale(504, 256), 128);
+        assert_eq!(frame_texture_scale(1008, 256), 256);
+        assert_eq!(frame_texture_scale(1600, 256), 256, "never above the scale asked for");
+        assert_eq!(frame_texture_scale(64, 256), 32, "at least 32 px");
+        assert_eq!(frame_texture_scale(256, 512), 128);
+        assert_eq!(frame_texture_scale(256, 16), 16);
+    }
 
     #[test]
     fn the_automatic_resolution_follows_the_object_within_the_step_budget() {

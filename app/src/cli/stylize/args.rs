@@ -98,7 +98,9 @@ pub struct StylizeArgs {
     /// decoupled, joint, color-only or geometry-only [default: decoupled].
     #[arg(long)]
     pub mode: Option<Mode>,
-    /// Texture scale: the style's height in pixels (128, 256, 512 = 0.5x, 1x, 2x) [default: 256].
+    /// Texture scale: the style's height in pixels (128, 256, 512 = 0.5x, 1x, 2x) [default: 256; with
+    /// whole-frame losses and without --preset, scaled with the working resolution as the reference's 256 px
+    /// at its 1,008: 64 px at 256, 128 at 504].
     #[arg(long)]
     pub texture_scale: Option<u32>,
     /// Working resolution: longer side of the optimisation renders [default:

@@ -17,8 +17,8 @@ use gast_core::io::{
 };
 use gast_core::raster::{self, RenderOptions};
 use gast_core::session::plan::{
-    AUTO_RUN_BUDGET_S, PIXELS_PER_FEATURE, StepModel, ViewsSurvey, auto_plan, auto_resolution_gpu, step_time_hint,
-    survey,
+    AUTO_RUN_BUDGET_S, PIXELS_PER_FEATURE, REFERENCE_FRAME_RESOLUTION, StepModel, ViewsSurvey, auto_plan,
+    auto_resolution_gpu, frame_texture_scale, step_time_hint, survey,
 };
 use gast_core::session::{Event, Session, SessionInputs, Stage1Cache, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::{FeatureNet, StyleConfig, StyleMaps};
@@ -369,8 +369,10 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     )?;
     refuse_photo_folder(&args.out, "--out", args.cameras.as_deref(), &cameras)?;
     let mut config = config;
-    if args.resolution.is_none() && args.preset.is_none() {
-        let ViewsSurvey { span, object } = survey(&scene, &cameras, config.focus, config.background);
+    let auto_resolution = args.resolution.is_none() && args.preset.is_none();
+    let auto_texture = args.texture_scale.is_none() && args.preset.is_none();
+    let surveyed = (auto_resolution || auto_texture).then(|| survey(&scene, &cameras, config.focus, config.background));
+    if let Some(ViewsSurvey { span, object }) = surveyed.filter(|_| auto_resolution) {
         let (chosen, wanted, hint) = match &gpu {
             Some(g) => {
                 let (chosen, wanted) = auto_resolution_gpu(span);
@@ -395,11 +397,27 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             }
         };
         eprintln!(
-            "working resolution {chosen} px: the object spans {:.0} relu3 positions across its longer side \
+            "working resolution {chosen} px: the {} spans {:.0} relu3 positions across its longer side \
              (64 would need {wanted} px); {hint}",
+            if object { "object" } else { "scene" },
             span * chosen as f32 / PIXELS_PER_FEATURE,
         );
         config.resolution = chosen;
+    }
+    // A whole frame keeps the reference's ratio of the style to the frame.
+    if let Some(ViewsSurvey { object: false, .. }) = surveyed.filter(|_| auto_texture) {
+        let scale = frame_texture_scale(config.resolution, config.texture_scale);
+        if scale != config.texture_scale {
+            eprintln!(
+                "texture scale {scale} px: the style's height in the reference's ratio to a whole frame ({} px at \
+                 {REFERENCE_FRAME_RESOLUTION} px), at this {} px working resolution (--texture-scale overrides)",
+                config.texture_scale, config.resolution
+            );
+            config.texture_scale = scale;
+            if let Some(problem) = style.problem_at_scale(scale) {
+                anyhow::bail!("{}: {problem} (--texture-scale)", args.style.display());
+            }
+        }
     }
     if let Some(p) = &args.save_preset {
         write_bytes(p, config.to_json().as_bytes())?;
