@@ -164,7 +164,9 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>) ->
     });
     changed |= ui.add(egui::Slider::new(&mut c.texture_scale, 16..=1024).text("style height (px)")).changed();
     changed |= ui.add(egui::Slider::new(&mut c.resolution, 64..=1024).text("working resolution")).changed();
-    ui.weak(gast_core::session::plan::step_time_hint(c.resolution, c.focus != Focus::Frame));
+    let object = c.focus != Focus::Frame;
+    let model = gast_core::session::plan::StepModel::for_focus(object);
+    ui.weak(gast_core::session::plan::step_time_hint(model, c.resolution, object));
     egui::ComboBox::from_label("focus").selected_text(focus_label(c.focus)).show_ui(ui, |ui| {
         for f in Focus::ALL {
             changed |= ui.selectable_value(&mut c.focus, f, focus_label(f)).changed();

@@ -29,7 +29,9 @@ pub(super) fn plan_for_cpu(
 ) -> String {
     use gast_core::session::plan::{AUTO_RUN_BUDGET_S, StepModel, ViewsSurvey, auto_plan, fit_cycles, survey};
     let ViewsSurvey { span, object } = survey(scene, cameras, config.focus, config.background);
-    let model = StepModel::for_focus(object);
+    // A whole frame at the default texture scale takes the reference's ratio (below).
+    let scaled_texture = !object && config.texture_scale == StyleConfig::default().texture_scale;
+    let model = StepModel::for_run(object, scaled_texture);
     let plan = auto_plan(span, model, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
     let asked = (config.resolution, config.cycles);
     config.resolution = plan.resolution.min(config.resolution);
@@ -39,7 +41,7 @@ pub(super) fn plan_for_cpu(
     let minutes = seconds / 60.0;
     // A whole frame keeps the reference's ratio of the style to the frame, as
     // in `gast stylize`, unless the texture scale was moved off its default.
-    let texture = if !object && config.texture_scale == StyleConfig::default().texture_scale {
+    let texture = if scaled_texture {
         let scale = gast_core::session::plan::frame_texture_scale(config.resolution, config.texture_scale);
         let said = (scale != config.texture_scale).then(|| {
             format!(

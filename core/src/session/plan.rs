@@ -35,13 +35,32 @@ const STEP_OBJECT: StepModel = StepModel { at_256: 0.29, exponent: 1.7 };
 /// 256 px (`gast bench step --device cpu --focus frame`), growing with the
 /// pixel count.
 const STEP_FRAME: StepModel = StepModel { at_256: 0.57, exponent: 2.0 };
+/// Whole-frame losses with the style in the reference's ratio to the frame
+/// ([`frame_texture_scale`]: 64 px at 256), a whole frame's default since
+/// 2026-12-01: fern × block2 on its 20 LLFF cameras (the frame recipe on),
+/// 1,000 steps at 256 px in 287 s alone on the 2-core CPU (0.287 s a step);
+/// 80 steps at 256, 384 and 512 px (texture scale 64, 96, 128) took 0.32,
+/// 0.77 and 1.33 s a step with the first visits, an exponent of 2.05.
+const STEP_FRAME_SCALED: StepModel = StepModel { at_256: 0.30, exponent: 2.0 };
 /// The longest step the automatic working resolution accepts, seconds.
 pub const AUTO_STEP_BUDGET_S: f64 = 1.0;
 
 impl StepModel {
-    /// The model for losses focused on the object (`true`) or on the whole frame.
+    /// The model for losses focused on the object (`true`) or on the whole
+    /// frame, the style at a fixed texture scale.
     pub fn for_focus(object: bool) -> Self {
-        if object { STEP_OBJECT } else { STEP_FRAME }
+        Self::for_run(object, false)
+    }
+
+    /// [`Self::for_focus`], where `scaled_texture` says that on a whole frame
+    /// the texture scale follows the working resolution ([`frame_texture_scale`]):
+    /// the style then has a sixteenth of the positions to search at 256 px.
+    pub fn for_run(object: bool, scaled_texture: bool) -> Self {
+        match (object, scaled_texture) {
+            (true, _) => STEP_OBJECT,
+            (false, true) => STEP_FRAME_SCALED,
+            (false, false) => STEP_FRAME,
+        }
     }
 
     /// Seconds of one step at `resolution` (longer side, px).
@@ -59,8 +78,8 @@ impl StepModel {
 /// The estimated time of one CPU step at `resolution` with losses focused on
 /// the object or on the whole frame (views fitted to an elongated object
 /// have fewer pixels and are faster).
-pub fn step_time_hint(resolution: u32, object: bool) -> String {
-    let s = StepModel::for_focus(object).seconds(resolution);
+pub fn step_time_hint(model: StepModel, resolution: u32, object: bool) -> String {
+    let s = model.seconds(resolution);
     let focus = if object { "the object focus" } else { "whole-frame losses" };
     format!("about {s:.2} s per step at {resolution} px on a 2-core CPU with {focus}")
 }
@@ -201,6 +220,12 @@ mod tests {
         assert_eq!(frame_texture_scale(64, 256), 32, "at least 32 px");
         assert_eq!(frame_texture_scale(256, 512), 128);
         assert_eq!(frame_texture_scale(256, 16), 16);
+        // The default run on fern (the scene spans the frame): at 256 px the
+        // scaled style halves the step, so the ten minutes hold 20 cycles, not 10.
+        let scaled = auto_plan(1.0, StepModel::for_run(false, true), 30, 100, AUTO_RUN_BUDGET_S);
+        let fixed = auto_plan(1.0, StepModel::for_focus(false), 30, 100, AUTO_RUN_BUDGET_S);
+        assert_eq!((scaled.resolution, scaled.cycles, fixed.resolution, fixed.cycles), (256, 20, 256, 10));
+        assert!(scaled.seconds <= AUTO_RUN_BUDGET_S, "{scaled:?}");
     }
 
     #[test]
@@ -218,8 +243,11 @@ mod tests {
         assert_eq!(auto_resolution(0.0, frame).1, 4096);
         // The measured steps the models rest on.
         assert!((object.seconds(512) - 0.94).abs() < 0.02, "{}", object.seconds(512));
-        assert!(step_time_hint(512, false).contains("2.28 s"), "{}", step_time_hint(512, false));
-        assert!(step_time_hint(256, true).contains("0.29 s") && step_time_hint(256, true).contains("object focus"));
+        let (frame, scaled) = (StepModel::for_focus(false), StepModel::for_run(false, true));
+        assert!(step_time_hint(frame, 512, false).contains("2.28 s"), "{}", step_time_hint(frame, 512, false));
+        assert!(step_time_hint(scaled, 512, false).contains("1.20 s"), "{}", step_time_hint(scaled, 512, false));
+        let hint = step_time_hint(object, 256, true);
+        assert!(hint.contains("0.29 s") && hint.contains("object focus"), "{hint}");
     }
 
     #[test]

@@ -379,7 +379,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
                 (chosen, wanted, format!("steps run on {}", g.describe()))
             }
             None => {
-                let model = StepModel::for_focus(object);
+                // On a whole frame the texture scale follows (below) unless it is given.
+                let model = StepModel::for_run(object, auto_texture);
                 let plan = auto_plan(span, model, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
                 let fewer = if args.cycles.is_none() && plan.cycles < config.cycles {
                     config.cycles = plan.cycles;
@@ -390,7 +391,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
                 let total = model.seconds(plan.resolution) * f64::from(config.schedule().total_steps());
                 let hint = format!(
                     "{}{fewer}: about {:.0} min on this CPU (--resolution and --cycles override)",
-                    step_time_hint(plan.resolution, object),
+                    step_time_hint(model, plan.resolution, object),
                     total / 60.0
                 );
                 (plan.resolution, plan.wanted, hint)
