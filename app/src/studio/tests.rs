@@ -636,6 +636,33 @@ fn shared_file(rel: &str) -> Option<PathBuf> {
     p.exists().then_some(p)
 }
 
+/// A session starter for tests: the core session worker on the CPU with the
+/// built-in style depth, on `views` orbit views at the working resolution of
+/// the config `plan` makes of the editor's (the worker's own planning, for a
+/// test that needs one).
+fn cpu_starter(
+    vgg: Arc<gast_core::vision::Vgg>,
+    views: usize,
+    plan: fn(StyleConfig) -> StyleConfig,
+) -> session_link::SessionStarter {
+    Box::new(move |req: session_link::StartRequest| {
+        let scene = Arc::unwrap_or_clone(req.scene);
+        let config = plan(req.config);
+        let side = config.resolution;
+        let opts = gast_core::camera::OrbitOptions { count: views, width: side, height: side, ..Default::default() };
+        let inputs = gast_core::session::SessionInputs {
+            cameras: gast_core::camera::framed_orbit(&scene, &opts),
+            scene,
+            style: (*req.style).clone(),
+            style_depth: gast_core::session::StyleDepthSource::Heuristic,
+            vgg: vgg.clone(),
+            config,
+            gpu: None,
+        };
+        Ok(session_link::SessionLink::of(gast_core::session::spawn(inputs, req.waker)))
+    })
+}
+
 /// Steps the app's workers until `done` holds (or panics after `seconds`).
 fn poll_until(app: &mut StudioApp, seconds: u64, what: &str, done: impl Fn(&StudioApp) -> bool) {
     let end = std::time::Instant::now() + std::time::Duration::from_secs(seconds);
@@ -672,27 +699,7 @@ fn the_contact_sheet_of_a_run_is_exported() {
     app.errors.clear();
 
     let vgg = Arc::new(gast_core::vision::Vgg::load(&weights).expect("weights"));
-    app.set_session_starter(Box::new(move |req: session_link::StartRequest| {
-        let scene = Arc::unwrap_or_clone(req.scene);
-        let opts = gast_core::camera::OrbitOptions {
-            count: 8,
-            width: req.config.resolution,
-            height: req.config.resolution,
-            ..Default::default()
-        };
-        let cameras = gast_core::camera::framed_orbit(&scene, &opts);
-        let inputs = gast_core::session::SessionInputs {
-            scene,
-            cameras,
-            style: (*req.style).clone(),
-            style_depth: gast_core::session::StyleDepthSource::Heuristic,
-            vgg: vgg.clone(),
-            config: req.config,
-            gpu: None,
-        };
-        let handle = gast_core::session::spawn(inputs, req.waker);
-        Ok(session_link::SessionLink::of(handle))
-    }));
+    app.set_session_starter(cpu_starter(vgg, 8, |config| config));
     app.config = StyleConfig {
         resolution: 64,
         texture_scale: 64,
@@ -930,22 +937,12 @@ fn the_editor_takes_the_planned_settings_when_the_run_starts() {
     };
     let vgg = Arc::new(gast_core::vision::Vgg::load(&weights).expect("weights"));
     let mut app = test_app();
-    app.set_session_starter(Box::new(move |req: session_link::StartRequest| {
-        let scene = Arc::unwrap_or_clone(req.scene);
-        // The plan's part: other values than the editor's.
-        let config = StyleConfig { resolution: 64, cycles: 1, texture_scale: 32, ..req.config };
-        let opts = gast_core::camera::OrbitOptions { count: 4, width: 64, height: 64, ..Default::default() };
-        let cameras = gast_core::camera::framed_orbit(&scene, &opts);
-        let inputs = gast_core::session::SessionInputs {
-            scene,
-            cameras,
-            style: (*req.style).clone(),
-            style_depth: gast_core::session::StyleDepthSource::Heuristic,
-            vgg: vgg.clone(),
-            config,
-            gpu: None,
-        };
-        Ok(session_link::SessionLink::of(gast_core::session::spawn(inputs, req.waker)))
+    // The plan's part: other values than the editor's.
+    app.set_session_starter(cpu_starter(vgg, 4, |config| StyleConfig {
+        resolution: 64,
+        cycles: 1,
+        texture_scale: 32,
+        ..config
     }));
     app.config =
         StyleConfig { resolution: 96, cycles: 3, steps_per_cycle: 2, texture_scale: 48, ..StyleConfig::default() };
