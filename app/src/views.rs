@@ -13,10 +13,15 @@ use gast_core::{Camera, Gaussians};
 #[derive(Args, Debug, Clone)]
 pub struct ViewArgs {
     /// Camera file or folder (COLMAP sparse/0, poses_bounds.npy, cameras.json, transforms.json).
-    /// Without it, views are generated on an orbit around the scene.
+    /// Without it, the cameras beside the scene (its folder's, as `gast fit`
+    /// writes them, or an INRIA model folder's cameras.json), else views
+    /// generated on an orbit around the scene.
     #[arg(long)]
     pub cameras: Option<PathBuf>,
-    /// Number of generated orbit views, 1 to 3,600 (ignored with --cameras).
+    /// Generate orbit views even when the scene's folder holds cameras.
+    #[arg(long, conflicts_with = "cameras")]
+    pub orbit: bool,
+    /// Number of generated orbit views, 1 to 3,600 (ignored when cameras are read).
     #[arg(long, default_value_t = 8, value_parser = view_count::<usize>())]
     pub views: usize,
     /// Longer side of the rendered images in pixels, 16 to 8,192 (camera intrinsics are rescaled).
@@ -141,6 +146,32 @@ pub fn refuse_photo_folder(
         source.display()
     );
     Ok(())
+}
+
+/// The camera file a command reads: `cameras` (`--cameras`) when given,
+/// else, unless `orbit` (`--orbit`), the folder beside `scene` that holds its
+/// training cameras ([`gast_core::camera::beside_scene`], said on stderr),
+/// else none (generated views). A camera file beside the scene that cannot be
+/// read is an error naming it, not a silent orbit.
+pub fn camera_source(scene: &Path, cameras: Option<&Path>, orbit: bool) -> anyhow::Result<Option<PathBuf>> {
+    if cameras.is_some() || orbit {
+        return Ok(cameras.map(Path::to_path_buf));
+    }
+    match gast_core::camera::beside_scene(scene) {
+        None => Ok(None),
+        Some(Ok((set, dir))) => {
+            eprintln!(
+                "cameras: the {} views found beside the scene in {} (--orbit generates views instead)",
+                set.cameras.len(),
+                dir.display()
+            );
+            Ok(Some(dir))
+        }
+        Some(Err(e)) => Err(anyhow::Error::new(e).context(format!(
+            "could not read the cameras beside the scene {} (give --cameras, or --orbit for generated views)",
+            scene.display()
+        ))),
+    }
 }
 
 /// The views of `args` for `scene`: the camera file (cropped to the object with

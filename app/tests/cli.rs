@@ -589,6 +589,59 @@ fn fit_names_a_missing_images_folder_and_an_empty_training_set() {
     std::fs::remove_dir_all(&out).ok();
 }
 
+/// `gast fit` writes its cameras beside the scene as `cameras.json`, and
+/// `render` (as `stylize` and the studio) starts from them without
+/// `--cameras`: fern's scene was seen from an orbit outside the capture.
+/// `--orbit` still generates views; cameras of other images, or a file that
+/// cannot be read, are left as they are.
+#[test]
+fn a_fitted_scene_brings_its_cameras_to_render() {
+    let Some(fern) = shared_file("data/datasets/fern") else { return };
+    let out = temp("fit-cameras");
+    let (scene, cameras) = (out.join("fit/f.ply"), out.join("fit/cameras.json"));
+    let fit = ["fit", s(&fern), "--resolution", "16", "--iterations", "1", "--out", s(&scene)];
+    let o = gast(&fit);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("cameras.json (20 cameras)"), "{}", stderr(&o));
+    let o = gast(&["render", s(&scene), "--out", s(&out.join("views")), "--size", "32"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("the 20 views found beside the scene"), "{}", stderr(&o));
+    let pngs = |d: &str| {
+        let names = std::fs::read_dir(out.join(d)).expect("views").filter_map(|e| e.ok());
+        let mut names: Vec<String> = names.map(|e| e.file_name().to_string_lossy().into_owned()).collect();
+        names.retain(|n| n.ends_with(".png") && !n.ends_with("_depth.png"));
+        names.sort();
+        names
+    };
+    let views = pngs("views");
+    assert_eq!((views.len(), views[0].as_str()), (20, "image000.png"), "{views:?}");
+    let o = gast(&["render", s(&scene), "--out", s(&out.join("orbit")), "--size", "32", "--orbit", "--views", "2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(pngs("orbit"), ["orbit_000.png", "orbit_001.png"]);
+    let o = gast(&["render", s(&scene), "--out", s(&out.join("x")), "--orbit", "--cameras", s(&fern)]);
+    assert!(stderr(&o).contains("cannot be used with"), "{}", stderr(&o));
+    // A refit replaces its own cameras.json.
+    let o = gast(&fit);
+    assert!(o.status.success() && stderr(&o).contains("cameras.json (20 cameras)"), "{}", stderr(&o));
+    // Cameras of other images are kept, with a warning.
+    let other = r#"[{"img_name": "other", "width": 8, "height": 6, "position": [0, 0, -3],
+        "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": 8, "fy": 8}]"#;
+    std::fs::write(&cameras, other).expect("write");
+    let o = gast(&fit);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("already holds the cameras of other images (1 of them"), "{}", stderr(&o));
+    assert_eq!(std::fs::read_to_string(&cameras).expect("kept"), other);
+    // One that cannot be read is named, not replaced by an orbit or by the fit's.
+    std::fs::write(&cameras, "[{\"img_name\": 3}]").expect("write");
+    let o = gast(&["render", s(&scene), "--out", s(&out.join("broken")), "--size", "32"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("cameras.json") && stderr(&o).contains("--orbit"), "{}", stderr(&o));
+    let o = gast(&fit);
+    assert!(o.status.success() && stderr(&o).contains("cameras.json is not written"), "{}", stderr(&o));
+    assert_eq!(std::fs::read_to_string(&cameras).expect("kept"), "[{\"img_name\": 3}]");
+    std::fs::remove_dir_all(&out).ok();
+}
+
 /// A benchmark's default input missing from the shared data folder is named
 /// with the folder it was looked for in and how to point elsewhere (it said
 /// only "../shared/…: No such file or directory" from another folder).

@@ -13,7 +13,7 @@ use gast_core::raster::{self, RenderOptions};
 
 use crate::progress;
 use crate::turntable::{self, TurntableOptions};
-use crate::views::{ViewArgs, load_scene, refuse_photo_folder, views_for};
+use crate::views::{ViewArgs, camera_source, load_scene, refuse_photo_folder, views_for};
 
 /// Arguments of `gast render`.
 #[derive(Args, Debug)]
@@ -53,8 +53,9 @@ pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
     if let Some(frames) = args.turntable {
         return run_turntable(&args, &scene, frames as usize, background);
     }
-    let cameras = views_for(&scene, &args.views)?;
-    refuse_photo_folder(&args.out, "--out", args.views.cameras.as_deref(), &cameras)?;
+    let source = camera_source(&args.scene, args.views.cameras.as_deref(), args.views.orbit)?;
+    let cameras = views_for(&scene, &ViewArgs { cameras: source.clone(), ..args.views.clone() })?;
+    refuse_photo_folder(&args.out, "--out", source.as_deref(), &cameras)?;
     super::output_folder(&args.out, "--out")?;
     let opts = RenderOptions { background };
     let pb = progress::bar(cameras.len() as u64, "render");

@@ -38,7 +38,8 @@ pub struct SceneFile {
     /// The Gaussians.
     pub gaussians: Gaussians,
     /// Cameras from the scene's folder (COLMAP, LLFF `poses_bounds.npy`, `cameras.json`,
-    /// `transforms.json`) and that folder.
+    /// `transforms.json`) or its INRIA model folder, and that folder
+    /// ([`gast_core::camera::beside_scene`]).
     pub cameras: Option<(gast_core::camera::CameraSet, PathBuf)>,
     /// What the reader had to repair (e.g. infinite opacities), one line per kind.
     pub warnings: Vec<String>,
@@ -46,10 +47,15 @@ pub struct SceneFile {
 
 /// Reads a scene and looks for training cameras beside it.
 pub fn read_scene_file(path: &std::path::Path) -> anyhow::Result<SceneFile> {
-    let (gaussians, warnings) = gast_core::scene::load_with_warnings(path)?;
-    let cameras = path.parent().filter(|d| !d.as_os_str().is_empty()).and_then(|dir| {
-        gast_core::camera::load(dir).ok().filter(|set| !set.cameras.is_empty()).map(|set| (set, dir.to_path_buf()))
-    });
+    let (gaussians, mut warnings) = gast_core::scene::load_with_warnings(path)?;
+    let cameras = match gast_core::camera::beside_scene(path) {
+        Some(Ok(found)) => Some(found),
+        Some(Err(e)) => {
+            warnings.push(format!("the cameras beside the scene are not used: {e}"));
+            None
+        }
+        None => None,
+    };
     Ok(SceneFile { gaussians, cameras, warnings })
 }
 

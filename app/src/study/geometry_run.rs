@@ -48,6 +48,7 @@ pub fn run(
         &scene,
         &ViewArgs {
             cameras: Some(cameras_path.clone()),
+            orbit: false,
             views: 0,
             size: sizes.resolution,
             fov: 50.0,

@@ -107,8 +107,15 @@ pub fn run_grid(
         }
         let Some((image, prepared)) = styles.get(&spec.style) else { continue };
         let framing = spec.framing;
-        let view_args =
-            |size: u32| ViewArgs { cameras: None, views: sizes.views, size, fov: 50.0, framing, crop: false };
+        let view_args = |size: u32| ViewArgs {
+            cameras: None,
+            orbit: false,
+            views: sizes.views,
+            size,
+            fov: 50.0,
+            framing,
+            crop: false,
+        };
         let mut views = views_for(scene, &view_args(spec.config.resolution))?;
         if let Some(budget_s) = sizes.defaults_plan_s.filter(|_| planned.contains(&spec.id)) {
             let (before, after) = plan_arm(&mut spec, scene, &views, budget_s);
@@ -272,6 +279,7 @@ mod tests {
                 &scene,
                 &ViewArgs {
                     cameras: None,
+                    orbit: false,
                     views: sizes.views,
                     size: spec.config.resolution,
                     fov: 50.0,

@@ -104,3 +104,37 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
     let warnings = orthonormal_warning(path, corrected, worst).into_iter().collect();
     Ok(CameraSet { cameras, warnings, depth_bounds: Vec::new() })
 }
+
+/// Writes `cameras` as an INRIA 3DGS `cameras.json` (the layout
+/// [`load_inria`] reads, so viewers and trainers that read the trainer's
+/// output read it too), through a temporary file renamed over `path`.
+/// The format keeps no principal point (the readers take the image centre):
+/// the result is the number of cameras whose principal point was more than
+/// half a pixel off centre, for the caller to warn of.
+pub fn write_inria(path: impl AsRef<Path>, cameras: &[Camera]) -> Result<usize, CameraError> {
+    let path = path.as_ref();
+    let mut off_centre = 0;
+    let entries: Vec<serde_json::Value> = (cameras.iter().enumerate())
+        .map(|(id, c)| {
+            if (c.cx - 0.5 * c.width as f32).abs() > 0.5 || (c.cy - 0.5 * c.height as f32).abs() > 0.5 {
+                off_centre += 1;
+            }
+            // The camera-to-world rotation row by row: its rows are the
+            // world-to-camera rotation's columns.
+            let c2w = c.rotation.as_dmat3().to_cols_array_2d();
+            serde_json::json!({
+                "id": id,
+                "img_name": c.name,
+                "width": c.width,
+                "height": c.height,
+                "position": c.center().as_dvec3().to_array(),
+                "rotation": c2w,
+                "fy": f64::from(c.fy),
+                "fx": f64::from(c.fx),
+            })
+        })
+        .collect();
+    let bytes = serde_json::to_vec(&entries).map_err(|e| CameraError::io(path, std::io::Error::other(e)))?;
+    crate::io::replace_with(path, |w| std::io::Write::write_all(w, &bytes)).map_err(|e| CameraError::io(path, e))?;
+    Ok(off_centre)
+}

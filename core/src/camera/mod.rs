@@ -40,7 +40,7 @@ pub use colmap_points::{ColmapPoints, find_colmap_points, load_colmap_points};
 pub use colmap_write::{write_colmap_binary, write_colmap_text};
 pub use error::CameraError;
 pub use framing::{crop_view, fit_view, framed_orbit, framing_subject, subject_span};
-pub use inria::load_inria;
+pub use inria::{load_inria, write_inria};
 pub use llff::{LLFF_IMAGE_FOLDERS, POSES_BOUNDS, load_llff};
 pub use orbit::{OrbitLayout, OrbitOptions, RobustBounds, orbit_cameras, robust_bounds};
 pub use transforms::load_transforms;
@@ -237,6 +237,31 @@ pub fn load_with_images(path: impl AsRef<Path>, images: Option<&str>) -> Result<
     let (set, source) = load_any(path, images)?;
     single_precision(&source, &set)?;
     Ok(set)
+}
+
+/// The training cameras that travel with a scene file: those of its own
+/// folder (what `gast fit` writes, a dataset holding the scene) or, for the
+/// INRIA trainer's `point_cloud/iteration_N/point_cloud.ply`, the model
+/// folder's `cameras.json`. `None` when neither folder holds a camera file;
+/// an error when one does and it cannot be read. With the set comes the
+/// folder it was found in.
+pub fn beside_scene(scene: &Path) -> Option<Result<(CameraSet, PathBuf), CameraError>> {
+    let here = |p: &Path| if p.as_os_str().is_empty() { Path::new(".").to_path_buf() } else { p.to_path_buf() };
+    let named = |p: &Path, f: &dyn Fn(&str) -> bool| p.file_name().and_then(|n| n.to_str()).is_some_and(f);
+    let parent = scene.parent()?;
+    let model = parent
+        .parent()
+        .filter(|pc| named(parent, &|n| n.starts_with("iteration_")) && named(pc, &|n| n == "point_cloud"))
+        .and_then(Path::parent);
+    let parent = here(parent);
+    for dir in std::iter::once(parent).chain(model.map(here)) {
+        match load(&dir) {
+            Err(CameraError::NotFound { path, .. }) if path == dir => continue,
+            Ok(set) if set.cameras.is_empty() => continue,
+            found => return Some(found.map(|set| (set, dir))),
+        }
+    }
+    None
 }
 
 /// The readers check the file's numbers as read (f64); a finite one past

@@ -163,7 +163,15 @@ pub fn run_raster(args: RasterArgs) -> anyhow::Result<ExitCode> {
         for &size in &args.sizes {
             let views = views_for(
                 &scene,
-                &ViewArgs { cameras: None, views: args.views, size, fov: 50.0, framing: Framing::Full, crop: false },
+                &ViewArgs {
+                    cameras: None,
+                    orbit: false,
+                    views: args.views,
+                    size,
+                    fov: 50.0,
+                    framing: Framing::Full,
+                    crop: false,
+                },
             )?;
             let (fwd, bwd) = time_views(&scene, &views, &opts);
             let (peak, _) = memory_mib();
@@ -213,7 +221,7 @@ fn time_views(scene: &gast_core::Gaussians, views: &[Camera], opts: &RenderOptio
 fn dense_ratio(name: &str, scene: &gast_core::Gaussians) -> anyhow::Result<()> {
     let views = views_for(
         scene,
-        &ViewArgs { cameras: None, views: 1, size: 96, fov: 50.0, framing: Framing::Full, crop: false },
+        &ViewArgs { cameras: None, orbit: false, views: 1, size: 96, fov: 50.0, framing: Framing::Full, crop: false },
     )?;
     let cam = &views[0];
     let opts = RenderOptions::default();

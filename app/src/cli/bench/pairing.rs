@@ -60,6 +60,7 @@ pub fn run_pairing(args: PairingArgs) -> anyhow::Result<ExitCode> {
         &scene,
         &ViewArgs {
             cameras: None,
+            orbit: false,
             views: args.views,
             size: args.resolution,
             fov: 50.0,

@@ -219,6 +219,7 @@ pub(super) fn step_inputs(args: &StepArgs) -> anyhow::Result<StepInputs> {
         &scene,
         &ViewArgs {
             cameras: args.cameras.clone(),
+            orbit: false,
             views: args.views,
             size: args.resolution,
             fov: 50.0,

@@ -36,10 +36,15 @@ pub struct StylizeArgs {
     #[command(flatten)]
     pub strength: super::super::convert::StrengthArgs,
     /// Optimisation cameras (COLMAP sparse/0, an LLFF poses_bounds.npy or its folder, cameras.json, transforms.json);
-    /// without it, `--views` orbit views are generated around the scene.
+    /// without it, the cameras beside the scene (its folder's, as `gast fit`
+    /// writes them, or an INRIA model folder's cameras.json), else `--views`
+    /// orbit views generated around the scene.
     #[arg(long)]
     pub cameras: Option<PathBuf>,
-    /// Number of generated orbit views, 1 to 3,600 (without --cameras).
+    /// Generate orbit views even when the scene's folder holds cameras.
+    #[arg(long, conflicts_with = "cameras")]
+    pub orbit: bool,
+    /// Number of generated orbit views, 1 to 3,600 (when no cameras are read).
     #[arg(long, default_value_t = 36, value_parser = crate::views::view_count::<usize>())]
     pub views: usize,
     /// Vertical field of view of generated views, degrees (1 to 170).

@@ -28,7 +28,7 @@ use serde::Serialize;
 
 use crate::progress;
 use crate::report::sheet;
-use crate::views::{ViewArgs, load_scene, refuse_photo_folder, views_for};
+use crate::views::{ViewArgs, camera_source, load_scene, refuse_photo_folder, views_for};
 
 mod args;
 pub use args::{FastArgs, StylizeArgs};
@@ -356,10 +356,12 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     // model's download, the run): the output folder, the cameras, the weights.
     // The folder is made only before the first write, after the run.
     super::check_output_folder(&args.out, "--out")?;
+    let source = camera_source(&args.scene, args.cameras.as_deref(), args.orbit)?;
     let cameras = views_for(
         &scene,
         &ViewArgs {
-            cameras: args.cameras.clone(),
+            cameras: source.clone(),
+            orbit: args.orbit,
             views: args.views,
             size: config.resolution,
             fov: args.fov,
@@ -367,7 +369,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             crop: args.crop,
         },
     )?;
-    refuse_photo_folder(&args.out, "--out", args.cameras.as_deref(), &cameras)?;
+    refuse_photo_folder(&args.out, "--out", source.as_deref(), &cameras)?;
     let mut config = config;
     let auto_resolution = args.resolution.is_none() && args.preset.is_none();
     let auto_texture = args.texture_scale.is_none() && args.preset.is_none();

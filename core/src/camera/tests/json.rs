@@ -5,7 +5,7 @@ use glam::{Vec2, Vec3};
 use serde_json::json;
 
 use super::{assert_close, temp_dir};
-use crate::camera::{Camera, CameraError, load, load_inria, load_transforms};
+use crate::camera::{Camera, CameraError, beside_scene, load, load_inria, load_transforms, write_inria};
 
 /// A cameras.json entry the way the 3DGS trainer writes it: invert [R|t] and
 /// write the inverse's rotation rows and translation.
@@ -46,6 +46,19 @@ fn inria_by_hand_and_round_trip() {
         assert_close(a, b, 1e-5);
     }
     assert_eq!(load(d.join("out/cameras.json")).expect("detected by content"), set);
+
+    // What `write_inria` writes reads back as the cameras it was given.
+    std::fs::create_dir_all(d.join("written")).expect("mkdir");
+    assert_eq!(write_inria(d.join("written/cameras.json"), &cams).expect("written"), 0);
+    let back = load(d.join("written")).expect("the written cameras.json");
+    assert!(back.warnings.is_empty(), "{:?}", back.warnings);
+    for (a, b) in cams.iter().zip(&back.cameras) {
+        assert_close(a, b, 1e-5);
+    }
+    // The format has no principal point: one off the centre is counted.
+    let mut shifted = cams.clone();
+    shifted[2].cx += 3.0;
+    assert_eq!(write_inria(d.join("written/cameras.json"), &shifted).expect("written"), 1);
 }
 
 #[test]
@@ -195,4 +208,32 @@ fn numbers_past_single_precision_are_named() {
         assert!(err.contains("transforms.json: camera 0 (a)"), "{err}");
         assert!(err.contains(&format!("expected {what} within single precision")), "{err}");
     }
+}
+
+#[test]
+fn the_cameras_beside_a_scene_are_found_in_its_folder_or_the_inria_model_folder() {
+    let d = temp_dir("beside");
+    let cams = vec![Camera::look_at("a", Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, Vec3::NEG_Y, 64, 48, 50.0)];
+    // A scene alone in its folder has none.
+    std::fs::create_dir_all(d.join("alone")).expect("mkdir");
+    assert!(beside_scene(&d.join("alone/scene.ply")).is_none());
+    // `gast fit`'s output: cameras.json beside the scene.
+    std::fs::create_dir_all(d.join("fit")).expect("mkdir");
+    write_inria(d.join("fit/cameras.json"), &cams).expect("written");
+    let (set, dir) = beside_scene(&d.join("fit/scene.ply")).expect("found").expect("read");
+    assert_eq!((set.cameras.len(), dir), (1, d.join("fit")));
+    // The INRIA trainer's layout: the model folder holds cameras.json.
+    let iteration = d.join("model/point_cloud/iteration_30000");
+    std::fs::create_dir_all(&iteration).expect("mkdir");
+    write_inria(d.join("model/cameras.json"), &cams).expect("written");
+    let (set, dir) = beside_scene(&iteration.join("point_cloud.ply")).expect("found").expect("read");
+    assert_eq!((set.cameras.len(), dir), (1, d.join("model")));
+    // Another folder two levels up is not looked in.
+    std::fs::create_dir_all(d.join("fit/renders/iteration_1")).expect("mkdir");
+    assert!(beside_scene(&d.join("fit/renders/iteration_1/scene.ply")).is_none());
+    // A camera file that cannot be read is an error naming it, not an orbit.
+    std::fs::create_dir_all(d.join("broken")).expect("mkdir");
+    std::fs::write(d.join("broken/cameras.json"), "[{\"img_name\": 3}]").expect("write");
+    let err = beside_scene(&d.join("broken/scene.ply")).expect("found").expect_err("malformed").to_string();
+    assert!(err.contains("cameras.json") && err.contains("img_name"), "{err}");
 }
