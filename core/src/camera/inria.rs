@@ -15,7 +15,9 @@ use std::path::Path;
 use glam::{DMat3, DVec3};
 use serde::Deserialize;
 
-use super::{CameraError, CameraSet, Field, ORTHONORMAL_TOLERANCE, check_fields, orthonormal_warning, rotation_from};
+use super::{
+    CameraError, CameraSet, Field, ORTHONORMAL_TOLERANCE, check_fields_of, orthonormal_warning, rotation_from,
+};
 use crate::Camera;
 
 #[derive(Deserialize)]
@@ -48,20 +50,16 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
     let mut cameras = Vec::with_capacity(items.len());
     for (i, item) in items.into_iter().enumerate() {
         let record = format!("cameras[{i}]");
-        check_fields(
-            path,
-            &record,
-            &item,
-            &[
-                ("img_name", Field::Text),
-                ("width", Field::Count),
-                ("height", Field::Count),
-                ("position", Field::Numbers(3)),
-                ("rotation", Field::Matrix(3, 3)),
-                ("fx", Field::Number),
-                ("fy", Field::Number),
-            ],
-        )?;
+        let fields = [
+            ("img_name", Field::Text),
+            ("width", Field::Count),
+            ("height", Field::Count),
+            ("position", Field::Numbers(3)),
+            ("rotation", Field::Matrix(3, 3)),
+            ("fx", Field::Number),
+            ("fy", Field::Number),
+        ];
+        check_fields_of(path, &record, &item, &fields, &fields.map(|(name, _)| name))?;
         let e: Entry = serde_json::from_value(item).map_err(|source| CameraError::Json {
             path: path.to_path_buf(),
             record: record.clone(),

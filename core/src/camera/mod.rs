@@ -403,6 +403,20 @@ pub(crate) enum Field {
     Matrix(usize, usize),
 }
 
+impl Field {
+    /// What the field holds, for messages.
+    fn expected(self) -> String {
+        match self {
+            Field::Number => "a number".into(),
+            Field::Count => "a whole number of pixels".into(),
+            Field::Text => "a string".into(),
+            Field::Numbers(n) => format!("a list of {n} numbers"),
+            Field::Rows => "a list of rows of numbers".into(),
+            Field::Matrix(r, c) => format!("a {r}x{c} matrix ({r} lists of {c} numbers)"),
+        }
+    }
+}
+
 /// Checks the `fields` present in the record `value` (an object; null reads
 /// as absent) before serde reads it, so that a wrong type names its field:
 /// serde_json's `from_value` names none ("invalid type: string, expected
@@ -414,29 +428,41 @@ pub(crate) fn check_fields(
     value: &serde_json::Value,
     fields: &[(&str, Field)],
 ) -> Result<(), CameraError> {
+    check_fields_of(path, record, value, fields, &[])
+}
+
+/// As [`check_fields`], with the fields that are `required` refused when
+/// null too (serde's "invalid type: null" named none of them).
+pub(crate) fn check_fields_of(
+    path: &Path,
+    record: &str,
+    value: &serde_json::Value,
+    fields: &[(&str, Field)],
+    required: &[&str],
+) -> Result<(), CameraError> {
     let Some(object) = value.as_object() else { return Ok(()) };
+    if let Some((name, field)) =
+        fields.iter().find(|(name, _)| required.contains(name) && object.get(*name).is_some_and(|v| v.is_null()))
+    {
+        return Err(CameraError::format(path, format!("{record}.{name}"), field.expected(), "null"));
+    }
     let numbers = |v: &serde_json::Value, n: Option<usize>| {
         v.as_array().is_some_and(|a| n.is_none_or(|n| a.len() == n) && a.iter().all(serde_json::Value::is_number))
     };
     for &(name, field) in fields {
         let Some(v) = object.get(name).filter(|v| !v.is_null()) else { continue };
-        let (fits, expected) = match field {
-            Field::Number => (v.is_number(), "a number".to_string()),
-            Field::Count => {
-                (v.is_u64() && v.as_u64().is_some_and(|n| n <= u64::from(u32::MAX)), "a whole number of pixels".into())
+        let fits = match field {
+            Field::Number => v.is_number(),
+            Field::Count => v.is_u64() && v.as_u64().is_some_and(|n| n <= u64::from(u32::MAX)),
+            Field::Text => v.is_string(),
+            Field::Numbers(n) => numbers(v, Some(n)),
+            Field::Rows => v.as_array().is_some_and(|rows| rows.iter().all(|r| numbers(r, None))),
+            Field::Matrix(r, c) => {
+                v.as_array().is_some_and(|rows| rows.len() == r && rows.iter().all(|row| numbers(row, Some(c))))
             }
-            Field::Text => (v.is_string(), "a string".into()),
-            Field::Numbers(n) => (numbers(v, Some(n)), format!("a list of {n} numbers")),
-            Field::Rows => (
-                v.as_array().is_some_and(|rows| rows.iter().all(|r| numbers(r, None))),
-                "a list of rows of numbers".into(),
-            ),
-            Field::Matrix(r, c) => (
-                v.as_array().is_some_and(|rows| rows.len() == r && rows.iter().all(|row| numbers(row, Some(c)))),
-                format!("a {r}x{c} matrix ({r} lists of {c} numbers)"),
-            ),
         };
         if !fits {
+            let expected = field.expected();
             let found = match v {
                 serde_json::Value::Array(_) => {
                     let text = v.to_string();

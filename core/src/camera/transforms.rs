@@ -14,7 +14,10 @@ use std::path::{Path, PathBuf};
 use glam::{DMat3, DVec3};
 use serde::Deserialize;
 
-use super::{CameraError, CameraSet, Field, ORTHONORMAL_TOLERANCE, check_fields, orthonormal_warning, rotation_from};
+use super::{
+    CameraError, CameraSet, Field, ORTHONORMAL_TOLERANCE, check_fields, check_fields_of, orthonormal_warning,
+    rotation_from,
+};
 use crate::Camera;
 
 /// Intrinsics that may appear at the top level or in a frame.
@@ -106,7 +109,8 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
     for (i, item) in doc.frames.into_iter().enumerate() {
         let record = format!("frames[{i}]");
         check_fields(path, &record, &item, &INTRINSIC_FIELDS)?;
-        check_fields(path, &record, &item, &[("file_path", Field::Text), ("transform_matrix", Field::Rows)])?;
+        let frame_fields = [("file_path", Field::Text), ("transform_matrix", Field::Rows)];
+        check_fields_of(path, &record, &item, &frame_fields, &["transform_matrix"])?;
         let frame: Frame = serde_json::from_value(item).map_err(|source| CameraError::Json {
             path: path.to_path_buf(),
             record: record.clone(),

@@ -133,6 +133,9 @@ fn malformed_json_gives_errors_naming_the_field() {
         (json!([{"id": 0, "img_name": "a", "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0]], "fx": 2, "fy": 2}]).to_string(), "cameras[0]"),
         (json!([{"id": 0, "img_name": "a", "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": -2, "fy": 2}]).to_string(), "a).fx"),
         (json!([]).to_string(), "at least one camera"),
+        (json!([{"id": 0, "img_name": "a", "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": null, "fy": 2}]).to_string(), "cameras[0].fx: expected a number, found null"),
+        (json!([{"id": 0, "img_name": null, "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": 2, "fy": 2}]).to_string(), "cameras[0].img_name: expected a string, found null"),
+        (json!({"camera_angle_x": 1, "w": 4, "h": 4, "frames": [{"transform_matrix": null}]}).to_string(), "frames[0].transform_matrix: expected a list of rows of numbers, found null"),
         ("7".into(), "a number"),
     ];
     for (text, needle) in cases {
