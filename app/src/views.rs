@@ -136,11 +136,35 @@ pub fn refuse_photo_folder(
     camera_source: Option<&Path>,
     cameras: &[Camera],
 ) -> anyhow::Result<()> {
-    let (Some(source), Ok(out_canonical)) = (camera_source, std::fs::canonicalize(out)) else { return Ok(()) };
-    let photos = gast_core::fit::photo_folders(source, cameras.iter().map(|c| c.name.as_str()));
+    if let Some(source) = camera_source {
+        let photos = gast_core::fit::photo_folders(source, cameras.iter().map(|c| c.name.as_str()));
+        refuse_among_photos(out, flag, &photos, source)?;
+    }
+    refuse_dataset_photo_folder(out, flag)
+}
+
+/// Refuses `out` when the folder above it is a dataset whose cameras'
+/// photos are in `out` (lego's `train`, fern's `images_4`, a COLMAP
+/// `images`), whatever cameras the command uses: an orbit render or a
+/// turntable there mixed its files with the photos, and an LLFF folder
+/// pairs its images with the poses by count.
+pub fn refuse_dataset_photo_folder(out: &Path, flag: &str) -> anyhow::Result<()> {
+    let Ok(canonical) = std::fs::canonicalize(out) else { return Ok(()) };
+    let Some(dataset) = canonical.parent() else { return Ok(()) };
+    let Ok(set) = gast_core::camera::load(dataset) else { return Ok(()) };
+    let photos = gast_core::fit::photo_folders(dataset, set.cameras.iter().map(|c| c.name.as_str()));
+    refuse_among_photos(out, flag, &photos, dataset)
+}
+
+/// Refuses `out`, the folder the option `flag` names, when it is one of
+/// `photos` (canonical folders of the dataset `source`'s photos, as
+/// [`gast_core::fit::photo_folders`] finds them). A folder that does not
+/// exist yet is none of them.
+pub fn refuse_among_photos(out: &Path, flag: &str, photos: &[PathBuf], source: &Path) -> anyhow::Result<()> {
+    let Ok(out_canonical) = std::fs::canonicalize(out) else { return Ok(()) };
     anyhow::ensure!(
         !photos.contains(&out_canonical),
-        "{flag} {}: expected a folder apart from the photos, found the folder of the photos of {} (the outputs \
+        "{flag} {}: expected a folder apart from the photos, found a folder of the photos of {} (the outputs \
          would replace or mix with them; choose another folder)",
         out.display(),
         source.display()

@@ -735,7 +735,7 @@ fn fit_previews_are_not_written_among_the_photos() {
     let o = gast(&[&args[..], &["--preview", s(&photos)]].concat());
     assert!(!o.status.success());
     assert!(
-        stderr(&o).contains("expected a folder apart from the photos, found a folder of the dataset's photos"),
+        stderr(&o).contains("expected a folder apart from the photos, found a folder of the photos of"),
         "{}",
         stderr(&o)
     );
@@ -787,10 +787,24 @@ fn views_are_not_written_among_a_datasets_photos() {
             let o = gast(args);
             assert!(!o.status.success(), "{args:?}");
             assert!(
-                stderr(&o).contains("expected a folder apart from the photos, found the folder of the photos of"),
+                stderr(&o).contains("expected a folder apart from the photos, found a folder of the photos of"),
                 "{args:?}: {}",
                 stderr(&o)
             );
+            assert_eq!(std::fs::read_dir(&out).expect("list").count(), before, "{args:?} wrote among the photos");
+        }
+    }
+    // Without the dataset's cameras too: an orbit render or a turntable into
+    // a dataset's photo folder (the folder above it reads as the dataset).
+    for out in [train.clone(), llff.join("images_4")] {
+        let before = std::fs::read_dir(&out).expect("list").count();
+        for args in [
+            &["render", s(&scene), "--out", s(&out), "--size", "16", "--views", "1"][..],
+            &["render", s(&scene), "--out", s(&out), "--size", "16", "--turntable", "2"],
+        ] {
+            let o = gast(args);
+            assert!(!o.status.success(), "{args:?}");
+            assert!(stderr(&o).contains("found a folder of the photos of"), "{args:?}: {}", stderr(&o));
             assert_eq!(std::fs::read_dir(&out).expect("list").count(), before, "{args:?} wrote among the photos");
         }
     }

@@ -142,7 +142,11 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         eprintln!("warning: {w}");
     }
     if let Some(dir) = &args.preview {
-        check_preview_folder(dir, &data.image_folders)?;
+        // Refused before the fit: the previews' `view0_truth.png`, … and
+        // `sheet.png` would mix with the photos, and an LLFF folder pairs
+        // its images with the poses by count.
+        crate::views::refuse_among_photos(dir, "--preview", &data.image_folders, &args.dataset)?;
+        super::check_output_folder(dir, "--preview")?;
     }
     let all_cameras: Vec<gast_core::Camera> = data.views.iter().map(|(c, _)| c.clone()).collect();
     let k = args.holdout_every;
@@ -288,22 +292,6 @@ fn initial_scene(
     eprintln!("initialisation: {} random Gaussians in the cameras' common view ({why})", cfg.initial_gaussians.max(1));
     let cameras: Vec<_> = views.iter().map(|(c, _)| c.clone()).collect();
     Ok(fit::initial_scene(&cameras, cfg))
-}
-
-/// Refuses, before the fit, a `--preview` folder the photos are read from,
-/// or another image folder of an LLFF dataset (its `view0_truth.png`, … and `sheet.png` would mix with them, and an
-/// LLFF folder pairs its images with the poses by count) or one that cannot
-/// be made or written in. The folder is made when the previews are written.
-fn check_preview_folder(dir: &std::path::Path, image_folders: &[std::path::PathBuf]) -> anyhow::Result<()> {
-    if let Ok(canonical) = std::fs::canonicalize(dir) {
-        anyhow::ensure!(
-            !image_folders.contains(&canonical),
-            "--preview {}: expected a folder apart from the photos, found a folder of the dataset's photos \
-             (the previews would mix with them; choose another folder)",
-            dir.display()
-        );
-    }
-    super::check_output_folder(dir, "--preview")
 }
 
 /// Renders four views spread over the dataset, writes each render and its

@@ -51,6 +51,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
     let scene = load_scene(&args.scene)?;
     let background = [r, g, b];
     if let Some(frames) = args.turntable {
+        refuse_photo_folder(&args.out, "--out", None, &[])?;
         return run_turntable(&args, &scene, frames as usize, background);
     }
     let source = camera_source(&args.scene, args.views.cameras.as_deref(), args.views.orbit)?;
