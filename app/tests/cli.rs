@@ -620,6 +620,20 @@ fn a_fitted_scene_brings_its_cameras_to_render() {
     assert_eq!(pngs("orbit"), ["orbit_000.png", "orbit_001.png"]);
     let o = gast(&["render", s(&scene), "--out", s(&out.join("x")), "--orbit", "--cameras", s(&fern)]);
     assert!(stderr(&o).contains("cannot be used with"), "{}", stderr(&o));
+    // A run on the fitted scene takes them too, and writes them beside its result.
+    if let Some((_, style, weights)) = guitar_with("wave.jpg") {
+        let run = out.join("run");
+        let o = Command::new(env!("CARGO_BIN_EXE_gast"))
+            .args(["stylize", s(&scene), s(&style), "--out", s(&run), "--resolution", "32", "--texture-scale", "32"])
+            .args(["--cycles", "1", "--steps-per-cycle", "1", "--preview-views", "1", "--depth-provider", "heuristic"])
+            .env("GAST_WEIGHTS", &weights)
+            .output()
+            .expect("run gast");
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(stderr(&o).contains("the 20 views found beside the scene"), "{}", stderr(&o));
+        let set = gast_core::camera::load(&run).expect("the run's cameras.json");
+        assert_eq!((set.cameras.len(), set.cameras[0].width), (20, 32));
+    }
     // A refit replaces its own cameras.json.
     let o = gast(&fit);
     assert!(o.status.success() && stderr(&o).contains("cameras.json (20 cameras)"), "{}", stderr(&o));

@@ -200,7 +200,8 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         views.len(),
         psnr_all
     );
-    write_cameras_beside(&args.out, &args.dataset, &all_cameras)?;
+    // Held-out views included, at the working size.
+    crate::views::write_cameras_beside(&args.out, &args.dataset, &all_cameras)?;
     if !held.is_empty() {
         eprintln!(
             "mean PSNR over the {} held-out views {:.2} dB",
@@ -213,62 +214,6 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         write_previews(dir, &scene, if held.is_empty() { &views } else { &held }, cfg.background)?;
     }
     Ok(ExitCode::SUCCESS)
-}
-
-/// Writes the fit's cameras (held-out views included, at the working size)
-/// as `cameras.json` beside the scene, the INRIA trainer's layout, so that the
-/// studio, `gast stylize` and `gast render` start from the dataset's own views
-/// ([`gast_core::camera::beside_scene`]) rather than an orbit from outside a
-/// forward-facing capture. A folder that holds other cameras keeps them: the
-/// dataset's own (the scene written into it), or a `cameras.json` of other
-/// images, which is left as it is with a warning.
-fn write_cameras_beside(
-    out: &std::path::Path,
-    dataset: &std::path::Path,
-    cameras: &[gast_core::Camera],
-) -> anyhow::Result<()> {
-    let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
-    let path = dir.join("cameras.json");
-    let same = |set: &gast_core::camera::CameraSet| {
-        set.cameras.len() == cameras.len() && set.cameras.iter().zip(cameras).all(|(a, b)| a.name == b.name)
-    };
-    match gast_core::camera::beside_scene(out) {
-        None => {}
-        // The same images' cameras: a refit replaces its own cameras.json;
-        // the dataset's own files (the scene written into it) need none.
-        Some(Ok((set, _))) if same(&set) && !path.is_file() => return Ok(()),
-        Some(Ok((set, _))) if same(&set) => {}
-        Some(Ok((set, found))) => {
-            eprintln!(
-                "warning: {} already holds the cameras of other images ({} of them, not this fit's {}); they are \
-                 left as they are, and the studio and `gast stylize` will take them for this scene unless given \
-                 --cameras {}",
-                found.display(),
-                set.cameras.len(),
-                cameras.len(),
-                dataset.display()
-            );
-            return Ok(());
-        }
-        Some(Err(e)) => {
-            eprintln!("warning: the fit's cameras.json is not written: the camera file beside the scene is kept: {e}");
-            return Ok(());
-        }
-    }
-    let off_centre = gast_core::camera::write_inria(&path, cameras)
-        .with_context(|| format!("could not write the fit's cameras to {}", path.display()))?;
-    eprintln!(
-        "wrote {} ({} cameras): the studio, `gast stylize` and `gast render` use them for this scene",
-        path.display(),
-        cameras.len()
-    );
-    if off_centre > 0 {
-        eprintln!(
-            "warning: {off_centre} of the cameras have their principal point off the image centre, which \
-             cameras.json does not keep (its readers take the centre)"
-        );
-    }
-    Ok(())
 }
 
 /// The dataset's SfM points as Gaussians when it has `points3D` (and

@@ -560,6 +560,10 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         }
         None => super::convert::save_scene(&args.out.join(&args.scene_name), &result, &args.save)?,
     }
+    // The cameras travel with the scene, for the studio and a rerun; an orbit is made again.
+    if let Some(source) = &source {
+        crate::views::write_cameras_beside(&args.out.join(&args.scene_name), source, session.cameras())?;
+    }
     part_done(&mut outputs, "scenes written", &mut t_part);
     // What the previews and the sheet need, kept; the session (its per-view
     // targets, the style's features, the optimiser's state, a GPU engine's
