@@ -179,8 +179,8 @@ pub fn refuse_among_photos(out: &Path, flag: &str, photos: &[PathBuf], source: &
 /// a forward-facing capture from outside. A folder that holds other cameras
 /// keeps them: the dataset's own (the scene written into it), or a
 /// `cameras.json` of other images, left as it is with a warning; one of the
-/// same images is replaced.
-pub fn write_cameras_beside(scene: &Path, source: &Path, cameras: &[Camera]) -> anyhow::Result<()> {
+/// same images is replaced. Returns what to tell the user, a line each.
+pub fn write_cameras_beside(scene: &Path, source: &Path, cameras: &[Camera]) -> anyhow::Result<Vec<String>> {
     let dir = scene.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let path = dir.join("cameras.json");
     let same = |set: &gast_core::camera::CameraSet| {
@@ -190,10 +190,10 @@ pub fn write_cameras_beside(scene: &Path, source: &Path, cameras: &[Camera]) -> 
         None => {}
         // The same images' cameras: a rerun replaces its own cameras.json;
         // the dataset's own files (the scene written into it) need none.
-        Some(Ok((set, _))) if same(&set) && !path.is_file() => return Ok(()),
+        Some(Ok((set, _))) if same(&set) && !path.is_file() => return Ok(Vec::new()),
         Some(Ok((set, _))) if same(&set) => {}
         Some(Ok((set, found))) => {
-            eprintln!(
+            return Ok(vec![format!(
                 "warning: {} already holds the cameras of other images ({} of them, not the {} written now); they are \
                  left as they are, and the studio and `gast stylize` will take them for this scene unless given \
                  --cameras {}",
@@ -201,28 +201,28 @@ pub fn write_cameras_beside(scene: &Path, source: &Path, cameras: &[Camera]) -> 
                 set.cameras.len(),
                 cameras.len(),
                 source.display()
-            );
-            return Ok(());
+            )]);
         }
         Some(Err(e)) => {
-            eprintln!("warning: cameras.json is not written: the camera file beside the scene is kept: {e}");
-            return Ok(());
+            return Ok(vec![format!(
+                "warning: cameras.json is not written: the camera file beside the scene is kept: {e}"
+            )]);
         }
     }
     let off_centre = gast_core::camera::write_inria(&path, cameras)
         .with_context(|| format!("could not write the cameras to {}", path.display()))?;
-    eprintln!(
+    let mut said = vec![format!(
         "wrote {} ({} cameras): the studio, `gast stylize` and `gast render` use them for this scene",
         path.display(),
         cameras.len()
-    );
+    )];
     if off_centre > 0 {
-        eprintln!(
+        said.push(format!(
             "warning: {off_centre} of the cameras have their principal point off the image centre, which \
              cameras.json does not keep (its readers take the centre)"
-        );
+        ));
     }
-    Ok(())
+    Ok(said)
 }
 
 /// The camera file a command reads: `cameras` (`--cameras`) when given,

@@ -201,7 +201,9 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         psnr_all
     );
     // Held-out views included, at the working size.
-    crate::views::write_cameras_beside(&args.out, &args.dataset, &all_cameras)?;
+    for line in crate::views::write_cameras_beside(&args.out, &args.dataset, &all_cameras)? {
+        eprintln!("{line}");
+    }
     if !held.is_empty() {
         eprintln!(
             "mean PSNR over the {} held-out views {:.2} dB",

@@ -68,7 +68,8 @@ pub enum JobDone {
     /// The style's maps for a [`StyleMapsKey`] are ready, with the depth's fallback warning.
     StyleMaps(StyleMapsKey, Box<Maps>, Option<String>),
     /// A file was written.
-    Exported(PathBuf),
+    /// A file was written, with what to tell beside it (cameras written with a scene).
+    Exported(PathBuf, Vec<String>),
     /// A job failed; the message names the file and the reason.
     Failed(String),
 }
@@ -219,7 +220,7 @@ impl Jobs {
         self.spawn(move || {
             let r = render(&g, &cam, &RenderOptions { background });
             match gast_core::io::write_png_rgb(&path, r.width, r.height, &r.rgb) {
-                Ok(()) => JobDone::Exported(path),
+                Ok(()) => JobDone::Exported(path, Vec::new()),
                 Err(e) => JobDone::Failed(format!("exporting the view: {e}")),
             }
         });
@@ -230,7 +231,7 @@ impl Jobs {
         self.spawn(move || {
             let r = render(&g, &cam, &RenderOptions::default());
             match gast_core::io::write_exr_depth(&path, r.width, r.height, &r.inv_depth) {
-                Ok(()) => JobDone::Exported(path),
+                Ok(()) => JobDone::Exported(path, Vec::new()),
                 Err(e) => JobDone::Failed(format!("exporting the depth: {e}")),
             }
         });
@@ -245,7 +246,7 @@ impl Jobs {
         dir: PathBuf,
     ) {
         self.spawn(move || match crate::turntable::write(&dir, &g, after.as_deref(), &opts, &mut |_, _| {}) {
-            Ok(made) => JobDone::Exported(made.gif),
+            Ok(made) => JobDone::Exported(made.gif, Vec::new()),
             Err(e) => JobDone::Failed(format!("exporting the turntable: {}", crate::error_text(&e))),
         });
     }
@@ -269,7 +270,7 @@ impl Jobs {
                 views,
             };
             match write_sheet(&path, &content) {
-                Ok(()) => JobDone::Exported(path),
+                Ok(()) => JobDone::Exported(path, Vec::new()),
                 Err(e) => JobDone::Failed(crate::error_text(&e)),
             }
         });
@@ -277,10 +278,18 @@ impl Jobs {
 
     /// Writes Gaussians in the format the file's name asks for (`.ply`,
     /// `.compressed.ply`, `.spz`, `.sog`; see `gast_core::scene::save`).
-    pub fn export_scene(&mut self, g: SharedGaussians, path: PathBuf) {
-        self.spawn(move || match gast_core::scene::save(&path, &g, &Default::default()) {
-            Ok(()) => JobDone::Exported(path),
-            Err(e) => JobDone::Failed(format!("exporting the scene: {e}")),
+    /// With `cameras` (the training cameras and the file they came from),
+    /// writes them beside it as `cameras.json`, so the export reopens on them.
+    pub fn export_scene(&mut self, g: SharedGaussians, path: PathBuf, cameras: Option<(Vec<Camera>, PathBuf)>) {
+        self.spawn(move || {
+            if let Err(e) = gast_core::scene::save(&path, &g, &Default::default()) {
+                return JobDone::Failed(format!("exporting the scene: {e}"));
+            }
+            let Some((cameras, source)) = cameras else { return JobDone::Exported(path, Vec::new()) };
+            match crate::views::write_cameras_beside(&path, &source, &cameras) {
+                Ok(said) => JobDone::Exported(path, said),
+                Err(e) => JobDone::Failed(format!("exporting the scene's cameras: {}", crate::error_text(&e))),
+            }
         });
     }
 

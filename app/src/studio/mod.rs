@@ -102,7 +102,8 @@ pub struct StudioApp {
     pub config: StyleConfig,
     view: ViewState,
     cameras: Vec<Camera>,
-    camera_source: String,
+    /// The file or folder the training cameras came from; `None`: the orbit.
+    camera_source: Option<PathBuf>,
     /// Where the before | after line sits (0: all after, 1: all before).
     split: f32,
     /// Whether the viewport compares before | after (off: the after side alone).
@@ -299,7 +300,7 @@ impl StudioApp {
             config: StyleConfig::default(),
             view: ViewState::default(),
             cameras: Vec::new(),
-            camera_source: String::new(),
+            camera_source: None,
             split: 0.5,
             compare: true,
             dragging_split: false,
@@ -490,7 +491,13 @@ impl StudioApp {
                     ));
                 }
                 inspect::JobDone::Scene(path, result) => self.finish_open_scene(&path, result),
-                inspect::JobDone::Exported(p) => self.notice = format!("wrote {}", p.display()),
+                inspect::JobDone::Exported(p, said) => {
+                    self.notice = format!("wrote {}", p.display());
+                    if said.iter().any(|l| l.starts_with("wrote")) {
+                        self.notice += " and its cameras.json";
+                    }
+                    self.run.log.extend(said);
+                }
                 inspect::JobDone::Failed(e) => self.errors.push(e),
             }
         }

@@ -10,7 +10,7 @@ impl StudioApp {
         let g = Arc::new(g);
         self.view.fit(&g);
         self.cameras = view::orbit_ring(&g, self.view.up, 12, 800, 600);
-        self.camera_source = "orbit".into();
+        self.camera_source = None;
         self.scene = Some(LoadedScene { name, scene: SceneRef { version: self.next_version, gaussians: g.into() } });
         self.next_version += 1;
         self.snapshot = None;
@@ -109,9 +109,20 @@ impl StudioApp {
         }
     }
 
+    /// The training cameras and where they came from, for an export to
+    /// carry; `None` with the orbit, which is made again from any scene.
+    pub(super) fn camera_file(&self) -> Option<(Vec<Camera>, PathBuf)> {
+        self.camera_source.clone().map(|from| (self.cameras.clone(), from))
+    }
+
+    /// Where the cameras came from, for the cameras panel.
+    pub(super) fn camera_source_name(&self) -> String {
+        self.camera_source.as_ref().map_or_else(|| "orbit".to_owned(), |p| p.display().to_string())
+    }
+
     pub(super) fn set_cameras(&mut self, set: gast_core::camera::CameraSet, from: &Path) {
         self.cameras = set.cameras;
-        self.camera_source = from.display().to_string();
+        self.camera_source = Some(from.to_path_buf());
         // The view starts at the first training camera: a forward-facing
         // capture (fern) seen from the orbit around it shows its blurred back.
         if let Some(cam) = self.cameras.first().cloned() {

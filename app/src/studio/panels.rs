@@ -52,7 +52,7 @@ impl StudioApp {
                     .set_file_name("stylized.ply")
                     .save_file()
             {
-                self.jobs.export_scene(g.clone(), p);
+                self.jobs.export_scene(g.clone(), p, self.camera_file());
             }
             let have_run = self.run.start().is_some() && self.snapshot.is_some();
             if ui
@@ -433,7 +433,7 @@ impl StudioApp {
                 self.background = bg;
             }
         });
-        egui::CollapsingHeader::new(format!("Cameras ({}, {})", self.cameras.len(), self.camera_source)).show(
+        egui::CollapsingHeader::new(format!("Cameras ({}, {})", self.cameras.len(), self.camera_source_name())).show(
             ui,
             |ui| {
                 let mut snap = None;

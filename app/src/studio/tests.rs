@@ -627,6 +627,39 @@ fn turntable_export_runs_in_the_background_and_shows_its_gif() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A scene with `cameras.json` beside it (as `gast fit` writes it) opens on
+/// its cameras, and an export of the scene carries them to its new folder;
+/// the demo scene's orbit is not written out.
+#[test]
+fn a_scenes_cameras_open_with_it_and_travel_with_its_export() {
+    let dir = std::env::temp_dir().join(format!("gast-studio-cameras-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    for sub in ["fit", "out"] {
+        std::fs::create_dir_all(dir.join(sub)).expect("dir");
+    }
+    let scene = super::assets::demo_scene();
+    let cameras: Vec<Camera> = (0..3).map(|k| demo_camera(&scene, 64 + k, 48)).collect();
+    let cameras: Vec<Camera> =
+        cameras.into_iter().enumerate().map(|(k, c)| Camera { name: format!("view{k}"), ..c }).collect();
+    gast_core::scene::save(dir.join("fit/scene.ply"), &scene, &Default::default()).expect("scene");
+    gast_core::camera::write_inria(dir.join("fit/cameras.json"), &cameras).expect("cameras");
+    let mut app = test_app();
+    // The demo scene's orbit is not a camera file to carry.
+    assert!(app.camera_file().is_none());
+    app.open_any(&dir.join("fit/scene.ply"));
+    assert!(app.errors.is_empty(), "{:?}", app.errors);
+    assert_eq!(app.cameras.len(), 3);
+    assert_eq!(app.camera_source_name(), dir.join("fit").display().to_string());
+    let g = app.current().expect("the scene");
+    app.jobs.export_scene(g, dir.join("out/stylized.ply"), app.camera_file());
+    poll_until(&mut app, 30, "the export", |a| a.jobs.running == 0);
+    assert!(app.errors.is_empty(), "{:?}", app.errors);
+    assert!(app.notice.ends_with("stylized.ply and its cameras.json"), "{}", app.notice);
+    let set = gast_core::camera::load(dir.join("out")).expect("the exported cameras.json");
+    assert_eq!(set.cameras.iter().map(|c| c.name.as_str()).collect::<Vec<_>>(), ["view0", "view1", "view2"]);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// A file of the shared data (`$GAST_SHARED`, else `../shared` beside the workspace).
 fn shared_file(rel: &str) -> Option<PathBuf> {
     let base = std::env::var_os("GAST_SHARED")

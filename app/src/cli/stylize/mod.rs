@@ -562,7 +562,9 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     }
     // The cameras travel with the scene, for the studio and a rerun; an orbit is made again.
     if let Some(source) = &source {
-        crate::views::write_cameras_beside(&args.out.join(&args.scene_name), source, session.cameras())?;
+        for line in crate::views::write_cameras_beside(&args.out.join(&args.scene_name), source, session.cameras())? {
+            eprintln!("  {line}");
+        }
     }
     part_done(&mut outputs, "scenes written", &mut t_part);
     // What the previews and the sheet need, kept; the session (its per-view
