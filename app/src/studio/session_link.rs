@@ -129,11 +129,20 @@ pub struct RunMonitor {
     pub log: Vec<String>,
     /// Version of the newest snapshot taken from the slot.
     pub snapshot_version: u64,
+    /// The seconds a step the run's plan expects, when it was planned.
+    pub planned_step_s: Option<f64>,
 }
 
 impl Default for RunMonitor {
     fn default() -> Self {
-        Self { link: None, status: RunStatus::Idle, steps: Vec::new(), log: Vec::new(), snapshot_version: 0 }
+        Self {
+            link: None,
+            status: RunStatus::Idle,
+            steps: Vec::new(),
+            log: Vec::new(),
+            snapshot_version: 0,
+            planned_step_s: None,
+        }
     }
 }
 
@@ -194,6 +203,7 @@ impl RunMonitor {
     pub fn apply(&mut self, event: Event) {
         match event {
             Event::Step(r) => self.steps.push(r),
+            Event::Planned { seconds_per_step } => self.planned_step_s = Some(seconds_per_step),
             Event::Stage { name, seconds } => self.log.push(format!("{name}: {seconds:.2} s")),
             Event::Culled { total, kept } => {
                 self.log.push(format!("optimising {kept} of {total} Gaussians (the rest are seen by no camera)"))
@@ -220,13 +230,16 @@ impl RunMonitor {
     /// first visit. A view's first step also makes its targets (the render
     /// of `G^c` and its features); read into the pace, they raised the
     /// first cycle's estimate (guitar × wave on the 2-core CPU, after 32
-    /// steps: 13 min 17 s against 12 min 20 s).
+    /// steps: 13 min 17 s against 12 min 20 s). While every step so far has
+    /// been a first visit, a planned run's expected pace stands in (fern's
+    /// 20 views: 25 min after 13 steps of a run planned to 10).
     pub fn progress(&self) -> Option<(f32, f64)> {
         let last = self.steps.last()?;
         let done = (last.iter + 1) as f64;
         let total = last.total.max(1) as f64;
-        let per_step =
-            self.last_cycle_pace().or_else(|| self.pace_after_first_visits()).unwrap_or(last.elapsed_s / done);
+        let per_step = (self.last_cycle_pace().or_else(|| self.pace_after_first_visits()))
+            .or(self.planned_step_s)
+            .unwrap_or(last.elapsed_s / done);
         Some(((done / total) as f32, (per_step * (total - done)).max(0.0)))
     }
 
@@ -363,6 +376,26 @@ mod tests {
             let want = pace * f64::from(40 - (iter + 1));
             assert!((eta - want).abs() < 1e-9, "step {iter}: ETA {eta} against {want}");
         }
+    }
+
+    /// A planned run's expected pace stands in while every step has been a
+    /// first visit (their targets made them slow), then the steps' own.
+    #[test]
+    fn a_planned_run_starts_its_eta_at_the_planned_pace() {
+        let mut m = RunMonitor::default();
+        m.apply(Event::Planned { seconds_per_step: 0.5 });
+        let mut elapsed = 0.0;
+        for iter in 0..6u32 {
+            elapsed += if iter < 4 { 6.0 } else { 1.0 };
+            m.steps.push(StepReport { view: iter % 4, ..report(iter, 40, 0, Phase::Color, elapsed) });
+            let (_, eta) = m.progress().expect("progress");
+            let pace = if iter < 4 { 0.5 } else { 1.0 };
+            let want = pace * f64::from(40 - (iter + 1));
+            assert!((eta - want).abs() < 1e-9, "step {iter}: ETA {eta} against {want}");
+        }
+        // A new run forgets the plan of the last.
+        m.attach(SessionLink::of(gast_core::session::spawn_with(|_| Err("none".into()), Arc::new(|| {}))));
+        assert_eq!(m.planned_step_s, None);
     }
 
     /// A close joins a worker that answers its Stop, and leaves one still

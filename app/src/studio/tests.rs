@@ -924,14 +924,17 @@ fn a_cpu_run_is_planned_to_about_ten_minutes() {
     let cameras = framed_orbit(&scene, &OrbitOptions { count: 12, width: 256, height: 256, ..OrbitOptions::default() });
     let mut config = StyleConfig::default();
     let asked = config.schedule().total_steps();
-    let said = super::worker::plan_for_cpu(&scene, &cameras, &mut config);
+    let (said, step_s) = super::worker::plan_for_cpu(&scene, &cameras, &mut config);
     assert!(said.starts_with("planned for about") && said.contains(&format!("{} px", config.resolution)), "{said}");
     // A small preset stays as small as it was.
     let mut small = StyleConfig { resolution: 64, cycles: 2, ..StyleConfig::default() };
-    let said_small = super::worker::plan_for_cpu(&scene, &cameras, &mut small);
+    let (said_small, _) = super::worker::plan_for_cpu(&scene, &cameras, &mut small);
     assert_eq!((small.resolution, small.cycles), (64, 2), "{said_small}");
     assert!(said_small.contains("as set"), "{said_small}");
     let model = StepModel::for_focus(config.focus.is_object(0.2));
+    // The pace the ETA starts from is the plan's: its steps fill the budget.
+    let planned = step_s * f64::from(config.schedule().total_steps());
+    assert!(step_s > 0.0 && planned <= AUTO_RUN_BUDGET_S * 1.05, "{planned:.0} s planned: {said}");
     let seconds = model.seconds(config.resolution) * f64::from(config.schedule().total_steps());
     assert!(seconds <= AUTO_RUN_BUDGET_S * 1.05, "{seconds:.0} s planned: {said}");
     assert!(config.schedule().total_steps() <= asked && config.resolution >= 256, "{said}");
@@ -946,7 +949,7 @@ fn a_planned_whole_frame_run_keeps_the_references_style_to_frame_ratio() {
     let scene = assets::demo_scene();
     let cameras = framed_orbit(&scene, &OrbitOptions { count: 12, width: 256, height: 256, ..OrbitOptions::default() });
     let mut frame = StyleConfig { focus: Focus::Frame, ..StyleConfig::default() };
-    let said = super::worker::plan_for_cpu(&scene, &cameras, &mut frame);
+    let (said, _) = super::worker::plan_for_cpu(&scene, &cameras, &mut frame);
     let expected = gast_core::session::plan::frame_texture_scale(frame.resolution, 256);
     assert!(expected < 256 && frame.texture_scale == expected, "{said}");
     assert!(said.contains(&format!("texture scale {expected} px")), "{said}");

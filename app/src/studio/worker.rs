@@ -21,12 +21,12 @@ const ORBIT_VIEWS: usize = 36;
 /// (a small preset stays small), lower where the budget needs it; a whole
 /// frame at the default texture scale takes the reference's ratio of style
 /// to frame ([`gast_core::session::plan::frame_texture_scale`]). Says what
-/// it chose.
+/// it chose, and the seconds a step it expects.
 pub(super) fn plan_for_cpu(
     scene: &gast_core::Gaussians,
     cameras: &[gast_core::Camera],
     config: &mut StyleConfig,
-) -> String {
+) -> (String, f64) {
     use gast_core::session::plan::{AUTO_RUN_BUDGET_S, StepModel, ViewsSurvey, auto_plan, fit_cycles, survey};
     let ViewsSurvey { span, object } = survey(scene, cameras, config.focus, config.background);
     // A whole frame at the default texture scale takes the reference's ratio (below).
@@ -54,7 +54,7 @@ pub(super) fn plan_for_cpu(
     } else {
         String::new()
     };
-    if (config.resolution, config.cycles) == asked {
+    let said = if (config.resolution, config.cycles) == asked {
         format!("about {minutes:.0} min on this CPU as set: {} px, {} cycles{texture}", asked.0, asked.1)
     } else {
         format!(
@@ -62,7 +62,8 @@ pub(super) fn plan_for_cpu(
              the run\" to keep them){texture}",
             config.resolution, config.cycles, asked.0, asked.1
         )
-    }
+    };
+    (said, model.seconds(config.resolution))
 }
 
 /// The studio's session starter.
@@ -100,8 +101,9 @@ pub fn starter() -> SessionStarter {
                 emit(Event::Stage { name: "weights and cameras".into(), seconds: t.elapsed().as_secs_f64() });
                 if fit_budget && gpu.is_none() {
                     let t = std::time::Instant::now();
-                    let plan = plan_for_cpu(&scene, &cameras, &mut config);
+                    let (plan, seconds_per_step) = plan_for_cpu(&scene, &cameras, &mut config);
                     emit(Event::Stage { name: plan, seconds: t.elapsed().as_secs_f64() });
+                    emit(Event::Planned { seconds_per_step });
                 }
                 let t = std::time::Instant::now();
                 // On a software rasterizer the CPU's kernels are ~40× faster.

@@ -105,6 +105,13 @@ pub enum Event {
         /// Gaussians being optimised.
         kept: usize,
     },
+    /// The run was planned to a time budget: the seconds a step is expected
+    /// to take, which an estimate of the time left can use until the steps'
+    /// own pace is known (each view's first step also makes its targets).
+    Planned {
+        /// Expected seconds a step.
+        seconds_per_step: f64,
+    },
     /// One step done.
     Step(StepReport),
     /// Something the user should know that does not stop the run.
