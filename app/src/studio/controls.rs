@@ -64,6 +64,17 @@ pub fn recipe_weights(c: &StyleConfig, coverage: Option<f32>) -> Vec<(&'static s
     c.recipe_lifts(coverage).into_iter().map(|(t, v)| (t.symbol, v)).collect()
 }
 
+/// The time a step of `c` takes on a 2-core CPU, under the resolution
+/// slider: the plan's model for the run's focus (the running session's
+/// `coverage` settles `auto`; without one it reads as the object) and, on a
+/// whole frame, for a style that follows the frame as a planned run sets it.
+pub fn step_hint(c: &StyleConfig, coverage: Option<f32>) -> String {
+    use gast_core::session::plan::{StepModel, frame_texture_scale, step_time_hint};
+    let object = coverage.map_or(c.focus != Focus::Frame, |v| c.focus.is_object(v));
+    let scaled = !object && c.texture_scale == frame_texture_scale(c.resolution, StyleConfig::default().texture_scale);
+    step_time_hint(StepModel::for_run(object, scaled), c.resolution, object)
+}
+
 /// Edits `c` in place; returns true when anything changed. `coverage`: the
 /// running session's mean coverage, which settles `auto` focus and so which
 /// recipe lifts which weight (shown under the slider it lifts).
@@ -164,9 +175,7 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>) ->
     });
     changed |= ui.add(egui::Slider::new(&mut c.texture_scale, 16..=1024).text("style height (px)")).changed();
     changed |= ui.add(egui::Slider::new(&mut c.resolution, 64..=1024).text("working resolution")).changed();
-    let object = c.focus != Focus::Frame;
-    let model = gast_core::session::plan::StepModel::for_focus(object);
-    ui.weak(gast_core::session::plan::step_time_hint(model, c.resolution, object));
+    ui.weak(step_hint(c, coverage));
     egui::ComboBox::from_label("focus").selected_text(focus_label(c.focus)).show_ui(ui, |ui| {
         for f in Focus::ALL {
             changed |= ui.selectable_value(&mut c.focus, f, focus_label(f)).changed();

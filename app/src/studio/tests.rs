@@ -940,6 +940,25 @@ fn a_cpu_run_is_planned_to_about_ten_minutes() {
     assert!(config.schedule().total_steps() <= asked && config.resolution >= 256, "{said}");
 }
 
+/// The step time under the resolution slider follows the run: fern's
+/// planned whole frame (256 px, the style at 64) is the scaled model's
+/// 0.30 s, not the object's; `auto` reads as the running session's coverage says.
+#[test]
+fn the_step_hint_follows_the_runs_focus_and_texture() {
+    use super::controls::step_hint;
+    use gast_core::style::Focus;
+    let fern = StyleConfig { focus: Focus::Frame, resolution: 256, texture_scale: 64, ..StyleConfig::default() };
+    assert!(
+        step_hint(&fern, None).contains("0.30 s per step at 256 px") && step_hint(&fern, None).contains("whole-frame")
+    );
+    let auto = StyleConfig { focus: Focus::Auto, ..fern.clone() };
+    assert_eq!(step_hint(&auto, Some(0.95)), step_hint(&fern, None));
+    assert!(step_hint(&auto, Some(0.2)).contains("the object focus"), "{}", step_hint(&auto, Some(0.2)));
+    // The style at its full 256 px on a whole frame takes the unscaled model.
+    let unscaled = StyleConfig { texture_scale: 256, ..fern };
+    assert_ne!(step_hint(&unscaled, None), step_hint(&auto, Some(0.95)));
+}
+
 /// A whole frame planned at the default texture scale takes the reference's
 /// ratio of style to frame, as `gast stylize` does; a scale the user moved is kept.
 #[test]
