@@ -720,6 +720,17 @@ fn a_named_depth_model_that_cannot_be_used_is_an_error() {
         assert!(err.contains(&said), "{err}");
         assert!(!err.contains("colour matching"), "the run started: {err}");
     }
+    // The same checkpoint named by $GAST_DEPTH_MODEL (it fell back with a warning).
+    let o = Command::new(env!("CARGO_BIN_EXE_gast"))
+        .args(["stylize", s(&scene), s(&style), "--weights", s(&weights), "--out", s(&out.join("run"))])
+        .args(["--resolution", "32"])
+        .env("GAST_DEPTH_MODEL", &broken)
+        .output()
+        .expect("run gast");
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(err.contains(&format!("$GAST_DEPTH_MODEL {} (unset it", broken.display())), "{err}");
+    assert!(!err.contains("colour matching"), "the run started: {err}");
     std::fs::remove_dir_all(&out).ok();
 }
 

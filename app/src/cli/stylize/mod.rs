@@ -65,13 +65,19 @@ pub fn resolve_style_depth(
         },
     );
     pb.finish_and_clear();
-    // A checkpoint the user named that cannot be used is an error, not the
-    // built-in estimate with a warning, before the run.
-    if let (Some(m), Some(why)) = (model, &resolved.learned_failure) {
+    // A checkpoint the user named (the flag, or $GAST_DEPTH_MODEL) that
+    // cannot be used is an error, not the built-in estimate with a warning,
+    // before the run.
+    let named = match model {
+        Some(m) => Some(format!("--depth-model {}", m.display())),
+        None => std::env::var_os("GAST_DEPTH_MODEL")
+            .filter(|v| !v.is_empty())
+            .map(|v| format!("$GAST_DEPTH_MODEL {} (unset it for the built-in estimate)", Path::new(&v).display())),
+    };
+    if let (Some(named), Some(why)) = (named, &resolved.learned_failure) {
         anyhow::bail!(
-            "--depth-model {}: expected a Depth Anything V2 checkpoint (a folder with model.safetensors and \
-             config.json, or the file), could not use it: {why}",
-            m.display()
+            "{named}: expected a Depth Anything V2 checkpoint (a folder with model.safetensors and config.json, or \
+             the file), could not use it: {why}"
         );
     }
     if let Some(w) = &resolved.warning {
