@@ -218,8 +218,8 @@ pub fn write_cameras_beside(scene: &Path, source: &Path, cameras: &[Camera]) -> 
     )];
     if off_centre > 0 {
         said.push(format!(
-            "warning: {off_centre} of the cameras have their principal point off the image centre, which \
-             cameras.json does not keep (its readers take the centre)"
+            "note: {off_centre} of the cameras have their principal point off the image centre: cameras.json \
+             keeps it in cx/cy keys, which gast reads and other readers of the format ignore (they take the centre)"
         ));
     }
     Ok(said)

@@ -8,7 +8,9 @@
 //! camera-to-world rotation whose columns are the camera's x (right), y (down)
 //! and z (forward) axes in world space — already our camera axes, since the
 //! trainer uses COLMAP's. `fx`/`fy` come from the field of view; the principal
-//! point is the image centre (the trainer assumes it).
+//! point is the image centre (the trainer assumes it). The project's writer
+//! adds `cx`/`cy` for a camera whose principal point is off the centre, and
+//! its reader takes them when present; other readers ignore the two keys.
 
 use std::path::Path;
 
@@ -29,10 +31,13 @@ struct Entry {
     rotation: [[f64; 3]; 3],
     fx: f64,
     fy: f64,
+    cx: Option<f64>,
+    cy: Option<f64>,
 }
 
 /// Reads an INRIA 3DGS `cameras.json` (a list of
-/// `{id, img_name, width, height, position, rotation, fx, fy}`), in file order.
+/// `{id, img_name, width, height, position, rotation, fx, fy}`, with the
+/// principal point `cx`/`cy` where given, else the image centre), in file order.
 pub fn load_inria(path: impl AsRef<Path>) -> Result<CameraSet, CameraError> {
     let path = path.as_ref();
     from_value(path, super::read_json(path)?)
@@ -58,8 +63,11 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
             ("rotation", Field::Matrix(3, 3)),
             ("fx", Field::Number),
             ("fy", Field::Number),
+            ("cx", Field::Number),
+            ("cy", Field::Number),
         ];
-        check_fields_of(path, &record, &item, &fields, &fields.map(|(name, _)| name))?;
+        let required = ["img_name", "width", "height", "position", "rotation", "fx", "fy"];
+        check_fields_of(path, &record, &item, &fields, &required)?;
         let e: Entry = serde_json::from_value(item).map_err(|source| CameraError::Json {
             path: path.to_path_buf(),
             record: record.clone(),
@@ -86,15 +94,22 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
             corrected += 1;
             worst = worst.max(dev);
         }
-        let (w, h) = (e.width as f32, e.height as f32);
+        let (w, h) = (f64::from(e.width), f64::from(e.height));
+        let principal = [("cx", e.cx, w), ("cy", e.cy, h)].map(|(name, given, size)| match given {
+            Some(p) if !p.is_finite() => Err(CameraError::format(path, rec(name), "a finite number", p.to_string())),
+            Some(p) => Ok(p as f32),
+            None => Ok((0.5 * size) as f32),
+        });
+        let [cx, cy] = principal;
+        let (cx, cy) = (cx?, cy?);
         cameras.push(Camera::from_camera_to_world(
             e.img_name,
             e.width,
             e.height,
             e.fx as f32,
             e.fy as f32,
-            0.5 * w,
-            0.5 * h,
+            cx,
+            cy,
             c2w,
             center.as_vec3(),
         ));
@@ -106,21 +121,21 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
 /// Writes `cameras` as an INRIA 3DGS `cameras.json` (the layout
 /// [`load_inria`] reads, so viewers and trainers that read the trainer's
 /// output read it too), through a temporary file renamed over `path`.
-/// The format keeps no principal point (the readers take the image centre):
-/// the result is the number of cameras whose principal point was more than
-/// half a pixel off centre, for the caller to warn of.
+/// The format keeps no principal point (its readers take the image centre):
+/// a camera whose principal point is more than half a pixel off centre gets
+/// `cx`/`cy` keys, which [`load_inria`] reads and other readers ignore. The
+/// result is the number of such cameras, for the caller to say that other
+/// tools will see them centred.
 pub fn write_inria(path: impl AsRef<Path>, cameras: &[Camera]) -> Result<usize, CameraError> {
     let path = path.as_ref();
     let mut off_centre = 0;
     let entries: Vec<serde_json::Value> = (cameras.iter().enumerate())
         .map(|(id, c)| {
-            if (c.cx - 0.5 * c.width as f32).abs() > 0.5 || (c.cy - 0.5 * c.height as f32).abs() > 0.5 {
-                off_centre += 1;
-            }
             // The camera-to-world rotation row by row: its rows are the
             // world-to-camera rotation's columns.
             let c2w = c.rotation.as_dmat3().to_cols_array_2d();
-            serde_json::json!({
+            let off = (c.cx - 0.5 * c.width as f32).abs() > 0.5 || (c.cy - 0.5 * c.height as f32).abs() > 0.5;
+            let mut entry = serde_json::json!({
                 "id": id,
                 "img_name": c.name,
                 "width": c.width,
@@ -129,7 +144,13 @@ pub fn write_inria(path: impl AsRef<Path>, cameras: &[Camera]) -> Result<usize, 
                 "rotation": c2w,
                 "fy": f64::from(c.fy),
                 "fx": f64::from(c.fx),
-            })
+            });
+            if off {
+                off_centre += 1;
+                entry["cx"] = f64::from(c.cx).into();
+                entry["cy"] = f64::from(c.cy).into();
+            }
+            entry
         })
         .collect();
     let bytes = serde_json::to_vec(&entries).map_err(|e| CameraError::io(path, std::io::Error::other(e)))?;

@@ -55,10 +55,21 @@ fn inria_by_hand_and_round_trip() {
     for (a, b) in cams.iter().zip(&back.cameras) {
         assert_close(a, b, 1e-5);
     }
-    // The format has no principal point: one off the centre is counted.
+    // The format has no principal point: one off the centre is counted, and
+    // kept in `cx`/`cy` keys that read back; the centred ones get none.
     let mut shifted = cams.clone();
     shifted[2].cx += 3.0;
+    shifted[2].cy -= 1.5;
     assert_eq!(write_inria(d.join("written/cameras.json"), &shifted).expect("written"), 1);
+    let doc: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("written/cameras.json")).expect("read")).expect("json");
+    assert_eq!((doc[2]["cx"].as_f64(), doc[2]["cy"].as_f64()), (Some(163.0), Some(118.5)));
+    assert!(doc[1].get("cx").is_none() && doc[1].get("cy").is_none(), "{}", doc[1]);
+    let back = load(d.join("written")).expect("the written cameras.json");
+    for (a, b) in shifted.iter().zip(&back.cameras) {
+        assert_close(a, b, 1e-5);
+    }
+    assert_eq!((back.cameras[2].cx, back.cameras[2].cy), (163.0, 118.5));
 }
 
 #[test]
@@ -136,6 +147,7 @@ fn malformed_json_gives_errors_naming_the_field() {
         (json!([{"id": 0, "img_name": "a", "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": null, "fy": 2}]).to_string(), "cameras[0].fx: expected a number, found null"),
         (json!([{"id": 0, "img_name": null, "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": 2, "fy": 2}]).to_string(), "cameras[0].img_name: expected a string, found null"),
         (json!({"camera_angle_x": 1, "w": 4, "h": 4, "frames": [{"transform_matrix": null}]}).to_string(), "frames[0].transform_matrix: expected a list of rows of numbers, found null"),
+        (json!([{"id": 0, "img_name": "a", "width": 4, "height": 4, "position": [0, 0, 0], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "fx": 2, "fy": 2, "cx": "left"}]).to_string(), "cameras[0].cx: expected a number, found a string"),
         ("7".into(), "a number"),
     ];
     for (text, needle) in cases {
