@@ -26,6 +26,10 @@ pub struct StepArgs {
     /// Working resolution (longer side, pixels).
     #[arg(long, default_value_t = 256)]
     pub resolution: u32,
+    /// The style's texture scale (its height in pixels, 16 to 4,096, as `gast stylize
+    /// --texture-scale`): a whole-frame `gast stylize` at 256 px takes 64 by default.
+    #[arg(long, default_value_t = 256, value_parser = crate::views::within(gast_core::style::TEXTURE_SCALES))]
+    pub texture_scale: u32,
     /// Orbit views (1 to 3,600).
     #[arg(long, default_value_t = 36, value_parser = crate::views::view_count::<usize>())]
     pub views: usize,
@@ -287,6 +291,7 @@ pub(super) fn asks_fast(args: &StepArgs) -> bool {
 fn step_config(args: &StepArgs) -> anyhow::Result<gast_core::style::StyleConfig> {
     let mut config = gast_core::style::StyleConfig {
         resolution: args.resolution,
+        texture_scale: args.texture_scale,
         focus: args.focus,
         ..gast_core::style::StyleConfig::default()
     };
