@@ -150,6 +150,23 @@ pub fn fit_cycles(model: StepModel, resolution: u32, cycles: u32, steps_per_cycl
     (cycles, per_cycle * f64::from(cycles))
 }
 
+/// The cycles of a planned CPU run once its first steps are timed: the
+/// model's seconds a step come from one 2-core machine, and another runs the
+/// same step faster or slower (fern × block2 at 256 px: 0.29 s a step there,
+/// 0.19 s on a 2-core machine whose GEMM ran 188 GFLOP/s against 124). After
+/// `done_steps` steps in `elapsed_s`, the cycles whose steps fit `budget_s`
+/// at that pace: at least the cycles begun, at most `most` (what the run
+/// asked for before the plan). `None` before a step is timed.
+pub fn replan_cycles(elapsed_s: f64, done_steps: u32, steps_per_cycle: u32, budget_s: f64, most: u32) -> Option<u32> {
+    if done_steps == 0 || elapsed_s.is_nan() || elapsed_s <= 0.0 {
+        return None;
+    }
+    let per_cycle = elapsed_s / f64::from(done_steps) * f64::from(steps_per_cycle.max(1));
+    let begun = done_steps.div_ceil(steps_per_cycle.max(1));
+    let fits = (budget_s / per_cycle).floor().min(f64::from(u32::MAX)) as u32;
+    Some(fits.min(most).max(begun).max(1))
+}
+
 /// The mean share of the pixels of `cameras` that `scene` covers (alpha of
 /// at least 0.5), rendered at 64 px: what `focus auto` decides on.
 pub fn mean_coverage(scene: &Gaussians, cameras: &[Camera], opts: &RenderOptions) -> f32 {
@@ -226,6 +243,22 @@ mod tests {
         let fixed = auto_plan(1.0, StepModel::for_focus(false), 30, 100, AUTO_RUN_BUDGET_S);
         assert_eq!((scaled.resolution, scaled.cycles, fixed.resolution, fixed.cycles), (256, 20, 256, 10));
         assert!(scaled.seconds <= AUTO_RUN_BUDGET_S, "{scaled:?}");
+    }
+
+    #[test]
+    fn a_planned_run_takes_the_cycles_its_measured_pace_fits() {
+        // fern's first cycle of 100 steps in 22 s on this machine, where the
+        // model said 0.30 s: 27 cycles fit ten minutes, the run asked 30.
+        assert_eq!(replan_cycles(22.0, 100, 100, AUTO_RUN_BUDGET_S, 30), Some(27));
+        // A faster machine is held to what the run asked for.
+        assert_eq!(replan_cycles(10.0, 100, 100, AUTO_RUN_BUDGET_S, 30), Some(30));
+        // A slower one gets fewer, never fewer than the cycles begun.
+        assert_eq!(replan_cycles(60.0, 100, 100, AUTO_RUN_BUDGET_S, 30), Some(10));
+        assert_eq!(replan_cycles(700.0, 100, 100, AUTO_RUN_BUDGET_S, 30), Some(1));
+        assert_eq!(replan_cycles(700.0, 150, 100, AUTO_RUN_BUDGET_S, 30), Some(2));
+        // Nothing timed yet.
+        assert_eq!(replan_cycles(0.0, 0, 100, AUTO_RUN_BUDGET_S, 30), None);
+        assert_eq!(replan_cycles(f64::NAN, 10, 100, AUTO_RUN_BUDGET_S, 30), None);
     }
 
     #[test]

@@ -18,7 +18,7 @@ use gast_core::io::{
 use gast_core::raster::{self, RenderOptions};
 use gast_core::session::plan::{
     AUTO_RUN_BUDGET_S, PIXELS_PER_FEATURE, REFERENCE_FRAME_RESOLUTION, StepModel, ViewsSurvey, auto_plan,
-    auto_resolution_gpu, frame_texture_scale, step_time_hint, survey,
+    auto_resolution_gpu, frame_texture_scale, replan_cycles, step_time_hint, survey,
 };
 use gast_core::session::{Event, Session, SessionInputs, Stage1Cache, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::{FeatureNet, StyleConfig, StyleMaps};
@@ -380,6 +380,10 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let auto_resolution = args.resolution.is_none() && args.preset.is_none();
     let auto_texture = args.texture_scale.is_none() && args.preset.is_none();
     let surveyed = (auto_resolution || auto_texture).then(|| survey(&scene, &cameras, config.focus, config.background));
+    // A CPU plan's cycles rest on one machine's step times: after the first
+    // cycle the run takes the cycles its own pace fits, up to those asked
+    // for (`replan_cycles`), unless --cycles is given. The model's seconds a step.
+    let mut replan = None;
     if let Some(ViewsSurvey { span, object }) = surveyed.filter(|_| auto_resolution) {
         let (chosen, wanted, hint) = match &gpu {
             Some(g) => {
@@ -390,6 +394,9 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
                 // On a whole frame the texture scale follows (below) unless it is given.
                 let model = StepModel::for_run(object, auto_texture);
                 let plan = auto_plan(span, model, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
+                if args.cycles.is_none() {
+                    replan = Some((config.cycles, model.seconds(plan.resolution)));
+                }
                 let fewer = if args.cycles.is_none() && plan.cycles < config.cycles {
                     config.cycles = plan.cycles;
                     format!(", {} cycles to fit", plan.cycles)
@@ -487,8 +494,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             );
         }
     }
-    let config = session.config().clone();
-    let total = session.total_steps();
+    let mut config = session.config().clone();
+    let mut total = session.total_steps();
     let pb = progress::bar(total as u64, "stylize");
     let mut steps = Vec::with_capacity(total as usize);
     let mut warned_collapse = false;
@@ -516,6 +523,26 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             anyhow::bail!("step {}: the loss became {}; stopping (try lower learning rates)", r.iter, r.losses.total);
         }
         steps.push(r);
+        let per_cycle = config.schedule().steps_per_cycle();
+        if let Some((most, model_s)) = replan.filter(|_| session.steps_done() == per_cycle) {
+            replan = None;
+            let (elapsed, done) = (session.elapsed_s(), session.steps_done());
+            let fits = replan_cycles(elapsed, done, per_cycle, AUTO_RUN_BUDGET_S, most);
+            if let Some(cycles) = fits.filter(|&c| c != config.cycles) {
+                session.set_config(StyleConfig { cycles, ..config.clone() })?;
+                config = session.config().clone();
+                total = session.total_steps();
+                pb.set_length(u64::from(total));
+                let pace = elapsed / f64::from(done);
+                let minutes = pace * f64::from(total) / 60.0;
+                pb.suspend(|| {
+                    eprintln!(
+                        "  re-planned after the first cycle: {cycles} cycles, about {minutes:.0} min of steps (its \
+                         steps took {pace:.2} s, the plan's model {model_s:.2} s; --cycles keeps a number)"
+                    )
+                });
+            }
+        }
         if interrupt.asked.load(Ordering::SeqCst) && !session.is_done() {
             stopped_at = Some(session.steps_done());
             break;
