@@ -114,6 +114,11 @@ pub struct StudioApp {
     fit_budget: bool,
     /// The run start whose planned settings the editor has taken ([`Self::adopt_plan`]).
     adopted: Option<std::sync::Weak<gast_core::session::RunStart>>,
+    /// The cycles the editor held before the plan's replaced them: the most
+    /// a re-plan gives ([`Self::replan_after_first_cycle`]).
+    asked_cycles: u32,
+    /// The run start whose cycles were re-planned, or found to need none.
+    replanned: Option<std::sync::Weak<gast_core::session::RunStart>>,
     background: [f32; 3],
     /// Messages shown in the bottom panel, newest last.
     pub errors: Vec<String>,
@@ -306,6 +311,8 @@ impl StudioApp {
             dragging_split: false,
             fit_budget: true,
             adopted: None,
+            asked_cycles: StyleConfig::default().cycles,
+            replanned: None,
             background: [0.0; 3],
             errors: Vec::new(),
             notice: String::new(),
@@ -436,9 +443,39 @@ impl StudioApp {
             return;
         }
         let planned = &start.config;
+        self.asked_cycles = self.config.cycles;
         (self.config.resolution, self.config.cycles, self.config.texture_scale) =
             (planned.resolution, planned.cycles, planned.texture_scale);
         self.adopted = Some(Arc::downgrade(&start));
+    }
+
+    /// A planned CPU run's cycles rest on one machine's step times
+    /// (`worker::plan_for_cpu`): once its first cycle has ended, the run
+    /// takes the cycles its measured pace fits in the plan's ten minutes, up
+    /// to those the editor asked for, as `gast stylize` does
+    /// ([`gast_core::session::plan::replan_cycles`]); once per run, and not
+    /// when the cycles were moved during the run.
+    fn replan_after_first_cycle(&mut self) {
+        use gast_core::session::plan::{AUTO_RUN_BUDGET_S, replan_cycles};
+        let (Some(start), Some(planned_s)) = (self.run.start(), self.run.planned_step_s) else { return };
+        let seen =
+            |w: &Option<std::sync::Weak<_>>| w.as_ref().is_some_and(|a| std::ptr::eq(a.as_ptr(), Arc::as_ptr(&start)));
+        if seen(&self.replanned) || !seen(&self.adopted) || !self.run.is_live() {
+            return;
+        }
+        let Some((steps, seconds)) = self.run.first_cycle() else { return };
+        self.replanned = Some(Arc::downgrade(&start));
+        if self.config.cycles != start.config.cycles {
+            return;
+        }
+        let fits = replan_cycles(seconds, steps, steps, AUTO_RUN_BUDGET_S, self.asked_cycles);
+        let Some(cycles) = fits.filter(|&c| c != self.config.cycles) else { return };
+        self.config.cycles = cycles;
+        self.run.send(Command::SetConfig(Box::new(self.config.clone())));
+        self.run.log.push(format!(
+            "re-planned after the first cycle: {cycles} cycles (its steps took {:.2} s, the plan's model {planned_s:.2} s)",
+            seconds / f64::from(steps.max(1))
+        ));
     }
 
     fn poll_workers(&mut self) {
@@ -451,6 +488,7 @@ impl StudioApp {
             self.next_version += 1;
         }
         self.adopt_plan();
+        self.replan_after_first_cycle();
         // While the run is live its GPU buffers are drawn; once it ends, its final snapshot.
         match self.run.live() {
             Some(l) if self.live.as_ref().is_some_and(|r| r.live.same_run(&l)) => {}

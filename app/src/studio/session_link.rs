@@ -174,6 +174,14 @@ impl RunMonitor {
         self.steps.last().map_or(0.0, |s| s.elapsed_s)
     }
 
+    /// The first cycle's steps and their seconds, once a later cycle's step
+    /// has been reported.
+    pub fn first_cycle(&self) -> Option<(u32, f64)> {
+        self.steps.last().filter(|r| r.cycle > 0)?;
+        let end = self.steps.iter().rposition(|r| r.cycle == 0)?;
+        Some((self.steps[end].iter + 1, self.steps[end].elapsed_s))
+    }
+
     /// Sends a command; false when no run is connected.
     pub fn send(&self, command: Command) -> bool {
         self.link.as_ref().is_some_and(|l| l.commands.send(command).is_ok())

@@ -1009,3 +1009,37 @@ fn the_editor_takes_the_planned_settings_when_the_run_starts() {
     assert_eq!((c.resolution, c.cycles, c.texture_scale), (64, 1, 32), "the plan's settings");
     assert_eq!((c.steps_per_cycle, c.weights.tv), (2, 0.5), "the user's other settings");
 }
+
+#[test]
+fn a_planned_run_takes_the_cycles_its_first_cycle_paced() {
+    let Some(weights) = shared_file("data/weights/vgg19-conv3.safetensors") else {
+        assert!(!in_ci(), "the shared VGG weights are missing (CI=true, so this is a failure)");
+        eprintln!("SKIPPED a_planned_run_takes_the_cycles_its_first_cycle_paced: no shared VGG weights");
+        return;
+    };
+    let vgg = Arc::new(gast_core::vision::Vgg::load(&weights).expect("weights"));
+    let mut app = test_app();
+    // The plan gave 3 of the 5 cycles asked for, at a model's pace of 100 s
+    // a step; the steps here take far less, so all 5 fit the ten minutes.
+    // (The re-plan must reach the worker before its third cycle ends: 20
+    // steps of margin, about 40 ms each here.)
+    app.set_session_starter(cpu_starter(vgg, 4, |config| StyleConfig {
+        resolution: 64,
+        cycles: 3,
+        texture_scale: 32,
+        ..config
+    }));
+    app.config =
+        StyleConfig { resolution: 96, cycles: 5, steps_per_cycle: 10, texture_scale: 48, ..StyleConfig::default() };
+    app.start_run();
+    app.run.planned_step_s = Some(100.0);
+    poll_until(&mut app, 900, "the run", |a| matches!(a.run.status, RunStatus::Finished { .. } | RunStatus::Failed(_)));
+    assert_eq!(app.run.status, RunStatus::Finished { completed: true }, "{:?}", app.errors);
+    assert_eq!(app.config.cycles, 5, "the editor holds the re-planned cycles");
+    assert_eq!(app.run.steps.len(), 50, "5 cycles of 10 steps ran");
+    assert!(
+        app.run.log.iter().any(|l| l.starts_with("re-planned after the first cycle: 5 cycles")),
+        "{:?}",
+        app.run.log
+    );
+}
