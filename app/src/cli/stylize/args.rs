@@ -91,7 +91,9 @@ pub struct StylizeArgs {
     /// file; else $GAST_DEPTH_MODEL, the caches, or a one-time download of the Small model.
     #[arg(long)]
     pub depth_model: Option<PathBuf>,
-    /// Cycles K [default: 30].
+    /// Cycles K [default: 30; a planned CPU run (no --resolution or --preset)
+    /// takes the cycles that fit about 10 min, set again after its first cycle
+    /// from the measured pace].
     #[arg(long)]
     pub cycles: Option<u32>,
     /// Steps per cycle N_c + N_g [default: 100].
@@ -116,7 +118,8 @@ pub struct StylizeArgs {
     /// with whole-frame losses 0.30 s at 256 px and 1.2 s at 512 px (0.57 and
     /// 2.3 s with --texture-scale 256 kept at any resolution). Without
     /// this or --preset, a CPU run is planned to about 10 min, taking fewer
-    /// cycles unless --cycles is given].
+    /// cycles unless --cycles is given, and after its first cycle takes the
+    /// cycles its measured pace fits, up to --cycles' default].
     #[arg(long)]
     pub resolution: Option<u32>,
     /// One flag per loss weight (`--lambda-gc`, …), from `gast_core::style::terms`.
