@@ -985,26 +985,15 @@ fn a_planned_whole_frame_run_keeps_the_references_style_to_frame_ratio() {
 /// slider moved during a planned run sent the unplanned 30 cycles back.
 #[test]
 fn the_editor_takes_the_planned_settings_when_the_run_starts() {
-    let Some(weights) = shared_file("data/weights/vgg19-conv3.safetensors") else {
-        assert!(!in_ci(), "the shared VGG weights are missing (CI=true, so this is a failure)");
-        eprintln!("SKIPPED the_editor_takes_the_planned_settings_when_the_run_starts: no shared VGG weights");
+    // The plan's part: other values than the editor's.
+    let plan = |config| StyleConfig { resolution: 64, cycles: 1, texture_scale: 32, ..config };
+    let mut editor =
+        StyleConfig { resolution: 96, cycles: 3, steps_per_cycle: 2, texture_scale: 48, ..StyleConfig::default() };
+    editor.weights.tv = 0.5;
+    let Some(mut app) = planned_app("the_editor_takes_the_planned_settings_when_the_run_starts", plan, editor) else {
         return;
     };
-    let vgg = Arc::new(gast_core::vision::Vgg::load(&weights).expect("weights"));
-    let mut app = test_app();
-    // The plan's part: other values than the editor's.
-    app.set_session_starter(cpu_starter(vgg, 4, |config| StyleConfig {
-        resolution: 64,
-        cycles: 1,
-        texture_scale: 32,
-        ..config
-    }));
-    app.config =
-        StyleConfig { resolution: 96, cycles: 3, steps_per_cycle: 2, texture_scale: 48, ..StyleConfig::default() };
-    app.config.weights.tv = 0.5;
-    app.start_run();
-    poll_until(&mut app, 600, "the run", |a| matches!(a.run.status, RunStatus::Finished { .. } | RunStatus::Failed(_)));
-    assert_eq!(app.run.status, RunStatus::Finished { completed: true }, "{:?}", app.errors);
+    run_to_the_end(&mut app);
     let c = &app.config;
     assert_eq!((c.resolution, c.cycles, c.texture_scale), (64, 1, 32), "the plan's settings");
     assert_eq!((c.steps_per_cycle, c.weights.tv), (2, 0.5), "the user's other settings");
@@ -1012,29 +1001,18 @@ fn the_editor_takes_the_planned_settings_when_the_run_starts() {
 
 #[test]
 fn a_planned_run_takes_the_cycles_its_first_cycle_paced() {
-    let Some(weights) = shared_file("data/weights/vgg19-conv3.safetensors") else {
-        assert!(!in_ci(), "the shared VGG weights are missing (CI=true, so this is a failure)");
-        eprintln!("SKIPPED a_planned_run_takes_the_cycles_its_first_cycle_paced: no shared VGG weights");
-        return;
-    };
-    let vgg = Arc::new(gast_core::vision::Vgg::load(&weights).expect("weights"));
-    let mut app = test_app();
     // The plan gave 3 of the 5 cycles asked for, at a model's pace of 100 s
     // a step; the steps here take far less, so all 5 fit the ten minutes.
     // (The re-plan must reach the worker before its third cycle ends: 20
     // steps of margin, about 40 ms each here.)
-    app.set_session_starter(cpu_starter(vgg, 4, |config| StyleConfig {
-        resolution: 64,
-        cycles: 3,
-        texture_scale: 32,
-        ..config
-    }));
-    app.config =
+    let plan = |config| StyleConfig { resolution: 64, cycles: 3, texture_scale: 32, ..config };
+    let editor =
         StyleConfig { resolution: 96, cycles: 5, steps_per_cycle: 10, texture_scale: 48, ..StyleConfig::default() };
-    app.start_run();
+    let Some(mut app) = planned_app("a_planned_run_takes_the_cycles_its_first_cycle_paced", plan, editor) else {
+        return;
+    };
     app.run.planned_step_s = Some(100.0);
-    poll_until(&mut app, 900, "the run", |a| matches!(a.run.status, RunStatus::Finished { .. } | RunStatus::Failed(_)));
-    assert_eq!(app.run.status, RunStatus::Finished { completed: true }, "{:?}", app.errors);
+    run_to_the_end(&mut app);
     assert_eq!(app.config.cycles, 5, "the editor holds the re-planned cycles");
     assert_eq!(app.run.steps.len(), 50, "5 cycles of 10 steps ran");
     assert!(
@@ -1042,4 +1020,27 @@ fn a_planned_run_takes_the_cycles_its_first_cycle_paced() {
         "{:?}",
         app.run.log
     );
+}
+
+/// A test app with `editor` in its editor whose run has started on 4 orbit
+/// views through `plan` (standing in for the CPU plan); `None`, said as
+/// skipped, without the shared VGG weights.
+fn planned_app(test: &str, plan: fn(StyleConfig) -> StyleConfig, editor: StyleConfig) -> Option<StudioApp> {
+    let Some(weights) = shared_file("data/weights/vgg19-conv3.safetensors") else {
+        assert!(!in_ci(), "the shared VGG weights are missing (CI=true, so this is a failure)");
+        eprintln!("SKIPPED {test}: no shared VGG weights");
+        return None;
+    };
+    let vgg = Arc::new(gast_core::vision::Vgg::load(&weights).expect("weights"));
+    let mut app = test_app();
+    app.set_session_starter(cpu_starter(vgg, 4, plan));
+    app.config = editor;
+    app.start_run();
+    Some(app)
+}
+
+/// Polls `app` until its run ends, and checks that it completed.
+fn run_to_the_end(app: &mut StudioApp) {
+    poll_until(app, 900, "the run", |a| matches!(a.run.status, RunStatus::Finished { .. } | RunStatus::Failed(_)));
+    assert_eq!(app.run.status, RunStatus::Finished { completed: true }, "{:?}", app.errors);
 }
