@@ -439,7 +439,7 @@ impl StudioApp {
     /// user has them.
     fn adopt_plan(&mut self) {
         let Some(start) = self.run.start() else { return };
-        if self.adopted.as_ref().is_some_and(|a| std::ptr::eq(a.as_ptr(), Arc::as_ptr(&start))) {
+        if is_start(&self.adopted, &start) {
             return;
         }
         let planned = &start.config;
@@ -458,9 +458,7 @@ impl StudioApp {
     fn replan_after_first_cycle(&mut self) {
         use gast_core::session::plan::{AUTO_RUN_BUDGET_S, replan_cycles};
         let (Some(start), Some(planned_s)) = (self.run.start(), self.run.planned_step_s) else { return };
-        let seen =
-            |w: &Option<std::sync::Weak<_>>| w.as_ref().is_some_and(|a| std::ptr::eq(a.as_ptr(), Arc::as_ptr(&start)));
-        if seen(&self.replanned) || !seen(&self.adopted) || !self.run.is_live() {
+        if is_start(&self.replanned, &start) || !is_start(&self.adopted, &start) || !self.run.is_live() {
             return;
         }
         let Some((steps, seconds)) = self.run.first_cycle() else { return };
@@ -746,6 +744,15 @@ impl StudioApp {
 
 /// How near the before | after line (in points) a drag grabs it.
 const SPLIT_GRAB_PX: f32 = 10.0;
+
+/// Whether `seen` is the run start `start` (a run the editor has already
+/// handled, by [`StudioApp::adopt_plan`] or its re-plan).
+fn is_start(
+    seen: &Option<std::sync::Weak<gast_core::session::RunStart>>,
+    start: &Arc<gast_core::session::RunStart>,
+) -> bool {
+    seen.as_ref().is_some_and(|a| std::ptr::eq(a.as_ptr(), Arc::as_ptr(start)))
+}
 
 #[cfg(test)]
 mod tests;

@@ -94,14 +94,10 @@ pub(crate) fn from_value(path: &Path, value: serde_json::Value) -> Result<Camera
             corrected += 1;
             worst = worst.max(dev);
         }
-        let (w, h) = (f64::from(e.width), f64::from(e.height));
-        let principal = [("cx", e.cx, w), ("cy", e.cy, h)].map(|(name, given, size)| match given {
-            Some(p) if !p.is_finite() => Err(CameraError::format(path, rec(name), "a finite number", p.to_string())),
-            Some(p) => Ok(p as f32),
-            None => Ok((0.5 * size) as f32),
-        });
-        let [cx, cy] = principal;
-        let (cx, cy) = (cx?, cy?);
+        // JSON numbers are finite; one past f32's range is refused by the
+        // loaders' single-precision check.
+        let (w, h) = (e.width as f32, e.height as f32);
+        let (cx, cy) = (e.cx.map_or(0.5 * w, |p| p as f32), e.cy.map_or(0.5 * h, |p| p as f32));
         cameras.push(Camera::from_camera_to_world(
             e.img_name,
             e.width,
