@@ -66,19 +66,20 @@ pub fn recipe_weights(c: &StyleConfig, coverage: Option<f32>) -> Vec<(&'static s
 
 /// The time a step of `c` takes on a 2-core CPU, under the resolution
 /// slider: the plan's model for the run's focus (the running session's
-/// `coverage` settles `auto`; without one it reads as the object) and, on a
-/// whole frame, for a style that follows the frame as a planned run sets it.
-pub fn step_hint(c: &StyleConfig, coverage: Option<f32>) -> String {
-    use gast_core::session::plan::{StepModel, frame_texture_scale, step_time_hint};
+/// `coverage` settles `auto`; without one it reads as the object) with the
+/// style at `c`'s texture scale, `style` (width, height) pixels when one is chosen.
+pub fn step_hint(c: &StyleConfig, coverage: Option<f32>, style: Option<[usize; 2]>) -> String {
+    use gast_core::session::plan::{StepModel, step_time_hint};
     let object = coverage.map_or(c.focus != Focus::Frame, |v| c.focus.is_object(v));
-    let scaled = !object && c.texture_scale == frame_texture_scale(c.resolution, StyleConfig::default().texture_scale);
-    step_time_hint(StepModel::for_run(object, scaled), c.resolution, object)
+    let [width, height] = style.unwrap_or([1, 1]);
+    step_time_hint(StepModel::for_run(object, Some(c.texture_scale)).with_style(width, height), c.resolution)
 }
 
 /// Edits `c` in place; returns true when anything changed. `coverage`: the
 /// running session's mean coverage, which settles `auto` focus and so which
-/// recipe lifts which weight (shown under the slider it lifts).
-pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>) -> bool {
+/// recipe lifts which weight (shown under the slider it lifts); `style`: the
+/// chosen style's size, for the step time under the resolution slider.
+pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>, style: Option<[usize; 2]>) -> bool {
     let mut changed = false;
     ui.label(egui::RichText::new("Loss weights").strong());
     let lifted = recipe_weights(c, coverage);
@@ -175,7 +176,7 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>) ->
     });
     changed |= ui.add(egui::Slider::new(&mut c.texture_scale, 16..=1024).text("style height (px)")).changed();
     changed |= ui.add(egui::Slider::new(&mut c.resolution, 64..=1024).text("working resolution")).changed();
-    ui.weak(step_hint(c, coverage));
+    ui.weak(step_hint(c, coverage, style));
     egui::ComboBox::from_label("focus").selected_text(focus_label(c.focus)).show_ui(ui, |ui| {
         for f in Focus::ALL {
             changed |= ui.selectable_value(&mut c.focus, f, focus_label(f)).changed();

@@ -450,9 +450,10 @@ impl StudioApp {
     }
 
     /// A planned CPU run's cycles rest on one machine's step times
-    /// (`worker::plan_for_cpu`): once its first cycle has ended, the run
-    /// takes the cycles its measured pace fits in the plan's ten minutes, up
-    /// to those the editor asked for, as `gast stylize` does
+    /// (`worker::plan_for_cpu`): at the end of the first cycle with a steady
+    /// pace (every view visited, then revisits), the run takes the cycles
+    /// that pace fits in the plan's ten minutes, up to those the editor
+    /// asked for, as `gast stylize` does
     /// ([`gast_core::session::plan::replan_cycles`]); once per run, and not
     /// when the cycles were moved during the run.
     fn replan_after_first_cycle(&mut self) {
@@ -461,18 +462,24 @@ impl StudioApp {
         if is_start(&self.replanned, &start) || !is_start(&self.adopted, &start) || !self.run.is_live() {
             return;
         }
-        let Some((steps, seconds)) = self.run.first_cycle() else { return };
+        let Some(pace) = self.run.pace_at_cycle_end() else { return };
+        let Some(steady) = pace.steady_s else { return };
         self.replanned = Some(Arc::downgrade(&start));
         if self.config.cycles != start.config.cycles {
             return;
         }
-        let fits = replan_cycles(seconds, steps, steps, AUTO_RUN_BUDGET_S, self.asked_cycles);
+        let per_cycle = start.config.schedule().steps_per_cycle();
+        let fits = replan_cycles(pace, per_cycle, AUTO_RUN_BUDGET_S, self.asked_cycles);
         let Some(cycles) = fits.filter(|&c| c != self.config.cycles) else { return };
         self.config.cycles = cycles;
         self.run.send(Command::SetConfig(Box::new(self.config.clone())));
+        let after = match pace.steps / per_cycle.max(1) {
+            1 => "the first cycle".to_string(),
+            n => format!("{n} cycles"),
+        };
         self.run.log.push(format!(
-            "re-planned after the first cycle: {cycles} cycles (its steps took {:.2} s, the plan's model {planned_s:.2} s)",
-            seconds / f64::from(steps.max(1))
+            "re-planned after {after}: {cycles} cycles (its steps took {steady:.2} s after each view's first visit, \
+             the plan's model {planned_s:.2} s)"
         ));
     }
 

@@ -227,7 +227,8 @@ impl StudioApp {
         ui.separator();
         ui.heading("Parameters");
         let coverage = self.run.start().map(|s| s.coverage);
-        if controls::config_editor(ui, &mut self.config, coverage) && self.run.is_live() {
+        let style = self.style.and_then(|k| self.styles.get(k)).map(|s| s.size);
+        if controls::config_editor(ui, &mut self.config, coverage, style) && self.run.is_live() {
             self.run.send(Command::SetConfig(Box::new(self.config.clone())));
         }
         ui.horizontal(|ui| {

@@ -174,12 +174,12 @@ impl RunMonitor {
         self.steps.last().map_or(0.0, |s| s.elapsed_s)
     }
 
-    /// The first cycle's steps and their seconds, once a later cycle's step
-    /// has been reported.
-    pub fn first_cycle(&self) -> Option<(u32, f64)> {
-        self.steps.last().filter(|r| r.cycle > 0)?;
-        let end = self.steps.iter().rposition(|r| r.cycle == 0)?;
-        Some((self.steps[end].iter + 1, self.steps[end].elapsed_s))
+    /// The pace of the steps up to the end of the last cycle that has ended
+    /// (a later cycle's step reported), as a re-plan reads it.
+    pub fn pace_at_cycle_end(&self) -> Option<gast_core::session::plan::Pace> {
+        let ended = self.steps.last()?.cycle.checked_sub(1)?;
+        let end = self.steps.iter().rposition(|r| r.cycle == ended)?;
+        gast_core::session::plan::Pace::read(self.steps[..=end].iter().map(|r| (r.view, r.elapsed_s)))
     }
 
     /// Sends a command; false when no run is connected.

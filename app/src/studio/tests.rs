@@ -924,11 +924,11 @@ fn a_cpu_run_is_planned_to_about_ten_minutes() {
     let cameras = framed_orbit(&scene, &OrbitOptions { count: 12, width: 256, height: 256, ..OrbitOptions::default() });
     let mut config = StyleConfig::default();
     let asked = config.schedule().total_steps();
-    let (said, step_s) = super::worker::plan_for_cpu(&scene, &cameras, &mut config);
+    let (said, step_s) = super::worker::plan_for_cpu(&scene, &cameras, [256, 256], &mut config);
     assert!(said.starts_with("planned for about") && said.contains(&format!("{} px", config.resolution)), "{said}");
     // A small preset stays as small as it was.
     let mut small = StyleConfig { resolution: 64, cycles: 2, ..StyleConfig::default() };
-    let (said_small, _) = super::worker::plan_for_cpu(&scene, &cameras, &mut small);
+    let (said_small, _) = super::worker::plan_for_cpu(&scene, &cameras, [256, 256], &mut small);
     assert_eq!((small.resolution, small.cycles), (64, 2), "{said_small}");
     assert!(said_small.contains("as set"), "{said_small}");
     let model = StepModel::for_focus(config.focus.is_object(0.2));
@@ -949,14 +949,21 @@ fn the_step_hint_follows_the_runs_focus_and_texture() {
     use gast_core::style::Focus;
     let fern = StyleConfig { focus: Focus::Frame, resolution: 256, texture_scale: 64, ..StyleConfig::default() };
     assert!(
-        step_hint(&fern, None).contains("0.30 s per step at 256 px") && step_hint(&fern, None).contains("whole-frame")
+        step_hint(&fern, None, None).contains("0.30 s per step at 256 px")
+            && step_hint(&fern, None, None).contains("whole-frame")
     );
     let auto = StyleConfig { focus: Focus::Auto, ..fern.clone() };
-    assert_eq!(step_hint(&auto, Some(0.95)), step_hint(&fern, None));
-    assert!(step_hint(&auto, Some(0.2)).contains("the object focus"), "{}", step_hint(&auto, Some(0.2)));
+    assert_eq!(step_hint(&auto, Some(0.95), None), step_hint(&fern, None, None));
+    assert!(step_hint(&auto, Some(0.2), None).contains("the object focus"), "{}", step_hint(&auto, Some(0.2), None));
     // The style at its full 256 px on a whole frame takes the unscaled model.
     let unscaled = StyleConfig { texture_scale: 256, ..fern };
-    assert_ne!(step_hint(&unscaled, None), step_hint(&auto, Some(0.95)));
+    assert_ne!(step_hint(&unscaled, None, None), step_hint(&auto, Some(0.95), None));
+    // The style's size counts: guitar × wave (4,200 × 2,000) at texture
+    // scale 1,024 took 1.45 s a step where 256 took 0.18 (2026-12-01).
+    let big = StyleConfig { focus: Focus::Object, resolution: 256, texture_scale: 1024, ..StyleConfig::default() };
+    let hint = step_hint(&big, None, Some([4200, 2000]));
+    assert!(hint.contains("1.18 s per step at 256 px (the style at 1024 px)"), "{hint}");
+    assert!(step_hint(&big, None, None).contains("0.71 s"), "{}", step_hint(&big, None, None));
 }
 
 /// A whole frame planned at the default texture scale takes the reference's
@@ -968,15 +975,15 @@ fn a_planned_whole_frame_run_keeps_the_references_style_to_frame_ratio() {
     let scene = assets::demo_scene();
     let cameras = framed_orbit(&scene, &OrbitOptions { count: 12, width: 256, height: 256, ..OrbitOptions::default() });
     let mut frame = StyleConfig { focus: Focus::Frame, ..StyleConfig::default() };
-    let (said, _) = super::worker::plan_for_cpu(&scene, &cameras, &mut frame);
+    let (said, _) = super::worker::plan_for_cpu(&scene, &cameras, [256, 256], &mut frame);
     let expected = gast_core::session::plan::frame_texture_scale(frame.resolution, 256);
     assert!(expected < 256 && frame.texture_scale == expected, "{said}");
     assert!(said.contains(&format!("texture scale {expected} px")), "{said}");
     let mut moved = StyleConfig { focus: Focus::Frame, texture_scale: 384, ..StyleConfig::default() };
-    super::worker::plan_for_cpu(&scene, &cameras, &mut moved);
+    super::worker::plan_for_cpu(&scene, &cameras, [256, 256], &mut moved);
     assert_eq!(moved.texture_scale, 384);
     let mut object = StyleConfig { focus: Focus::Object, ..StyleConfig::default() };
-    super::worker::plan_for_cpu(&scene, &cameras, &mut object);
+    super::worker::plan_for_cpu(&scene, &cameras, [256, 256], &mut object);
     assert_eq!(object.texture_scale, 256, "an object keeps the style at 256");
 }
 

@@ -14,11 +14,21 @@ pub const PIXELS_PER_FEATURE: f32 = 8.0;
 /// relu3 positions the object should span across its longer side.
 pub const OBJECT_FEATURES: f32 = 64.0;
 /// How long one CPU optimisation step takes on a 2-core machine: `at_256`
-/// seconds at 256 px, growing as the resolution to the power `exponent`.
+/// seconds at 256 px with the style at its reference texture scale, growing
+/// as the resolution to the power `exponent`, plus the nearest-neighbour
+/// matching's share for a style at another texture scale
+/// ([`MATCHING_S_PER_STYLE_PIXEL`]).
 #[derive(Clone, Copy, Debug)]
 pub struct StepModel {
     at_256: f64,
     exponent: f64,
+    /// Losses on the object (the reference texture scale 256) or on the
+    /// whole frame (the reference's ratio, [`frame_texture_scale`]).
+    object: bool,
+    /// The run's texture scale; `None`: the reference's.
+    texture_scale: Option<u32>,
+    /// The style image's width over its height ([`Self::with_style`]; 1 until given).
+    style_aspect: f64,
 }
 
 /// Object focus, views fitted to the object, the assignment terms on
@@ -30,58 +40,93 @@ pub struct StepModel {
 /// terms were on (181 and 576 ms: VGG runs on the object's cone and the
 /// search on its positions, so the time grows more slowly than the pixel
 /// count).
-const STEP_OBJECT: StepModel = StepModel { at_256: 0.29, exponent: 1.7 };
-/// Whole-frame losses (the paper's): every position is searched, 566 ms at
-/// 256 px (`gast bench step --device cpu --focus frame`), growing with the
-/// pixel count.
-const STEP_FRAME: StepModel = StepModel { at_256: 0.57, exponent: 2.0 };
-/// Whole-frame losses with the style in the reference's ratio to the frame
-/// ([`frame_texture_scale`]: 64 px at 256), a whole frame's default since
-/// 2026-12-01: fern × block2 on its 20 LLFF cameras (the frame recipe on),
-/// 1,000 steps at 256 px in 287 s alone on the 2-core CPU (0.287 s a step);
-/// 80 steps at 256, 384 and 512 px (texture scale 64, 96, 128) took 0.32,
-/// 0.77 and 1.33 s a step with the first visits, an exponent of 2.05.
-const STEP_FRAME_SCALED: StepModel = StepModel { at_256: 0.30, exponent: 2.0 };
+const STEP_OBJECT: (f64, f64) = (0.29, 1.7);
+/// Whole-frame losses (the paper's) with the style in the reference's ratio
+/// to the frame ([`frame_texture_scale`]: 64 px at 256), a whole frame's
+/// default since 2026-12-01: fern × block2 on its 20 LLFF cameras (the frame
+/// recipe on), 1,000 steps at 256 px in 287 s alone on the 2-core CPU (0.287
+/// s a step); 80 steps at 256, 384 and 512 px (texture scale 64, 96, 128)
+/// took 0.32, 0.77 and 1.33 s a step with the first visits, an exponent of
+/// 2.05.
+const STEP_FRAME: (f64, f64) = (0.30, 2.0);
+/// Seconds a step the nearest-neighbour matching adds at 256 px for each
+/// pixel of style (its texture scale squared times its width over its
+/// height) above the model's reference scale: the search runs over every
+/// style position for each rendered one, so it grows as the style's pixels
+/// and as the rendered positions (as the model's step grows with the
+/// resolution: guitar's fitted views at 512 px, the style at 256 and 512,
+/// 512 and 929 ms, where the model adds 0.58 s). Fitted to `gast
+/// bench step --device cpu --resolution 256 --no-parts` on the 2-core CPU,
+/// 2026-12-01, as (whole frame, object): fern × block2 (0.57 wide for 1
+/// high) on its cameras at texture scale 64, 128, 256, 512: steps of 266,
+/// 260, 296, 448 ms; guitar × wave (2.1 wide) on 12 orbit views, whole
+/// frame, at 64 and 256: 265 and 482 ms; on 12 fitted views, the object's
+/// pixels, at 128, 256, 512, 1,024: 141, 178, 317, 1,452 ms (the style's
+/// features past the caches at 1,024, where the model adds 0.89 s to the
+/// measured 1.27).
+pub const MATCHING_S_PER_STYLE_PIXEL: (f64, f64) = (1.6e-6, 0.43e-6);
 /// The longest step the automatic working resolution accepts, seconds.
 pub const AUTO_STEP_BUDGET_S: f64 = 1.0;
 
 impl StepModel {
     /// The model for losses focused on the object (`true`) or on the whole
-    /// frame, the style at a fixed texture scale.
+    /// frame, the style at texture scale 256 (the default).
     pub fn for_focus(object: bool) -> Self {
-        Self::for_run(object, false)
+        Self::for_run(object, Some(256))
     }
 
-    /// [`Self::for_focus`], where `scaled_texture` says that on a whole frame
-    /// the texture scale follows the working resolution ([`frame_texture_scale`]):
-    /// the style then has a sixteenth of the positions to search at 256 px.
-    pub fn for_run(object: bool, scaled_texture: bool) -> Self {
-        match (object, scaled_texture) {
-            (true, _) => STEP_OBJECT,
-            (false, true) => STEP_FRAME_SCALED,
-            (false, false) => STEP_FRAME,
-        }
+    /// The model for losses on the object or the whole frame with the style
+    /// at `texture_scale`; `None` on a whole frame: the texture scale
+    /// follows the working resolution ([`frame_texture_scale`], as a planned
+    /// run sets it), on an object: 256.
+    pub fn for_run(object: bool, texture_scale: Option<u32>) -> Self {
+        let (at_256, exponent) = if object { STEP_OBJECT } else { STEP_FRAME };
+        Self { at_256, exponent, object, texture_scale, style_aspect: 1.0 }
+    }
+
+    /// The model for a style image of `width` × `height` pixels (a wide
+    /// style has more positions to search at the same texture scale).
+    pub fn with_style(self, width: usize, height: usize) -> Self {
+        let aspect = width as f64 / height.max(1) as f64;
+        Self { style_aspect: if aspect.is_finite() && aspect > 0.0 { aspect } else { 1.0 }, ..self }
+    }
+
+    /// The texture scale the model's steps were timed at, at `resolution`.
+    fn reference_texture(self, resolution: u32) -> u32 {
+        if self.object { 256 } else { frame_texture_scale(resolution, 256) }
     }
 
     /// Seconds of one step at `resolution` (longer side, px).
     pub fn seconds(self, resolution: u32) -> f64 {
-        self.at_256 * (f64::from(resolution) / 256.0).powf(self.exponent)
+        let side = f64::from(resolution) / 256.0;
+        let base = self.at_256 * side.powf(self.exponent);
+        let reference = f64::from(self.reference_texture(resolution));
+        let texture = self.texture_scale.map_or(reference, f64::from);
+        let per_pixel = if self.object { MATCHING_S_PER_STYLE_PIXEL.1 } else { MATCHING_S_PER_STYLE_PIXEL.0 };
+        let positions = side.powf(self.exponent);
+        let matching = per_pixel * positions * self.style_aspect * (texture * texture - reference * reference);
+        // A smaller style saves at most the matching's share of the step.
+        (base + matching).max(0.8 * base)
     }
 
-    /// The largest multiple of 32 whose step fits in `budget` seconds.
+    /// The largest multiple of 32 whose step fits in `budget` seconds (32
+    /// where none does).
     pub fn largest_within(self, budget: f64) -> u32 {
-        let side = 256.0 * (budget / self.at_256).powf(1.0 / self.exponent);
-        (side / 32.0).floor() as u32 * 32
+        (1..=4096 / 32).map(|k| k * 32).take_while(|&r| self.seconds(r) <= budget).last().unwrap_or(32)
     }
 }
 
-/// The estimated time of one CPU step at `resolution` with losses focused on
-/// the object or on the whole frame (views fitted to an elongated object
-/// have fewer pixels and are faster).
-pub fn step_time_hint(model: StepModel, resolution: u32, object: bool) -> String {
+/// The estimated time of one CPU step at `resolution` by `model` (views
+/// fitted to an elongated object have fewer pixels and are faster), naming
+/// the texture scale where the run's differs from the model's reference.
+pub fn step_time_hint(model: StepModel, resolution: u32) -> String {
     let s = model.seconds(resolution);
-    let focus = if object { "the object focus" } else { "whole-frame losses" };
-    format!("about {s:.2} s per step at {resolution} px on a 2-core CPU with {focus}")
+    let focus = if model.object { "the object focus" } else { "whole-frame losses" };
+    let style = match model.texture_scale {
+        Some(t) if t != model.reference_texture(resolution) => format!(" (the style at {t} px)"),
+        _ => String::new(),
+    };
+    format!("about {s:.2} s per step at {resolution} px{style} on a 2-core CPU with {focus}")
 }
 
 /// The working resolution for an object that spans `span` of the longer
@@ -137,7 +182,8 @@ pub struct AutoPlan {
 pub fn auto_plan(span: f32, model: StepModel, cycles: u32, steps_per_cycle: u32, budget_s: f64) -> AutoPlan {
     let steps = f64::from(cycles.max(1) * steps_per_cycle.max(1));
     let fits = model.largest_within(budget_s / steps).max(AUTO_MIN_RESOLUTION);
-    let (resolution, wanted) = resolution_for(span, fits.min(model.largest_within(AUTO_STEP_BUDGET_S)));
+    let cap = fits.min(model.largest_within(AUTO_STEP_BUDGET_S)).max(AUTO_MIN_RESOLUTION);
+    let (resolution, wanted) = resolution_for(span, cap);
     let (cycles, seconds) = fit_cycles(model, resolution, cycles, steps_per_cycle, budget_s);
     AutoPlan { resolution, wanted, cycles, seconds }
 }
@@ -150,20 +196,63 @@ pub fn fit_cycles(model: StepModel, resolution: u32, cycles: u32, steps_per_cycl
     (cycles, per_cycle * f64::from(cycles))
 }
 
+/// Revisits a steady pace needs before a re-plan reads it ([`Pace::read`]).
+pub const STEADY_STEPS: u32 = 5;
+
+/// The pace of a run's first steps, as a re-plan reads it: every view's
+/// first visit also makes its targets (the render of `G^c` and its
+/// features) and is slower than the steps after it, which are the rest of
+/// the run (fern × block2 at 256 px on a 2-core machine: 0.225 s a step
+/// over the first hundred, 0.184 s over the run).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pace {
+    /// Steps done.
+    pub steps: u32,
+    /// Their seconds.
+    pub elapsed_s: f64,
+    /// Seconds a step since the last view's first visit, once at least
+    /// [`STEADY_STEPS`] steps have revisited a view.
+    pub steady_s: Option<f64>,
+}
+
+impl Pace {
+    /// The pace of steps given in order as (view, seconds since the run
+    /// started at the step's end); `None` before a step. A session visits
+    /// every view once before it visits any twice.
+    pub fn read(steps: impl IntoIterator<Item = (u32, f64)>) -> Option<Self> {
+        let mut seen = std::collections::HashSet::new();
+        let (mut count, mut elapsed_s, mut last_first) = (0u32, 0.0, None);
+        for (view, elapsed) in steps {
+            if last_first.is_none() && !seen.insert(view) {
+                last_first = Some((count, elapsed_s));
+            }
+            count += 1;
+            elapsed_s = elapsed;
+        }
+        let steady_s = last_first
+            .filter(|&(k, _)| count - k >= STEADY_STEPS)
+            .map(|(k, at)| (elapsed_s - at) / f64::from(count - k));
+        (count > 0).then_some(Self { steps: count, elapsed_s, steady_s })
+    }
+}
+
 /// The cycles of a planned CPU run once its first steps are timed: the
 /// model's seconds a step come from one 2-core machine, and another runs the
 /// same step faster or slower (fern × block2 at 256 px: 0.29 s a step there,
 /// 0.19 s on a 2-core machine whose GEMM ran 188 GFLOP/s against 124). After
-/// `done_steps` steps in `elapsed_s`, the cycles whose steps fit `budget_s`
-/// at that pace: at least the cycles begun, at most `most` (what the run
-/// asked for before the plan). `None` before a step is timed.
-pub fn replan_cycles(elapsed_s: f64, done_steps: u32, steps_per_cycle: u32, budget_s: f64, most: u32) -> Option<u32> {
-    if done_steps == 0 || elapsed_s.is_nan() || elapsed_s <= 0.0 {
+/// the steps of `pace`, the cycles whose steps fit `budget_s`, the steps
+/// left at the steady pace (the first steps' own where none is read yet):
+/// at least the cycles begun, at most `most` (what the run asked for before
+/// the plan). `None` before a step is timed.
+pub fn replan_cycles(pace: Pace, steps_per_cycle: u32, budget_s: f64, most: u32) -> Option<u32> {
+    let Pace { steps, elapsed_s, steady_s } = pace;
+    if steps == 0 || elapsed_s.is_nan() || elapsed_s <= 0.0 {
         return None;
     }
-    let per_cycle = elapsed_s / f64::from(done_steps) * f64::from(steps_per_cycle.max(1));
-    let begun = done_steps.div_ceil(steps_per_cycle.max(1));
-    let fits = (budget_s / per_cycle).floor().min(f64::from(u32::MAX)) as u32;
+    let per_step = steady_s.filter(|s| *s > 0.0).unwrap_or(elapsed_s / f64::from(steps));
+    let fit_steps = f64::from(steps) + (budget_s - elapsed_s).max(0.0) / per_step;
+    let begun = steps.div_ceil(steps_per_cycle.max(1));
+    let fits = (fit_steps / f64::from(steps_per_cycle.max(1))).floor().min(f64::from(u32::MAX)) as u32;
     Some(fits.min(most).max(begun).max(1))
 }
 
@@ -238,28 +327,49 @@ mod tests {
         assert_eq!(frame_texture_scale(256, 512), 128);
         assert_eq!(frame_texture_scale(256, 16), 16);
         // The default run on fern (the scene spans the frame): at 256 px the
-        // scaled style halves the step, so the ten minutes hold 20 cycles, not 10.
-        let scaled = auto_plan(1.0, StepModel::for_run(false, true), 30, 100, AUTO_RUN_BUDGET_S);
+        // scaled style shortens the step, so the ten minutes hold 20 cycles, not 15.
+        let scaled = auto_plan(1.0, StepModel::for_run(false, None), 30, 100, AUTO_RUN_BUDGET_S);
         let fixed = auto_plan(1.0, StepModel::for_focus(false), 30, 100, AUTO_RUN_BUDGET_S);
-        assert_eq!((scaled.resolution, scaled.cycles, fixed.resolution, fixed.cycles), (256, 20, 256, 10));
+        assert_eq!((scaled.resolution, scaled.cycles, fixed.resolution, fixed.cycles), (256, 20, 256, 15));
         assert!(scaled.seconds <= AUTO_RUN_BUDGET_S, "{scaled:?}");
     }
 
     #[test]
     fn a_planned_run_takes_the_cycles_its_measured_pace_fits() {
+        let pace = |elapsed_s, steps| Pace { steps, elapsed_s, steady_s: None };
         // fern's first cycle of 100 steps took 22 s on a 2-core machine on
         // 2026-12-01, where the model says 0.30 s a step: 27 cycles fit ten
         // minutes, of the 30 the run asked for.
-        assert_eq!(replan_cycles(22.0, 100, 100, AUTO_RUN_BUDGET_S, 30), Some(27));
+        assert_eq!(replan_cycles(pace(22.0, 100), 100, AUTO_RUN_BUDGET_S, 30), Some(27));
         // A faster machine is held to what the run asked for.
-        assert_eq!(replan_cycles(10.0, 100, 100, AUTO_RUN_BUDGET_S, 30), Some(30));
+        assert_eq!(replan_cycles(pace(10.0, 100), 100, AUTO_RUN_BUDGET_S, 30), Some(30));
         // A slower one gets fewer, never fewer than the cycles begun.
-        assert_eq!(replan_cycles(60.0, 100, 100, AUTO_RUN_BUDGET_S, 30), Some(10));
-        assert_eq!(replan_cycles(700.0, 100, 100, AUTO_RUN_BUDGET_S, 30), Some(1));
-        assert_eq!(replan_cycles(700.0, 150, 100, AUTO_RUN_BUDGET_S, 30), Some(2));
+        assert_eq!(replan_cycles(pace(60.0, 100), 100, AUTO_RUN_BUDGET_S, 30), Some(10));
+        assert_eq!(replan_cycles(pace(700.0, 100), 100, AUTO_RUN_BUDGET_S, 30), Some(1));
+        assert_eq!(replan_cycles(pace(700.0, 150), 100, AUTO_RUN_BUDGET_S, 30), Some(2));
         // Nothing timed yet.
-        assert_eq!(replan_cycles(0.0, 0, 100, AUTO_RUN_BUDGET_S, 30), None);
-        assert_eq!(replan_cycles(f64::NAN, 10, 100, AUTO_RUN_BUDGET_S, 30), None);
+        assert_eq!(replan_cycles(pace(0.0, 0), 100, AUTO_RUN_BUDGET_S, 30), None);
+        assert_eq!(replan_cycles(pace(f64::NAN, 10), 100, AUTO_RUN_BUDGET_S, 30), None);
+        // The steps after the first visits are the rest of the run: a first
+        // cycle of 30 s whose revisits took 0.2 s a step leaves 570 s for
+        // 2,850 more steps, 29 cycles, where its mean pace (0.3 s) gave 20.
+        let steady = Pace { steps: 100, elapsed_s: 30.0, steady_s: Some(0.2) };
+        assert_eq!(replan_cycles(steady, 100, AUTO_RUN_BUDGET_S, 30), Some(29));
+    }
+
+    #[test]
+    fn the_pace_leaves_out_each_views_first_visit() {
+        // Four views, each first visit 1 s, then steps of 0.25 s.
+        let steps =
+            |n: u32| (0..n).map(|i| (i % 4, if i < 4 { f64::from(i + 1) } else { 4.0 + 0.25 * f64::from(i - 3) }));
+        let steady = |n| Pace::read(steps(n)).expect("steps").steady_s;
+        let read = Pace::read(steps(20)).expect("steps");
+        assert_eq!((read.steps, read.elapsed_s), (20, 8.0));
+        assert!(steady(20).is_some_and(|s| (s - 0.25).abs() < 1e-12), "{read:?}");
+        // Fewer than STEADY_STEPS revisits: no steady pace yet.
+        assert_eq!(steady(4 + STEADY_STEPS - 1), None);
+        assert!(steady(4 + STEADY_STEPS).is_some());
+        assert_eq!(Pace::read(std::iter::empty()), None);
     }
 
     #[test]
@@ -267,9 +377,9 @@ mod tests {
         let (object, frame) = (StepModel::for_focus(true), StepModel::for_focus(false));
         // A fitted view (the object spans 90 %) wants 576 px for 64 relu3
         // positions; with the object focus a 1 s step allows 512 px (0.29 s
-        // per 256 px step), with whole-frame losses only 320 px.
+        // per 256 px step), with whole-frame losses (a square style at 256) 384 px.
         assert_eq!(auto_resolution(0.9, object), (512, 576));
-        assert_eq!(auto_resolution(0.9, frame), (320, 576));
+        assert_eq!(auto_resolution(0.9, frame), (384, 576));
         assert!(object.seconds(512) <= 1.0 && object.seconds(544) > 1.0);
         // A small object wants more, gets the cap; nothing goes below 128 px.
         assert_eq!(auto_resolution(0.3, object).0, 512);
@@ -277,11 +387,40 @@ mod tests {
         assert_eq!(auto_resolution(0.0, frame).1, 4096);
         // The measured steps the models rest on.
         assert!((object.seconds(512) - 0.94).abs() < 0.02, "{}", object.seconds(512));
-        let (frame, scaled) = (StepModel::for_focus(false), StepModel::for_run(false, true));
-        assert!(step_time_hint(frame, 512, false).contains("2.28 s"), "{}", step_time_hint(frame, 512, false));
-        assert!(step_time_hint(scaled, 512, false).contains("1.20 s"), "{}", step_time_hint(scaled, 512, false));
-        let hint = step_time_hint(object, 256, true);
-        assert!(hint.contains("0.29 s") && hint.contains("object focus"), "{hint}");
+        let (frame, scaled) = (StepModel::for_focus(false), StepModel::for_run(false, None));
+        let hint = step_time_hint(frame, 512);
+        assert!(hint.contains("1.51 s") && hint.contains("the style at 256 px"), "{hint}");
+        assert_eq!(
+            step_time_hint(scaled, 512),
+            "about 1.20 s per step at 512 px on a 2-core CPU with whole-frame losses"
+        );
+        let hint = step_time_hint(object, 256);
+        assert!(hint.contains("0.29 s") && hint.contains("object focus") && !hint.contains("style at"), "{hint}");
+    }
+
+    #[test]
+    fn the_step_time_counts_the_styles_texture_scale() {
+        // guitar × wave (4,200 × 2,000) on 12 fitted views at 256 px,
+        // 2026-12-01: 178 ms a step with the style at 256, 317 at 512, 1,452
+        // at 1,024; the model (0.29 s at 256) adds the matching's growth.
+        let wave = |t| StepModel::for_run(true, Some(t)).with_style(4200, 2000);
+        let at = |t| wave(t).seconds(256);
+        assert!((at(256) - 0.29).abs() < 1e-9);
+        assert!((at(512) - 0.468).abs() < 0.005 && (at(1024) - 1.178).abs() < 0.005, "{} {}", at(512), at(1024));
+        let hint = step_time_hint(wave(1024), 256);
+        assert!(hint.contains("1.18 s per step at 256 px (the style at 1024 px)"), "{hint}");
+        // A smaller style saves at most a fifth.
+        assert!((at(16) - 0.8 * 0.29).abs() < 1e-9, "{}", at(16));
+        // fern at 256 px: block2 (1,000 × 1,765) at 512 where a planned run takes 64.
+        let fern = StepModel::for_run(false, Some(512)).with_style(1000, 1765).seconds(256);
+        assert!((fern - 0.534).abs() < 0.005, "{fern}");
+        // A run that plans a bigger style gets fewer cycles: guitar with
+        // wave at 1,024 fits 5 cycles in ten minutes, not 20, at 256 px still.
+        let big = auto_plan(0.9, wave(1024), 30, 100, AUTO_RUN_BUDGET_S);
+        assert_eq!((big.resolution, big.cycles), (256, 5));
+        // A degenerate size reads as square.
+        let square = StepModel::for_run(true, Some(512));
+        assert_eq!(square.with_style(0, 10).seconds(256), square.seconds(256));
     }
 
     #[test]
@@ -292,9 +431,9 @@ mod tests {
         let g = auto_plan(0.9, object, 30, 100, AUTO_RUN_BUDGET_S);
         assert_eq!((g.resolution, g.wanted, g.cycles), (256, 576, 20));
         assert!(g.seconds <= AUTO_RUN_BUDGET_S && g.seconds > 550.0, "{}", g.seconds);
-        // A full frame (fern): 256 px, and 10 cycles fit.
+        // A full frame with a square style at 256: 256 px, and 15 cycles fit.
         let f = auto_plan(1.0, frame, 30, 100, AUTO_RUN_BUDGET_S);
-        assert_eq!((f.resolution, f.cycles), (256, 10));
+        assert_eq!((f.resolution, f.cycles), (256, 15));
         assert!(f.seconds <= AUTO_RUN_BUDGET_S);
         // A longer budget raises the resolution toward the wanted 576 px, up to the 1 s step cap.
         let long = auto_plan(0.9, object, 30, 100, 36_000.0);

@@ -17,7 +17,7 @@ use gast_core::io::{
 };
 use gast_core::raster::{self, RenderOptions};
 use gast_core::session::plan::{
-    AUTO_RUN_BUDGET_S, PIXELS_PER_FEATURE, REFERENCE_FRAME_RESOLUTION, StepModel, ViewsSurvey, auto_plan,
+    AUTO_RUN_BUDGET_S, PIXELS_PER_FEATURE, Pace, REFERENCE_FRAME_RESOLUTION, StepModel, ViewsSurvey, auto_plan,
     auto_resolution_gpu, frame_texture_scale, replan_cycles, step_time_hint, survey,
 };
 use gast_core::session::{Event, Session, SessionInputs, Stage1Cache, StepReport, StyleDepthSource, StyleImage};
@@ -381,8 +381,9 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let auto_texture = args.texture_scale.is_none() && args.preset.is_none();
     let surveyed = (auto_resolution || auto_texture).then(|| survey(&scene, &cameras, config.focus, config.background));
     // A CPU plan's cycles rest on one machine's step times: after the first
-    // cycle the run takes the cycles its own pace fits, up to those asked
-    // for (`replan_cycles`), unless --cycles is given. The model's seconds a step.
+    // cycle with a steady pace (`Pace`) the run takes the cycles that pace
+    // fits, up to those asked for (`replan_cycles`), unless --cycles is
+    // given. The model's seconds a step.
     let mut replan = None;
     if let Some(ViewsSurvey { span, object }) = surveyed.filter(|_| auto_resolution) {
         let (chosen, wanted, hint) = match &gpu {
@@ -392,7 +393,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             }
             None => {
                 // On a whole frame the texture scale follows (below) unless it is given.
-                let model = StepModel::for_run(object, auto_texture);
+                let texture = (object || !auto_texture).then_some(config.texture_scale);
+                let model = StepModel::for_run(object, texture).with_style(style.width, style.height);
                 let plan = auto_plan(span, model, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
                 if args.cycles.is_none() {
                     replan = Some((config.cycles, model.seconds(plan.resolution)));
@@ -406,7 +408,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
                 let total = model.seconds(plan.resolution) * f64::from(config.schedule().total_steps());
                 let hint = format!(
                     "{}{fewer}: about {:.0} min on this CPU (--resolution and --cycles override)",
-                    step_time_hint(model, plan.resolution, object),
+                    step_time_hint(model, plan.resolution),
                     total / 60.0
                 );
                 (plan.resolution, plan.wanted, hint)
@@ -524,21 +526,28 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         }
         steps.push(r);
         let per_cycle = config.schedule().steps_per_cycle();
-        if let Some((most, model_s)) = replan.filter(|_| session.steps_done() == per_cycle) {
+        // At the end of the first cycle that has a steady pace (every view visited, then revisits).
+        let at_cycle_end = session.steps_done() % per_cycle.max(1) == 0;
+        let pace =
+            replan.filter(|_| at_cycle_end).and_then(|_| Pace::read(steps.iter().map(|r| (r.view, r.elapsed_s))));
+        if let (Some((most, model_s)), Some(pace @ Pace { steady_s: Some(steady), .. })) = (replan, pace) {
             replan = None;
-            let (elapsed, done) = (session.elapsed_s(), session.steps_done());
-            let fits = replan_cycles(elapsed, done, per_cycle, AUTO_RUN_BUDGET_S, most);
+            let fits = replan_cycles(pace, per_cycle, AUTO_RUN_BUDGET_S, most);
             if let Some(cycles) = fits.filter(|&c| c != config.cycles) {
                 session.set_config(StyleConfig { cycles, ..config.clone() })?;
                 config = session.config().clone();
                 total = session.total_steps();
                 pb.set_length(u64::from(total));
-                let pace = elapsed / f64::from(done);
-                let minutes = pace * f64::from(total) / 60.0;
+                let minutes = (pace.elapsed_s + steady * f64::from(total - pace.steps)) / 60.0;
+                let after = match pace.steps / per_cycle.max(1) {
+                    1 => "the first cycle".to_string(),
+                    n => format!("{n} cycles"),
+                };
                 pb.suspend(|| {
                     eprintln!(
-                        "  re-planned after the first cycle: {cycles} cycles, about {minutes:.0} min of steps (its \
-                         steps took {pace:.2} s, the plan's model {model_s:.2} s; --cycles keeps a number)"
+                        "  re-planned after {after}: {cycles} cycles, about {minutes:.0} min of steps (its steps \
+                         took {steady:.2} s after each view's first visit, the plan's model {model_s:.2} s; --cycles \
+                         keeps a number)"
                     )
                 });
             }
