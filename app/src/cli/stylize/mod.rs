@@ -214,6 +214,25 @@ struct Measures {
     /// Mean colour of the covered pixels (alpha ≥ 0.5) of the colour-matched and after renders.
     colour_matched: CoveredColour,
     colour_after: CoveredColour,
+    /// The RGB style distances on the object, for a run whose losses are on
+    /// the object (absent otherwise).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    on_object: Option<ObjectDistances>,
+}
+
+/// The RGB style distances over the feature positions the colour-matched
+/// render covers (`gast_core::style::focus::{coverage_mask, feature_mask}`,
+/// the positions an object run's losses read, and `gast bench quality`'s
+/// `_object` measures): an object run leaves the background, the same in
+/// every render, which the whole-view distances average in.
+#[derive(Serialize, Clone, Copy, Default)]
+struct ObjectDistances {
+    mean_std_before: f32,
+    mean_std_matched: f32,
+    mean_std_after: f32,
+    nn_distance_before: f32,
+    nn_distance_matched: f32,
+    nn_distance_after: f32,
 }
 
 impl Measures {
@@ -221,7 +240,9 @@ impl Measures {
     fn mean<'a>(all: impl ExactSizeIterator<Item = &'a Measures>) -> Self {
         let n = all.len().max(1) as f32;
         let mut m = Self::default();
+        let mut all_object = Vec::new();
         for p in all {
+            all_object.push(p.on_object);
             m.mean_std_before += p.mean_std_before / n;
             m.mean_std_matched += p.mean_std_matched / n;
             m.mean_std_after += p.mean_std_after / n;
@@ -238,6 +259,21 @@ impl Measures {
             m.colour_matched.chroma += p.colour_matched.chroma / n;
             m.colour_after.luminance += p.colour_after.luminance / n;
             m.colour_after.chroma += p.colour_after.chroma / n;
+        }
+        // On the object: the mean over the views that show it.
+        let seen: Vec<ObjectDistances> = all_object.into_iter().flatten().collect();
+        if !seen.is_empty() {
+            let k = seen.len() as f32;
+            let mut o = ObjectDistances::default();
+            for p in &seen {
+                o.mean_std_before += p.mean_std_before / k;
+                o.mean_std_matched += p.mean_std_matched / k;
+                o.mean_std_after += p.mean_std_after / k;
+                o.nn_distance_before += p.nn_distance_before / k;
+                o.nn_distance_matched += p.nn_distance_matched / k;
+                o.nn_distance_after += p.nn_distance_after / k;
+            }
+            m.on_object = Some(o);
         }
         m
     }
@@ -618,13 +654,19 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let (background, focus_on_object, coverage) = (config.background, session.focus_on_object(), session.coverage());
     drop(session);
     let (matched, cameras, maps, views) = (&matched, &cameras[..], &maps, args.preview_views);
+    let object = focus_on_object;
     let previews = match &preview_gpu {
         Some(ctx) => {
             eprintln!("  preview measures: VGG and nearest-neighbour searches on {}", ctx.describe());
             let (net, nearest) = (GpuFeatureNet::new(ctx.clone(), &vgg), GpuNearest::new(ctx.clone()));
-            write_previews(&args.out, &scene, matched, &result, cameras, maps, background, &net, Some(&nearest), views)?
+            let nearest = Some(&nearest);
+            write_previews(
+                &args.out, &scene, matched, &result, cameras, maps, background, &net, nearest, views, object,
+            )?
         }
-        None => write_previews(&args.out, &scene, matched, &result, cameras, maps, background, &*vgg, None, views)?,
+        None => {
+            write_previews(&args.out, &scene, matched, &result, cameras, maps, background, &*vgg, None, views, object)?
+        }
     };
     for (name, seconds) in previews.parts {
         part_took(&mut outputs, name, seconds);
@@ -676,6 +718,17 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         m.nn_distance_after,
         100.0 * m.inverse_depth_change
     );
+    if let Some(o) = m.on_object {
+        eprintln!(
+            "  on the object's positions: mean-std {:.4} -> {:.4} -> {:.4}; nearest-neighbour {:.4} -> {:.4} -> {:.4}",
+            o.mean_std_before,
+            o.mean_std_matched,
+            o.mean_std_after,
+            o.nn_distance_before,
+            o.nn_distance_matched,
+            o.nn_distance_after
+        );
+    }
     eprintln!(
         "  depth against the style's depth: nearest-neighbour {:.4} -> {:.4}, sliced Wasserstein {:.3} -> {:.3} (colour-matched -> after); relief energy {:.4} of the depth range",
         m.depth_style_matched.nn_cos,
@@ -731,6 +784,7 @@ fn write_previews<N: FeatureNet>(
     net: &N,
     nearest: Option<&GpuNearest>,
     count: usize,
+    on_object: bool,
 ) -> anyhow::Result<Previews> {
     let mut parts = [
         ("preview views rendered", 0.0),
@@ -790,6 +844,8 @@ fn write_previews<N: FeatureNet>(
         let (fb, fm, fa) = (feats(&before), feats(&matched), feats(&after));
         let (dm, da) = (depth_feats(&matched), depth_feats(&after));
         lap(1, &mut parts);
+        let object =
+            if on_object { object_distances(&rgb_ref, &matched, [&fb, &fm, &fa], |a| nn(&rgb_ref, a))? } else { None };
         let measures = Measures {
             mean_std_before: rgb_ref.mean_std_distance(&fb.data),
             mean_std_matched: rgb_ref.mean_std_distance(&fm.data),
@@ -815,12 +871,41 @@ fn write_previews<N: FeatureNet>(
             // As the detector of `gast bench quality` reads them: each render's own covered pixels.
             colour_matched: CoveredColour::of(&matched.rgb, &matched.alpha),
             colour_after: CoveredColour::of(&after.rgb, &after.alpha),
+            on_object: object,
         };
         lap(2, &mut parts);
         metrics.push(PreviewMetrics { view: k, measures });
         renders.push([before, matched, after]);
     }
     Ok(Previews { metrics, renders, parts })
+}
+
+/// The RGB style distances of a view's (input, colour-matched, after)
+/// features over the positions `matched` covers; `None` where it covers none.
+fn object_distances(
+    style: &StyleReference,
+    matched: &raster::Render,
+    feats: [&gast_core::style::step::FeatureMap; 3],
+    nn: impl Fn(&[f32]) -> anyhow::Result<f32>,
+) -> anyhow::Result<Option<ObjectDistances>> {
+    use gast_core::style::focus::{coverage_mask, feature_mask, gather_positions};
+    let (h, w) = (matched.height as usize, matched.width as usize);
+    let f = feats[1];
+    let cells = feature_mask(&coverage_mask(&matched.alpha, h, w), h, w, f.height, f.width);
+    let idx: Vec<usize> = (0..cells.len()).filter(|&x| cells[x]).collect();
+    if idx.is_empty() {
+        return Ok(None);
+    }
+    let on = |f: &gast_core::style::step::FeatureMap| gather_positions(&f.data, f.channels, f.height * f.width, &idx);
+    let [b, m, a] = feats.map(on);
+    Ok(Some(ObjectDistances {
+        mean_std_before: style.mean_std_distance(&b),
+        mean_std_matched: style.mean_std_distance(&m),
+        mean_std_after: style.mean_std_distance(&a),
+        nn_distance_before: nn(&b)?,
+        nn_distance_matched: nn(&m)?,
+        nn_distance_after: nn(&a)?,
+    }))
 }
 
 #[cfg(test)]
@@ -850,6 +935,18 @@ mod tests {
         let first = serde_json::to_value(preview[0]).expect("serialises");
         assert_eq!(first["view"], 0);
         assert!(first["mean_std_after"].is_number() && first.get("measures").is_none(), "{first}");
+        assert!(first.get("on_object").is_none(), "a run on the whole frame has no object distances: {first}");
+        // An object run's distances on the object: the mean of the views that show it.
+        let on = |v: f32| Some(ObjectDistances { nn_distance_after: v, ..ObjectDistances::default() });
+        let views = [
+            Measures { on_object: on(0.1), ..view(0.2) },
+            Measures { on_object: None, ..view(0.4) },
+            Measures { on_object: on(0.3), ..view(0.4) },
+        ];
+        let o = Measures::mean(views.iter()).on_object.expect("two views show the object");
+        assert!((o.nn_distance_after - 0.2).abs() < 1e-6);
+        let json = serde_json::to_value(Measures::mean(views.iter())).expect("serialises");
+        assert!(json["on_object"]["nn_distance_after"].is_number(), "{json}");
     }
 
     /// The preview measures with the GPU's VGG and nearest-neighbour search
@@ -894,15 +991,18 @@ mod tests {
         std::fs::create_dir_all(&dir).expect("a temporary folder");
         let measures = |p: Previews| numbers(&serde_json::to_value(&p.metrics).expect("serialises"));
         let (scenes, bg) = ([&before, &matched, &after], [0.0; 3]);
-        let cpu =
-            write_previews(&dir, scenes[0], scenes[1], scenes[2], &cameras, &maps, bg, &vgg, None, 2).expect("CPU");
+        // As for a run whose losses are on the object: its distances there too.
+        let cpu = write_previews(&dir, scenes[0], scenes[1], scenes[2], &cameras, &maps, bg, &vgg, None, 2, true)
+            .expect("CPU");
         let (net, nearest) = (GpuFeatureNet::new(ctx.clone(), &vgg), GpuNearest::new(ctx));
-        let gpu = write_previews(&dir, scenes[0], scenes[1], scenes[2], &cameras, &maps, bg, &net, Some(&nearest), 2)
+        let nearest = Some(&nearest);
+        let gpu = write_previews(&dir, scenes[0], scenes[1], scenes[2], &cameras, &maps, bg, &net, nearest, 2, true)
             .expect("GPU");
         let (cpu, gpu) = (measures(cpu), measures(gpu));
         std::fs::remove_dir_all(&dir).ok();
         assert_eq!(cpu.len(), gpu.len());
-        assert!(cpu.len() >= 2 * 16, "{} measures", cpu.len());
+        assert!(cpu.len() >= 2 * (16 + 6), "{} measures", cpu.len());
+        assert_eq!(cpu.iter().filter(|(n, _)| n.contains("on_object.nn_distance")).count(), 2 * 3, "{cpu:?}");
         for ((name, c), (_, g)) in cpu.iter().zip(&gpu) {
             assert!((c - g).abs() <= 1e-3 * c.abs().max(1e-2), "{name}: CPU {c}, GPU {g}");
         }
