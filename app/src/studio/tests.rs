@@ -10,6 +10,7 @@ use super::viewport::{SharedGaussians, Side, SplatRenderer, bench, read_target};
 use super::*;
 use gast_core::raster::{RenderOptions, render};
 use gast_core::session::Command;
+use gast_core::session::plan::MODEL_GEMM_GFLOPS;
 
 /// Whether tests that need lavapipe/Xvfb must fail (CI) rather than skip.
 fn in_ci() -> bool {
@@ -924,11 +925,11 @@ fn a_cpu_run_is_planned_to_about_ten_minutes() {
     let cameras = framed_orbit(&scene, &OrbitOptions { count: 12, width: 256, height: 256, ..OrbitOptions::default() });
     let mut config = StyleConfig::default();
     let asked = config.schedule().total_steps();
-    let (said, step_s) = super::worker::plan_for_cpu(&scene, &cameras, [256, 256], &mut config);
+    let (said, step_s) = super::worker::plan_for_cpu(&scene, &cameras, [256, 256], MODEL_GEMM_GFLOPS, &mut config);
     assert!(said.starts_with("planned for about") && said.contains(&format!("{} px", config.resolution)), "{said}");
     // A small preset stays as small as it was.
     let mut small = StyleConfig { resolution: 64, cycles: 2, ..StyleConfig::default() };
-    let (said_small, _) = super::worker::plan_for_cpu(&scene, &cameras, [256, 256], &mut small);
+    let (said_small, _) = super::worker::plan_for_cpu(&scene, &cameras, [256, 256], MODEL_GEMM_GFLOPS, &mut small);
     assert_eq!((small.resolution, small.cycles), (64, 2), "{said_small}");
     assert!(said_small.contains("as set"), "{said_small}");
     let model = StepModel::for_focus(config.focus.is_object(0.2));
@@ -975,15 +976,15 @@ fn a_planned_whole_frame_run_keeps_the_references_style_to_frame_ratio() {
     let scene = assets::demo_scene();
     let cameras = framed_orbit(&scene, &OrbitOptions { count: 12, width: 256, height: 256, ..OrbitOptions::default() });
     let mut frame = StyleConfig { focus: Focus::Frame, ..StyleConfig::default() };
-    let (said, _) = super::worker::plan_for_cpu(&scene, &cameras, [256, 256], &mut frame);
+    let (said, _) = super::worker::plan_for_cpu(&scene, &cameras, [256, 256], MODEL_GEMM_GFLOPS, &mut frame);
     let expected = gast_core::session::plan::frame_texture_scale(frame.resolution, 256);
     assert!(expected < 256 && frame.texture_scale == expected, "{said}");
     assert!(said.contains(&format!("texture scale {expected} px")), "{said}");
     let mut moved = StyleConfig { focus: Focus::Frame, texture_scale: 384, ..StyleConfig::default() };
-    super::worker::plan_for_cpu(&scene, &cameras, [256, 256], &mut moved);
+    super::worker::plan_for_cpu(&scene, &cameras, [256, 256], MODEL_GEMM_GFLOPS, &mut moved);
     assert_eq!(moved.texture_scale, 384);
     let mut object = StyleConfig { focus: Focus::Object, ..StyleConfig::default() };
-    super::worker::plan_for_cpu(&scene, &cameras, [256, 256], &mut object);
+    super::worker::plan_for_cpu(&scene, &cameras, [256, 256], MODEL_GEMM_GFLOPS, &mut object);
     assert_eq!(object.texture_scale, 256, "an object keeps the style at 256");
 }
 

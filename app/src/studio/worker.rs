@@ -21,20 +21,23 @@ const ORBIT_VIEWS: usize = 36;
 /// (a small preset stays small), lower where the budget needs it; a whole
 /// frame at the default texture scale takes the reference's ratio of style
 /// to frame ([`gast_core::session::plan::frame_texture_scale`]). `style`:
-/// the style image's (width, height). Says what it chose, and the seconds a
-/// step it expects.
+/// the style image's (width, height); `gemm_gflops`: this machine's rate
+/// ([`gast_core::session::plan::machine_gemm_gflops`]). Says what it chose,
+/// and the seconds a step it expects.
 pub(super) fn plan_for_cpu(
     scene: &gast_core::Gaussians,
     cameras: &[gast_core::Camera],
     style: [usize; 2],
+    gemm_gflops: f64,
     config: &mut StyleConfig,
 ) -> (String, f64) {
     use gast_core::session::plan::{AUTO_RUN_BUDGET_S, StepModel, ViewsSurvey, auto_plan, fit_cycles, survey};
     let ViewsSurvey { span, object } = survey(scene, cameras, config.focus, config.background);
     // A whole frame at the default texture scale takes the reference's ratio (below).
     let scaled_texture = !object && config.texture_scale == StyleConfig::default().texture_scale;
-    let model =
-        StepModel::for_run(object, (!scaled_texture).then_some(config.texture_scale)).with_style(style[0], style[1]);
+    let model = StepModel::for_run(object, (!scaled_texture).then_some(config.texture_scale))
+        .with_style(style[0], style[1])
+        .on_machine(gemm_gflops);
     let plan = auto_plan(span, model, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
     let asked = (config.resolution, config.cycles);
     config.resolution = plan.resolution.min(config.resolution);
@@ -104,8 +107,9 @@ pub fn starter() -> SessionStarter {
                 emit(Event::Stage { name: "weights and cameras".into(), seconds: t.elapsed().as_secs_f64() });
                 if fit_budget && gpu.is_none() {
                     let t = std::time::Instant::now();
+                    let gflops = gast_core::session::plan::machine_gemm_gflops();
                     let (plan, seconds_per_step) =
-                        plan_for_cpu(&scene, &cameras, [style.width, style.height], &mut config);
+                        plan_for_cpu(&scene, &cameras, [style.width, style.height], gflops, &mut config);
                     emit(Event::Stage { name: plan, seconds: t.elapsed().as_secs_f64() });
                     emit(Event::Planned { seconds_per_step });
                 }

@@ -29,6 +29,8 @@ pub struct StepModel {
     texture_scale: Option<u32>,
     /// The style image's width over its height ([`Self::with_style`]; 1 until given).
     style_aspect: f64,
+    /// This machine's step time over the model machine's ([`Self::on_machine`]; 1 until given).
+    pace: f64,
 }
 
 /// Object focus, views fitted to the object, the assignment terms on
@@ -67,6 +69,19 @@ const STEP_FRAME: (f64, f64) = (0.30, 2.0);
 pub const MATCHING_S_PER_STYLE_PIXEL: (f64, f64) = (1.6e-6, 0.43e-6);
 /// The longest step the automatic working resolution accepts, seconds.
 pub const AUTO_STEP_BUDGET_S: f64 = 1.0;
+/// The rate of [`machine_gemm_gflops`] on the 2-core machine the models'
+/// steps were timed on, GFLOP/s: 124 on the machine of [`STEP_FRAME`]'s
+/// run (its fern run 0.287 s a step); a later 2-core machine at 188 ran the
+/// same steps at 0.184–0.189 s, the ratio of the rates (2026-12-01).
+pub const MODEL_GEMM_GFLOPS: f64 = 124.0;
+
+/// This machine's rate for the matrix product VGG's convolutions and the
+/// nearest-neighbour search run on (`256 × 2304` by `2304 × 4096`, best of
+/// three after one to warm up, all threads), GFLOP/s: about 50 ms on a
+/// 2-core machine, for [`StepModel::on_machine`].
+pub fn machine_gemm_gflops() -> f64 {
+    crate::vision::gemm_gflops(256, 64 * 64, 2304, 3)
+}
 
 impl StepModel {
     /// The model for losses focused on the object (`true`) or on the whole
@@ -81,7 +96,30 @@ impl StepModel {
     /// run sets it), on an object: 256.
     pub fn for_run(object: bool, texture_scale: Option<u32>) -> Self {
         let (at_256, exponent) = if object { STEP_OBJECT } else { STEP_FRAME };
-        Self { at_256, exponent, object, texture_scale, style_aspect: 1.0 }
+        Self { at_256, exponent, object, texture_scale, style_aspect: 1.0, pace: 1.0 }
+    }
+
+    /// The model on a machine whose matrix products run at `gemm_gflops`
+    /// ([`machine_gemm_gflops`]): where that is at least twice
+    /// [`MODEL_GEMM_GFLOPS`], its steps take the model machine's times
+    /// halved once for each doubling (at most four times); else the model's
+    /// own. The rate predicts a step only roughly, and varies from probe to
+    /// probe (179, 200 and 229 GFLOP/s in three runs on one 2-core machine,
+    /// whose steps took 0.16–0.20 s where the model says 0.29), so it only
+    /// moves a plan on a machine of clearly more power (a desktop's 8 or 16
+    /// cores), and by no more than it has: a slower machine keeps the plan,
+    /// and the re-plan after the first cycle ([`replan_cycles`]) gives it
+    /// fewer cycles.
+    pub fn on_machine(self, gemm_gflops: f64) -> Self {
+        let ratio = gemm_gflops / MODEL_GEMM_GFLOPS;
+        let doublings = if ratio.is_finite() && ratio >= 2.0 { ratio.log2().floor().min(4.0) } else { 0.0 };
+        Self { pace: 0.5f64.powf(doublings), ..self }
+    }
+
+    /// How many times faster than the model machine [`Self::on_machine`]
+    /// takes this one to be (1: not scaled).
+    pub fn speed_up(self) -> f64 {
+        1.0 / self.pace
     }
 
     /// The model for a style image of `width` × `height` pixels (a wide
@@ -106,7 +144,7 @@ impl StepModel {
         let positions = side.powf(self.exponent);
         let matching = per_pixel * positions * self.style_aspect * (texture * texture - reference * reference);
         // A smaller style saves at most the matching's share of the step.
-        (base + matching).max(0.8 * base)
+        self.pace * (base + matching).max(0.8 * base)
     }
 
     /// The largest multiple of 32 whose step fits in `budget` seconds (32
@@ -126,7 +164,8 @@ pub fn step_time_hint(model: StepModel, resolution: u32) -> String {
         Some(t) if t != model.reference_texture(resolution) => format!(" (the style at {t} px)"),
         _ => String::new(),
     };
-    format!("about {s:.2} s per step at {resolution} px{style} on a 2-core CPU with {focus}")
+    let cpu = if model.speed_up() > 1.0 { "this CPU" } else { "a 2-core CPU" };
+    format!("about {s:.2} s per step at {resolution} px{style} on {cpu} with {focus}")
 }
 
 /// The working resolution for an object that spans `span` of the longer
@@ -396,6 +435,28 @@ mod tests {
         );
         let hint = step_time_hint(object, 256);
         assert!(hint.contains("0.29 s") && hint.contains("object focus") && !hint.contains("style at"), "{hint}");
+    }
+
+    #[test]
+    fn the_model_follows_the_machines_matrix_products() {
+        // Twice the model machine's rate: half its step; the plan then fits
+        // the default 30 cycles of fern at 256 px, and guitar gets 288 px.
+        let frame = StepModel::for_run(false, None);
+        let fast = frame.on_machine(2.0 * MODEL_GEMM_GFLOPS);
+        assert!((fast.seconds(256) - 0.15).abs() < 1e-9 && fast.speed_up() == 2.0, "{fast:?}");
+        assert_eq!(auto_plan(1.0, fast, 30, 100, AUTO_RUN_BUDGET_S).cycles, 30);
+        let guitar = auto_plan(0.9, StepModel::for_focus(true).on_machine(2.0 * MODEL_GEMM_GFLOPS), 30, 100, 600.0);
+        assert_eq!((guitar.resolution, guitar.cycles), (288, 30));
+        assert!(step_time_hint(fast, 256).contains("on this CPU"), "{}", step_time_hint(fast, 256));
+        // One halving per whole doubling, at most four; a 2-core machine's
+        // probes (179–229 GFLOP/s) and slower machines keep the model.
+        assert_eq!(frame.on_machine(7.9 * MODEL_GEMM_GFLOPS).speed_up(), 4.0);
+        assert_eq!(frame.on_machine(1e9).speed_up(), 16.0);
+        for kept in [179.0, 229.0, 1.0, 0.0, -1.0, f64::NAN, f64::INFINITY] {
+            assert_eq!(frame.on_machine(kept).speed_up(), 1.0, "{kept}");
+        }
+        assert!(step_time_hint(frame.on_machine(200.0), 256).contains("on a 2-core CPU"));
+        assert!(machine_gemm_gflops() > 0.0);
     }
 
     #[test]

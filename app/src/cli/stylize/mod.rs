@@ -17,8 +17,8 @@ use gast_core::io::{
 };
 use gast_core::raster::{self, RenderOptions};
 use gast_core::session::plan::{
-    AUTO_RUN_BUDGET_S, PIXELS_PER_FEATURE, Pace, REFERENCE_FRAME_RESOLUTION, StepModel, ViewsSurvey, auto_plan,
-    auto_resolution_gpu, frame_texture_scale, replan_cycles, step_time_hint, survey,
+    AUTO_RUN_BUDGET_S, MODEL_GEMM_GFLOPS, PIXELS_PER_FEATURE, Pace, REFERENCE_FRAME_RESOLUTION, StepModel, ViewsSurvey,
+    auto_plan, auto_resolution_gpu, frame_texture_scale, machine_gemm_gflops, replan_cycles, step_time_hint, survey,
 };
 use gast_core::session::{Event, Session, SessionInputs, Stage1Cache, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::{FeatureNet, StyleConfig, StyleMaps};
@@ -430,7 +430,10 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             None => {
                 // On a whole frame the texture scale follows (below) unless it is given.
                 let texture = (object || !auto_texture).then_some(config.texture_scale);
-                let model = StepModel::for_run(object, texture).with_style(style.width, style.height);
+                // The model's times, scaled to this machine by its matrix products' rate.
+                let gflops = machine_gemm_gflops();
+                let model =
+                    StepModel::for_run(object, texture).with_style(style.width, style.height).on_machine(gflops);
                 let plan = auto_plan(span, model, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
                 if args.cycles.is_none() {
                     replan = Some((config.cycles, model.seconds(plan.resolution)));
@@ -442,8 +445,17 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
                     String::new()
                 };
                 let total = model.seconds(plan.resolution) * f64::from(config.schedule().total_steps());
+                let k = model.speed_up();
+                let faster = if k > 1.0 {
+                    format!(
+                        ", its steps taken as {k:.0}× the model machine's pace (its matrix products ran {gflops:.0} \
+                         GFLOP/s against {MODEL_GEMM_GFLOPS:.0})"
+                    )
+                } else {
+                    String::new()
+                };
                 let hint = format!(
-                    "{}{fewer}: about {:.0} min on this CPU (--resolution and --cycles override)",
+                    "{}{fewer}: about {:.0} min on this CPU{faster} (--resolution and --cycles override)",
                     step_time_hint(model, plan.resolution),
                     total / 60.0
                 );
