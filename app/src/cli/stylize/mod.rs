@@ -430,7 +430,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             None => {
                 // On a whole frame the texture scale follows (below) unless it is given.
                 let texture = (object || !auto_texture).then_some(config.texture_scale);
-                // The model's times, scaled to this machine by its matrix products' rate.
+                // The model's times, halved per doubling where this machine's
+                // matrix products run at least twice the model machine's.
                 let gflops = machine_gemm_gflops();
                 let model =
                     StepModel::for_run(object, texture).with_style(style.width, style.height).on_machine(gflops);
