@@ -188,6 +188,10 @@ for name, what, target in (("full_guitar", "full schedule, guitar × block2", 60
     if rep:
         steps = rep.get("steps") or []
         note = (note + "; " if note else "") + f"{len(steps)} steps at {rep.get('config', {}).get('resolution', '?')} px"
+        # An object run's RGB distance on the object (report.json's summary.on_object, since 2026-12-01).
+        obj = (rep.get("summary") or {}).get("on_object")
+        if obj:
+            note += f"; RGB NN-cos on the object {obj['nn_distance_matched']:.4f} -> {obj['nn_distance_after']:.4f}"
     figure(what + " (load to export)", s["wall_s"] if s["rc"] == 0 else None, "s", f"≤ {target:.0f} s",
            s["rc"] == 0 and s["wall_s"] <= target, note)
 

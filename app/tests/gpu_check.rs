@@ -140,6 +140,13 @@ fn the_gpu_check_report_gives_this_build_against_the_baseline() {
         "fern_parts.log",
         "step benchmark: ...\n\nGPU parts on test (median ms)\n  vgg forward 504×504 ms                5.250\n  raster backward tiles               3.000\n\nschedule: ...\n".into(),
     );
+    // The guitar's full schedule: its report's distance on the object.
+    write("full_guitar.rc.json", r#"{"name":"full_guitar","rc":0,"wall_s":150.0}"#.into());
+    std::fs::create_dir_all(raw.join("full_guitar")).expect("full_guitar dir");
+    write(
+        "full_guitar/report.json",
+        r#"{"config":{"resolution":512},"steps":[{},{}],"summary":{"on_object":{"nn_distance_matched":0.2265,"nn_distance_after":0.1971}}}"#.into(),
+    );
     let run = Command::new("python3")
         .arg(root.join("tools/gpu_check_report.py"))
         .args([&raw, &out])
@@ -170,6 +177,9 @@ fn the_gpu_check_report_gives_this_build_against_the_baseline() {
     let paired = figure("guitar geometry step at 256 px, pairing in blocks of 256 / one block");
     assert!((paired["value"].as_f64().expect("ratio") - 24.0 / 45.0).abs() < 1e-9, "{paired}");
     assert!(paired["note"].as_str().is_some_and(|n| n.contains("--assign-block 512: 44.00, 46.00")), "{paired}");
+    let full = figure("full schedule, guitar × block2 (load to export)");
+    let note = full["note"].as_str().unwrap_or_default();
+    assert!(note.contains("2 steps at 512 px") && note.contains("on the object 0.2265 -> 0.1971"), "{full}");
     let shared = figure("guitar colour step at 256 px, shared passes / a pass per dispatch");
     assert!((shared["value"].as_f64().expect("ratio") - 21.0 / 41.0).abs() < 1e-9, "{shared}");
     assert!(shared["note"].as_str().is_some_and(|n| n.contains("GAST_GPU_PASSES=each: 40.00, 42.00")), "{shared}");
