@@ -197,13 +197,9 @@ struct PreviewMetrics {
 /// (input, colour-matched, after), or their mean over the preview views.
 #[derive(Serialize, Clone, Copy, Default)]
 struct Measures {
-    mean_std_before: f32,
-    /// The colour-matched render's, the state the optimisation starts from.
-    mean_std_matched: f32,
-    mean_std_after: f32,
-    nn_distance_before: f32,
-    nn_distance_matched: f32,
-    nn_distance_after: f32,
+    /// Over the whole views.
+    #[serde(flatten)]
+    rgb: RgbDistances,
     inverse_depth_change: f32,
     /// The depth style distance (`gast_core::eval::depth_structure`) of the
     /// colour-matched and after renders' inverse depth to the style's depth.
@@ -217,17 +213,16 @@ struct Measures {
     /// The RGB style distances on the object, for a run whose losses are on
     /// the object (absent otherwise).
     #[serde(skip_serializing_if = "Option::is_none")]
-    on_object: Option<ObjectDistances>,
+    on_object: Option<RgbDistances>,
 }
 
-/// The RGB style distances over the feature positions the colour-matched
-/// render covers (`gast_core::style::focus::{coverage_mask, feature_mask}`,
-/// the positions an object run's losses read, and `gast bench quality`'s
-/// `_object` measures): an object run leaves the background, the same in
-/// every render, which the whole-view distances average in.
+/// The RGB style distances (mean-std and nearest-neighbour cosine of VGG
+/// relu3 against the style's) of a view's input, colour-matched and after
+/// renders, or their mean over views.
 #[derive(Serialize, Clone, Copy, Default)]
-struct ObjectDistances {
+struct RgbDistances {
     mean_std_before: f32,
+    /// The colour-matched render's, the state the optimisation starts from.
     mean_std_matched: f32,
     mean_std_after: f32,
     nn_distance_before: f32,
@@ -235,20 +230,50 @@ struct ObjectDistances {
     nn_distance_after: f32,
 }
 
-impl Measures {
-    /// The mean of each measure over `all` (zeros when empty).
-    fn mean<'a>(all: impl ExactSizeIterator<Item = &'a Measures>) -> Self {
-        let n = all.len().max(1) as f32;
+impl RgbDistances {
+    /// The distances of the (input, colour-matched, after) features `[b, m,
+    /// a]` (channel-major, the style's channels) to `style`, the
+    /// nearest-neighbour ones by `nn`.
+    fn measure(
+        style: &StyleReference,
+        [b, m, a]: [&[f32]; 3],
+        nn: impl Fn(&[f32]) -> anyhow::Result<f32>,
+    ) -> anyhow::Result<Self> {
+        Ok(Self {
+            mean_std_before: style.mean_std_distance(b),
+            mean_std_matched: style.mean_std_distance(m),
+            mean_std_after: style.mean_std_distance(a),
+            nn_distance_before: nn(b)?,
+            nn_distance_matched: nn(m)?,
+            nn_distance_after: nn(a)?,
+        })
+    }
+
+    /// The mean of each distance over `all`; `None` when empty.
+    fn mean(all: &[RgbDistances]) -> Option<Self> {
+        let n = all.len() as f32;
         let mut m = Self::default();
-        let mut all_object = Vec::new();
         for p in all {
-            all_object.push(p.on_object);
             m.mean_std_before += p.mean_std_before / n;
             m.mean_std_matched += p.mean_std_matched / n;
             m.mean_std_after += p.mean_std_after / n;
             m.nn_distance_before += p.nn_distance_before / n;
             m.nn_distance_matched += p.nn_distance_matched / n;
             m.nn_distance_after += p.nn_distance_after / n;
+        }
+        (!all.is_empty()).then_some(m)
+    }
+}
+
+impl Measures {
+    /// The mean of each measure over `all` (zeros when empty).
+    fn mean<'a>(all: impl ExactSizeIterator<Item = &'a Measures>) -> Self {
+        let n = all.len().max(1) as f32;
+        let mut m = Self::default();
+        let (mut rgb, mut on_object) = (Vec::new(), Vec::new());
+        for p in all {
+            rgb.push(p.rgb);
+            on_object.extend(p.on_object);
             m.inverse_depth_change += p.inverse_depth_change / n;
             m.depth_style_matched.nn_cos += p.depth_style_matched.nn_cos / n;
             m.depth_style_matched.sw += p.depth_style_matched.sw / n;
@@ -260,21 +285,9 @@ impl Measures {
             m.colour_after.luminance += p.colour_after.luminance / n;
             m.colour_after.chroma += p.colour_after.chroma / n;
         }
+        m.rgb = RgbDistances::mean(&rgb).unwrap_or_default();
         // On the object: the mean over the views that show it.
-        let seen: Vec<ObjectDistances> = all_object.into_iter().flatten().collect();
-        if !seen.is_empty() {
-            let k = seen.len() as f32;
-            let mut o = ObjectDistances::default();
-            for p in &seen {
-                o.mean_std_before += p.mean_std_before / k;
-                o.mean_std_matched += p.mean_std_matched / k;
-                o.mean_std_after += p.mean_std_after / k;
-                o.nn_distance_before += p.nn_distance_before / k;
-                o.nn_distance_matched += p.nn_distance_matched / k;
-                o.nn_distance_after += p.nn_distance_after / k;
-            }
-            m.on_object = Some(o);
-        }
+        m.on_object = RgbDistances::mean(&on_object);
         m
     }
 }
@@ -723,12 +736,12 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     eprintln!(
         "  style distance (mean-std of VGG relu3) {:.4} -> {:.4} -> {:.4}; nearest-neighbour {:.4} -> {:.4} -> {:.4} \
          (input -> colour-matched -> after); inverse depth changed by {:.1}%",
-        m.mean_std_before,
-        m.mean_std_matched,
-        m.mean_std_after,
-        m.nn_distance_before,
-        m.nn_distance_matched,
-        m.nn_distance_after,
+        m.rgb.mean_std_before,
+        m.rgb.mean_std_matched,
+        m.rgb.mean_std_after,
+        m.rgb.nn_distance_before,
+        m.rgb.nn_distance_matched,
+        m.rgb.nn_distance_after,
         100.0 * m.inverse_depth_change
     );
     if let Some(o) = m.on_object {
@@ -860,12 +873,7 @@ fn write_previews<N: FeatureNet>(
         let object =
             if on_object { object_distances(&rgb_ref, &matched, [&fb, &fm, &fa], |a| nn(&rgb_ref, a))? } else { None };
         let measures = Measures {
-            mean_std_before: rgb_ref.mean_std_distance(&fb.data),
-            mean_std_matched: rgb_ref.mean_std_distance(&fm.data),
-            mean_std_after: rgb_ref.mean_std_distance(&fa.data),
-            nn_distance_matched: nn(&rgb_ref, &fm.data)?,
-            nn_distance_before: nn(&rgb_ref, &fb.data)?,
-            nn_distance_after: nn(&rgb_ref, &fa.data)?,
+            rgb: RgbDistances::measure(&rgb_ref, [&fb.data, &fm.data, &fa.data], |a| nn(&rgb_ref, a))?,
             inverse_depth_change: inverse_depth_change(
                 &matched.inv_depth,
                 &after.inv_depth,
@@ -894,13 +902,18 @@ fn write_previews<N: FeatureNet>(
 }
 
 /// The RGB style distances of a view's (input, colour-matched, after)
-/// features over the positions `matched` covers; `None` where it covers none.
+/// features over the feature positions `matched` covers
+/// (`gast_core::style::focus::{coverage_mask, feature_mask}`: the positions
+/// an object run's losses read, as `gast bench quality`'s `_object`
+/// measures); `None` where it covers none. An object run leaves the
+/// background, the same in every render, which the whole-view distances
+/// average in.
 fn object_distances(
     style: &StyleReference,
     matched: &raster::Render,
     feats: [&gast_core::style::step::FeatureMap; 3],
     nn: impl Fn(&[f32]) -> anyhow::Result<f32>,
-) -> anyhow::Result<Option<ObjectDistances>> {
+) -> anyhow::Result<Option<RgbDistances>> {
     use gast_core::style::focus::{coverage_mask, feature_mask, gather_positions};
     let (h, w) = (matched.height as usize, matched.width as usize);
     let f = feats[1];
@@ -911,14 +924,7 @@ fn object_distances(
     }
     let on = |f: &gast_core::style::step::FeatureMap| gather_positions(&f.data, f.channels, f.height * f.width, &idx);
     let [b, m, a] = feats.map(on);
-    Ok(Some(ObjectDistances {
-        mean_std_before: style.mean_std_distance(&b),
-        mean_std_matched: style.mean_std_distance(&m),
-        mean_std_after: style.mean_std_distance(&a),
-        nn_distance_before: nn(&b)?,
-        nn_distance_matched: nn(&m)?,
-        nn_distance_after: nn(&a)?,
-    }))
+    RgbDistances::measure(style, [&b, &m, &a], nn).map(Some)
 }
 
 #[cfg(test)]
@@ -931,7 +937,7 @@ mod tests {
     #[test]
     fn the_summary_is_the_views_mean_with_flat_keys() {
         let view = |v: f32| Measures {
-            nn_distance_after: v,
+            rgb: RgbDistances { nn_distance_after: v, ..RgbDistances::default() },
             depth_style_after: DepthStyleDistance { nn_cos: v, sw: 2.0 * v },
             colour_after: CoveredColour { luminance: v, chroma: 0.5 },
             ..Measures::default()
@@ -939,9 +945,9 @@ mod tests {
         let preview =
             [PreviewMetrics { view: 0, measures: view(0.2) }, PreviewMetrics { view: 1, measures: view(0.4) }];
         let m = Measures::mean(preview.iter().map(|p| &p.measures));
-        assert!((m.nn_distance_after - 0.3).abs() < 1e-6 && (m.depth_style_after.sw - 0.6).abs() < 1e-6);
+        assert!((m.rgb.nn_distance_after - 0.3).abs() < 1e-6 && (m.depth_style_after.sw - 0.6).abs() < 1e-6);
         assert!((m.colour_after.chroma - 0.5).abs() < 1e-6);
-        assert_eq!(Measures::mean([].iter()).nn_distance_after, 0.0);
+        assert_eq!(Measures::mean([].iter()).rgb.nn_distance_after, 0.0);
         let json = serde_json::to_value(Summary { measures: m, colour_collapse: None }).expect("serialises");
         assert!(json["nn_distance_after"].as_f64().is_some_and(|v| (v - 0.3).abs() < 1e-6), "{json}");
         assert!(json["depth_style_after"]["sw"].is_number() && json["colour_collapse"].is_null(), "{json}");
@@ -950,7 +956,7 @@ mod tests {
         assert!(first["mean_std_after"].is_number() && first.get("measures").is_none(), "{first}");
         assert!(first.get("on_object").is_none(), "a run on the whole frame has no object distances: {first}");
         // An object run's distances on the object: the mean of the views that show it.
-        let on = |v: f32| Some(ObjectDistances { nn_distance_after: v, ..ObjectDistances::default() });
+        let on = |v: f32| Some(RgbDistances { nn_distance_after: v, ..RgbDistances::default() });
         let views = [
             Measures { on_object: on(0.1), ..view(0.2) },
             Measures { on_object: None, ..view(0.4) },
