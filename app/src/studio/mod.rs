@@ -473,10 +473,7 @@ impl StudioApp {
         let Some(cycles) = fits.filter(|&c| c != self.config.cycles) else { return };
         self.config.cycles = cycles;
         self.run.send(Command::SetConfig(Box::new(self.config.clone())));
-        let after = match pace.steps / per_cycle.max(1) {
-            1 => "the first cycle".to_string(),
-            n => format!("{n} cycles"),
-        };
+        let after = pace.cycles_said(per_cycle);
         self.run.log.push(format!(
             "re-planned after {after}: {cycles} cycles (its steps took {steady:.2} s after each view's first visit, \
              the plan's model {planned_s:.2} s)"

@@ -280,8 +280,7 @@ impl RunMonitor {
     /// (the session visits every view once before any twice); `None` while
     /// every step has been a first visit.
     fn last_first_visit(&self) -> Option<usize> {
-        let mut seen = std::collections::HashSet::new();
-        self.steps.iter().position(|r| !seen.insert(r.view))?.checked_sub(1)
+        gast_core::session::plan::last_first_visit(self.steps.iter().map(|r| r.view))
     }
 }
 

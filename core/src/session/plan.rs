@@ -259,20 +259,32 @@ impl Pace {
     /// started at the step's end); `None` before a step. A session visits
     /// every view once before it visits any twice.
     pub fn read(steps: impl IntoIterator<Item = (u32, f64)>) -> Option<Self> {
-        let mut seen = std::collections::HashSet::new();
-        let (mut count, mut elapsed_s, mut last_first) = (0u32, 0.0, None);
-        for (view, elapsed) in steps {
-            if last_first.is_none() && !seen.insert(view) {
-                last_first = Some((count, elapsed_s));
-            }
-            count += 1;
-            elapsed_s = elapsed;
-        }
-        let steady_s = last_first
-            .filter(|&(k, _)| count - k >= STEADY_STEPS)
-            .map(|(k, at)| (elapsed_s - at) / f64::from(count - k));
-        (count > 0).then_some(Self { steps: count, elapsed_s, steady_s })
+        let steps: Vec<(u32, f64)> = steps.into_iter().collect();
+        let &(_, elapsed_s) = steps.last()?;
+        let count = steps.len() as u32;
+        let steady_s = last_first_visit(steps.iter().map(|&(view, _)| view))
+            .map(|k| (count - 1 - k as u32, steps[k].1))
+            .filter(|&(revisits, _)| revisits >= STEADY_STEPS)
+            .map(|(revisits, at)| (elapsed_s - at) / f64::from(revisits));
+        Some(Self { steps: count, elapsed_s, steady_s })
     }
+
+    /// How a re-plan names the cycles these steps ended: "the first cycle"
+    /// or "N cycles".
+    pub fn cycles_said(&self, steps_per_cycle: u32) -> String {
+        match self.steps / steps_per_cycle.max(1) {
+            1 => "the first cycle".to_string(),
+            n => format!("{n} cycles"),
+        }
+    }
+}
+
+/// Index of the step before the first that revisits a view, of steps
+/// visiting `views` in order (a session visits every view once before it
+/// visits any twice); `None` while every step has been a first visit.
+pub fn last_first_visit(views: impl IntoIterator<Item = u32>) -> Option<usize> {
+    let mut seen = std::collections::HashSet::new();
+    views.into_iter().position(|v| !seen.insert(v))?.checked_sub(1)
 }
 
 /// The cycles of a planned CPU run once its first steps are timed: the
@@ -409,6 +421,11 @@ mod tests {
         assert_eq!(steady(4 + STEADY_STEPS - 1), None);
         assert!(steady(4 + STEADY_STEPS).is_some());
         assert_eq!(Pace::read(std::iter::empty()), None);
+        assert_eq!(last_first_visit([0, 1, 2, 3, 0]), Some(3));
+        assert_eq!(last_first_visit([0, 1, 2]), None);
+        // How a re-plan names when it came.
+        assert_eq!(read.cycles_said(20), "the first cycle");
+        assert_eq!(Pace { steps: 60, ..read }.cycles_said(20), "3 cycles");
     }
 
     #[test]

@@ -601,10 +601,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
                 total = session.total_steps();
                 pb.set_length(u64::from(total));
                 let minutes = (pace.elapsed_s + steady * f64::from(total - pace.steps)) / 60.0;
-                let after = match pace.steps / per_cycle.max(1) {
-                    1 => "the first cycle".to_string(),
-                    n => format!("{n} cycles"),
-                };
+                let after = pace.cycles_said(per_cycle);
                 pb.suspend(|| {
                     eprintln!(
                         "  re-planned after {after}: {cycles} cycles, about {minutes:.0} min of steps (its steps \
