@@ -127,8 +127,9 @@ impl Source<'_> {
     }
 }
 
-/// An RGBA8 texture.
+/// An RGBA8 texture, and the file it came from (for messages).
 struct Texture {
+    file: PathBuf,
     rgba: Vec<u8>,
     width: usize,
     height: usize,
@@ -167,7 +168,7 @@ fn texture(src: &Source<'_>, meta: &Path, field: &str, name: &str, need: usize) 
             format!("{width}×{height} = {} texels", width * height),
         ));
     }
-    Ok(Texture { rgba: img.into_raw(), width, height })
+    Ok(Texture { file, rgba: img.into_raw(), width, height })
 }
 
 fn need_files(path: &Path, field: &str, files: &[String], n: usize) -> Result<(), SceneError> {
@@ -243,7 +244,7 @@ fn decode(path: &Path, bytes: &[u8], src: &Source<'_>) -> Result<Gaussians, Scen
             let centroids = texture(src, path, "shN_centroids", &s.files[0], 0)?;
             if centroids.width != 64 * coeffs || centroids.height * 64 < s.count {
                 return Err(fmt(
-                    path,
+                    &centroids.file,
                     "shN_centroids",
                     format!("{} texels wide, ≥ {} rows for {} entries", 64 * coeffs, s.count.div_ceil(64), s.count),
                     format!("{}×{}", centroids.width, centroids.height),
@@ -271,7 +272,7 @@ fn decode(path: &Path, bytes: &[u8], src: &Source<'_>) -> Result<Gaussians, Scen
         let q = quats.texel(i);
         let largest = q[3].checked_sub(252).filter(|&m| m < 4).ok_or_else(|| {
             fmt(
-                path,
+                &quats.file,
                 &format!("quats texel {i}"),
                 "alpha 252 to 255 (index of the largest component)",
                 q[3].to_string(),
@@ -303,7 +304,7 @@ fn decode(path: &Path, bytes: &[u8], src: &Source<'_>) -> Result<Gaussians, Scen
             let label = t[0] as usize | (t[1] as usize) << 8;
             if label >= s.count {
                 return Err(fmt(
-                    path,
+                    &labels.file,
                     &format!("shN_labels texel {i}"),
                     format!("a palette index below {}", s.count),
                     label.to_string(),
