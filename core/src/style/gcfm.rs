@@ -26,7 +26,7 @@ use super::sliced::{SLICED_PROJECTIONS, SlicedTarget};
 
 /// The epsilon of the reference's normalisations.
 pub(super) const EPS: f64 = 1e-8;
-/// Score-matrix elements per tile (4 MiB of `f32`).
+/// Score-matrix elements per tile at most (4 MiB of `f32`).
 const TILE_ELEMS: usize = 1 << 20;
 /// Scores within this fraction of the rendered vector's norm of the best (or
 /// worst) one are re-evaluated in `f64`.
@@ -130,8 +130,29 @@ pub struct GcfmOutput {
     pub matches: Matches,
 }
 
+/// The rendered rows of each tile of a search against `m` style positions
+/// over `n` rows, and how each tile's product runs. A tile holds at most
+/// [`TILE_ELEMS`] scores; the tiles are made even, and when they are at
+/// least as many as the threads, a multiple of them, so no thread ends with
+/// a long tile alone (fern's 768 rows against 2,304 style positions were
+/// tiles of 455 and 313 rows on two threads). When they are fewer, each
+/// tile's product is spread over the threads itself: an object's few covered
+/// positions against a large style are one tile (41 to 136 rows against
+/// 8,576 style positions at guitar's 256 px), which was the one serial part
+/// of a CPU step.
+pub(super) fn row_tiles(n: usize, m: usize) -> (usize, gemm::Parallelism) {
+    let most = (TILE_ELEMS / m.max(1)).clamp(8, n.max(8));
+    let threads = rayon::current_num_threads().max(1);
+    let tiles = n.div_ceil(most).max(1);
+    if tiles < threads {
+        (n.div_ceil(tiles).max(1), gemm::Parallelism::Rayon(0))
+    } else {
+        (n.div_ceil(tiles.next_multiple_of(threads)).max(1), gemm::Parallelism::None)
+    }
+}
+
 /// `dst (t × m) = lhs (t × c, element (x, k) at lhs[k·n + x0 + x]) · rhs (c × m)`,
-/// accumulating into `dst` when `accumulate`.
+/// accumulating into `dst` when `accumulate`, on `par`'s threads.
 #[allow(unsafe_code)]
 #[allow(clippy::too_many_arguments)]
 pub(super) fn gemm_tile(
@@ -144,6 +165,7 @@ pub(super) fn gemm_tile(
     c: usize,
     rhs: &[f32],
     accumulate: bool,
+    par: gemm::Parallelism,
 ) {
     assert!(dst.len() >= t * m && x0 + t <= n && lhs.len() >= c * n && rhs.len() >= c * m);
     if t == 0 || m == 0 || c == 0 {
@@ -173,7 +195,7 @@ pub(super) fn gemm_tile(
             false,
             false,
             false,
-            gemm::Parallelism::None,
+            par,
         );
     }
 }
@@ -202,7 +224,7 @@ pub fn match_every_position(style: &StyleFeatures, rendered: [&[f32]; 3], n: usi
         let per: Vec<Vec<f64>> = rendered.iter().map(|r| column_sq_norms(r, c, n)).collect();
         (0..n).map(|x| per.iter().map(|p| p[x]).sum()).collect()
     };
-    let tile = (TILE_ELEMS / m).clamp(8, n.max(8));
+    let (tile, par) = row_tiles(n, m);
     let starts: Vec<usize> = (0..n).step_by(tile).collect();
     let parts: Vec<(Vec<u32>, Vec<u32>)> = starts
         .par_iter()
@@ -210,7 +232,7 @@ pub fn match_every_position(style: &StyleFeatures, rendered: [&[f32]; 3], n: usi
             let t = tile.min(n - x0);
             let mut scores = vec![0f32; t * m];
             for (k, r) in rendered.iter().enumerate() {
-                gemm_tile(&mut scores, t, m, r, n, x0, c, &style.feats[k], k > 0);
+                gemm_tile(&mut scores, t, m, r, n, x0, c, &style.feats[k], k > 0, par);
             }
             let mut best = Vec::with_capacity(t);
             let mut worst = Vec::with_capacity(t);

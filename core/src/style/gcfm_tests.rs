@@ -29,6 +29,36 @@ fn tiled_matching_equals_dense() {
     assert_eq!(match_features(&st, rr, n), match_features_dense(&st, rr, n));
 }
 
+/// A search's tiles are even, a multiple of the threads when they fill them,
+/// and otherwise spread each product over the threads; the matches are the
+/// dense search's on 1, 2 and 5 threads either way.
+#[test]
+fn row_tiles_balance_the_threads_and_keep_the_matches() {
+    let on = |threads: usize, n: usize, m: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
+        let (tile, par) = pool.install(|| row_tiles(n, m));
+        (tile, matches!(par, gemm::Parallelism::Rayon(_)))
+    };
+    // fern at 256 px: 768 rows against 2,304 style positions, tiles of 455 and 313 rows before.
+    assert_eq!(on(2, 768, 2304), (384, false));
+    assert_eq!(on(1, 768, 2304), (384, false));
+    assert_eq!(on(2, 5000, 2304), (417, false), "11 tiles of at most 455 rows made 12");
+    // An object's few rows against a large style: one tile, its product spread.
+    assert_eq!(on(2, 100, 8576), (100, true));
+    assert_eq!(on(16, 768, 2304), (384, true));
+    assert_eq!(on(2, 0, 10), (1, true), "no rows");
+
+    let (c, n) = (24, 300);
+    let st = style(c, 60, 64); // 3,840 positions: two tiles of 150 rows
+    let r = [feats(c, n, 4), feats(c, n, 5), feats(c, n, 6)];
+    let rr = [&r[0][..], &r[1][..], &r[2][..]];
+    let dense = match_features_dense(&st, rr, n);
+    for threads in [1, 2, 5] {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
+        assert_eq!(pool.install(|| match_every_position(&st, rr, n)), dense, "{threads} threads");
+    }
+}
+
 #[test]
 fn exact_copy_matches_itself() {
     let (c, hs, ws) = (16, 5, 7);

@@ -24,7 +24,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::distinct::search_distinct;
-use super::gcfm::{EPS, Matches, StyleFeatures, gemm_tile, match_features};
+use super::gcfm::{EPS, Matches, StyleFeatures, gemm_tile, match_features, row_tiles};
 use crate::vision::matmul;
 
 /// How the GCFM matches are searched.
@@ -201,14 +201,14 @@ impl MatchIndex {
         for (mo, r) in rendered.iter().enumerate() {
             matmul(&mut proj, n, (&self.basis[mo * c..], d, 1), (r, n), (l, n, c), mo > 0);
         }
-        let tile = ((1 << 20) / m).clamp(8, n.max(8));
+        let (tile, par) = row_tiles(n, m);
         let starts: Vec<usize> = (0..n).step_by(tile).collect();
         let parts: Vec<(Vec<u32>, Vec<u32>)> = starts
             .par_iter()
             .map(|&x0| {
                 let t = tile.min(n - x0);
                 let mut scores = vec![0f32; t * m];
-                gemm_tile(&mut scores, t, m, &proj, n, x0, l, &self.projected, false);
+                gemm_tile(&mut scores, t, m, &proj, n, x0, l, &self.projected, false, par);
                 let mut order: Vec<u32> = if k >= m { (0..m as u32).collect() } else { Vec::new() };
                 let (mut hi, mut lo) = (TopK::new(k), TopK::new(k));
                 let mut joint = vec![0f32; d];
