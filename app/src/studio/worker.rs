@@ -107,7 +107,7 @@ pub fn starter() -> SessionStarter {
                 emit(Event::Stage { name: "weights and cameras".into(), seconds: t.elapsed().as_secs_f64() });
                 if fit_budget && gpu.is_none() {
                     let t = std::time::Instant::now();
-                    let gflops = gast_core::session::plan::machine_gemm_gflops();
+                    let gflops = gast_core::session::plan::machine_gemm_gflops_once();
                     let (plan, seconds_per_step) =
                         plan_for_cpu(&scene, &cameras, [style.width, style.height], gflops, &mut config);
                     emit(Event::Stage { name: plan, seconds: t.elapsed().as_secs_f64() });

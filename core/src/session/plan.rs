@@ -83,6 +83,22 @@ pub fn machine_gemm_gflops() -> f64 {
     crate::vision::gemm_gflops(256, 64 * 64, 2304, 3)
 }
 
+/// [`machine_gemm_gflops`] probed once a process: the studio's runs plan
+/// with the first run's probe, and the step time under its resolution
+/// slider reads the same rate ([`machine_gemm_gflops_known`]), so the hint
+/// and the plan agree.
+pub fn machine_gemm_gflops_once() -> f64 {
+    *MACHINE_GEMM_GFLOPS.get_or_init(machine_gemm_gflops)
+}
+
+/// The rate [`machine_gemm_gflops_once`] probed, if a run has probed it;
+/// never probes (the studio's interface thread reads it every frame).
+pub fn machine_gemm_gflops_known() -> Option<f64> {
+    MACHINE_GEMM_GFLOPS.get().copied()
+}
+
+static MACHINE_GEMM_GFLOPS: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
+
 impl StepModel {
     /// The model for losses focused on the object (`true`) or on the whole
     /// frame, the style at texture scale 256 (the default).

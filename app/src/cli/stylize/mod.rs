@@ -18,7 +18,8 @@ use gast_core::io::{
 use gast_core::raster::{self, RenderOptions};
 use gast_core::session::plan::{
     AUTO_RUN_BUDGET_S, MODEL_GEMM_GFLOPS, PIXELS_PER_FEATURE, Pace, REFERENCE_FRAME_RESOLUTION, StepModel, ViewsSurvey,
-    auto_plan, auto_resolution_gpu, frame_texture_scale, machine_gemm_gflops, replan_cycles, step_time_hint, survey,
+    auto_plan, auto_resolution_gpu, frame_texture_scale, machine_gemm_gflops_once, replan_cycles, step_time_hint,
+    survey,
 };
 use gast_core::session::{Event, Session, SessionInputs, Stage1Cache, StepReport, StyleDepthSource, StyleImage};
 use gast_core::style::{FeatureNet, StyleConfig, StyleMaps};
@@ -445,7 +446,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
                 let texture = (object || !auto_texture).then_some(config.texture_scale);
                 // The model's times, halved per doubling where this machine's
                 // matrix products run at least twice the model machine's.
-                let gflops = machine_gemm_gflops();
+                let gflops = machine_gemm_gflops_once();
                 let model =
                     StepModel::for_run(object, texture).with_style(style.width, style.height).on_machine(gflops);
                 let plan = auto_plan(span, model, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
