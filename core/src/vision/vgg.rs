@@ -34,6 +34,9 @@ pub const FEATURE_CHANNELS: usize = 768;
 /// pixel rows: the style at the default texture scale, 256, is one band).
 pub const BAND_ROWS: usize = 64;
 
+/// Values per rayon item in the backward pass's element-wise loops.
+const CHUNK: usize = 1 << 14;
+
 /// A CHW feature map.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Features {
@@ -191,12 +194,14 @@ impl Vgg {
             if layer == 5 || layer == 4 {
                 // relu3_2 and relu3_1 are features themselves as well as the next layer's input.
                 let b = block(layer - 4, outr);
-                v.par_iter_mut().zip(&b).for_each(|(a, b)| *a += b);
+                v.par_chunks_mut(CHUNK).zip(b.par_chunks(CHUNK)).for_each(|(a, b)| {
+                    a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
+                });
             }
-            v.par_iter_mut().zip(&state.relu_open[layer]).for_each(|(g, &open)| {
-                if !open {
-                    *g = 0.0;
-                }
+            // In chunks the loop vectorises; one rayon item per value cost
+            // 2.5 % of a CPU step's samples.
+            v.par_chunks_mut(CHUNK).zip(state.relu_open[layer].par_chunks(CHUNK)).for_each(|(g, open)| {
+                g.iter_mut().zip(open).for_each(|(g, &open)| *g = if open { *g } else { 0.0 });
             });
             // The convolution ran on its input's region; the cut ring has no gradient.
             if inr != outr {
