@@ -225,6 +225,13 @@ fn bad_inputs_fail_with_the_file_named_and_keep_existing_outputs() {
     let o = gast(&["stylize", s(&scene), s(&bogus), "--ratio-geo", "1.5", "--out", s(&out)]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("ratio_geo"), "{}", stderr(&o));
+    // A preset's bad value names the preset, not only the setting.
+    let preset = out.join("bad_preset.json");
+    std::fs::write(&preset, r#"{"ratio_geo": 1.5}"#).expect("preset written");
+    let o = gast(&["stylize", s(&scene), s(&bogus), "--preset", s(&preset), "--out", s(&out)]);
+    assert!(!o.status.success());
+    let said = stderr(&o);
+    assert!(said.contains("ratio_geo") && said.contains(&format!("{} with the flags", preset.display())), "{said}");
     // --save-preset over a file that is not a preset is refused before any
     // work (`--save-preset wave.jpg` replaced the style with JSON).
     let style = shared_file("data/styles/wave.jpg").expect("the shared styles beside the scenes");

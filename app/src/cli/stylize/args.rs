@@ -249,7 +249,11 @@ impl StylizeArgs {
         set!(self.phase_leak, c.phase_leak);
         set!(self.split_px, c.split_px);
         set!(self.depth_relief, c.depth_relief_px);
-        crate::cli::checked(c)
+        // A preset's bad value would otherwise read as if a flag had set it.
+        crate::cli::checked(c).map_err(|e| match &self.preset {
+            Some(p) if p.is_file() => e.context(format!("{} with the flags", p.display())),
+            _ => e,
+        })
     }
 }
 
