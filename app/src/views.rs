@@ -229,14 +229,30 @@ pub fn write_cameras_beside(scene: &Path, source: &Path, cameras: &[Camera]) -> 
 /// else, unless `orbit` (`--orbit`), the folder beside `scene` that holds its
 /// training cameras ([`gast_core::camera::beside_scene`], said on stderr),
 /// else none (generated views). A camera file beside the scene that cannot be
-/// read is an error naming it, not a silent orbit.
-pub fn camera_source(scene: &Path, cameras: Option<&Path>, orbit: bool) -> anyhow::Result<Option<PathBuf>> {
+/// read is an error naming it, not a silent orbit; cameras beside it that
+/// mostly do not see `gaussians` ([`gast_core::session::plan::foreign_cameras`])
+/// are left out with a warning.
+pub fn camera_source(
+    scene: &Path,
+    gaussians: &Gaussians,
+    cameras: Option<&Path>,
+    orbit: bool,
+) -> anyhow::Result<Option<PathBuf>> {
     if cameras.is_some() || orbit {
         return Ok(cameras.map(Path::to_path_buf));
     }
     match gast_core::camera::beside_scene(scene) {
         None => Ok(None),
         Some(Ok((set, dir))) => {
+            if let Some(why) = gast_core::session::plan::foreign_cameras(gaussians, &set.cameras) {
+                eprintln!(
+                    "warning: the cameras found beside the scene in {} are not used: {why}; generating orbit views \
+                     instead (--cameras {} takes them anyway)",
+                    dir.display(),
+                    dir.display()
+                );
+                return Ok(None);
+            }
             eprintln!(
                 "cameras: the {} views found beside the scene in {} (--orbit generates views instead)",
                 set.cameras.len(),

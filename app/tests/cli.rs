@@ -663,6 +663,35 @@ fn a_fitted_scene_brings_its_cameras_to_render() {
     std::fs::remove_dir_all(&out).ok();
 }
 
+/// Cameras found beside a scene that see none of it in most views are
+/// another scene's (a folder of scenes with one camera file): `render` and
+/// `stylize` leave them out with a warning and generate views; `--cameras`
+/// still takes them.
+#[test]
+fn cameras_beside_an_unrelated_scene_are_left_out() {
+    let (Some(guitar), Some(fern)) =
+        (shared_file("data/scenes/guitar.compressed.ply"), shared_file("data/datasets/fern"))
+    else {
+        return;
+    };
+    let out = temp("foreign-cameras");
+    std::fs::create_dir_all(&out).expect("dir");
+    let scene = out.join("guitar.compressed.ply");
+    std::fs::copy(&guitar, &scene).expect("copy the scene");
+    let fern_cameras = gast_core::camera::load(&fern).expect("fern's cameras").cameras;
+    gast_core::camera::write_inria(out.join("cameras.json"), &fern_cameras).expect("fern's cameras beside guitar");
+    let o = gast(&["render", s(&scene), "--out", s(&out.join("views")), "--size", "32", "--views", "2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = stderr(&o);
+    assert!(said.contains("are not used:") && said.contains("look like another scene's cameras"), "{said}");
+    let count = |d: &str| std::fs::read_dir(out.join(d)).expect("views").filter(|e| e.is_ok()).count();
+    assert_eq!(count("views"), 2 * 3, "two orbit views, a PNG, a depth PNG and an EXR each");
+    let o = gast(&["render", s(&scene), "--out", s(&out.join("asked")), "--size", "32", "--cameras", s(&out)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(count("asked"), 20 * 3, "--cameras takes them");
+    std::fs::remove_dir_all(&out).ok();
+}
+
 /// A benchmark's default input missing from the shared data folder is named
 /// with the folder it was looked for in and how to point elsewhere (it said
 /// only "../shared/…: No such file or directory" from another folder).

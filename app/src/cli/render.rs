@@ -54,7 +54,7 @@ pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
         refuse_photo_folder(&args.out, "--out", None, &[])?;
         return run_turntable(&args, &scene, frames as usize, background);
     }
-    let source = camera_source(&args.scene, args.views.cameras.as_deref(), args.views.orbit)?;
+    let source = camera_source(&args.scene, &scene, args.views.cameras.as_deref(), args.views.orbit)?;
     let cameras = views_for(&scene, &ViewArgs { cameras: source.clone(), ..args.views.clone() })?;
     refuse_photo_folder(&args.out, "--out", source.as_deref(), &cameras)?;
     super::output_folder(&args.out, "--out")?;

@@ -49,7 +49,13 @@ pub struct SceneFile {
 pub fn read_scene_file(path: &std::path::Path) -> anyhow::Result<SceneFile> {
     let (gaussians, mut warnings) = gast_core::scene::load_with_warnings(path)?;
     let cameras = match gast_core::camera::beside_scene(path) {
-        Some(Ok(found)) => Some(found),
+        Some(Ok((set, dir))) => match gast_core::session::plan::foreign_cameras(&gaussians, &set.cameras) {
+            Some(why) => {
+                warnings.push(format!("the cameras beside the scene in {} are not used: {why}", dir.display()));
+                None
+            }
+            None => Some((set, dir)),
+        },
         Some(Err(e)) => {
             warnings.push(format!("the cameras beside the scene are not used: {e}"));
             None

@@ -661,6 +661,30 @@ fn a_scenes_cameras_open_with_it_and_travel_with_its_export() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// Cameras beside a scene that see none of it in most views are another
+/// scene's: the scene opens on its orbit, and the log says why.
+#[test]
+fn cameras_beside_an_unrelated_scene_are_not_opened() {
+    let dir = std::env::temp_dir().join(format!("gast-studio-foreign-cameras-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("dir");
+    let scene = super::assets::demo_scene();
+    let cameras: Vec<Camera> = (0..3).map(|k| demo_camera(&scene, 64 + k, 48)).collect();
+    let mut far = scene.clone();
+    for m in &mut far.means {
+        m[0] += 1000.0;
+    }
+    gast_core::scene::save(dir.join("scene.ply"), &far, &Default::default()).expect("scene");
+    gast_core::camera::write_inria(dir.join("cameras.json"), &cameras).expect("cameras");
+    let mut app = test_app();
+    app.open_any(&dir.join("scene.ply"));
+    assert!(app.errors.is_empty(), "{:?}", app.errors);
+    assert!(app.camera_file().is_none(), "the orbit, not the camera file");
+    let said = app.run.log.iter().find(|l| l.contains("are not used")).expect("the log says why");
+    assert!(said.contains("3 of their 3 views show none of the scene"), "{said}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// A file of the shared data (`$GAST_SHARED`, else `../shared` beside the workspace).
 fn shared_file(rel: &str) -> Option<PathBuf> {
     let base = std::env::var_os("GAST_SHARED")

@@ -93,10 +93,16 @@ pub fn fit_view(cam: &Camera, points: &[Vec3], longer_side: u32) -> Camera {
 }
 
 /// How much of `cam`'s frame the points take: the longer side of their
-/// projected box over the longer image side (0 when none is in front).
+/// projected box over the longer image side (0 when none is in front), the
+/// box clipped to the frame widened by a frame on each side, so at most 3. A
+/// point just in front of the camera's plane projects arbitrarily far out
+/// (cameras beside or inside the subject read spans of millions).
 pub fn subject_span(cam: &Camera, points: &[Vec3]) -> f32 {
     let Some((lo, hi)) = normalised_box(cam, points) else { return 0.0 };
-    ((hi.x - lo.x) * cam.fx).max((hi.y - lo.y) * cam.fy) / cam.width.max(cam.height).max(1) as f32
+    let (w, h) = (cam.width as f32, cam.height as f32);
+    let pixels = |q: Vec2| Vec2::new(q.x * cam.fx + cam.cx, q.y * cam.fy + cam.cy);
+    let (lo, hi) = (pixels(lo).max(Vec2::new(-w, -h)), pixels(hi).min(Vec2::new(2.0 * w, 2.0 * h)));
+    ((hi.x - lo.x).max(0.0)).max((hi.y - lo.y).max(0.0)) / w.max(h).max(1.0)
 }
 
 /// Orbit views (positions and directions of [`orbit_cameras`]) each fitted to

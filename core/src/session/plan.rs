@@ -326,15 +326,43 @@ pub fn replan_cycles(pace: Pace, steps_per_cycle: u32, budget_s: f64, most: u32)
 /// The mean share of the pixels of `cameras` that `scene` covers (alpha of
 /// at least 0.5), rendered at 64 px: what `focus auto` decides on.
 pub fn mean_coverage(scene: &Gaussians, cameras: &[Camera], opts: &RenderOptions) -> f32 {
+    let shares = view_coverages(scene, cameras, opts);
+    shares.iter().sum::<f32>() / shares.len().max(1) as f32
+}
+
+/// Each view's share of pixels that `scene` covers (alpha of at least 0.5),
+/// rendered at 64 px on the longer side.
+pub fn view_coverages(scene: &Gaussians, cameras: &[Camera], opts: &RenderOptions) -> Vec<f32> {
     use rayon::prelude::*;
-    let shares: Vec<f32> = cameras
+    cameras
         .par_iter()
         .map(|c| {
             let r = raster::render(scene, &c.with_longer_side(64), opts);
             r.alpha.iter().filter(|&&a| a >= 0.5).count() as f32 / r.alpha.len().max(1) as f32
         })
-        .collect();
-    shares.iter().sum::<f32>() / shares.len().max(1) as f32
+        .collect()
+}
+
+/// Why the cameras found beside a scene file look like another scene's:
+/// more than half of them show none of `scene` (no pixel at least half
+/// opaque at 64 px), as when a folder holds several scenes and one
+/// `cameras.json`. `None` when they look at it. Cameras a user names
+/// (`--cameras`) are taken as given; these are only found.
+pub fn foreign_cameras(scene: &Gaussians, cameras: &[Camera]) -> Option<String> {
+    if cameras.is_empty() {
+        return None;
+    }
+    let shares = view_coverages(scene, cameras, &RenderOptions::default());
+    let blind = shares.iter().filter(|&&s| s == 0.0).count();
+    (2 * blind > cameras.len()).then(|| {
+        let mean = shares.iter().sum::<f32>() / shares.len() as f32;
+        format!(
+            "{blind} of their {} views show none of the scene (it covers {:.1}% of their pixels): they look like \
+             another scene's cameras",
+            cameras.len(),
+            100.0 * mean
+        )
+    })
 }
 
 /// What a plan needs to know of a scene seen from its views.
@@ -382,6 +410,42 @@ pub fn resolution_for(span: f32, cap: u32) -> (u32, u32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Cameras that look at a scene are its own; the same cameras with the
+    /// scene 100 units away see none of it and are another scene's; the
+    /// plan's span stays within the frame and its margins either way.
+    #[test]
+    fn cameras_that_do_not_see_the_scene_are_anothers() {
+        let mut g = Gaussians::with_capacity(0, 0);
+        for i in 0..512 {
+            let at = |k: usize| (k as f32 - 3.5) * 0.1;
+            g.means.push([at(i % 8), at(i / 8 % 8), at(i / 64)]);
+            g.log_scales.push([0.08f32.ln(); 3]);
+            g.quats.push([1.0, 0.0, 0.0, 0.0]);
+            g.opacity_logits.push(4.0);
+            g.sh.extend([0.5, 0.2, -0.3]);
+        }
+        let opts = crate::camera::OrbitOptions { count: 8, width: 64, height: 64, ..Default::default() };
+        let cameras = crate::camera::orbit_cameras(&g.means, &opts);
+        assert_eq!(foreign_cameras(&g, &cameras), None);
+        let mut far = g.clone();
+        for m in &mut far.means {
+            m[0] += 100.0;
+        }
+        let why = foreign_cameras(&far, &cameras).expect("the cameras see none of the moved scene");
+        // (The view looking along +x may still see it, a few pixels far off.)
+        let blind: usize = why.split(' ').next().and_then(|n| n.parse().ok()).expect("a count first");
+        assert!(blind >= 7 && why.contains("of their 8 views show none of the scene"), "{why}");
+        // Half of the views blind is not yet another scene's.
+        let mut half = cameras[..4].to_vec();
+        half.extend(crate::camera::orbit_cameras(&far.means, &opts)[..4].iter().cloned());
+        assert_eq!(foreign_cameras(&far, &half), None);
+        // Cameras inside the scene: points just in front of them project far out.
+        let inside: Vec<Camera> =
+            cameras.iter().map(|c| Camera { translation: glam::Vec3::ZERO, ..c.clone() }).collect();
+        let span = survey(&g, &inside, Focus::Frame, [0.0; 3]).span;
+        assert!(span > 0.9 && span <= 3.0, "span {span}");
+    }
 
     #[test]
     fn a_whole_frame_run_keeps_the_references_ratio_of_style_to_frame() {

@@ -412,7 +412,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     // model's download, the run): the output folder, the cameras, the weights.
     // The folder is made only before the first write, after the run.
     super::check_output_folder(&args.out, "--out")?;
-    let source = camera_source(&args.scene, args.cameras.as_deref(), args.orbit)?;
+    let source = camera_source(&args.scene, &scene, args.cameras.as_deref(), args.orbit)?;
     let cameras = views_for(
         &scene,
         &ViewArgs {
