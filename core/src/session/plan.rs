@@ -347,23 +347,30 @@ pub fn view_coverages(scene: &Gaussians, cameras: &[Camera], opts: &RenderOption
 /// more than half of them show none of `scene` (no pixel at least half
 /// opaque at 64 px), as when a folder holds several scenes and one
 /// `cameras.json`. `None` when they look at it. Cameras a user names
-/// (`--cameras`) are taken as given; these are only found.
+/// (`--cameras`) are taken as given; these are only found. At most
+/// [`FOREIGN_CHECK_VIEWS`] views, spread over the set, are rendered.
 pub fn foreign_cameras(scene: &Gaussians, cameras: &[Camera]) -> Option<String> {
     if cameras.is_empty() {
         return None;
     }
-    let shares = view_coverages(scene, cameras, &RenderOptions::default());
+    let n = cameras.len();
+    let k = n.min(FOREIGN_CHECK_VIEWS);
+    let checked: Vec<Camera> = (0..k).map(|i| cameras[i * n / k].clone()).collect();
+    let shares = view_coverages(scene, &checked, &RenderOptions::default());
     let blind = shares.iter().filter(|&&s| s == 0.0).count();
-    (2 * blind > cameras.len()).then(|| {
+    (2 * blind > k).then(|| {
         let mean = shares.iter().sum::<f32>() / shares.len() as f32;
+        let of = if k < n { format!("{k} of their {n} views, spread,") } else { format!("their {n} views") };
         format!(
-            "{blind} of their {} views show none of the scene (it covers {:.1}% of their pixels): they look like \
-             another scene's cameras",
-            cameras.len(),
+            "{blind} of {of} show none of the scene (it covers {:.1}% of their pixels): they look like another \
+             scene's cameras",
             100.0 * mean
         )
     })
 }
+
+/// The most views [`foreign_cameras`] renders (at 64 px each).
+pub const FOREIGN_CHECK_VIEWS: usize = 16;
 
 /// What a plan needs to know of a scene seen from its views.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -425,7 +432,8 @@ mod tests {
             g.opacity_logits.push(4.0);
             g.sh.extend([0.5, 0.2, -0.3]);
         }
-        let opts = crate::camera::OrbitOptions { count: 8, width: 64, height: 64, ..Default::default() };
+        use crate::camera::OrbitOptions;
+        let opts = OrbitOptions { count: 8, width: 64, height: 64, ..Default::default() };
         let cameras = crate::camera::orbit_cameras(&g.means, &opts);
         assert_eq!(foreign_cameras(&g, &cameras), None);
         let mut far = g.clone();
@@ -436,6 +444,11 @@ mod tests {
         // (The view looking along +x may still see it, a few pixels far off.)
         let blind: usize = why.split(' ').next().and_then(|n| n.parse().ok()).expect("a count first");
         assert!(blind >= 7 && why.contains("of their 8 views show none of the scene"), "{why}");
+        // A larger set is read from views spread over it.
+        let many = crate::camera::orbit_cameras(&g.means, &OrbitOptions { count: 40, ..opts.clone() });
+        let why = foreign_cameras(&far, &many).expect("none of the spread views sees it");
+        assert!(why.contains("of 16 of their 40 views, spread, show none"), "{why}");
+        assert_eq!(foreign_cameras(&g, &many), None);
         // Half of the views blind is not yet another scene's.
         let mut half = cameras[..4].to_vec();
         half.extend(crate::camera::orbit_cameras(&far.means, &opts)[..4].iter().cloned());
