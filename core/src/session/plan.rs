@@ -360,7 +360,7 @@ pub fn foreign_cameras(scene: &Gaussians, cameras: &[Camera]) -> Option<String> 
     let blind = shares.iter().filter(|&&s| s == 0.0).count();
     (2 * blind > k).then(|| {
         let mean = shares.iter().sum::<f32>() / shares.len() as f32;
-        let of = if k < n { format!("{k} of their {n} views, spread,") } else { format!("their {n} views") };
+        let of = if k < n { format!("{k} views spread over their {n}") } else { format!("their {n} views") };
         format!(
             "{blind} of {of} show none of the scene (it covers {:.1}% of their pixels): they look like another \
              scene's cameras",
@@ -447,7 +447,7 @@ mod tests {
         // A larger set is read from views spread over it.
         let many = crate::camera::orbit_cameras(&g.means, &OrbitOptions { count: 40, ..opts.clone() });
         let why = foreign_cameras(&far, &many).expect("none of the spread views sees it");
-        assert!(why.contains("of 16 of their 40 views, spread, show none"), "{why}");
+        assert!(why.contains("of 16 views spread over their 40 show none"), "{why}");
         assert_eq!(foreign_cameras(&g, &many), None);
         // Half of the views blind is not yet another scene's.
         let mut half = cameras[..4].to_vec();
