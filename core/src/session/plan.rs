@@ -326,26 +326,27 @@ pub fn replan_cycles(pace: Pace, steps_per_cycle: u32, budget_s: f64, most: u32)
 /// The mean share of the pixels of `cameras` that `scene` covers (alpha of
 /// at least 0.5), rendered at 64 px: what `focus auto` decides on.
 pub fn mean_coverage(scene: &Gaussians, cameras: &[Camera], opts: &RenderOptions) -> f32 {
-    let shares = view_coverages(scene, cameras, opts);
+    let shares = view_coverages(scene, cameras, opts, 0.5);
     shares.iter().sum::<f32>() / shares.len().max(1) as f32
 }
 
-/// Each view's share of pixels that `scene` covers (alpha of at least 0.5),
-/// rendered at 64 px on the longer side.
-pub fn view_coverages(scene: &Gaussians, cameras: &[Camera], opts: &RenderOptions) -> Vec<f32> {
+/// Each view's share of pixels that `scene` covers (alpha of at least
+/// `alpha`), rendered at 64 px on the longer side.
+pub fn view_coverages(scene: &Gaussians, cameras: &[Camera], opts: &RenderOptions, alpha: f32) -> Vec<f32> {
     use rayon::prelude::*;
     cameras
         .par_iter()
         .map(|c| {
             let r = raster::render(scene, &c.with_longer_side(64), opts);
-            r.alpha.iter().filter(|&&a| a >= 0.5).count() as f32 / r.alpha.len().max(1) as f32
+            r.alpha.iter().filter(|&&a| a >= alpha).count() as f32 / r.alpha.len().max(1) as f32
         })
         .collect()
 }
 
 /// Why the cameras found beside a scene file look like another scene's:
-/// more than half of them show none of `scene` (no pixel at least half
-/// opaque at 64 px), as when a folder holds several scenes and one
+/// more than half of them show none of `scene` (no pixel of alpha 0.05 or
+/// more at 64 px: a small or faint subject still counts as seen), as when a
+/// folder holds several scenes and one
 /// `cameras.json`. `None` when they look at it. Cameras a user names
 /// (`--cameras`) are taken as given; these are only found. At most
 /// [`FOREIGN_CHECK_VIEWS`] views, spread over the set, are rendered.
@@ -356,7 +357,7 @@ pub fn foreign_cameras(scene: &Gaussians, cameras: &[Camera]) -> Option<String> 
     let n = cameras.len();
     let k = n.min(FOREIGN_CHECK_VIEWS);
     let checked: Vec<Camera> = (0..k).map(|i| cameras[i * n / k].clone()).collect();
-    let shares = view_coverages(scene, &checked, &RenderOptions::default());
+    let shares = view_coverages(scene, &checked, &RenderOptions::default(), 0.05);
     let blind = shares.iter().filter(|&&s| s == 0.0).count();
     (2 * blind > k).then(|| {
         let mean = shares.iter().sum::<f32>() / shares.len() as f32;
