@@ -297,6 +297,26 @@ wide_parts = compare("tile", ("t64", "t128"), "GEMM tiles 128² / 64²", ("GAST_
 doc["wide_parts"] = wide_parts
 doc["ab_parts"] = ab_parts
 
+# The CPU engine on 1, 2, 4, ... threads (cpu_threads_T): its step and the speed-up over one thread.
+scaling = []
+for name in sorted((n for n in doc["steps"] if n.startswith("cpu_threads_")), key=lambda n: int(n.split("_")[2])):
+    t = int(name.split("_")[2])
+    j = load(name + ".json")
+    cpu = next((r for r in (j or {"runs": []})["runs"] if r["label"] == "cpu"), None)
+    if not cpu:
+        figure(f"CPU engine, guitar step on {t} thread{'s' if t > 1 else ''}", None, "ms", None, None, status(name))
+        continue
+    scaling.append({"threads": t, "ms_per_step": cpu["ms_per_step"], "colour_ms": cpu.get("colour_step_median_ms"),
+                    "geometry_ms": cpu.get("geometry_step_median_ms")})
+    one = scaling[0]["ms_per_step"] if scaling[0]["threads"] == 1 else None
+    fmt = lambda v: "–" if v is None else f"{v:.1f}"
+    figure(f"CPU engine, guitar step at {j.get('resolution', '?')} px on {t} thread{'s' if t > 1 else ''}",
+           cpu["ms_per_step"], "ms", None, None,
+           (f"{one / cpu['ms_per_step']:.2f}x one thread's step; " if one else "")
+           + f"medians: colour {fmt(scaling[-1]['colour_ms'])} ms, geometry {fmt(scaling[-1]['geometry_ms'])} ms; "
+           f"mean over {cpu['steps']} steps")
+doc["cpu_threads"] = scaling
+
 # The depth network.
 d = log("depth_net")
 lines = [l.strip() for l in d.splitlines() if "GPU" in l or "gpu" in l]

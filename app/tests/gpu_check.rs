@@ -45,6 +45,8 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
         "pairing",
         "compare_sliced_depth",
         "playbot_32",
+        "cpu_threads_1",
+        "cpu_threads_2",
         "studio",
     ] {
         assert_eq!(doc["steps"][step]["rc"], 0, "step {step}: {}\n{tail}", doc["steps"][step]);
@@ -62,6 +64,10 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
     let what = "depth relief 8 px + phase leak, GPU against the CPU engine: first step's GCFM, relative difference";
     let agree = figures.iter().find(|f| f["what"] == what).unwrap_or_else(|| panic!("{what}\n{tail}"));
     assert_eq!(agree["ok"], true, "{agree}");
+    // The CPU engine alone on one thread and on two, the second against the first.
+    let two = figures.iter().find(|f| f["what"] == "CPU engine, guitar step at 32 px on 2 threads").expect("2 threads");
+    assert!(two["value"].as_f64().is_some_and(|ms| ms > 0.0), "{two}");
+    assert!(two["note"].as_str().is_some_and(|n| n.contains("x one thread's step")), "{two}");
     let step = figures.iter().find(|f| f["what"] == "guitar step at 48 px").expect("step figure");
     assert!(step["value"].as_f64().is_some_and(|ms| ms > 0.0), "{step}");
     // The studio drawn headless (`gast studio --headless`), at the window size the step asks for.
