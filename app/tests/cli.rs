@@ -225,6 +225,14 @@ fn bad_inputs_fail_with_the_file_named_and_keep_existing_outputs() {
     let o = gast(&["stylize", s(&scene), s(&bogus), "--ratio-geo", "1.5", "--out", s(&out)]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("ratio_geo"), "{}", stderr(&o));
+    // A folder of other work as a SOG output: its meta.json is not replaced.
+    let work = out.join("work");
+    std::fs::create_dir_all(&work).expect("dir");
+    std::fs::write(work.join("meta.json"), b"{\"my\": \"settings\"}").expect("meta");
+    let o = gast(&["convert", s(&scene), &format!("{}/", work.display())]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("work/meta.json: output folder: expected a SOG scene's meta.json"), "{}", stderr(&o));
+    assert_eq!(std::fs::read(work.join("meta.json")).expect("kept"), b"{\"my\": \"settings\"}");
     // A preset's bad value names the preset, not only the setting.
     let preset = out.join("bad_preset.json");
     std::fs::write(&preset, r#"{"ratio_geo": 1.5}"#).expect("preset written");

@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Args;
 use gast_core::Gaussians;
-use gast_core::scene::{SaveOptions, SceneFormat, Strength};
+use gast_core::scene::{SaveOptions, Strength};
 
 use crate::progress;
 use crate::views::load_scene;
@@ -111,9 +111,17 @@ pub fn blended(
         .with_context(|| format!("cannot blend toward {}", matched_path.display()))
 }
 
-/// Checks that `path` names a format [`save_scene`] writes, before any long work.
+/// Checks that `path` names a format [`save_scene`] writes, and that an
+/// existing folder as a SOG output holds no other files of its names, before
+/// any long work.
 pub fn check_output_name(path: &Path) -> anyhow::Result<()> {
-    SceneFormat::from_output(path).map(|_| ()).context("cannot choose a scene format from the output's name")
+    match gast_core::scene::check_output(path) {
+        Ok(_) => Ok(()),
+        Err(e @ gast_core::scene::SceneError::UnknownFormat { .. }) => {
+            Err(anyhow::Error::new(e).context("cannot choose a scene format from the output's name"))
+        }
+        Err(e) => Err(e.into()),
+    }
 }
 
 /// Refuses an output that is the input scene itself (the same file, or the

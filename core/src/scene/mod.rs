@@ -38,7 +38,9 @@ use std::path::Path;
 pub use blend::{BlendError, Strength, blend};
 pub use error::SceneError;
 pub use ply::{LOG_SCALE_INF, LOG_SCALE_NEG_INF, OPACITY_LOGIT_INF, OPACITY_LOGIT_NEG_INF};
-pub use save::{OUTPUT_NAMES, SOG_PALETTES, SPZ_VERSIONS, SaveOptions, SceneFormat, save, save_with_progress};
+pub use save::{
+    OUTPUT_NAMES, SOG_PALETTES, SPZ_VERSIONS, SaveOptions, SceneFormat, check_output, save, save_with_progress,
+};
 
 /// SH basis constant of band 0: rendered colour is `0.5 + C0 · c_0 + …`.
 pub const SH_C0: f32 = 0.282_094_8;

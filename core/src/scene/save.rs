@@ -33,6 +33,19 @@ pub enum SceneFormat {
 pub const OUTPUT_NAMES: &str = "a name ending in .ply (INRIA), .compressed.ply (PlayCanvas), .spz (Niantic), \
      .sog (SOG bundle), or a SOG folder (…/meta.json, an existing folder, or a name ending in /)";
 
+/// The format `path` asks for, checked before any long work: an existing
+/// folder as a SOG output must hold a SOG scene or none of its files
+/// (`sog_write::refuse_foreign_folder`).
+pub fn check_output(path: &Path) -> Result<SceneFormat, SceneError> {
+    let format = SceneFormat::from_output(path)?;
+    if let SceneFormat::SogFolder(dir) = &format
+        && dir.is_dir()
+    {
+        super::sog_write::refuse_foreign_folder(dir)?;
+    }
+    Ok(format)
+}
+
 impl SceneFormat {
     /// The format an output name asks for (see the module docs).
     pub fn from_output(path: &Path) -> Result<Self, SceneError> {

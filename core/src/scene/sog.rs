@@ -68,6 +68,11 @@ struct Meta {
     sh_n: Option<ShN>,
 }
 
+/// Whether `bytes` are SOG metadata (a `meta.json` this reader takes).
+pub(crate) fn is_meta(bytes: &[u8]) -> bool {
+    serde_json::from_slice::<Meta>(bytes).is_ok()
+}
+
 /// Reads a SOG scene from its `meta.json`.
 pub(crate) fn read_sog(meta_path: &Path) -> Result<Gaussians, SceneError> {
     let bytes = std::fs::read(meta_path).map_err(|e| SceneError::io(meta_path, e))?;

@@ -161,12 +161,57 @@ pub(crate) fn encode(
     Ok(files)
 }
 
+/// The names a SOG folder's files take (`meta.json` and the textures [`encode`] writes).
+pub(crate) const FILE_NAMES: [&str; 8] = [
+    "meta.json",
+    "means_l.webp",
+    "means_u.webp",
+    "quats.webp",
+    "scales.webp",
+    "sh0.webp",
+    "shN_centroids.webp",
+    "shN_labels.webp",
+];
+
+/// Refuses an existing folder as a SOG output where writing would replace a
+/// file that is not a SOG scene's: a `meta.json` that is not SOG metadata
+/// (a folder of other work: `gast convert scene.ply ~/project/` replaced its
+/// `meta.json`), or, with no `meta.json`, a file of a texture's name. A
+/// folder holding a SOG scene is replaced as a whole, as before.
+pub(crate) fn refuse_foreign_folder(dir: &Path) -> Result<(), SceneError> {
+    let meta = dir.join("meta.json");
+    let choose = "(the SOG output would replace it; choose a new or empty folder)";
+    match std::fs::read(&meta) {
+        Ok(bytes) if super::sog::is_meta(&bytes) => return Ok(()),
+        Ok(_) => {
+            return Err(SceneError::format(
+                &meta,
+                "output folder",
+                "a SOG scene's meta.json to replace, or none",
+                format!("another file {choose}"),
+            ));
+        }
+        Err(_) => {}
+    }
+    match FILE_NAMES.iter().map(|n| dir.join(n)).find(|p| p.exists()) {
+        Some(path) => Err(SceneError::format(
+            &path,
+            "output folder",
+            "no file of a SOG texture's name where no SOG scene is (the folder has no meta.json)",
+            format!("one {choose}"),
+        )),
+        None => Ok(()),
+    }
+}
+
 /// Writes the files into `dir`. A new folder is filled under a temporary name
 /// and renamed into place; in an existing folder each file is replaced
 /// atomically, `meta.json` last, so a reader never sees new metadata with old
-/// textures.
+/// textures. An existing folder whose files are not a SOG scene's is refused
+/// ([`refuse_foreign_folder`]).
 pub(crate) fn write_folder(dir: &Path, files: &SogFiles) -> Result<(), SceneError> {
     if dir.is_dir() {
+        refuse_foreign_folder(dir)?;
         // All or none: a read-only file found midway would leave old and new textures mixed.
         for (name, _) in files {
             let path = dir.join(name);

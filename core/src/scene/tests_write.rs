@@ -110,6 +110,38 @@ fn rewriting_a_sog_folder_replaces_it_whole() {
     assert_eq!(entries(&dir), ["scene"]);
 }
 
+/// A folder of other work is not a SOG output to fill: a `meta.json` that
+/// is not SOG metadata, or a file of a texture's name with no `meta.json`,
+/// is refused before the encoding and kept; files of other names beside a
+/// new SOG scene stay as they are.
+#[test]
+fn a_sog_output_never_replaces_another_folders_files() {
+    let dir = scratch("sog_foreign");
+    let work = dir.join("work");
+    std::fs::create_dir_all(&work).expect("dir");
+    std::fs::write(work.join("meta.json"), br#"{"my": "project settings"}"#).expect("meta");
+    std::fs::write(work.join("notes.txt"), b"notes").expect("notes");
+    let e = super::check_output(&work).expect_err("a foreign meta.json");
+    let said = e.to_string();
+    assert!(said.contains("work/meta.json: output folder: expected a SOG scene's meta.json to replace"), "{said}");
+    let e = save(&work, &sample(10, 0), &SaveOptions::default()).expect_err("the writer refuses it too");
+    assert!(matches!(e, SceneError::Format { .. }), "{e}");
+    assert_eq!(std::fs::read(work.join("meta.json")).expect("kept"), br#"{"my": "project settings"}"#);
+    // A texture's name with no SOG scene beside it.
+    std::fs::remove_file(work.join("meta.json")).expect("rm");
+    std::fs::write(work.join("sh0.webp"), b"a picture").expect("webp");
+    let said = super::check_output(&work).expect_err("a foreign sh0.webp").to_string();
+    assert!(said.contains("work/sh0.webp: output folder: expected no file of a SOG texture's name"), "{said}");
+    // Without them the folder takes the scene, its other files kept; then it holds
+    // a SOG scene, which a rewrite replaces.
+    std::fs::remove_file(work.join("sh0.webp")).expect("rm");
+    save(&work, &sample(10, 0), &SaveOptions::default()).expect("into a folder of other files");
+    assert_eq!(std::fs::read(work.join("notes.txt")).expect("kept"), b"notes");
+    super::check_output(&work).expect("a SOG scene's folder");
+    save(&work, &sample(12, 1), &SaveOptions::default()).expect("replaced");
+    assert_eq!(load(work.join("meta.json")).expect("load").len(), 12);
+}
+
 /// An INRIA file whose opacities and log-scales include ±inf, as
 /// splat-transform writes for an opacity of exactly 1.
 fn with_infinities(dir: &Path) -> (std::path::PathBuf, Gaussians) {
