@@ -332,7 +332,7 @@ pub fn mean_coverage(scene: &Gaussians, cameras: &[Camera], opts: &RenderOptions
 
 /// Each view's share of pixels that `scene` covers (alpha of at least
 /// `alpha`), rendered at 64 px on the longer side.
-pub fn view_coverages(scene: &Gaussians, cameras: &[Camera], opts: &RenderOptions, alpha: f32) -> Vec<f32> {
+fn view_coverages(scene: &Gaussians, cameras: &[Camera], opts: &RenderOptions, alpha: f32) -> Vec<f32> {
     use rayon::prelude::*;
     cameras
         .par_iter()
@@ -346,10 +346,10 @@ pub fn view_coverages(scene: &Gaussians, cameras: &[Camera], opts: &RenderOption
 /// Why the cameras found beside a scene file look like another scene's:
 /// more than half of them show none of `scene` (no pixel of alpha 0.05 or
 /// more at 64 px: a small or faint subject still counts as seen), as when a
-/// folder holds several scenes and one
-/// `cameras.json`. `None` when they look at it. Cameras a user names
-/// (`--cameras`) are taken as given; these are only found. At most
-/// [`FOREIGN_CHECK_VIEWS`] views, spread over the set, are rendered.
+/// folder holds several scenes and one `cameras.json`. `None` when they look
+/// at it. Cameras a user names (`--cameras`) are taken as given; these are
+/// only found. At most [`FOREIGN_CHECK_VIEWS`] views, spread over the set,
+/// are rendered.
 pub fn foreign_cameras(scene: &Gaussians, cameras: &[Camera]) -> Option<String> {
     if cameras.is_empty() {
         return None;
