@@ -355,16 +355,7 @@ fn sog_zip_bundle() {
     use std::io::Write;
     let dir = sog_dir("sog_zip", 252, 0);
     let want = load(&dir).expect("directory");
-    let names = [
-        "meta.json",
-        "means_l.webp",
-        "means_u.webp",
-        "quats.webp",
-        "scales.webp",
-        "sh0.webp",
-        "shN_centroids.webp",
-        "shN_labels.webp",
-    ];
+    let names = crate::scene::sog_write::FILE_NAMES;
     let bundle = |method: zip::CompressionMethod, skip: &str| {
         let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
         let opts = zip::write::SimpleFileOptions::default().compression_method(method);
