@@ -164,21 +164,78 @@ where
     F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 {
     refuse_read_only(path)?;
-    remove_stale_temps(path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")));
+    remove_stale_temps(folder_of(path));
+    let tmp = write_temp(path, write)?;
+    std::fs::rename(&tmp, path).inspect_err(|_| {
+        let _ = std::fs::remove_file(&tmp);
+    })
+}
+
+/// Replaces files that only make sense together (a SOG scene's textures and
+/// its `meta.json`, a COLMAP model's cameras and images) all or none, as
+/// [`replace_with`] does one: every file is written to its [`temp_path`] and
+/// synced, and only when all are written are they renamed into place. A write
+/// that fails (a full disk, a read-only file) removes the temporaries and
+/// leaves every existing file as it was; before, the files replaced until then
+/// stayed, beside the old others. The renames need no space; only a crash
+/// between them could still mix the two sets. The error names the file.
+pub fn replace_all(files: &[(PathBuf, &[u8])]) -> Result<(), (PathBuf, std::io::Error)> {
+    for (path, _) in files {
+        refuse_read_only(path).map_err(|e| (path.clone(), e))?;
+    }
+    let mut swept: Vec<&Path> = Vec::new();
+    for (path, _) in files {
+        let folder = folder_of(path);
+        if !swept.contains(&folder) {
+            remove_stale_temps(folder);
+            swept.push(folder);
+        }
+    }
+    let mut temps: Vec<PathBuf> = Vec::with_capacity(files.len());
+    let remove = |temps: &[PathBuf]| temps.iter().for_each(|t| drop(std::fs::remove_file(t)));
+    for (path, bytes) in files {
+        match write_temp(path, |w| w.write_all(bytes)) {
+            Ok(tmp) => temps.push(tmp),
+            Err(e) => {
+                remove(&temps);
+                return Err((path.clone(), e));
+            }
+        }
+    }
+    for (k, ((path, _), tmp)) in files.iter().zip(&temps).enumerate() {
+        if let Err(e) = std::fs::rename(tmp, path) {
+            remove(&temps[k..]);
+            return Err((path.clone(), e));
+        }
+    }
+    Ok(())
+}
+
+/// The folder `path` is in (`.` for a bare name).
+fn folder_of(path: &Path) -> &Path {
+    path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."))
+}
+
+/// Writes `path`'s [`temp_path`] through `write`, flushed and synced, and
+/// returns it; on an error the temporary file is removed.
+fn write_temp<F>(path: &Path, write: F) -> std::io::Result<PathBuf>
+where
+    F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+{
     let tmp = temp_path(path);
     let result = (|| {
-        let file = File::create(&tmp)?;
-        let mut w = BufWriter::new(file);
+        let mut w = BufWriter::new(File::create(&tmp)?);
         write(&mut w)?;
         w.flush()?;
-        w.get_ref().sync_all()?;
-        drop(w);
-        std::fs::rename(&tmp, path)
+        w.get_ref().sync_all()
     })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
+    match result {
+        Ok(()) => Ok(tmp),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(e)
+        }
     }
-    result
 }
 
 /// Writes `bytes` as the whole file, atomically ([`atomic_write`]).
@@ -368,6 +425,29 @@ mod tests {
         assert_eq!(leftovers.len(), 1, "temporary file left behind: {leftovers:?}");
         atomic_write(&path, |w| w.write_all(b"new")).expect("write");
         assert_eq!(std::fs::read(&path).expect("read back"), b"new");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn files_that_belong_together_are_replaced_all_or_none() {
+        let dir = scratch("all");
+        let (a, b) = (dir.join("a.webp"), dir.join("meta.json"));
+        std::fs::write(&a, b"old a").expect("seed file");
+        std::fs::write(&b, b"old meta").expect("seed file");
+        // The second file's temporary cannot be made (a folder holds its
+        // name), as a full disk would refuse it after the first was written.
+        let blocked = temp_path(&b);
+        std::fs::create_dir(&blocked).expect("a folder");
+        let (path, e) = replace_all(&[(a.clone(), b"new a"), (b.clone(), b"new meta")]).expect_err("a blocked write");
+        assert_eq!(path, b, "the error names the file: {e}");
+        assert_eq!(std::fs::read(&a).expect("read back"), b"old a", "the first file was replaced alone");
+        assert_eq!(std::fs::read(&b).expect("read back"), b"old meta");
+        assert!(!temp_path(&a).exists(), "the first file's temporary was left");
+        std::fs::remove_dir(&blocked).expect("a folder");
+        replace_all(&[(a.clone(), b"new a"), (b.clone(), b"new meta")]).expect("both written");
+        assert_eq!(std::fs::read(&a).expect("read back"), b"new a");
+        assert_eq!(std::fs::read(&b).expect("read back"), b"new meta");
+        assert_eq!(std::fs::read_dir(&dir).expect("list").count(), 2, "a temporary file was left");
         std::fs::remove_dir_all(&dir).ok();
     }
 

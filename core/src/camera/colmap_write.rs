@@ -6,7 +6,6 @@
 //! `k + 1`) without 2D points. Values are written as `f64` converted from the
 //! stored `f32`, so the text form reads back bit-exact.
 
-use std::io::Write;
 use std::path::Path;
 
 use glam::DQuat;
@@ -20,12 +19,13 @@ fn qvec(c: &Camera) -> [f64; 4] {
     [q.w, q.x, q.y, q.z]
 }
 
-/// Writes `bytes` as `dir/name`, `dir` made if needed, through a temporary
-/// file renamed over it ([`crate::io::replace_with`]).
-fn write(dir: &Path, name: &str, bytes: &[u8]) -> Result<(), CameraError> {
+/// Writes the model's two files into `dir`, made if needed, both or neither
+/// ([`crate::io::replace_all`]): a failed write keeps the old model whole, not
+/// new cameras beside old images.
+fn write(dir: &Path, files: [(&str, &[u8]); 2]) -> Result<(), CameraError> {
     crate::io::create_folder(dir).map_err(|e| CameraError::io(dir, e))?;
-    let path = dir.join(name);
-    crate::io::replace_with(&path, |w| w.write_all(bytes)).map_err(|e| CameraError::io(&path, e))
+    let files = files.map(|(name, bytes)| (dir.join(name), bytes));
+    crate::io::replace_all(&files).map_err(|(path, e)| CameraError::io(path, e))
 }
 
 /// Writes `cameras.txt` and `images.txt` into `dir` (created if needed).
@@ -47,7 +47,7 @@ pub fn write_colmap_text(dir: impl AsRef<Path>, cameras: &[Camera]) -> Result<()
             f64::from(c.cy)
         );
     }
-    write(dir, "cameras.txt", out.as_bytes())?;
+    let cameras_txt = out;
 
     let mut out = String::from(
         "# Image list with two lines of data per image:\n#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n#   POINTS2D[] as (X, Y, POINT3D_ID)\n",
@@ -58,7 +58,7 @@ pub fn write_colmap_text(dir: impl AsRef<Path>, cameras: &[Camera]) -> Result<()
         let t = c.translation.as_dvec3();
         out += &format!("{} {qw} {qx} {qy} {qz} {} {} {} {} {}\n\n", k + 1, t.x, t.y, t.z, k + 1, c.name);
     }
-    write(dir, "images.txt", out.as_bytes())
+    write(dir, [("cameras.txt", cameras_txt.as_bytes()), ("images.txt", out.as_bytes())])
 }
 
 /// Writes `cameras.bin` and `images.bin` into `dir` (created if needed).
@@ -88,8 +88,5 @@ pub fn write_colmap_binary(dir: impl AsRef<Path>, cameras: &[Camera]) -> Result<
         ims.push(0);
         ims.extend_from_slice(&0u64.to_le_bytes());
     }
-    for (name, bytes) in [("cameras.bin", cams), ("images.bin", ims)] {
-        write(dir, name, &bytes)?;
-    }
-    Ok(())
+    write(dir, [("cameras.bin", &cams), ("images.bin", &ims)])
 }

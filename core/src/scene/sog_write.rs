@@ -205,22 +205,17 @@ pub(crate) fn refuse_foreign_folder(dir: &Path) -> Result<(), SceneError> {
 }
 
 /// Writes the files into `dir`. A new folder is filled under a temporary name
-/// and renamed into place; in an existing folder each file is replaced
-/// atomically, `meta.json` last, so a reader never sees new metadata with old
-/// textures. An existing folder whose files are not a SOG scene's is refused
+/// and renamed into place; in an existing folder the files are all written
+/// before any replaces its old one ([`crate::io::replace_all`]), `meta.json`
+/// last, so a failed write keeps the old scene whole and a reader never sees
+/// new metadata with old textures. An existing folder whose files are not a SOG scene's is refused
 /// ([`refuse_foreign_folder`]).
 pub(crate) fn write_folder(dir: &Path, files: &SogFiles) -> Result<(), SceneError> {
     if dir.is_dir() {
         refuse_foreign_folder(dir)?;
-        // All or none: a read-only file found midway would leave old and new textures mixed.
-        for (name, _) in files {
-            let path = dir.join(name);
-            crate::io::refuse_read_only(&path).map_err(|e| SceneError::io(&path, e))?;
-        }
-        for (name, bytes) in files {
-            super::atomic_write(&dir.join(name), |w| w.write_all(bytes))?;
-        }
-        return Ok(());
+        // All or none: a read-only file or a full disk midway would leave old and new textures mixed.
+        let files: Vec<_> = files.iter().map(|(name, bytes)| (dir.join(name), bytes.as_slice())).collect();
+        return crate::io::replace_all(&files).map_err(|(path, e)| SceneError::io(path, e));
     }
     let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "sog".into());
     if let Some(parent) = dir.parent() {

@@ -142,6 +142,38 @@ fn a_sog_output_never_replaces_another_folders_files() {
     assert_eq!(load(work.join("meta.json")).expect("load").len(), 12);
 }
 
+#[test]
+fn a_sog_rewrite_that_fails_midway_keeps_the_old_scene_whole() {
+    let dir = scratch("sog_midway");
+    let out = dir.join("scene");
+    std::fs::create_dir_all(&out).expect("dir");
+    save(&out, &sample(10, 0), &SaveOptions::default()).expect("the first scene");
+    let before: Vec<_> =
+        super::sog_write::FILE_NAMES.iter().filter_map(|n| std::fs::read(out.join(n)).ok().map(|b| (*n, b))).collect();
+    assert!(before.len() >= 6, "a SOG scene's files: {}", before.len());
+    // The rotations' temporary cannot be made (a folder holds its name), as a
+    // full disk refuses a file after the first few: before, the files written
+    // until then replaced theirs, a scene of two scenes' textures.
+    let blocked = crate::io::temp_path(&out.join("quats.webp"));
+    std::fs::create_dir(&blocked).expect("a folder");
+    let e = save(&out, &sample(12, 1), &SaveOptions::default()).expect_err("a blocked write");
+    assert!(e.to_string().contains("quats.webp"), "the error names the file: {e}");
+    for (name, bytes) in &before {
+        assert_eq!(&std::fs::read(out.join(name)).expect("kept"), bytes, "{name} was replaced");
+    }
+    assert_eq!(load(out.join("meta.json")).expect("the old scene").len(), 10);
+    std::fs::remove_dir(&blocked).expect("a folder");
+    let left: Vec<_> = std::fs::read_dir(&out)
+        .expect("list")
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(left.is_empty(), "temporaries left: {left:?}");
+    save(&out, &sample(12, 1), &SaveOptions::default()).expect("then replaced");
+    assert_eq!(load(out.join("meta.json")).expect("load").len(), 12);
+}
+
 /// An INRIA file whose opacities and log-scales include ±inf, as
 /// splat-transform writes for an opacity of exactly 1.
 fn with_infinities(dir: &Path) -> (std::path::PathBuf, Gaussians) {
