@@ -647,9 +647,10 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     };
     let result = session.result();
     super::output_folder(&args.out, "--out")?;
-    // The colour-matched scene, for `gast convert --blend` to set a strength later.
+    // The run's scene first: where the disk has room for one scene only, it is
+    // the one kept. Then the colour-matched scene, for `gast convert --blend`
+    // to set a strength later.
     let matched_path = args.out.join(MATCHED_NAME);
-    super::convert::save_scene(&matched_path, session.colour_matched(), &super::convert::SaveArgs::default())?;
     match args.strength.strength().filter(|s| !s.is_full()) {
         Some(strength) => {
             let blended = super::convert::blended(session.colour_matched(), &result, strength, &matched_path)?;
@@ -662,6 +663,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         }
         None => super::convert::save_scene(&args.out.join(&args.scene_name), &result, &args.save)?,
     }
+    super::convert::save_scene(&matched_path, session.colour_matched(), &super::convert::SaveArgs::default())?;
     // The cameras travel with the scene, for the studio and a rerun; an orbit is made again.
     if let Some(source) = &source {
         for line in crate::views::write_cameras_beside(&args.out.join(&args.scene_name), source, session.cameras())? {
