@@ -238,6 +238,37 @@ where
     }
 }
 
+/// The most one decoded image may take: the `image` crate's default limit
+/// (512 MiB), which [`open_image`] keeps. An RGB JPEG of 13,000 × 13,000
+/// pixels fits; a run uses a style at its texture scale (at most 4,096 px
+/// high), so a larger file only costs memory.
+pub const IMAGE_DECODE_LIMIT: u64 = 512 << 20;
+
+/// Decodes an image file (PNG, JPEG, WebP) within [`IMAGE_DECODE_LIMIT`]. One
+/// past it is said with its size and what it would take decoded (`image`
+/// itself only says "Memory limit exceeded"); other errors are the decoder's.
+pub fn open_image(path: &Path) -> Result<image::DynamicImage, String> {
+    image::open(path).map_err(|e| match (&e, decoded_size(path)) {
+        (image::ImageError::Limits(_), Some((w, h, bytes))) if bytes > IMAGE_DECODE_LIMIT => format!(
+            "a {w}x{h} image, which takes {:.2} GiB decoded, more than the {} MiB one image may take here; \
+             downscale it (to about 8,000 px on its longer side)",
+            bytes as f64 / f64::from(1u32 << 30),
+            IMAGE_DECODE_LIMIT >> 20
+        ),
+        _ => e.to_string(),
+    })
+}
+
+/// An image file's width, height and decoded size in bytes, from its header.
+fn decoded_size(path: &Path) -> Option<(u32, u32, u64)> {
+    use image::ImageDecoder;
+    let mut reader = image::ImageReader::open(path).ok()?.with_guessed_format().ok()?;
+    reader.no_limits();
+    let decoder = reader.into_decoder().ok()?;
+    let (w, h) = decoder.dimensions();
+    Some((w, h, decoder.total_bytes()))
+}
+
 /// Writes `bytes` as the whole file, atomically ([`atomic_write`]).
 pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
     atomic_write(path, |w| w.write_all(bytes))
@@ -448,6 +479,40 @@ mod tests {
         assert_eq!(std::fs::read(&a).expect("read back"), b"new a");
         assert_eq!(std::fs::read(&b).expect("read back"), b"new meta");
         assert_eq!(std::fs::read_dir(&dir).expect("list").count(), 2, "a temporary file was left");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn an_image_past_the_decode_limit_is_said_with_its_size() {
+        // A PNG header for 20,000 × 20,000 RGB pixels (1.12 GiB decoded), then no pixels.
+        fn chunk(kind: &[u8; 4], data: &[u8]) -> Vec<u8> {
+            let body = [kind.as_slice(), data].concat();
+            let crc = !body.iter().fold(!0u32, |c, &b| {
+                (0..8).fold(c ^ u32::from(b), |c, _| if c & 1 == 1 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 })
+            });
+            [&(data.len() as u32).to_be_bytes()[..], &body, &crc.to_be_bytes()].concat()
+        }
+        let side = 20_000u32.to_be_bytes();
+        let ihdr = [&side[..], &side, &[8, 2, 0, 0, 0]].concat();
+        let png = [
+            &b"\x89PNG\r\n\x1a\n"[..],
+            &chunk(b"IHDR", &ihdr),
+            &chunk(b"IDAT", &[0x78, 0x9c, 3, 0, 0, 0, 0, 1]),
+            &chunk(b"IEND", &[]),
+        ]
+        .concat();
+        let dir = scratch("big-image");
+        let path = dir.join("big.png");
+        std::fs::write(&path, png).expect("a PNG");
+        let said = open_image(&path).expect_err("past the limit");
+        assert_eq!(
+            said,
+            "a 20000x20000 image, which takes 1.12 GiB decoded, more than the 512 MiB one image may take here; \
+             downscale it (to about 8,000 px on its longer side)"
+        );
+        // An image within the limit decodes.
+        write_png_rgb(&dir.join("small.png"), 3, 2, &[0.5; 18]).expect("a PNG");
+        assert_eq!(open_image(&dir.join("small.png")).expect("decodes").width(), 3);
         std::fs::remove_dir_all(&dir).ok();
     }
 

@@ -91,8 +91,8 @@ impl StudioApp {
 
     /// Loads a style image; on failure the error is shown and the previous style stays.
     pub fn open_style(&mut self, path: &Path) {
-        match image::open(path) {
-            Ok(img) => self.add_style(path.to_path_buf(), img.to_rgb8()),
+        match gast_core::io::open_image(path) {
+            Ok(img) => self.add_style(path.to_path_buf(), img.into_rgb8()),
             Err(e) => {
                 let keep = if self.styles.is_empty() { "no style is open" } else { "keeping the previous style" };
                 self.report(anyhow::anyhow!(

@@ -115,7 +115,7 @@ fn canonical_folders(dataset: &Path, folders: impl Iterator<Item = PathBuf>) -> 
 /// Reads an image as RGB in `[0, 1]`, compositing any alpha channel on `background`.
 pub fn read_rgb(path: &Path, background: [f32; 3]) -> Result<(u32, u32, Vec<f32>), FitDataError> {
     let img =
-        image::open(path).map_err(|e| FitDataError::Image { path: path.to_path_buf(), message: e.to_string() })?;
+        crate::io::open_image(path).map_err(|message| FitDataError::Image { path: path.to_path_buf(), message })?;
     let rgba = img.to_rgba32f();
     let (w, h) = rgba.dimensions();
     let mut rgb = Vec::with_capacity(w as usize * h as usize * 3);

@@ -248,7 +248,7 @@ impl Session {
             )));
         }
         let config = config.resolved(coverage);
-        let ct = ColorTransfer::fit(&survey.covered_rgb, &style.to_f32());
+        let ct = ColorTransfer::fit(&survey.covered_rgb, &style.rgb);
         let mut full = scene;
         ct.apply_to_gaussians(&mut full);
         on_event(Event::Stage { name: "colour matching".into(), seconds: t.elapsed().as_secs_f64() });

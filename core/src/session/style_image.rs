@@ -30,9 +30,9 @@ pub const MIN_SCALED_SIDE: usize = 4;
 impl StyleImage {
     /// Reads any image the `image` crate decodes (PNG, JPEG, WebP) as RGB.
     pub fn open(path: &Path) -> Result<Self, String> {
-        let img = image::open(path)
+        let img = crate::io::open_image(path)
             .map_err(|e| format!("{}: expected an RGB image (PNG, JPEG or WebP), found: {e}", path.display()))?;
-        Self::from_rgb(path, img.to_rgb8())
+        Self::from_rgb(path, img.into_rgb8())
     }
 
     /// The style of a decoded image read from `path` (named in the message),

@@ -16,12 +16,12 @@ use super::resize::resize_bilinear;
 #[derive(Debug, thiserror::Error)]
 pub enum StyleDepthError {
     /// The PNG (or other raster image) could not be read.
-    #[error("{path}: expected a depth image (PNG 8- or 16-bit grey, or EXR), found: {source}")]
+    #[error("{path}: expected a depth image (PNG 8- or 16-bit grey, or EXR), found: {message}")]
     Image {
         /// The file.
         path: String,
         /// What the decoder said.
-        source: image::ImageError,
+        message: String,
     },
     /// The EXR file could not be read.
     #[error("{path}: expected an EXR depth image, found: {source}")]
@@ -175,7 +175,8 @@ impl DepthImage {
         if is_exr {
             return Self::from_exr(path, shown);
         }
-        let img = image::open(path).map_err(|source| StyleDepthError::Image { path: shown.clone(), source })?;
+        let img =
+            crate::io::open_image(path).map_err(|message| StyleDepthError::Image { path: shown.clone(), message })?;
         let luma = img.to_luma16();
         let (width, height) = (luma.width() as usize, luma.height() as usize);
         if width == 0 || height == 0 {
