@@ -373,6 +373,44 @@ fn ctrl_c_stops_a_run_and_keeps_what_it_has() {
     std::fs::remove_dir_all(&out).ok();
 }
 
+/// Ctrl-C during `fit`: the fit stops after its iteration and still writes
+/// the scene as it is, with its cameras.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_stops_a_fit_and_writes_its_scene() {
+    use std::io::{BufRead, BufReader};
+    let Some(fern) = shared_file("data/datasets/fern") else { return };
+    let out = temp("ctrlc-fit");
+    let scene = out.join("f.ply");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gast"))
+        .args(["fit", s(&fern), "--resolution", "64", "--iterations", "1000000", "--out", s(&scene)])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("spawn gast");
+    let mut lines = BufReader::new(child.stderr.take().expect("stderr")).lines();
+    let mut seen = Vec::new();
+    // The last line before the iterations start.
+    for line in lines.by_ref() {
+        let line = line.expect("stderr line");
+        seen.push(line.clone());
+        if line.contains("fitting 1000000 iterations") {
+            break;
+        }
+    }
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let kill = Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill");
+    assert!(kill.success());
+    seen.extend(lines.map_while(Result::ok));
+    let status = child.wait().expect("wait");
+    let text = seen.join("\n");
+    assert!(status.success(), "{text}");
+    assert!(text.contains("stopped at iteration ") && text.contains(" of 1000000 (Ctrl-C)"), "{text}");
+    let fitted = gast_core::scene::load(&scene).expect("the stopped fit's scene");
+    assert!(!fitted.is_empty());
+    assert!(out.join("cameras.json").is_file(), "{text}");
+    std::fs::remove_dir_all(&out).ok();
+}
+
 /// Decodes an animated GIF: its frames' sizes.
 fn gif_frames(path: &Path) -> Vec<(u32, u32)> {
     let file = std::io::BufReader::new(std::fs::File::open(path).expect("the GIF"));

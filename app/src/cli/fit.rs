@@ -3,6 +3,7 @@
 //! datasets without a Gaussian scene can be stylized. It starts from the
 //! dataset's COLMAP SfM points when there are any, else from random Gaussians.
 
+use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -176,6 +177,10 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     let t_fit = Instant::now();
     let pb = progress::bar(u64::from(cfg.iterations), "fit");
     let mut smoothed = None::<f32>;
+    // Ctrl-C stops the fit after its current iteration and writes the scene as it is.
+    let interrupt = super::interrupt::interrupt();
+    let mut stopped_at = None;
+    interrupt.begin();
     let scene = fit::fit_from(&views, initial, &cfg, &mut |p| {
         let l = smoothed.map_or(p.loss, |s| 0.98 * s + 0.02 * p.loss);
         smoothed = Some(l);
@@ -183,8 +188,20 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
             progress::advance_to(&pb, u64::from(p.iteration));
             pb.set_message(format!("L1 {l:.4}, {} Gaussians", p.gaussians));
         }
+        if interrupt.asked() && p.iteration < p.iterations {
+            stopped_at = Some(p.iteration);
+            return ControlFlow::Break(());
+        }
+        ControlFlow::Continue(())
     });
+    interrupt.end();
     pb.finish_and_clear();
+    if let Some(n) = stopped_at {
+        eprintln!(
+            "stopped at iteration {n} of {} (Ctrl-C): writing the scene as it is; Ctrl-C again quits at once",
+            cfg.iterations
+        );
+    }
     let fit_s = t_fit.elapsed().as_secs_f64();
 
     if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {

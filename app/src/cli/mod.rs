@@ -5,6 +5,7 @@ mod check;
 pub mod convert;
 mod demo;
 mod fit;
+mod interrupt;
 pub mod quality;
 mod render;
 mod stylize;

@@ -24,6 +24,7 @@ mod init;
 #[cfg(test)]
 mod tests;
 
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 use glam::{Quat, Vec3};
@@ -237,11 +238,17 @@ pub fn initial_scene_from_points(points: &ColmapPoints, cfg: &FitConfig) -> Gaus
 /// Fits a scene to posed images from random initial Gaussians
 /// ([`initial_scene`]): `views` holds each camera with its RGB image
 /// (`height × width × 3` in `[0, 1]`, already composited on
-/// `cfg.background`). `progress` is called after every iteration.
+/// `cfg.background`). `progress` is called after every iteration; its
+/// `Break` stops the fit there (a user's Ctrl-C), which then ends as after
+/// the last iteration.
 ///
 /// # Panics
 /// When an image's size does not match its camera (a caller bug).
-pub fn fit(views: &[(Camera, Vec<f32>)], cfg: &FitConfig, progress: &mut dyn FnMut(FitProgress)) -> Gaussians {
+pub fn fit(
+    views: &[(Camera, Vec<f32>)],
+    cfg: &FitConfig,
+    progress: &mut dyn FnMut(FitProgress) -> ControlFlow<()>,
+) -> Gaussians {
     let cameras: Vec<Camera> = views.iter().map(|(c, _)| c.clone()).collect();
     fit_from(views, initial_scene(&cameras, cfg), cfg, progress)
 }
@@ -254,7 +261,7 @@ pub fn fit_from(
     views: &[(Camera, Vec<f32>)],
     initial: Gaussians,
     cfg: &FitConfig,
-    progress: &mut dyn FnMut(FitProgress),
+    progress: &mut dyn FnMut(FitProgress) -> ControlFlow<()>,
 ) -> Gaussians {
     for (cam, img) in views {
         assert_eq!(
@@ -325,13 +332,16 @@ pub fn fit_from(
             opt = Optimisers::new(&g);
             stats = GradStats::new(g.len());
         }
-        progress(FitProgress {
+        let said = progress(FitProgress {
             iteration: done,
             iterations: cfg.iterations,
             loss: (loss * f64::from(scale)) as f32,
             gaussians: g.len(),
             elapsed_s: start.elapsed().as_secs_f64(),
         });
+        if said.is_break() {
+            break;
+        }
     }
     // Drop what ended up (nearly) invisible.
     let keep: Vec<u32> =

@@ -55,7 +55,10 @@ fn fits_a_synthetic_scene() {
     let cams: Vec<Camera> = views.iter().map(|v| v.0.clone()).collect();
     let before = mean_psnr(&initial_scene(&cams, &cfg), &views, cfg.background);
     let mut last = None;
-    let g = fit(&views, &cfg, &mut |p| last = Some(p));
+    let g = fit(&views, &cfg, &mut |p| {
+        last = Some(p);
+        ControlFlow::Continue(())
+    });
     let after = mean_psnr(&g, &views, cfg.background);
     let last = last.expect("progress was reported");
     println!("synthetic fit: PSNR {before:.2} dB → {after:.2} dB, {} Gaussians, {:.2} s", g.len(), last.elapsed_s);
@@ -66,6 +69,22 @@ fn fits_a_synthetic_scene() {
     // rounding and scheduling changes, and still fails on a fit that only
     // learns colours or stops early (23.4 dB at 100 iterations).
     assert!(after > 26.0 && after > before + 15.0, "PSNR {before:.2} → {after:.2} dB");
+}
+
+#[test]
+fn a_break_from_progress_stops_the_fit_there() {
+    let target = target_scene();
+    let opts = RenderOptions::default();
+    let views: Vec<(Camera, Vec<f32>)> =
+        cameras().into_iter().map(|c| (c.clone(), raster::render(&target, &c, &opts).rgb)).collect();
+    let cfg = FitConfig { iterations: 400, initial_gaussians: 200, ..FitConfig::default() };
+    let mut seen = Vec::new();
+    let g = fit(&views, &cfg, &mut |p| {
+        seen.push(p.iteration);
+        if p.iteration == 7 { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
+    });
+    assert_eq!(seen, (1..=7).collect::<Vec<_>>(), "iterations after the break");
+    assert!(!g.is_empty(), "the stopped fit's scene");
 }
 
 #[test]

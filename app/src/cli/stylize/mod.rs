@@ -4,7 +4,6 @@
 use std::path::Path;
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use anyhow::Context;
@@ -96,33 +95,6 @@ pub fn resolve_style_depth(
     }
     let source = resolved.source;
     Ok(source)
-}
-
-/// Ctrl-C during the steps: the first stops the run after its current step
-/// (the run still writes its scene, renders and report), a second quits at
-/// once. Before the steps start (loading, a download) Ctrl-C quits at once,
-/// as everywhere else. Installed once per process (a second `stylize` in one
-/// process, as the tests do, shares it).
-struct Interrupt {
-    /// The steps are running: Ctrl-C asks them to stop.
-    stepping: Arc<AtomicBool>,
-    /// Ctrl-C was pressed while stepping.
-    asked: Arc<AtomicBool>,
-}
-
-fn interrupt() -> &'static Interrupt {
-    static FLAGS: std::sync::OnceLock<Interrupt> = std::sync::OnceLock::new();
-    FLAGS.get_or_init(|| {
-        let (stepping, asked) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
-        let (s, a) = (stepping.clone(), asked.clone());
-        // No handler (another one is installed): Ctrl-C quits as before.
-        let _ = ctrlc::set_handler(move || {
-            if !s.load(Ordering::SeqCst) || a.swap(true, Ordering::SeqCst) {
-                std::process::exit(130);
-            }
-        });
-        Interrupt { stepping, asked }
-    })
 }
 
 /// What a user reads when the colour watch sees the object's colours
@@ -370,7 +342,7 @@ fn check_inputs_are_not_outputs(args: &StylizeArgs) -> anyhow::Result<()> {
 /// Runs the stylization and writes the outputs.
 pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let t_all = Instant::now();
-    let interrupt = interrupt();
+    let interrupt = super::interrupt::interrupt();
     check_scene_name(&args.scene_name)?;
     check_inputs_are_not_outputs(&args)?;
     if let Some(p) = &args.save_preset {
@@ -565,8 +537,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let mut steps = Vec::with_capacity(total as usize);
     let mut warned_collapse = false;
     let mut stopped_at = None;
-    interrupt.asked.store(false, Ordering::SeqCst);
-    interrupt.stepping.store(true, Ordering::SeqCst);
+    interrupt.begin();
     while let Some(r) = session.step() {
         let lum = r.colour.map_or(String::new(), |c| format!(" luminance {:.2}x", c.luminance_ratio()));
         pb.set_message(format!(
@@ -612,12 +583,12 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
                 });
             }
         }
-        if interrupt.asked.load(Ordering::SeqCst) && !session.is_done() {
+        if interrupt.asked() && !session.is_done() {
             stopped_at = Some(session.steps_done());
             break;
         }
     }
-    interrupt.stepping.store(false, Ordering::SeqCst);
+    interrupt.end();
     pb.finish_and_clear();
     if let Some(n) = stopped_at {
         eprintln!("stopped at step {n} of {total} (Ctrl-C): writing what the run has; Ctrl-C again quits at once");
