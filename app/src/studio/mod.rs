@@ -531,6 +531,13 @@ impl StudioApp {
                     ));
                 }
                 inspect::JobDone::Scene(path, result) => self.finish_open_scene(&path, result),
+                inspect::JobDone::Style(path, result) => {
+                    let opened = result.is_ok().then(|| format!("opened {}", path.display()));
+                    self.finish_open_style(path, result);
+                    if let Some(notice) = opened {
+                        self.notice = notice;
+                    }
+                }
                 inspect::JobDone::Exported(p, said) => {
                     self.notice = format!("wrote {}", p.display());
                     if said.iter().any(|l| l.starts_with("wrote")) {

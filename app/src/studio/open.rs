@@ -67,40 +67,43 @@ impl StudioApp {
         }
     }
 
-    /// Adds a decoded style image and selects it; one the runs cannot use
-    /// (smaller than 4×4, or too long and narrow) is refused with the error
-    /// shown, and the previous style stays.
+    /// Adds a decoded style image (a generated one) and selects it, as
+    /// [`StudioApp::finish_open_style`] does a file's.
     pub(super) fn add_style(&mut self, path: PathBuf, img: image::RgbImage) {
-        let thumb = image::imageops::thumbnail(&img, 96, (96 * img.height() / img.width().max(1)).max(1));
-        let image = match gast_core::session::StyleImage::from_rgb(&path, img) {
-            Ok(style) => Arc::new(style),
+        let file = inspect::style_file(&path, img);
+        self.finish_open_style(path, file);
+    }
+
+    /// Loads a style image (on a worker thread once the window runs).
+    pub fn open_style(&mut self, path: &Path) {
+        if self.load_in_background {
+            self.notice = format!("loading {}…", path.display());
+            self.jobs.load_style(path.to_path_buf());
+        } else {
+            let result = inspect::read_style_file(path);
+            self.finish_open_style(path.to_path_buf(), result);
+        }
+    }
+
+    /// Puts a read style at the head of the recent strip and selects it; on
+    /// failure (a file this build cannot read, an image the runs cannot use)
+    /// the error is shown and the previous style stays.
+    pub(super) fn finish_open_style(&mut self, path: PathBuf, result: Result<inspect::StyleFile, String>) {
+        let file = match result {
+            Ok(file) => file,
             Err(e) => {
                 let keep = if self.styles.is_empty() { "no style is open" } else { "keeping the previous style" };
                 return self.report(anyhow::anyhow!("{e}; {keep}"));
             }
         };
-        let color = egui::ColorImage::from_rgb([thumb.width() as usize, thumb.height() as usize], thumb.as_raw());
+        let inspect::StyleFile { image, thumb } = file;
         let texture =
-            self.ctx.load_texture(format!("style {}", path.display()), color.clone(), egui::TextureOptions::LINEAR);
+            self.ctx.load_texture(format!("style {}", path.display()), thumb.clone(), egui::TextureOptions::LINEAR);
         let size = [image.width, image.height];
         self.styles.retain(|s| s.path != path);
-        self.styles.insert(0, LoadedStyle { path, image, thumb: color, texture, size });
+        self.styles.insert(0, LoadedStyle { path, image, thumb, texture, size });
         self.styles.truncate(8);
         self.style = Some(0);
-    }
-
-    /// Loads a style image; on failure the error is shown and the previous style stays.
-    pub fn open_style(&mut self, path: &Path) {
-        match gast_core::io::open_image(path) {
-            Ok(img) => self.add_style(path.to_path_buf(), img.into_rgb8()),
-            Err(e) => {
-                let keep = if self.styles.is_empty() { "no style is open" } else { "keeping the previous style" };
-                self.report(anyhow::anyhow!(
-                    "{}: not a style image this build can read (PNG, JPEG, WebP): {e}; {keep}",
-                    path.display()
-                ))
-            }
-        }
     }
 
     pub(super) fn open_generated_styles(&mut self) {

@@ -553,11 +553,12 @@ fn dropped_styles_and_scenes_open() {
         Arc::new(TestDrop(dir.join(assets::DEMO_STYLES[1]))),
         Arc::new(TestDrop(dir.join(assets::DEMO_SCENE))),
         Arc::new(TestDrop(dir.join("no-such-file.ply"))),
+        Arc::new(TestDrop(dir.join("no-such-style.jpg"))),
     ];
     harness.state_mut().load_in_background = true;
     harness.input_mut().dropped_files = dropped;
     harness.step();
-    // Scenes load on a worker thread: wait for both results.
+    // Scenes and styles load on worker threads: wait for all four results.
     for _ in 0..200 {
         if harness.state().jobs.running == 0 {
             break;
@@ -570,8 +571,11 @@ fn dropped_styles_and_scenes_open() {
     assert_eq!(app.styles.len(), styles_before + 1, "the dropped style joins the recent strip");
     assert_eq!(app.style, Some(0), "and becomes the current style");
     assert!(app.styles[0].path.ends_with(assets::DEMO_STYLES[1]));
-    assert_eq!(app.errors.len(), 1, "{:?}", app.errors);
-    assert!(app.errors[0].contains("no-such-file.ply"), "{}", app.errors[0]);
+    assert_eq!(app.errors.len(), 2, "{:?}", app.errors);
+    let said = app.errors.join("\n");
+    assert!(said.contains("no-such-file.ply"), "{said}");
+    assert!(said.contains("no-such-style.jpg: not a style image this build can read"), "{said}");
+    assert!(said.contains("keeping the previous style"), "{said}");
     assert!(app.scene.as_ref().is_some_and(|s| s.scene.version > 1), "the dropped scene replaced the first one");
 }
 
