@@ -314,16 +314,42 @@ fn a_bad_camera_file_fails_before_the_depth_model_is_looked_for() {
     std::fs::remove_dir_all(&out).ok();
 }
 
+/// Runs gast with `args`, sends it Ctrl-C (SIGINT) two seconds after it
+/// printed a line containing `before` (the last before its loop starts), and
+/// returns its exit status and everything it printed.
+#[cfg(unix)]
+fn interrupted(args: &[&str], before: &str) -> (std::process::ExitStatus, String) {
+    use std::io::{BufRead, BufReader};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gast"))
+        .args(args)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("spawn gast");
+    let mut lines = BufReader::new(child.stderr.take().expect("stderr")).lines();
+    let mut seen = Vec::new();
+    for line in lines.by_ref() {
+        let line = line.expect("stderr line");
+        seen.push(line.clone());
+        if line.contains(before) {
+            break;
+        }
+    }
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let kill = Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill");
+    assert!(kill.success());
+    seen.extend(lines.map_while(Result::ok));
+    (child.wait().expect("wait"), seen.join("\n"))
+}
+
 /// Ctrl-C during `stylize`: the run stops after its step and still writes the
 /// scene, the renders and a report that says where it stopped.
 #[cfg(unix)]
 #[test]
 fn ctrl_c_stops_a_run_and_keeps_what_it_has() {
-    use std::io::{BufRead, BufReader};
     let Some((scene, style, weights)) = guitar_with("block2.jpg") else { return };
     let out = temp("ctrlc");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_gast"))
-        .args([
+    let (status, text) = interrupted(
+        &[
             "stylize",
             s(&scene),
             s(&style),
@@ -341,26 +367,9 @@ fn ctrl_c_stops_a_run_and_keeps_what_it_has() {
             "1",
             "--depth-provider",
             "heuristic",
-        ])
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("spawn gast");
-    let mut lines = BufReader::new(child.stderr.take().expect("stderr")).lines();
-    let mut seen = Vec::new();
-    // The last line before the steps start.
-    for line in lines.by_ref() {
-        let line = line.expect("stderr line");
-        seen.push(line.clone());
-        if line.contains("object recipe") {
-            break;
-        }
-    }
-    std::thread::sleep(std::time::Duration::from_secs(2));
-    let kill = Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill");
-    assert!(kill.success());
-    seen.extend(lines.map_while(Result::ok));
-    let status = child.wait().expect("wait");
-    let text = seen.join("\n");
+        ],
+        "object recipe",
+    );
     assert!(status.success(), "{text}");
     assert!(text.contains("stopped at step"), "{text}");
     let report: serde_json::Value =
@@ -378,31 +387,13 @@ fn ctrl_c_stops_a_run_and_keeps_what_it_has() {
 #[cfg(unix)]
 #[test]
 fn ctrl_c_stops_a_fit_and_writes_its_scene() {
-    use std::io::{BufRead, BufReader};
     let Some(fern) = shared_file("data/datasets/fern") else { return };
     let out = temp("ctrlc-fit");
     let scene = out.join("f.ply");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_gast"))
-        .args(["fit", s(&fern), "--resolution", "64", "--iterations", "1000000", "--out", s(&scene)])
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("spawn gast");
-    let mut lines = BufReader::new(child.stderr.take().expect("stderr")).lines();
-    let mut seen = Vec::new();
-    // The last line before the iterations start.
-    for line in lines.by_ref() {
-        let line = line.expect("stderr line");
-        seen.push(line.clone());
-        if line.contains("fitting 1000000 iterations") {
-            break;
-        }
-    }
-    std::thread::sleep(std::time::Duration::from_secs(2));
-    let kill = Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill");
-    assert!(kill.success());
-    seen.extend(lines.map_while(Result::ok));
-    let status = child.wait().expect("wait");
-    let text = seen.join("\n");
+    let (status, text) = interrupted(
+        &["fit", s(&fern), "--resolution", "64", "--iterations", "1000000", "--out", s(&scene)],
+        "fitting 1000000 iterations",
+    );
     assert!(status.success(), "{text}");
     assert!(text.contains("stopped at iteration ") && text.contains(" of 1000000 (Ctrl-C)"), "{text}");
     let fitted = gast_core::scene::load(&scene).expect("the stopped fit's scene");
