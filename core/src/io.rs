@@ -1,6 +1,8 @@
 //! Writing outputs safely: every file goes to a temporary sibling first and is
-//! renamed into place, so an existing file is never half-overwritten, plus the
-//! image formats the studio exports (PNG for colour, EXR for depth).
+//! renamed into place, so an existing file is never half-overwritten, and
+//! files that belong together are replaced all or none ([`replace_all`]);
+//! plus the image formats the studio exports (PNG for colour, EXR for depth),
+//! and reading images within the decoder's memory limit ([`open_image`]).
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
