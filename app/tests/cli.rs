@@ -43,6 +43,12 @@ fn help_lists_every_subcommand() {
     for sub in ["render", "stylize", "check", "bench"] {
         assert!(text.contains(sub), "--help does not mention {sub}:\n{text}");
     }
+    // The long-running commands say what Ctrl-C does.
+    for sub in ["stylize", "fit"] {
+        let o = gast(&[sub, "--help"]);
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(text.contains("Ctrl-C during the") && text.contains("a second Ctrl-C quits"), "{sub} --help:\n{text}");
+    }
 }
 
 #[test]

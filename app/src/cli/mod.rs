@@ -64,12 +64,20 @@ pub enum Command {
     /// Stylize a scene with a style image: colour matching, then the K-cycle
     /// colour/geometry optimisation; writes the stylized .ply, before/after
     /// renders with depth, and report.json.
+    ///
+    /// Ctrl-C during the steps stops the run after its current step and still
+    /// writes the scene, the renders and the report (`stopped_at`); a second
+    /// Ctrl-C quits at once.
     Stylize(Box<stylize::StylizeArgs>),
     /// Convert a scene between INRIA .ply, PlayCanvas .compressed.ply, Niantic .spz
     /// and SOG (folder or .sog); the output's name picks the format.
     Convert(convert::ConvertArgs),
     /// Fit a 3DGS scene to posed images (transforms.json, COLMAP, LLFF poses_bounds.npy, cameras.json)
     /// with the CPU rasterizer; writes the .ply and optional preview renders.
+    ///
+    /// Ctrl-C during the fit stops it after its current iteration and still
+    /// writes the scene as it is, with its cameras; a second Ctrl-C quits at
+    /// once.
     Fit(fit::FitArgs),
     /// Compare the project's numerics with reference files.
     #[command(subcommand)]
