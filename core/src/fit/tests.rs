@@ -40,12 +40,16 @@ fn cameras() -> Vec<Camera> {
         .collect()
 }
 
-#[test]
-fn fits_a_synthetic_scene() {
+/// The target scene's renders from [`cameras`], the views a fit is given.
+fn target_views() -> Vec<(Camera, Vec<f32>)> {
     let target = target_scene();
     let opts = RenderOptions::default();
-    let views: Vec<(Camera, Vec<f32>)> =
-        cameras().into_iter().map(|c| (c.clone(), raster::render(&target, &c, &opts).rgb)).collect();
+    cameras().into_iter().map(|c| (c.clone(), raster::render(&target, &c, &opts).rgb)).collect()
+}
+
+#[test]
+fn fits_a_synthetic_scene() {
+    let views = target_views();
     let cfg = FitConfig {
         iterations: 400,
         initial_gaussians: 1000,
@@ -73,10 +77,7 @@ fn fits_a_synthetic_scene() {
 
 #[test]
 fn a_break_from_progress_stops_the_fit_there() {
-    let target = target_scene();
-    let opts = RenderOptions::default();
-    let views: Vec<(Camera, Vec<f32>)> =
-        cameras().into_iter().map(|c| (c.clone(), raster::render(&target, &c, &opts).rgb)).collect();
+    let views = target_views();
     let cfg = FitConfig { iterations: 400, initial_gaussians: 200, ..FitConfig::default() };
     let mut seen = Vec::new();
     let g = fit(&views, &cfg, &mut |p| {
