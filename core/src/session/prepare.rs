@@ -147,12 +147,13 @@ pub fn learned_style_depth(
     let mut gpu_failure = None;
     let mut compute = || {
         let net = DepthAnything::load_path(&path)?;
-        let (rgb, h, w) = (style.to_f32(), style.height, style.width);
-        let Some(ctx) = gpu else { return Ok(net.depth_image(&rgb, h, w)) };
+        // The 8-bit image is read in place by the resize to the network's input.
+        let (rgb, h, w) = (&style.rgb[..], style.height, style.width);
+        let Some(ctx) = gpu else { return Ok(net.depth_image(rgb, h, w)) };
         let on_gpu = GpuDepthNet::new(ctx, net);
-        Ok(on_gpu.depth_image(ctx, &rgb, h, w).unwrap_or_else(|e| {
+        Ok(on_gpu.depth_image(ctx, rgb, h, w).unwrap_or_else(|e| {
             gpu_failure = Some(format!("the depth network failed on the GPU ({e}); ran it on the CPU"));
-            on_gpu.cpu().depth_image(&rgb, h, w)
+            on_gpu.cpu().depth_image(rgb, h, w)
         }))
     };
     let result = match cache {

@@ -8,6 +8,7 @@
 //! clamp of the renderer.
 
 use crate::scene::{Gaussians, SH_C0};
+use crate::vision::resize::Unit;
 
 /// The affine colour map `x ↦ A x + b` (RGB, values in [0, 1]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -32,8 +33,8 @@ impl ColorTransfer {
     /// `A = C_s^{1/2} C_c^{-1/2}` from population covariances (symmetric square
     /// roots by eigen-decomposition, eigenvalues clamped to [1e-8, 1e8]),
     /// `b = μ_s − A μ_c`. Returns the identity when either set is empty. The
-    /// style may be the 8-bit image itself ([`Channel`]), read in place.
-    pub fn fit<S: Channel>(content: &[f32], style: &[S]) -> Self {
+    /// style may be the 8-bit image itself ([`Unit`]), read in place.
+    pub fn fit<S: Unit>(content: &[f32], style: &[S]) -> Self {
         if content.len() < 3 || style.len() < 3 {
             return Self::identity();
         }
@@ -90,40 +91,19 @@ impl ColorTransfer {
     }
 }
 
-/// A colour value as [`ColorTransfer::fit`] reads it, in [0, 1].
-pub trait Channel: Copy {
-    /// The value in [0, 1].
-    fn unit(self) -> f64;
-}
-
-impl Channel for f32 {
-    fn unit(self) -> f64 {
-        f64::from(self)
-    }
-}
-
-/// An 8-bit value over 255, divided in `f32` as the style's maps are, so the
-/// fit equals the one on the image converted to `f32` (a 12,000 × 12,000
-/// style took 1.6 GiB for that copy).
-impl Channel for u8 {
-    fn unit(self) -> f64 {
-        f64::from(f32::from(self) / 255.0)
-    }
-}
-
 /// Mean and population covariance of RGB triples, in f64.
-fn mean_cov<T: Channel>(px: &[T]) -> ([f64; 3], [[f64; 3]; 3]) {
+fn mean_cov<T: Unit>(px: &[T]) -> ([f64; 3], [[f64; 3]; 3]) {
     let n = (px.len() / 3) as f64;
     let mut mu = [0f64; 3];
     for p in px.chunks_exact(3) {
         for i in 0..3 {
-            mu[i] += p[i].unit();
+            mu[i] += f64::from(p[i].unit());
         }
     }
     mu.iter_mut().for_each(|m| *m /= n);
     let mut cov = [[0f64; 3]; 3];
     for p in px.chunks_exact(3) {
-        let d: [f64; 3] = std::array::from_fn(|i| p[i].unit() - mu[i]);
+        let d: [f64; 3] = std::array::from_fn(|i| f64::from(p[i].unit()) - mu[i]);
         for i in 0..3 {
             for j in 0..3 {
                 cov[i][j] += d[i] * d[j];

@@ -219,10 +219,31 @@ pub fn downscale_half_backward(v_out: &[f32], h: usize, w: usize, c: usize) -> V
 /// Source taps of one output sample along one axis: `(source index, weight)`.
 pub(crate) type Taps = Vec<Vec<(usize, f32)>>;
 
+/// A channel value an image holds, read as `f32` in [0, 1]: an `f32` as it
+/// is, an 8-bit value over 255 (as `StyleImage::to_f32` divides), so an
+/// 8-bit style is read in place rather than copied to `f32` first (a
+/// 12,000 × 12,000 style took 1.6 GiB for that copy).
+pub trait Unit: Copy + Send + Sync {
+    /// The value in [0, 1].
+    fn unit(self) -> f32;
+}
+
+impl Unit for f32 {
+    fn unit(self) -> f32 {
+        self
+    }
+}
+
+impl Unit for u8 {
+    fn unit(self) -> f32 {
+        f32::from(self) / 255.0
+    }
+}
+
 /// Applies per-axis taps to an HWC image: columns first, then rows, each
 /// pass parallel over output rows (a style photo brought to the depth
 /// network's size is millions of pixels with a dozen taps each).
-fn resample_separable(src: &[f32], (h, w, c): (usize, usize, usize), ty: &Taps, tx: &Taps) -> Vec<f32> {
+fn resample_separable<T: Unit>(src: &[T], (h, w, c): (usize, usize, usize), ty: &Taps, tx: &Taps) -> Vec<f32> {
     assert_eq!(src.len(), h * w * c, "resample: image size mismatch");
     let ow = tx.len();
     if h == 0 || w == 0 || ow == 0 || c == 0 {
@@ -232,7 +253,7 @@ fn resample_separable(src: &[f32], (h, w, c): (usize, usize, usize), ty: &Taps, 
     mid.par_chunks_mut(ow * c).zip(src.par_chunks(w * c)).for_each(|(mid_row, src_row)| {
         for (out, taps) in mid_row.chunks_exact_mut(c).zip(tx) {
             for &(x, wt) in taps {
-                out.iter_mut().zip(&src_row[x * c..(x + 1) * c]).for_each(|(o, &v)| *o += wt * v);
+                out.iter_mut().zip(&src_row[x * c..(x + 1) * c]).for_each(|(o, &v)| *o += wt * v.unit());
             }
         }
     });
@@ -302,7 +323,7 @@ fn pil_cubic_taps(src: usize, dst: usize) -> Taps {
 /// Bicubic resize with antialiasing as Pillow's `Image.resize(BICUBIC)` (and
 /// torchvision's `antialias=True`) computes it, in floating point: what the
 /// `transformers` image processors use to bring an image to the network's size.
-pub fn resize_bicubic_antialias(src: &[f32], h: usize, w: usize, c: usize, oh: usize, ow: usize) -> Vec<f32> {
+pub fn resize_bicubic_antialias<T: Unit>(src: &[T], h: usize, w: usize, c: usize, oh: usize, ow: usize) -> Vec<f32> {
     resample_separable(src, (h, w, c), &pil_cubic_taps(h, oh), &pil_cubic_taps(w, ow))
 }
 
@@ -411,6 +432,19 @@ mod tests {
             let img = ramp(6, 5, 3);
             let same = f(&img, 6, 5, 3, 6, 5);
             assert!(img.iter().zip(&same).all(|(a, b)| (a - b).abs() < 1e-6));
+        }
+    }
+
+    #[test]
+    fn antialias_reads_8_bit_values_as_their_f32_copy() {
+        // The depth network's resize reads a style's bytes in place: the same
+        // bits as the resize of the copy `StyleImage::to_f32` made before.
+        let (h, w) = (37, 53);
+        let bytes: Vec<u8> = (0..h * w * 3).map(|i| (i * 97 % 251) as u8).collect();
+        let copy: Vec<f32> = bytes.iter().map(|&v| f32::from(v) / 255.0).collect();
+        for (oh, ow) in [(12, 17), (37, 53), (50, 80)] {
+            let from_bytes = resize_bicubic_antialias(&bytes, h, w, 3, oh, ow);
+            assert_eq!(from_bytes, resize_bicubic_antialias(&copy, h, w, 3, oh, ow), "{oh}x{ow}");
         }
     }
 

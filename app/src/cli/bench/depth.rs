@@ -80,7 +80,7 @@ fn time_gpu_depth(
     let (ih, iw) = input_size(h, w, INPUT_SIZE, net.cpu().config().patch_size);
     let on = || format!("the depth network on {}", ctx.describe());
     let (t, c) = (Instant::now(), cpu_seconds());
-    net.estimate_rgb(ctx, &style.to_f32(), h, w).with_context(on)?;
+    net.depth_image(ctx, &style.rgb[..], h, w).with_context(on)?;
     let (per_style, per_style_cpu) = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
     let x = vec![0.25f32; 3 * INPUT_SIZE * INPUT_SIZE];
     let mut walls = Vec::with_capacity(reps);
@@ -128,9 +128,13 @@ pub(super) fn time_style_depth(
     let load_s = t.elapsed().as_secs_f64();
     let (h, w) = (style.height, style.width);
     let (ih, iw) = input_size(h, w, INPUT_SIZE, model.config().patch_size);
+    // What a run computes once per style: the estimate at the network's size.
+    let (_, before_mib) = super::memory_mib();
+    super::reset_peak_memory();
     let (t, c) = (Instant::now(), cpu_seconds());
-    let _ = model.estimate_rgb(&style.to_f32(), h, w);
+    let _ = model.depth_image(&style.rgb[..], h, w);
     let (per_style, per_style_cpu) = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
+    let (peak_mib, _) = super::memory_mib();
     let x = vec![0.25f32; 3 * INPUT_SIZE * INPUT_SIZE];
     let (walls, cpus): (Vec<f64>, Vec<f64>) = (0..reps)
         .map(|_| {
@@ -141,7 +145,7 @@ pub(super) fn time_style_depth(
         .unzip();
     let forward = (median(walls), median(cpus));
     println!(
-        "style depth (Depth Anything V2, {what}): load {load_s:.2} s; per style {per_style:.2} s wall, {per_style_cpu:.2} s CPU ({w}×{h} image, network input {iw}×{ih}); forward at {INPUT_SIZE}×{INPUT_SIZE}: {:.2} s wall, {:.2} s CPU (medians of {reps})",
+        "style depth (Depth Anything V2, {what}): load {load_s:.2} s; per style {per_style:.2} s wall, {per_style_cpu:.2} s CPU ({w}×{h} image, network input {iw}×{ih}), peak resident {peak_mib:.0} MiB ({before_mib:.0} MiB before it); forward at {INPUT_SIZE}×{INPUT_SIZE}: {:.2} s wall, {:.2} s CPU (medians of {reps})",
         forward.0, forward.1
     );
     if stages {

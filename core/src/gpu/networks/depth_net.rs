@@ -27,7 +27,7 @@ use super::gemm::{Gemm, GemmSpec, Strided};
 use super::{Bind, GpuContext, GpuError, Kernel};
 use crate::vision::depth::ops::Norm;
 use crate::vision::depth::{DepthAnything, INPUT_SIZE, input_size};
-use crate::vision::resize::resize_bicubic;
+use crate::vision::resize::{Unit, resize_bicubic};
 use crate::vision::style_depth::DepthImage;
 
 /// Largest attention-score block, in f32 elements (64 MiB), below lavapipe's
@@ -168,9 +168,15 @@ impl GpuDepthNet {
     }
 
     /// [`DepthAnything::depth_image`] with the network on the GPU: the
-    /// estimate of an RGB image (HWC in [0, 1], `h × w`) at the network's
-    /// input size, near = larger.
-    pub fn depth_image(&self, ctx: &GpuContext, rgb: &[f32], h: usize, w: usize) -> Result<DepthImage, GpuError> {
+    /// estimate of an RGB image (HWC, `f32` in [0, 1] or 8-bit, [`Unit`],
+    /// `h × w`) at the network's input size, near = larger.
+    pub fn depth_image<T: Unit>(
+        &self,
+        ctx: &GpuContext,
+        rgb: &[T],
+        h: usize,
+        w: usize,
+    ) -> Result<DepthImage, GpuError> {
         let (ih, iw) = input_size(h, w, INPUT_SIZE, self.net.config().patch_size);
         let values = self.forward(ctx, &self.net.preprocess(rgb, h, w, ih, iw), ih, iw)?;
         Ok(DepthImage { values, height: ih, width: iw, near_is_larger: true })
@@ -178,7 +184,7 @@ impl GpuDepthNet {
 
     /// Relative inverse depth of an RGB image at its own size, as
     /// [`DepthAnything::estimate_rgb`] (the resize back on the CPU).
-    pub fn estimate_rgb(&self, ctx: &GpuContext, rgb: &[f32], h: usize, w: usize) -> Result<Vec<f32>, GpuError> {
+    pub fn estimate_rgb<T: Unit>(&self, ctx: &GpuContext, rgb: &[T], h: usize, w: usize) -> Result<Vec<f32>, GpuError> {
         let d = self.depth_image(ctx, rgb, h, w)?;
         Ok(resize_bicubic(&d.values, d.height, d.width, 1, h, w))
     }

@@ -30,7 +30,7 @@ pub use config::{BackboneConfig, DepthConfig};
 pub use profile::StageTimes;
 pub use resolve::{DepthModelLocations, checkpoint_digest, resolve_depth_model};
 
-use super::resize::{resize_bicubic, resize_bicubic_antialias};
+use super::resize::{Unit, resize_bicubic, resize_bicubic_antialias};
 use super::style_depth::{DepthImage, StyleDepthProvider};
 use super::weights::WeightsError;
 use profile::Clock;
@@ -222,9 +222,10 @@ impl DepthAnything {
         self.dpt.forward(&stages, h / p, w / p, clock)
     }
 
-    /// Relative inverse depth of an RGB image (HWC in [0, 1], `h × w`) at its
-    /// own size, through the reference's pre- and post-processing.
-    pub fn estimate_rgb(&self, rgb: &[f32], h: usize, w: usize) -> Vec<f32> {
+    /// Relative inverse depth of an RGB image (HWC, `f32` in [0, 1] or 8-bit,
+    /// [`Unit`], `h × w`) at its own size, through the reference's pre- and
+    /// post-processing.
+    pub fn estimate_rgb<T: Unit>(&self, rgb: &[T], h: usize, w: usize) -> Vec<f32> {
         let (ih, iw) = input_size(h, w, INPUT_SIZE, self.config.patch_size);
         let depth = self.forward(&self.preprocess(rgb, h, w, ih, iw), ih, iw);
         resize_bicubic(&depth, ih, iw, 1, h, w)
@@ -232,7 +233,7 @@ impl DepthAnything {
 
     /// The image resized to `ih × iw` (bicubic with antialiasing) and
     /// ImageNet-normalised, as CHW.
-    pub(crate) fn preprocess(&self, rgb: &[f32], h: usize, w: usize, ih: usize, iw: usize) -> Vec<f32> {
+    pub(crate) fn preprocess<T: Unit>(&self, rgb: &[T], h: usize, w: usize, ih: usize, iw: usize) -> Vec<f32> {
         const MEAN: [f32; 3] = [0.485, 0.456, 0.406];
         const STD: [f32; 3] = [0.229, 0.224, 0.225];
         let resized = resize_bicubic_antialias(rgb, h, w, 3, ih, iw);
@@ -248,7 +249,7 @@ impl DepthAnything {
     /// The estimate as a depth image (near = larger) at the network's input
     /// size, to compute once per style: [`DepthImage`] resizes it to every
     /// texture scale the style is used at, and polarity applies afterwards.
-    pub fn depth_image(&self, rgb: &[f32], h: usize, w: usize) -> DepthImage {
+    pub fn depth_image<T: Unit>(&self, rgb: &[T], h: usize, w: usize) -> DepthImage {
         let (ih, iw) = input_size(h, w, INPUT_SIZE, self.config.patch_size);
         let values = self.forward(&self.preprocess(rgb, h, w, ih, iw), ih, iw);
         DepthImage { values, height: ih, width: iw, near_is_larger: true }

@@ -26,6 +26,24 @@ fn golden_forward_matches() -> Result<(), DepthModelError> {
     Ok(())
 }
 
+#[test]
+fn preprocess_reads_a_style_in_place_as_its_f32_copy() -> Result<(), Box<dyn std::error::Error>> {
+    // A run hands the network the style's 8-bit pixels (a 12,000-px style's
+    // f32 copy took 1.6 GiB); the input must be the copy's to the bit.
+    let (Some(p), Some(style)) = (shared("golden/depth/depth_seed1.safetensors"), shared("data/styles/hydrangea.jpg"))
+    else {
+        return Ok(());
+    };
+    let model = DepthAnything::load_with_metadata_config(&p)?;
+    let style = crate::session::StyleImage::open(&style)?;
+    let (h, w) = (style.height, style.width);
+    let (ih, iw) = input_size(h, w, INPUT_SIZE, model.config().patch_size);
+    let from_bytes = model.preprocess(&style.rgb[..], h, w, ih, iw);
+    assert_eq!(from_bytes.len(), 3 * ih * iw);
+    assert!(from_bytes == model.preprocess(&style.to_f32(), h, w, ih, iw), "the inputs differ");
+    Ok(())
+}
+
 /// The golden file's bytes with its header edited by `edit` (data unchanged).
 fn edited(golden: &[u8], edit: impl FnOnce(&mut serde_json::Map<String, serde_json::Value>)) -> Vec<u8> {
     let n = u64::from_le_bytes(golden[..8].try_into().unwrap_or([0; 8])) as usize;
