@@ -33,13 +33,14 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Open the studio window, optionally with a scene and a style image
+    /// Open the studio window, optionally with a scene and style images
     /// (drag files onto the window to open others).
     Studio {
         /// A scene (.ply, .compressed.ply, .spz, SOG); the demo scene when absent.
         scene: Option<PathBuf>,
-        /// A style image; the first demo style when absent.
-        style: Option<PathBuf>,
+        /// Style images, into the strip of recent styles (the last one
+        /// selected, eight at most); the first demo style when none is given.
+        styles: Vec<PathBuf>,
         /// Where runs compute: auto (a hardware GPU when there is one, else the
         /// CPU), cpu, or gpu (the window's adapter even when it is a software one).
         #[arg(long, default_value_t = gast_core::gpu::DeviceChoice::Auto)]
@@ -152,8 +153,8 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     };
     match command {
-        Command::Studio { scene, style, device, headless } => {
-            let args = studio::StudioArgs { scene, style, device };
+        Command::Studio { scene, styles, device, headless } => {
+            let args = studio::StudioArgs { scene, styles, device };
             if headless {
                 studio::run_headless(args, Some(studio::worker::starter()))?;
             } else {

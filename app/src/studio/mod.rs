@@ -50,8 +50,9 @@ use viewport::{FrameStats, LiveRef, SceneRef, SharedGaussians, ViewportCallback,
 pub struct StudioArgs {
     /// A scene file; the demo scene when absent.
     pub scene: Option<PathBuf>,
-    /// A style image; the first demo style when absent.
-    pub style: Option<PathBuf>,
+    /// Style images, opened in order (the last one selected); the first
+    /// demo style when none is given.
+    pub styles: Vec<PathBuf>,
     /// Where runs compute at first (the device selector changes it).
     pub device: gast_core::gpu::DeviceChoice,
 }
@@ -65,8 +66,13 @@ struct LoadedScene {
 /// A style image and its thumbnail.
 struct LoadedStyle {
     path: PathBuf,
-    /// The whole image, handed to the worker when a run starts.
-    image: Arc<gast_core::session::StyleImage>,
+    /// The whole image, which a run and the style's maps take: kept while the
+    /// style is selected, and always for a generated one; a file's is let go
+    /// when another style is picked and read again when it is picked back
+    /// (eight recent styles at full size held 432 MB each at 12,000 px).
+    image: Option<Arc<gast_core::session::StyleImage>>,
+    /// Read from a file, which can be read again.
+    from_file: bool,
     thumb: egui::ColorImage,
     texture: egui::TextureHandle,
     size: [usize; 2],
@@ -355,13 +361,13 @@ impl StudioApp {
             Some(p) => app.open_scene(p),
             None => app.open_demo_scene(),
         }
-        let style = args.style.clone().or_else(|| {
-            let p = assets::source_assets_dir().join(assets::DEMO_STYLES[0]);
-            p.exists().then_some(p)
-        });
-        match style {
-            Some(p) => app.open_style(&p),
-            None => app.open_generated_styles(),
+        let demo = assets::source_assets_dir().join(assets::DEMO_STYLES[0]);
+        if !args.styles.is_empty() {
+            args.styles.iter().for_each(|p| app.open_style(p));
+        } else if demo.exists() {
+            app.open_style(&demo);
+        } else {
+            app.open_generated_styles();
         }
         app.load_in_background = true;
         app
@@ -609,8 +615,8 @@ impl StudioApp {
         if have || self.style_maps_requested.as_ref() == Some(&key) {
             return;
         }
+        let Some(image) = style.image.clone() else { return };
         self.style_maps_requested = Some(key.clone());
-        let image = style.image.clone();
         self.jobs.style_maps(key, image);
     }
 

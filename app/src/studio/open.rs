@@ -72,6 +72,31 @@ impl StudioApp {
     pub(super) fn add_style(&mut self, path: PathBuf, img: image::RgbImage) {
         let file = inspect::style_file(&path, img);
         self.finish_open_style(path, file);
+        if let Some(s) = self.styles.first_mut() {
+            s.from_file = false;
+        }
+    }
+
+    /// Selects the `k`-th recent style: at once when its image is held, else
+    /// once its file is read again (then at the head of the strip).
+    pub(super) fn select_style(&mut self, k: usize) {
+        let Some(s) = self.styles.get(k) else { return };
+        if s.image.is_some() {
+            self.style = Some(k);
+            self.release_unselected_styles();
+        } else {
+            let path = s.path.clone();
+            self.open_style(&path);
+        }
+    }
+
+    /// Lets go of the images of the styles read from files and not selected.
+    fn release_unselected_styles(&mut self) {
+        for (k, s) in self.styles.iter_mut().enumerate() {
+            if Some(k) != self.style && s.from_file {
+                s.image = None;
+            }
+        }
     }
 
     /// Loads a style image (on a worker thread once the window runs).
@@ -101,9 +126,10 @@ impl StudioApp {
             self.ctx.load_texture(format!("style {}", path.display()), thumb.clone(), egui::TextureOptions::LINEAR);
         let size = [image.width, image.height];
         self.styles.retain(|s| s.path != path);
-        self.styles.insert(0, LoadedStyle { path, image, thumb, texture, size });
+        self.styles.insert(0, LoadedStyle { path, image: Some(image), from_file: true, thumb, texture, size });
         self.styles.truncate(8);
         self.style = Some(0);
+        self.release_unselected_styles();
     }
 
     pub(super) fn open_generated_styles(&mut self) {

@@ -199,8 +199,8 @@ impl StudioApp {
                     pick = Some(k);
                 }
             }
-            if pick.is_some() {
-                self.style = pick;
+            if let Some(k) = pick {
+                self.select_style(k);
             }
         });
         if let Some(s) = self.style.and_then(|k| self.styles.get(k)) {
@@ -360,9 +360,11 @@ impl StudioApp {
     }
 
     pub(super) fn start_run(&mut self) {
-        let (Some(starter), Some(scene), Some(style)) =
-            (&self.starter, &self.scene, self.style.and_then(|k| self.styles.get(k)))
-        else {
+        let (Some(starter), Some(scene), Some((style, image))) = (
+            &self.starter,
+            &self.scene,
+            self.style.and_then(|k| self.styles.get(k)).and_then(|s| Some((s, s.image.clone()?))),
+        ) else {
             return;
         };
         let problems = self.config.problems();
@@ -373,7 +375,7 @@ impl StudioApp {
         let ctx = self.ctx.clone();
         let request = StartRequest {
             scene: scene.scene.gaussians.to_arc(),
-            style: style.image.clone(),
+            style: image,
             style_path: style.path.clone(),
             style_depth_image: self.style_depth_images.get(&style.path).cloned(),
             config: self.config.clone(),

@@ -580,6 +580,38 @@ fn dropped_styles_and_scenes_open() {
 }
 
 #[test]
+fn recent_styles_hold_the_selected_image_only() {
+    let (Some(wave), Some(fire)) = (shared_file("data/styles/wave.jpg"), shared_file("data/styles/fire.jpg")) else {
+        panic!("the shared styles wave.jpg and fire.jpg are needed (set GAST_SHARED)");
+    };
+    let mut app = test_app();
+    let generated = PathBuf::from("generated ramp");
+    app.add_style(
+        generated.clone(),
+        image::RgbImage::from_fn(64, 48, |x, y| image::Rgb([x as u8 * 4, y as u8 * 5, 90])),
+    );
+    app.open_style(&wave);
+    app.open_style(&fire);
+    let held = |app: &StudioApp, p: &Path| app.styles.iter().find(|s| s.path == p).map(|s| s.image.is_some());
+    assert_eq!((app.style, app.styles[0].path.clone()), (Some(0), fire.clone()));
+    assert_eq!(held(&app, &fire), Some(true));
+    assert_eq!(held(&app, &wave), Some(false), "a file's style not selected lets its image go");
+    assert_eq!(held(&app, &generated), Some(true), "a generated style, which cannot be read again, keeps its own");
+    // Picking it back reads the file again and puts it at the head.
+    let k = app.styles.iter().position(|s| s.path == wave).expect("wave in the strip");
+    app.select_style(k);
+    assert_eq!((app.style, app.styles[0].path.clone()), (Some(0), wave.clone()));
+    assert_eq!(app.styles[0].image.as_ref().map(|i| (i.width, i.height)), Some((4200, 2000)));
+    assert_eq!(held(&app, &fire), Some(false));
+    // A held one is selected at once, in its place.
+    let k = app.styles.iter().position(|s| s.path == generated).expect("the generated style in the strip");
+    app.select_style(k);
+    assert_eq!((app.style, app.styles[k].path.clone()), (Some(k), generated));
+    assert_eq!(held(&app, &wave), Some(false));
+    assert!(app.errors.is_empty(), "{:?}", app.errors);
+}
+
+#[test]
 fn sh_split_across_two_bindings_renders_the_same() {
     let Some((device, queue, _)) = device_or_skip("sh_split_across_two_bindings_renders_the_same") else { return };
     let g: SharedGaussians = Arc::new(bench::synthetic_scene(3000)).into();
