@@ -49,7 +49,8 @@ pub struct ConvertArgs {
     /// The scene: INRIA .ply, .compressed.ply, .spz, a SOG folder, meta.json or .sog.
     pub input: PathBuf,
     /// The output; its name picks the format: .ply, .compressed.ply, .spz, .sog,
-    /// or a SOG folder (a name ending in /, an existing folder, or …/meta.json).
+    /// or a SOG folder (a name ending in /, an existing folder not named as a file
+    /// format's, or …/meta.json).
     pub output: PathBuf,
     #[command(flatten)]
     pub save: SaveArgs,

@@ -47,33 +47,47 @@ pub fn check_output(path: &Path) -> Result<SceneFormat, SceneError> {
 }
 
 impl SceneFormat {
-    /// The format an output name asks for (see the module docs).
+    /// The format an output name asks for (see the module docs). An existing
+    /// folder whose name ends as a file format's (`scene.ply/`) is an error
+    /// unless the name ends in `/`: `gast convert a.spz out.ply` with a
+    /// folder `out.ply` wrote a SOG scene into it.
     pub fn from_output(path: &Path) -> Result<Self, SceneError> {
         let name = path.file_name().map(|n| n.to_string_lossy().to_lowercase()).unwrap_or_default();
         let text = path.to_string_lossy();
-        if text.ends_with('/') || text.ends_with(std::path::MAIN_SEPARATOR) || path.is_dir() {
+        let ext = path.extension().map(|e| e.to_string_lossy().to_lowercase());
+        let by_name = if name.ends_with(".compressed.ply") {
+            Some(Self::CompressedPly)
+        } else {
+            match ext.as_deref() {
+                Some("ply") => Some(Self::Ply),
+                Some("spz") => Some(Self::Spz),
+                Some("sog") => Some(Self::SogBundle),
+                _ => None,
+            }
+        };
+        let trailing = text.ends_with('/') || text.ends_with(std::path::MAIN_SEPARATOR);
+        if !trailing && by_name.is_some() && path.is_dir() {
+            let expected = format!(
+                "a file, as the name's .{} asks (to write a SOG scene into that folder, end the name with /)",
+                ext.unwrap_or_default()
+            );
+            return Err(SceneError::format(path, "output", expected, "an existing folder of that name"));
+        }
+        if trailing || path.is_dir() {
             return Ok(Self::SogFolder(path.to_path_buf()));
         }
         if name == "meta.json" {
             let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
             return Ok(Self::SogFolder(dir.to_path_buf()));
         }
-        if name.ends_with(".compressed.ply") {
-            return Ok(Self::CompressedPly);
-        }
-        match path.extension().map(|e| e.to_string_lossy().to_lowercase()).as_deref() {
-            Some("ply") => Ok(Self::Ply),
-            Some("spz") => Ok(Self::Spz),
-            Some("sog") => Ok(Self::SogBundle),
-            ext => Err(SceneError::UnknownFormat {
-                path: path.to_path_buf(),
-                expected: OUTPUT_NAMES.into(),
-                found: match ext {
-                    Some(e) => format!("the extension .{e}"),
-                    None => "a name without an extension".into(),
-                },
-            }),
-        }
+        by_name.ok_or_else(|| SceneError::UnknownFormat {
+            path: path.to_path_buf(),
+            expected: OUTPUT_NAMES.into(),
+            found: match ext {
+                Some(e) => format!("the extension .{e}"),
+                None => "a name without an extension".into(),
+            },
+        })
     }
 }
 

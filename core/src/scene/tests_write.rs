@@ -97,6 +97,17 @@ fn bad_output_paths_are_clear_errors_and_leave_nothing() {
     let err = save_ply(dir.join("taken.ply"), &g).expect_err("rename over a folder");
     assert!(matches!(err, SceneError::Io { .. }), "{err}");
     assert_eq!(entries(&dir), ["file", "taken.ply"]);
+    // An existing folder named as a file format's is not taken for a SOG
+    // folder (it was: `gast convert` wrote SOG textures into `taken.ply/`),
+    // unless the name ends in `/`.
+    let msg = save(dir.join("taken.ply"), &g, &SaveOptions::default()).expect_err("a folder named .ply").to_string();
+    assert!(
+        msg.contains("taken.ply") && msg.contains("existing folder") && msg.contains("end the name with /"),
+        "{msg}"
+    );
+    assert_eq!(entries(&dir.join("taken.ply")), ["inner"]);
+    save(dir.join("taken.ply/"), &g, &SaveOptions::default()).expect("a SOG folder asked for with /");
+    assert!(dir.join("taken.ply/meta.json").is_file());
 }
 
 #[test]
