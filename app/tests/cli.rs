@@ -113,6 +113,13 @@ fn check_golden_passes_on_the_shared_files_and_fails_on_others() {
 fn stylize_writes_a_scene_renders_and_a_report() {
     let Some((scene, style, weights)) = guitar_with("block2.jpg") else { return };
     let out = temp("stylize");
+    // An earlier run's previews of views this run does not have: removed, not
+    // left beside its own files; a file of another name stays.
+    std::fs::create_dir_all(&out).expect("output folder");
+    let earlier = ["view1_after.png", "view3_colour_matched_depth.exr", "view12_before_depth_jet.png"];
+    for f in earlier.iter().chain(&["view1_notes.txt", "view1_after.png.bak"]) {
+        std::fs::write(out.join(f), b"an earlier file").expect("plant a file");
+    }
     let o = gast(&[
         "stylize",
         s(&scene),
@@ -157,6 +164,9 @@ fn stylize_writes_a_scene_renders_and_a_report() {
     for f in ["view0_before.png", "view0_after.png", "view0_after_depth.exr", "style_depth.png", "style_edge.png"] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
+    assert!(earlier.iter().all(|f| !out.join(f).exists()), "an earlier run's previews are left");
+    assert!(out.join("view1_notes.txt").is_file() && out.join("view1_after.png.bak").is_file());
+    assert!(stderr(&o).contains("removed 3 preview files of views 1 and above"), "{}", stderr(&o));
 
     // Strength after the run: the colour-matched scene is written beside the
     // result, and `convert --blend` reproduces either end exactly.

@@ -284,6 +284,41 @@ const REPORT_NAME: &str = "report.json";
 /// The style, its depth and its edges at texture scale.
 const STYLE_NAMES: [&str; 3] = ["style.png", "style_depth.png", "style_edge.png"];
 
+/// The three renders of a preview view and the four files of each:
+/// `view{k}_{tag}{suffix}`.
+const PREVIEW_TAGS: [&str; 3] = ["before", "colour_matched", "after"];
+const PREVIEW_SUFFIXES: [&str; 4] = [".png", "_depth.png", "_depth.exr", "_depth_jet.png"];
+
+/// Removes the preview files of views `kept` and above from `out`, which an
+/// earlier run with more preview views left there: beside this run's files
+/// they showed another run's scene and style under the same names. Only the
+/// exact names a run writes are touched; returns how many were removed.
+fn remove_stale_previews(out: &Path, kept: usize) -> anyhow::Result<usize> {
+    let stale = |name: &str| -> bool {
+        let Some(rest) = name.strip_prefix("view") else { return false };
+        let digits = rest.bytes().take_while(u8::is_ascii_digit).count();
+        let (Ok(k), Some(rest)) = (rest[..digits].parse::<usize>(), rest[digits..].strip_prefix('_')) else {
+            return false;
+        };
+        let ours = PREVIEW_TAGS
+            .iter()
+            .any(|tag| rest.strip_prefix(tag).is_some_and(|suffix| PREVIEW_SUFFIXES.contains(&suffix)));
+        ours && k >= kept
+    };
+    let mut removed = 0;
+    let entries = std::fs::read_dir(out).with_context(|| format!("{}: listing the output folder", out.display()))?;
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        if entry.file_type().is_ok_and(|t| t.is_file()) && name.to_str().is_some_and(stale) {
+            let path = entry.path();
+            std::fs::remove_file(&path)
+                .with_context(|| format!("{}: removing an earlier run's preview file", path.display()))?;
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
 /// `--scene-name` is a name inside the output folder with a format's ending:
 /// `../x.ply` or `/tmp/x.ply` would write outside `--out`, and
 /// [`MATCHED_NAME`] would replace the colour-matched scene.
@@ -668,6 +703,14 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     for (name, seconds) in previews.parts {
         part_took(&mut outputs, name, seconds);
     }
+    let stale = remove_stale_previews(&args.out, previews.renders.len())?;
+    if stale > 0 {
+        eprintln!(
+            "  removed {stale} preview files of views {} and above, which an earlier run left in {}",
+            previews.renders.len(),
+            args.out.display()
+        );
+    }
     t_part = Instant::now();
     let preview = previews.metrics;
     let sheet_path = args.out.join(SHEET_NAME);
@@ -823,11 +866,13 @@ fn write_previews<N: FeatureNet>(
         let matched = raster::render(colour_matched, cam, &opts);
         let after = raster::render(result, cam, &opts);
         lap(0, &mut parts);
-        for (tag, img) in [("before", &before), ("colour_matched", &matched), ("after", &after)] {
-            write_png_rgb(&out.join(format!("view{k}_{tag}.png")), w, h, &img.rgb)?;
-            write_depth_png(&out.join(format!("view{k}_{tag}_depth.png")), w, h, &img.inv_depth, &img.alpha)?;
-            write_exr_depth(&out.join(format!("view{k}_{tag}_depth.exr")), w, h, &img.inv_depth)?;
-            write_depth_jet_png(&out.join(format!("view{k}_{tag}_depth_jet.png")), w, h, &img.inv_depth, &img.alpha)?;
+        for (tag, img) in PREVIEW_TAGS.into_iter().zip([&before, &matched, &after]) {
+            let name = |suffix: &str| out.join(format!("view{k}_{tag}{suffix}"));
+            let [rgb, depth, exr, jet] = PREVIEW_SUFFIXES;
+            write_png_rgb(&name(rgb), w, h, &img.rgb)?;
+            write_depth_png(&name(depth), w, h, &img.inv_depth, &img.alpha)?;
+            write_exr_depth(&name(exr), w, h, &img.inv_depth)?;
+            write_depth_jet_png(&name(jet), w, h, &img.inv_depth, &img.alpha)?;
         }
         lap(3, &mut parts);
         let feats = |img: &raster::Render| {
