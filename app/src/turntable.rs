@@ -122,6 +122,9 @@ pub fn write(
     }
     let gif = out.join(GIF_NAME);
     write_bytes(&gif, &encode_gif(gif_frames).with_context(|| format!("encoding {}", gif.display()))?)?;
+    // A longer turntable's frames from before would read as this one's.
+    gast_core::io::remove_series_tail(out, "turntable_", &[".png"], cams.len())
+        .map_err(|(path, e)| anyhow::anyhow!("{}: removing an earlier turntable's frame: {e}", path.display()))?;
     Ok(Turntable { frames, gif, width, height })
 }
 

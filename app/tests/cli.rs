@@ -65,6 +65,12 @@ fn render_writes_colour_and_depth_of_every_view() {
         assert!(out.join(format!("orbit_{v:03}_depth.exr")).is_file());
         assert!(out.join(format!("orbit_{v:03}_depth.png")).is_file());
     }
+    // A shorter orbit into the same folder removes the longer one's tail.
+    std::fs::write(out.join("orbit_notes.txt"), b"kept").expect("a file of another name");
+    let o = gast(&["render", s(&scene), "--out", s(&out), "--views", "2", "--size", "96"]);
+    assert!(o.status.success() && stderr(&o).contains("removed 3 files of orbit views 2 and above"), "{}", stderr(&o));
+    assert!(out.join("orbit_001_depth.exr").is_file() && !out.join("orbit_002.png").exists());
+    assert!(out.join("orbit_notes.txt").is_file());
     std::fs::remove_dir_all(&out).ok();
 }
 
@@ -461,6 +467,11 @@ fn turntables_write_frames_and_a_gif_and_compare_side_by_side() {
 
     let o = gast(&["render", s(&scene), "--compare", s(&scene), "--out", s(&cmp)]);
     assert!(!o.status.success(), "--compare without --turntable must be refused");
+    // A shorter turntable into the same folder leaves none of the longer one's frames.
+    let o = gast(&["render", s(&scene), "--out", s(&out), "--turntable", "4", "--size", "64"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.join("turntable_003.png").is_file() && !out.join("turntable_004.png").exists());
+    assert_eq!(gif_frames(&out.join("turntable.gif")), vec![(64, 64); 4]);
     std::fs::remove_dir_all(&out).ok();
     std::fs::remove_dir_all(&cmp).ok();
 }

@@ -79,6 +79,35 @@ pub fn remove_stale_temps(dir: &Path) -> usize {
     removed
 }
 
+/// Removes from `dir` the files named `{prefix}{k}{suffix}`, `k` a decimal
+/// number (any padding) from `kept` up and `suffix` one of `suffixes`: what
+/// an earlier, longer series of views or frames left under the names this
+/// one writes, which beside the new series read as part of it. Only those
+/// exact names are touched. Returns how many were removed.
+pub fn remove_series_tail(
+    dir: &Path,
+    prefix: &str,
+    suffixes: &[&str],
+    kept: usize,
+) -> Result<usize, (PathBuf, std::io::Error)> {
+    let in_tail = |name: &str| -> bool {
+        let Some(rest) = name.strip_prefix(prefix) else { return false };
+        let digits = rest.bytes().take_while(u8::is_ascii_digit).count();
+        let (number, suffix) = rest.split_at(digits);
+        number.parse::<usize>().is_ok_and(|k| k >= kept) && suffixes.contains(&suffix)
+    };
+    let entries = std::fs::read_dir(dir).map_err(|e| (dir.to_path_buf(), e))?;
+    let mut removed = 0;
+    for e in entries.flatten() {
+        if e.file_type().is_ok_and(|t| t.is_file()) && e.file_name().to_str().is_some_and(in_tail) {
+            let path = e.path();
+            std::fs::remove_file(&path).map_err(|err| (path, err))?;
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
 /// The process id in a [`temp_path`] name (`.<name>.tmp-<pid>`), if it is one.
 fn stale_pid(name: &str) -> Option<u32> {
     let rest = name.strip_prefix('.')?;

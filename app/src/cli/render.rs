@@ -78,6 +78,19 @@ pub fn run(args: RenderArgs) -> anyhow::Result<ExitCode> {
         pb.inc(1);
     }
     pb.finish_and_clear();
+    if source.is_none() {
+        // Orbit views `orbit_000` …: an earlier, longer orbit's tail would sit beside them.
+        let stale = gast_core::io::remove_series_tail(
+            &args.out,
+            "orbit_",
+            &[".png", "_depth.png", "_depth.exr"],
+            cameras.len(),
+        )
+        .map_err(|(path, e)| anyhow::anyhow!("{}: removing an earlier orbit's view: {e}", path.display()))?;
+        if stale > 0 {
+            eprintln!("removed {stale} files of orbit views {} and above, which an earlier render left", cameras.len());
+        }
+    }
     eprintln!(
         "rendered {} views of {} ({} Gaussians) into {} in {:.2} s",
         cameras.len(),

@@ -291,32 +291,13 @@ const PREVIEW_SUFFIXES: [&str; 4] = [".png", "_depth.png", "_depth.exr", "_depth
 
 /// Removes the preview files of views `kept` and above from `out`, which an
 /// earlier run with more preview views left there: beside this run's files
-/// they showed another run's scene and style under the same names. Only the
-/// exact names a run writes are touched; returns how many were removed.
+/// they showed another run's scene and style under the same names.
 fn remove_stale_previews(out: &Path, kept: usize) -> anyhow::Result<usize> {
-    let stale = |name: &str| -> bool {
-        let Some(rest) = name.strip_prefix("view") else { return false };
-        let digits = rest.bytes().take_while(u8::is_ascii_digit).count();
-        let (Ok(k), Some(rest)) = (rest[..digits].parse::<usize>(), rest[digits..].strip_prefix('_')) else {
-            return false;
-        };
-        let ours = PREVIEW_TAGS
-            .iter()
-            .any(|tag| rest.strip_prefix(tag).is_some_and(|suffix| PREVIEW_SUFFIXES.contains(&suffix)));
-        ours && k >= kept
-    };
-    let mut removed = 0;
-    let entries = std::fs::read_dir(out).with_context(|| format!("{}: listing the output folder", out.display()))?;
-    for entry in entries.flatten() {
-        let name = entry.file_name();
-        if entry.file_type().is_ok_and(|t| t.is_file()) && name.to_str().is_some_and(stale) {
-            let path = entry.path();
-            std::fs::remove_file(&path)
-                .with_context(|| format!("{}: removing an earlier run's preview file", path.display()))?;
-            removed += 1;
-        }
-    }
-    Ok(removed)
+    let names: Vec<String> =
+        PREVIEW_TAGS.iter().flat_map(|tag| PREVIEW_SUFFIXES.iter().map(move |s| format!("_{tag}{s}"))).collect();
+    let names: Vec<&str> = names.iter().map(String::as_str).collect();
+    gast_core::io::remove_series_tail(out, "view", &names, kept)
+        .map_err(|(path, e)| anyhow::anyhow!("{}: removing an earlier run's preview file: {e}", path.display()))
 }
 
 /// `--scene-name` is a name inside the output folder with a format's ending:
