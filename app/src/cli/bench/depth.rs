@@ -54,7 +54,7 @@ pub fn run_depth(args: DepthArgs) -> anyhow::Result<ExitCode> {
     let style = gast_core::session::StyleImage::open(&style_path).map_err(anyhow::Error::msg)?;
     println!("depth benchmark: style {}, {} threads", style_path.display(), rayon::current_num_threads());
     let gpu = args.device.resolve().with_context(|| format!("--device {}", args.device))?;
-    let (model, cpu_forward) = time_style_depth(&style, args.depth_model.as_deref(), args.reps, args.stages)?;
+    let (model, cpu_forward) = time_style_depth(&style, args.depth_model.as_deref(), args.reps, args.stages, true)?;
     if let Some(ctx) = gpu {
         time_gpu_depth(&ctx, model, &style, args.reps, cpu_forward)?;
     }
@@ -105,13 +105,16 @@ fn time_gpu_depth(
 /// Prints the depth network's time for one style (pre- and post-processing
 /// included) and the median of `reps` forward passes at 518×518. Uses the
 /// checkpoint found on this machine, else random weights at the Small model's
-/// sizes (same cost, meaningless output), and says which. Returns the
-/// network and the median forward's wall and CPU seconds.
+/// sizes (same cost, meaningless output), and says which. With `peak`, also
+/// the peak resident memory while the estimate is made, which resets the
+/// process's peak mark (`gast bench step` reports its steps' peak, so not
+/// there). Returns the network and the median forward's wall and CPU seconds.
 pub(super) fn time_style_depth(
     style: &gast_core::session::StyleImage,
     explicit: Option<&std::path::Path>,
     reps: usize,
     stages: bool,
+    peak: bool,
 ) -> anyhow::Result<(DepthAnything, (f64, f64))> {
     use gast_core::vision::depth::{DepthConfig, DepthModelLocations};
     let t = Instant::now();
@@ -130,11 +133,15 @@ pub(super) fn time_style_depth(
     let (ih, iw) = input_size(h, w, INPUT_SIZE, model.config().patch_size);
     // What a run computes once per style: the estimate at the network's size.
     let (_, before_mib) = super::memory_mib();
-    super::reset_peak_memory();
+    if peak {
+        super::reset_peak_memory();
+    }
     let (t, c) = (Instant::now(), cpu_seconds());
     let _ = model.depth_image(&style.rgb[..], h, w);
     let (per_style, per_style_cpu) = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
     let (peak_mib, _) = super::memory_mib();
+    let memory =
+        if peak { format!(", peak resident {peak_mib:.0} MiB ({before_mib:.0} MiB before it)") } else { String::new() };
     let x = vec![0.25f32; 3 * INPUT_SIZE * INPUT_SIZE];
     let (walls, cpus): (Vec<f64>, Vec<f64>) = (0..reps)
         .map(|_| {
@@ -145,7 +152,7 @@ pub(super) fn time_style_depth(
         .unzip();
     let forward = (median(walls), median(cpus));
     println!(
-        "style depth (Depth Anything V2, {what}): load {load_s:.2} s; per style {per_style:.2} s wall, {per_style_cpu:.2} s CPU ({w}×{h} image, network input {iw}×{ih}), peak resident {peak_mib:.0} MiB ({before_mib:.0} MiB before it); forward at {INPUT_SIZE}×{INPUT_SIZE}: {:.2} s wall, {:.2} s CPU (medians of {reps})",
+        "style depth (Depth Anything V2, {what}): load {load_s:.2} s; per style {per_style:.2} s wall, {per_style_cpu:.2} s CPU ({w}×{h} image, network input {iw}×{ih}){memory}; forward at {INPUT_SIZE}×{INPUT_SIZE}: {:.2} s wall, {:.2} s CPU (medians of {reps})",
         forward.0, forward.1
     );
     if stages {

@@ -699,7 +699,7 @@ fn print_parts(args: &StepArgs, inputs: &StepInputs, runs: &[StepRun]) -> anyhow
             100.0 * (flops / gemm / 1e9) / vt.forward_s
         );
     }
-    time_style_depth(&inputs.style, args.depth_model.as_deref(), 1, false)?;
+    time_style_depth(&inputs.style, args.depth_model.as_deref(), 1, false, false)?;
     if !runs.iter().all(|r| r.device.starts_with("CPU")) {
         let ctx = gast_core::gpu::DeviceChoice::Gpu.resolve()?.context("no GPU adapter for the per-part figures")?;
         gpu_parts(&ctx, &inputs.vgg, &inputs.scene, &inputs.views[0], args.resolution as usize)?;
