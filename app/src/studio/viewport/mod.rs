@@ -20,6 +20,8 @@ pub mod splat_from_engine;
 mod splat_from_engine_tests;
 pub mod splat_project;
 pub mod splat_sort;
+#[cfg(test)]
+mod tests;
 
 use std::sync::Arc;
 use std::time::Instant;
