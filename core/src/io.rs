@@ -343,34 +343,13 @@ pub fn depth_to_gray(inv_depth: &[f32], alpha: &[f32]) -> Vec<u8> {
     covered_unit_depth(inv_depth, alpha).map(|t| t.map_or(0, |t| to_u8(0.1 + 0.9 * t))).collect()
 }
 
-/// An inverse-depth map in the JET colour map, the way the reference draws its
-/// depth figures (z-score, then per-frame min-max, then JET: the z-score is
-/// affine, so this is min-max over the covered pixels, `alpha ≥ 0.5`);
-/// uncovered pixels black. A relief of a tenth of the range shows as a change
-/// of hue, where the grey of [`depth_to_gray`] barely changes. RGB, 8-bit.
-pub fn depth_to_jet(inv_depth: &[f32], alpha: &[f32]) -> Vec<u8> {
-    let lut = crate::vision::colormap::jet_lut();
-    covered_unit_depth(inv_depth, alpha).flat_map(|t| t.map_or([0; 3], |t| lut[to_u8(t) as usize])).collect()
-}
-
 /// Each pixel's inverse depth min-max normalised over the covered pixels
 /// (`alpha ≥ 0.5`) to [0, 1], `None` where it is uncovered or not finite.
-fn covered_unit_depth<'a>(inv_depth: &'a [f32], alpha: &'a [f32]) -> impl Iterator<Item = Option<f32>> + 'a {
+pub fn covered_unit_depth<'a>(inv_depth: &'a [f32], alpha: &'a [f32]) -> impl Iterator<Item = Option<f32>> + 'a {
     let covered: Vec<f32> = inv_depth.iter().zip(alpha).filter(|(_, a)| **a >= 0.5).map(|(d, _)| *d).collect();
     let (lo, hi) = finite_range(&covered);
     let scale = if hi > lo { 1.0 / (hi - lo) } else { 0.0 };
     inv_depth.iter().zip(alpha).map(move |(&d, &a)| (a >= 0.5 && d.is_finite()).then_some((d - lo) * scale))
-}
-
-/// Writes an inverse-depth map as a JET-coloured PNG ([`depth_to_jet`]).
-pub fn write_depth_jet_png(
-    path: &Path,
-    width: u32,
-    height: u32,
-    inv_depth: &[f32],
-    alpha: &[f32],
-) -> Result<(), OutputError> {
-    write_png(path, width, height, image::ColorType::Rgb8, &depth_to_jet(inv_depth, alpha))
 }
 
 fn write_png(path: &Path, width: u32, height: u32, color: image::ColorType, bytes: &[u8]) -> Result<(), OutputError> {
@@ -415,7 +394,8 @@ pub fn write_exr_depth(path: &Path, width: u32, height: u32, values: &[f32]) -> 
     atomic_write(path, |w| w.write_all(encoded.get_ref()))
 }
 
-fn to_u8(v: f32) -> u8 {
+/// A value in [0, 1] as 8 bits, rounded (clamped outside).
+pub fn to_u8(v: f32) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
 

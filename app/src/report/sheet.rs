@@ -10,10 +10,11 @@
 
 use std::path::Path;
 
-use gast_core::io::{depth_to_gray, depth_to_jet};
+use gast_core::io::depth_to_gray;
 use gast_core::raster::{self, Render, RenderOptions};
 use gast_core::style::config::{LossWeights, ParamRegulariser};
 use gast_core::style::{StyleConfig, StyleMaps};
+use gast_core::vision::colormap::depth_to_jet;
 use gast_core::{Camera, Gaussians};
 use image::{Rgb, RgbImage};
 use vello_cpu::color::AlphaColor;

@@ -161,7 +161,7 @@ pub fn maps(g: &Gaussians, cam: &Camera, background: [f32; 3]) -> Maps {
     Maps {
         rgb: rgb_image(r.width, r.height, &r.rgb),
         depth: gray_image(r.width, r.height, &depth, |i| r.alpha[i] > 0.05),
-        depth_jet: jet_image(r.width, r.height, &gast_core::io::depth_to_jet(&r.inv_depth, &r.alpha)),
+        depth_jet: jet_image(r.width, r.height, &gast_core::vision::colormap::depth_to_jet(&r.inv_depth, &r.alpha)),
         edges: gray_image(r.width, r.height, &edges, |_| true),
     }
 }
@@ -189,7 +189,7 @@ pub fn style_maps(style: &StyleImage, key: &StyleMapsKey) -> (Maps, Option<Strin
     let maps = Maps {
         rgb: rgb_image(w, h, &m.rgb),
         depth: gray_image(w, h, &m.depth, |_| true),
-        depth_jet: jet_image(w, h, &gast_core::io::depth_to_jet(&m.depth, &vec![1.0; m.depth.len()])),
+        depth_jet: jet_image(w, h, &gast_core::vision::colormap::depth_to_jet(&m.depth, &vec![1.0; m.depth.len()])),
         edges: gray_image(w, h, &m.edge, |_| true),
     };
     (maps, warning)

@@ -1,4 +1,4 @@
-//! OpenCV's `COLORMAP_JET`, bit-exact.
+//! OpenCV's `COLORMAP_JET`, bit-exact, and depth maps drawn in it.
 //!
 //! The reference colours the style depth with `cv2.applyColorMap(.., JET)` and
 //! runs Canny on the result, so the style edges depend on the exact 8-bit
@@ -6,7 +6,10 @@
 //! re-interpolates them in `f32` and converts with round-half-to-even; this
 //! module repeats that arithmetic instead of using an analytic jet.
 
+use std::path::Path;
 use std::sync::OnceLock;
+
+use crate::io::{OutputError, covered_unit_depth, to_u8, write_png_rgb8};
 
 /// The 256 float samples of one channel of OpenCV's jet base map, as piecewise
 /// linear functions of the index `k` (OpenCV lists them as literals; these are
@@ -89,6 +92,27 @@ pub fn to_u8_truncating(map: &[f32]) -> Vec<u8> {
     let (lo, hi) = map.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
     let range = hi - lo + 1e-8;
     map.iter().map(|&v| (((v - lo) / range) * 255.0).clamp(0.0, 255.0) as u8).collect()
+}
+
+/// An inverse-depth map in the JET colour map, the way the reference draws its
+/// depth figures (z-score, then per-frame min-max, then JET: the z-score is
+/// affine, so this is min-max over the covered pixels, `alpha ≥ 0.5`);
+/// uncovered pixels black. A relief of a tenth of the range shows as a change
+/// of hue, where the grey of [`crate::io::depth_to_gray`] barely changes. RGB, 8-bit.
+pub fn depth_to_jet(inv_depth: &[f32], alpha: &[f32]) -> Vec<u8> {
+    let lut = jet_lut();
+    covered_unit_depth(inv_depth, alpha).flat_map(|t| t.map_or([0; 3], |t| lut[to_u8(t) as usize])).collect()
+}
+
+/// Writes an inverse-depth map as a JET-coloured PNG ([`depth_to_jet`]).
+pub fn write_depth_jet_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    inv_depth: &[f32],
+    alpha: &[f32],
+) -> Result<(), OutputError> {
+    write_png_rgb8(path, width, height, &depth_to_jet(inv_depth, alpha))
 }
 
 #[cfg(test)]

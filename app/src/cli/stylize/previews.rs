@@ -12,9 +12,10 @@ use gast_core::Camera;
 use gast_core::eval::depth_structure::{self, DepthStyleDistance};
 use gast_core::eval::{CoveredColour, Degeneration, StyleReference, inverse_depth_change};
 use gast_core::gpu::GpuNearest;
-use gast_core::io::{write_depth_jet_png, write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb};
+use gast_core::io::{write_depth_png, write_exr_depth, write_png_gray_normalized, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
 use gast_core::style::{FeatureNet, StyleMaps};
+use gast_core::vision::colormap::write_depth_jet_png;
 use serde::Serialize;
 
 use super::STYLE_NAMES;
