@@ -208,32 +208,11 @@ fn blit_composites_the_before_after_split() {
         blit.draw(&mut pass, &bind);
     }
     queue.submit([encoder.finish()]);
-    // Read back (4 bytes a texel, rows padded to 256).
-    let row = (w * 4).div_ceil(256) * 256;
-    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-        label: None,
-        size: (row * h) as u64,
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-        mapped_at_creation: false,
-    });
-    let mut encoder = device.create_command_encoder(&Default::default());
-    encoder.copy_texture_to_buffer(
-        out.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &buffer,
-            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(h) },
-        },
-        wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
-    );
-    queue.submit([encoder.finish()]);
-    buffer.slice(..).map_async(wgpu::MapMode::Read, |_| {});
-    let _ = device.poll(wgpu::PollType::wait_indefinitely());
-    let data = buffer.slice(..).get_mapped_range().expect("mapped");
+    let rows = read_texture_rows(&device, &queue, &out, 4).expect("read back the blit");
     let mut img = image::RgbImage::new(w, h);
-    for y in 0..h {
-        for x in 0..w {
-            let o = (y * row + x * 4) as usize;
-            img.put_pixel(x, y, image::Rgb([data[o], data[o + 1], data[o + 2]]));
+    for (y, line) in rows.iter().enumerate() {
+        for (x, px) in line.chunks_exact(4).enumerate() {
+            img.put_pixel(x as u32, y as u32, image::Rgb([px[0], px[1], px[2]]));
         }
     }
     let path = std::env::temp_dir().join("gast-studio-gpu-vs-cpu").join("split.png");
