@@ -66,14 +66,15 @@ impl SceneFormat {
             }
         };
         let trailing = text.ends_with('/') || text.ends_with(std::path::MAIN_SEPARATOR);
-        if !trailing && by_name.is_some() && path.is_dir() {
+        let folder = path.is_dir();
+        if !trailing && by_name.is_some() && folder {
             let expected = format!(
                 "a file, as the name's .{} asks (to write a SOG scene into that folder, end the name with /)",
                 ext.unwrap_or_default()
             );
             return Err(SceneError::format(path, "output", expected, "an existing folder of that name"));
         }
-        if trailing || path.is_dir() {
+        if trailing || folder {
             return Ok(Self::SogFolder(path.to_path_buf()));
         }
         if name == "meta.json" {
