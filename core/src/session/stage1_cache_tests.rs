@@ -36,7 +36,7 @@ fn second_call_hits_the_cache_and_other_images_miss() -> Result<(), DepthModelEr
             &depth_key(s, &id, INPUT_SIZE),
             || {
                 forwards.set(forwards.get() + 1);
-                Ok::<_, DepthModelError>(net.depth_image(&s.to_f32(), s.height, s.width))
+                Ok::<_, DepthModelError>(net.depth_image(&s.rgb[..], s.height, s.width))
             },
             warnings,
         )
