@@ -168,6 +168,41 @@ fn cameras_that_do_not_see_the_scene_fail_with_a_message() {
     }
 }
 
+/// The session keeps its input, not a colour-matched copy beside it: `G^c`
+/// and the result are made from it, the culled Gaussians in the result those
+/// of `G^c`, the optimised ones the steps'.
+#[test]
+fn the_result_is_the_colour_matched_scene_with_the_optimised_gaussians_in_place() {
+    let config = StyleConfig { cycles: 1, steps_per_cycle: 4, resolution: 32, texture_scale: 32, ..Default::default() };
+    let Some(mut inputs) = inputs(config) else { return };
+    // Two Gaussians no camera sees: copies of the first two, too faint to draw.
+    let faint = gast_core::session::subset(&inputs.scene, &[0, 1]);
+    let n = inputs.scene.len();
+    for i in 0..2 {
+        inputs.scene.means.push(faint.means[i]);
+        inputs.scene.log_scales.push(faint.log_scales[i]);
+        inputs.scene.quats.push(faint.quats[i]);
+        inputs.scene.opacity_logits.push(-20.0); // below the rasterizer's 1/255
+        inputs.scene.sh.extend_from_slice(faint.sh_of(i));
+    }
+    let scene = inputs.scene.clone();
+    let mut session = gast_core::session::Session::prepare(inputs, &mut |_| {}).expect("a session");
+    assert_eq!(session.input().sh, scene.sh, "the input as given");
+    let matched = session.colour_matched();
+    assert_ne!(matched.sh, scene.sh, "the colours matched");
+    assert_eq!(session.result().sh, matched.sh, "before any step the result is G^c");
+    assert!(session.optimised_count() <= n, "the faint Gaussians are culled: {} of {n}", session.optimised_count());
+    while session.step().is_some() {}
+    let result = session.result();
+    let changed = |i: usize| result.sh_of(i) != matched.sh_of(i) || result.means[i] != matched.means[i];
+    assert!((0..n).any(changed), "the steps moved the optimised Gaussians");
+    for i in n..n + 2 {
+        assert!(!changed(i), "culled Gaussian {i} is G^c's");
+        assert_eq!(result.opacity_logits[i], matched.opacity_logits[i]);
+    }
+    assert_eq!(session.into_input().sh, scene.sh, "handed back as given");
+}
+
 /// Cameras that see nothing of the scene among those that do are named in a
 /// warning before the run (guitar seen from fern's LLFF poses: 18 of the 20
 /// views empty, the run went ahead silently); the orbit alone raises none.
@@ -604,7 +639,7 @@ fn gpu_colour_floor_gives_the_cpu_losses() {
     };
     // The optimised Gaussians are those whose DC changed (the floor raises
     // even those without a gradient); the rest of the scene keeps its colours.
-    let (a, b, before) = (dc(&cpu.result()), dc(&gpu.result()), dc(cpu.colour_matched()));
+    let (a, b, before) = (dc(&cpu.result()), dc(&gpu.result()), dc(&cpu.colour_matched()));
     let on = |v: &[f32]| v.iter().filter(|&&x| x == DC_FLOOR).count();
     let moved: Vec<usize> = (0..a.len()).filter(|&i| a[i] != before[i] || b[i] != before[i]).collect();
     assert!(moved.len() > a.len() / 10, "only {} of {} DC coefficients moved", moved.len(), a.len());

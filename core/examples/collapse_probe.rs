@@ -79,7 +79,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         gpu: None,
     };
     let session = Session::prepare_with_style(inputs, None, &mut |_| {})?;
-    let before = session.colour_matched().clone();
+    let before = session.colour_matched();
     let opts = RenderOptions::default();
     let n = before.len();
 

@@ -115,7 +115,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         gpu: None,
     };
     let session = Session::prepare_with_style(inputs, None, &mut |_| {})?;
-    let gc = session.colour_matched();
+    let gc = &session.colour_matched();
     let eval = Evaluator::new(
         vgg,
         &session.style().targets.features,

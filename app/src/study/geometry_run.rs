@@ -125,7 +125,9 @@ pub fn run(
             .with_context(|| format!("{style} × {}", arm.label()))?;
         let prepare_s = t.elapsed().as_secs_f64();
         let opts = RenderOptions { background: config.background };
-        let matched: Vec<Render> = eval.iter().map(|c| raster::render(session.colour_matched(), c, &opts)).collect();
+        let colour_matched = session.colour_matched();
+        let matched: Vec<Render> = eval.iter().map(|c| raster::render(&colour_matched, c, &opts)).collect();
+        drop(colour_matched);
         let mut checkpoints =
             vec![GeometryCheckpoint { step: 0, seconds: prepare_s, measures: measure(vgg, &matched, &matched, refs) }];
         let per_cycle = config.steps_per_cycle.max(1);

@@ -77,10 +77,11 @@ pub fn run_trial(
         background = mean_colour(&session.style().maps.rgb);
     }
     let t = Instant::now();
+    let matched = session.colour_matched();
     let evaluator = Evaluator::new(
         Arc::clone(&vgg),
         &session.style().targets.features,
-        session.colour_matched(),
+        &matched,
         &EvalOptions { background, ..*eval },
     );
     let reference = evaluator.measure_reference();
@@ -112,7 +113,7 @@ pub fn run_trial(
     let steps = session.steps_done();
     out.push(Checkpoint { step: steps, seconds: prepare_s + session.elapsed_s(), measures });
     let stability = assess_stability(
-        session.colour_matched(),
+        &matched,
         &result,
         &losses,
         Some((reference.consistency_long, measures.consistency_long)),

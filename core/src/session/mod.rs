@@ -62,7 +62,7 @@ impl RunStart {
     /// The start of a prepared session.
     pub fn of(session: &Session) -> Self {
         Self {
-            colour_matched: session.colour_matched().clone(),
+            colour_matched: session.colour_matched(),
             cameras: session.cameras().to_vec(),
             style_maps: session.style().maps.clone(),
             config: session.config().clone(),

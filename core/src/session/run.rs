@@ -73,6 +73,17 @@ struct ViewTarget {
     palette: crate::style::palette::Palette,
 }
 
+/// What only the CPU engine steps: the optimised Gaussians, the frozen
+/// reference and Adam's moments. A run on the GPU engine keeps none of it on
+/// the host (the engine holds its own copies on the device).
+struct CpuState {
+    /// The optimised Gaussians (current).
+    g: Gaussians,
+    /// `G^c` restricted to `keep`: the frozen reference.
+    g_ref: Gaussians,
+    opt: Optimisers,
+}
+
 /// Optimiser state, one Adam per parameter group, per phase (kept across cycles).
 struct Optimisers {
     color: Adam,
@@ -125,27 +136,29 @@ pub struct Session {
     inputs_style: StyleImage,
     style_depth: StyleDepthSource,
     vgg: Arc<Vgg>,
-    /// The whole colour-matched scene; optimised Gaussians are scattered into it on export.
-    full: Gaussians,
-    /// Indices into `full` of the optimised Gaussians.
+    /// The scene the run starts from (as loaded, or split at
+    /// [`StyleConfig::split_px`]). The whole colour-matched scene `G^c`, into
+    /// which the optimised Gaussians are scattered on export, is `colour`
+    /// applied to it, made when asked for rather than kept beside it.
+    input: Gaussians,
+    /// Stage 0's colour matching.
+    colour: ColorTransfer,
+    /// Indices into `input` of the optimised Gaussians.
     keep: Vec<u32>,
-    /// The optimised Gaussians (current).
-    g: Gaussians,
-    /// `G^c` restricted to `keep`: the frozen reference.
-    g_ref: Gaussians,
+    /// The CPU engine's Gaussians and optimiser; `None` on the GPU engine.
+    cpu: Option<CpuState>,
     base_cameras: Vec<Camera>,
     cameras: Vec<Camera>,
     extent: f32,
     style: PreparedStyle,
     targets: Vec<Option<ViewTarget>>,
-    opt: Optimisers,
     /// The reference's gradient leak between phases (empty when off).
     leak: Leak,
     sampler: ViewSampler,
     step: u32,
     elapsed_s: f64,
     /// The GPU engine when the steps run there (it then holds the optimised
-    /// Gaussians; `g` keeps the colour-matched start).
+    /// Gaussians and their reference).
     engine: Option<Box<GpuEngine>>,
     /// The engine's buffers as a viewer on its device reads them, once asked for.
     live: Option<LiveGaussians>,
@@ -248,14 +261,13 @@ impl Session {
             )));
         }
         let config = config.resolved(coverage);
-        let ct = ColorTransfer::fit(&survey.covered_rgb, &style.rgb);
-        let mut full = scene;
-        ct.apply_to_gaussians(&mut full);
+        let colour = ColorTransfer::fit(&survey.covered_rgb, &style.rgb);
         on_event(Event::Stage { name: "colour matching".into(), seconds: t.elapsed().as_secs_f64() });
 
         let t = Instant::now();
-        let g_ref = subset(&full, &keep);
-        on_event(Event::Culled { total: full.len(), kept: keep.len() });
+        let mut g_ref = subset(&scene, &keep);
+        colour.apply_to_gaussians(&mut g_ref);
+        on_event(Event::Culled { total: scene.len(), kept: keep.len() });
         on_event(Event::Stage { name: "visibility culling".into(), seconds: t.elapsed().as_secs_f64() });
 
         let t = Instant::now();
@@ -278,13 +290,6 @@ impl Session {
         }
 
         let n = keep.len();
-        let opt = Optimisers {
-            color: Adam::new(n * 3, config.adam),
-            means: Adam::new(n * 3, config.adam),
-            scales: Adam::new(n * 3, config.adam),
-            quats: Adam::new(n * 4, config.adam),
-            opacity: Adam::new(n, config.adam),
-        };
         let extent = scene_extent(&work_cams);
         let sampler = ViewSampler::new(work_cams.len(), config.seed);
         let engine = match gpu {
@@ -308,6 +313,18 @@ impl Session {
             }
             None => None,
         };
+        // The CPU engine's state, made only where it steps.
+        let cpu = engine.is_none().then(|| CpuState {
+            g: g_ref.clone(),
+            g_ref,
+            opt: Optimisers {
+                color: Adam::new(n * 3, config.adam),
+                means: Adam::new(n * 3, config.adam),
+                scales: Adam::new(n * 3, config.adam),
+                quats: Adam::new(n * 4, config.adam),
+                opacity: Adam::new(n, config.adam),
+            },
+        });
         Ok(Self {
             targets: (0..work_cams.len()).map(|_| None).collect(),
             view_matches: (0..work_cams.len()).map(|_| None).collect(),
@@ -317,16 +334,15 @@ impl Session {
             audit: (0.0, 0.0, 0),
             base_cameras: cameras,
             cameras: work_cams,
-            g: g_ref.clone(),
-            g_ref,
-            full,
+            input: scene,
+            colour,
             keep,
+            cpu,
             extent,
             style: style_maps_,
             inputs_style: style,
             style_depth,
             vgg,
-            opt,
             leak: Leak::for_config(&config, n, engine.is_some()),
             sampler,
             step: 0,
@@ -374,9 +390,25 @@ impl Session {
         &self.style
     }
 
-    /// The colour-matched scene before optimisation (`G^c`, whole).
-    pub fn colour_matched(&self) -> &Gaussians {
-        &self.full
+    /// The colour-matched scene before optimisation (`G^c`, whole), made
+    /// anew from the run's input at each call.
+    pub fn colour_matched(&self) -> Gaussians {
+        let mut full = self.input.clone();
+        self.colour.apply_to_gaussians(&mut full);
+        full
+    }
+
+    /// The scene the run started from: as loaded, or split at
+    /// [`StyleConfig::split_px`].
+    pub fn input(&self) -> &Gaussians {
+        &self.input
+    }
+
+    /// Ends the session, handing back its input ([`Session::input`]) and
+    /// letting go of everything else (the optimised Gaussians, the targets,
+    /// the style's features, a GPU engine's buffers).
+    pub fn into_input(self) -> Gaussians {
+        self.input
     }
 
     /// Mean share of the optimisation views' pixels the input scene covers.
@@ -397,12 +429,18 @@ impl Session {
 
     /// The whole scene with the current optimised Gaussians in place (read
     /// back from the GPU when the steps run there).
+    /// Where a GPU engine's Gaussians cannot be read back, the colour-matched
+    /// scene.
     pub fn result(&self) -> Gaussians {
-        let mut out = self.full.clone();
-        match self.engine.as_ref().map(|e| e.download()) {
-            Some(Ok(g)) => scatter(&mut out, &self.keep, &g),
-            _ => scatter(&mut out, &self.keep, &self.g),
-        }
+        let downloaded = self.engine.as_ref().and_then(|e| e.download().ok());
+        let Some(g) = downloaded.as_ref().or(self.cpu.as_ref().map(|c| &c.g)) else {
+            return self.colour_matched();
+        };
+        // `G^c` where nothing is optimised (the culled Gaussians); the rest is
+        // overwritten by the optimised ones.
+        let mut out = self.input.clone();
+        self.colour.apply_to_gaussians_except(&mut out, &self.keep);
+        scatter(&mut out, &self.keep, g);
         out
     }
 
@@ -412,7 +450,7 @@ impl Session {
     pub fn live(&mut self) -> Option<LiveGaussians> {
         let engine = self.engine.as_ref()?;
         if self.live.is_none() {
-            let (base, keep) = (Arc::new(self.full.clone()), Arc::new(self.keep.clone()));
+            let (base, keep) = (Arc::new(self.colour_matched()), Arc::new(self.keep.clone()));
             let live = LiveGaussians::new(engine.context(), engine.gaussians(), base, keep);
             live.publish(u64::from(self.step));
             self.live = Some(live);
@@ -510,7 +548,7 @@ impl Session {
         }
         if config.leaks_between_phases() != self.config.leaks_between_phases() {
             // Turned on or off: the sums start empty (the GPU engine's too).
-            self.leak = Leak::for_config(&config, self.g.len(), self.engine.is_some());
+            self.leak = Leak::for_config(&config, self.keep.len(), self.engine.is_some());
             if let Some(e) = &mut self.engine {
                 e.reset_leak();
             }
@@ -544,10 +582,11 @@ impl Session {
         if self.targets[view].as_ref().is_some_and(|t| t.outside.is_some() || !want_hold) {
             return;
         }
+        let Some(cpu) = &self.cpu else { return };
         let opts = RenderOptions { background: self.config.background };
         let cam = &self.cameras[view];
         let (h, w) = (cam.height as usize, cam.width as usize);
-        let r = raster::render(&self.g_ref, cam, &opts);
+        let r = raster::render(&cpu.g_ref, cam, &opts);
         let rgb: Vec<f32> = r.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
         if let Some(t) = self.targets[view].as_mut() {
             t.outside = Some((outside_mask(&r.alpha), rgb));

@@ -96,9 +96,11 @@ impl Session {
         let mut timings = StepTimings::default();
 
         self.make_target(view);
+        let object = self.focus_on_object();
+        let cpu = self.cpu.as_mut()?;
 
         let t = Instant::now();
-        let (img, state) = raster::forward(&self.g, &cam, &opts);
+        let (img, state) = raster::forward(&cpu.g, &cam, &opts);
         timings.render_ms = ms(t);
         let rgb: Vec<f32> = img.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
         self.colour_watch.observe(view, CoveredColour::of(&rgb, &img.alpha));
@@ -139,12 +141,10 @@ impl Session {
             &self.config.weights_for(phase),
             depth_grad,
             LossFocus {
-                mask: self.focus_on_object().then_some(target.coverage.as_slice()),
+                mask: object.then_some(target.coverage.as_slice()),
                 window: self.config.vgg_window,
-                outside: (target.outside.as_ref())
-                    .filter(|_| self.focus_on_object())
-                    .map(|(mask, rgb)| Outside { mask, rgb }),
-                palette: self.focus_on_object().then_some(target.palette),
+                outside: (target.outside.as_ref()).filter(|_| object).map(|(mask, rgb)| Outside { mask, rgb }),
+                palette: object.then_some(target.palette),
                 relief_px: self.config.depth_relief_px as usize,
                 assign_block: self.config.assign_block as usize,
             },
@@ -167,7 +167,7 @@ impl Session {
             }
         }
         let t = Instant::now();
-        let mut grads = raster::backward(&self.g, &cam, &opts, &state, &v_rgb, &loss.v_inv_depth);
+        let mut grads = raster::backward(&cpu.g, &cam, &opts, &state, &v_rgb, &loss.v_inv_depth);
         timings.raster_backward_ms = ms(t);
 
         let t = Instant::now();
@@ -175,20 +175,19 @@ impl Session {
         let lr = self.config.lr;
         let wts = self.config.weights;
         if phase.updates_color() {
-            let k = self.g.sh_coeffs() * 3;
-            let mut dc: Vec<f32> = (0..self.g.len())
-                .flat_map(|i| [self.g.sh[i * k], self.g.sh[i * k + 1], self.g.sh[i * k + 2]])
-                .collect();
-            let mut v_dc: Vec<f32> = (0..self.g.len())
+            let k = cpu.g.sh_coeffs() * 3;
+            let mut dc: Vec<f32> =
+                (0..cpu.g.len()).flat_map(|i| [cpu.g.sh[i * k], cpu.g.sh[i * k + 1], cpu.g.sh[i * k + 2]]).collect();
+            let mut v_dc: Vec<f32> = (0..cpu.g.len())
                 .flat_map(|i| [grads.v_sh[i * k], grads.v_sh[i * k + 1], grads.v_sh[i * k + 2]])
                 .collect();
             take_leak(&mut v_dc, &mut self.leak.color);
-            self.opt.color.step(&mut dc, &v_dc, lr.color);
+            cpu.opt.color.step(&mut dc, &v_dc, lr.color);
             if self.config.color_floor {
                 floor_dc(&mut dc);
             }
-            for i in 0..self.g.len() {
-                self.g.sh[i * k..i * k + 3].copy_from_slice(&dc[3 * i..3 * i + 3]);
+            for i in 0..cpu.g.len() {
+                cpu.g.sh[i * k..i * k + 3].copy_from_slice(&dc[3 * i..3 * i + 3]);
             }
         }
         if geometry {
@@ -196,9 +195,9 @@ impl Session {
                 ParamRegulariser::Norm => l2_distance(x, r),
                 ParamRegulariser::MeanSquare => mean_square_distance(x, r, components),
             };
-            let (l_o, mut v_o) = reg(&self.g.opacity_logits, &self.g_ref.opacity_logits, 1);
-            let (l_s, mut v_s) = reg(flat(&self.g.log_scales), flat(&self.g_ref.log_scales), 3);
-            let (l_q, mut v_q) = reg(flat(&self.g.quats), flat(&self.g_ref.quats), 4);
+            let (l_o, mut v_o) = reg(&cpu.g.opacity_logits, &cpu.g_ref.opacity_logits, 1);
+            let (l_s, mut v_s) = reg(flat(&cpu.g.log_scales), flat(&cpu.g_ref.log_scales), 3);
+            let (l_q, mut v_q) = reg(flat(&cpu.g.quats), flat(&cpu.g_ref.quats), 4);
             terms.reg_opacity = l_o;
             terms.reg_scale = l_s;
             terms.reg_rotation = l_q;
@@ -210,10 +209,10 @@ impl Session {
             take_leak(&mut v_s, &mut self.leak.scales);
             take_leak(&mut v_q, &mut self.leak.quats);
             take_leak(&mut v_o, &mut self.leak.opacity);
-            self.opt.means.step(flat_mut(&mut self.g.means), flat(&grads.v_means), lr.means_per_extent * self.extent);
-            self.opt.scales.step(flat_mut(&mut self.g.log_scales), &v_s, lr.scales);
-            self.opt.quats.step(flat_mut(&mut self.g.quats), &v_q, lr.quats);
-            self.opt.opacity.step(&mut self.g.opacity_logits, &v_o, lr.opacity);
+            cpu.opt.means.step(flat_mut(&mut cpu.g.means), flat(&grads.v_means), lr.means_per_extent * self.extent);
+            cpu.opt.scales.step(flat_mut(&mut cpu.g.log_scales), &v_s, lr.scales);
+            cpu.opt.quats.step(flat_mut(&mut cpu.g.quats), &v_q, lr.quats);
+            cpu.opt.opacity.step(&mut cpu.g.opacity_logits, &v_o, lr.opacity);
         }
         if leaking {
             // What this step's backward left on the other phase's parameters.
@@ -225,7 +224,7 @@ impl Session {
                     add_into(&mut self.leak.opacity, &grads.v_opacity_logits);
                 }
                 Phase::Geometry => {
-                    let k = self.g.sh_coeffs() * 3;
+                    let k = cpu.g.sh_coeffs() * 3;
                     for (i, acc) in self.leak.color.chunks_exact_mut(3).enumerate() {
                         add_into(acc, &grads.v_sh[i * k..i * k + 3]);
                     }

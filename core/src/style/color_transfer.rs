@@ -71,10 +71,20 @@ impl ColorTransfer {
     /// rendered colour `0.5 + Σ_l Y_l c_l` becomes `A·colour + b` (before the
     /// renderer's clamp).
     pub fn apply_to_gaussians(&self, g: &mut Gaussians) {
+        self.apply_to_gaussians_except(g, &[]);
+    }
+
+    /// As [`Self::apply_to_gaussians`], leaving out the Gaussians at `skip`
+    /// (ascending indices): those a caller overwrites next.
+    pub fn apply_to_gaussians_except(&self, g: &mut Gaussians, skip: &[u32]) {
         let k = g.sh_coeffs();
         let half = self.apply([0.5; 3]);
         let dc_shift: [f32; 3] = std::array::from_fn(|i| (half[i] - 0.5) / SH_C0);
-        for coeffs in g.sh.chunks_exact_mut(k * 3) {
+        let mut skip = skip.iter().peekable();
+        for (n, coeffs) in g.sh.chunks_exact_mut(k * 3).enumerate() {
+            if skip.next_if(|&&s| s as usize == n).is_some() {
+                continue;
+            }
             for (band, c) in coeffs.chunks_exact_mut(3).enumerate() {
                 let mut y = [0.0f32; 3];
                 for (i, yi) in y.iter_mut().enumerate() {
@@ -255,5 +265,26 @@ mod tests {
         g.sh.extend_from_slice(&[1.0, 2.0, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
         t.apply_to_gaussians(&mut g);
         assert_eq!(&g.sh[3..6], &[2.0, 5.0, 1.5]);
+    }
+
+    #[test]
+    fn the_gaussians_left_out_keep_their_coefficients_and_the_rest_are_mapped_alike() {
+        let t = ColorTransfer { a: [[0.9, 0.1, -0.2], [0.05, 1.1, 0.0], [0.3, -0.1, 0.7]], b: [0.05, -0.1, 0.2] };
+        let mut g = Gaussians::with_capacity(6, 1);
+        for i in 0..6 {
+            g.means.push([0.0; 3]);
+            g.log_scales.push([0.0; 3]);
+            g.quats.push([1.0, 0.0, 0.0, 0.0]);
+            g.opacity_logits.push(0.0);
+            g.sh.extend((0..12).map(|c| 0.05 * (i * 12 + c) as f32 - 1.0));
+        }
+        let (mut all, mut some) = (g.clone(), g.clone());
+        t.apply_to_gaussians(&mut all);
+        t.apply_to_gaussians_except(&mut some, &[0, 2, 3]);
+        for i in 0..6 {
+            let want = if [0, 2, 3].contains(&i) { g.sh_of(i) } else { all.sh_of(i) };
+            assert_eq!(some.sh_of(i), want, "Gaussian {i}");
+        }
+        assert_ne!(all.sh, g.sh);
     }
 }

@@ -370,8 +370,12 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
 
     let mut stages = Vec::new();
     let mut culled = (scene.len(), scene.len());
+    // The session takes the scene and hands it back for the "before"
+    // previews; a split run starts from another scene, so the loaded one is
+    // kept beside it.
+    let loaded = (config.split_px > 0.0).then(|| scene.clone());
     let inputs = SessionInputs {
-        scene: scene.clone(),
+        scene,
         cameras: cameras.clone(),
         style,
         style_depth,
@@ -496,6 +500,14 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         *t = Instant::now();
     };
     let result = session.result();
+    // What the outputs, the previews and the sheet need, kept; the session (its
+    // optimised Gaussians, per-view targets, the style's features, the
+    // optimiser's state, a GPU engine's buffers) is let go before them, whose
+    // VGG passes were added on top of it: guitar × wave at 576 px peaked at
+    // 803 MB resident with it, 617 MB without.
+    let (matched, cameras, maps) = (session.colour_matched(), session.cameras().to_vec(), session.style().maps.clone());
+    let (background, focus_on_object, coverage) = (config.background, session.focus_on_object(), session.coverage());
+    let scene = loaded.unwrap_or_else(|| session.into_input());
     super::output_folder(&args.out, "--out")?;
     // The run's scene first: where the disk has room for one scene only, it is
     // the one kept. Then the colour-matched scene, for `gast convert --blend`
@@ -503,7 +515,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let matched_path = args.out.join(MATCHED_NAME);
     match args.strength.strength().filter(|s| !s.is_full()) {
         Some(strength) => {
-            let blended = super::convert::blended(session.colour_matched(), &result, strength, &matched_path)?;
+            let blended = super::convert::blended(&matched, &result, strength, &matched_path)?;
             super::convert::save_scene(&args.out.join(&args.scene_name), &blended, &args.save)?;
             eprintln!(
                 "  wrote the scene at colour strength {:.0}%, shape strength {:.0}% (the renders below show 100%)",
@@ -513,22 +525,14 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         }
         None => super::convert::save_scene(&args.out.join(&args.scene_name), &result, &args.save)?,
     }
-    super::convert::save_scene(&matched_path, session.colour_matched(), &super::convert::SaveArgs::default())?;
+    super::convert::save_scene(&matched_path, &matched, &super::convert::SaveArgs::default())?;
     // The cameras travel with the scene, for the studio and a rerun; an orbit is made again.
     if let Some(source) = &source {
-        for line in crate::views::write_cameras_beside(&args.out.join(&args.scene_name), source, session.cameras())? {
+        for line in crate::views::write_cameras_beside(&args.out.join(&args.scene_name), source, &cameras)? {
             eprintln!("  {line}");
         }
     }
     part_done(&mut outputs, "scenes written", &mut t_part);
-    // What the previews and the sheet need, kept; the session (its per-view
-    // targets, the style's features, the optimiser's state, a GPU engine's
-    // buffers) is let go before them, whose VGG passes were added on top of it:
-    // guitar × wave at 576 px peaked at 803 MB resident with it, 617 MB without.
-    let (matched, cameras, maps) =
-        (session.colour_matched().clone(), session.cameras().to_vec(), session.style().maps.clone());
-    let (background, focus_on_object, coverage) = (config.background, session.focus_on_object(), session.coverage());
-    drop(session);
     let (matched, cameras, maps, views) = (&matched, &cameras[..], &maps, args.preview_views);
     let object = focus_on_object;
     let previews = match &preview_gpu {
