@@ -5,8 +5,10 @@
 //! the run's settings and time. `gast stylize` writes it as `sheet.png`; the
 //! studio exports the same sheet for its current run.
 //!
-//! Tiles are letterboxed into squares so that views of any aspect ratio (the
-//! fitted framing gives each view its own) line up in a grid.
+//! Tiles are letterboxed into boxes `TILE` wide so that views of any aspect
+//! ratio (the fitted framing gives each view its own) line up in a grid; a
+//! row is as tall as its tallest tile at that width (at most `TILE`), so
+//! wide views leave no empty bands above and below.
 
 use std::path::Path;
 
@@ -22,7 +24,7 @@ use vello_cpu::kurbo::{Affine, BezPath};
 
 use super::glyphs::shape_text;
 
-/// Side of one square tile, pixels.
+/// Width of one tile, and the most a row of tiles is high, pixels.
 const TILE: u32 = 200;
 /// Gap between tiles, pixels.
 const GAP: u32 = 6;
@@ -179,8 +181,15 @@ pub fn settings_line(config: &StyleConfig, steps: u32, seconds: f64, focus_on_ob
 pub fn contact_sheet(content: &SheetContent) -> RgbImage {
     let width = COLUMNS * TILE + (COLUMNS + 1) * GAP;
     let header = 2 * LABEL + GAP;
-    let row = LABEL + TILE + GAP;
-    let height = header + row * (1 + content.views.len() as u32) + GAP;
+    let style_h = content.style.iter().map(fitted_height).max().unwrap_or(TILE);
+    let view_h: Vec<u32> = content
+        .views
+        .iter()
+        .map(|rs| rs.iter().map(|r| row_height(r.width, r.height)).max())
+        .map(|h| h.unwrap_or(TILE))
+        .collect();
+    let row = |h: u32| LABEL + h + GAP;
+    let height = header + row(style_h) + view_h.iter().map(|&h| row(h)).sum::<u32>() + GAP;
     let mut img = RgbImage::from_pixel(width, height, BACKGROUND);
     let mut labels: Vec<(f64, f64, f64, String)> = vec![
         (f64::from(GAP), 17.0, 16.0, content.title.clone()),
@@ -190,21 +199,21 @@ pub fn contact_sheet(content: &SheetContent) -> RgbImage {
     let mut y = header;
     for (c, (tile, name)) in content.style.iter().zip(["style", "style depth", "style edges"]).enumerate() {
         labels.push((f64::from(col_x(c as u32)), f64::from(y + 16), 13.0, name.into()));
-        blit(&mut img, tile, col_x(c as u32), y + LABEL);
+        blit(&mut img, tile, col_x(c as u32), y + LABEL, style_h);
     }
-    y += row;
+    y += row(style_h);
     let names = ["before", "colour-matched", "after"];
-    for (v, renders) in content.views.iter().enumerate() {
+    for (v, (renders, &h)) in content.views.iter().zip(&view_h).enumerate() {
         for (k, r) in renders.iter().enumerate() {
             let (rgb_col, depth_col, jet_col) = (k as u32, 3 + k as u32, 6 + k as u32);
             labels.push((f64::from(col_x(rgb_col)), f64::from(y + 16), 13.0, format!("view {} {}", v + 1, names[k])));
             labels.push((f64::from(col_x(depth_col)), f64::from(y + 16), 13.0, format!("{} depth", names[k])));
             labels.push((f64::from(col_x(jet_col)), f64::from(y + 16), 13.0, format!("{} depth, JET", names[k])));
-            blit(&mut img, &Tile::render_rgb(r), col_x(rgb_col), y + LABEL);
-            blit(&mut img, &Tile::render_depth(r), col_x(depth_col), y + LABEL);
-            blit(&mut img, &Tile::render_depth_jet(r), col_x(jet_col), y + LABEL);
+            blit(&mut img, &Tile::render_rgb(r), col_x(rgb_col), y + LABEL, h);
+            blit(&mut img, &Tile::render_depth(r), col_x(depth_col), y + LABEL, h);
+            blit(&mut img, &Tile::render_depth_jet(r), col_x(jet_col), y + LABEL, h);
         }
-        y += row;
+        y += row(h);
     }
     draw_text(&mut img, &labels);
     img
@@ -218,14 +227,33 @@ pub fn write_sheet(path: &Path, content: &SheetContent) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("cannot write the contact sheet: {e}"))
 }
 
-/// Draws `tile` scaled (nearest neighbour) into the `TILE × TILE` square at
-/// `(x0, y0)`, centred, keeping its aspect ratio; the rest is letterbox grey.
-fn blit(img: &mut RgbImage, tile: &Tile, x0: u32, y0: u32) {
+/// The scale that fits `tile` into a `TILE × TILE` square, and its size at it.
+fn fit(tile: &Tile) -> (f64, u32, u32) {
     let (tw, th) = (tile.width.max(1), tile.height.max(1));
     let s = f64::from(TILE) / f64::from(tw.max(th));
-    let (dw, dh) = (((f64::from(tw) * s).round() as u32).max(1), ((f64::from(th) * s).round() as u32).max(1));
-    let (ox, oy) = ((TILE - dw.min(TILE)) / 2, (TILE - dh.min(TILE)) / 2);
-    for y in 0..TILE {
+    let size = |v: u32| ((f64::from(v) * s).round() as u32).clamp(1, TILE);
+    (s, size(tw), size(th))
+}
+
+/// How high `tile` is drawn ([`blit`]): `TILE` for a tall or square one.
+fn fitted_height(tile: &Tile) -> u32 {
+    fit(tile).2
+}
+
+/// The height of a sheet row whose pictures are `width × height` (all of a
+/// view's are): they are drawn `TILE` wide, or `TILE` high when taller.
+pub fn row_height(width: u32, height: u32) -> u32 {
+    fitted_height(&Tile { width, height, rgb: Vec::new() })
+}
+
+/// Draws `tile` scaled (nearest neighbour) into the box `TILE` wide and
+/// `box_h` high at `(x0, y0)`, centred, keeping its aspect ratio (at most
+/// `TILE × TILE`); the rest is letterbox grey.
+fn blit(img: &mut RgbImage, tile: &Tile, x0: u32, y0: u32, box_h: u32) {
+    let (tw, th) = (tile.width.max(1), tile.height.max(1));
+    let (s, dw, dh) = fit(tile);
+    let (ox, oy) = ((TILE - dw) / 2, (box_h.saturating_sub(dh)) / 2);
+    for y in 0..box_h {
         for x in 0..TILE {
             let inside = x >= ox && x < ox + dw && y >= oy && y < oy + dh;
             let px = if inside && tile.rgb.len() == (tw * th * 3) as usize {
@@ -320,13 +348,20 @@ mod tests {
         };
         let img = contact_sheet(&content);
         assert_eq!(img.width(), COLUMNS * TILE + (COLUMNS + 1) * GAP);
-        assert_eq!(img.height(), 2 * LABEL + GAP + 5 * (LABEL + TILE + GAP) + GAP);
+        // The square style's row is a square tile high; the 40 × 24 views'
+        // rows as high as the views drawn TILE wide, with no letterbox bands.
+        let view_h = TILE * 24 / 40;
+        assert_eq!(img.height(), 2 * LABEL + GAP + (LABEL + TILE + GAP) + 4 * (LABEL + view_h + GAP) + GAP);
         // The style tile is its colour, the after tile of the last view its render.
         let header = 2 * LABEL + GAP;
         assert_eq!(img.get_pixel(GAP + TILE / 2, header + LABEL + TILE / 2).0, [153, 153, 153]);
-        let last = header + 4 * (LABEL + TILE + GAP) + LABEL;
-        let after = img.get_pixel(GAP + 2 * (TILE + GAP) + TILE / 2, last + TILE / 2).0;
+        let last = header + (LABEL + TILE + GAP) + 3 * (LABEL + view_h + GAP) + LABEL;
+        let after = img.get_pixel(GAP + 2 * (TILE + GAP) + TILE / 2, last + view_h / 2).0;
         assert_eq!(after, [204, 128, 51]);
+        // The view's first and last rows are drawn: no letterbox above or below.
+        let first_col = GAP + 2 * (TILE + GAP) + TILE / 2;
+        assert_ne!(img.get_pixel(first_col, last).0, [48, 48, 54]);
+        assert_ne!(img.get_pixel(first_col, last + view_h - 1).0, [48, 48, 54]);
         // Labels are drawn: light pixels in the title line.
         let bright = (0..img.width())
             .flat_map(|x| (0..LABEL).map(move |y| (x, y)))

@@ -540,16 +540,26 @@ fn the_contact_sheet_of_a_run_is_exported() {
     assert!(app.notice.contains(&path.display().to_string()), "the notice does not name the sheet: {}", app.notice);
     let img = image::open(&path).unwrap_or_else(|e| panic!("{}: not an image ({e})", path.display())).to_rgb8();
     // Nine columns of 200 px tiles (RGB, grey depth, JET depth of before / colour-matched /
-    // after); a header, the style row and four view rows.
+    // after); a header, the style row and four view rows, each as high as its pictures
+    // drawn 200 px wide (at most 200).
+    let start = app.run.start().expect("the run's start");
+    let maps = &start.style_maps;
+    let rows: Vec<u32> = std::iter::once(crate::report::sheet::row_height(maps.width as u32, maps.height as u32))
+        .chain(
+            crate::report::sheet::spread(&start.cameras, 4)
+                .map(|c| crate::report::sheet::row_height(c.width, c.height)),
+        )
+        .collect();
     assert_eq!(img.width(), 9 * 200 + 10 * 6);
-    assert_eq!(img.height(), 2 * 22 + 6 + 5 * (22 + 200 + 6) + 6);
+    assert_eq!(img.height(), 2 * 22 + 6 + rows.iter().map(|h| 22 + h + 6).sum::<u32>() + 6, "rows {rows:?}");
     let mut colours: Vec<[u8; 3]> = img.pixels().map(|p| p.0).collect();
     colours.sort_unstable();
     colours.dedup();
     // Every view's before and after RGB tiles show the scene (not one flat colour) and differ.
-    let tile = |row: u32, col: u32| {
-        let (x0, y0) = (6 + col * 206, 2 * 22 + 6 + row * 228 + 22);
-        (0..200u32).flat_map(move |y| (0..200u32).map(move |x| (x0 + x, y0 + y))).collect::<Vec<_>>()
+    let tile = |row: usize, col: u32| {
+        let y0 = 2 * 22 + 6 + rows[..row].iter().map(|h| 22 + h + 6).sum::<u32>() + 22;
+        let (x0, h) = (6 + col * 206, rows[row]);
+        (0..h).flat_map(move |y| (0..200u32).map(move |x| (x0 + x, y0 + y))).collect::<Vec<_>>()
     };
     let luminance = |p: [u8; 3]| 0.299 * f64::from(p[0]) + 0.587 * f64::from(p[1]) + 0.114 * f64::from(p[2]);
     for view in 1..=4 {
@@ -558,7 +568,10 @@ fn the_contact_sheet_of_a_run_is_exported() {
         let mean = after.iter().map(|&p| luminance(p)).sum::<f64>() / after.len() as f64;
         let spread = (after.iter().map(|&p| (luminance(p) - mean).powi(2)).sum::<f64>() / after.len() as f64).sqrt();
         let changed = before.iter().zip(&after).filter(|(a, b)| a != b).count();
-        println!("view {view}: after tile luminance {mean:.1} ± {spread:.1}, {changed} of 40000 pixels changed");
+        println!(
+            "view {view}: after tile luminance {mean:.1} ± {spread:.1}, {changed} of {} pixels changed",
+            after.len()
+        );
         assert!(spread > 5.0, "view {view}: the after tile is flat ({spread:.1})");
         assert!(changed > 1000, "view {view}: the after tile equals the before tile");
     }
