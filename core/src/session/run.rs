@@ -428,9 +428,8 @@ impl Session {
     }
 
     /// The whole scene with the current optimised Gaussians in place (read
-    /// back from the GPU when the steps run there).
-    /// Where a GPU engine's Gaussians cannot be read back, the colour-matched
-    /// scene.
+    /// back from the GPU when the steps run there); the colour-matched scene
+    /// where a GPU engine's Gaussians cannot be read back.
     pub fn result(&self) -> Gaussians {
         let downloaded = self.engine.as_ref().and_then(|e| e.download().ok());
         let Some(g) = downloaded.as_ref().or(self.cpu.as_ref().map(|c| &c.g)) else {
