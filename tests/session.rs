@@ -19,7 +19,7 @@ use gast_tests::shared_file;
 fn inputs(config: StyleConfig) -> Option<SessionInputs> {
     let full = whole_guitar_inputs(config)?;
     let keep: Vec<u32> = (0..full.scene.len() as u32).step_by(4).collect();
-    Some(SessionInputs { scene: gast_core::session::subset(&full.scene, &keep), ..full })
+    Some(SessionInputs { scene: Arc::new(gast_core::session::subset(&full.scene, &keep)), ..full })
 }
 
 /// [`inputs`] with all of guitar's Gaussians.
@@ -29,7 +29,15 @@ fn whole_guitar_inputs(config: StyleConfig) -> Option<SessionInputs> {
     let vgg = Arc::new(Vgg::load(&shared_file("data/weights/vgg19-conv3.safetensors")?).expect("weights"));
     let opts = gast_core::camera::OrbitOptions { count: 6, width: 48, height: 48, ..Default::default() };
     let cameras = gast_core::camera::orbit_cameras(&scene.means, &opts);
-    Some(SessionInputs { scene, cameras, style, style_depth: StyleDepthSource::Heuristic, vgg, config, gpu: None })
+    Some(SessionInputs {
+        scene: Arc::new(scene),
+        cameras,
+        style,
+        style_depth: StyleDepthSource::Heuristic,
+        vgg,
+        config,
+        gpu: None,
+    })
 }
 
 fn next(events: &crossbeam_channel::Receiver<Event>) -> Event {
@@ -151,14 +159,14 @@ fn a_bad_configuration_fails_with_a_message() {
 #[test]
 fn cameras_that_do_not_see_the_scene_fail_with_a_message() {
     let Some(full) = inputs(StyleConfig::default()) else { return };
-    let mut unseen = full.scene.clone();
+    let mut unseen = (*full.scene).clone();
     unseen.opacity_logits.iter_mut().for_each(|o| *o = -20.0); // below the rasterizer's 1/255
     let mut faint =
         gast_core::session::subset(&full.scene, &(0..full.scene.len() as u32).step_by(2000).collect::<Vec<_>>());
     faint.opacity_logits.iter_mut().for_each(|o| *o = -4.0); // alpha 0.018 each
     for (scene, said) in [
-        (unseen, "Gaussians is visible from the 6 optimisation cameras"),
-        (faint, "the scene covers no pixel of the 6 optimisation views"),
+        (Arc::new(unseen), "Gaussians is visible from the 6 optimisation cameras"),
+        (Arc::new(faint), "the scene covers no pixel of the 6 optimisation views"),
     ] {
         let err = gast_core::session::Session::prepare(SessionInputs { scene, ..full.clone() }, &mut |_| {})
             .err()
@@ -178,14 +186,15 @@ fn the_result_is_the_colour_matched_scene_with_the_optimised_gaussians_in_place(
     // Two Gaussians no camera sees: copies of the first two, too faint to draw.
     let faint = gast_core::session::subset(&inputs.scene, &[0, 1]);
     let n = inputs.scene.len();
+    let scene = Arc::make_mut(&mut inputs.scene);
     for i in 0..2 {
-        inputs.scene.means.push(faint.means[i]);
-        inputs.scene.log_scales.push(faint.log_scales[i]);
-        inputs.scene.quats.push(faint.quats[i]);
-        inputs.scene.opacity_logits.push(-20.0); // below the rasterizer's 1/255
-        inputs.scene.sh.extend_from_slice(faint.sh_of(i));
+        scene.means.push(faint.means[i]);
+        scene.log_scales.push(faint.log_scales[i]);
+        scene.quats.push(faint.quats[i]);
+        scene.opacity_logits.push(-20.0); // below the rasterizer's 1/255
+        scene.sh.extend_from_slice(faint.sh_of(i));
     }
-    let scene = inputs.scene.clone();
+    let scene = Arc::clone(&inputs.scene);
     let mut session = gast_core::session::Session::prepare(inputs, &mut |_| {}).expect("a session");
     assert_eq!(session.input().sh, scene.sh, "the input as given");
     let matched = session.colour_matched();
@@ -200,7 +209,7 @@ fn the_result_is_the_colour_matched_scene_with_the_optimised_gaussians_in_place(
         assert!(!changed(i), "culled Gaussian {i} is G^c's");
         assert_eq!(result.opacity_logits[i], matched.opacity_logits[i]);
     }
-    assert_eq!(session.into_input().sh, scene.sh, "handed back as given");
+    assert!(Arc::ptr_eq(session.input(), &scene), "the input shared, not copied");
 }
 
 /// Cameras that see nothing of the scene among those that do are named in a

@@ -70,7 +70,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &OrbitOptions { count: 36, width: 256, height: 256, fov_y_degrees: 50.0, ..OrbitOptions::default() },
     );
     let inputs = SessionInputs {
-        scene: g0.clone(),
+        scene: std::sync::Arc::new(g0.clone()),
         cameras: cameras.clone(),
         style: StyleImage::open(Path::new(style))?,
         style_depth: StyleDepthSource::Heuristic,

@@ -106,7 +106,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let style_image = StyleImage::open(std::path::Path::new(style))?;
     let background = background(&style_image)?;
     let inputs = SessionInputs {
-        scene: g,
+        scene: std::sync::Arc::new(g),
         cameras,
         style: style_image,
         style_depth: StyleDepthSource::Heuristic,

@@ -465,7 +465,7 @@ fn cpu_starter(
     plan: fn(StyleConfig) -> StyleConfig,
 ) -> session_link::SessionStarter {
     Box::new(move |req: session_link::StartRequest| {
-        let scene = Arc::unwrap_or_clone(req.scene);
+        let scene = req.scene;
         let config = plan(req.config);
         let side = config.resolution;
         let opts = gast_core::camera::OrbitOptions { count: views, width: side, height: side, ..Default::default() };

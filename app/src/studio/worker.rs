@@ -92,7 +92,6 @@ pub fn starter() -> SessionStarter {
                 })
                 .map_err(|e| e.to_string())?;
                 let vgg = Arc::new(Vgg::load(&weights).map_err(|e| e.to_string())?);
-                let scene = Arc::unwrap_or_clone(scene);
                 let cameras = if cameras.is_empty() {
                     let opts = OrbitOptions {
                         count: ORBIT_VIEWS,

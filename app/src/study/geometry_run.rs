@@ -43,7 +43,7 @@ pub fn run(
         Some(p) => p.clone(),
         None => fit_scene(sizes, &cameras_path, out, fit)?,
     };
-    let scene = load_scene(&scene_path)?;
+    let scene = Arc::new(load_scene(&scene_path)?);
     let cameras = views_for(
         &scene,
         &ViewArgs {
@@ -113,7 +113,7 @@ pub fn run(
         let base = bar.position();
         let t = Instant::now();
         let inputs = SessionInputs {
-            scene: scene.clone(),
+            scene: Arc::clone(&scene),
             cameras: cameras.clone(),
             style: image.clone(),
             style_depth: StyleDepthSource::Heuristic,

@@ -81,7 +81,7 @@ pub fn run_grid(
         let (ta, tb) = (&grid.trials[a], &grid.trials[b]);
         (ta.scene, &ta.style).cmp(&(tb.scene, &tb.style))
     });
-    let mut scenes: BTreeMap<usize, Gaussians> = BTreeMap::new();
+    let mut scenes: BTreeMap<usize, Arc<Gaussians>> = BTreeMap::new();
     let mut styles: BTreeMap<StyleSource, (StyleImage, PreparedStyle)> = BTreeMap::new();
     let eval = EvalOptions { resolution: sizes.eval_resolution, ..EvalOptions::default() };
     for &i in &order {
@@ -89,7 +89,7 @@ pub fn run_grid(
         if !scenes.contains_key(&spec.scene) {
             scenes.clear(); // trials are grouped by scene: keep one in memory
             let path = shared.join(&sizes.scenes[spec.scene]);
-            scenes.insert(spec.scene, load_scene(&path)?);
+            scenes.insert(spec.scene, Arc::new(load_scene(&path)?));
         }
         let Some(scene) = scenes.get(&spec.scene) else { continue };
         if !styles.contains_key(&spec.style) {
@@ -123,7 +123,7 @@ pub fn run_grid(
             views = views_for(scene, &view_args(spec.config.resolution))?;
         }
         let inputs = SessionInputs {
-            scene: scene.clone(),
+            scene: Arc::clone(scene),
             cameras: views,
             style: image.clone(),
             style_depth: StyleDepthSource::Heuristic,

@@ -43,8 +43,9 @@ pub enum SessionError {
 /// Everything a run starts from.
 #[derive(Clone)]
 pub struct SessionInputs {
-    /// The scene as loaded.
-    pub scene: Gaussians,
+    /// The scene as loaded, shared: the session only reads it (a studio
+    /// showing it, a study running it under many settings, keep theirs).
+    pub scene: Arc<Gaussians>,
     /// Optimisation cameras (any resolution: they are rescaled to the working resolution).
     pub cameras: Vec<Camera>,
     /// The style image.
@@ -140,7 +141,7 @@ pub struct Session {
     /// [`StyleConfig::split_px`]). The whole colour-matched scene `G^c`, into
     /// which the optimised Gaussians are scattered on export, is `colour`
     /// applied to it, made when asked for rather than kept beside it.
-    input: Gaussians,
+    input: Arc<Gaussians>,
     /// Stage 0's colour matching.
     colour: ColorTransfer,
     /// Indices into `input` of the optimised Gaussians.
@@ -217,6 +218,7 @@ impl Session {
             let t = Instant::now();
             let cap = scene.len().saturating_mul(crate::style::config::SPLIT_MAX_FACTOR);
             let (split, r) = super::split::split_large(&scene, &work_cams, config.split_px, cap);
+            let split = Arc::new(split);
             let capped = if r.capped { ", stopped at the cap" } else { "" };
             on_event(Event::Stage {
                 name: format!(
@@ -393,22 +395,15 @@ impl Session {
     /// The colour-matched scene before optimisation (`G^c`, whole), made
     /// anew from the run's input at each call.
     pub fn colour_matched(&self) -> Gaussians {
-        let mut full = self.input.clone();
+        let mut full = (*self.input).clone();
         self.colour.apply_to_gaussians(&mut full);
         full
     }
 
     /// The scene the run started from: as loaded, or split at
     /// [`StyleConfig::split_px`].
-    pub fn input(&self) -> &Gaussians {
+    pub fn input(&self) -> &Arc<Gaussians> {
         &self.input
-    }
-
-    /// Ends the session, handing back its input ([`Session::input`]) and
-    /// letting go of everything else (the optimised Gaussians, the targets,
-    /// the style's features, a GPU engine's buffers).
-    pub fn into_input(self) -> Gaussians {
-        self.input
     }
 
     /// Mean share of the optimisation views' pixels the input scene covers.
@@ -437,7 +432,7 @@ impl Session {
         };
         // `G^c` where nothing is optimised (the culled Gaussians); the rest is
         // overwritten by the optimised ones.
-        let mut out = self.input.clone();
+        let mut out = (*self.input).clone();
         self.colour.apply_to_gaussians_except(&mut out, &self.keep);
         scatter(&mut out, &self.keep, g);
         out

@@ -204,7 +204,7 @@ fn write_json(args: &StepArgs, runs: &[(&str, &StepRun)]) -> anyhow::Result<()> 
 
 /// What both step benchmarks load: the scene, its orbit views, the style and the network.
 pub(super) struct StepInputs {
-    pub(super) scene: gast_core::Gaussians,
+    pub(super) scene: std::sync::Arc<gast_core::Gaussians>,
     pub(super) views: Vec<Camera>,
     pub(super) style: gast_core::session::StyleImage,
     pub(super) vgg: std::sync::Arc<gast_core::vision::Vgg>,
@@ -244,7 +244,7 @@ pub(super) fn step_inputs(args: &StepArgs) -> anyhow::Result<StepInputs> {
         args.resolution,
         rayon::current_num_threads()
     );
-    Ok(StepInputs { scene, views, style, vgg })
+    Ok(StepInputs { scene: std::sync::Arc::new(scene), views, style, vgg })
 }
 
 /// With `--matching-reuse` alone and a GPU: the engine with and without
@@ -527,7 +527,7 @@ fn time_steps(
 
     let StepInputs { scene, views, style, vgg } = step_inputs;
     let inputs = SessionInputs {
-        scene: scene.clone(),
+        scene: std::sync::Arc::clone(scene),
         cameras: views.clone(),
         style: style.clone(),
         style_depth: StyleDepthSource::Heuristic,

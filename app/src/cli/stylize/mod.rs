@@ -370,12 +370,10 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
 
     let mut stages = Vec::new();
     let mut culled = (scene.len(), scene.len());
-    // The session takes the scene and hands it back for the "before"
-    // previews; a split run starts from another scene, so the loaded one is
-    // kept beside it.
-    let loaded = (config.split_px > 0.0).then(|| scene.clone());
+    // The session shares the scene, which the "before" previews draw.
+    let scene = Arc::new(scene);
     let inputs = SessionInputs {
-        scene,
+        scene: Arc::clone(&scene),
         cameras: cameras.clone(),
         style,
         style_depth,
@@ -507,7 +505,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     // 803 MB resident with it, 617 MB without.
     let (matched, cameras, maps) = (session.colour_matched(), session.cameras().to_vec(), session.style().maps.clone());
     let (background, focus_on_object, coverage) = (config.background, session.focus_on_object(), session.coverage());
-    let scene = loaded.unwrap_or_else(|| session.into_input());
+    drop(session);
     super::output_folder(&args.out, "--out")?;
     // The run's scene first: where the disk has room for one scene only, it is
     // the one kept. Then the colour-matched scene, for `gast convert --blend`

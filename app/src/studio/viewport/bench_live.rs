@@ -47,7 +47,8 @@ pub fn run(scene: Gaussians, style: StyleImage, vgg: Arc<Vgg>, reps: u32) -> any
         ..Default::default()
     };
     let style_depth = StyleDepthSource::Heuristic;
-    let inputs = SessionInputs { scene, cameras, style, style_depth, vgg, config, gpu: Some(ctx.clone()) };
+    let inputs =
+        SessionInputs { scene: Arc::new(scene), cameras, style, style_depth, vgg, config, gpu: Some(ctx.clone()) };
     let mut session = Session::prepare(inputs, &mut |_| {}).map_err(|e| anyhow::anyhow!("{e}"))?;
     let live = session.live().context("the session did not start on the GPU")?;
     let device = &ctx.device;

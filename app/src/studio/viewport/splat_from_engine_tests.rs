@@ -29,7 +29,15 @@ fn gpu_session(ctx: &GpuContext) -> Option<Session> {
         ..Default::default()
     };
     let style_depth = StyleDepthSource::Heuristic;
-    let inputs = SessionInputs { scene, cameras, style, style_depth, vgg, config, gpu: Some(ctx.clone()) };
+    let inputs = SessionInputs {
+        scene: std::sync::Arc::new(scene),
+        cameras,
+        style,
+        style_depth,
+        vgg,
+        config,
+        gpu: Some(ctx.clone()),
+    };
     Some(Session::prepare(inputs, &mut |_| {}).expect("GPU session"))
 }
 
