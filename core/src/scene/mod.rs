@@ -27,7 +27,7 @@ mod sog;
 mod sog_write;
 mod spz;
 #[cfg(test)]
-mod test_util;
+pub(crate) mod test_util;
 #[cfg(test)]
 mod tests;
 #[cfg(test)]

@@ -270,14 +270,7 @@ mod tests {
     #[test]
     fn the_gaussians_left_out_keep_their_coefficients_and_the_rest_are_mapped_alike() {
         let t = ColorTransfer { a: [[0.9, 0.1, -0.2], [0.05, 1.1, 0.0], [0.3, -0.1, 0.7]], b: [0.05, -0.1, 0.2] };
-        let mut g = Gaussians::with_capacity(6, 1);
-        for i in 0..6 {
-            g.means.push([0.0; 3]);
-            g.log_scales.push([0.0; 3]);
-            g.quats.push([1.0, 0.0, 0.0, 0.0]);
-            g.opacity_logits.push(0.0);
-            g.sh.extend((0..12).map(|c| 0.05 * (i * 12 + c) as f32 - 1.0));
-        }
+        let g = crate::scene::test_util::sample(6, 1);
         let (mut all, mut some) = (g.clone(), g.clone());
         t.apply_to_gaussians(&mut all);
         t.apply_to_gaussians_except(&mut some, &[0, 2, 3]);

@@ -226,9 +226,8 @@ impl DepthAnything {
     /// [`Unit`], `h × w`) at its own size, through the reference's pre- and
     /// post-processing.
     pub fn estimate_rgb<T: Unit>(&self, rgb: &[T], h: usize, w: usize) -> Vec<f32> {
-        let (ih, iw) = input_size(h, w, INPUT_SIZE, self.config.patch_size);
-        let depth = self.forward(&self.preprocess(rgb, h, w, ih, iw), ih, iw);
-        resize_bicubic(&depth, ih, iw, 1, h, w)
+        let d = self.depth_image(rgb, h, w);
+        resize_bicubic(&d.values, d.height, d.width, 1, h, w)
     }
 
     /// The image resized to `ih × iw` (bicubic with antialiasing) and
