@@ -33,6 +33,85 @@ pub struct Maps {
     pub edges: egui::ColorImage,
 }
 
+/// The names of the four maps, in [`Maps`]' order.
+pub const MAP_NAMES: [&str; 4] = ["RGB", "inverse depth", "inverse depth (JET)", "edges"];
+
+impl Maps {
+    fn into_array(self) -> [egui::ColorImage; 4] {
+        [self.rgb, self.depth, self.depth_jet, self.edges]
+    }
+}
+
+/// One set of maps on the inspect strip, as textures: each map at its full
+/// size (shown on hover) and as drawn in the strip, filtered down to the
+/// strip's height. egui_wgpu samples textures without mipmaps, so a map drawn
+/// at a quarter of its size picks one texel in four: a style's one-pixel edge
+/// lines came out as speckle noise.
+pub struct MapTextures {
+    maps: [egui::ColorImage; 4],
+    full: [egui::TextureHandle; 4],
+    shown: [egui::TextureHandle; 4],
+    /// The height in pixels `shown` was filtered to.
+    shown_height: usize,
+}
+
+impl MapTextures {
+    pub fn new(ctx: &egui::Context, name: &str, maps: Maps) -> Self {
+        let maps = maps.into_array();
+        let opts = egui::TextureOptions::LINEAR;
+        // Two textures a map (a handle's clone would share its texture).
+        let load =
+            |i: usize, what: &str| ctx.load_texture(format!("{name} {} {what}", MAP_NAMES[i]), maps[i].clone(), opts);
+        let full = std::array::from_fn(|i| load(i, "full"));
+        let shown = std::array::from_fn(|i| load(i, "strip"));
+        let shown_height = maps[0].height();
+        Self { maps, full, shown, shown_height }
+    }
+
+    /// Width over height of each map.
+    pub fn aspects(&self) -> [f32; 4] {
+        std::array::from_fn(|i| self.maps[i].width() as f32 / self.maps[i].height().max(1) as f32)
+    }
+
+    /// Refilters the strip's textures for drawing `height` pixels tall (not
+    /// above the maps' own size); nothing when they already are.
+    pub fn fit(&mut self, height: usize) {
+        let height = height.clamp(1, self.maps[0].height().max(1));
+        if height == self.shown_height {
+            return;
+        }
+        for (t, m) in self.shown.iter_mut().zip(&self.maps) {
+            t.set(downscale(m, height), egui::TextureOptions::LINEAR);
+        }
+        self.shown_height = height;
+    }
+
+    /// The textures drawn in the strip.
+    pub fn shown(&self) -> &[egui::TextureHandle; 4] {
+        &self.shown
+    }
+
+    /// The textures at the maps' own size.
+    pub fn full(&self) -> &[egui::TextureHandle; 4] {
+        &self.full
+    }
+}
+
+/// `img` resized to `height` rows (its aspect kept) with a filter as wide as
+/// the reduction, so that every source pixel counts: a thin line turns grey
+/// rather than vanishing or aliasing.
+pub fn downscale(img: &egui::ColorImage, height: usize) -> egui::ColorImage {
+    let (w, h) = (img.width(), img.height());
+    if height >= h || w == 0 || h == 0 {
+        return img.clone();
+    }
+    let width = ((w * height) as f32 / h as f32).round().max(1.0) as u32;
+    let src =
+        image::RgbaImage::from_raw(w as u32, h as u32, img.as_raw().to_vec()).expect("a ColorImage holds w·h pixels");
+    let out = image::imageops::resize(&src, width, height as u32, image::imageops::FilterType::Triangle);
+    egui::ColorImage::from_rgba_premultiplied([width as usize, height], out.as_raw())
+}
+
 /// A scene file as read: its Gaussians and the training cameras found beside it.
 pub struct SceneFile {
     /// The Gaussians.
@@ -341,5 +420,50 @@ impl Jobs {
         let done: Vec<JobDone> = self.rx.try_iter().collect();
         self.running = self.running.saturating_sub(done.len());
         done
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{MapTextures, Maps, downscale};
+
+    #[test]
+    fn the_strip_draws_filtered_textures_and_keeps_the_full_ones() {
+        let ctx = egui::Context::default();
+        let img = |c| egui::ColorImage::filled([240, 120], c);
+        let maps = Maps {
+            rgb: img(egui::Color32::RED),
+            depth: img(egui::Color32::GRAY),
+            depth_jet: img(egui::Color32::BLUE),
+            edges: img(egui::Color32::WHITE),
+        };
+        let mut t = MapTextures::new(&ctx, "test", maps);
+        assert_eq!(t.aspects(), [2.0; 4]);
+        t.fit(60);
+        for i in 0..4 {
+            assert_eq!(t.shown()[i].size(), [120, 60]);
+            assert_eq!(t.full()[i].size(), [240, 120]);
+        }
+        // Never above the maps' own size.
+        t.fit(500);
+        assert_eq!(t.shown()[0].size(), [240, 120]);
+    }
+
+    #[test]
+    fn downscale_keeps_thin_lines_as_grey() {
+        // One-pixel white columns every fourth pixel on black, as an edge map's
+        // lines: sampled one texel in four they would come out all white or all
+        // black; filtered to a quarter, every column is the same grey.
+        let (w, h) = (64, 32);
+        let px = (0..w * h).map(|i| if i % w % 4 == 1 { egui::Color32::WHITE } else { egui::Color32::BLACK }).collect();
+        let img = egui::ColorImage::new([w, h], px);
+        let small = downscale(&img, 8);
+        assert_eq!(small.size, [16, 8]);
+        let greys: Vec<u8> = small.pixels.iter().map(|c| c.r()).collect();
+        let (lo, hi) = greys.iter().fold((u8::MAX, 0), |(lo, hi), &g| (lo.min(g), hi.max(g)));
+        assert!(hi - lo <= 16 && (40..=90).contains(&lo), "greys {lo}..{hi}");
+        // Not enlarged, and kept as it is at its own size.
+        assert_eq!(downscale(&img, 32).pixels, img.pixels);
+        assert_eq!(downscale(&img, 64).size, [64, 32]);
     }
 }

@@ -138,9 +138,9 @@ pub struct StudioApp {
     stats: Arc<Mutex<FrameStats>>,
     viewport_notes: Arc<Mutex<ViewportNotes>>,
     jobs: inspect::Jobs,
-    maps: Option<[egui::TextureHandle; 4]>,
+    maps: Option<inspect::MapTextures>,
     /// The selected style's maps at texture scale, and what they were made for.
-    style_maps: Option<(inspect::StyleMapsKey, [egui::TextureHandle; 4])>,
+    style_maps: Option<(inspect::StyleMapsKey, inspect::MapTextures)>,
     style_maps_requested: Option<inspect::StyleMapsKey>,
     /// A depth image per style (by style path), for the `image` depth provider.
     style_depth_images: std::collections::HashMap<PathBuf, PathBuf>,
@@ -514,27 +514,10 @@ impl StudioApp {
         }
         for done in self.jobs.poll() {
             match done {
-                inspect::JobDone::Maps(m) => {
-                    let opts = egui::TextureOptions::LINEAR;
-                    self.maps = Some([
-                        self.ctx.load_texture("inspect rgb", m.rgb, opts),
-                        self.ctx.load_texture("inspect depth", m.depth, opts),
-                        self.ctx.load_texture("inspect depth jet", m.depth_jet, opts),
-                        self.ctx.load_texture("inspect edges", m.edges, opts),
-                    ]);
-                }
+                inspect::JobDone::Maps(m) => self.maps = Some(inspect::MapTextures::new(&self.ctx, "inspect", *m)),
                 inspect::JobDone::StyleMaps(key, m, warning) => {
                     self.style_depth_warning = warning;
-                    let opts = egui::TextureOptions::LINEAR;
-                    self.style_maps = Some((
-                        key,
-                        [
-                            self.ctx.load_texture("style rgb", m.rgb, opts),
-                            self.ctx.load_texture("style depth", m.depth, opts),
-                            self.ctx.load_texture("style depth jet", m.depth_jet, opts),
-                            self.ctx.load_texture("style edges", m.edges, opts),
-                        ],
-                    ));
+                    self.style_maps = Some((key, inspect::MapTextures::new(&self.ctx, "style", *m)));
                 }
                 inspect::JobDone::Scene(path, result) => self.finish_open_scene(&path, result),
                 inspect::JobDone::Style(path, result) => {

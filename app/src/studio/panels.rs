@@ -8,7 +8,7 @@ use egui::{Color32, RichText, Ui};
 use gast_core::session::Command;
 use gast_core::style::StyleConfig;
 
-use super::inspect::SheetJob;
+use super::inspect::{self, SheetJob};
 use super::session_link::{RunStatus, StartRequest};
 use super::view::{UpAxis, ViewState};
 use super::viewport::SharedGaussians;
@@ -467,17 +467,24 @@ impl StudioApp {
             ui.weak("RGB · inverse depth, grey and JET · edges: the current view (CPU rasterizer) | the style at texture scale");
         });
         // One height for all eight maps, so that they fit the strip side by side.
-        let aspect = |maps: &[egui::TextureHandle; 4]| {
-            maps.iter().map(|t| t.size()[0] as f32 / t.size()[1].max(1) as f32).sum::<f32>()
-        };
+        let aspect = |maps: &inspect::MapTextures| maps.aspects().iter().sum::<f32>();
         let total = self.maps.as_ref().map_or(0.0, aspect) + self.style_maps.as_ref().map_or(0.0, |(_, m)| aspect(m));
         let room = ui.available_width() - 9.0 * ui.spacing().item_spacing.x - 8.0;
         let h = if total > 0.0 { (room / total).clamp(40.0, 150.0) } else { 150.0 };
-        let show = |ui: &mut Ui, maps: &[egui::TextureHandle; 4], what: &str| {
-            for (t, name) in maps.iter().zip(["RGB", "inverse depth", "inverse depth (JET)", "edges"]) {
-                let [w, th] = t.size();
-                let size = egui::vec2(h * w as f32 / th.max(1) as f32, h);
-                ui.add(egui::Image::new(t).fit_to_exact_size(size)).on_hover_text(format!("{what}: {name}"));
+        let px = (h * ui.ctx().pixels_per_point()).round() as usize;
+        for maps in self.maps.iter_mut().chain(self.style_maps.iter_mut().map(|(_, m)| m)) {
+            maps.fit(px);
+        }
+        let show = |ui: &mut Ui, maps: &inspect::MapTextures, what: &str| {
+            for (i, name) in inspect::MAP_NAMES.iter().enumerate() {
+                let size = egui::vec2(h * maps.aspects()[i], h);
+                ui.add(egui::Image::new(&maps.shown()[i]).fit_to_exact_size(size)).on_hover_ui(|ui| {
+                    ui.label(format!("{what}: {name}"));
+                    let t = &maps.full()[i];
+                    let [w, th] = t.size();
+                    let ppp = ui.ctx().pixels_per_point();
+                    ui.add(egui::Image::new(t).fit_to_exact_size(egui::vec2(w as f32, th as f32) / ppp));
+                });
             }
         };
         ui.horizontal(|ui| {
