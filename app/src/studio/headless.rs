@@ -57,9 +57,11 @@ pub fn run(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Result<
                 }
             }
         }
-        let image = draw(&rs, &ctx, output)?;
-        for cb in shots {
-            cb.complete(image.clone());
+        let delay = output.viewport_output.get(&egui::ViewportId::ROOT).map_or(Duration::ZERO, |v| v.repaint_delay);
+        if let Some(image) = draw(&rs, &ctx, output, !shots.is_empty())? {
+            for cb in shots {
+                cb.complete(image.clone());
+            }
         }
         if close {
             // What the window would have shown in its bottom panel, for the log.
@@ -73,18 +75,22 @@ pub fn run(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Result<
             }
             return Ok(());
         }
-        // A window's frames come at the display's pace; here the workers
-        // (the run, the inspection maps) need the time between them.
-        std::thread::sleep(Duration::from_millis(10));
+        // A window draws when something asks for it (an input, a worker's
+        // wake-up, a delayed repaint); with no event loop to wake, this one
+        // draws when asked at once and otherwise looks again every 100 ms,
+        // leaving the time between frames to the workers (the run, the maps).
+        std::thread::sleep(delay.clamp(Duration::from_millis(10), Duration::from_millis(100)));
     }
 }
 
-/// Draws one frame's output into a texture of the screen's size and reads it back.
+/// Draws one frame's output into a texture of the screen's size and waits
+/// for it; reads it back when `read_back` (a screenshot asked for it).
 fn draw(
     rs: &egui_wgpu::RenderState,
     ctx: &egui::Context,
     mut output: egui::FullOutput,
-) -> anyhow::Result<Arc<egui::ColorImage>> {
+    read_back: bool,
+) -> anyhow::Result<Option<Arc<egui::ColorImage>>> {
     let (device, queue) = (&rs.device, &rs.queue);
     let ppp = output.pixels_per_point;
     let size = ctx.content_rect().size() * ppp;
@@ -135,6 +141,10 @@ fn draw(
         renderer.free_texture(&id);
     }
     drop(renderer);
+    if !read_back {
+        let _ = device.poll(wgpu::PollType::wait_indefinitely());
+        return Ok(None);
+    }
     let rows = super::viewport::read_texture_rows(device, queue, &texture, 4)
         .ok_or_else(|| anyhow::anyhow!("the headless frame could not be read back"))?;
     let bgra = matches!(rs.target_format, wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb);
@@ -146,5 +156,5 @@ fn draw(
             egui::Color32::from_rgba_premultiplied(r, p[1], b, p[3])
         })
         .collect();
-    Ok(Arc::new(egui::ColorImage::new([w as usize, h as usize], pixels)))
+    Ok(Some(Arc::new(egui::ColorImage::new([w as usize, h as usize], pixels))))
 }

@@ -93,6 +93,12 @@ struct ScreenshotState {
 pub struct StudioApp {
     scene: Option<LoadedScene>,
     snapshot: Option<SceneRef>,
+    /// A newer snapshot than `snapshot`, waiting for [`SOFTWARE_VIEW_INTERVAL`]
+    /// on a software renderer, and when `snapshot` was taken up.
+    newer_snapshot: Option<Arc<gast_core::session::Snapshot>>,
+    snapshot_taken_at: Option<std::time::Instant>,
+    /// The viewport draws on a software renderer (lavapipe): the CPU the run needs.
+    software_viewport: bool,
     /// How much of the stylization is shown and exported (colour, shape; 1 = all).
     strength: [f32; 2],
     /// The snapshot blended toward the run's colour-matched scene by
@@ -203,6 +209,10 @@ pub fn run_with(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Re
 /// projection pass; `shaders/splat_project.wgsl`).
 const VIEWPORT_STORAGE_BUFFERS: u32 = 4;
 
+/// How often a running optimisation's newest snapshot is drawn when the
+/// viewport renders in software ([`StudioApp::take_newer_snapshot`]).
+const SOFTWARE_VIEW_INTERVAL: std::time::Duration = std::time::Duration::from_secs(4);
+
 /// Whether the window's device can run the viewport's compute passes: a GL
 /// fallback without compute storage buffers cannot (wgpu would refuse the
 /// pipelines), and the studio then says so instead of stopping.
@@ -278,6 +288,7 @@ impl StudioApp {
     ) -> Self {
         let mut app = StudioApp::new(ctx, args);
         let info = rs.adapter.get_info();
+        app.software_viewport = info.device_type == wgpu::DeviceType::Cpu;
         match viewport_support(&rs.device.limits(), &info.name) {
             Ok(()) => {
                 let gpu = gast_core::gpu::GpuContext::from_device(rs.device.clone(), rs.queue.clone(), info);
@@ -302,6 +313,9 @@ impl StudioApp {
         let mut app = Self {
             scene: None,
             snapshot: None,
+            newer_snapshot: None,
+            snapshot_taken_at: None,
+            software_viewport: false,
             strength: env_strength(),
             shown: None,
             live: None,
@@ -486,15 +500,39 @@ impl StudioApp {
         ));
     }
 
+    /// Takes up the run's newest snapshot: at once on a GPU, at most every
+    /// [`SOFTWARE_VIEW_INTERVAL`] while a run goes on with a software
+    /// renderer, where drawing a whole-frame scene takes about half a second
+    /// of a 2-core machine (fern at 1,104×690 on lavapipe) and every
+    /// snapshot's draw would take that from the run. A paused or ended run's is taken at once.
+    fn take_newer_snapshot(&mut self) {
+        if self.newer_snapshot.is_none() {
+            return;
+        }
+        let since = self.snapshot_taken_at.map(|t| t.elapsed());
+        if self.software_viewport
+            && matches!(self.run.status, RunStatus::Running)
+            && let Some(since) = since.filter(|&s| s < SOFTWARE_VIEW_INTERVAL)
+        {
+            self.ctx.request_repaint_after(SOFTWARE_VIEW_INTERVAL - since);
+            return;
+        }
+        if let Some(snap) = self.newer_snapshot.take() {
+            self.snapshot = Some(SceneRef { version: self.next_version, gaussians: SharedGaussians::Snapshot(snap) });
+            self.next_version += 1;
+            self.snapshot_taken_at = Some(std::time::Instant::now());
+        }
+    }
+
     fn poll_workers(&mut self) {
         if let Ok(mut notes) = self.viewport_notes.lock() {
             self.errors.append(&mut notes.errors);
             self.run.log.append(&mut notes.warnings);
         }
         if let Some(snap) = self.run.poll() {
-            self.snapshot = Some(SceneRef { version: self.next_version, gaussians: SharedGaussians::Snapshot(snap) });
-            self.next_version += 1;
+            self.newer_snapshot = Some(snap);
         }
+        self.take_newer_snapshot();
         self.adopt_plan();
         self.replan_after_first_cycle();
         // While the run is live its GPU buffers are drawn; once it ends, its final snapshot.

@@ -14,6 +14,7 @@ impl StudioApp {
         self.scene = Some(LoadedScene { name, scene: SceneRef { version: self.next_version, gaussians: g.into() } });
         self.next_version += 1;
         self.snapshot = None;
+        self.newer_snapshot = None;
         self.maps = None;
         self.inspected_view = None;
     }

@@ -147,10 +147,17 @@ impl StudioApp {
                 None => ui.label("no scene"),
             };
             ui.separator();
+            let kept = if stats.kept > 0 { " (kept from the last frame)" } else { "" };
             ui.label(format!(
-                "drawn {}  sort {:.1} ms  prepare {:.1} ms",
+                "drawn {}{kept}  sort {:.1} ms  prepare {:.1} ms",
                 stats.drawn, stats.sort_ms, stats.prepare_ms
             ));
+            if self.software_viewport && matches!(self.run.status, RunStatus::Running) {
+                ui.label(format!(
+                    "software renderer: the view takes the run's newest state every {} s",
+                    super::SOFTWARE_VIEW_INTERVAL.as_secs()
+                ));
+            }
             if let Some(step) = stats.live_step {
                 ui.label(format!("after: step {step} from the optimiser's GPU buffers"));
             }
@@ -380,7 +387,14 @@ impl StudioApp {
             style_depth_image: self.style_depth_images.get(&style.path).cloned(),
             config: self.config.clone(),
             cameras: self.cameras.clone(),
-            waker: Arc::new(move || ctx.request_repaint()),
+            // Every step's report wakes the window (progress, loss chart); a
+            // software renderer, whose frames take the run's CPU, redraws
+            // for them at most once a second.
+            waker: if self.software_viewport {
+                Arc::new(move || ctx.request_repaint_after(std::time::Duration::from_secs(1)))
+            } else {
+                Arc::new(move || ctx.request_repaint())
+            },
             gpu: self.device.pick(self.gpu.as_ref()),
             fit_budget: self.fit_budget,
         };

@@ -11,7 +11,11 @@ impl StudioApp {
         if script.done {
             return true;
         }
-        ctx.request_repaint();
+        // The run's events wake the window at every step; this only polls
+        // the loading and the pause, as a user's window would not redraw on
+        // its own (an immediate repaint here drew frames without end, which
+        // on a software renderer took the CPU from the run it scripts).
+        ctx.request_repaint_after(std::time::Duration::from_millis(250));
         if !script.started {
             let ready = self.scene.is_some() && self.style.is_some() && self.starter.is_some();
             if ready {

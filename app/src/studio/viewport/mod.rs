@@ -94,6 +94,11 @@ struct GpuScene {
     projected: wgpu::Buffer,
     /// The GPU engine's buffers this scene follows, when it is drawn from them.
     live: Option<splat_from_engine::LiveScatter>,
+    /// The camera this scene's target was last drawn from and the splats
+    /// drawn: a repaint that changes neither (a progress line, a slider, a
+    /// tooltip) keeps that image rather than drawing every splat again, which
+    /// on a software renderer took the CPU from the run.
+    drawn_for: Option<(Camera, u32)>,
 }
 
 /// An offscreen render target.
@@ -113,6 +118,8 @@ pub struct FrameStats {
     pub prepare_ms: f32,
     /// The optimiser's step drawn from its GPU buffers, when a side is drawn from them.
     pub live_step: Option<u64>,
+    /// Renders that kept the image drawn before (same scene, same camera).
+    pub kept: u32,
 }
 
 /// What the viewport has to tell the user about the scenes it was given
@@ -397,6 +404,7 @@ impl SplatRenderer {
             sh_split: split as u32,
             sh_degree: degree,
             sorted_for: None,
+            drawn_for: None,
             gpu_sort: self.gpu_sort.as_ref().map(|k| k.scene(n)),
             geom,
             sh_a,
@@ -439,7 +447,9 @@ impl SplatRenderer {
     }
 
     /// Records the render of `side` from `cam` into its target (premultiplied
-    /// RGBA, transparent where nothing was drawn). Returns false when `side` has no scene.
+    /// RGBA, transparent where nothing was drawn), unless the target already
+    /// holds that scene from that camera (a scene drawn from a running GPU
+    /// engine's buffers is drawn every time). Returns false when `side` has no scene.
     pub fn render(
         &mut self,
         device: &wgpu::Device,
@@ -452,6 +462,14 @@ impl SplatRenderer {
         let (w, h) = (cam.width.max(1), cam.height.max(1));
         self.ensure_target(device, side, w, h);
         let Some(scene) = &mut self.scenes[side as usize] else { return false };
+        if scene.live.is_none()
+            && let Some((drawn_cam, drawn)) = &scene.drawn_for
+            && drawn_cam == cam
+        {
+            self.stats.drawn += *drawn as usize;
+            self.stats.kept += 1;
+            return true;
+        }
         if let Some(live) = &mut scene.live {
             live.record(encoder, &self.from_engine);
             self.stats.live_step = live.copied_steps();
@@ -466,6 +484,9 @@ impl SplatRenderer {
             let Some(target) = &self.targets[side as usize] else { return false };
             self.draw.draw(encoder, &target.view, &scene.draw_bind, n);
             self.stats.drawn += n as usize;
+            if let Some(scene) = &mut self.scenes[side as usize] {
+                scene.drawn_for = Some((cam.clone(), n));
+            }
             self.stats.prepare_ms += started.elapsed().as_secs_f32() * 1e3;
             return true;
         }
@@ -494,6 +515,9 @@ impl SplatRenderer {
         let Some(target) = &self.targets[side as usize] else { return false };
         self.draw.draw(encoder, &target.view, &scene.draw_bind, visible);
         self.stats.drawn += visible as usize;
+        if let Some(scene) = &mut self.scenes[side as usize] {
+            scene.drawn_for = Some((cam.clone(), visible));
+        }
         self.stats.prepare_ms += started.elapsed().as_secs_f32() * 1e3;
         true
     }

@@ -264,3 +264,34 @@ fn sh_split_across_two_bindings_renders_the_same() {
     let note = r.set_scene(&device, Side::Before, 1, &g).expect("upload").expect("a note");
     assert!(note.contains("SH degree 2 of 3"), "{note}");
 }
+
+#[test]
+fn a_still_view_of_the_same_scene_keeps_its_image() {
+    let Some((device, queue, _)) = device_or_skip("a_still_view_of_the_same_scene_keeps_its_image") else { return };
+    let g: SharedGaussians = Arc::new(assets::demo_scene()).into();
+    let cam = demo_camera(&g, 160, 120);
+    let mut r = SplatRenderer::new(&device);
+    r.set_scene(&device, Side::Before, 1, &g).expect("upload");
+    let frame = |r: &mut SplatRenderer, cam: &Camera| {
+        r.begin_frame();
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+        assert!(r.render(&device, &queue, &mut encoder, Side::Before, cam));
+        queue.submit([encoder.finish()]);
+        let (texture, _) = r.target(Side::Before).expect("target");
+        (r.stats, read_target(&device, &queue, texture))
+    };
+    let (first, image) = frame(&mut r, &cam);
+    assert_eq!(first.kept, 0);
+    assert!(first.drawn > 0);
+    // The same camera and scene: nothing drawn, the same image, the same count.
+    let (again, kept_image) = frame(&mut r, &cam);
+    assert_eq!((again.kept, again.drawn), (1, first.drawn));
+    assert_eq!(kept_image, image);
+    // Another camera, or another version of the scene, is drawn.
+    let mut moved = cam.clone();
+    moved.translation.x += 0.05;
+    assert_eq!(frame(&mut r, &moved).0.kept, 0);
+    r.set_scene(&device, Side::Before, 2, &g).expect("upload");
+    assert_eq!(frame(&mut r, &moved).0.kept, 0);
+    assert_eq!(frame(&mut r, &moved).0.kept, 1);
+}
