@@ -1,6 +1,8 @@
-//! Turntables: a scene seen from a ring of cameras around its up axis, as
-//! numbered PNG frames and one looping animated GIF, the form a chat or a web
-//! page shows without a viewer. With a second scene the two are rendered from
+//! Turntables: a scene seen from a ring of cameras around its up axis (or,
+//! for a forward-facing capture such as LLFF's fern, from a loop through its
+//! own cameras: [`gast_core::camera::forward_sweep`]), as numbered PNG frames
+//! and one looping animated GIF, the form a chat or a web page shows without
+//! a viewer. With a second scene the two are rendered from
 //! the same cameras and put side by side in each frame (before | after), so a
 //! stylization can be shared as one moving picture.
 //!
@@ -10,7 +12,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
-use gast_core::camera::{OrbitLayout, OrbitOptions, orbit_cameras};
+use gast_core::camera::{OrbitLayout, OrbitOptions, forward_sweep, orbit_cameras};
 use gast_core::io::{write_bytes, write_png_rgb};
 use gast_core::raster::{self, RenderOptions};
 use gast_core::{Camera, Gaussians};
@@ -35,6 +37,10 @@ pub struct TurntableOptions {
     pub up: [f32; 3],
     /// Background colour, RGB in [0, 1].
     pub background: [f32; 3],
+    /// The scene's training cameras, when it has them: forward-facing ones
+    /// replace the ring by a loop through them (their field of view, not
+    /// `fov_y_degrees`).
+    pub training: Vec<Camera>,
 }
 
 impl Default for TurntableOptions {
@@ -46,6 +52,7 @@ impl Default for TurntableOptions {
             elevation_degrees: 20.0,
             up: OrbitOptions::default().up,
             background: [0.0; 3],
+            training: Vec::new(),
         }
     }
 }
@@ -63,8 +70,13 @@ pub struct Turntable {
     pub height: u32,
 }
 
-/// The ring of cameras around `scene` (evenly spaced over one turn).
+/// The ring of cameras around `scene` (evenly spaced over one turn), or the
+/// loop through forward-facing training cameras.
 pub fn cameras(scene: &Gaussians, opts: &TurntableOptions) -> Vec<Camera> {
+    let size = opts.size.max(1);
+    if let Some(sweep) = forward_sweep(&opts.training, &scene.means, opts.frames.max(1), size, size) {
+        return sweep;
+    }
     let orbit = OrbitOptions {
         count: opts.frames.max(1),
         width: opts.size.max(1),

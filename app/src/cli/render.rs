@@ -30,7 +30,9 @@ pub struct RenderArgs {
           value_parser = crate::views::unit_channel)]
     pub background: Vec<f32>,
     /// Instead of the views, N frames on a ring around the scene (`turntable_NNN.png`)
-    /// and a looping animated `turntable.gif`, `--size` pixels square.
+    /// and a looping animated `turntable.gif`, `--size` pixels square. A forward-facing
+    /// capture (its cameras beside it or `--cameras`, all looking one way, as LLFF's fern)
+    /// gets a loop through its own cameras instead, NeRF's spiral; `--orbit` keeps the ring.
     #[arg(long, value_name = "N", value_parser = crate::views::view_count::<u32>())]
     pub turntable: Option<u32>,
     /// A second scene (e.g. the stylized one) shown beside SCENE in every
@@ -110,7 +112,17 @@ fn run_turntable(
     background: [f32; 3],
 ) -> anyhow::Result<ExitCode> {
     let after = args.compare.as_deref().map(load_scene).transpose()?;
+    // A forward-facing capture's own cameras give its loop (a ring would show its back).
+    let training = match camera_source(&args.scene, scene, args.views.cameras.as_deref(), args.views.orbit)? {
+        Some(path) => {
+            gast_core::camera::load(&path)
+                .with_context(|| format!("could not load the cameras {}", path.display()))?
+                .cameras
+        }
+        None => Vec::new(),
+    };
     let opts = TurntableOptions {
+        training,
         frames,
         size: args.views.size,
         fov_y_degrees: args.views.fov,

@@ -752,10 +752,8 @@ impl StudioApp {
             if scroll != 0.0 {
                 self.view.zoom(scroll);
             }
-            if ui.input(|i| i.key_pressed(egui::Key::F))
-                && let Some(g) = self.current()
-            {
-                self.view.fit(&g);
+            if ui.input(|i| i.key_pressed(egui::Key::F)) {
+                self.frame_scene();
             }
         }
         let flying = ui.input(|i| i.pointer.secondary_down()) && (response.hovered() || response.dragged());

@@ -155,12 +155,29 @@ impl StudioApp {
         self.camera_source = Some(from.to_path_buf());
         // The view starts at the first training camera: a forward-facing
         // capture (fern) seen from the orbit around it shows its blurred back.
+        self.snap_to_first_camera();
+        for w in set.warnings {
+            self.run.log.push(format!("cameras: {w}"));
+        }
+    }
+
+    /// Puts the view at the first training camera, looking at the scene's centre.
+    fn snap_to_first_camera(&mut self) {
         if let Some(cam) = self.cameras.first().cloned() {
             let focus = self.current().and_then(|g| gast_core::camera::robust_bounds(&g.means)).map(|b| b.center);
             self.view.snap_to(&cam, focus);
         }
-        for w in set.warnings {
-            self.run.log.push(format!("cameras: {w}"));
+    }
+
+    /// Frames the scene (F, Fit, Reset): from a three-quarter view of its
+    /// bounds, or, for a forward-facing capture's own cameras (fern), from its
+    /// first camera, as it opened: its bounds seen from aside show what no
+    /// photo saw.
+    pub(super) fn frame_scene(&mut self) {
+        if self.camera_source.is_some() && gast_core::camera::forward_facing(&self.cameras).is_some() {
+            self.snap_to_first_camera();
+        } else if let Some(g) = self.current() {
+            self.view.fit(&g);
         }
     }
 

@@ -82,7 +82,10 @@ impl StudioApp {
             let label = if compare { "Turntable, before | after…" } else { "Turntable…" };
             if ui
                 .button(label)
-                .on_hover_text("36 frames around the scene as PNG and an animated GIF, into a folder")
+                .on_hover_text(
+                    "36 frames around the scene (through its own cameras for a forward-facing capture) as PNG \
+                     and an animated GIF, into a folder",
+                )
                 .clicked()
                 && let Some(dir) = rfd::FileDialog::new().set_title("Folder for the turntable").pick_folder()
             {
@@ -98,7 +101,10 @@ impl StudioApp {
         let Some(scene) = &self.scene else { return };
         let before = scene.scene.gaussians.clone();
         let after = self.after().map(|s| s.gaussians.clone());
-        let opts = TurntableOptions { up: self.view.up.vector().to_array(), background: self.background, ..opts };
+        // The scene's own cameras, when it has them: a forward-facing capture loops through them.
+        let training = if self.camera_source.is_some() { self.cameras.clone() } else { Vec::new() };
+        let opts =
+            TurntableOptions { up: self.view.up.vector().to_array(), background: self.background, training, ..opts };
         self.notice = format!("writing a turntable into {}…", dir.display());
         self.jobs.export_turntable(before, after, opts, dir);
     }
@@ -406,17 +412,17 @@ impl StudioApp {
 
     pub(super) fn view_controls(&mut self, ui: &mut Ui) {
         ui.horizontal(|ui| {
-            if ui.button("Fit").on_hover_text("frame the scene's robust bounds (F)").clicked()
-                && let Some(g) = self.current()
+            if ui
+                .button("Fit")
+                .on_hover_text("frame the scene's robust bounds, or a forward-facing capture from its first camera (F)")
+                .clicked()
             {
-                self.view.fit(&g);
+                self.frame_scene();
             }
             if ui.button("Reset").clicked() {
                 let up = self.view.up;
                 self.view = ViewState { up, ..ViewState::default() };
-                if let Some(g) = self.current() {
-                    self.view.fit(&g);
-                }
+                self.frame_scene();
             }
             egui::ComboBox::new("up", "up axis").selected_text(format!("{:?}", self.view.up)).show_ui(ui, |ui| {
                 for up in [UpAxis::NegY, UpAxis::PosY, UpAxis::PosZ] {

@@ -412,6 +412,13 @@ fn a_scenes_cameras_open_with_it_and_travel_with_its_export() {
     assert!(app.errors.is_empty(), "{:?}", app.errors);
     assert_eq!(app.cameras.len(), 3);
     assert_eq!(app.camera_source_name(), dir.join("fit").display().to_string());
+    // They all look one way: F (Fit, Reset) returns to the first of them, where the scene opened.
+    let opened = app.view.eye();
+    assert!(opened.distance(app.cameras[0].center()) < 1e-3, "{opened} against {}", app.cameras[0].center());
+    app.view.orbit(1.0, 0.3);
+    assert!(app.view.eye().distance(opened) > 1e-2);
+    app.frame_scene();
+    assert!(app.view.eye().distance(opened) < 1e-3);
     let g = app.current().expect("the scene");
     app.jobs.export_scene(g, dir.join("out/stylized.ply"), app.camera_file());
     poll_until(&mut app, 30, "the export", |a| a.jobs.running == 0);

@@ -22,6 +22,7 @@ mod inria;
 mod llff;
 mod npy;
 mod orbit;
+mod sweep;
 #[cfg(test)]
 mod tests;
 mod transforms;
@@ -43,6 +44,7 @@ pub use framing::{crop_view, fit_view, framed_orbit, framing_subject, subject_sp
 pub use inria::{load_inria, write_inria};
 pub use llff::{LLFF_IMAGE_FOLDERS, POSES_BOUNDS, load_llff};
 pub use orbit::{OrbitLayout, OrbitOptions, RobustBounds, orbit_cameras, robust_bounds};
+pub use sweep::{forward_facing, forward_sweep};
 pub use transforms::load_transforms;
 
 /// A pinhole camera (distortion-free), world-to-camera.
