@@ -432,6 +432,35 @@ fn gif_frames(path: &Path) -> Vec<(u32, u32)> {
     frames.iter().map(|f| f.buffer().dimensions()).collect()
 }
 
+/// Fern's own cameras look one way: its turntable loops through them (a
+/// scene fitted for one iteration from its SfM points is enough to see it),
+/// unless `--orbit` asks for the ring.
+#[test]
+fn a_forward_facing_capture_turntable_loops_through_its_cameras() {
+    let Some(fern) =
+        shared_file("data/datasets/fern/poses_bounds.npy").map(|p| p.parent().expect("dataset").to_path_buf())
+    else {
+        return;
+    };
+    let dir = temp("turntable-fern");
+    let scene = dir.join("fern.ply");
+    let o = gast(&["fit", s(&fern), "--iterations", "1", "--resolution", "64", "--out", s(&scene)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = dir.join("loop");
+    let o = gast(&["render", s(&scene), "--out", s(&out), "--turntable", "4", "--size", "48"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("loops through its 20 cameras"), "{}", stderr(&o));
+    for i in 0..4 {
+        let img = image::open(out.join(format!("turntable_{i:03}.png"))).expect("a frame").to_rgb8();
+        let lit = img.pixels().filter(|p| p.0.iter().any(|&c| c > 20)).count();
+        assert!(lit > 48 * 48 / 2, "frame {i}: the scene fills the view from its cameras' side, {lit} lit pixels");
+    }
+    let o = gast(&["render", s(&scene), "--out", s(&dir.join("ring")), "--turntable", "4", "--size", "48", "--orbit"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("loops through"), "{}", stderr(&o));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn turntables_write_frames_and_a_gif_and_compare_side_by_side() {
     let Some(scene) = shared_file("data/scenes/guitar.compressed.ply") else { return };

@@ -121,6 +121,13 @@ fn run_turntable(
         }
         None => Vec::new(),
     };
+    if gast_core::camera::forward_facing(&training).is_some() {
+        eprintln!(
+            "a forward-facing capture: the turntable loops through its {} cameras rather than circling the scene \
+             (--orbit circles it)",
+            training.len()
+        );
+    }
     let opts = TurntableOptions {
         training,
         frames,
