@@ -97,19 +97,17 @@ impl MapTextures {
     }
 }
 
-/// `img` resized to `height` rows (its aspect kept) with a filter as wide as
-/// the reduction, so that every source pixel counts: a thin line turns grey
-/// rather than vanishing or aliasing.
+/// `img` resized to `height` rows (its aspect kept) by area averaging
+/// ([`gast_core::vision::resize::resize_area_u8`]), so that every source
+/// pixel counts: a thin line turns grey rather than vanishing or aliasing.
 pub fn downscale(img: &egui::ColorImage, height: usize) -> egui::ColorImage {
     let (w, h) = (img.width(), img.height());
     if height >= h || w == 0 || h == 0 {
         return img.clone();
     }
-    let width = ((w * height) as f32 / h as f32).round().max(1.0) as u32;
-    let src =
-        image::RgbaImage::from_raw(w as u32, h as u32, img.as_raw().to_vec()).expect("a ColorImage holds w·h pixels");
-    let out = image::imageops::resize(&src, width, height as u32, image::imageops::FilterType::Triangle);
-    egui::ColorImage::from_rgba_premultiplied([width as usize, height], out.as_raw())
+    let width = ((w * height) as f32 / h as f32).round().max(1.0) as usize;
+    let out = gast_core::vision::resize::resize_area_u8(img.as_raw(), h, w, 4, height, width);
+    egui::ColorImage::from_rgba_premultiplied([width, height], &out)
 }
 
 /// A scene file as read: its Gaussians and the training cameras found beside it.
