@@ -114,11 +114,7 @@ fn run_turntable(
     let after = args.compare.as_deref().map(load_scene).transpose()?;
     // A forward-facing capture's own cameras give its loop (a ring would show its back).
     let training = match camera_source(&args.scene, scene, args.views.cameras.as_deref(), args.views.orbit)? {
-        Some(path) => {
-            gast_core::camera::load(&path)
-                .with_context(|| format!("could not load the cameras {}", path.display()))?
-                .cameras
-        }
+        Some(path) => views_for(scene, &ViewArgs { cameras: Some(path), ..args.views.clone() })?,
         None => Vec::new(),
     };
     if gast_core::camera::forward_facing(&training).is_some() {
