@@ -15,7 +15,7 @@ fn fit_lego_improves_on_the_initialisation() {
     let cameras: Vec<_> = data.views.iter().map(|v| v.0.clone()).collect();
     let before = mean_psnr(&initial_scene(&cameras, &cfg), &data.views, cfg.background);
     let start = std::time::Instant::now();
-    let scene = fit(&data.views, &cfg, &mut |_| std::ops::ControlFlow::Continue(()));
+    let scene = fit(&data.views, &cfg, &mut |_, _| std::ops::ControlFlow::Continue(()));
     let after = mean_psnr(&scene, &data.views, cfg.background);
     println!(
         "lego 64 px, 20 views, {} iterations: PSNR {before:.2} dB at the start, {after:.2} dB after ({} Gaussians, {:.1} s)",

@@ -341,6 +341,19 @@ fn a_bad_camera_file_fails_before_the_depth_model_is_looked_for() {
 /// returns its exit status and everything it printed.
 #[cfg(unix)]
 fn interrupted(args: &[&str], before: &str) -> (std::process::ExitStatus, String) {
+    signalled(args, before, "-INT", std::time::Duration::from_secs(2))
+}
+
+/// Runs `gast` with `args`, sends it `signal` (`-INT`, `-KILL`) `after` it
+/// printed a line containing `before`, and returns its exit status and
+/// everything it printed.
+#[cfg(unix)]
+fn signalled(
+    args: &[&str],
+    before: &str,
+    signal: &str,
+    after: std::time::Duration,
+) -> (std::process::ExitStatus, String) {
     use std::io::{BufRead, BufReader};
     let mut child = Command::new(env!("CARGO_BIN_EXE_gast"))
         .args(args)
@@ -356,8 +369,8 @@ fn interrupted(args: &[&str], before: &str) -> (std::process::ExitStatus, String
             break;
         }
     }
-    std::thread::sleep(std::time::Duration::from_secs(2));
-    let kill = Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill");
+    std::thread::sleep(after);
+    let kill = Command::new("kill").args([signal, &child.id().to_string()]).status().expect("kill");
     assert!(kill.success());
     seen.extend(lines.map_while(Result::ok));
     (child.wait().expect("wait"), seen.join("\n"))
@@ -404,23 +417,95 @@ fn ctrl_c_stops_a_run_and_keeps_what_it_has() {
     std::fs::remove_dir_all(&out).ok();
 }
 
+/// The iteration after `marker` in `text` ("stopped at iteration 123 of …").
+fn iteration_after(text: &str, marker: &str) -> u32 {
+    let at = text.find(marker).unwrap_or_else(|| panic!("no {marker:?} in {text}")) + marker.len();
+    text[at..].split(|c: char| !c.is_ascii_digit()).next().and_then(|n| n.parse().ok()).expect("an iteration")
+}
+
 /// Ctrl-C during `fit`: the fit stops after its iteration and still writes
-/// the scene as it is, with its cameras.
+/// the scene as it is, with its cameras, and keeps a checkpoint that the
+/// same command with `--resume` goes on from (stopped again, later on);
+/// with other settings `--resume` is refused, saying which.
 #[cfg(unix)]
 #[test]
-fn ctrl_c_stops_a_fit_and_writes_its_scene() {
+fn ctrl_c_stops_a_fit_and_resume_goes_on_from_there() {
     let Some(fern) = shared_file("data/datasets/fern") else { return };
     let out = temp("ctrlc-fit");
     let scene = out.join("f.ply");
-    let (status, text) = interrupted(
-        &["fit", s(&fern), "--resolution", "64", "--iterations", "1000000", "--out", s(&scene)],
-        "fitting 1000000 iterations",
-    );
+    let fit = ["fit", s(&fern), "--resolution", "64", "--iterations", "1000000", "--out", s(&scene)];
+    let (status, text) = interrupted(&fit, "fitting 1000000 iterations");
     assert!(status.success(), "{text}");
-    assert!(text.contains("stopped at iteration ") && text.contains(" of 1000000 (Ctrl-C)"), "{text}");
+    assert!(text.contains(" of 1000000 (Ctrl-C)"), "{text}");
+    let stopped = iteration_after(&text, "stopped at iteration ");
     let fitted = gast_core::scene::load(&scene).expect("the stopped fit's scene");
     assert!(!fitted.is_empty());
     assert!(out.join("cameras.json").is_file(), "{text}");
+    assert!(text.contains("the same command with --resume goes on from it"), "{text}");
+    let checkpoint = gast_core::scene::load(out.join("f.checkpoint.ply")).expect("the checkpoint");
+    assert_eq!(checkpoint.len(), fitted.len());
+
+    let other = gast(&["fit", s(&fern), "--resolution", "64", "--iterations", "5", "--resume", "--out", s(&scene)]);
+    assert!(!other.status.success());
+    assert!(stderr(&other).contains("config.iterations: 1000000 then, 5 now"), "{}", stderr(&other));
+
+    let resumed = [&fit[..], &["--resume"]].concat();
+    let (status, text) = interrupted(&resumed, "resuming from iteration");
+    assert!(status.success(), "{text}");
+    assert_eq!(iteration_after(&text, "resuming from iteration "), stopped, "{text}");
+    assert!(iteration_after(&text, "stopped at iteration ") > stopped, "{text}");
+    std::fs::remove_dir_all(&out).ok();
+}
+
+/// A fit killed outright (SIGKILL: no chance to write) leaves its last
+/// checkpoint, a whole scene with its record and cameras, which `--resume`
+/// accepts; a fit that ends removes its checkpoint.
+#[cfg(unix)]
+#[test]
+fn a_killed_fit_leaves_its_checkpoint() {
+    let Some(fern) = shared_file("data/datasets/fern") else { return };
+    let out = temp("killed-fit");
+    let scene = out.join("f.spz");
+    let fit = [
+        "fit",
+        s(&fern),
+        "--resolution",
+        "64",
+        "--iterations",
+        "1000000",
+        "--checkpoint-every",
+        "1",
+        "--out",
+        s(&scene),
+    ];
+    let (status, text) = signalled(&fit, "checkpoint: iteration", "-KILL", std::time::Duration::ZERO);
+    assert!(!status.success(), "{text}");
+    assert!(!scene.exists(), "{text}");
+    let at = iteration_after(&text, "checkpoint: iteration ");
+    let checkpoint = gast_core::scene::load(out.join("f.checkpoint.ply")).expect("the killed fit's checkpoint");
+    assert!(!checkpoint.is_empty());
+    assert!(out.join("cameras.json").is_file(), "{text}");
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("f.checkpoint.json")).expect("the record"))
+            .expect("json");
+    assert!(record["iteration"].as_u64().is_some_and(|i| i >= u64::from(at)), "{record}");
+
+    // A short fit to the end writes its output and leaves no checkpoint.
+    let o = gast(&[
+        "fit",
+        s(&fern),
+        "--resolution",
+        "64",
+        "--iterations",
+        "3",
+        "--checkpoint-every",
+        "1",
+        "--out",
+        s(&scene),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("holds a checkpoint of an earlier fit"), "{}", stderr(&o));
+    assert!(scene.is_file() && !out.join("f.checkpoint.ply").exists() && !out.join("f.checkpoint.json").exists());
     std::fs::remove_dir_all(&out).ok();
 }
 

@@ -4,7 +4,7 @@
 //! dataset's COLMAP SfM points when there are any, else from random Gaussians.
 
 use std::ops::ControlFlow;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -68,6 +68,71 @@ pub struct FitArgs {
     /// Write a few renders beside their ground truth into this folder.
     #[arg(long)]
     pub preview: Option<PathBuf>,
+    /// Every this many seconds of fitting, write the scene as it stands to a
+    /// checkpoint beside the output (`fern.ply` → `fern.checkpoint.ply`, INRIA
+    /// .ply whatever the output's format, with cameras.json), so a fit killed
+    /// or crashed loses at most this much; the checkpoint is removed once the
+    /// output is written. 0: none.
+    #[arg(long, default_value_t = DEFAULT_CHECKPOINT_S, value_parser = crate::views::within(CHECKPOINT_SECONDS))]
+    pub checkpoint_every: u64,
+    /// Go on from the checkpoint beside the output, left by a fit that was
+    /// killed, crashed or stopped with Ctrl-C: from its iteration, with the
+    /// same dataset and settings (the same flags), which it checks.
+    #[arg(long)]
+    pub resume: bool,
+}
+
+/// Seconds between checkpoints by default: a long fit (hours on a large
+/// capture) loses at most five minutes; a fern fit (about six) writes one.
+pub(crate) const DEFAULT_CHECKPOINT_S: u64 = 300;
+
+/// The accepted `--checkpoint-every`: none, or up to a day.
+const CHECKPOINT_SECONDS: std::ops::RangeInclusive<u64> = 0..=86_400;
+
+/// What a checkpoint's `.json` beside its scene records: enough to go on
+/// (`--resume`) and to refuse going on with other settings.
+#[derive(serde::Serialize, serde::Deserialize, Debug, PartialEq)]
+struct CheckpointInfo {
+    /// Iterations done when the scene was written.
+    iteration: u32,
+    /// The fit's settings (after the flags and the LLFF resolution).
+    config: FitConfig,
+    /// `--holdout-every` and `--views`: which views it fits.
+    holdout_every: usize,
+    views: usize,
+    /// `--images` and `--random-init`.
+    images: Option<String>,
+    random_init: bool,
+}
+
+/// The checkpoint's record beside its scene (`fern.checkpoint.json`).
+fn checkpoint_info_path(checkpoint: &Path) -> PathBuf {
+    checkpoint.with_extension("json")
+}
+
+/// Where a fit writing `out` keeps its checkpoint: beside it, the format's
+/// suffix replaced by `.checkpoint.ply` (`fern.spz` → `fern.checkpoint.ply`,
+/// a SOG folder `out/` → `out.checkpoint.ply`).
+pub fn checkpoint_path(out: &Path) -> PathBuf {
+    let folder =
+        matches!(gast_core::scene::SceneFormat::from_output(out), Ok(gast_core::scene::SceneFormat::SogFolder(_)));
+    let (dir, stem) = if folder && out.file_name().is_some_and(|n| n.eq_ignore_ascii_case("meta.json")) {
+        let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        (dir.parent().map(Path::to_path_buf), dir.file_name().map(|n| n.to_string_lossy().into_owned()))
+    } else {
+        (out.parent().map(Path::to_path_buf), out.file_name().map(|n| n.to_string_lossy().into_owned()))
+    };
+    let mut stem = stem.unwrap_or_else(|| "fit".to_owned());
+    if !folder {
+        let lower = stem.to_lowercase();
+        for suffix in [".compressed.ply", ".ply", ".spz", ".sog"] {
+            if lower.ends_with(suffix) {
+                stem.truncate(stem.len() - suffix.len());
+                break;
+            }
+        }
+    }
+    dir.unwrap_or_default().join(format!("{stem}.checkpoint.ply"))
 }
 
 impl FitArgs {
@@ -136,6 +201,11 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         cfg.resolution = LLFF_RESOLUTION;
         eprintln!("LLFF capture: fitting at {LLFF_RESOLUTION} px, the size of its images_8 (--resolution overrides)");
     }
+    // Checked before the images load: a resume with other settings, or without a checkpoint, is refused at once.
+    let resume_from = if args.resume { Some(resumable(&args, &cfg)?) } else { None };
+    if !args.resume {
+        warn_of_a_checkpoint(&args.out);
+    }
     let t0 = Instant::now();
     let data = load_posed_images(&args.dataset, args.images.as_deref(), cfg.resolution, args.views, cfg.background)
         .with_context(|| format!("could not load the posed images of {}", args.dataset.display()))?;
@@ -161,7 +231,16 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         };
         anyhow::bail!("{}: expected at least one view to fit, found {found}", args.dataset.display())
     };
-    let initial = initial_scene(&args, &views, &cfg)?;
+    let (initial, start) = match resume_from {
+        Some(start) => {
+            let path = checkpoint_path(&args.out);
+            let scene = gast_core::scene::load(&path)
+                .with_context(|| format!("could not read the checkpoint {} to resume from", path.display()))?;
+            eprintln!("resuming from iteration {start} of {}: {}", cfg.iterations, path.display());
+            (scene, start)
+        }
+        None => (initial_scene(&args, &views, &cfg)?, 0),
+    };
     eprintln!(
         "loaded {} views ({} held out) of {} at {}×{} in {:.1} s; fitting {} iterations from {} Gaussians",
         views.len(),
@@ -170,27 +249,35 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         first.width,
         first.height,
         t0.elapsed().as_secs_f64(),
-        cfg.iterations,
+        cfg.iterations - start,
         initial.len()
     );
 
     let t_fit = Instant::now();
-    let pb = progress::bar(u64::from(cfg.iterations), "fit");
+    // Over the iterations this run does (its pace and time left are this run's).
+    let pb = progress::bar(u64::from(cfg.iterations - start), "fit");
     let mut smoothed = None::<f32>;
     // Ctrl-C stops the fit after its current iteration and writes the scene as it is.
     let interrupt = super::interrupt::interrupt();
     let mut stopped_at = None;
+    let mut checkpoint = Checkpoint::new(&args, &cfg, &all_cameras);
     interrupt.begin();
-    let scene = fit::fit_from(&views, initial, &cfg, &mut |p| {
+    let scene = fit::fit_resumed(&views, initial, &cfg, start, &mut |p, scene| {
         let l = smoothed.map_or(p.loss, |s| 0.98 * s + 0.02 * p.loss);
         smoothed = Some(l);
         if p.iteration % 10 == 0 || p.iteration == p.iterations {
-            progress::advance_to(&pb, u64::from(p.iteration));
+            progress::advance_to(&pb, u64::from(p.iteration - start));
             pb.set_message(format!("L1 {l:.4}, {} Gaussians", p.gaussians));
         }
         if interrupt.asked() && p.iteration < p.iterations {
             stopped_at = Some(p.iteration);
             return ControlFlow::Break(());
+        }
+        if p.iteration < p.iterations
+            && let Some(line) = checkpoint.maybe_write(p, || fit::finished(scene, &cfg))
+        {
+            // Not `pb.println`: a hidden bar (output not a terminal) drops its lines.
+            pb.suspend(|| eprintln!("{line}"));
         }
         ControlFlow::Continue(())
     });
@@ -201,6 +288,14 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
             "stopped at iteration {n} of {} (Ctrl-C): writing the scene as it is; Ctrl-C again quits at once",
             cfg.iterations
         );
+        // Kept, so that the same command with --resume goes on from here.
+        match checkpoint.write(&scene, n) {
+            Ok(()) => eprintln!(
+                "checkpoint: iteration {n} written to {}; the same command with --resume goes on from it",
+                checkpoint.path.display()
+            ),
+            Err(e) => eprintln!("warning: the checkpoint at iteration {n} was not written: {e:#}"),
+        }
     }
     let fit_s = t_fit.elapsed().as_secs_f64();
 
@@ -221,6 +316,9 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     for line in crate::views::write_cameras_beside(&args.out, &args.dataset, &all_cameras)? {
         eprintln!("{line}");
     }
+    if stopped_at.is_none() {
+        checkpoint.remove();
+    }
     if !held.is_empty() {
         eprintln!(
             "mean PSNR over the {} held-out views {:.2} dB",
@@ -233,6 +331,167 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         write_previews(dir, &scene, if held.is_empty() { &views } else { &held }, cfg.background)?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The iteration `--resume` goes on from: the checkpoint beside `--out`
+/// must exist and record the same settings as `cfg` and the flags that pick
+/// the views; else an error that says what differs.
+fn resumable(args: &FitArgs, cfg: &FitConfig) -> anyhow::Result<u32> {
+    let path = checkpoint_path(&args.out);
+    let info_path = checkpoint_info_path(&path);
+    anyhow::ensure!(
+        path.is_file() && info_path.is_file(),
+        "{}: expected the checkpoint of an earlier fit to --resume from ({} with its record {}, written every \
+         --checkpoint-every seconds and at Ctrl-C), found {}",
+        args.out.display(),
+        path.display(),
+        info_path.display(),
+        if path.is_file() { "the scene without its record" } else { "none" }
+    );
+    let text =
+        std::fs::read_to_string(&info_path).with_context(|| format!("could not read {}", info_path.display()))?;
+    let info: CheckpointInfo = serde_json::from_str(&text)
+        .with_context(|| format!("{}: expected a fit checkpoint's record (JSON)", info_path.display()))?;
+    let now = Checkpoint::new(args, cfg, &[]).info(info.iteration);
+    if info != now {
+        let (was, is) = (serde_json::to_value(&info)?, serde_json::to_value(&now)?);
+        let differs = differing_keys(&was, &is, "");
+        anyhow::bail!(
+            "{}: the checkpoint was fitted with other settings ({}); give the same flags to --resume, or leave \
+             --resume out to start afresh (the new fit replaces the checkpoint)",
+            path.display(),
+            differs.join(", ")
+        );
+    }
+    Ok(info.iteration)
+}
+
+/// `key: was → is` for every leaf where two JSON objects differ.
+fn differing_keys(was: &serde_json::Value, is: &serde_json::Value, prefix: &str) -> Vec<String> {
+    match (was, is) {
+        (serde_json::Value::Object(a), serde_json::Value::Object(b)) => a
+            .iter()
+            .flat_map(|(k, v)| {
+                let key = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+                differing_keys(v, b.get(k).unwrap_or(&serde_json::Value::Null), &key)
+            })
+            .collect(),
+        _ if was == is => Vec::new(),
+        _ => vec![format!("{prefix}: {was} then, {is} now")],
+    }
+}
+
+/// Says so when a checkpoint of an earlier fit lies beside `out`: this fit
+/// replaces it at its first checkpoint, and `--resume` would go on from it.
+fn warn_of_a_checkpoint(out: &Path) {
+    let path = checkpoint_path(out);
+    if path.is_file() {
+        eprintln!(
+            "warning: {} holds a checkpoint of an earlier fit; this fit replaces it at its first checkpoint and \
+             removes it when done (the same command with --resume goes on from it instead)",
+            path.display()
+        );
+    }
+}
+
+/// The fit's checkpoints ([`FitArgs::checkpoint_every`]): the scene as it
+/// stands, written atomically to [`checkpoint_path`] with the cameras beside
+/// it, and removed once the output is written.
+struct Checkpoint<'a> {
+    path: PathBuf,
+    every: Option<std::time::Duration>,
+    last: Instant,
+    args: &'a FitArgs,
+    cfg: &'a FitConfig,
+    cameras: &'a [gast_core::Camera],
+    written: bool,
+}
+
+impl<'a> Checkpoint<'a> {
+    fn new(args: &'a FitArgs, cfg: &'a FitConfig, cameras: &'a [gast_core::Camera]) -> Self {
+        Self {
+            path: checkpoint_path(&args.out),
+            every: (args.checkpoint_every > 0).then(|| std::time::Duration::from_secs(args.checkpoint_every)),
+            last: Instant::now(),
+            args,
+            cfg,
+            cameras,
+            written: false,
+        }
+    }
+
+    /// What this fit's checkpoint at `iteration` records.
+    fn info(&self, iteration: u32) -> CheckpointInfo {
+        CheckpointInfo {
+            iteration,
+            config: self.cfg.clone(),
+            holdout_every: self.args.holdout_every,
+            views: self.args.views,
+            images: self.args.images.clone(),
+            random_init: self.args.random_init,
+        }
+    }
+
+    /// Writes the scene `scene()` when the interval has passed since the
+    /// last one (or the fit's start); returns what to tell the user. A
+    /// failed write is a warning: the fit goes on, and its output is
+    /// written (or fails, saying why) at the end as before.
+    fn maybe_write(&mut self, p: fit::FitProgress, scene: impl FnOnce() -> gast_core::Gaussians) -> Option<String> {
+        let every = self.every?;
+        if self.last.elapsed() < every {
+            return None;
+        }
+        let t = Instant::now();
+        let result = self.write(&scene(), p.iteration);
+        self.last = Instant::now();
+        Some(match result {
+            Ok(()) => format!(
+                "checkpoint: iteration {} of {} written to {} in {:.0} ms",
+                p.iteration,
+                p.iterations,
+                self.path.display(),
+                t.elapsed().as_secs_f64() * 1e3
+            ),
+            Err(e) => format!("warning: the checkpoint at iteration {} was not written: {e:#}", p.iteration),
+        })
+    }
+
+    /// Writes the scene after `iteration` iterations and its record (the
+    /// record last: a record always names a scene written whole).
+    fn write(&mut self, scene: &gast_core::Gaussians, iteration: u32) -> anyhow::Result<()> {
+        if let Some(parent) = self.path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            super::output_folder(parent, "--out")?;
+        }
+        let info_path = checkpoint_info_path(&self.path);
+        // A record of an older checkpoint must not pair with the new scene if this write stops half-way.
+        if info_path.is_file() {
+            std::fs::remove_file(&info_path).with_context(|| format!("could not replace {}", info_path.display()))?;
+        }
+        gast_core::scene::save(&self.path, scene, &gast_core::scene::SaveOptions::default())
+            .with_context(|| format!("could not write the checkpoint {}", self.path.display()))?;
+        let json = serde_json::to_string_pretty(&self.info(iteration))?;
+        gast_core::io::write_bytes(&info_path, json.as_bytes())
+            .with_context(|| format!("could not write the checkpoint's record {}", info_path.display()))?;
+        if !self.written {
+            // Once: the checkpoint is a scene the studio and `gast stylize` open with its cameras.
+            crate::views::write_cameras_beside(&self.path, &self.args.dataset, self.cameras)?;
+        }
+        self.written = true;
+        Ok(())
+    }
+
+    /// Removes the checkpoint (scene and record) once the output holds the
+    /// whole fit; also the one a resumed fit went on from.
+    fn remove(&self) {
+        let info_path = checkpoint_info_path(&self.path);
+        for path in [&info_path, &self.path] {
+            if path.is_file()
+                && let Err(e) = std::fs::remove_file(path)
+            {
+                eprintln!("warning: could not remove the checkpoint {}: {e}", path.display());
+            }
+        }
+    }
 }
 
 /// The dataset's SfM points as Gaussians when it has `points3D` (and
@@ -290,4 +549,23 @@ fn write_previews(
     write_png_rgb(&dir.join("sheet.png"), (2 * w) as u32, (n * h) as u32, &sheet)?;
     eprintln!("previews in {} (sheet.png: ground truth left, render right)", dir.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_checkpoint_lies_beside_the_output_as_an_inria_ply() {
+        for (out, checkpoint) in [
+            ("fern.ply", "fern.checkpoint.ply"),
+            ("runs/fern.compressed.ply", "runs/fern.checkpoint.ply"),
+            ("runs/Fern.SPZ", "runs/Fern.checkpoint.ply"),
+            ("fern.sog", "fern.checkpoint.ply"),
+            ("runs/fern/", "runs/fern.checkpoint.ply"),
+            ("runs/fern/meta.json", "runs/fern.checkpoint.ply"),
+        ] {
+            assert_eq!(checkpoint_path(Path::new(out)), Path::new(checkpoint), "{out}");
+        }
+    }
 }

@@ -238,16 +238,17 @@ pub fn initial_scene_from_points(points: &ColmapPoints, cfg: &FitConfig) -> Gaus
 /// Fits a scene to posed images from random initial Gaussians
 /// ([`initial_scene`]): `views` holds each camera with its RGB image
 /// (`height × width × 3` in `[0, 1]`, already composited on
-/// `cfg.background`). `progress` is called after every iteration; its
-/// `Break` stops the fit there (a user's Ctrl-C), which then ends as after
-/// the last iteration.
+/// `cfg.background`). `progress` is called after every iteration with the
+/// scene as it stands (before [`finished`]'s pruning: a checkpoint writes
+/// `finished(scene, cfg)`); its `Break` stops the fit there (a user's
+/// Ctrl-C), which then ends as after the last iteration.
 ///
 /// # Panics
 /// When an image's size does not match its camera (a caller bug).
 pub fn fit(
     views: &[(Camera, Vec<f32>)],
     cfg: &FitConfig,
-    progress: &mut dyn FnMut(FitProgress) -> ControlFlow<()>,
+    progress: &mut dyn FnMut(FitProgress, &Gaussians) -> ControlFlow<()>,
 ) -> Gaussians {
     let cameras: Vec<Camera> = views.iter().map(|(c, _)| c.clone()).collect();
     fit_from(views, initial_scene(&cameras, cfg), cfg, progress)
@@ -261,7 +262,26 @@ pub fn fit_from(
     views: &[(Camera, Vec<f32>)],
     initial: Gaussians,
     cfg: &FitConfig,
-    progress: &mut dyn FnMut(FitProgress) -> ControlFlow<()>,
+    progress: &mut dyn FnMut(FitProgress, &Gaussians) -> ControlFlow<()>,
+) -> Gaussians {
+    fit_resumed(views, initial, cfg, 0, progress)
+}
+
+/// As [`fit_from`], from iteration `start` (a checkpoint's scene after
+/// `start` iterations of the same `cfg`): the learning-rate schedule and
+/// densification go on from there. The Adam moments and the densification's
+/// gradient statistics start afresh (a checkpoint holds the scene only), and
+/// the view order is drawn anew, so a resumed fit is not bit-identical to
+/// one run through.
+///
+/// # Panics
+/// When an image's size does not match its camera (a caller bug).
+pub fn fit_resumed(
+    views: &[(Camera, Vec<f32>)],
+    initial: Gaussians,
+    cfg: &FitConfig,
+    start: u32,
+    progress: &mut dyn FnMut(FitProgress, &Gaussians) -> ControlFlow<()>,
 ) -> Gaussians {
     for (cam, img) in views {
         assert_eq!(
@@ -277,14 +297,14 @@ pub fn fit_from(
         return g;
     }
     let extent = scene_extent(&cameras);
-    let mut rng = Rng::new(cfg.seed ^ 0xA5A5_5A5A);
+    let mut rng = Rng::new(cfg.seed ^ 0xA5A5_5A5A ^ u64::from(start));
     let opts = RenderOptions { background: cfg.background };
     let mut opt = Optimisers::new(&g);
     let mut stats = GradStats::new(g.len());
     let mut order: Vec<usize> = Vec::new();
-    let start = Instant::now();
+    let t0 = Instant::now();
     let densify_until = (cfg.densify.until_fraction * cfg.iterations as f32) as u32;
-    for it in 0..cfg.iterations {
+    for it in start.min(cfg.iterations)..cfg.iterations {
         if order.is_empty() {
             order = (0..views.len()).collect();
             for i in (1..order.len()).rev() {
@@ -332,21 +352,30 @@ pub fn fit_from(
             opt = Optimisers::new(&g);
             stats = GradStats::new(g.len());
         }
-        let said = progress(FitProgress {
-            iteration: done,
-            iterations: cfg.iterations,
-            loss: (loss * f64::from(scale)) as f32,
-            gaussians: g.len(),
-            elapsed_s: start.elapsed().as_secs_f64(),
-        });
+        let said = progress(
+            FitProgress {
+                iteration: done,
+                iterations: cfg.iterations,
+                loss: (loss * f64::from(scale)) as f32,
+                gaussians: g.len(),
+                elapsed_s: t0.elapsed().as_secs_f64(),
+            },
+            &g,
+        );
         if said.is_break() {
             break;
         }
     }
-    // Drop what ended up (nearly) invisible.
+    finished(&g, cfg)
+}
+
+/// The scene a fit hands out: `g` without the Gaussians that ended up
+/// (nearly) invisible, below `cfg.densify.min_opacity`. [`fit_from`] ends
+/// with it; a checkpoint taken during the fit writes it too.
+pub fn finished(g: &Gaussians, cfg: &FitConfig) -> Gaussians {
     let keep: Vec<u32> =
         (0..g.len() as u32).filter(|&i| sigmoid(g.opacity_logits[i as usize]) >= cfg.densify.min_opacity).collect();
-    subset(&g, &keep)
+    subset(g, &keep)
 }
 
 fn sigmoid(x: f32) -> f32 {

@@ -59,7 +59,7 @@ fn fits_a_synthetic_scene() {
     let cams: Vec<Camera> = views.iter().map(|v| v.0.clone()).collect();
     let before = mean_psnr(&initial_scene(&cams, &cfg), &views, cfg.background);
     let mut last = None;
-    let g = fit(&views, &cfg, &mut |p| {
+    let g = fit(&views, &cfg, &mut |p, _| {
         last = Some(p);
         ControlFlow::Continue(())
     });
@@ -80,12 +80,49 @@ fn a_break_from_progress_stops_the_fit_there() {
     let views = target_views();
     let cfg = FitConfig { iterations: 400, initial_gaussians: 200, ..FitConfig::default() };
     let mut seen = Vec::new();
-    let g = fit(&views, &cfg, &mut |p| {
+    let g = fit(&views, &cfg, &mut |p, _| {
         seen.push(p.iteration);
         if p.iteration == 7 { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
     });
     assert_eq!(seen, (1..=7).collect::<Vec<_>>(), "iterations after the break");
     assert!(!g.is_empty(), "the stopped fit's scene");
+}
+
+/// A fit stopped at iteration 150 of 400, its scene taken as a checkpoint
+/// takes it ([`finished`]), and resumed from there: the resumed part reports
+/// iterations 151 to 400 and ends as good as a fit run through (the bar of
+/// [`fits_a_synthetic_scene`]).
+#[test]
+fn a_fit_resumed_from_its_checkpoint_goes_on_to_the_end() {
+    let views = target_views();
+    let cfg = FitConfig {
+        iterations: 400,
+        initial_gaussians: 1000,
+        densify: DensifyConfig { from: 100, interval: 50, ..DensifyConfig::default() },
+        ..FitConfig::default()
+    };
+    let mut checkpoint = None;
+    fit(&views, &cfg, &mut |p, g| {
+        if p.iteration == 150 {
+            checkpoint = Some(finished(g, &cfg));
+            return ControlFlow::Break(());
+        }
+        ControlFlow::Continue(())
+    });
+    let checkpoint = checkpoint.expect("the checkpoint at iteration 150");
+    let at_150 = mean_psnr(&checkpoint, &views, cfg.background);
+    let mut seen = Vec::new();
+    let g = fit_resumed(&views, checkpoint, &cfg, 150, &mut |p, _| {
+        seen.push(p.iteration);
+        ControlFlow::Continue(())
+    });
+    assert_eq!(seen, (151..=400).collect::<Vec<_>>());
+    let after = mean_psnr(&g, &views, cfg.background);
+    println!("resumed fit: PSNR {at_150:.2} dB at iteration 150 → {after:.2} dB at 400");
+    assert!(after > 26.0 && after > at_150 + 1.0, "PSNR {at_150:.2} → {after:.2} dB");
+    // From the last iteration on, nothing is left to do: the scene comes back pruned only.
+    let done = fit_resumed(&views, g.clone(), &cfg, 400, &mut |_, _| panic!("an iteration past the end"));
+    assert_eq!(done.len(), finished(&g, &cfg).len());
 }
 
 #[test]
