@@ -47,15 +47,20 @@ fn target_views() -> Vec<(Camera, Vec<f32>)> {
     cameras().into_iter().map(|c| (c.clone(), raster::render(&target, &c, &opts).rgb)).collect()
 }
 
-#[test]
-fn fits_a_synthetic_scene() {
-    let views = target_views();
-    let cfg = FitConfig {
+/// 400 iterations from 1,000 random Gaussians, densifying every 50 from the 100th.
+fn densifying_fit() -> FitConfig {
+    FitConfig {
         iterations: 400,
         initial_gaussians: 1000,
         densify: DensifyConfig { from: 100, interval: 50, ..DensifyConfig::default() },
         ..FitConfig::default()
-    };
+    }
+}
+
+#[test]
+fn fits_a_synthetic_scene() {
+    let views = target_views();
+    let cfg = densifying_fit();
     let cams: Vec<Camera> = views.iter().map(|v| v.0.clone()).collect();
     let before = mean_psnr(&initial_scene(&cams, &cfg), &views, cfg.background);
     let mut last = None;
@@ -95,12 +100,7 @@ fn a_break_from_progress_stops_the_fit_there() {
 #[test]
 fn a_fit_resumed_from_its_checkpoint_goes_on_to_the_end() {
     let views = target_views();
-    let cfg = FitConfig {
-        iterations: 400,
-        initial_gaussians: 1000,
-        densify: DensifyConfig { from: 100, interval: 50, ..DensifyConfig::default() },
-        ..FitConfig::default()
-    };
+    let cfg = densifying_fit();
     let mut checkpoint = None;
     fit(&views, &cfg, &mut |p, g| {
         if p.iteration == 150 {
