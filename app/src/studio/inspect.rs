@@ -170,6 +170,9 @@ pub fn read_style_file(path: &Path) -> Result<StyleFile, String> {
     style_file(path, img.into_rgb8())
 }
 
+/// How the message of a failed scene export starts.
+pub const SCENE_EXPORT_FAILED: &str = "exporting the scene";
+
 /// What a finished job reports.
 pub enum JobDone {
     /// A scene file was read (or not).
@@ -400,15 +403,16 @@ impl Jobs {
     /// `.compressed.ply`, `.spz`, `.sog`; see `gast_core::scene::save`).
     /// With `cameras` (the training cameras and the file they came from),
     /// writes them beside it as `cameras.json`, so the export reopens on them.
+    /// A failure's message starts with [`SCENE_EXPORT_FAILED`].
     pub fn export_scene(&mut self, g: SharedGaussians, path: PathBuf, cameras: Option<(Vec<Camera>, PathBuf)>) {
         self.spawn(move || {
             if let Err(e) = gast_core::scene::save(&path, &g, &Default::default()) {
-                return JobDone::Failed(format!("exporting the scene: {e}"));
+                return JobDone::Failed(format!("{SCENE_EXPORT_FAILED}: {e}"));
             }
             let Some((cameras, source)) = cameras else { return JobDone::Exported(path, Vec::new()) };
             match crate::views::write_cameras_beside(&path, &source, &cameras) {
                 Ok(said) => JobDone::Exported(path, said),
-                Err(e) => JobDone::Failed(format!("exporting the scene's cameras: {}", crate::error_text(&e))),
+                Err(e) => JobDone::Failed(format!("{SCENE_EXPORT_FAILED}'s cameras: {}", crate::error_text(&e))),
             }
         });
     }

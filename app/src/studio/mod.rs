@@ -21,6 +21,7 @@ pub mod assets;
 pub mod controls;
 mod headless;
 pub mod inspect;
+mod leave;
 mod open;
 mod panels;
 mod scripted;
@@ -93,6 +94,8 @@ struct ScreenshotState {
 pub struct StudioApp {
     scene: Option<LoadedScene>,
     snapshot: Option<SceneRef>,
+    /// Asking before a close or an open drops an unexported result.
+    leave: leave::LeaveGuard,
     /// A newer snapshot than `snapshot`, waiting for [`SOFTWARE_VIEW_INTERVAL`]
     /// on a software renderer, and when `snapshot` was taken up.
     newer_snapshot: Option<Arc<gast_core::session::Snapshot>>,
@@ -313,6 +316,7 @@ impl StudioApp {
         let mut app = Self {
             scene: None,
             snapshot: None,
+            leave: leave::LeaveGuard::default(),
             newer_snapshot: None,
             snapshot_taken_at: None,
             software_viewport: false,
@@ -571,8 +575,14 @@ impl StudioApp {
                         self.notice += " and its cameras.json";
                     }
                     self.run.log.extend(said);
+                    self.scene_exported(&p);
                 }
-                inspect::JobDone::Failed(e) => self.errors.push(e),
+                inspect::JobDone::Failed(e) => {
+                    if e.starts_with(inspect::SCENE_EXPORT_FAILED) {
+                        self.scene_export_failed(&e);
+                    }
+                    self.errors.push(e);
+                }
             }
         }
     }
@@ -605,6 +615,7 @@ impl StudioApp {
         self.poll_workers();
         self.refresh_strength();
         self.handle_drops(ui);
+        self.guard_close(ui);
         egui::Panel::top("menu").show(ui, |ui| self.menu_bar(ui));
         egui::Panel::bottom("status").resizable(true).default_size(90.0).show(ui, |ui| self.status_panel(ui));
         egui::Panel::right("controls").resizable(true).default_size(330.0).show(ui, |ui| {
@@ -617,6 +628,7 @@ impl StudioApp {
             self.request_inspection(false);
         }
         self.request_style_maps();
+        self.leave_modal(ui);
         self.test_switches(ui.ctx());
     }
 
@@ -663,6 +675,7 @@ impl StudioApp {
             // The engine's buffers hold the run at full strength.
             live: self.live.clone().filter(|_| self.strength == [1.0, 1.0]),
             split: self.shown_split(),
+            rect,
             background: self.background,
             stats: self.stats.clone(),
             notes: self.viewport_notes.clone(),

@@ -7,6 +7,14 @@ use super::*;
 
 impl StudioApp {
     pub(super) fn set_scene(&mut self, name: String, g: Gaussians) {
+        // A run of the previous scene ends with it: its snapshots would come
+        // in as this scene's result (the question of `leave` came first).
+        if self.run.link.is_some() {
+            self.run.shut_down();
+            self.run = session_link::RunMonitor::default();
+            self.live = None;
+            self.shown = None;
+        }
         let g = Arc::new(g);
         self.view.fit(&g);
         self.cameras = view::orbit_ring(&g, self.view.up, 12, 800, 600);
@@ -209,13 +217,13 @@ impl StudioApp {
                 if value.is_array() || value.get("frames").is_some() {
                     self.open_cameras(path);
                 } else if value.get("means").is_some() {
-                    self.open_scene(path);
+                    self.open_scene_guarded(path);
                 } else {
                     self.load_preset(path);
                 }
             }
             _ if path.is_dir() && !path.join("meta.json").exists() => self.open_cameras(path),
-            _ => self.open_scene(path),
+            _ => self.open_scene_guarded(path),
         }
     }
 

@@ -24,7 +24,7 @@ impl StudioApp {
             if ui.button("Open scene…").clicked()
                 && let Some(p) = rfd::FileDialog::new().add_filter("Gaussian splats", &["ply"]).pick_file()
             {
-                self.open_scene(&p);
+                self.open_scene_guarded(&p);
             }
             if ui.button("Open style…").clicked()
                 && let Some(p) =
@@ -52,7 +52,7 @@ impl StudioApp {
                     .set_file_name("stylized.ply")
                     .save_file()
             {
-                self.jobs.export_scene(g.clone(), p, self.camera_file());
+                self.export_current_scene(p, false);
             }
             let have_run = self.run.start().is_some() && self.snapshot.is_some();
             if ui

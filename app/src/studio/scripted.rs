@@ -88,11 +88,11 @@ impl StudioApp {
         }
         let shot_pending = self.screenshot.requested && !self.screenshot.done.load(Ordering::SeqCst);
         if self.frames >= n && !shot_pending {
-            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            self.close_window(ctx);
         }
         if self.frames >= n + 600 {
             eprintln!("studio: the screenshot never arrived; closing");
-            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            self.close_window(ctx);
         }
     }
 }

@@ -868,3 +868,72 @@ fn run_to_the_end(app: &mut StudioApp) {
     poll_until(app, 900, "the run", |a| matches!(a.run.status, RunStatus::Finished { .. } | RunStatus::Failed(_)));
     assert_eq!(app.run.status, RunStatus::Finished { completed: true }, "{:?}", app.errors);
 }
+
+/// A root-window close request, as the window's close button makes.
+fn request_close(harness: &mut egui_kittest::Harness<'_, StudioApp>) -> bool {
+    harness.input_mut().viewports.entry(egui::ViewportId::ROOT).or_default().events.push(egui::ViewportEvent::Close);
+    harness.step();
+    let cancelled = harness
+        .output()
+        .viewport_output
+        .get(&egui::ViewportId::ROOT)
+        .is_some_and(|v| v.commands.contains(&egui::ViewportCommand::CancelClose));
+    harness.run_steps(2);
+    cancelled
+}
+
+/// Closing the window, or opening another scene, while the run's result is
+/// held by no export asks first (it dropped the minutes of a run without a
+/// word): the close is cancelled and the question names the steps; Cancel
+/// keeps all; once exported, the close goes through; a newer snapshot asks
+/// again; "Open without exporting" opens the scene and ends the run, whose
+/// snapshots no longer come in as the new scene's result.
+#[test]
+fn leaving_an_unexported_result_asks_first() {
+    let (app, _crx, _etx) = app_with_a_run(5);
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 900.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    settle(&mut harness);
+    assert_eq!(harness.state().unexported_step(), Some(5));
+    assert!(request_close(&mut harness), "the close went through with an unexported result");
+    harness.get_by_label_contains("The stylized scene is not exported");
+    harness.get_by_label_contains("Closing the studio drops the run's result after 5 steps");
+    harness.get_by_label("Cancel").click();
+    harness.run_steps(2);
+    assert!(harness.state().leave.asking.is_none());
+    assert!(harness.query_by_label_contains("The stylized scene is not exported").is_none());
+
+    let dir = std::env::temp_dir().join(format!("gast-studio-leave-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let exported = dir.join("stylized.ply");
+    harness.state_mut().export_current_scene(exported.clone(), false);
+    settle(&mut harness);
+    assert!(exported.is_file());
+    assert_eq!(harness.state().unexported_step(), None);
+    assert!(!request_close(&mut harness), "an exported result still asked");
+
+    // A newer snapshot is not in the export.
+    let mut g = (*harness.state().scene.as_ref().expect("scene").scene.gaussians).clone();
+    g.sh[0] += 0.5;
+    let link = harness.state().run.link.as_ref().expect("the run").snapshots.clone();
+    link.put(gast_core::session::Snapshot { step: 9, gaussians: g.clone() });
+    harness.run_steps(3);
+    assert_eq!(harness.state().unexported_step(), Some(9));
+    let other = dir.join("other.ply");
+    gast_core::scene::save(&other, &g, &Default::default()).expect("other scene");
+    let before = harness.state().scene.as_ref().map(|s| s.scene.version);
+    harness.state_mut().open_any(&other);
+    harness.run_steps(2);
+    assert_eq!(harness.state().scene.as_ref().map(|s| s.scene.version), before, "opened without asking");
+    harness.get_by_label_contains("Opening other.ply drops the run's result after 9 steps");
+    harness.get_by_label("Open without exporting").click();
+    harness.run_steps(2);
+    assert_eq!(harness.state().scene.as_ref().map(|s| s.name.as_str()), Some("other.ply"));
+    assert!(harness.state().run.link.is_none() && harness.state().snapshot.is_none(), "the old run goes on");
+    link.put(gast_core::session::Snapshot { step: 10, gaussians: g });
+    harness.run_steps(3);
+    assert!(harness.state().snapshot.is_none(), "the old run's snapshot came in as the new scene's");
+    assert!(!request_close(&mut harness), "no result, yet the close asked");
+    std::fs::remove_dir_all(&dir).ok();
+}

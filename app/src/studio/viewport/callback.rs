@@ -66,6 +66,9 @@ pub struct ViewportCallback {
     pub live: Option<LiveRef>,
     /// Split position in [0, 1]: left of it shows `before`.
     pub split: f32,
+    /// Where egui paints the callback, in points (the blit places the split
+    /// line by the framebuffer's pixel columns within it).
+    pub rect: egui::Rect,
     /// Background colour.
     pub background: [f32; 3],
     /// Where the frame's statistics go.
@@ -79,7 +82,7 @@ impl egui_wgpu::CallbackTrait for ViewportCallback {
         &self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        _screen: &egui_wgpu::ScreenDescriptor,
+        screen: &egui_wgpu::ScreenDescriptor,
         encoder: &mut wgpu::CommandEncoder,
         resources: &mut egui_wgpu::CallbackResources,
     ) -> Vec<wgpu::CommandBuffer> {
@@ -133,7 +136,18 @@ impl egui_wgpu::CallbackTrait for ViewportCallback {
         let after = if has_after { r.target(Side::After).map(|t| t.1).unwrap_or(before) } else { before };
         let split = if has_after { self.split } else { 1.0 };
         let bg = self.background;
-        let params = BlitUniform { background: [bg[0], bg[1], bg[2], 1.0], split: [split, 0.0, 0.0, 0.0] };
+        // The viewport egui sets for `paint`, in framebuffer pixels.
+        let px = egui::PaintCallbackInfo {
+            viewport: self.rect,
+            clip_rect: self.rect,
+            pixels_per_point: screen.pixels_per_point,
+            screen_size_px: screen.size_in_pixels,
+        }
+        .viewport_in_pixels();
+        let params = BlitUniform {
+            background: [bg[0], bg[1], bg[2], 1.0],
+            split: [split, px.left_px as f32, px.width_px.max(1) as f32, 0.0],
+        };
         res.blit_bind = Some(res.blit.prepare(device, queue, params, before, after));
         Vec::new()
     }

@@ -69,7 +69,8 @@ const _: () = assert!(std::mem::size_of::<ProjectedSplat>() == 48);
 pub struct BlitUniform {
     /// Background colour, w unused.
     pub background: [f32; 4],
-    /// x: split position in [0, 1] (1 = all "before"); yzw unused.
+    /// x: split position in [0, 1] (1 = all "before"); y: the viewport's
+    /// left edge and z its width, in framebuffer pixels; w unused.
     pub split: [f32; 4],
 }
 const _: () = assert!(std::mem::size_of::<BlitUniform>() == 32);

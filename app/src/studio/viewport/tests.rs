@@ -162,7 +162,8 @@ fn blit_composites_the_before_after_split() {
         dc[1] -= 0.3;
     }
     let after: SharedGaussians = Arc::new(dark).into();
-    let (w, h) = (320u32, 240u32);
+    // The studio's viewport at 1600×1000 (an odd width, as a window's often is).
+    let (w, h) = (1107u32, 690u32);
     let cam = demo_camera(&before, w, h);
     let mut r = SplatRenderer::new(&device);
     r.set_scene(&device, Side::Before, 1, &before).expect("upload");
@@ -183,7 +184,11 @@ fn blit_composites_the_before_after_split() {
     let mut encoder = device.create_command_encoder(&Default::default());
     r.render(&device, &queue, &mut encoder, Side::Before, &cam);
     r.render(&device, &queue, &mut encoder, Side::After, &cam);
-    let params = super::gpu_types::BlitUniform { background: [0.1, 0.1, 0.12, 1.0], split: [0.5, 0.0, 0.0, 0.0] };
+    // The middle of an odd width falls on a pixel's centre, where the line's
+    // columns were decided by the interpolated coordinate's rounding.
+    let split = 0.5;
+    let params =
+        super::gpu_types::BlitUniform { background: [0.1, 0.1, 0.12, 1.0], split: [split, 0.0, w as f32, 0.0] };
     let bind = blit.prepare(
         &device,
         &queue,
@@ -223,6 +228,13 @@ fn blit_composites_the_before_after_split() {
     assert_eq!(img.get_pixel(2, 2).0, [26, 26, 31]);
     let line = img.get_pixel(w / 2, h / 2).0;
     assert!(line[0] > 200 && line[2] < 100, "split line {line:?}");
+    // The line is straight and two pixels wide: the same columns in every row.
+    let columns = |y: u32| (0..w).filter(|&x| img.get_pixel(x, y).0 == [255, 217, 51]).collect::<Vec<_>>();
+    let first = columns(0);
+    assert_eq!(first.len(), 2, "line columns {first:?}");
+    for y in 1..h {
+        assert_eq!(columns(y), first, "row {y}: the line steps");
+    }
     let mean = |x0: u32, x1: u32| {
         let mut s = [0f64; 3];
         for y in 0..h {
