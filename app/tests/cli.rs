@@ -417,6 +417,65 @@ fn ctrl_c_stops_a_run_and_keeps_what_it_has() {
     std::fs::remove_dir_all(&out).ok();
 }
 
+/// A `gast stylize` run killed outright keeps its last checkpoint (the
+/// stylized scene as it stood, a whole INRIA .ply); the checkpoint is no input
+/// for a run into the same folder (it would be replaced, then removed); a run
+/// that ends removes it.
+#[cfg(unix)]
+#[test]
+fn a_killed_stylize_run_leaves_its_checkpoint() {
+    let Some((scene, style, weights)) = guitar_with("block2.jpg") else { return };
+    let out = temp("killed-stylize");
+    let run = |cycles: &'static str| {
+        vec![
+            "stylize".to_owned(),
+            s(&scene).to_owned(),
+            s(&style).to_owned(),
+            "--weights".to_owned(),
+            s(&weights).to_owned(),
+            "--out".to_owned(),
+            s(&out).to_owned(),
+            "--cycles".to_owned(),
+            cycles.to_owned(),
+            "--steps-per-cycle".to_owned(),
+            "10".to_owned(),
+            "--resolution".to_owned(),
+            "48".to_owned(),
+            "--views".to_owned(),
+            "2".to_owned(),
+            "--preview-views".to_owned(),
+            "1".to_owned(),
+            "--depth-provider".to_owned(),
+            "heuristic".to_owned(),
+            "--checkpoint-every".to_owned(),
+            "1".to_owned(),
+        ]
+    };
+    let long = run("1000");
+    let long: Vec<&str> = long.iter().map(String::as_str).collect();
+    let (status, text) = signalled(&long, "checkpoint: step", "-KILL", std::time::Duration::ZERO);
+    assert!(!status.success(), "{text}");
+    assert!(!out.join("stylized.ply").exists(), "{text}");
+    let checkpoint = out.join("stylized.checkpoint.ply");
+    let kept = gast_core::scene::load(&checkpoint).expect("the killed run's checkpoint");
+    let input = gast_core::scene::load(&scene).expect("guitar");
+    assert_eq!(kept.len(), input.len(), "the checkpoint holds the whole scene");
+
+    let mut again = long.clone();
+    again[1] = s(&checkpoint);
+    let o = gast(&again);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("found one of its outputs (stylized.checkpoint.ply)"), "{}", stderr(&o));
+    assert!(checkpoint.is_file());
+
+    let short = run("1");
+    let short: Vec<&str> = short.iter().map(String::as_str).collect();
+    let o = gast(&short);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.join("stylized.ply").is_file() && !checkpoint.exists(), "{}", stderr(&o));
+    std::fs::remove_dir_all(&out).ok();
+}
+
 /// The iteration after `marker` in `text` ("stopped at iteration 123 of …").
 fn iteration_after(text: &str, marker: &str) -> u32 {
     let at = text.find(marker).unwrap_or_else(|| panic!("no {marker:?} in {text}")) + marker.len();

@@ -15,6 +15,7 @@ use gast_core::fit::{self, FitConfig, load_posed_images, mean_psnr, psnr};
 use gast_core::io::write_png_rgb;
 use gast_core::raster::{self, RenderOptions};
 
+use super::checkpoint::{CHECKPOINT_SECONDS, DEFAULT_CHECKPOINT_S, Due, checkpoint_path};
 use crate::progress;
 
 /// Arguments of `gast fit`.
@@ -80,59 +81,6 @@ pub struct FitArgs {
     /// same dataset and settings (the same flags), which it checks.
     #[arg(long)]
     pub resume: bool,
-}
-
-/// Seconds between checkpoints by default: a long fit (hours on a large
-/// capture) loses at most five minutes; a fern fit (about six) writes one.
-pub(crate) const DEFAULT_CHECKPOINT_S: u64 = 300;
-
-/// The accepted `--checkpoint-every`: none, or up to a day.
-const CHECKPOINT_SECONDS: std::ops::RangeInclusive<u64> = 0..=86_400;
-
-/// What a checkpoint's `.json` beside its scene records: enough to go on
-/// (`--resume`) and to refuse going on with other settings.
-#[derive(serde::Serialize, serde::Deserialize, Debug, PartialEq)]
-struct CheckpointInfo {
-    /// Iterations done when the scene was written.
-    iteration: u32,
-    /// The fit's settings (after the flags and the LLFF resolution).
-    config: FitConfig,
-    /// `--holdout-every` and `--views`: which views it fits.
-    holdout_every: usize,
-    views: usize,
-    /// `--images` and `--random-init`.
-    images: Option<String>,
-    random_init: bool,
-}
-
-/// The checkpoint's record beside its scene (`fern.checkpoint.json`).
-fn checkpoint_info_path(checkpoint: &Path) -> PathBuf {
-    checkpoint.with_extension("json")
-}
-
-/// Where a fit writing `out` keeps its checkpoint: beside it, the format's
-/// suffix replaced by `.checkpoint.ply` (`fern.spz` → `fern.checkpoint.ply`,
-/// a SOG folder `out/` → `out.checkpoint.ply`).
-pub fn checkpoint_path(out: &Path) -> PathBuf {
-    let folder =
-        matches!(gast_core::scene::SceneFormat::from_output(out), Ok(gast_core::scene::SceneFormat::SogFolder(_)));
-    let (dir, stem) = if folder && out.file_name().is_some_and(|n| n.eq_ignore_ascii_case("meta.json")) {
-        let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-        (dir.parent().map(Path::to_path_buf), dir.file_name().map(|n| n.to_string_lossy().into_owned()))
-    } else {
-        (out.parent().map(Path::to_path_buf), out.file_name().map(|n| n.to_string_lossy().into_owned()))
-    };
-    let mut stem = stem.unwrap_or_else(|| "fit".to_owned());
-    if !folder {
-        let lower = stem.to_lowercase();
-        for suffix in [".compressed.ply", ".ply", ".spz", ".sog"] {
-            if lower.ends_with(suffix) {
-                stem.truncate(stem.len() - suffix.len());
-                break;
-            }
-        }
-    }
-    dir.unwrap_or_default().join(format!("{stem}.checkpoint.ply"))
 }
 
 impl FitArgs {
@@ -333,6 +281,27 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// What a checkpoint's `.json` beside its scene records: enough to go on
+/// (`--resume`) and to refuse going on with other settings.
+#[derive(serde::Serialize, serde::Deserialize, Debug, PartialEq)]
+struct CheckpointInfo {
+    /// Iterations done when the scene was written.
+    iteration: u32,
+    /// The fit's settings (after the flags and the LLFF resolution).
+    config: FitConfig,
+    /// `--holdout-every` and `--views`: which views it fits.
+    holdout_every: usize,
+    views: usize,
+    /// `--images` and `--random-init`.
+    images: Option<String>,
+    random_init: bool,
+}
+
+/// The checkpoint's record beside its scene (`fern.checkpoint.json`).
+fn checkpoint_info_path(checkpoint: &Path) -> PathBuf {
+    checkpoint.with_extension("json")
+}
+
 /// The iteration `--resume` goes on from: the checkpoint beside `--out`
 /// must exist and record the same settings as `cfg` and the flags that pick
 /// the views; else an error that says what differs.
@@ -399,8 +368,7 @@ fn warn_of_a_checkpoint(out: &Path) {
 /// it, and removed once the output is written.
 struct Checkpoint<'a> {
     path: PathBuf,
-    every: Option<std::time::Duration>,
-    last: Instant,
+    due: Due,
     args: &'a FitArgs,
     cfg: &'a FitConfig,
     cameras: &'a [gast_core::Camera],
@@ -411,8 +379,7 @@ impl<'a> Checkpoint<'a> {
     fn new(args: &'a FitArgs, cfg: &'a FitConfig, cameras: &'a [gast_core::Camera]) -> Self {
         Self {
             path: checkpoint_path(&args.out),
-            every: (args.checkpoint_every > 0).then(|| std::time::Duration::from_secs(args.checkpoint_every)),
-            last: Instant::now(),
+            due: Due::every(args.checkpoint_every),
             args,
             cfg,
             cameras,
@@ -437,13 +404,12 @@ impl<'a> Checkpoint<'a> {
     /// failed write is a warning: the fit goes on, and its output is
     /// written (or fails, saying why) at the end as before.
     fn maybe_write(&mut self, p: fit::FitProgress, scene: impl FnOnce() -> gast_core::Gaussians) -> Option<String> {
-        let every = self.every?;
-        if self.last.elapsed() < every {
+        if !self.due.now() {
             return None;
         }
         let t = Instant::now();
         let result = self.write(&scene(), p.iteration);
-        self.last = Instant::now();
+        self.due.written();
         Some(match result {
             Ok(()) => format!(
                 "checkpoint: iteration {} of {} written to {} in {:.0} ms",
@@ -549,23 +515,4 @@ fn write_previews(
     write_png_rgb(&dir.join("sheet.png"), (2 * w) as u32, (n * h) as u32, &sheet)?;
     eprintln!("previews in {} (sheet.png: ground truth left, render right)", dir.display());
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_checkpoint_lies_beside_the_output_as_an_inria_ply() {
-        for (out, checkpoint) in [
-            ("fern.ply", "fern.checkpoint.ply"),
-            ("runs/fern.compressed.ply", "runs/fern.checkpoint.ply"),
-            ("runs/Fern.SPZ", "runs/Fern.checkpoint.ply"),
-            ("fern.sog", "fern.checkpoint.ply"),
-            ("runs/fern/", "runs/fern.checkpoint.ply"),
-            ("runs/fern/meta.json", "runs/fern.checkpoint.ply"),
-        ] {
-            assert_eq!(checkpoint_path(Path::new(out)), Path::new(checkpoint), "{out}");
-        }
-    }
 }

@@ -2,6 +2,7 @@
 
 mod bench;
 mod check;
+mod checkpoint;
 pub mod convert;
 mod demo;
 mod fit;

@@ -195,6 +195,13 @@ pub struct StylizeArgs {
     /// else the CPU), cpu, or gpu (any adapter, software ones included).
     #[arg(long, default_value_t = DeviceChoice::Auto)]
     pub device: DeviceChoice,
+    /// Every this many seconds of steps, write the stylized scene as it stands
+    /// to `stylized.checkpoint.ply` in the output folder (INRIA .ply, named
+    /// after --scene-name), so a run killed or crashed keeps what it had; it
+    /// is removed once the scene is written. 0: none.
+    #[arg(long, default_value_t = crate::cli::checkpoint::DEFAULT_CHECKPOINT_S,
+          value_parser = crate::views::within(crate::cli::checkpoint::CHECKPOINT_SECONDS))]
+    pub checkpoint_every: u64,
 }
 
 impl StylizeArgs {

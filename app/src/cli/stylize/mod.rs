@@ -21,6 +21,7 @@ use gast_core::vision::Vgg;
 use gast_core::vision::style_depth::{DepthImage, DepthProvider};
 use serde::Serialize;
 
+use super::checkpoint::{Due, checkpoint_path};
 use crate::progress;
 use crate::report::sheet;
 use crate::views::{ViewArgs, camera_source, load_scene, refuse_photo_folder, views_for};
@@ -157,6 +158,31 @@ struct Report {
 
 /// The colour-matched scene's name in the output folder (for `gast convert --blend`).
 const MATCHED_NAME: &str = "colour_matched.ply";
+
+/// Writes the run's scene after `step` of `total` steps to `path` (making
+/// the output folder `out` first); returns the line that says so, or why
+/// not: a failed checkpoint is a warning, the run goes on.
+fn write_checkpoint(
+    out: &std::path::Path,
+    path: &std::path::Path,
+    scene: &gast_core::Gaussians,
+    step: u32,
+    total: u32,
+) -> String {
+    let t = Instant::now();
+    let written = super::output_folder(out, "--out").and_then(|()| {
+        gast_core::scene::save(path, scene, &Default::default())
+            .with_context(|| format!("could not write the checkpoint {}", path.display()))
+    });
+    match written {
+        Ok(()) => format!(
+            "  checkpoint: step {step} of {total} written to {} in {:.0} ms",
+            path.display(),
+            t.elapsed().as_secs_f64() * 1e3
+        ),
+        Err(e) => format!("  warning: the checkpoint at step {step} was not written: {e:#}"),
+    }
+}
 /// The other files of fixed name a run writes into its output folder.
 const SHEET_NAME: &str = "sheet.png";
 const REPORT_NAME: &str = "report.json";
@@ -189,7 +215,8 @@ fn written_by_a_run(name: &std::path::Path, scene_name: &std::path::Path) -> boo
     let text = name.to_string_lossy();
     let view = text.strip_prefix("view").is_some_and(|rest| rest.starts_with(|c: char| c.is_ascii_digit()))
         && (text.ends_with(".png") || text.ends_with(".exr"));
-    name == scene_name || fixed.into_iter().any(|f| name == std::path::Path::new(f)) || view
+    let checkpoint = checkpoint_path(scene_name);
+    name == scene_name || name == checkpoint || fixed.into_iter().any(|f| name == std::path::Path::new(f)) || view
 }
 
 /// The run's inputs (scene, style, style depth, preset) are not among the
@@ -418,6 +445,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let mut steps = Vec::with_capacity(total as usize);
     let mut warned_collapse = false;
     let mut stopped_at = None;
+    let checkpoint = checkpoint_path(&args.out.join(&args.scene_name));
+    let mut due = Due::every(args.checkpoint_every);
     interrupt.begin();
     while let Some(r) = session.step() {
         let lum = r.colour.map_or(String::new(), |c| format!(" luminance {:.2}x", c.luminance_ratio()));
@@ -467,6 +496,11 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         if interrupt.asked() && !session.is_done() {
             stopped_at = Some(session.steps_done());
             break;
+        }
+        if due.now() && !session.is_done() {
+            let line = write_checkpoint(&args.out, &checkpoint, &session.result(), session.steps_done(), total);
+            due.written();
+            pb.suspend(|| eprintln!("{line}"));
         }
     }
     interrupt.end();
@@ -529,6 +563,11 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         for line in crate::views::write_cameras_beside(&args.out.join(&args.scene_name), source, &cameras)? {
             eprintln!("  {line}");
         }
+    }
+    if checkpoint.is_file()
+        && let Err(e) = std::fs::remove_file(&checkpoint)
+    {
+        eprintln!("  warning: could not remove the checkpoint {}: {e}", checkpoint.display());
     }
     part_done(&mut outputs, "scenes written", &mut t_part);
     let (matched, cameras, maps, views) = (&matched, &cameras[..], &maps, args.preview_views);
