@@ -220,3 +220,34 @@ fn real_scene_round_trips_through_save_ply_bit_exactly() {
     assert_eq!(bits(back.quats.as_flattened()), bits(g.quats.as_flattened()));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A folder that is no SOG scene is refused saying what it is (it said only
+/// "meta.json: No such file or directory"): a posed-photo dataset, which
+/// `gast fit` turns into a scene; an INRIA model folder, naming its newest
+/// `point_cloud.ply`; else its first names.
+#[test]
+fn a_folder_that_is_no_scene_says_what_it_holds() {
+    for (rel, kind) in [("data/datasets/fern", "LLFF poses_bounds.npy"), ("data/datasets/lego", "NeRF transforms.json")]
+    {
+        let Some(dir) = shared_file(rel) else { continue };
+        let e = scene::load(&dir).expect_err("a photo dataset is no scene").to_string();
+        assert!(e.contains(&format!("found a folder of posed photos ({kind})")) && e.contains("gast fit"), "{e}");
+    }
+    let dir = std::env::temp_dir().join(format!("gast-folder-no-scene-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("dir");
+    let e = scene::load(&dir).expect_err("empty").to_string();
+    assert!(e.contains("found an empty folder"), "{e}");
+    for it in ["7000", "30000"] {
+        let folder = dir.join("point_cloud").join(format!("iteration_{it}"));
+        std::fs::create_dir_all(&folder).expect("dir");
+        gast_tests::write_empty_ply(&folder.join("point_cloud.ply"));
+    }
+    let e = scene::load(&dir).expect_err("a model folder").to_string();
+    let newest = dir.join("point_cloud/iteration_30000/point_cloud.ply");
+    assert!(
+        e.contains(&format!("INRIA model folder without meta.json; its newest scene is {}", newest.display())),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

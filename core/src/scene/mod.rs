@@ -146,10 +146,71 @@ pub fn load(path: impl AsRef<Path>) -> Result<Gaussians, SceneError> {
 pub fn load_with_warnings(path: impl AsRef<Path>) -> Result<(Gaussians, Vec<String>), SceneError> {
     let path = path.as_ref();
     if path.is_dir() {
-        return sog::read_sog(&path.join("meta.json")).map(|g| (g, Vec::new()));
+        let meta = path.join("meta.json");
+        if !meta.exists() {
+            return Err(SceneError::UnknownFormat {
+                path: path.to_path_buf(),
+                expected: "a scene file (.ply, .compressed.ply, .spz, .sog) or a SOG folder with its meta.json".into(),
+                found: folder_contents(path),
+            });
+        }
+        return sog::read_sog(&meta).map(|g| (g, Vec::new()));
     }
     let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
     load_from_bytes_with_warnings(path, &bytes)
+}
+
+/// What a folder that is no SOG scene holds, for the error that refuses it:
+/// a posed-photo dataset (which holds no Gaussians: `gast fit` makes a scene
+/// from it), an INRIA trainer's model folder (naming its newest
+/// `point_cloud.ply`), or else its first few names.
+fn folder_contents(dir: &Path) -> String {
+    let has = |name: &str| dir.join(name).exists();
+    let names: Vec<String> = std::fs::read_dir(dir)
+        .map(|entries| entries.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect())
+        .unwrap_or_default();
+    let photos = if has("poses_bounds.npy") {
+        Some("LLFF poses_bounds.npy")
+    } else if names.iter().any(|n| n.starts_with("transforms") && n.ends_with(".json")) {
+        Some("NeRF transforms.json")
+    } else if has("sparse/0") || has("sparse/cameras.bin") || has("sparse/cameras.txt") {
+        Some("COLMAP sparse/0")
+    } else {
+        None
+    };
+    if let Some(kind) = photos {
+        return format!(
+            "a folder of posed photos ({kind}), which holds no Gaussians: fit a scene from it first \
+             (`gast fit {} --out scene.ply`)",
+            dir.display()
+        );
+    }
+    let newest = std::fs::read_dir(dir.join("point_cloud"))
+        .map(|entries| {
+            entries
+                .flatten()
+                .filter_map(|e| {
+                    let n = e.file_name().to_string_lossy().into_owned();
+                    let it: u64 = n.strip_prefix("iteration_")?.parse().ok()?;
+                    e.path().join("point_cloud.ply").is_file().then_some((it, e.path().join("point_cloud.ply")))
+                })
+                .max_by_key(|(it, _)| *it)
+        })
+        .ok()
+        .flatten();
+    if let Some((_, ply)) = newest {
+        return format!("an INRIA model folder without meta.json; its newest scene is {}", ply.display());
+    }
+    let mut shown: Vec<&String> = names.iter().collect();
+    shown.sort();
+    match shown.len() {
+        0 => "an empty folder".into(),
+        n => {
+            let first: Vec<&str> = shown.iter().take(5).map(|s| s.as_str()).collect();
+            let more = if n > 5 { format!(", … ({n} in all)") } else { String::new() };
+            format!("a folder without meta.json holding {}{more}", first.join(", "))
+        }
+    }
 }
 
 /// Decodes a scene file already held in memory, recognising the format as
