@@ -279,6 +279,10 @@ pub const IMAGE_DECODE_LIMIT: u64 = 512 << 20;
 /// past it is said with its size and what it would take decoded (`image`
 /// itself only says "Memory limit exceeded"); other errors are the decoder's.
 pub fn open_image(path: &Path) -> Result<image::DynamicImage, String> {
+    if path.is_dir() {
+        // `image` says only "The image format could not be determined".
+        return Err("a folder".into());
+    }
     image::open(path).map_err(|e| match (&e, decoded_size(path)) {
         (image::ImageError::Limits(_), Some((w, h, bytes))) if bytes > IMAGE_DECODE_LIMIT => format!(
             "a {w}x{h} image, which takes {:.2} GiB decoded, more than the {} MiB one image may take here; \
@@ -524,6 +528,8 @@ mod tests {
         // An image within the limit decodes.
         write_png_rgb(&dir.join("small.png"), 3, 2, &[0.5; 18]).expect("a PNG");
         assert_eq!(open_image(&dir.join("small.png")).expect("decodes").width(), 3);
+        // A folder says so ("The image format could not be determined" before).
+        assert_eq!(open_image(&dir).expect_err("a folder"), "a folder");
         std::fs::remove_dir_all(&dir).ok();
     }
 
