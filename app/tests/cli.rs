@@ -709,6 +709,16 @@ fn without_a_display_gast_runs_the_headless_demo_and_studio_fails() {
     assert!(!o.status.success(), "`gast studio` without a display must fail");
     assert_eq!(stderr(&o).trim(), format!("error: {NO_DESKTOP}"));
     std::fs::remove_dir_all(&dir).ok();
+
+    // Without its weights the demo fails before writing, and leaves no empty folder.
+    let dir = temp("first-run-no-weights");
+    std::fs::create_dir_all(&dir).expect("temp folder");
+    let o = gast_without_display(&[], &dir, Path::new("/nonexistent/vgg19.safetensors"));
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("/nonexistent/vgg19.safetensors"), "{}", stderr(&o));
+    let left: Vec<_> = std::fs::read_dir(&dir).expect("the folder").flatten().map(|e| e.file_name()).collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// A bad `--assign-block` is refused before `gast bench step` loads anything:

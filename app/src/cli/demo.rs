@@ -80,7 +80,10 @@ pub fn run() -> anyhow::Result<ExitCode> {
     let matches = StylizeArgs::augment_args(clap::Command::new("gast stylize"))
         .try_get_matches_from(&argv)
         .context("the demo's stylize flags")?;
-    let code = stylize::run(StylizeArgs::from_arg_matches(&matches)?)?;
+    let code = stylize::run(StylizeArgs::from_arg_matches(&matches)?).inspect_err(|_| {
+        // A run that failed before writing (no weights offline) leaves no empty folder behind.
+        let _ = std::fs::remove_dir(&out);
+    })?;
     println!("the demo's outputs are in {}", out.display());
     Ok(code)
 }
