@@ -69,7 +69,8 @@ pub enum Command {
     ///
     /// Ctrl-C during the steps stops the run after its current step and still
     /// writes the scene, the renders and the report (`stopped_at`); a second
-    /// Ctrl-C quits at once.
+    /// Ctrl-C quits at once. Every 5 minutes the stylized scene goes to
+    /// stylized.checkpoint.ply in the output folder, so a killed run keeps it.
     Stylize(Box<stylize::StylizeArgs>),
     /// Convert a scene between INRIA .ply, PlayCanvas .compressed.ply, Niantic .spz
     /// and SOG (folder or .sog); the output's name picks the format.
@@ -79,7 +80,9 @@ pub enum Command {
     ///
     /// Ctrl-C during the fit stops it after its current iteration and still
     /// writes the scene as it is, with its cameras; a second Ctrl-C quits at
-    /// once.
+    /// once. Every 5 minutes, and at Ctrl-C, a checkpoint goes beside the
+    /// output (fern.ply → fern.checkpoint.ply); after a kill or a crash the
+    /// same command with --resume goes on from it.
     Fit(fit::FitArgs),
     /// Compare the project's numerics with reference files.
     #[command(subcommand)]
