@@ -507,6 +507,12 @@ fn ctrl_c_stops_a_fit_and_resume_goes_on_from_there() {
     let other = gast(&["fit", s(&fern), "--resolution", "64", "--iterations", "5", "--resume", "--out", s(&scene)]);
     assert!(!other.status.success());
     assert!(stderr(&other).contains("config.iterations: 1000000 then, 5 now"), "{}", stderr(&other));
+    if let Some(lego) = shared_file("data/datasets/lego") {
+        let o =
+            gast(&["fit", s(&lego), "--resolution", "64", "--iterations", "1000000", "--resume", "--out", s(&scene)]);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains("datasets/fern\" then, ") && stderr(&o).contains("lego\" now"), "{}", stderr(&o));
+    }
 
     let resumed = [&fit[..], &["--resume"]].concat();
     let (status, text) = interrupted(&resumed, "resuming from iteration");

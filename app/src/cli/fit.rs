@@ -287,6 +287,8 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
 struct CheckpointInfo {
     /// Iterations done when the scene was written.
     iteration: u32,
+    /// The dataset fitted (its absolute path where it resolves).
+    dataset: PathBuf,
     /// The fit's settings (after the flags and the LLFF resolution).
     config: FitConfig,
     /// `--holdout-every` and `--views`: which views it fits.
@@ -391,6 +393,7 @@ impl<'a> Checkpoint<'a> {
     fn info(&self, iteration: u32) -> CheckpointInfo {
         CheckpointInfo {
             iteration,
+            dataset: self.args.dataset.canonicalize().unwrap_or_else(|_| self.args.dataset.clone()),
             config: self.cfg.clone(),
             holdout_every: self.args.holdout_every,
             views: self.args.views,
