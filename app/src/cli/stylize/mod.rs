@@ -159,6 +159,12 @@ struct Report {
 /// The colour-matched scene's name in the output folder (for `gast convert --blend`).
 const MATCHED_NAME: &str = "colour_matched.ply";
 
+/// The other files of fixed name a run writes into its output folder.
+const SHEET_NAME: &str = "sheet.png";
+const REPORT_NAME: &str = "report.json";
+/// The style, its depth and its edges at texture scale.
+const STYLE_NAMES: [&str; 3] = ["style.png", "style_depth.png", "style_edge.png"];
+
 /// Writes the run's scene after `step` of `total` steps to `path` (making
 /// the output folder `out` first); returns the line that says so, or why
 /// not: a failed checkpoint is a warning, the run goes on.
@@ -183,11 +189,6 @@ fn write_checkpoint(
         Err(e) => format!("  warning: the checkpoint at step {step} was not written: {e:#}"),
     }
 }
-/// The other files of fixed name a run writes into its output folder.
-const SHEET_NAME: &str = "sheet.png";
-const REPORT_NAME: &str = "report.json";
-/// The style, its depth and its edges at texture scale.
-const STYLE_NAMES: [&str; 3] = ["style.png", "style_depth.png", "style_edge.png"];
 
 /// `--scene-name` is a name inside the output folder with a format's ending:
 /// `../x.ply` or `/tmp/x.ply` would write outside `--out`, and
