@@ -313,23 +313,50 @@ fn load_any(path: &Path, images: Option<&str>) -> Result<(CameraSet, PathBuf), C
 
 const EXPECTED: &str = "sparse/0/{cameras,images}.{bin,txt}, poses_bounds.npy, cameras.json or transforms*.json";
 
-fn load_dir(dir: &Path, images: Option<&str>) -> Result<(CameraSet, PathBuf), CameraError> {
+/// The kinds of camera file a folder may hold, in the order [`camera_file_in`] looks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CameraFileKind {
+    /// A COLMAP model (`cameras` and `images`, `.bin` or `.txt`).
+    Colmap,
+    /// LLFF `poses_bounds.npy`.
+    Llff,
+    /// An INRIA `cameras.json`.
+    Inria,
+    /// A NeRF `transforms*.json`.
+    Transforms,
+}
+
+/// The cameras a folder holds, as a camera load of the folder finds them:
+/// a COLMAP model in `sparse/0`, `sparse` or the folder itself, else
+/// `poses_bounds.npy`, else `cameras.json`, else a `transforms*.json`; with
+/// the file (or COLMAP folder).
+pub fn camera_file_in(dir: &Path) -> Option<(CameraFileKind, PathBuf)> {
     for d in [dir.join("sparse/0"), dir.join("sparse"), dir.to_path_buf()] {
         if colmap::has_colmap_files(&d) {
-            return Ok((load_colmap(&d)?, d));
+            return Some((CameraFileKind::Colmap, d));
         }
     }
     if dir.join(POSES_BOUNDS).is_file() {
-        return Ok((load_llff(dir, images)?, dir.join(POSES_BOUNDS)));
+        return Some((CameraFileKind::Llff, dir.join(POSES_BOUNDS)));
     }
     let inria = dir.join("cameras.json");
     if inria.is_file() {
-        return Ok((load_inria(&inria)?, inria));
+        return Some((CameraFileKind::Inria, inria));
     }
-    if let Some(t) = find_transforms(dir) {
-        return Ok((load_transforms(&t)?, t));
-    }
-    Err(CameraError::NotFound { path: dir.to_path_buf(), expected: EXPECTED.into() })
+    find_transforms(dir).map(|t| (CameraFileKind::Transforms, t))
+}
+
+fn load_dir(dir: &Path, images: Option<&str>) -> Result<(CameraSet, PathBuf), CameraError> {
+    let Some((kind, file)) = camera_file_in(dir) else {
+        return Err(CameraError::NotFound { path: dir.to_path_buf(), expected: EXPECTED.into() });
+    };
+    let set = match kind {
+        CameraFileKind::Colmap => load_colmap(&file)?,
+        CameraFileKind::Llff => load_llff(dir, images)?,
+        CameraFileKind::Inria => load_inria(&file)?,
+        CameraFileKind::Transforms => load_transforms(&file)?,
+    };
+    Ok((set, file))
 }
 
 /// `transforms.json`, else `transforms_train.json`, else the first `transforms*.json` by name.

@@ -165,18 +165,17 @@ pub fn load_with_warnings(path: impl AsRef<Path>) -> Result<(Gaussians, Vec<Stri
 /// from it), an INRIA trainer's model folder (naming its newest
 /// `point_cloud.ply`), or else its first few names.
 fn folder_contents(dir: &Path) -> String {
-    let has = |name: &str| dir.join(name).exists();
+    use crate::camera::CameraFileKind;
     let names: Vec<String> = std::fs::read_dir(dir)
         .map(|entries| entries.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect())
         .unwrap_or_default();
-    let photos = if has("poses_bounds.npy") {
-        Some("LLFF poses_bounds.npy")
-    } else if names.iter().any(|n| n.starts_with("transforms") && n.ends_with(".json")) {
-        Some("NeRF transforms.json")
-    } else if has("sparse/0") || has("sparse/cameras.bin") || has("sparse/cameras.txt") {
-        Some("COLMAP sparse/0")
-    } else {
-        None
+    // The cameras a camera load of the folder would find; a `cameras.json`
+    // alone is what `gast fit` and the INRIA trainer write beside a scene.
+    let photos = match crate::camera::camera_file_in(dir) {
+        Some((CameraFileKind::Llff, _)) => Some("LLFF poses_bounds.npy"),
+        Some((CameraFileKind::Transforms, _)) => Some("NeRF transforms.json"),
+        Some((CameraFileKind::Colmap, _)) => Some("COLMAP sparse/0"),
+        Some((CameraFileKind::Inria, _)) | None => None,
     };
     if let Some(kind) = photos {
         return format!(
