@@ -60,11 +60,9 @@ impl StudioApp {
     /// which version it writes; `then_leave` goes on with the pending
     /// [`Leave`] once it is written.
     pub(super) fn export_current_scene(&mut self, path: PathBuf, then_leave: bool) {
-        let version = self.after().or(self.scene.as_ref().map(|s| &s.scene)).map(|s| s.version);
-        let Some(g) = self.current() else { return };
-        if let Some(v) = version {
-            self.leave.exporting = Some((path.clone(), v, then_leave));
-        }
+        let Some(shown) = self.current_ref() else { return };
+        let g = shown.gaussians.clone();
+        self.leave.exporting = Some((path.clone(), shown.version, then_leave));
         self.jobs.export_scene(g, path, self.camera_file());
     }
 
@@ -176,13 +174,7 @@ impl StudioApp {
         });
         match answer {
             Some(Answer::Export) => {
-                let picked = rfd::FileDialog::new()
-                    .add_filter("INRIA PLY or PlayCanvas NAME.compressed.ply", &["ply"])
-                    .add_filter("Niantic SPZ", &["spz"])
-                    .add_filter("PlayCanvas SOG bundle", &["sog"])
-                    .set_file_name("stylized.ply")
-                    .save_file();
-                if let Some(p) = picked {
+                if let Some(p) = super::panels::scene_save_dialog() {
                     self.leave.export_error = None;
                     self.export_current_scene(p, true);
                 }

@@ -412,7 +412,12 @@ impl StudioApp {
     /// The Gaussians shown as "current": the newest snapshot at the chosen
     /// strength, else the scene.
     fn current(&self) -> Option<SharedGaussians> {
-        self.after().or(self.scene.as_ref().map(|s| &s.scene)).map(|s| s.gaussians.clone())
+        self.current_ref().map(|s| s.gaussians.clone())
+    }
+
+    /// [`Self::current`] with its version.
+    fn current_ref(&self) -> Option<&SceneRef> {
+        self.after().or(self.scene.as_ref().map(|s| &s.scene))
     }
 
     /// The stylized side as shown and exported: the newest snapshot, blended

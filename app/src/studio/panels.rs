@@ -16,6 +16,17 @@ use super::{StudioApp, controls};
 use crate::report::sheet;
 use crate::turntable::TurntableOptions;
 
+/// The file dialog that names an exported scene; the name's ending picks
+/// the format (NAME.compressed.ply for PlayCanvas's).
+pub(super) fn scene_save_dialog() -> Option<std::path::PathBuf> {
+    rfd::FileDialog::new()
+        .add_filter("INRIA PLY or PlayCanvas NAME.compressed.ply", &["ply"])
+        .add_filter("Niantic SPZ", &["spz"])
+        .add_filter("PlayCanvas SOG bundle", &["sog"])
+        .set_file_name("stylized.ply")
+        .save_file()
+}
+
 impl StudioApp {
     pub(super) fn menu_bar(&mut self, ui: &mut Ui) {
         ui.horizontal(|ui| {
@@ -43,14 +54,8 @@ impl StudioApp {
         let cam = self.viewport_camera();
         ui.add_enabled_ui(current.is_some(), |ui| {
             let Some(g) = current else { return };
-            // The name's ending picks the format (NAME.compressed.ply for PlayCanvas's).
             if ui.button("Current Gaussians as .ply, .compressed.ply, .spz or .sog…").clicked()
-                && let Some(p) = rfd::FileDialog::new()
-                    .add_filter("INRIA PLY or PlayCanvas NAME.compressed.ply", &["ply"])
-                    .add_filter("Niantic SPZ", &["spz"])
-                    .add_filter("PlayCanvas SOG bundle", &["sog"])
-                    .set_file_name("stylized.ply")
-                    .save_file()
+                && let Some(p) = scene_save_dialog()
             {
                 self.export_current_scene(p, false);
             }
