@@ -79,8 +79,8 @@ pub fn cameras(scene: &Gaussians, opts: &TurntableOptions) -> Vec<Camera> {
     }
     let orbit = OrbitOptions {
         count: opts.frames.max(1),
-        width: opts.size.max(1),
-        height: opts.size.max(1),
+        width: size,
+        height: size,
         fov_y_degrees: opts.fov_y_degrees,
         up: opts.up,
         layout: OrbitLayout::Ring { elevation_degrees: opts.elevation_degrees },
