@@ -39,6 +39,17 @@ pub fn checkpoint_path(out: &Path) -> PathBuf {
     dir.unwrap_or_default().join(format!("{stem}.checkpoint.ply"))
 }
 
+/// Writes `scene` to the checkpoint `path` (INRIA .ply, atomically), making
+/// its folder first.
+pub fn write_scene(path: &Path, scene: &gast_core::Gaussians) -> anyhow::Result<()> {
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        super::output_folder(parent, "--out")?;
+    }
+    anyhow::Context::with_context(gast_core::scene::save(path, scene, &Default::default()), || {
+        format!("could not write the checkpoint {}", path.display())
+    })
+}
+
 /// When the next checkpoint is due: every `every` seconds (0: never).
 pub struct Due {
     every: Option<Duration>,

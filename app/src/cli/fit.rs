@@ -428,16 +428,12 @@ impl<'a> Checkpoint<'a> {
     /// Writes the scene after `iteration` iterations and its record (the
     /// record last: a record always names a scene written whole).
     fn write(&mut self, scene: &gast_core::Gaussians, iteration: u32) -> anyhow::Result<()> {
-        if let Some(parent) = self.path.parent().filter(|p| !p.as_os_str().is_empty()) {
-            super::output_folder(parent, "--out")?;
-        }
         let info_path = checkpoint_info_path(&self.path);
         // A record of an older checkpoint must not pair with the new scene if this write stops half-way.
         if info_path.is_file() {
             std::fs::remove_file(&info_path).with_context(|| format!("could not replace {}", info_path.display()))?;
         }
-        gast_core::scene::save(&self.path, scene, &gast_core::scene::SaveOptions::default())
-            .with_context(|| format!("could not write the checkpoint {}", self.path.display()))?;
+        super::checkpoint::write_scene(&self.path, scene)?;
         let json = serde_json::to_string_pretty(&self.info(iteration))?;
         gast_core::io::write_bytes(&info_path, json.as_bytes())
             .with_context(|| format!("could not write the checkpoint's record {}", info_path.display()))?;

@@ -165,22 +165,12 @@ const REPORT_NAME: &str = "report.json";
 /// The style, its depth and its edges at texture scale.
 const STYLE_NAMES: [&str; 3] = ["style.png", "style_depth.png", "style_edge.png"];
 
-/// Writes the run's scene after `step` of `total` steps to `path` (making
-/// the output folder `out` first); returns the line that says so, or why
-/// not: a failed checkpoint is a warning, the run goes on.
-fn write_checkpoint(
-    out: &std::path::Path,
-    path: &std::path::Path,
-    scene: &gast_core::Gaussians,
-    step: u32,
-    total: u32,
-) -> String {
+/// Writes the run's scene after `step` of `total` steps to the checkpoint
+/// `path` (making the output folder first); returns the line that says so,
+/// or why not: a failed checkpoint is a warning, the run goes on.
+fn write_checkpoint(path: &std::path::Path, scene: &gast_core::Gaussians, step: u32, total: u32) -> String {
     let t = Instant::now();
-    let written = super::output_folder(out, "--out").and_then(|()| {
-        gast_core::scene::save(path, scene, &Default::default())
-            .with_context(|| format!("could not write the checkpoint {}", path.display()))
-    });
-    match written {
+    match super::checkpoint::write_scene(path, scene) {
         Ok(()) => format!(
             "  checkpoint: step {step} of {total} written to {} in {:.0} ms",
             path.display(),
@@ -499,7 +489,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             break;
         }
         if due.now() && !session.is_done() {
-            let line = write_checkpoint(&args.out, &checkpoint, &session.result(), session.steps_done(), total);
+            let line = write_checkpoint(&checkpoint, &session.result(), session.steps_done(), total);
             due.written();
             pb.suspend(|| eprintln!("{line}"));
         }
