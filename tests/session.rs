@@ -6,7 +6,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
-use gast_core::session::{Command, Event, SessionInputs, StyleDepthSource, StyleImage, spawn};
+use gast_core::session::{Command, Event, SessionError, SessionInputs, StyleDepthSource, StyleImage, spawn};
 use gast_core::style::config::LossWeights;
 use gast_core::style::{MeanSteps, Mode, Phase, StyleConfig};
 use gast_core::vision::Vgg;
@@ -210,6 +210,56 @@ fn the_result_is_the_colour_matched_scene_with_the_optimised_gaussians_in_place(
         assert_eq!(result.opacity_logits[i], matched.opacity_logits[i]);
     }
     assert!(Arc::ptr_eq(session.input(), &scene), "the input shared, not copied");
+}
+
+/// A run resumed from another's result at step k (its checkpoint, through an
+/// INRIA .ply) goes on where that one stood: the same state, the same views
+/// and phases from k on, and the same loss at its first step, which is
+/// computed before any update; on the CPU and on the GPU engine.
+#[test]
+fn a_run_resumed_from_a_checkpoint_goes_on_where_it_stood() {
+    use gast_core::session::Session;
+    let config = StyleConfig { cycles: 2, steps_per_cycle: 6, resolution: 32, texture_scale: 32, ..Default::default() };
+    let Some(cpu_inputs) = inputs(config) else { return };
+    let gpu_inputs = SessionInputs { gpu: Some(gpu_context()), ..cpu_inputs.clone() };
+    let file = std::env::temp_dir().join(format!("gast-resume-{}.ply", std::process::id()));
+    for (device, inputs) in [("CPU", cpu_inputs), ("GPU", gpu_inputs)] {
+        let k = 5;
+        let mut whole = Session::prepare(inputs.clone(), &mut |_| {}).expect("a session");
+        for _ in 0..k {
+            whole.step().expect("a step");
+        }
+        gast_core::scene::save(&file, &whole.result(), &Default::default()).expect("the checkpoint written");
+        let checkpoint = gast_core::scene::load(&file).expect("the checkpoint read");
+        let after: Vec<_> = (0..4).map(|_| whole.step().expect("a step")).collect();
+
+        let mut resumed = Session::prepare(inputs.clone(), &mut |_| {}).expect("a session");
+        resumed.resume_at(&checkpoint, k).expect("resumed");
+        assert_eq!(resumed.steps_done(), k, "{device}");
+        let state = resumed.result();
+        assert!(
+            state.means == checkpoint.means && state.sh == checkpoint.sh && state.quats == checkpoint.quats,
+            "{device}: the resumed state is the checkpoint's"
+        );
+        for (i, a) in after.iter().enumerate() {
+            let b = resumed.step().expect("a resumed step");
+            assert_eq!((a.iter, a.cycle, a.phase, a.view), (b.iter, b.cycle, b.phase, b.view), "{device} step {i}");
+            if i == 0 {
+                let err = (a.losses.total - b.losses.total).abs() / a.losses.total.abs().max(1e-6);
+                assert!(err < 1e-5, "{device}: step {k}'s loss {} resumed, {} whole", b.losses.total, a.losses.total);
+            }
+        }
+        assert_eq!(resumed.total_steps(), whole.total_steps());
+
+        let mut late = Session::prepare(inputs.clone(), &mut |_| {}).expect("a session");
+        let total = late.total_steps();
+        assert!(
+            matches!(late.resume_at(&checkpoint, total), Err(SessionError::Input(m)) if m.contains("before the schedule's"))
+        );
+        let half = gast_core::session::subset(&checkpoint, &[0, 1, 2]);
+        assert!(matches!(late.resume_at(&half, k), Err(SessionError::Input(m)) if m.contains("found 3 of")));
+    }
+    std::fs::remove_file(&file).ok();
 }
 
 /// Cameras that see nothing of the scene among those that do are named in a

@@ -130,6 +130,8 @@ pub struct GpuEngine {
     leak: Option<GpuLeak>,
     /// The host's share of the last step ([`GpuEngine::host_times`]).
     host: HostTimes,
+    /// Steps taken (or resumed from): each step's assignment draw is seeded by it.
+    steps: u64,
 }
 
 /// What the host spent of one GPU step: the time the device's part timings
@@ -221,6 +223,7 @@ impl GpuEngine {
             assign: None,
             leak: None,
             host: HostTimes::default(),
+            steps: 0,
         };
         engine.bytes = ctx.allocated_bytes().saturating_sub(before);
         Ok(engine)
@@ -245,6 +248,15 @@ impl GpuEngine {
     /// Reads the optimised Gaussians back (snapshots, export).
     pub fn download(&self) -> Result<Gaussians, GpuError> {
         self.g.download(&self.ctx)
+    }
+
+    /// Goes on after `steps` steps with the optimised Gaussians `g` (as
+    /// many, same SH degree as at [`GpuEngine::new`]): a resumed run's state,
+    /// whose next draws are those of its step. The optimiser's moments are
+    /// left as they are.
+    pub fn resume(&mut self, g: &Gaussians, steps: u32) {
+        self.g.write(&self.ctx, g);
+        self.steps = u64::from(steps);
     }
 
     /// Warnings raised since the last call.
@@ -423,6 +435,8 @@ impl GpuEngine {
             let style = &self.style;
             let a =
                 self.assign.get_or_insert_with(|| GpuAssignment::new(ctx, style.channels(), config.seed ^ ASSIGN_SEED));
+            // Seeded by the step, so that a run resumed at a step draws as the whole run did.
+            a.reseed(config.seed ^ ASSIGN_SEED ^ self.steps.wrapping_mul(0x9E37_79B9_7F4A_7C15));
             a.record_gather(ctx, &mut enc, plan.loss.rgb_features(), n, covered, style.modality(0), style.positions());
             gathered = Some(submit(&mut host, enc));
             enc = ctx.encoder("engine.step.feature_losses");
@@ -539,6 +553,7 @@ impl GpuEngine {
             terms.reg_rotation = s[slot::REG_ROTATION];
         }
         terms.total = terms.weighted(&w);
+        self.steps += 1;
         Ok(terms)
     }
 

@@ -551,6 +551,52 @@ impl Session {
         Ok(())
     }
 
+    /// Goes on from `step` with `scene` as the run's state: a run resumed from
+    /// the checkpoint of an earlier one with the same inputs and settings
+    /// (`scene` is that run's [`Session::result`], whole). The optimised
+    /// Gaussians take its values, the views are drawn as that run's were
+    /// from `step` on; the optimiser's moments start afresh (Adam's bias
+    /// correction makes its first updates full-sized again), as do the kept
+    /// matches. Before the first step only.
+    pub fn resume_at(&mut self, scene: &Gaussians, step: u32) -> Result<(), SessionError> {
+        if self.step > 0 {
+            return Err(SessionError::Input(format!(
+                "a run resumes before its first step, not after step {}",
+                self.step
+            )));
+        }
+        if scene.len() != self.input.len() || scene.sh_degree != self.input.sh_degree {
+            return Err(SessionError::Input(format!(
+                "expected a scene of {} Gaussians of SH degree {} to resume from (the run's input), found {} of \
+                 degree {}",
+                self.input.len(),
+                self.input.sh_degree,
+                scene.len(),
+                scene.sh_degree
+            )));
+        }
+        if step >= self.total_steps() {
+            return Err(SessionError::Input(format!(
+                "expected a step before the schedule's {} to resume from, found {step}",
+                self.total_steps()
+            )));
+        }
+        let part = subset(scene, &self.keep);
+        if let Some(cpu) = &mut self.cpu {
+            cpu.g = part;
+        } else if let Some(engine) = &mut self.engine {
+            engine.resume(&part, step);
+        }
+        for _ in 0..step {
+            self.sampler.next();
+        }
+        self.step = step;
+        if let Some(live) = &self.live {
+            live.publish(u64::from(self.step));
+        }
+        Ok(())
+    }
+
     /// Computes the per-view targets (the render of `G^c`, its content
     /// features and coverage) of every view that has none yet, as each view's
     /// first step would; returns the seconds it took. Benchmarks call it so

@@ -41,6 +41,18 @@ impl GpuGaussians {
         }
     }
 
+    /// Overwrites the parameters with `g`'s, which must have as many
+    /// Gaussians and the same SH degree (the caller checks: a resumed run's
+    /// state, [`crate::session::Session::resume_at`]).
+    pub fn write(&self, ctx: &GpuContext, g: &Gaussians) {
+        debug_assert!(g.len() == self.len && g.sh_degree == self.sh_degree);
+        ctx.write(&self.means, &g.means);
+        ctx.write(&self.log_scales, &g.log_scales);
+        ctx.write(&self.quats, &g.quats);
+        ctx.write(&self.opacity_logits, &g.opacity_logits);
+        ctx.write(&self.sh, &g.sh);
+    }
+
     /// SH coefficients per colour channel.
     pub fn sh_coeffs(&self) -> usize {
         crate::scene::sh_coeffs_for_degree(self.sh_degree)

@@ -18,7 +18,8 @@
 //!
 //! The draw differs from the CPU step's in its seed only: the CPU seeds from
 //! the features' bits (which would need the whole maps here), the engine from
-//! a counter of its own, so a run is reproducible and each step draws anew.
+//! the run's seed and the step's index, so a run is reproducible, each step
+//! draws anew and a resumed run draws as the whole run did.
 
 use super::Commands;
 use super::{Bind, GpuContext, GpuError, Kernel};
@@ -68,7 +69,8 @@ pub struct GpuAssignment {
 }
 
 impl GpuAssignment {
-    /// The workspace for `channels`-channel features, its draws seeded by `seed`.
+    /// The workspace for `channels`-channel features, its draws seeded by
+    /// `seed` (until [`GpuAssignment::reseed`]).
     pub fn new(ctx: &GpuContext, channels: usize, seed: u64) -> Self {
         let src = include_str!("../../../../shaders/assignment.wgsl");
         let binds = [Bind::Uniform, Bind::Read, Bind::Read, Bind::ReadWrite];
@@ -93,6 +95,11 @@ impl GpuAssignment {
             drawn: 0,
             pull_ms: (0.0, 0.0),
         }
+    }
+
+    /// Seeds the next draws by `seed`.
+    pub fn reseed(&mut self, seed: u64) {
+        self.rng = Rng::new(seed);
     }
 
     fn params(&self, positions: usize, count: usize) -> AssignParams {
