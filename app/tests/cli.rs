@@ -377,50 +377,92 @@ fn signalled(
 }
 
 /// Ctrl-C during `stylize`: the run stops after its step and still writes the
-/// scene, the renders and a report that says where it stopped.
+/// scene, the renders and a report that says where it stopped, and keeps a
+/// checkpoint with its record; `--resume` with other settings is refused,
+/// saying which; the same command with `--resume` goes on from the step it
+/// stopped at to the end, and then removes the checkpoint.
 #[cfg(unix)]
 #[test]
-fn ctrl_c_stops_a_run_and_keeps_what_it_has() {
+fn ctrl_c_stops_a_run_and_resume_goes_on_to_the_end() {
     let Some((scene, style, weights)) = guitar_with("block2.jpg") else { return };
     let out = temp("ctrlc");
-    let (status, text) = interrupted(
-        &[
-            "stylize",
-            s(&scene),
-            s(&style),
-            "--weights",
-            s(&weights),
-            "--out",
-            s(&out),
-            "--cycles",
-            "100",
-            "--resolution",
-            "48",
-            "--views",
-            "2",
-            "--preview-views",
-            "1",
-            "--depth-provider",
-            "heuristic",
-        ],
-        "object recipe",
-    );
+    let run = [
+        "stylize",
+        s(&scene),
+        s(&style),
+        "--weights",
+        s(&weights),
+        "--out",
+        s(&out),
+        "--cycles",
+        "4",
+        "--steps-per-cycle",
+        "150",
+        "--resolution",
+        "48",
+        "--views",
+        "2",
+        "--preview-views",
+        "1",
+        "--depth-provider",
+        "heuristic",
+    ];
+    let (status, text) = interrupted(&run, "object recipe");
     assert!(status.success(), "{text}");
     assert!(text.contains("stopped at step"), "{text}");
+    assert!(text.contains("the same command with --resume goes on from it"), "{text}");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report")).expect("json");
     let at = report["stopped_at"].as_u64().expect("stopped_at");
-    assert!((1..10_000).contains(&at), "stopped at {at}");
+    assert!((1..600).contains(&at), "stopped at {at}");
     assert_eq!(report["steps"].as_array().expect("steps").len() as u64, at);
     let result = gast_core::scene::load(out.join("stylized.ply")).expect("the stopped run's scene");
-    assert!(!result.is_empty());
+    let checkpoint = gast_core::scene::load(out.join("stylized.checkpoint.ply")).expect("the checkpoint");
+    assert_eq!(checkpoint.len(), result.len());
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("stylized.checkpoint.json")).expect("the record"))
+            .expect("json");
+    assert_eq!(record["step"].as_u64(), Some(at), "{record}");
+
+    let mut other = run.to_vec();
+    other[8] = "3"; // --cycles
+    other[14] = "3"; // --views
+    let o = gast(&[&other[..], &["--resume"]].concat());
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("config.cycles: 4 then, 3 now"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("cameras: \"2 views, "), "{}", stderr(&o));
+    if let Some(mosaic) = shared_file("data/styles/mosaic.jpg") {
+        let mut elsewhere = run.to_vec();
+        elsewhere[2] = s(&mosaic);
+        let o = gast(&[&elsewhere[..], &["--resume"]].concat());
+        assert!(!o.status.success());
+        assert!(
+            stderr(&o).contains("block2.jpg\" then, ") && stderr(&o).contains("mosaic.jpg\" now"),
+            "{}",
+            stderr(&o)
+        );
+    }
+
+    let o = gast(&[&run[..], &["--resume"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(iteration_after(&stderr(&o), "resuming from step "), at as u32, "{}", stderr(&o));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report")).expect("json");
+    assert_eq!(report["resumed_from"].as_u64(), Some(at));
+    assert!(report["stopped_at"].is_null());
+    let steps = report["steps"].as_array().expect("steps");
+    assert_eq!(steps.len() as u64, 600 - at, "the resumed run's own steps");
+    assert_eq!(steps[0]["iter"].as_u64(), Some(at));
+    assert!(!out.join("stylized.checkpoint.ply").exists() && !out.join("stylized.checkpoint.json").exists());
+    assert!(gast_core::scene::load(out.join("stylized.ply")).is_ok());
     std::fs::remove_dir_all(&out).ok();
 }
 
 /// A `gast stylize` run killed outright keeps its last checkpoint (the
-/// stylized scene as it stood, a whole INRIA .ply); the checkpoint is no input
-/// for a run into the same folder (it would be replaced, then removed); a run
-/// that ends removes it.
+/// stylized scene as it stood, a whole INRIA .ply) with its record; the
+/// checkpoint is no input for a run into the same folder (it would be
+/// replaced, then removed); a run that ends removes it and its record, after
+/// which `--resume` has nothing to go on from.
 #[cfg(unix)]
 #[test]
 fn a_killed_stylize_run_leaves_its_checkpoint() {
@@ -460,6 +502,11 @@ fn a_killed_stylize_run_leaves_its_checkpoint() {
     let kept = gast_core::scene::load(&checkpoint).expect("the killed run's checkpoint");
     let input = gast_core::scene::load(&scene).expect("guitar");
     assert_eq!(kept.len(), input.len(), "the checkpoint holds the whole scene");
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("stylized.checkpoint.json")).expect("the record"))
+            .expect("json");
+    let at = iteration_after(&text, "checkpoint: step ");
+    assert!(record["step"].as_u64().is_some_and(|s| s >= u64::from(at)), "{record}");
 
     let mut again = long.clone();
     again[1] = s(&checkpoint);
@@ -472,7 +519,18 @@ fn a_killed_stylize_run_leaves_its_checkpoint() {
     let short: Vec<&str> = short.iter().map(String::as_str).collect();
     let o = gast(&short);
     assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("holds a checkpoint of an earlier stylization"), "{}", stderr(&o));
     assert!(out.join("stylized.ply").is_file() && !checkpoint.exists(), "{}", stderr(&o));
+    assert!(!out.join("stylized.checkpoint.json").exists());
+
+    // Nothing left to go on from.
+    let o = gast(&[&short[..], &["--resume"]].concat());
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("expected the checkpoint of an earlier stylization to --resume from"),
+        "{}",
+        stderr(&o)
+    );
     std::fs::remove_dir_all(&out).ok();
 }
 

@@ -1,10 +1,13 @@
 //! Checkpoints of long runs (`gast fit`, `gast stylize`): the scene as it
-//! stands, written now and then beside the output as an INRIA `.ply`, so that
-//! a run killed, crashed or cut off loses at most the interval; removed once
-//! the output is written.
+//! stands, written now and then beside the output as an INRIA `.ply` with a
+//! record (`.json`) of the run's settings and progress, so that a run killed,
+//! crashed or cut off loses at most the interval and the same command with
+//! `--resume` goes on from it; removed once the output is written.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+
+use anyhow::Context;
 
 /// Seconds between checkpoints by default: a long fit or stylization (hours
 /// on a large capture) loses at most five minutes; a fern fit (about six)
@@ -45,9 +48,106 @@ pub fn write_scene(path: &Path, scene: &gast_core::Gaussians) -> anyhow::Result<
     if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
         super::output_folder(parent, "--out")?;
     }
-    anyhow::Context::with_context(gast_core::scene::save(path, scene, &Default::default()), || {
-        format!("could not write the checkpoint {}", path.display())
-    })
+    gast_core::scene::save(path, scene, &Default::default())
+        .with_context(|| format!("could not write the checkpoint {}", path.display()))
+}
+
+/// The record beside a checkpoint's scene (`fern.checkpoint.json`).
+pub fn record_path(checkpoint: &Path) -> PathBuf {
+    checkpoint.with_extension("json")
+}
+
+/// Writes the checkpoint `path`: the scene, then its `record` (last: a
+/// record always names a scene written whole; an older one is removed
+/// first, so that it does not pair with the new scene if this write stops
+/// half-way).
+pub fn write_with_record(
+    path: &Path,
+    scene: &gast_core::Gaussians,
+    record: &impl serde::Serialize,
+) -> anyhow::Result<()> {
+    let record_path = record_path(path);
+    if record_path.is_file() {
+        std::fs::remove_file(&record_path).with_context(|| format!("could not replace {}", record_path.display()))?;
+    }
+    write_scene(path, scene)?;
+    let json = serde_json::to_string_pretty(record)?;
+    gast_core::io::write_bytes(&record_path, json.as_bytes())
+        .with_context(|| format!("could not write the checkpoint's record {}", record_path.display()))
+}
+
+/// Removes the checkpoint `path` and its record, where they are (a warning
+/// for what cannot be removed).
+pub fn remove(path: &Path) {
+    for path in [&record_path(path), path] {
+        if path.is_file()
+            && let Err(e) = std::fs::remove_file(path)
+        {
+            eprintln!("warning: could not remove the checkpoint {}: {e}", path.display());
+        }
+    }
+}
+
+/// Reads the record of the checkpoint `path`, which `--resume` asked for on
+/// behalf of the output `out` (`what`: "fit", "stylization"); an error that
+/// says what is missing or unreadable.
+pub fn read_record<R: serde::de::DeserializeOwned>(out: &Path, path: &Path, what: &str) -> anyhow::Result<R> {
+    let record_path = record_path(path);
+    anyhow::ensure!(
+        path.is_file() && record_path.is_file(),
+        "{}: expected the checkpoint of an earlier {what} to --resume from ({} with its record {}, written every \
+         --checkpoint-every seconds and at Ctrl-C), found {}",
+        out.display(),
+        path.display(),
+        record_path.display(),
+        if path.is_file() { "the scene without its record" } else { "none" }
+    );
+    let text =
+        std::fs::read_to_string(&record_path).with_context(|| format!("could not read {}", record_path.display()))?;
+    serde_json::from_str(&text)
+        .with_context(|| format!("{}: expected a {what} checkpoint's record (JSON)", record_path.display()))
+}
+
+/// Refuses to go on from the checkpoint `path` whose record `was` differs
+/// from this run's `now`, naming each setting that differs.
+pub fn refuse_other_settings<R: serde::Serialize + PartialEq>(path: &Path, was: &R, now: &R) -> anyhow::Result<()> {
+    if was == now {
+        return Ok(());
+    }
+    let (was, is) = (serde_json::to_value(was)?, serde_json::to_value(now)?);
+    anyhow::bail!(
+        "{}: the checkpoint was made with other settings ({}); give the same flags to --resume, or leave --resume \
+         out to start afresh (the new run replaces the checkpoint)",
+        path.display(),
+        differing_keys(&was, &is, "").join(", ")
+    )
+}
+
+/// `key: was → is` for every leaf where two JSON objects differ.
+fn differing_keys(was: &serde_json::Value, is: &serde_json::Value, prefix: &str) -> Vec<String> {
+    match (was, is) {
+        (serde_json::Value::Object(a), serde_json::Value::Object(b)) => a
+            .iter()
+            .flat_map(|(k, v)| {
+                let key = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+                differing_keys(v, b.get(k).unwrap_or(&serde_json::Value::Null), &key)
+            })
+            .collect(),
+        _ if was == is => Vec::new(),
+        _ => vec![format!("{prefix}: {was} then, {is} now")],
+    }
+}
+
+/// Says so when a checkpoint of an earlier run (`what`) lies at `path`: this
+/// run replaces it at its first checkpoint, and `--resume` would go on from it.
+pub fn warn_of_a_checkpoint(path: &Path, what: &str) {
+    if path.is_file() {
+        eprintln!(
+            "warning: {} holds a checkpoint of an earlier {what}; this {what} replaces it at its first checkpoint \
+             and removes it when done (the same command with --resume goes on from it instead)",
+            path.display()
+        );
+    }
 }
 
 /// When the next checkpoint is due: every `every` seconds (0: never).

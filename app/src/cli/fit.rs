@@ -4,7 +4,7 @@
 //! dataset's COLMAP SfM points when there are any, else from random Gaussians.
 
 use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -15,7 +15,7 @@ use gast_core::fit::{self, FitConfig, load_posed_images, mean_psnr, psnr};
 use gast_core::io::write_png_rgb;
 use gast_core::raster::{self, RenderOptions};
 
-use super::checkpoint::{CHECKPOINT_SECONDS, DEFAULT_CHECKPOINT_S, Due, checkpoint_path};
+use super::checkpoint::{self, CHECKPOINT_SECONDS, DEFAULT_CHECKPOINT_S, Due, checkpoint_path};
 use crate::progress;
 
 /// Arguments of `gast fit`.
@@ -152,7 +152,7 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     // Checked before the images load: a resume with other settings, or without a checkpoint, is refused at once.
     let resume_from = if args.resume { Some(resumable(&args, &cfg)?) } else { None };
     if !args.resume {
-        warn_of_a_checkpoint(&args.out);
+        checkpoint::warn_of_a_checkpoint(&checkpoint_path(&args.out), "fit");
     }
     let t0 = Instant::now();
     let data = load_posed_images(&args.dataset, args.images.as_deref(), cfg.resolution, args.views, cfg.background)
@@ -299,70 +299,14 @@ struct CheckpointInfo {
     random_init: bool,
 }
 
-/// The checkpoint's record beside its scene (`fern.checkpoint.json`).
-fn checkpoint_info_path(checkpoint: &Path) -> PathBuf {
-    checkpoint.with_extension("json")
-}
-
 /// The iteration `--resume` goes on from: the checkpoint beside `--out`
 /// must exist and record the same settings as `cfg` and the flags that pick
 /// the views; else an error that says what differs.
 fn resumable(args: &FitArgs, cfg: &FitConfig) -> anyhow::Result<u32> {
     let path = checkpoint_path(&args.out);
-    let info_path = checkpoint_info_path(&path);
-    anyhow::ensure!(
-        path.is_file() && info_path.is_file(),
-        "{}: expected the checkpoint of an earlier fit to --resume from ({} with its record {}, written every \
-         --checkpoint-every seconds and at Ctrl-C), found {}",
-        args.out.display(),
-        path.display(),
-        info_path.display(),
-        if path.is_file() { "the scene without its record" } else { "none" }
-    );
-    let text =
-        std::fs::read_to_string(&info_path).with_context(|| format!("could not read {}", info_path.display()))?;
-    let info: CheckpointInfo = serde_json::from_str(&text)
-        .with_context(|| format!("{}: expected a fit checkpoint's record (JSON)", info_path.display()))?;
-    let now = Checkpoint::new(args, cfg, &[]).info(info.iteration);
-    if info != now {
-        let (was, is) = (serde_json::to_value(&info)?, serde_json::to_value(&now)?);
-        let differs = differing_keys(&was, &is, "");
-        anyhow::bail!(
-            "{}: the checkpoint was fitted with other settings ({}); give the same flags to --resume, or leave \
-             --resume out to start afresh (the new fit replaces the checkpoint)",
-            path.display(),
-            differs.join(", ")
-        );
-    }
+    let info: CheckpointInfo = checkpoint::read_record(&args.out, &path, "fit")?;
+    checkpoint::refuse_other_settings(&path, &info, &Checkpoint::new(args, cfg, &[]).info(info.iteration))?;
     Ok(info.iteration)
-}
-
-/// `key: was → is` for every leaf where two JSON objects differ.
-fn differing_keys(was: &serde_json::Value, is: &serde_json::Value, prefix: &str) -> Vec<String> {
-    match (was, is) {
-        (serde_json::Value::Object(a), serde_json::Value::Object(b)) => a
-            .iter()
-            .flat_map(|(k, v)| {
-                let key = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
-                differing_keys(v, b.get(k).unwrap_or(&serde_json::Value::Null), &key)
-            })
-            .collect(),
-        _ if was == is => Vec::new(),
-        _ => vec![format!("{prefix}: {was} then, {is} now")],
-    }
-}
-
-/// Says so when a checkpoint of an earlier fit lies beside `out`: this fit
-/// replaces it at its first checkpoint, and `--resume` would go on from it.
-fn warn_of_a_checkpoint(out: &Path) {
-    let path = checkpoint_path(out);
-    if path.is_file() {
-        eprintln!(
-            "warning: {} holds a checkpoint of an earlier fit; this fit replaces it at its first checkpoint and \
-             removes it when done (the same command with --resume goes on from it instead)",
-            path.display()
-        );
-    }
 }
 
 /// The fit's checkpoints ([`FitArgs::checkpoint_every`]): the scene as it
@@ -425,18 +369,10 @@ impl<'a> Checkpoint<'a> {
         })
     }
 
-    /// Writes the scene after `iteration` iterations and its record (the
-    /// record last: a record always names a scene written whole).
+    /// Writes the scene after `iteration` iterations and its record
+    /// ([`checkpoint::write_with_record`]), and the cameras beside it once.
     fn write(&mut self, scene: &gast_core::Gaussians, iteration: u32) -> anyhow::Result<()> {
-        let info_path = checkpoint_info_path(&self.path);
-        // A record of an older checkpoint must not pair with the new scene if this write stops half-way.
-        if info_path.is_file() {
-            std::fs::remove_file(&info_path).with_context(|| format!("could not replace {}", info_path.display()))?;
-        }
-        super::checkpoint::write_scene(&self.path, scene)?;
-        let json = serde_json::to_string_pretty(&self.info(iteration))?;
-        gast_core::io::write_bytes(&info_path, json.as_bytes())
-            .with_context(|| format!("could not write the checkpoint's record {}", info_path.display()))?;
+        checkpoint::write_with_record(&self.path, scene, &self.info(iteration))?;
         if !self.written {
             // Once: the checkpoint is a scene the studio and `gast stylize` open with its cameras.
             crate::views::write_cameras_beside(&self.path, &self.args.dataset, self.cameras)?;
@@ -448,14 +384,7 @@ impl<'a> Checkpoint<'a> {
     /// Removes the checkpoint (scene and record) once the output holds the
     /// whole fit; also the one a resumed fit went on from.
     fn remove(&self) {
-        let info_path = checkpoint_info_path(&self.path);
-        for path in [&info_path, &self.path] {
-            if path.is_file()
-                && let Err(e) = std::fs::remove_file(path)
-            {
-                eprintln!("warning: could not remove the checkpoint {}: {e}", path.display());
-            }
-        }
+        checkpoint::remove(&self.path);
     }
 }
 

@@ -69,8 +69,9 @@ pub enum Command {
     ///
     /// Ctrl-C during the steps stops the run after its current step and still
     /// writes the scene, the renders and the report (`stopped_at`); a second
-    /// Ctrl-C quits at once. Every 5 minutes the stylized scene goes to
-    /// stylized.checkpoint.ply in the output folder, so a killed run keeps it.
+    /// Ctrl-C quits at once. Every 5 minutes, and at Ctrl-C, the stylized
+    /// scene goes to stylized.checkpoint.ply in the output folder; after a
+    /// kill, a crash or Ctrl-C the same command with --resume goes on from it.
     Stylize(Box<stylize::StylizeArgs>),
     /// Convert a scene between INRIA .ply, PlayCanvas .compressed.ply, Niantic .spz
     /// and SOG (folder or .sog); the output's name picks the format.

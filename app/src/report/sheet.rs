@@ -135,8 +135,15 @@ pub fn maps_tiles(m: &StyleMaps) -> [Tile; 3] {
 
 /// The sheet's settings line: mode, steps, sizes, focus, the learning rates
 /// the collapse study varies (colour, and the means' per unit of extent), the
-/// colour floor, the loss weights that differ from the defaults and the time.
-pub fn settings_line(config: &StyleConfig, steps: u32, seconds: f64, focus_on_object: bool, coverage: f32) -> String {
+/// colour floor, the loss weights that differ from the defaults and the time
+/// of the steps `from..steps` (`from` > 0: a run resumed there).
+pub fn settings_line(
+    config: &StyleConfig,
+    (from, steps): (u32, u32),
+    seconds: f64,
+    focus_on_object: bool,
+    coverage: f32,
+) -> String {
     let focus = if focus_on_object { "object" } else { "frame" };
     let defaults = LossWeights::default();
     let weights: String = config
@@ -173,8 +180,8 @@ pub fn settings_line(config: &StyleConfig, steps: u32, seconds: f64, focus_on_ob
         config.lr.means_per_extent,
         if config.color_floor { "on" } else { "off" },
         seconds,
-        seconds / f64::from(steps.max(1)),
-    )
+        seconds / f64::from(steps.saturating_sub(from).max(1)),
+    ) + &if from > 0 { format!(", resumed at step {from}") } else { String::new() }
 }
 
 /// The sheet as an RGB image.
@@ -306,19 +313,19 @@ mod tests {
     fn the_settings_line_names_both_learning_rates_and_fits_the_sheet() {
         let mut config = StyleConfig { cycles: 30, resolution: 576, ..StyleConfig::default() };
         config.lr.means_per_extent = 1e-5;
-        let line = settings_line(&config, 3000, 1733.0, true, 0.2);
+        let line = settings_line(&config, (0, 3000), 1733.0, true, 0.2);
         assert!(line.contains("lr colour 0.01, means 1e-5 x extent, colour floor off;"), "{line}");
         // The weights that differ from the defaults follow, and still fit.
         config.weights.assignment_cosine = 10.0;
         config.weights.assignment = 0.003;
         config.weights.outside = 100000.0;
-        let line = settings_line(&config, 3000, 1733.0, true, 0.2);
+        let line = settings_line(&config, (0, 3000), 1733.0, true, 0.2);
         assert!(line.contains("colour floor off, λ_out 100000, λ_as 0.003, λ_asc 10;"), "{line}");
         // The geometry options that are off by default, when on.
         config.depth_relief_px = 8;
         config.phase_leak = true;
         config.split_px = 2.0;
-        let line = settings_line(&config, 3000, 1733.0, true, 0.2);
+        let line = settings_line(&config, (0, 3000), 1733.0, true, 0.2);
         assert!(line.contains("λ_asc 10, depth relief 8 px, split 2 px, phase leak;"), "{line}");
         let width = shape_text(&line, 13.0, None);
         let sheet = f64::from(COLUMNS * TILE + (COLUMNS + 1) * GAP);

@@ -139,7 +139,7 @@ impl StudioApp {
             title: format!("{} x {style}", scene.name),
             settings: sheet::settings_line(
                 &start.config,
-                step,
+                (0, step),
                 self.run.elapsed_s(),
                 start.focus_on_object,
                 start.coverage,

@@ -21,13 +21,14 @@ use gast_core::vision::Vgg;
 use gast_core::vision::style_depth::{DepthImage, DepthProvider};
 use serde::Serialize;
 
-use super::checkpoint::{Due, checkpoint_path};
+use super::checkpoint::{self, Due, checkpoint_path};
 use crate::progress;
 use crate::report::sheet;
 use crate::views::{ViewArgs, camera_source, load_scene, refuse_photo_folder, views_for};
 
 mod args;
 mod previews;
+mod resume;
 pub use args::{FastArgs, StylizeArgs};
 use previews::{Measures, PreviewMetrics, Summary, remove_stale_previews, write_previews};
 
@@ -151,6 +152,9 @@ struct Report {
     outputs_s: Vec<(String, f64)>,
     /// The step a Ctrl-C stopped the run at; `None`: the whole schedule ran.
     stopped_at: Option<u32>,
+    /// The step this run went on from (`--resume`): `steps` and
+    /// `optimisation_s` are this run's from there.
+    resumed_from: Option<u32>,
     steps: Vec<StepReport>,
     preview: Vec<PreviewMetrics>,
     summary: Summary,
@@ -165,12 +169,19 @@ const REPORT_NAME: &str = "report.json";
 /// The style, its depth and its edges at texture scale.
 const STYLE_NAMES: [&str; 3] = ["style.png", "style_depth.png", "style_edge.png"];
 
-/// Writes the run's scene after `step` of `total` steps to the checkpoint
-/// `path` (making the output folder first); returns the line that says so,
-/// or why not: a failed checkpoint is a warning, the run goes on.
-fn write_checkpoint(path: &std::path::Path, scene: &gast_core::Gaussians, step: u32, total: u32) -> String {
+/// Writes the run's scene after `record.step` of `total` steps to the
+/// checkpoint `path` with its record (making the output folder first);
+/// returns the line that says so, or why not: a failed checkpoint is a
+/// warning, the run goes on.
+fn write_checkpoint(
+    path: &std::path::Path,
+    scene: &gast_core::Gaussians,
+    record: &resume::Record,
+    total: u32,
+) -> String {
     let t = Instant::now();
-    match super::checkpoint::write_scene(path, scene) {
+    let step = record.step;
+    match checkpoint::write_with_record(path, scene, record) {
         Ok(()) => format!(
             "  checkpoint: step {step} of {total} written to {} in {:.0} ms",
             path.display(),
@@ -207,7 +218,11 @@ fn written_by_a_run(name: &std::path::Path, scene_name: &std::path::Path) -> boo
     let view = text.strip_prefix("view").is_some_and(|rest| rest.starts_with(|c: char| c.is_ascii_digit()))
         && (text.ends_with(".png") || text.ends_with(".exr"));
     let checkpoint = checkpoint_path(scene_name);
-    name == scene_name || name == checkpoint || fixed.into_iter().any(|f| name == std::path::Path::new(f)) || view
+    name == scene_name
+        || name == checkpoint
+        || name == checkpoint::record_path(&checkpoint)
+        || fixed.into_iter().any(|f| name == std::path::Path::new(f))
+        || view
 }
 
 /// The run's inputs (scene, style, style depth, preset) are not among the
@@ -242,6 +257,14 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let interrupt = super::interrupt::interrupt();
     check_scene_name(&args.scene_name)?;
     check_inputs_are_not_outputs(&args)?;
+    let checkpoint = checkpoint_path(&args.out.join(&args.scene_name));
+    // Checked before the slow work: a resume without a checkpoint is refused at once.
+    let resume = if args.resume {
+        Some(resume::Resume::read(&args, &checkpoint)?)
+    } else {
+        checkpoint::warn_of_a_checkpoint(&checkpoint, "stylization");
+        None
+    };
     if let Some(p) = &args.save_preset {
         super::replaceable_json(p, "--save-preset")?;
     }
@@ -298,7 +321,9 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let mut config = config;
     let auto_resolution = args.resolution.is_none() && args.preset.is_none();
     let auto_texture = args.texture_scale.is_none() && args.preset.is_none();
-    let surveyed = (auto_resolution || auto_texture).then(|| survey(&scene, &cameras, config.focus, config.background));
+    // A resumed run takes what the first run planned (below) rather than planning anew.
+    let surveyed = (resume.is_none() && (auto_resolution || auto_texture))
+        .then(|| survey(&scene, &cameras, config.focus, config.background));
     // A CPU plan's cycles rest on one machine's step times: after the first
     // cycle with a steady pace (`Pace`) the run takes the cycles that pace
     // fits, up to those asked for (`replan_cycles`), unless --cycles is
@@ -369,6 +394,15 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             }
         }
     }
+    // The checkpoint's state, once its record agrees with this run's inputs and settings.
+    let resumed = match &resume {
+        Some(r) => {
+            r.take_planned(&args, &mut config);
+            let now = resume::Record::of(&args, scene.len(), &cameras, &config, 0);
+            Some((r.check_and_load(&now)?, r.record.step))
+        }
+        None => None,
+    };
     if let Some(p) = &args.save_preset {
         write_bytes(p, config.to_json().as_bytes())?;
     }
@@ -390,6 +424,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let mut culled = (scene.len(), scene.len());
     // The session shares the scene, which the "before" previews draw.
     let scene = Arc::new(scene);
+    // The settings as given to the session (its cycles as re-planned), which a checkpoint records.
+    let mut asked = config.clone();
     let inputs = SessionInputs {
         scene: Arc::clone(&scene),
         cameras: cameras.clone(),
@@ -430,13 +466,31 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             );
         }
     }
+    let start = match resumed {
+        Some((state, step)) => {
+            session
+                .resume_at(&state, step)
+                .with_context(|| format!("could not resume from {}", checkpoint.display()))?;
+            eprintln!(
+                "  resuming from step {step} of {}: {} (the optimiser's moments start afresh)",
+                session.total_steps(),
+                checkpoint.display()
+            );
+            step
+        }
+        None => 0,
+    };
+    let record = |asked: &StyleConfig, step: u32| resume::Record::of(&args, scene.len(), &cameras, asked, step);
     let mut config = session.config().clone();
     let mut total = session.total_steps();
     let pb = progress::bar(total as u64, "stylize");
+    if start > 0 {
+        pb.set_position(u64::from(start));
+        pb.reset_eta();
+    }
     let mut steps = Vec::with_capacity(total as usize);
     let mut warned_collapse = false;
     let mut stopped_at = None;
-    let checkpoint = checkpoint_path(&args.out.join(&args.scene_name));
     let mut due = Due::every(args.checkpoint_every);
     interrupt.begin();
     while let Some(r) = session.step() {
@@ -471,6 +525,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             if let Some(cycles) = fits.filter(|&c| c != config.cycles) {
                 session.set_config(StyleConfig { cycles, ..config.clone() })?;
                 config = session.config().clone();
+                asked.cycles = cycles;
                 total = session.total_steps();
                 pb.set_length(u64::from(total));
                 let minutes = (pace.elapsed_s + steady * f64::from(total - pace.steps)) / 60.0;
@@ -489,7 +544,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             break;
         }
         if due.now() && !session.is_done() {
-            let line = write_checkpoint(&checkpoint, &session.result(), session.steps_done(), total);
+            let line = write_checkpoint(&checkpoint, &session.result(), &record(&asked, session.steps_done()), total);
             due.written();
             pb.suspend(|| eprintln!("{line}"));
         }
@@ -498,16 +553,21 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     pb.finish_and_clear();
     if let Some(n) = stopped_at {
         eprintln!("stopped at step {n} of {total} (Ctrl-C): writing what the run has; Ctrl-C again quits at once");
+        // Kept, so that the same command with --resume goes on from here.
+        let line = write_checkpoint(&checkpoint, &session.result(), &record(&asked, n), total);
+        eprintln!("{line}; the same command with --resume goes on from it");
     }
     if let Some(why) = session.failure() {
         anyhow::bail!("the optimisation stopped at {why}");
     }
     let optimisation_s = session.elapsed_s();
     let done = session.steps_done();
+    let resumed_at = if start > 0 { format!(" (steps {start} to {done}: resumed)") } else { String::new() };
     eprintln!(
-        "  optimisation on {}: {done} steps in {optimisation_s:.1} s ({:.3} s/step)",
+        "  optimisation on {}: {} steps in {optimisation_s:.1} s ({:.3} s/step){resumed_at}",
         session.device(),
-        optimisation_s / done.max(1) as f64
+        done - start,
+        optimisation_s / (done - start).max(1) as f64
     );
 
     // After the steps the work is the host's (renders, VGG measures, files):
@@ -555,10 +615,9 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             eprintln!("  {line}");
         }
     }
-    if checkpoint.is_file()
-        && let Err(e) = std::fs::remove_file(&checkpoint)
-    {
-        eprintln!("  warning: could not remove the checkpoint {}: {e}", checkpoint.display());
+    if stopped_at.is_none() {
+        // The scene holds the whole run: the checkpoint (also one resumed from) has served.
+        checkpoint::remove(&checkpoint);
     }
     part_done(&mut outputs, "scenes written", &mut t_part);
     let (matched, cameras, maps, views) = (&matched, &cameras[..], &maps, args.preview_views);
@@ -590,7 +649,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     t_part = Instant::now();
     let preview = previews.metrics;
     let sheet_path = args.out.join(SHEET_NAME);
-    let settings = sheet::settings_line(&config, done, optimisation_s, focus_on_object, coverage);
+    let settings = sheet::settings_line(&config, (start, done), optimisation_s, focus_on_object, coverage);
     let title = format!(
         "{} x {}",
         args.scene.file_name().unwrap_or_default().to_string_lossy(),
@@ -664,6 +723,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         optimisation_s,
         outputs_s: outputs,
         stopped_at,
+        resumed_from: (start > 0).then_some(start),
         steps,
         preview,
         summary,

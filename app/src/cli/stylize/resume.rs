@@ -1,0 +1,122 @@
+//! `gast stylize --resume`: a run killed, crashed or stopped goes on from
+//! the checkpoint beside its output (`stylized.checkpoint.ply`) with its
+//! record (`stylized.checkpoint.json`: the step, the inputs, the views and
+//! the settings), when this run's are the same.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use gast_core::style::StyleConfig;
+use serde::{Deserialize, Serialize};
+
+use super::StylizeArgs;
+use crate::cli::checkpoint;
+
+/// What a stylization's checkpoint records beside its scene: enough to go
+/// on (`--resume`) and to refuse going on with other inputs or settings.
+#[derive(Serialize, Deserialize, Debug, PartialEq, Clone)]
+pub struct Record {
+    /// Steps done when the scene was written.
+    pub step: u32,
+    /// The scene stylized (its absolute path where it resolves) and its Gaussians.
+    pub scene: PathBuf,
+    pub gaussians: usize,
+    /// The style image and the style depth's image or network, when given.
+    pub style: PathBuf,
+    pub style_depth: Option<PathBuf>,
+    pub depth_model: Option<PathBuf>,
+    /// The optimisation views: their number and a fingerprint of their poses and sizes.
+    pub cameras: String,
+    /// The settings the run was given (after its plan: the working
+    /// resolution, texture scale and cycles it chose).
+    pub config: StyleConfig,
+}
+
+impl Record {
+    /// This run's record after `step` steps.
+    pub fn of(
+        args: &StylizeArgs,
+        gaussians: usize,
+        cameras: &[gast_core::Camera],
+        config: &StyleConfig,
+        step: u32,
+    ) -> Self {
+        let absolute = |p: &Path| p.canonicalize().unwrap_or_else(|_| p.to_path_buf());
+        Self {
+            step,
+            scene: absolute(&args.scene),
+            gaussians,
+            style: absolute(&args.style),
+            style_depth: args.style_depth.as_deref().map(absolute),
+            depth_model: args.depth_model.as_deref().map(absolute),
+            cameras: fingerprint(cameras),
+            config: config.clone(),
+        }
+    }
+}
+
+/// `N views, <hash>`: FNV-1a over the cameras' every field.
+fn fingerprint(cameras: &[gast_core::Camera]) -> String {
+    let text = format!("{cameras:?}");
+    let hash = text.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3));
+    format!("{} views, {hash:016x}", cameras.len())
+}
+
+/// A checkpoint `--resume` goes on from: its record, and where it lies.
+pub struct Resume {
+    pub path: PathBuf,
+    pub record: Record,
+}
+
+impl Resume {
+    /// The checkpoint at `path` (beside the run's output) and its record; an
+    /// error when either is missing or unreadable.
+    pub fn read(args: &StylizeArgs, path: &Path) -> anyhow::Result<Self> {
+        let record = checkpoint::read_record(&args.out.join(&args.scene_name), path, "stylization")?;
+        Ok(Self { path: path.to_path_buf(), record })
+    }
+
+    /// Takes the recorded working resolution, texture scale and cycles where
+    /// this run would choose them itself (their flags not given): the plan
+    /// rests on a measure of this machine's speed, which may differ now.
+    pub fn take_planned(&self, args: &StylizeArgs, config: &mut StyleConfig) {
+        let from_preset = args.preset.is_some();
+        if args.resolution.is_none() && !from_preset {
+            config.resolution = self.record.config.resolution;
+        }
+        if args.texture_scale.is_none() && !from_preset {
+            config.texture_scale = self.record.config.texture_scale;
+        }
+        if args.cycles.is_none() {
+            config.cycles = self.record.config.cycles;
+        }
+    }
+
+    /// Refuses other inputs or settings than the record's (`now`, at its step),
+    /// naming each that differs; else reads the checkpoint's scene.
+    pub fn check_and_load(&self, now: &Record) -> anyhow::Result<gast_core::Gaussians> {
+        let now = Record { step: self.record.step, ..now.clone() };
+        checkpoint::refuse_other_settings(&self.path, &self.record, &now)?;
+        gast_core::scene::load(&self.path)
+            .with_context(|| format!("could not read the checkpoint {} to resume from", self.path.display()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_fingerprint_tells_other_views_apart() {
+        let cams = gast_core::camera::orbit_cameras(
+            &[[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]],
+            &gast_core::camera::OrbitOptions { count: 4, width: 64, height: 48, ..Default::default() },
+        );
+        let a = fingerprint(&cams);
+        assert!(a.starts_with("4 views, "), "{a}");
+        assert_eq!(a, fingerprint(&cams.clone()));
+        let wider: Vec<_> = cams.iter().map(|c| c.with_longer_side(128)).collect();
+        assert_ne!(a, fingerprint(&wider));
+        assert_ne!(a, fingerprint(&cams[..3]));
+    }
+}
