@@ -398,6 +398,11 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let resumed = match &resume {
         Some(r) => {
             r.take_planned(&args, &mut config);
+            eprintln!(
+                "working resolution {} px, texture scale {} px, {} cycles of {} steps: the plan of the run that \
+                 left the checkpoint",
+                config.resolution, config.texture_scale, config.cycles, config.steps_per_cycle
+            );
             let now = resume::Record::of(&args, scene.len(), &cameras, &config, 0);
             Some((r.check_and_load(&now)?, r.record.step))
         }
@@ -483,11 +488,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let record = |asked: &StyleConfig, step: u32| resume::Record::of(&args, scene.len(), &cameras, asked, step);
     let mut config = session.config().clone();
     let mut total = session.total_steps();
-    let pb = progress::bar(total as u64, "stylize");
-    if start > 0 {
-        pb.set_position(u64::from(start));
-        pb.reset_eta();
-    }
+    // Over the steps this run does (its pace and time left are this run's), as `gast fit`'s.
+    let pb = progress::bar(u64::from(total - start), "stylize");
     let mut steps = Vec::with_capacity(total as usize);
     let mut warned_collapse = false;
     let mut stopped_at = None;
@@ -527,7 +529,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
                 config = session.config().clone();
                 asked.cycles = cycles;
                 total = session.total_steps();
-                pb.set_length(u64::from(total));
+                pb.set_length(u64::from(total - start));
                 let minutes = (pace.elapsed_s + steady * f64::from(total - pace.steps)) / 60.0;
                 let after = pace.cycles_said(per_cycle);
                 pb.suspend(|| {
