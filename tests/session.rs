@@ -213,16 +213,23 @@ fn the_result_is_the_colour_matched_scene_with_the_optimised_gaussians_in_place(
 }
 
 /// A run resumed from another's result at step k (its checkpoint, through an
-/// INRIA .ply) goes on where that one stood: the same state, the same views
-/// and phases from k on, and the same loss at its first step, which is
-/// computed before any update; on the CPU and on the GPU engine.
+/// INRIA .ply, and the optimiser's state through its safetensors file) goes
+/// on where that one stood: the same state, the same views and phases from
+/// k on, the same loss at its first step (computed before any update), and
+/// with the optimiser's moments the updates of the whole run, which fresh
+/// moments do not give; on the CPU and on the GPU engine.
 #[test]
 fn a_run_resumed_from_a_checkpoint_goes_on_where_it_stood() {
-    use gast_core::session::Session;
+    use gast_core::session::{OptimiserState, Session};
     let config = StyleConfig { cycles: 2, steps_per_cycle: 6, resolution: 32, texture_scale: 32, ..Default::default() };
     let Some(cpu_inputs) = inputs(config) else { return };
     let gpu_inputs = SessionInputs { gpu: Some(gpu_context()), ..cpu_inputs.clone() };
     let file = std::env::temp_dir().join(format!("gast-resume-{}.ply", std::process::id()));
+    // The largest difference of the means and colours of two scenes.
+    let apart = |a: &gast_core::Gaussians, b: &gast_core::Gaussians| {
+        let means = a.means.iter().flatten().zip(b.means.iter().flatten());
+        means.chain(a.sh.iter().zip(&b.sh)).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max)
+    };
     for (device, inputs) in [("CPU", cpu_inputs), ("GPU", gpu_inputs)] {
         let k = 5;
         let mut whole = Session::prepare(inputs.clone(), &mut |_| {}).expect("a session");
@@ -231,33 +238,58 @@ fn a_run_resumed_from_a_checkpoint_goes_on_where_it_stood() {
         }
         gast_core::scene::save(&file, &whole.result(), &Default::default()).expect("the checkpoint written");
         let checkpoint = gast_core::scene::load(&file).expect("the checkpoint read");
+        let moments = whole.optimiser_state().expect("the optimiser's state");
+        assert_eq!(moments.step, k);
+        let moments = OptimiserState::from_safetensors(&moments.to_safetensors().expect("written")).expect("read");
         let after: Vec<_> = (0..4).map(|_| whole.step().expect("a step")).collect();
+        let end = whole.result();
 
-        let mut resumed = Session::prepare(inputs.clone(), &mut |_| {}).expect("a session");
-        resumed.resume_at(&checkpoint, k).expect("resumed");
-        assert_eq!(resumed.steps_done(), k, "{device}");
-        let state = resumed.result();
-        assert!(
-            state.means == checkpoint.means && state.sh == checkpoint.sh && state.quats == checkpoint.quats,
-            "{device}: the resumed state is the checkpoint's"
-        );
-        for (i, a) in after.iter().enumerate() {
-            let b = resumed.step().expect("a resumed step");
-            assert_eq!((a.iter, a.cycle, a.phase, a.view), (b.iter, b.cycle, b.phase, b.view), "{device} step {i}");
-            if i == 0 {
-                let err = (a.losses.total - b.losses.total).abs() / a.losses.total.abs().max(1e-6);
-                assert!(err < 1e-5, "{device}: step {k}'s loss {} resumed, {} whole", b.losses.total, a.losses.total);
+        let mut ends = Vec::new();
+        for with_moments in [true, false] {
+            let mut resumed = Session::prepare(inputs.clone(), &mut |_| {}).expect("a session");
+            resumed.resume_at(&checkpoint, k, with_moments.then_some(&moments)).expect("resumed");
+            assert_eq!(resumed.steps_done(), k, "{device}");
+            let state = resumed.result();
+            assert!(
+                state.means == checkpoint.means && state.sh == checkpoint.sh && state.quats == checkpoint.quats,
+                "{device}: the resumed state is the checkpoint's"
+            );
+            for (i, a) in after.iter().enumerate() {
+                let b = resumed.step().expect("a resumed step");
+                assert_eq!((a.iter, a.cycle, a.phase, a.view), (b.iter, b.cycle, b.phase, b.view), "{device} step {i}");
+                if i == 0 {
+                    let err = (a.losses.total - b.losses.total).abs() / a.losses.total.abs().max(1e-6);
+                    assert!(
+                        err < 1e-5,
+                        "{device}: step {k}'s loss {} resumed, {} whole",
+                        b.losses.total,
+                        a.losses.total
+                    );
+                }
             }
+            assert_eq!(resumed.total_steps(), whole.total_steps());
+            ends.push(apart(&resumed.result(), &end));
         }
-        assert_eq!(resumed.total_steps(), whole.total_steps());
+        let [kept, fresh] = ends[..] else { unreachable!() };
+        eprintln!(
+            "{device}: 4 steps after resuming, the largest difference from the whole run: {kept:e} with the moments, {fresh:e} without"
+        );
+        assert!(
+            kept <= 1e-6 && fresh > 100.0 * kept.max(1e-8),
+            "{device}: with the moments {kept:e}, without {fresh:e}"
+        );
 
         let mut late = Session::prepare(inputs.clone(), &mut |_| {}).expect("a session");
         let total = late.total_steps();
-        assert!(
-            matches!(late.resume_at(&checkpoint, total), Err(SessionError::Input(m)) if m.contains("before the schedule's"))
-        );
+        let refused = |r: Result<(), SessionError>, says: &str| {
+            assert!(matches!(&r, Err(SessionError::Input(m)) if m.contains(says)), "{device}: {r:?}, expected {says:?}")
+        };
+        refused(late.resume_at(&checkpoint, total, None), "before the schedule's");
         let half = gast_core::session::subset(&checkpoint, &[0, 1, 2]);
-        assert!(matches!(late.resume_at(&half, k), Err(SessionError::Input(m)) if m.contains("found 3 of")));
+        refused(late.resume_at(&half, k, None), "found 3 of");
+        refused(late.resume_at(&checkpoint, k + 1, Some(&moments)), "found one at step 5");
+        let short = OptimiserState { groups: moments.groups[..4].to_vec(), ..moments.clone() };
+        refused(late.resume_at(&checkpoint, k, Some(&short)), "the optimiser's state does not fit");
     }
     std::fs::remove_file(&file).ok();
 }

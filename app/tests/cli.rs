@@ -423,6 +423,7 @@ fn ctrl_c_stops_a_run_and_resume_goes_on_to_the_end() {
         serde_json::from_str(&std::fs::read_to_string(out.join("stylized.checkpoint.json")).expect("the record"))
             .expect("json");
     assert_eq!(record["step"].as_u64(), Some(at), "{record}");
+    assert!(out.join("stylized.checkpoint.adam.safetensors").is_file(), "the optimiser's state beside it");
 
     let mut other = run.to_vec();
     other[8] = "3"; // --cycles
@@ -446,6 +447,7 @@ fn ctrl_c_stops_a_run_and_resume_goes_on_to_the_end() {
     let o = gast(&[&run[..], &["--resume"]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(iteration_after(&stderr(&o), "resuming from step "), at as u32, "{}", stderr(&o));
+    assert!(stderr(&o).contains("(with the optimiser's moments)"), "{}", stderr(&o));
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report")).expect("json");
     assert_eq!(report["resumed_from"].as_u64(), Some(at));
@@ -453,7 +455,9 @@ fn ctrl_c_stops_a_run_and_resume_goes_on_to_the_end() {
     let steps = report["steps"].as_array().expect("steps");
     assert_eq!(steps.len() as u64, 600 - at, "the resumed run's own steps");
     assert_eq!(steps[0]["iter"].as_u64(), Some(at));
-    assert!(!out.join("stylized.checkpoint.ply").exists() && !out.join("stylized.checkpoint.json").exists());
+    for name in ["stylized.checkpoint.ply", "stylized.checkpoint.json", "stylized.checkpoint.adam.safetensors"] {
+        assert!(!out.join(name).exists(), "{name} left after the whole run");
+    }
     assert!(gast_core::scene::load(out.join("stylized.ply")).is_ok());
     std::fs::remove_dir_all(&out).ok();
 }
@@ -507,6 +511,13 @@ fn a_killed_stylize_run_leaves_its_checkpoint() {
             .expect("json");
     let at = iteration_after(&text, "checkpoint: step ");
     assert!(record["step"].as_u64().is_some_and(|s| s >= u64::from(at)), "{record}");
+
+    // A damaged optimiser's state: the run goes on with fresh moments, saying so.
+    std::fs::write(out.join("stylized.checkpoint.adam.safetensors"), b"damaged").expect("write");
+    let resumed = [&long[..], &["--resume"]].concat();
+    let (status, text) = interrupted(&resumed, "resuming from step");
+    assert!(status.success(), "{text}");
+    assert!(text.contains("the optimiser's moments start afresh: ") && text.contains("is unreadable"), "{text}");
 
     let mut again = long.clone();
     again[1] = s(&checkpoint);

@@ -57,29 +57,44 @@ pub fn record_path(checkpoint: &Path) -> PathBuf {
     checkpoint.with_extension("json")
 }
 
-/// Writes the checkpoint `path`: the scene, then its `record` (last: a
-/// record always names a scene written whole; an older one is removed
-/// first, so that it does not pair with the new scene if this write stops
-/// half-way).
+/// The optimiser's state beside a checkpoint's scene
+/// (`stylized.checkpoint.adam.safetensors`), where the run keeps one.
+pub fn moments_path(checkpoint: &Path) -> PathBuf {
+    checkpoint.with_extension("adam.safetensors")
+}
+
+/// Writes the checkpoint `path`: the scene, the optimiser's state
+/// (`moments`, a safetensors file's bytes) where given, then its `record`
+/// (last: a record always names a scene and state written whole; older ones
+/// are removed first, so that they do not pair with the new scene if this
+/// write stops half-way).
 pub fn write_with_record(
     path: &Path,
     scene: &gast_core::Gaussians,
+    moments: Option<&[u8]>,
     record: &impl serde::Serialize,
 ) -> anyhow::Result<()> {
     let record_path = record_path(path);
-    if record_path.is_file() {
-        std::fs::remove_file(&record_path).with_context(|| format!("could not replace {}", record_path.display()))?;
+    for old in [&record_path, &moments_path(path)] {
+        if old.is_file() {
+            std::fs::remove_file(old).with_context(|| format!("could not replace {}", old.display()))?;
+        }
     }
     write_scene(path, scene)?;
+    if let Some(bytes) = moments {
+        let at = moments_path(path);
+        gast_core::io::write_bytes(&at, bytes)
+            .with_context(|| format!("could not write the optimiser's state {}", at.display()))?;
+    }
     let json = serde_json::to_string_pretty(record)?;
     gast_core::io::write_bytes(&record_path, json.as_bytes())
         .with_context(|| format!("could not write the checkpoint's record {}", record_path.display()))
 }
 
-/// Removes the checkpoint `path` and its record, where they are (a warning
-/// for what cannot be removed).
+/// Removes the checkpoint `path`, its record and its optimiser's state,
+/// where they are (a warning for what cannot be removed).
 pub fn remove(path: &Path) {
-    for path in [&record_path(path), path] {
+    for path in [&record_path(path), &moments_path(path), path] {
         if path.is_file()
             && let Err(e) = std::fs::remove_file(path)
         {

@@ -372,7 +372,7 @@ impl<'a> Checkpoint<'a> {
     /// Writes the scene after `iteration` iterations and its record
     /// ([`checkpoint::write_with_record`]), and the cameras beside it once.
     fn write(&mut self, scene: &gast_core::Gaussians, iteration: u32) -> anyhow::Result<()> {
-        checkpoint::write_with_record(&self.path, scene, &self.info(iteration))?;
+        checkpoint::write_with_record(&self.path, scene, None, &self.info(iteration))?;
         if !self.written {
             // Once: the checkpoint is a scene the studio and `gast stylize` open with its cameras.
             crate::views::write_cameras_beside(&self.path, &self.args.dataset, self.cameras)?;

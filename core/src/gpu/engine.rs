@@ -259,6 +259,26 @@ impl GpuEngine {
         self.steps = u64::from(steps);
     }
 
+    /// Each parameter group's optimiser state, read back, in the order of
+    /// [`crate::session::moments::GROUPS`].
+    pub fn optimiser_state(&self) -> Result<Vec<crate::style::adam::AdamState>, GpuError> {
+        let o = &self.opt;
+        [&o.color, &o.means, &o.scales, &o.quats, &o.opacity].into_iter().map(|a| a.state(&self.ctx)).collect()
+    }
+
+    /// Goes on from `groups` (as [`GpuEngine::optimiser_state`] gives them).
+    pub fn set_optimiser_state(&mut self, groups: &[crate::style::adam::AdamState]) -> Result<(), String> {
+        let o = &mut self.opt;
+        let adams = [&mut o.color, &mut o.means, &mut o.scales, &mut o.quats, &mut o.opacity];
+        if groups.len() != adams.len() {
+            return Err(format!("expected {} parameter groups, found {}", adams.len(), groups.len()));
+        }
+        for (adam, g) in adams.into_iter().zip(groups) {
+            adam.set_state(&self.ctx, g)?;
+        }
+        Ok(())
+    }
+
     /// Warnings raised since the last call.
     pub fn take_warnings(&mut self) -> Vec<String> {
         std::mem::take(&mut self.warnings)

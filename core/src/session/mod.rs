@@ -7,6 +7,7 @@
 
 mod colour_watch;
 mod events;
+pub mod moments;
 pub mod plan;
 mod prepare;
 mod run;
@@ -18,6 +19,7 @@ mod worker;
 
 pub use colour_watch::{ColourReading, ColourWatch};
 pub use events::{Command, Event, LossTerms, StepReport, StepTimings};
+pub use moments::OptimiserState;
 pub use prepare::{
     PreparedStyle, ResolvedDepth, StyleDepthSource, StyleImage, ViewSurvey, prepare_style, scatter, subset,
     survey_views,

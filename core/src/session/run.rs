@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use super::colour_watch::ColourWatch;
 use super::events::{Event, LossTerms, StepReport, StepTimings};
+use super::moments::OptimiserState;
 use super::prepare::{PreparedStyle, StyleDepthSource, StyleImage, prepare_style, scatter, subset, survey_views};
 use crate::camera::{Camera, scene_extent};
 use crate::eval::stability::CoveredColour;
@@ -551,14 +552,36 @@ impl Session {
         Ok(())
     }
 
+    /// The optimiser's state: every parameter group's steps and moments
+    /// (read back from the GPU when the steps run there), which a checkpoint
+    /// keeps so that a resumed run updates as the whole run would have.
+    pub fn optimiser_state(&self) -> Result<OptimiserState, String> {
+        let groups = match (&self.cpu, &self.engine) {
+            (Some(cpu), _) => {
+                let o = &cpu.opt;
+                [&o.color, &o.means, &o.scales, &o.quats, &o.opacity].map(|a| a.state()).to_vec()
+            }
+            (None, Some(engine)) => engine.optimiser_state().map_err(|e| e.to_string())?,
+            (None, None) => return Err("the run has no optimiser".into()),
+        };
+        Ok(OptimiserState { step: self.step, groups })
+    }
+
     /// Goes on from `step` with `scene` as the run's state: a run resumed from
     /// the checkpoint of an earlier one with the same inputs and settings
     /// (`scene` is that run's [`Session::result`], whole). The optimised
     /// Gaussians take its values, the views are drawn as that run's were
-    /// from `step` on; the optimiser's moments start afresh (Adam's bias
-    /// correction makes its first updates full-sized again), as do the kept
-    /// matches. Before the first step only.
-    pub fn resume_at(&mut self, scene: &Gaussians, step: u32) -> Result<(), SessionError> {
+    /// from `step` on, and with `moments` (that run's
+    /// [`Session::optimiser_state`] at `step`) the optimiser goes on as it
+    /// was; without, its moments start afresh (Adam's bias correction makes
+    /// its first updates full-sized again). The kept matches start afresh.
+    /// Before the first step only.
+    pub fn resume_at(
+        &mut self,
+        scene: &Gaussians,
+        step: u32,
+        moments: Option<&OptimiserState>,
+    ) -> Result<(), SessionError> {
         if self.step > 0 {
             return Err(SessionError::Input(format!(
                 "a run resumes before its first step, not after step {}",
@@ -581,10 +604,43 @@ impl Session {
                 self.total_steps()
             )));
         }
+        if let Some(m) = moments.filter(|m| m.step != step) {
+            return Err(SessionError::Input(format!(
+                "expected the optimiser's state at step {step}, found one at step {}",
+                m.step
+            )));
+        }
+        if let Some(m) = moments {
+            // Checked whole before any of it is taken.
+            let n = self.keep.len();
+            let sizes = [3 * n, 3 * n, 3 * n, 4 * n, n];
+            let fits = m.groups.len() == sizes.len()
+                && m.groups.iter().zip(sizes).all(|(g, len)| g.m.len() == len && g.v.len() == len);
+            if !fits {
+                let found: Vec<String> = m.groups.iter().map(|g| format!("{}/{}", g.m.len(), g.v.len())).collect();
+                return Err(SessionError::Input(format!(
+                    "the optimiser's state does not fit: expected moments of {sizes:?} parameters (the groups {}), \
+                     found {}",
+                    super::moments::GROUPS.join(", "),
+                    found.join(", ")
+                )));
+            }
+        }
         let part = subset(scene, &self.keep);
+        let moments_problem = |e: String| SessionError::Input(format!("the optimiser's state does not fit: {e}"));
         if let Some(cpu) = &mut self.cpu {
+            if let Some(m) = moments {
+                let o = &mut cpu.opt;
+                let adams = [&mut o.color, &mut o.means, &mut o.scales, &mut o.quats, &mut o.opacity];
+                for (adam, g) in adams.into_iter().zip(&m.groups) {
+                    adam.set_state(g.clone()).map_err(moments_problem)?;
+                }
+            }
             cpu.g = part;
         } else if let Some(engine) = &mut self.engine {
+            if let Some(m) = moments {
+                engine.set_optimiser_state(&m.groups).map_err(moments_problem)?;
+            }
             engine.resume(&part, step);
         }
         for _ in 0..step {

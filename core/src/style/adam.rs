@@ -24,6 +24,18 @@ impl Default for AdamConfig {
     }
 }
 
+/// What an optimiser has learnt, apart from its configuration: the steps
+/// taken and the moments (a checkpoint's, to go on from).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AdamState {
+    /// Steps taken (the bias correction's `t`).
+    pub step: u32,
+    /// First moments, one per parameter.
+    pub m: Vec<f32>,
+    /// Second moments, one per parameter.
+    pub v: Vec<f32>,
+}
+
 /// Adam state for one flat parameter array.
 #[derive(Clone, Debug)]
 pub struct Adam {
@@ -42,6 +54,26 @@ impl Adam {
     /// Number of steps taken so far.
     pub fn steps(&self) -> u32 {
         self.step
+    }
+
+    /// The steps taken and the moments.
+    pub fn state(&self) -> AdamState {
+        AdamState { step: self.step, m: self.m.clone(), v: self.v.clone() }
+    }
+
+    /// Goes on from `state`, which must have a moment per parameter; else
+    /// an error saying what it has.
+    pub fn set_state(&mut self, state: AdamState) -> Result<(), String> {
+        if state.m.len() != self.m.len() || state.v.len() != self.m.len() {
+            return Err(format!(
+                "expected {} moments of each order, found {} and {}",
+                self.m.len(),
+                state.m.len(),
+                state.v.len()
+            ));
+        }
+        (self.step, self.m, self.v) = (state.step, state.m, state.v);
+        Ok(())
     }
 
     /// One update `params -= lr · m̂ / (sqrt(v̂) + eps)`.

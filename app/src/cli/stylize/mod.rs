@@ -169,21 +169,20 @@ const REPORT_NAME: &str = "report.json";
 /// The style, its depth and its edges at texture scale.
 const STYLE_NAMES: [&str; 3] = ["style.png", "style_depth.png", "style_edge.png"];
 
-/// Writes the run's scene after `record.step` of `total` steps to the
-/// checkpoint `path` with its record (making the output folder first);
-/// returns the line that says so, or why not: a failed checkpoint is a
-/// warning, the run goes on.
-fn write_checkpoint(
-    path: &std::path::Path,
-    scene: &gast_core::Gaussians,
-    record: &resume::Record,
-    total: u32,
-) -> String {
+/// Writes the run's scene and optimiser's state after `record.step` of
+/// `total` steps to the checkpoint `path` with its record (making the output
+/// folder first); returns the line that says so, or why not: a failed
+/// checkpoint is a warning, the run goes on.
+fn write_checkpoint(path: &std::path::Path, session: &Session, record: &resume::Record, total: u32) -> String {
     let t = Instant::now();
     let step = record.step;
-    match checkpoint::write_with_record(path, scene, record) {
+    let (moments, without) = match session.optimiser_state().and_then(|m| m.to_safetensors()) {
+        Ok(bytes) => (Some(bytes), String::new()),
+        Err(e) => (None, format!(", without the optimiser's state ({e})")),
+    };
+    match checkpoint::write_with_record(path, &session.result(), moments.as_deref(), record) {
         Ok(()) => format!(
-            "  checkpoint: step {step} of {total} written to {} in {:.0} ms",
+            "  checkpoint: step {step} of {total} written to {} in {:.0} ms{without}",
             path.display(),
             t.elapsed().as_secs_f64() * 1e3
         ),
@@ -221,6 +220,7 @@ fn written_by_a_run(name: &std::path::Path, scene_name: &std::path::Path) -> boo
     name == scene_name
         || name == checkpoint
         || name == checkpoint::record_path(&checkpoint)
+        || name == checkpoint::moments_path(&checkpoint)
         || fixed.into_iter().any(|f| name == std::path::Path::new(f))
         || view
 }
@@ -473,14 +473,11 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     }
     let start = match resumed {
         Some((state, step)) => {
+            let (moments, how) = resume::moments(&checkpoint, step);
             session
-                .resume_at(&state, step)
+                .resume_at(&state, step, moments.as_ref())
                 .with_context(|| format!("could not resume from {}", checkpoint.display()))?;
-            eprintln!(
-                "  resuming from step {step} of {}: {} (the optimiser's moments start afresh)",
-                session.total_steps(),
-                checkpoint.display()
-            );
+            eprintln!("  resuming from step {step} of {}: {} ({how})", session.total_steps(), checkpoint.display());
             step
         }
         None => 0,
@@ -546,7 +543,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             break;
         }
         if due.now() && !session.is_done() {
-            let line = write_checkpoint(&checkpoint, &session.result(), &record(&asked, session.steps_done()), total);
+            let line = write_checkpoint(&checkpoint, &session, &record(&asked, session.steps_done()), total);
             due.written();
             pb.suspend(|| eprintln!("{line}"));
         }
@@ -556,7 +553,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     if let Some(n) = stopped_at {
         eprintln!("stopped at step {n} of {total} (Ctrl-C): writing what the run has; Ctrl-C again quits at once");
         // Kept, so that the same command with --resume goes on from here.
-        let line = write_checkpoint(&checkpoint, &session.result(), &record(&asked, n), total);
+        let line = write_checkpoint(&checkpoint, &session, &record(&asked, n), total);
         eprintln!("{line}; the same command with --resume goes on from it");
     }
     if let Some(why) = session.failure() {

@@ -4,8 +4,8 @@
 //! [`crate::style::StyleConfig::color_floor`]) in the same pass.
 
 use super::Commands;
-use super::{Bind, GpuContext, Kernel};
-use crate::style::adam::AdamConfig;
+use super::{Bind, GpuContext, GpuError, Kernel};
+use crate::style::adam::{AdamConfig, AdamState};
 
 /// Threads per workgroup in `adam.wgsl`.
 const WORKGROUP: u32 = 256;
@@ -94,6 +94,35 @@ impl GpuAdam {
     /// Steps taken so far.
     pub fn steps(&self) -> u32 {
         self.step
+    }
+
+    /// The steps taken and the moments, read back.
+    pub fn state(&self, ctx: &GpuContext) -> Result<AdamState, GpuError> {
+        let read = |b: &wgpu::Buffer| -> Result<Vec<f32>, GpuError> {
+            let mut x: Vec<f32> = ctx.read(b)?;
+            x.truncate(self.len);
+            Ok(x)
+        };
+        Ok(AdamState { step: self.step, m: read(&self.m)?, v: read(&self.v)? })
+    }
+
+    /// Goes on from `state`, which must have a moment per parameter; else
+    /// an error saying what it has.
+    pub fn set_state(&mut self, ctx: &GpuContext, state: &AdamState) -> Result<(), String> {
+        if state.m.len() != self.len || state.v.len() != self.len {
+            return Err(format!(
+                "expected {} moments of each order, found {} and {}",
+                self.len,
+                state.m.len(),
+                state.v.len()
+            ));
+        }
+        if self.len > 0 {
+            ctx.write(&self.m, &state.m);
+            ctx.write(&self.v, &state.v);
+        }
+        self.step = state.step;
+        Ok(())
     }
 
     /// Records one update of `params` by `grads` (both `len` floats) into `encoder`.
