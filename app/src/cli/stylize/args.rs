@@ -198,16 +198,18 @@ pub struct StylizeArgs {
     /// Every this many seconds of steps, and at Ctrl-C, write the stylized
     /// scene as it stands to `stylized.checkpoint.ply` in the output folder
     /// (INRIA .ply, named after --scene-name) with its record
-    /// (`stylized.checkpoint.json`), so a run killed or crashed keeps what it
-    /// had and `--resume` goes on from it; removed once the scene is written.
-    /// 0: none.
+    /// (`stylized.checkpoint.json`) and the optimiser's state
+    /// (`stylized.checkpoint.adam.safetensors`), so a run killed or crashed
+    /// keeps what it had and `--resume` goes on from it; removed once the
+    /// scene is written. 0: none between (Ctrl-C still writes one).
     #[arg(long, default_value_t = crate::cli::checkpoint::DEFAULT_CHECKPOINT_S,
           value_parser = crate::views::within(crate::cli::checkpoint::CHECKPOINT_SECONDS))]
     pub checkpoint_every: u64,
     /// Go on from the checkpoint in the output folder, left by a run of the
     /// same command that was killed, crashed or stopped with Ctrl-C: the
-    /// steps go on from its step, with the views and phases the whole run
-    /// would have had (the optimiser's moments start afresh). Refused, naming
+    /// steps go on from its step, with the views, phases and optimiser
+    /// state the whole run would have had (fresh moments, said so, where the
+    /// state file is missing or unreadable). Refused, naming
     /// what differs, when the scene, style, views or settings are not the
     /// checkpoint's; the working resolution, texture scale and cycles the
     /// first run planned are taken from it.
