@@ -95,12 +95,23 @@ impl Resume {
     }
 
     /// Refuses other inputs or settings than the record's (`now`, at its step),
-    /// naming each that differs; else reads the checkpoint's scene.
+    /// naming each that differs; else reads the checkpoint's scene, which
+    /// must hold the run's Gaussians (as many as the input, unless the run
+    /// splits them).
     pub fn check_and_load(&self, now: &Record) -> anyhow::Result<gast_core::Gaussians> {
         let now = Record { step: self.record.step, ..now.clone() };
         checkpoint::refuse_other_settings(&self.path, &self.record, &now)?;
-        gast_core::scene::load(&self.path)
-            .with_context(|| format!("could not read the checkpoint {} to resume from", self.path.display()))
+        let scene = gast_core::scene::load(&self.path)
+            .with_context(|| format!("could not read the checkpoint {} to resume from", self.path.display()))?;
+        if now.config.split_px == 0.0 && scene.len() != now.gaussians {
+            anyhow::bail!(
+                "{}: expected the run's {} Gaussians to resume from, found {}: not this run's checkpoint",
+                self.path.display(),
+                now.gaussians,
+                scene.len()
+            );
+        }
+        Ok(scene)
     }
 }
 
@@ -121,6 +132,43 @@ pub fn moments(path: &Path, step: u32) -> (Option<OptimiserState>, String) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Another scene put in the checkpoint's place is refused before the
+    /// run prepares, by its count.
+    #[test]
+    fn a_checkpoint_of_other_gaussians_is_refused_at_once() {
+        let dir = std::env::temp_dir().join(format!("gast-resume-unit-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("a folder");
+        let path = dir.join("stylized.checkpoint.ply");
+        let two = gast_core::Gaussians {
+            means: vec![[0.0; 3], [1.0; 3]],
+            log_scales: vec![[-2.0; 3]; 2],
+            quats: vec![[1.0, 0.0, 0.0, 0.0]; 2],
+            opacity_logits: vec![0.0; 2],
+            sh_degree: 0,
+            sh: vec![0.5; 6],
+        };
+        gast_core::scene::save(&path, &two, &Default::default()).expect("written");
+        let record = Record {
+            step: 7,
+            scene: "scene.ply".into(),
+            gaussians: 3,
+            style: "style.jpg".into(),
+            style_depth: None,
+            depth_model: None,
+            cameras: "1 views, 0".into(),
+            config: StyleConfig::default(),
+        };
+        let resume = Resume { path: path.clone(), record: record.clone() };
+        let e = resume.check_and_load(&Record { step: 0, ..record.clone() }).expect_err("refused").to_string();
+        assert!(e.contains("expected the run's 3 Gaussians to resume from, found 2"), "{e}");
+        let two_now = Record { gaussians: 2, ..record.clone() };
+        let e = resume.check_and_load(&two_now).expect_err("refused").to_string();
+        assert!(e.contains("gaussians: 3 then, 2 now"), "{e}");
+        let resume = Resume { path, record: two_now.clone() };
+        assert_eq!(resume.check_and_load(&two_now).expect("its own").len(), 2);
+        std::fs::remove_dir_all(&dir).ok();
+    }
 
     #[test]
     fn the_fingerprint_tells_other_views_apart() {
