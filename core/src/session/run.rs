@@ -574,7 +574,8 @@ impl Session {
     /// from `step` on, and with `moments` (that run's
     /// [`Session::optimiser_state`] at `step`) the optimiser goes on as it
     /// was; without, its moments start afresh (Adam's bias correction makes
-    /// its first updates full-sized again). The kept matches start afresh.
+    /// its first updates full-sized again). The kept matches
+    /// (`--matching-reuse`) and the phase leak's sums start afresh.
     /// Before the first step only.
     pub fn resume_at(
         &mut self,
