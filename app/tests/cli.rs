@@ -354,6 +354,18 @@ fn signalled(
     signal: &str,
     after: std::time::Duration,
 ) -> (std::process::ExitStatus, String) {
+    signalled_each(args, before, signal, &[after])
+}
+
+/// As [`signalled`], sending `signal` once per wait in `waits` (each wait
+/// before its signal).
+#[cfg(unix)]
+fn signalled_each(
+    args: &[&str],
+    before: &str,
+    signal: &str,
+    waits: &[std::time::Duration],
+) -> (std::process::ExitStatus, String) {
     use std::io::{BufRead, BufReader};
     let mut child = Command::new(env!("CARGO_BIN_EXE_gast"))
         .args(args)
@@ -369,9 +381,11 @@ fn signalled(
             break;
         }
     }
-    std::thread::sleep(after);
-    let kill = Command::new("kill").args([signal, &child.id().to_string()]).status().expect("kill");
-    assert!(kill.success());
+    for wait in waits {
+        std::thread::sleep(*wait);
+        let kill = Command::new("kill").args([signal, &child.id().to_string()]).status().expect("kill");
+        assert!(kill.success());
+    }
     seen.extend(lines.map_while(Result::ok));
     (child.wait().expect("wait"), seen.join("\n"))
 }
@@ -459,6 +473,46 @@ fn ctrl_c_stops_a_run_and_resume_goes_on_to_the_end() {
         assert!(!out.join(name).exists(), "{name} left after the whole run");
     }
     assert!(gast_core::scene::load(out.join("stylized.ply")).is_ok());
+    std::fs::remove_dir_all(&out).ok();
+}
+
+/// One Ctrl-C delivered twice at once (`timeout -s INT` signals the command
+/// and then its process group) still stops the run after its step, which
+/// writes what it has; two presses apart quit at once, writing nothing.
+#[cfg(unix)]
+#[test]
+fn a_doubled_ctrl_c_stops_a_run_and_a_second_press_quits() {
+    let Some((scene, style, weights)) = guitar_with("block2.jpg") else { return };
+    let out = temp("double-int");
+    let run = [
+        "stylize",
+        s(&scene),
+        s(&style),
+        "--weights",
+        s(&weights),
+        "--out",
+        s(&out),
+        "--cycles",
+        "1000",
+        "--resolution",
+        "48",
+        "--views",
+        "2",
+        "--preview-views",
+        "1",
+        "--depth-provider",
+        "heuristic",
+    ];
+    let at_once = std::time::Duration::ZERO;
+    let (status, text) = signalled_each(&run, "object recipe", "-INT", &[std::time::Duration::from_secs(1), at_once]);
+    assert!(status.success(), "{text}");
+    assert!(text.contains("stopped at step"), "{text}");
+    assert!(out.join("stylized.ply").is_file());
+    std::fs::remove_dir_all(&out).ok();
+
+    let apart = std::time::Duration::from_millis(600);
+    let (status, text) = signalled_each(&run, "object recipe", "-INT", &[std::time::Duration::from_secs(1), apart]);
+    assert_eq!(status.code(), Some(130), "{text}");
     std::fs::remove_dir_all(&out).ok();
 }
 

@@ -5,6 +5,7 @@
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
 /// The process's Ctrl-C flags. Installed once per process (a second command
 /// in one process, as the tests run them, shares it).
@@ -33,15 +34,27 @@ impl Interrupt {
     }
 }
 
+/// A second SIGINT this soon after the first is the same Ctrl-C delivered
+/// twice, not a second press: `timeout -s INT` sends it to the command and
+/// then to its process group, and when the two are not merged the command
+/// quit at once, writing nothing (a fern run stopped so lost every step).
+const ONE_PRESS: Duration = Duration::from_millis(200);
+
 /// The process's [`Interrupt`], its Ctrl-C handler installed on first use.
 pub fn interrupt() -> &'static Interrupt {
     static FLAGS: std::sync::OnceLock<Interrupt> = std::sync::OnceLock::new();
     FLAGS.get_or_init(|| {
         let (looping, asked) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
         let (l, a) = (looping.clone(), asked.clone());
+        let mut first: Option<Instant> = None;
         // No handler (another one is installed): Ctrl-C quits as before.
         let _ = ctrlc::set_handler(move || {
-            if !l.load(Ordering::SeqCst) || a.swap(true, Ordering::SeqCst) {
+            if !l.load(Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+            if !a.swap(true, Ordering::SeqCst) {
+                first = Some(Instant::now());
+            } else if first.is_none_or(|t| t.elapsed() >= ONE_PRESS) {
                 std::process::exit(130);
             }
         });
