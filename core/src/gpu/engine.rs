@@ -99,6 +99,18 @@ struct Optimisers {
     opacity: GpuAdam,
 }
 
+impl Optimisers {
+    /// Every group, in the order of [`crate::session::moments::GROUPS`].
+    fn groups(&self) -> [&GpuAdam; 5] {
+        [&self.color, &self.means, &self.scales, &self.quats, &self.opacity]
+    }
+
+    /// [`Optimisers::groups`], to set.
+    fn groups_mut(&mut self) -> [&mut GpuAdam; 5] {
+        [&mut self.color, &mut self.means, &mut self.scales, &mut self.quats, &mut self.opacity]
+    }
+}
+
 /// The optimisation state on the device and the step that advances it.
 pub struct GpuEngine {
     ctx: GpuContext,
@@ -130,8 +142,6 @@ pub struct GpuEngine {
     leak: Option<GpuLeak>,
     /// The host's share of the last step ([`GpuEngine::host_times`]).
     host: HostTimes,
-    /// Steps taken (or resumed from): each step's assignment draw is seeded by it.
-    steps: u64,
 }
 
 /// What the host spent of one GPU step: the time the device's part timings
@@ -223,7 +233,6 @@ impl GpuEngine {
             assign: None,
             leak: None,
             host: HostTimes::default(),
-            steps: 0,
         };
         engine.bytes = ctx.allocated_bytes().saturating_sub(before);
         Ok(engine)
@@ -250,26 +259,22 @@ impl GpuEngine {
         self.g.download(&self.ctx)
     }
 
-    /// Goes on after `steps` steps with the optimised Gaussians `g` (as
-    /// many, same SH degree as at [`GpuEngine::new`]): a resumed run's state,
-    /// whose next draws are those of its step. The optimiser's moments are
-    /// left as they are.
-    pub fn resume(&mut self, g: &Gaussians, steps: u32) {
+    /// Sets the optimised Gaussians to `g` (as many, same SH degree as at
+    /// [`GpuEngine::new`]): a resumed run's state. The optimiser's moments
+    /// are left as they are.
+    pub fn set_gaussians(&mut self, g: &Gaussians) {
         self.g.write(&self.ctx, g);
-        self.steps = u64::from(steps);
     }
 
     /// Each parameter group's optimiser state, read back, in the order of
     /// [`crate::session::moments::GROUPS`].
     pub fn optimiser_state(&self) -> Result<Vec<crate::style::adam::AdamState>, GpuError> {
-        let o = &self.opt;
-        [&o.color, &o.means, &o.scales, &o.quats, &o.opacity].into_iter().map(|a| a.state(&self.ctx)).collect()
+        self.opt.groups().into_iter().map(|a| a.state(&self.ctx)).collect()
     }
 
     /// Goes on from `groups` (as [`GpuEngine::optimiser_state`] gives them).
     pub fn set_optimiser_state(&mut self, groups: &[crate::style::adam::AdamState]) -> Result<(), String> {
-        let o = &mut self.opt;
-        let adams = [&mut o.color, &mut o.means, &mut o.scales, &mut o.quats, &mut o.opacity];
+        let adams = self.opt.groups_mut();
         if groups.len() != adams.len() {
             return Err(format!("expected {} parameter groups, found {}", adams.len(), groups.len()));
         }
@@ -350,12 +355,14 @@ impl GpuEngine {
         self.host
     }
 
-    /// One optimisation step from view `view` seen by `cam` in `phase`; the
-    /// parts run back to back on the device, so no stage timings come back
-    /// (`gast bench step --device gpu` times them separately), only the
-    /// host's share ([`GpuEngine::host_times`]).
+    /// The run's step `step` (its index: the assignment terms' draws are
+    /// seeded by it) from view `view` seen by `cam` in `phase`; the parts run
+    /// back to back on the device, so no stage timings come back (`gast bench
+    /// step --device gpu` times them separately), only the host's share
+    /// ([`GpuEngine::host_times`]).
     pub fn step(
         &mut self,
+        step: u32,
         view: usize,
         cam: &Camera,
         phase: Phase,
@@ -456,7 +463,7 @@ impl GpuEngine {
             let a =
                 self.assign.get_or_insert_with(|| GpuAssignment::new(ctx, style.channels(), config.seed ^ ASSIGN_SEED));
             // Seeded by the step, so that a run resumed at a step draws as the whole run did.
-            a.reseed(config.seed ^ ASSIGN_SEED ^ self.steps.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+            a.reseed(config.seed ^ ASSIGN_SEED ^ u64::from(step).wrapping_mul(0x9E37_79B9_7F4A_7C15));
             a.record_gather(ctx, &mut enc, plan.loss.rgb_features(), n, covered, style.modality(0), style.positions());
             gathered = Some(submit(&mut host, enc));
             enc = ctx.encoder("engine.step.feature_losses");
@@ -573,7 +580,6 @@ impl GpuEngine {
             terms.reg_rotation = s[slot::REG_ROTATION];
         }
         terms.total = terms.weighted(&w);
-        self.steps += 1;
         Ok(terms)
     }
 

@@ -95,6 +95,18 @@ struct Optimisers {
     opacity: Adam,
 }
 
+impl Optimisers {
+    /// Every group, in the order of [`super::moments::GROUPS`].
+    fn groups(&self) -> [&Adam; 5] {
+        [&self.color, &self.means, &self.scales, &self.quats, &self.opacity]
+    }
+
+    /// [`Optimisers::groups`], to set.
+    fn groups_mut(&mut self) -> [&mut Adam; 5] {
+        [&mut self.color, &mut self.means, &mut self.scales, &mut self.quats, &mut self.opacity]
+    }
+}
+
 /// Gradients one phase's steps leave on the other phase's parameters
 /// ([`StyleConfig::phase_leak`]), summed until that phase's next step adds
 /// them to its own. Empty when the leak is off, and when the steps run on the
@@ -557,10 +569,7 @@ impl Session {
     /// keeps so that a resumed run updates as the whole run would have.
     pub fn optimiser_state(&self) -> Result<OptimiserState, String> {
         let groups = match (&self.cpu, &self.engine) {
-            (Some(cpu), _) => {
-                let o = &cpu.opt;
-                [&o.color, &o.means, &o.scales, &o.quats, &o.opacity].map(|a| a.state()).to_vec()
-            }
+            (Some(cpu), _) => cpu.opt.groups().map(|a| a.state()).to_vec(),
             (None, Some(engine)) => engine.optimiser_state().map_err(|e| e.to_string())?,
             (None, None) => return Err("the run has no optimiser".into()),
         };
@@ -631,9 +640,7 @@ impl Session {
         let moments_problem = |e: String| SessionError::Input(format!("the optimiser's state does not fit: {e}"));
         if let Some(cpu) = &mut self.cpu {
             if let Some(m) = moments {
-                let o = &mut cpu.opt;
-                let adams = [&mut o.color, &mut o.means, &mut o.scales, &mut o.quats, &mut o.opacity];
-                for (adam, g) in adams.into_iter().zip(&m.groups) {
+                for (adam, g) in cpu.opt.groups_mut().into_iter().zip(&m.groups) {
                     adam.set_state(g.clone()).map_err(moments_problem)?;
                 }
             }
@@ -642,7 +649,7 @@ impl Session {
             if let Some(m) = moments {
                 engine.set_optimiser_state(&m.groups).map_err(moments_problem)?;
             }
-            engine.resume(&part, step);
+            engine.set_gaussians(&part);
         }
         for _ in 0..step {
             self.sampler.next();

@@ -60,7 +60,7 @@ impl Session {
         let Some(engine) = &mut self.engine else { return Err("no GPU engine".into()) };
         engine.set_object_focus(object);
         let cam = &self.cameras[view];
-        let losses = engine.step(view, cam, phase, &self.config, self.extent).map_err(|e| e.to_string())?;
+        let losses = engine.step(self.step, view, cam, phase, &self.config, self.extent).map_err(|e| e.to_string())?;
         if self.step.is_multiple_of(GPU_COLOUR_EVERY) || !self.colour_watch.has_reference(view) {
             if let Some(r) = engine.reference_colour(view) {
                 self.colour_watch.set_reference(view, r);
