@@ -390,6 +390,20 @@ fn signalled_each(
     (child.wait().expect("wait"), seen.join("\n"))
 }
 
+/// `gast stylize` of `scene` with `style` into `out` at 48 px, one preview
+/// view, the heuristic style depth: the small run the Ctrl-C, checkpoint and
+/// resume tests stop, kill and resume; `flags` are its others.
+fn small_run<'a>(
+    scene: &'a Path,
+    style: &'a Path,
+    weights: &'a Path,
+    out: &'a Path,
+    flags: &[&'a str],
+) -> Vec<&'a str> {
+    let base = ["stylize", s(scene), s(style), "--weights", s(weights), "--out", s(out), "--resolution", "48"];
+    [&base[..], &["--preview-views", "1", "--depth-provider", "heuristic"], flags].concat()
+}
+
 /// Ctrl-C during `stylize`: the run stops after its step and still writes the
 /// scene, the renders and a report that says where it stopped, and keeps a
 /// checkpoint with its record; `--resume` with other settings is refused,
@@ -400,27 +414,8 @@ fn signalled_each(
 fn ctrl_c_stops_a_run_and_resume_goes_on_to_the_end() {
     let Some((scene, style, weights)) = guitar_with("block2.jpg") else { return };
     let out = temp("ctrlc");
-    let run = [
-        "stylize",
-        s(&scene),
-        s(&style),
-        "--weights",
-        s(&weights),
-        "--out",
-        s(&out),
-        "--cycles",
-        "4",
-        "--steps-per-cycle",
-        "150",
-        "--resolution",
-        "48",
-        "--views",
-        "2",
-        "--preview-views",
-        "1",
-        "--depth-provider",
-        "heuristic",
-    ];
+    let flags = ["--cycles", "4", "--steps-per-cycle", "150", "--views", "2"];
+    let run = small_run(&scene, &style, &weights, &out, &flags);
     let (status, text) = interrupted(&run, "object recipe");
     assert!(status.success(), "{text}");
     assert!(text.contains("stopped at step"), "{text}");
@@ -439,16 +434,14 @@ fn ctrl_c_stops_a_run_and_resume_goes_on_to_the_end() {
     assert_eq!(record["step"].as_u64(), Some(at), "{record}");
     assert!(out.join("stylized.checkpoint.adam.safetensors").is_file(), "the optimiser's state beside it");
 
-    let mut other = run.to_vec();
-    other[8] = "3"; // --cycles
-    other[14] = "3"; // --views
+    let other =
+        small_run(&scene, &style, &weights, &out, &["--cycles", "3", "--steps-per-cycle", "150", "--views", "3"]);
     let o = gast(&[&other[..], &["--resume"]].concat());
     assert!(!o.status.success());
     assert!(stderr(&o).contains("config.cycles: 4 then, 3 now"), "{}", stderr(&o));
     assert!(stderr(&o).contains("cameras: \"2 views, "), "{}", stderr(&o));
     if let Some(mosaic) = shared_file("data/styles/mosaic.jpg") {
-        let mut elsewhere = run.to_vec();
-        elsewhere[2] = s(&mosaic);
+        let elsewhere = small_run(&scene, &mosaic, &weights, &out, &flags);
         let o = gast(&[&elsewhere[..], &["--resume"]].concat());
         assert!(!o.status.success());
         assert!(
@@ -484,25 +477,7 @@ fn ctrl_c_stops_a_run_and_resume_goes_on_to_the_end() {
 fn a_doubled_ctrl_c_stops_a_run_and_a_second_press_quits() {
     let Some((scene, style, weights)) = guitar_with("block2.jpg") else { return };
     let out = temp("double-int");
-    let run = [
-        "stylize",
-        s(&scene),
-        s(&style),
-        "--weights",
-        s(&weights),
-        "--out",
-        s(&out),
-        "--cycles",
-        "1000",
-        "--resolution",
-        "48",
-        "--views",
-        "2",
-        "--preview-views",
-        "1",
-        "--depth-provider",
-        "heuristic",
-    ];
+    let run = small_run(&scene, &style, &weights, &out, &["--cycles", "1000", "--views", "2"]);
     let at_once = std::time::Duration::ZERO;
     let (status, text) = signalled_each(&run, "object recipe", "-INT", &[std::time::Duration::from_secs(1), at_once]);
     assert!(status.success(), "{text}");
@@ -526,33 +501,11 @@ fn a_doubled_ctrl_c_stops_a_run_and_a_second_press_quits() {
 fn a_killed_stylize_run_leaves_its_checkpoint() {
     let Some((scene, style, weights)) = guitar_with("block2.jpg") else { return };
     let out = temp("killed-stylize");
-    let run = |cycles: &'static str| {
-        vec![
-            "stylize".to_owned(),
-            s(&scene).to_owned(),
-            s(&style).to_owned(),
-            "--weights".to_owned(),
-            s(&weights).to_owned(),
-            "--out".to_owned(),
-            s(&out).to_owned(),
-            "--cycles".to_owned(),
-            cycles.to_owned(),
-            "--steps-per-cycle".to_owned(),
-            "10".to_owned(),
-            "--resolution".to_owned(),
-            "48".to_owned(),
-            "--views".to_owned(),
-            "2".to_owned(),
-            "--preview-views".to_owned(),
-            "1".to_owned(),
-            "--depth-provider".to_owned(),
-            "heuristic".to_owned(),
-            "--checkpoint-every".to_owned(),
-            "1".to_owned(),
-        ]
+    let run = |cycles| {
+        let flags = ["--cycles", cycles, "--steps-per-cycle", "10", "--views", "2", "--checkpoint-every", "1"];
+        small_run(&scene, &style, &weights, &out, &flags)
     };
     let long = run("1000");
-    let long: Vec<&str> = long.iter().map(String::as_str).collect();
     let (status, text) = signalled(&long, "checkpoint: step", "-KILL", std::time::Duration::ZERO);
     assert!(!status.success(), "{text}");
     assert!(!out.join("stylized.ply").exists(), "{text}");
@@ -581,7 +534,6 @@ fn a_killed_stylize_run_leaves_its_checkpoint() {
     assert!(checkpoint.is_file());
 
     let short = run("1");
-    let short: Vec<&str> = short.iter().map(String::as_str).collect();
     let o = gast(&short);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("holds a checkpoint of an earlier stylization"), "{}", stderr(&o));

@@ -44,7 +44,7 @@ pub fn checkpoint_path(out: &Path) -> PathBuf {
 
 /// Writes `scene` to the checkpoint `path` (INRIA .ply, atomically), making
 /// its folder first.
-pub fn write_scene(path: &Path, scene: &gast_core::Gaussians) -> anyhow::Result<()> {
+fn write_scene(path: &Path, scene: &gast_core::Gaussians) -> anyhow::Result<()> {
     if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
         super::output_folder(parent, "--out")?;
     }
