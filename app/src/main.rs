@@ -4,6 +4,7 @@
 //! Every subcommand drives the same `gast-core` code the studio uses; long work
 //! shows progress bars, and errors carry the file and what was expected.
 
+mod checkpoint;
 mod cli;
 mod progress;
 mod report;

@@ -15,7 +15,7 @@ use gast_core::fit::{self, FitConfig, load_posed_images, mean_psnr, psnr};
 use gast_core::io::write_png_rgb;
 use gast_core::raster::{self, RenderOptions};
 
-use super::checkpoint::{self, CHECKPOINT_SECONDS, DEFAULT_CHECKPOINT_S, Due, checkpoint_path};
+use crate::checkpoint::{self, CHECKPOINT_SECONDS, DEFAULT_CHECKPOINT_S, Due, checkpoint_path};
 use crate::progress;
 
 /// Arguments of `gast fit`.

@@ -2,7 +2,6 @@
 
 mod bench;
 mod check;
-mod checkpoint;
 pub mod convert;
 mod demo;
 mod fit;

@@ -140,7 +140,7 @@ fn fit_photos(dataset: &Path, out: &Path, iterations: u32) -> anyhow::Result<()>
         preset: None,
         holdout_every: 8,
         preview: None,
-        checkpoint_every: super::checkpoint::DEFAULT_CHECKPOINT_S,
+        checkpoint_every: crate::checkpoint::DEFAULT_CHECKPOINT_S,
         resume: false,
     };
     super::fit::run(args).map(|_| ())

@@ -202,8 +202,8 @@ pub struct StylizeArgs {
     /// (`stylized.checkpoint.adam.safetensors`), so a run killed or crashed
     /// keeps what it had and `--resume` goes on from it; removed once the
     /// scene is written. 0: none between (Ctrl-C still writes one).
-    #[arg(long, default_value_t = crate::cli::checkpoint::DEFAULT_CHECKPOINT_S,
-          value_parser = crate::views::within(crate::cli::checkpoint::CHECKPOINT_SECONDS))]
+    #[arg(long, default_value_t = crate::checkpoint::DEFAULT_CHECKPOINT_S,
+          value_parser = crate::views::within(crate::checkpoint::CHECKPOINT_SECONDS))]
     pub checkpoint_every: u64,
     /// Go on from the checkpoint in the output folder, left by a run of the
     /// same command that was killed, crashed or stopped with Ctrl-C: the

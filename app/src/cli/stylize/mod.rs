@@ -21,7 +21,7 @@ use gast_core::vision::Vgg;
 use gast_core::vision::style_depth::{DepthImage, DepthProvider};
 use serde::Serialize;
 
-use super::checkpoint::{self, Due, checkpoint_path};
+use crate::checkpoint::{self, Due, checkpoint_path};
 use crate::progress;
 use crate::report::sheet;
 use crate::views::{ViewArgs, camera_source, load_scene, refuse_photo_folder, views_for};

@@ -12,7 +12,7 @@ use gast_core::style::StyleConfig;
 use serde::{Deserialize, Serialize};
 
 use super::StylizeArgs;
-use crate::cli::checkpoint;
+use crate::checkpoint;
 
 /// What a stylization's checkpoint records beside its scene: enough to go
 /// on (`--resume`) and to refuse going on with other inputs or settings.
@@ -51,17 +51,10 @@ impl Record {
             style: absolute(&args.style),
             style_depth: args.style_depth.as_deref().map(absolute),
             depth_model: args.depth_model.as_deref().map(absolute),
-            cameras: fingerprint(cameras),
+            cameras: checkpoint::cameras_fingerprint(cameras),
             config: config.clone(),
         }
     }
-}
-
-/// `N views, <hash>`: FNV-1a over the cameras' every field.
-fn fingerprint(cameras: &[gast_core::Camera]) -> String {
-    let text = format!("{cameras:?}");
-    let hash = text.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3));
-    format!("{} views, {hash:016x}", cameras.len())
 }
 
 /// A checkpoint `--resume` goes on from: its record, and where it lies.
@@ -168,19 +161,5 @@ mod tests {
         let resume = Resume { path, record: two_now.clone() };
         assert_eq!(resume.check_and_load(&two_now).expect("its own").len(), 2);
         std::fs::remove_dir_all(&dir).ok();
-    }
-
-    #[test]
-    fn the_fingerprint_tells_other_views_apart() {
-        let cams = gast_core::camera::orbit_cameras(
-            &[[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]],
-            &gast_core::camera::OrbitOptions { count: 4, width: 64, height: 48, ..Default::default() },
-        );
-        let a = fingerprint(&cams);
-        assert!(a.starts_with("4 views, "), "{a}");
-        assert_eq!(a, fingerprint(&cams.clone()));
-        let wider: Vec<_> = cams.iter().map(|c| c.with_longer_side(128)).collect();
-        assert_ne!(a, fingerprint(&wider));
-        assert_ne!(a, fingerprint(&cams[..3]));
     }
 }

@@ -1,8 +1,10 @@
-//! Checkpoints of long runs (`gast fit`, `gast stylize`): the scene as it
-//! stands, written now and then beside the output as an INRIA `.ply` with a
-//! record (`.json`) of the run's settings and progress, so that a run killed,
-//! crashed or cut off loses at most the interval and the same command with
-//! `--resume` goes on from it; removed once the output is written.
+//! Checkpoints of long runs (`gast fit`, `gast stylize`, a studio run): the
+//! scene as it stands, written now and then as an INRIA `.ply` with a record
+//! (`.json`) of the run's settings and progress, and the optimiser's state
+//! where the run keeps one, so that a run killed, crashed or cut off loses at
+//! most the interval and goes on from it (`--resume`, the studio's "Go on");
+//! removed once the output is written. The command line keeps its checkpoint
+//! beside the output, the studio in the user's cache (`studio::recovery`).
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -46,7 +48,8 @@ pub fn checkpoint_path(out: &Path) -> PathBuf {
 /// its folder first.
 fn write_scene(path: &Path, scene: &gast_core::Gaussians) -> anyhow::Result<()> {
     if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        super::output_folder(parent, "--out")?;
+        gast_core::io::create_folder(parent)
+            .with_context(|| format!("could not create the checkpoint's folder {}", parent.display()))?;
     }
     gast_core::scene::save(path, scene, &Default::default())
         .with_context(|| format!("could not write the checkpoint {}", path.display()))
@@ -165,6 +168,14 @@ pub fn warn_of_a_checkpoint(path: &Path, what: &str) {
     }
 }
 
+/// `N views, <hash>`: FNV-1a over the cameras' every field, which a record
+/// keeps so that a run goes on only over the views it was made with.
+pub fn cameras_fingerprint(cameras: &[gast_core::Camera]) -> String {
+    let text = format!("{cameras:?}");
+    let hash = text.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3));
+    format!("{} views, {hash:016x}", cameras.len())
+}
+
 /// When the next checkpoint is due: every `every` seconds (0: never).
 pub struct Due {
     every: Option<Duration>,
@@ -204,5 +215,19 @@ mod tests {
         ] {
             assert_eq!(checkpoint_path(Path::new(out)), Path::new(checkpoint), "{out}");
         }
+    }
+
+    #[test]
+    fn the_fingerprint_tells_other_views_apart() {
+        let cams = gast_core::camera::orbit_cameras(
+            &[[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]],
+            &gast_core::camera::OrbitOptions { count: 4, width: 64, height: 48, ..Default::default() },
+        );
+        let a = cameras_fingerprint(&cams);
+        assert!(a.starts_with("4 views, "), "{a}");
+        assert_eq!(a, cameras_fingerprint(&cams.clone()));
+        let wider: Vec<_> = cams.iter().map(|c| c.with_longer_side(128)).collect();
+        assert_ne!(a, cameras_fingerprint(&wider));
+        assert_ne!(a, cameras_fingerprint(&cams[..3]));
     }
 }
