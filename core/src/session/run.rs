@@ -584,7 +584,8 @@ impl Session {
     /// [`Session::optimiser_state`] at `step`) the optimiser goes on as it
     /// was; without, its moments start afresh (Adam's bias correction makes
     /// its first updates full-sized again). The kept matches
-    /// (`--matching-reuse`) and the phase leak's sums start afresh.
+    /// (`--matching-reuse`) and the phase leak's sums start afresh. At the
+    /// schedule's last step the run is done (its state is the result).
     /// Before the first step only.
     pub fn resume_at(
         &mut self,
@@ -608,9 +609,9 @@ impl Session {
                 scene.sh_degree
             )));
         }
-        if step >= self.total_steps() {
+        if step > self.total_steps() {
             return Err(SessionError::Input(format!(
-                "expected a step before the schedule's {} to resume from, found {step}",
+                "expected a step within the schedule's {} to resume from, found {step}",
                 self.total_steps()
             )));
         }

@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::{Receiver, Sender, TryRecvError};
 
 use super::events::{Command, Event};
+use super::moments::OptimiserState;
 use super::run::{Session, SessionInputs};
 use super::slot::Slot;
 use super::{RunStart, Snapshot};
@@ -71,6 +72,62 @@ pub fn spawn_with<F>(load: F, waker: Arc<dyn Fn() + Send + Sync>) -> SessionHand
 where
     F: FnOnce(&mut dyn FnMut(Event)) -> Result<SessionInputs, String> + Send + 'static,
 {
+    spawn_run(move |emit| load(emit).map(|inputs| (inputs, RunOptions::default())), waker)
+}
+
+/// What a worker does besides stepping a fresh run: go on from an earlier
+/// run's state, and keep the run's state now and then, so that a later one
+/// can go on from it when this one is killed or crashes.
+#[derive(Default)]
+pub struct RunOptions {
+    /// Go on from this state of a run with the same inputs and settings.
+    pub resume: Option<ResumeFrom>,
+    /// Keeps the run's state.
+    pub keep: Option<Keeper>,
+}
+
+/// An earlier run's state to go on from ([`Session::resume_at`]).
+pub struct ResumeFrom {
+    /// Its scene after `step` steps (its [`Session::result`], whole).
+    pub scene: Gaussians,
+    /// Steps it had done.
+    pub step: u32,
+    /// Its optimiser's state at `step`, where kept; else the moments start afresh.
+    pub moments: Option<OptimiserState>,
+}
+
+/// Keeps a run's state: `write` is given the session after every `every` of
+/// stepping, at a pause and at the run's end (whenever it has taken a step
+/// since the last write). A write's error is reported as a warning and the
+/// run goes on.
+pub struct Keeper {
+    /// Stepping time between writes.
+    pub every: Duration,
+    /// Writes the session's state (its result, optimiser state and step).
+    pub write: Box<dyn FnMut(&Session) -> Result<(), String> + Send>,
+}
+
+impl Keeper {
+    /// Writes the session's state when it has stepped since `written` (the
+    /// step last written), reporting a failure as a warning.
+    fn keep(&mut self, session: &Session, written: &mut u32, emit: &dyn Fn(Event)) {
+        if session.steps_done() == *written {
+            return;
+        }
+        *written = session.steps_done();
+        if let Err(e) = (self.write)(session) {
+            emit(Event::Warning(format!("the run's state could not be kept at step {written}: {e}")));
+        }
+    }
+}
+
+/// Like [`spawn_with`], with `load` also giving the [`RunOptions`]: a state to
+/// go on from (applied once the session is prepared; a state that does not
+/// fit the run ends it with [`Event::Failed`]) and a [`Keeper`].
+pub fn spawn_run<F>(load: F, waker: Arc<dyn Fn() + Send + Sync>) -> SessionHandle
+where
+    F: FnOnce(&mut dyn FnMut(Event)) -> Result<(SessionInputs, RunOptions), String> + Send + 'static,
+{
     let (cmd_tx, cmd_rx) = crossbeam_channel::unbounded();
     let (ev_tx, ev_rx) = crossbeam_channel::unbounded();
     let slot = Arc::new(Slot::default());
@@ -99,14 +156,14 @@ fn worker<F>(
     waker: Arc<dyn Fn() + Send + Sync>,
 ) -> Option<Gaussians>
 where
-    F: FnOnce(&mut dyn FnMut(Event)) -> Result<SessionInputs, String>,
+    F: FnOnce(&mut dyn FnMut(Event)) -> Result<(SessionInputs, RunOptions), String>,
 {
     let emit = |e: Event| {
         let _ = events.send(e);
         waker();
     };
-    let inputs = match load(&mut |e| emit(e)) {
-        Ok(inputs) => inputs,
+    let (inputs, options) = match load(&mut |e| emit(e)) {
+        Ok(loaded) => loaded,
         Err(e) => {
             emit(Event::Failed(e));
             return None;
@@ -119,15 +176,35 @@ where
             return None;
         }
     };
+    if let Some(from) = options.resume {
+        let t = Instant::now();
+        let with = if from.moments.is_some() { "with" } else { "the moments afresh, without" };
+        if let Err(e) = session.resume_at(&from.scene, from.step, from.moments.as_ref()) {
+            emit(Event::Failed(format!("could not go on from step {}: {e}", from.step)));
+            return None;
+        }
+        emit(Event::Stage {
+            name: format!(
+                "went on from step {} of {} ({with} the optimiser's state)",
+                from.step,
+                session.total_steps()
+            ),
+            seconds: t.elapsed().as_secs_f64(),
+        });
+    }
     let slot = &slots.snapshots;
     slots.start.put(RunStart::of(&session));
     if let Some(l) = session.live() {
         slots.live.put(l);
     }
-    slot.put(Snapshot { step: 0, gaussians: session.result() });
+    slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
     waker();
-    run_loop(&mut session, &commands, &emit, slot, &*waker);
+    let mut keep = options.keep.map(|k| (k, session.steps_done()));
+    run_loop_keeping(&mut session, &commands, &emit, slot, &*waker, keep.as_mut());
     let result = session.result();
+    if let Some((keeper, written)) = &mut keep {
+        keeper.keep(&session, written, &emit);
+    }
     slot.put(Snapshot { step: session.steps_done(), gaussians: result.clone() });
     emit(Event::Finished { completed: session.is_done(), steps: session.steps_done(), seconds: session.elapsed_s() });
     Some(result)
@@ -142,7 +219,21 @@ pub fn run_loop(
     slot: &Slot<Snapshot>,
     waker: &dyn Fn(),
 ) {
+    run_loop_keeping(session, commands, emit, slot, waker, None);
+}
+
+/// [`run_loop`], keeping the run's state with `keep` (its keeper and the
+/// step it last wrote) every interval of stepping and at a pause.
+fn run_loop_keeping(
+    session: &mut Session,
+    commands: &Receiver<Command>,
+    emit: &dyn Fn(Event),
+    slot: &Slot<Snapshot>,
+    waker: &dyn Fn(),
+    mut keep: Option<&mut (Keeper, u32)>,
+) {
     let mut paused = false;
+    let mut last_kept = Instant::now();
     let mut last_snapshot = Instant::now();
     let interval = if session.is_shared_live() { LIVE_SNAPSHOT_INTERVAL } else { SNAPSHOT_INTERVAL };
     loop {
@@ -164,6 +255,10 @@ pub fn run_loop(
                 if !paused {
                     paused = true;
                     slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
+                    if let Some((keeper, written)) = keep.as_deref_mut() {
+                        keeper.keep(session, written, emit);
+                        last_kept = Instant::now();
+                    }
                     emit(Event::Paused);
                 }
                 continue;
@@ -191,6 +286,12 @@ pub fn run_loop(
                 if bad {
                     emit(Event::Warning(format!("step {}: the loss is not finite; stopping", report.iter)));
                     return;
+                }
+                if let Some((keeper, written)) = keep.as_deref_mut()
+                    && last_kept.elapsed() >= keeper.every
+                {
+                    keeper.keep(session, written, emit);
+                    last_kept = Instant::now();
                 }
                 if last_snapshot.elapsed() >= interval {
                     slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
