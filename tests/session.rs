@@ -186,7 +186,7 @@ fn a_worker_keeps_its_runs_state_and_another_goes_on_from_it() {
     handle.commands.send(Command::Resume).expect("send");
     assert_eq!(finished(&handle), (true, 8));
     let whole = handle.stop_and_join().expect("the whole run's result");
-    let kept = Arc::try_unwrap(kept).ok().expect("the worker let go of its keeper").into_inner().expect("kept");
+    let kept = Arc::try_unwrap(kept).expect("the worker let go of its keeper").into_inner().expect("kept");
     let steps: Vec<u32> = kept.iter().map(|k| k.0).collect();
     assert_eq!(steps.len(), 2, "kept at {steps:?}: once at the pause, once at the end");
     assert!((3..8).contains(&steps[0]) && steps[1] == 8, "kept at {steps:?}");

@@ -94,6 +94,22 @@ pub fn write_with_record(
         .with_context(|| format!("could not write the checkpoint's record {}", record_path.display()))
 }
 
+/// The optimiser's state beside the checkpoint `path` at `step`, and what
+/// to say of it: kept, or why the moments start afresh (none written, or
+/// unreadable: a resume still goes on, as from a checkpoint without one).
+pub fn read_moments(path: &Path, step: u32) -> (Option<gast_core::session::OptimiserState>, String) {
+    let at = moments_path(path);
+    let read = std::fs::read(&at)
+        .map_err(|e| e.to_string())
+        .and_then(|b| gast_core::session::OptimiserState::from_safetensors(&b));
+    match read {
+        Ok(m) if m.step == step => (Some(m), "with the optimiser's moments".into()),
+        Ok(m) => (None, format!("the optimiser's moments start afresh: {} holds step {}'s", at.display(), m.step)),
+        Err(_) if !at.exists() => (None, format!("the optimiser's moments start afresh: no {}", at.display())),
+        Err(e) => (None, format!("the optimiser's moments start afresh: {} is unreadable ({e})", at.display())),
+    }
+}
+
 /// Removes the checkpoint `path`, its record and its optimiser's state,
 /// where they are (a warning for what cannot be removed).
 pub fn remove(path: &Path) {

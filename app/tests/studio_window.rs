@@ -195,6 +195,7 @@ fn scripted_studio_run(name: &str, strength: Option<&str>) -> Option<(PathBuf, P
         .env("GAST_STUDIO_EXPORT", &export)
         .env("GAST_STUDIO_EXIT_AFTER_FRAMES", "20")
         .env("GAST_STUDIO_SCREENSHOT", &shot)
+        .env("GAST_STUDIO_RUNS", dir.join("kept"))
         .env("XDG_RUNTIME_DIR", &dir)
         .output()
         .expect("run xvfb-run");
@@ -246,5 +247,94 @@ fn the_strength_sliders_export_what_they_show() {
     assert!(result.opacity_logits == input.opacity_logits && result.quats == input.quats);
     let recoloured = input.sh.iter().zip(&result.sh).filter(|(a, b)| a != b).count();
     assert!(recoloured > input.len(), "colour strength 100% exported no new colours ({recoloured})");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A studio killed during a run leaves the run's state in the cache; the
+/// next studio on the same scene and style offers it, goes on from it (the
+/// scripted switch presses "Go on from it") and ends where a run through
+/// ends, to the bit on the CPU; a studio closed normally removes what it kept.
+#[test]
+fn a_killed_studios_run_goes_on_in_the_next_studio() {
+    let Some((dir, _)) = headless_gast("kept") else { return };
+    let (Some(guitar), Some(style), Some(weights)) = (
+        gast_tests::shared_file("data/scenes/guitar.compressed.ply"),
+        gast_tests::shared_file("data/styles/starry.jpg"),
+        gast_tests::shared_file("data/weights/vgg19-conv3.safetensors"),
+    ) else {
+        return;
+    };
+    let preset = dir.join("preset.json");
+    let config = gast_core::style::StyleConfig {
+        resolution: 48,
+        texture_scale: 48,
+        cycles: 2,
+        steps_per_cycle: 8,
+        ratio_geo: 0.5,
+        ..Default::default()
+    };
+    std::fs::write(&preset, config.to_json()).expect("preset");
+    let studio = |kept: &Path, steps: &str, export: Option<&Path>, go_on: bool, frames: &str| {
+        let (_, mut cmd) = headless_gast("kept").expect("checked above");
+        cmd.args(["studio", "--headless", "--device", "cpu"])
+            .arg(&guitar)
+            .arg(&style)
+            .env("GAST_WEIGHTS", &weights)
+            .envs(gast_tests::shared_file("golden/depth/depth_seed1.safetensors").map(|p| ("GAST_DEPTH_MODEL", p)))
+            .env("GAST_STUDIO_PRESET", &preset)
+            .env("GAST_STUDIO_RUN_STEPS", steps)
+            .env("GAST_STUDIO_EXIT_AFTER_FRAMES", frames)
+            .env("GAST_STUDIO_WINDOW", "640x400")
+            .env("GAST_STUDIO_RUNS", kept)
+            .env("XDG_RUNTIME_DIR", &dir)
+            .envs(export.map(|e| ("GAST_STUDIO_EXPORT", e)))
+            .envs(go_on.then_some(("GAST_STUDIO_GO_ON", "1")));
+        cmd
+    };
+    let finish = |mut cmd: Command, what: &str| {
+        let out = cmd.output().expect("run gast studio --headless");
+        let log = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        println!("{what}:\n{log}");
+        assert!(out.status.success(), "{what}: the studio exited with {:?}", out.status);
+        log
+    };
+    let files = |folder: &Path| -> Vec<PathBuf> {
+        std::fs::read_dir(folder).map(|d| d.flatten().map(|e| e.path()).collect()).unwrap_or_default()
+    };
+
+    // One run through its 16 steps; its close removes what it kept.
+    let (whole_kept, whole) = (dir.join("kept-whole"), dir.join("whole.ply"));
+    finish(studio(&whole_kept, "1000", Some(&whole), false, "3"), "the run through");
+    assert_eq!(files(&whole_kept), Vec::<PathBuf>::new(), "a studio closed normally left its run's state");
+
+    // A run paused after about 5 steps (its state kept then) and killed.
+    let kept = dir.join("kept");
+    let mut killed = studio(&kept, "5", None, false, "100000").spawn().expect("start gast studio --headless");
+    let started = std::time::Instant::now();
+    let step = loop {
+        let record = files(&kept).into_iter().find(|p| p.to_string_lossy().ends_with(".checkpoint.json"));
+        let step = record
+            .and_then(|p| std::fs::read_to_string(p).ok())
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(|v| v["step"].as_u64());
+        if let Some(step) = step {
+            break step;
+        }
+        assert!(started.elapsed().as_secs() < 300, "the killed studio kept no state within five minutes");
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    };
+    killed.kill().expect("kill the studio");
+    killed.wait().expect("the studio ended");
+    assert!((5..16).contains(&step), "kept at step {step}");
+    assert_eq!(files(&kept).len(), 3, "the scene, the optimiser's state and the record: {:?}", files(&kept));
+
+    // The next studio goes on from it to the end.
+    let resumed = dir.join("resumed.ply");
+    let log = finish(studio(&kept, "1000", Some(&resumed), true, "3"), "the run gone on from the kept one");
+    assert!(log.contains(&format!("went on from step {step} of 16 (with the optimiser's state)")), "{log}");
+    let (a, b) = (gast_core::scene::load(&whole).expect("whole"), gast_core::scene::load(&resumed).expect("resumed"));
+    assert!(a.means != gast_core::scene::load(&guitar).expect("input").means, "the run moved nothing");
+    assert!(a == b, "the run gone on from step {step} did not end where the run through ended");
+    assert_eq!(files(&kept), Vec::<PathBuf>::new(), "the studio's close left the run's state");
     std::fs::remove_dir_all(&dir).ok();
 }

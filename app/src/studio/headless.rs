@@ -64,12 +64,15 @@ pub fn run(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Result<
             }
         }
         if close {
-            // What the window would have shown in its bottom panel, for the log.
+            // What the window would have shown in its panels, for the log.
+            for line in &app.run.log {
+                eprintln!("studio: the run's log: {line}");
+            }
             for e in &app.errors {
                 eprintln!("studio: shown in the window: {e}");
             }
             // The run's thread ends before the device and the process do.
-            app.run.shut_down();
+            app.shut_down();
             if app.script.as_ref().is_some_and(|s| s.failed) {
                 anyhow::bail!("the scripted run (GAST_STUDIO_RUN_STEPS) could not start");
             }

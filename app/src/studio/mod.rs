@@ -12,6 +12,8 @@
 //! presses Start once the scene and style are open, pauses after N steps and
 //! saves the current Gaussians to `GAST_STUDIO_EXPORT` (the frame count of the
 //! exit switch then starts from there), as a user would with the Export menu.
+//! With `GAST_STUDIO_GO_ON=1` the scripted run goes on from the kept run
+//! offered ([`recovery`]) instead of pressing Start.
 //! `GAST_STUDIO_STRENGTH=C[,S]` sets the strength sliders (percent);
 //! `GAST_STUDIO_WINDOW=WxH` opens the window at that size (1280×800 without),
 //! so a screenshot can show the whole side panel. `gast studio --headless`
@@ -24,6 +26,7 @@ pub mod inspect;
 mod leave;
 mod open;
 mod panels;
+pub mod recovery;
 mod scripted;
 pub mod session_link;
 pub mod style_depth;
@@ -96,6 +99,8 @@ pub struct StudioApp {
     snapshot: Option<SceneRef>,
     /// Asking before a close or an open drops an unexported result.
     leave: leave::LeaveGuard,
+    /// Runs kept against a crash: this studio's, and one offered to go on from.
+    recovery: recovery::Recovery,
     /// A newer snapshot than `snapshot`, waiting for [`SOFTWARE_VIEW_INTERVAL`]
     /// on a software renderer, and when `snapshot` was taken up.
     newer_snapshot: Option<Arc<gast_core::session::Snapshot>>,
@@ -174,6 +179,8 @@ pub struct StudioApp {
 /// The `GAST_STUDIO_RUN_STEPS` test switch's progress.
 struct ScriptedRun {
     steps: usize,
+    /// `GAST_STUDIO_GO_ON`: go on from the kept run offered instead of pressing Start.
+    go_on: bool,
     export: Option<PathBuf>,
     started: bool,
     /// Pause was sent; the export waits for the paused state's snapshot.
@@ -248,7 +255,7 @@ impl eframe::App for StudioApp {
     }
 
     fn on_exit(&mut self) {
-        self.run.shut_down();
+        self.shut_down();
     }
 }
 
@@ -317,6 +324,7 @@ impl StudioApp {
             scene: None,
             snapshot: None,
             leave: leave::LeaveGuard::default(),
+            recovery: recovery::Recovery::default(),
             newer_snapshot: None,
             snapshot_taken_at: None,
             software_viewport: false,
@@ -365,6 +373,7 @@ impl StudioApp {
             screenshot: ScreenshotState::default(),
             script: env_u64("GAST_STUDIO_RUN_STEPS").map(|n| ScriptedRun {
                 steps: n as usize,
+                go_on: std::env::var_os("GAST_STUDIO_GO_ON").is_some_and(|v| v == "1"),
                 export: std::env::var_os("GAST_STUDIO_EXPORT").map(PathBuf::from),
                 started: false,
                 pausing: false,
@@ -397,6 +406,13 @@ impl StudioApp {
     }
 
     /// Connects the code that spawns session workers; until then Start is disabled.
+    /// Ends the studio's run and removes the state it kept: the studio
+    /// closes (after asking about an unexported result).
+    pub(super) fn shut_down(&mut self) {
+        self.run.shut_down();
+        self.recovery.discard_all();
+    }
+
     pub fn set_session_starter(&mut self, starter: SessionStarter) {
         self.starter = Some(starter);
     }
@@ -544,6 +560,7 @@ impl StudioApp {
         self.take_newer_snapshot();
         self.adopt_plan();
         self.replan_after_first_cycle();
+        self.look_for_kept_run();
         // While the run is live its GPU buffers are drawn; once it ends, its final snapshot.
         match self.run.live() {
             Some(l) if self.live.as_ref().is_some_and(|r| r.live.same_run(&l)) => {}

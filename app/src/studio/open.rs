@@ -11,6 +11,7 @@ impl StudioApp {
         // in as this scene's result (the question of `leave` came first).
         if self.run.link.is_some() {
             self.run.shut_down();
+            self.recovery.discard_all();
             self.run = session_link::RunMonitor::default();
             self.live = None;
             self.shown = None;

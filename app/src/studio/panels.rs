@@ -230,6 +230,7 @@ impl StudioApp {
         ui.separator();
         ui.heading("Run");
         self.run_buttons(ui);
+        self.kept_run_offer(ui);
         controls::loss_chart(ui, &self.run.steps);
         if let Some((p, eta)) = self.run.progress() {
             ui.add(egui::ProgressBar::new(p).text(format!("{:.0}%  ETA {}", p * 100.0, time_left(eta))));
@@ -378,7 +379,13 @@ impl StudioApp {
     }
 
     pub(super) fn start_run(&mut self) {
-        let (Some(starter), Some(scene), Some((style, image))) = (
+        self.start_run_from(None);
+    }
+
+    /// Starts a run, going on from the kept run `resume` when given (its
+    /// settings are the editor's by then); its state is kept against a crash.
+    pub(super) fn start_run_from(&mut self, resume: Option<super::recovery::Offer>) {
+        let (Some(_), Some(scene), Some((style, image))) = (
             &self.starter,
             &self.scene,
             self.style.and_then(|k| self.styles.get(k)).and_then(|s| Some((s, s.image.clone()?))),
@@ -391,11 +398,18 @@ impl StudioApp {
             return;
         }
         let ctx = self.ctx.clone();
+        let scene = scene.scene.gaussians.to_arc();
+        let style_path = style.path.clone();
+        let style_depth_image = match &resume {
+            Some(offer) => offer.record.style_depth_image.clone(),
+            None => self.style_depth_images.get(&style.path).cloned(),
+        };
+        let keep = self.new_slot(&style_path, [image.width, image.height], style_depth_image.clone());
         let request = StartRequest {
-            scene: scene.scene.gaussians.to_arc(),
+            scene,
             style: image,
-            style_path: style.path.clone(),
-            style_depth_image: self.style_depth_images.get(&style.path).cloned(),
+            style_path,
+            style_depth_image,
             config: self.config.clone(),
             cameras: self.cameras.clone(),
             // Every step's report wakes the window (progress, loss chart); a
@@ -407,8 +421,11 @@ impl StudioApp {
                 Arc::new(move || ctx.request_repaint())
             },
             gpu: self.device.pick(self.gpu.as_ref()),
-            fit_budget: self.fit_budget,
+            fit_budget: self.fit_budget && resume.is_none(),
+            keep,
+            resume,
         };
+        let Some(starter) = &self.starter else { return };
         match starter(request) {
             Ok(link) => self.run.attach(link),
             Err(e) => self.report(e.context("starting the run")),

@@ -20,7 +20,15 @@ impl StudioApp {
             let ready = self.scene.is_some() && self.style.is_some() && self.starter.is_some();
             if ready {
                 script.started = true;
-                self.start_run();
+                if !script.go_on {
+                    self.start_run();
+                } else if self.recovery.offer.is_some() {
+                    self.go_on_from_kept_run();
+                } else {
+                    self.report(anyhow::anyhow!(
+                        "GAST_STUDIO_GO_ON: no kept run of this scene and style to go on from"
+                    ));
+                }
             }
             // A scene or style that failed to load, or a run refused at its
             // start, ends the script (it waited for ever) with what the window shows.

@@ -94,6 +94,10 @@ pub struct StartRequest {
     /// On the CPU, fit the working resolution and the cycles to about ten
     /// minutes (`gast_core::session::plan::auto_plan`), as `gast stylize` does.
     pub fit_budget: bool,
+    /// Where the run's state is kept against a crash ([`super::recovery`]).
+    pub keep: Option<super::recovery::Slot>,
+    /// A kept run to go on from (its settings are `config`; no plan is made).
+    pub resume: Option<super::recovery::Offer>,
 }
 
 /// Starts a session worker (provided by whoever links the session runner in).
@@ -241,13 +245,16 @@ impl RunMonitor {
     /// steps: 13 min 17 s against 12 min 20 s). While every step so far has
     /// been a first visit, a planned run's expected pace stands in (fern's
     /// 20 views: 25 min after 13 steps of a run planned to 10).
+    ///
+    /// A run that went on from a kept one reports from its step on, its
+    /// times from its own start.
     pub fn progress(&self) -> Option<(f32, f64)> {
-        let last = self.steps.last()?;
+        let (first, last) = (self.steps.first()?, self.steps.last()?);
         let done = (last.iter + 1) as f64;
         let total = last.total.max(1) as f64;
         let per_step = (self.last_cycle_pace().or_else(|| self.pace_after_first_visits()))
             .or(self.planned_step_s)
-            .unwrap_or(last.elapsed_s / done);
+            .unwrap_or(last.elapsed_s / f64::from(last.iter + 1 - first.iter));
         Some(((done / total) as f32, (per_step * (total - done)).max(0.0)))
     }
 
@@ -263,7 +270,8 @@ impl RunMonitor {
             .iter()
             .rposition(|r| r.cycle < ended)
             .or_else(|| self.last_first_visit().filter(|&k| k < end));
-        let (s0, i0) = start.map_or((0.0, -1), |k| (self.steps[k].elapsed_s, self.steps[k].iter as i64));
+        let before_first = i64::from(self.steps[0].iter) - 1;
+        let (s0, i0) = start.map_or((0.0, before_first), |k| (self.steps[k].elapsed_s, self.steps[k].iter as i64));
         let steps = self.steps[end].iter as i64 - i0;
         (steps > 0).then(|| (self.steps[end].elapsed_s - s0) / steps as f64)
     }
@@ -364,6 +372,24 @@ mod tests {
             };
             assert!((eta - pace * left).abs() < 1e-9, "step {iter}: ETA {eta} against {}", pace * left);
         }
+    }
+
+    /// A run that went on from step 10 of 20 reports from there, its times
+    /// from its own start: its pace is its own steps' (2 s), not its time
+    /// over all the steps before it.
+    #[test]
+    fn a_run_gone_on_from_a_kept_one_takes_its_own_pace() {
+        let mut m = RunMonitor::default();
+        for (k, iter) in (10..13u32).enumerate() {
+            m.steps.push(report(iter, 20, 2, Phase::Color, 2.0 * (k + 1) as f64));
+            let (p, eta) = m.progress().expect("progress");
+            assert!((p - (iter + 1) as f32 / 20.0).abs() < 1e-6);
+            assert!((eta - 2.0 * f64::from(20 - (iter + 1))).abs() < 1e-9, "step {iter}: ETA {eta}");
+        }
+        // A cycle that ended within this run: its pace from the run's first step.
+        m.steps.push(report(13, 20, 3, Phase::Color, 8.0));
+        let (_, eta) = m.progress().expect("progress");
+        assert!((eta - 2.0 * 6.0).abs() < 1e-9, "ETA {eta} after the first cycle ended");
     }
 
     /// The first visits' targets are not read into the pace: views 0–3 each

@@ -7,7 +7,7 @@
 use std::sync::Arc;
 
 use gast_core::camera::{OrbitOptions, framed_orbit};
-use gast_core::session::{Event, SessionInputs, spawn_with};
+use gast_core::session::{Event, RunOptions, SessionInputs, spawn_run};
 use gast_core::style::StyleConfig;
 use gast_core::vision::Vgg;
 
@@ -75,9 +75,20 @@ pub(super) fn plan_for_cpu(
 /// The studio's session starter.
 pub fn starter() -> SessionStarter {
     Box::new(|req: StartRequest| {
-        let StartRequest { scene, style, style_path, style_depth_image, mut config, cameras, waker, gpu, fit_budget } =
-            req;
-        let handle = spawn_with(
+        let StartRequest {
+            scene,
+            style,
+            style_path,
+            style_depth_image,
+            mut config,
+            cameras,
+            waker,
+            gpu,
+            fit_budget,
+            keep,
+            resume,
+        } = req;
+        let handle = spawn_run(
             move |emit: &mut dyn FnMut(Event)| {
                 let t = std::time::Instant::now();
                 let style = Arc::unwrap_or_clone(style);
@@ -104,7 +115,8 @@ pub fn starter() -> SessionStarter {
                     cameras
                 };
                 emit(Event::Stage { name: "weights and cameras".into(), seconds: t.elapsed().as_secs_f64() });
-                if fit_budget && gpu.is_none() {
+                // A kept run goes on with the settings it was planned with.
+                if fit_budget && gpu.is_none() && resume.is_none() {
                     let t = std::time::Instant::now();
                     let gflops = gast_core::session::plan::machine_gemm_gflops_once();
                     let (plan, seconds_per_step) =
@@ -125,7 +137,20 @@ pub fn starter() -> SessionStarter {
                     emit(Event::Warning(w));
                 }
                 emit(Event::Stage { name: "style depth".into(), seconds: t.elapsed().as_secs_f64() });
-                Ok(SessionInputs { scene, cameras, style, style_depth, vgg, config, gpu })
+                let resume = match resume {
+                    Some(offer) => {
+                        let t = std::time::Instant::now();
+                        let (from, said) = offer.load()?;
+                        emit(Event::Stage {
+                            name: format!("read the kept run {} ({said})", offer.path.display()),
+                            seconds: t.elapsed().as_secs_f64(),
+                        });
+                        Some(from)
+                    }
+                    None => None,
+                };
+                let options = RunOptions { resume, keep: keep.map(|slot| slot.keeper()) };
+                Ok((SessionInputs { scene, cameras, style, style_depth, vgg, config, gpu }, options))
             },
             waker,
         );

@@ -98,14 +98,17 @@ pub struct ResumeFrom {
 
 /// Keeps a run's state: `write` is given the session after every `every` of
 /// stepping, at a pause and at the run's end (whenever it has taken a step
-/// since the last write). A write's error is reported as a warning and the
-/// run goes on.
+/// since the last write). Each write is reported as a stage with its time;
+/// a write's error as a warning, and the run goes on.
 pub struct Keeper {
     /// Stepping time between writes.
     pub every: Duration,
     /// Writes the session's state (its result, optimiser state and step).
-    pub write: Box<dyn FnMut(&Session) -> Result<(), String> + Send>,
+    pub write: KeepWrite,
 }
+
+/// A [`Keeper`]'s writer: the session's state to wherever it is kept.
+pub type KeepWrite = Box<dyn FnMut(&Session) -> Result<(), String> + Send>;
 
 impl Keeper {
     /// Writes the session's state when it has stepped since `written` (the
@@ -115,8 +118,13 @@ impl Keeper {
             return;
         }
         *written = session.steps_done();
-        if let Err(e) = (self.write)(session) {
-            emit(Event::Warning(format!("the run's state could not be kept at step {written}: {e}")));
+        let t = Instant::now();
+        match (self.write)(session) {
+            Ok(()) => emit(Event::Stage {
+                name: format!("kept the run's state at step {written}"),
+                seconds: t.elapsed().as_secs_f64(),
+            }),
+            Err(e) => emit(Event::Warning(format!("the run's state could not be kept at step {written}: {e}"))),
         }
     }
 }

@@ -473,7 +473,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     }
     let start = match resumed {
         Some((state, step)) => {
-            let (moments, how) = resume::moments(&checkpoint, step);
+            let (moments, how) = checkpoint::read_moments(&checkpoint, step);
             session
                 .resume_at(&state, step, moments.as_ref())
                 .with_context(|| format!("could not resume from {}", checkpoint.display()))?;

@@ -7,7 +7,6 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use gast_core::session::OptimiserState;
 use gast_core::style::StyleConfig;
 use serde::{Deserialize, Serialize};
 
@@ -105,20 +104,6 @@ impl Resume {
             );
         }
         Ok(scene)
-    }
-}
-
-/// The optimiser's state beside the checkpoint `path` at `step`, and what
-/// to say of it: kept, or why the moments start afresh (none written, or
-/// unreadable: a resume still goes on, as from a checkpoint without one).
-pub fn moments(path: &Path, step: u32) -> (Option<OptimiserState>, String) {
-    let at = checkpoint::moments_path(path);
-    let read = std::fs::read(&at).map_err(|e| e.to_string()).and_then(|b| OptimiserState::from_safetensors(&b));
-    match read {
-        Ok(m) if m.step == step => (Some(m), "with the optimiser's moments".into()),
-        Ok(m) => (None, format!("the optimiser's moments start afresh: {} holds step {}'s", at.display(), m.step)),
-        Err(_) if !at.exists() => (None, format!("the optimiser's moments start afresh: no {}", at.display())),
-        Err(e) => (None, format!("the optimiser's moments start afresh: {} is unreadable ({e})", at.display())),
     }
 }
 
