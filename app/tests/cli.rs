@@ -576,8 +576,10 @@ fn ctrl_c_stops_a_fit_and_resume_goes_on_from_there() {
     assert!(!fitted.is_empty());
     assert!(out.join("cameras.json").is_file(), "{text}");
     assert!(text.contains("the same command with --resume goes on from it"), "{text}");
+    // The checkpoint holds the fit as it stood, before the output's pruning.
     let checkpoint = gast_core::scene::load(out.join("f.checkpoint.ply")).expect("the checkpoint");
-    assert_eq!(checkpoint.len(), fitted.len());
+    assert!(gast_core::fit::finished(&checkpoint, &gast_core::fit::FitConfig::default()) == fitted);
+    assert!(out.join("f.checkpoint.adam.safetensors").is_file(), "the fit's state: {text}");
 
     let other = gast(&["fit", s(&fern), "--resolution", "64", "--iterations", "5", "--resume", "--out", s(&scene)]);
     assert!(!other.status.success());
@@ -594,6 +596,45 @@ fn ctrl_c_stops_a_fit_and_resume_goes_on_from_there() {
     assert!(status.success(), "{text}");
     assert_eq!(iteration_after(&text, "resuming from iteration "), stopped, "{text}");
     assert!(iteration_after(&text, "stopped at iteration ") > stopped, "{text}");
+    std::fs::remove_dir_all(&out).ok();
+}
+
+/// A fit killed outright after its first checkpoint (scene, state, record)
+/// and resumed from it writes the scene a fit run through writes, to the
+/// byte; without the state (an older checkpoint) it goes on, saying so.
+#[cfg(unix)]
+#[test]
+fn a_fit_resumed_from_its_checkpoint_writes_the_scene_of_a_fit_run_through() {
+    let Some(fern) = shared_file("data/datasets/fern") else { return };
+    let out = temp("exact-fit");
+    let (whole, part) = (out.join("whole.ply"), out.join("part.ply"));
+    let fit = |scene: &Path| {
+        let args = ["fit", s(&fern), "--resolution", "64", "--iterations", "600", "--checkpoint-every", "1"];
+        [&args[..], &["--out", s(scene)]].concat().into_iter().map(str::to_owned).collect::<Vec<_>>()
+    };
+    let run = |args: &[String]| gast(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let o = run(&fit(&whole));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let killed = fit(&part);
+    let killed: Vec<&str> = killed.iter().map(String::as_str).collect();
+    let (status, text) = signalled(&killed, "checkpoint: iteration", "-KILL", std::time::Duration::ZERO);
+    assert!(!status.success() && !part.exists(), "{text}");
+    let at = iteration_after(&text, "checkpoint: iteration ");
+    assert!(at < 600, "{text}");
+    let resumed = [fit(&part), vec!["--resume".to_owned()]].concat();
+    let o = run(&resumed);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("(with the fit's optimiser state, statistics and view order)"), "{}", stderr(&o));
+    let (a, b) = (std::fs::read(&whole).expect("whole"), std::fs::read(&part).expect("resumed"));
+    assert!(a == b, "the fit resumed from iteration {at} wrote another scene than the fit run through");
+
+    // Without its state (an older version's checkpoint) the fit still goes on, saying why.
+    let (status, text) = signalled(&killed, "checkpoint: iteration", "-KILL", std::time::Duration::ZERO);
+    assert!(!status.success(), "{text}");
+    std::fs::remove_file(out.join("part.checkpoint.adam.safetensors")).expect("the state was written");
+    let o = run(&resumed);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("the optimiser's moments and the view order start afresh: no "), "{}", stderr(&o));
     std::fs::remove_dir_all(&out).ok();
 }
 

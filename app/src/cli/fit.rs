@@ -4,7 +4,7 @@
 //! dataset's COLMAP SfM points when there are any, else from random Gaussians.
 
 use std::ops::ControlFlow;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -71,14 +71,15 @@ pub struct FitArgs {
     pub preview: Option<PathBuf>,
     /// Every this many seconds of fitting, write the scene as it stands to a
     /// checkpoint beside the output (`fern.ply` → `fern.checkpoint.ply`, INRIA
-    /// .ply whatever the output's format, with cameras.json), so a fit killed
-    /// or crashed loses at most this much; the checkpoint is removed once the
-    /// output is written. 0: none.
+    /// .ply whatever the output's format, with cameras.json and the fit's
+    /// optimiser state), so a fit killed or crashed loses at most this much;
+    /// the checkpoint is removed once the output is written. 0: none.
     #[arg(long, default_value_t = DEFAULT_CHECKPOINT_S, value_parser = crate::views::within(CHECKPOINT_SECONDS))]
     pub checkpoint_every: u64,
     /// Go on from the checkpoint beside the output, left by a fit that was
     /// killed, crashed or stopped with Ctrl-C: from its iteration, with the
-    /// same dataset and settings (the same flags), which it checks.
+    /// same dataset and settings (the same flags), which it checks; with
+    /// the optimiser's state it keeps, the result is the fit run through's.
     #[arg(long)]
     pub resume: bool,
 }
@@ -179,15 +180,16 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         };
         anyhow::bail!("{}: expected at least one view to fit, found {found}", args.dataset.display())
     };
-    let (initial, start) = match resume_from {
+    let (initial, start, state) = match resume_from {
         Some(start) => {
             let path = checkpoint_path(&args.out);
             let scene = gast_core::scene::load(&path)
                 .with_context(|| format!("could not read the checkpoint {} to resume from", path.display()))?;
-            eprintln!("resuming from iteration {start} of {}: {}", cfg.iterations, path.display());
-            (scene, start)
+            let (state, said) = fit_state(&path, &scene, start, views.len());
+            eprintln!("resuming from iteration {start} of {}: {} ({said})", cfg.iterations, path.display());
+            (scene, start, state)
         }
-        None => (initial_scene(&args, &views, &cfg)?, 0),
+        None => (initial_scene(&args, &views, &cfg)?, 0, None),
     };
     eprintln!(
         "loaded {} views ({} held out) of {} at {}×{} in {:.1} s; fitting {} iterations from {} Gaussians",
@@ -210,7 +212,7 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     let mut stopped_at = None;
     let mut checkpoint = Checkpoint::new(&args, &cfg, &all_cameras);
     interrupt.begin();
-    let scene = fit::fit_resumed(&views, initial, &cfg, start, &mut |p, scene| {
+    let scene = fit::fit_resumed(&views, initial, &cfg, start, state, &mut |p, run| {
         let l = smoothed.map_or(p.loss, |s| 0.98 * s + 0.02 * p.loss);
         smoothed = Some(l);
         if p.iteration % 10 == 0 || p.iteration == p.iterations {
@@ -218,11 +220,12 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
             pb.set_message(format!("L1 {l:.4}, {} Gaussians", p.gaussians));
         }
         if interrupt.asked() && p.iteration < p.iterations {
-            stopped_at = Some(p.iteration);
+            // Kept, so that the same command with --resume goes on from here.
+            stopped_at = Some((p.iteration, checkpoint.write(run)));
             return ControlFlow::Break(());
         }
         if p.iteration < p.iterations
-            && let Some(line) = checkpoint.maybe_write(p, || fit::finished(scene, &cfg))
+            && let Some(line) = checkpoint.maybe_write(p, run)
         {
             // Not `pb.println`: a hidden bar (output not a terminal) drops its lines.
             pb.suspend(|| eprintln!("{line}"));
@@ -231,13 +234,12 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     });
     interrupt.end();
     pb.finish_and_clear();
-    if let Some(n) = stopped_at {
+    if let Some((n, written)) = &stopped_at {
         eprintln!(
             "stopped at iteration {n} of {} (Ctrl-C): writing the scene as it is; Ctrl-C again quits at once",
             cfg.iterations
         );
-        // Kept, so that the same command with --resume goes on from here.
-        match checkpoint.write(&scene, n) {
+        match written {
             Ok(()) => eprintln!(
                 "checkpoint: iteration {n} written to {}; the same command with --resume goes on from it",
                 checkpoint.path.display()
@@ -346,16 +348,16 @@ impl<'a> Checkpoint<'a> {
         }
     }
 
-    /// Writes the scene `scene()` when the interval has passed since the
+    /// Writes the fit as it stands when the interval has passed since the
     /// last one (or the fit's start); returns what to tell the user. A
     /// failed write is a warning: the fit goes on, and its output is
     /// written (or fails, saying why) at the end as before.
-    fn maybe_write(&mut self, p: fit::FitProgress, scene: impl FnOnce() -> gast_core::Gaussians) -> Option<String> {
+    fn maybe_write(&mut self, p: fit::FitProgress, run: &fit::FitRun<'_>) -> Option<String> {
         if !self.due.now() {
             return None;
         }
         let t = Instant::now();
-        let result = self.write(&scene(), p.iteration);
+        let result = self.write(run);
         self.due.written();
         Some(match result {
             Ok(()) => format!(
@@ -369,10 +371,13 @@ impl<'a> Checkpoint<'a> {
         })
     }
 
-    /// Writes the scene after `iteration` iterations and its record
-    /// ([`checkpoint::write_with_record`]), and the cameras beside it once.
-    fn write(&mut self, scene: &gast_core::Gaussians, iteration: u32) -> anyhow::Result<()> {
-        checkpoint::write_with_record(&self.path, scene, None, &self.info(iteration))?;
+    /// Writes the fit's scene as it stands (before the final pruning), its
+    /// state and its record ([`checkpoint::write_with_record`]), and the
+    /// cameras beside it once.
+    fn write(&mut self, run: &fit::FitRun<'_>) -> anyhow::Result<()> {
+        let state = run.state();
+        let bytes = state.to_safetensors().map_err(|e| anyhow::anyhow!("the fit's state: {e}"))?;
+        checkpoint::write_with_record(&self.path, run.scene(), Some(&bytes), &self.info(state.iteration))?;
         if !self.written {
             // Once: the checkpoint is a scene the studio and `gast stylize` open with its cameras.
             crate::views::write_cameras_beside(&self.path, &self.args.dataset, self.cameras)?;
@@ -385,6 +390,25 @@ impl<'a> Checkpoint<'a> {
     /// whole fit; also the one a resumed fit went on from.
     fn remove(&self) {
         checkpoint::remove(&self.path);
+    }
+}
+
+/// The fit's state beside the checkpoint `path` of `scene` after `start`
+/// iterations over `views` views, and what to say of it: kept, or why the
+/// moments, statistics and view order start afresh (none written, as by
+/// older versions, or unreadable, or not this scene's: the fit still goes on).
+fn fit_state(path: &Path, scene: &gast_core::Gaussians, start: u32, views: usize) -> (Option<fit::FitState>, String) {
+    let at = checkpoint::moments_path(path);
+    let read = std::fs::read(&at)
+        .map_err(|e| e.to_string())
+        .and_then(|b| fit::FitState::from_safetensors(&b))
+        .and_then(|s| s.check(scene, start, views).map(|()| s));
+    match read {
+        Ok(state) => (Some(state), "with the fit's optimiser state, statistics and view order".into()),
+        Err(_) if !at.exists() => {
+            (None, format!("the optimiser's moments and the view order start afresh: no {}", at.display()))
+        }
+        Err(e) => (None, format!("the optimiser's moments and the view order start afresh: {}: {e}", at.display())),
     }
 }
 

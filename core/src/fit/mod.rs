@@ -9,9 +9,11 @@
 //! iteration, Adam with the original trainer's learning rates (the means' rate
 //! decays exponentially and scales with the scene extent), and the trainer's
 //! clone/split/prune densification driven by the view-space gradient of the
-//! means. Departures from the original, for brevity: no D-SSIM term, no opacity
-//! reset, and the Adam moments restart after each densification (the trainer
-//! keeps those of the surviving Gaussians).
+//! means. Departures from the original, for brevity: no D-SSIM term, no
+//! opacity reset, and the Adam moments restart after each densification (the
+//! trainer keeps those of the surviving Gaussians). A checkpoint keeps the
+//! fit's whole state ([`FitState`]), so a fit resumed from one is the fit run
+//! through.
 //!
 //! The view-space gradient is not exposed by the rasterizer, so it is
 //! recovered from the world-space gradient of the mean: `∂L/∂t = R ∂L/∂μ` in
@@ -21,6 +23,7 @@
 
 mod data;
 mod init;
+mod state;
 #[cfg(test)]
 mod tests;
 
@@ -34,11 +37,12 @@ use crate::camera::{Camera, ColmapPoints, scene_extent};
 use crate::raster::{self, Grads, RenderOptions};
 use crate::scene::Gaussians;
 use crate::session::subset;
-use crate::style::adam::{Adam, AdamConfig};
+use crate::style::adam::{Adam, AdamConfig, AdamState};
 
 pub use data::{FitDataError, PosedImages, find_image, image_candidates, load_posed_images, photo_folders, read_rgb};
 pub use init::look_at_region;
 use init::{Rng, random_gaussians, sfm_gaussians};
+pub use state::FitState;
 
 /// Everything that shapes a fit. Learning rates are the 3DGS trainer's.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -239,16 +243,16 @@ pub fn initial_scene_from_points(points: &ColmapPoints, cfg: &FitConfig) -> Gaus
 /// ([`initial_scene`]): `views` holds each camera with its RGB image
 /// (`height × width × 3` in `[0, 1]`, already composited on
 /// `cfg.background`). `progress` is called after every iteration with the
-/// scene as it stands (before [`finished`]'s pruning: a checkpoint writes
-/// `finished(scene, cfg)`); its `Break` stops the fit there (a user's
-/// Ctrl-C), which then ends as after the last iteration.
+/// fit as it stands ([`FitRun`]: its scene before [`finished`]'s pruning,
+/// and its whole state, which a checkpoint writes); its `Break` stops the
+/// fit there (a user's Ctrl-C), which then ends as after the last iteration.
 ///
 /// # Panics
 /// When an image's size does not match its camera (a caller bug).
 pub fn fit(
     views: &[(Camera, Vec<f32>)],
     cfg: &FitConfig,
-    progress: &mut dyn FnMut(FitProgress, &Gaussians) -> ControlFlow<()>,
+    progress: &mut dyn FnMut(FitProgress, &FitRun<'_>) -> ControlFlow<()>,
 ) -> Gaussians {
     let cameras: Vec<Camera> = views.iter().map(|(c, _)| c.clone()).collect();
     fit_from(views, initial_scene(&cameras, cfg), cfg, progress)
@@ -262,26 +266,29 @@ pub fn fit_from(
     views: &[(Camera, Vec<f32>)],
     initial: Gaussians,
     cfg: &FitConfig,
-    progress: &mut dyn FnMut(FitProgress, &Gaussians) -> ControlFlow<()>,
+    progress: &mut dyn FnMut(FitProgress, &FitRun<'_>) -> ControlFlow<()>,
 ) -> Gaussians {
-    fit_resumed(views, initial, cfg, 0, progress)
+    fit_resumed(views, initial, cfg, 0, None, progress)
 }
 
 /// As [`fit_from`], from iteration `start` (a checkpoint's scene after
 /// `start` iterations of the same `cfg`): the learning-rate schedule and
-/// densification go on from there. The Adam moments and the densification's
-/// gradient statistics start afresh (a checkpoint holds the scene only), and
-/// the view order is drawn anew, so a resumed fit is not bit-identical to
-/// one run through.
+/// densification go on from there. With `state` (the fit's [`FitRun::state`]
+/// at `start`, which must pass [`FitState::check`] for `initial`) the Adam
+/// moments, the densification's gradient statistics, the view order and the
+/// generator go on as they were, and the resumed fit is the fit run through,
+/// to the bit; without, they start afresh and the view order is drawn anew.
 ///
 /// # Panics
-/// When an image's size does not match its camera (a caller bug).
+/// When an image's size does not match its camera, or `state` does not fit
+/// `initial` (caller bugs).
 pub fn fit_resumed(
     views: &[(Camera, Vec<f32>)],
     initial: Gaussians,
     cfg: &FitConfig,
     start: u32,
-    progress: &mut dyn FnMut(FitProgress, &Gaussians) -> ControlFlow<()>,
+    state: Option<FitState>,
+    progress: &mut dyn FnMut(FitProgress, &FitRun<'_>) -> ControlFlow<()>,
 ) -> Gaussians {
     for (cam, img) in views {
         assert_eq!(
@@ -302,6 +309,15 @@ pub fn fit_resumed(
     let mut opt = Optimisers::new(&g);
     let mut stats = GradStats::new(g.len());
     let mut order: Vec<usize> = Vec::new();
+    if let Some(state) = state {
+        if let Err(e) = state.check(&g, start, views.len()) {
+            panic!("fit: the state to resume from does not fit: {e}");
+        }
+        opt.set_state(state.groups);
+        stats = GradStats { sum: state.grad_sum, count: state.grad_count };
+        order = state.order.iter().map(|&v| v as usize).collect();
+        rng = Rng::from_state(state.rng);
+    }
     let t0 = Instant::now();
     let densify_until = (cfg.densify.until_fraction * cfg.iterations as f32) as u32;
     for it in start.min(cfg.iterations)..cfg.iterations {
@@ -352,6 +368,7 @@ pub fn fit_resumed(
             opt = Optimisers::new(&g);
             stats = GradStats::new(g.len());
         }
+        let run = FitRun { g: &g, opt: &opt, stats: &stats, order: &order, rng: &rng, iteration: done };
         let said = progress(
             FitProgress {
                 iteration: done,
@@ -360,13 +377,43 @@ pub fn fit_resumed(
                 gaussians: g.len(),
                 elapsed_s: t0.elapsed().as_secs_f64(),
             },
-            &g,
+            &run,
         );
         if said.is_break() {
             break;
         }
     }
     finished(&g, cfg)
+}
+
+/// A fit as it stands after an iteration, as [`fit`]'s `progress` sees it.
+pub struct FitRun<'a> {
+    g: &'a Gaussians,
+    opt: &'a Optimisers,
+    stats: &'a GradStats,
+    order: &'a [usize],
+    rng: &'a Rng,
+    iteration: u32,
+}
+
+impl FitRun<'_> {
+    /// The scene, before [`finished`]'s pruning.
+    pub fn scene(&self) -> &Gaussians {
+        self.g
+    }
+
+    /// Everything else a fit resumed from here needs to go on as this one
+    /// does ([`fit_resumed`]).
+    pub fn state(&self) -> FitState {
+        FitState {
+            iteration: self.iteration,
+            groups: self.opt.state(),
+            grad_sum: self.stats.sum.clone(),
+            grad_count: self.stats.count.clone(),
+            order: self.order.iter().map(|&v| v as u32).collect(),
+            rng: self.rng.state(),
+        }
+    }
 }
 
 /// The scene a fit hands out: `g` without the Gaussians that ended up
@@ -404,6 +451,20 @@ impl Optimisers {
             opacity: Adam::new(n, c),
             dc: Adam::new(3 * n, c),
             rest: Adam::new(rest * n, c),
+        }
+    }
+
+    /// Every group's state, in the order of [`state::GROUPS`].
+    fn state(&self) -> Vec<AdamState> {
+        [&self.means, &self.scales, &self.quats, &self.opacity, &self.dc, &self.rest].map(Adam::state).to_vec()
+    }
+
+    /// Goes on from [`Self::state`]'s groups, checked to fit ([`FitState::check`]).
+    fn set_state(&mut self, groups: Vec<AdamState>) {
+        let mine =
+            [&mut self.means, &mut self.scales, &mut self.quats, &mut self.opacity, &mut self.dc, &mut self.rest];
+        for (adam, g) in mine.into_iter().zip(groups) {
+            adam.set_state(g).unwrap_or_else(|e| panic!("fit: the state to resume from does not fit: {e}"));
         }
     }
 

@@ -1,7 +1,8 @@
 //! The optimiser's state of a run ([`OptimiserState`]): each parameter
 //! group's Adam steps and moments, which a checkpoint keeps beside its scene
 //! so that a resumed run updates as the whole run would have. Stored as
-//! safetensors: `{group}.m` and `{group}.v` (f32), the steps in the metadata.
+//! safetensors: `{group}.m` and `{group}.v` (f32), the steps in the metadata
+//! ([`StateFile`], which a fit's state ([`crate::fit::FitState`]) shares).
 
 use std::collections::HashMap;
 
@@ -24,49 +25,109 @@ pub struct OptimiserState {
 impl OptimiserState {
     /// The state as a safetensors file's bytes.
     pub fn to_safetensors(&self) -> Result<Vec<u8>, String> {
-        let bytes: Vec<(String, Vec<u8>)> = (GROUPS.iter().zip(&self.groups))
-            .flat_map(|(name, g)| [(format!("{name}.m"), &g.m), (format!("{name}.v"), &g.v)])
-            .map(|(name, x)| (name, x.iter().flat_map(|f| f.to_le_bytes()).collect()))
-            .collect();
-        let views = bytes
-            .iter()
-            .map(|(name, b)| Ok((name.clone(), TensorView::new(Dtype::F32, vec![b.len() / 4], b)?)))
-            .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()
-            .map_err(|e| e.to_string())?;
-        let mut meta: HashMap<String, String> =
-            GROUPS.iter().zip(&self.groups).map(|(name, g)| (format!("{name}.steps"), g.step.to_string())).collect();
-        meta.insert("step".into(), self.step.to_string());
-        safetensors::serialize(views, Some(meta)).map_err(|e| e.to_string())
+        let meta = HashMap::from([("step".to_owned(), self.step.to_string())]);
+        StateFile::write(&GROUPS, &self.groups, &[], meta)
     }
 
     /// Reads [`OptimiserState::to_safetensors`]'s bytes; an error that says
     /// what is missing or malformed.
     pub fn from_safetensors(bytes: &[u8]) -> Result<Self, String> {
+        let file = StateFile::read(bytes)?;
+        Ok(Self { step: file.number("step")?, groups: file.groups(&GROUPS)? })
+    }
+}
+
+/// A tensor of a state file beside the groups' moments.
+pub(crate) enum Tensor<'a> {
+    F32(&'a [f32]),
+    U32(&'a [u32]),
+}
+
+/// A safetensors file of optimiser groups (`{group}.m`, `{group}.v` in f32,
+/// `{group}.steps` in the metadata), further tensors and metadata: the
+/// format of a stylization's and of a fit's optimiser state.
+pub(crate) struct StateFile<'a> {
+    st: safetensors::SafeTensors<'a>,
+    meta: HashMap<String, String>,
+}
+
+impl<'a> StateFile<'a> {
+    /// The bytes of a file of `groups` (named by `names`), `extra` tensors and `meta`.
+    pub fn write(
+        names: &[&str],
+        groups: &[AdamState],
+        extra: &[(&str, Tensor<'_>)],
+        mut meta: HashMap<String, String>,
+    ) -> Result<Vec<u8>, String> {
+        let le = |x: &[f32]| -> Vec<u8> { x.iter().flat_map(|f| f.to_le_bytes()).collect() };
+        let mut bytes: Vec<(String, Dtype, Vec<u8>)> = (names.iter().zip(groups))
+            .flat_map(|(name, g)| [(format!("{name}.m"), &g.m), (format!("{name}.v"), &g.v)])
+            .map(|(name, x)| (name, Dtype::F32, le(x)))
+            .collect();
+        for (name, t) in extra {
+            bytes.push(match t {
+                Tensor::F32(x) => ((*name).to_owned(), Dtype::F32, le(x)),
+                Tensor::U32(x) => ((*name).to_owned(), Dtype::U32, x.iter().flat_map(|u| u.to_le_bytes()).collect()),
+            });
+        }
+        let views = bytes
+            .iter()
+            .map(|(name, dtype, b)| Ok((name.clone(), TensorView::new(*dtype, vec![b.len() / 4], b)?)))
+            .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()
+            .map_err(|e| e.to_string())?;
+        meta.extend(names.iter().zip(groups).map(|(name, g)| (format!("{name}.steps"), g.step.to_string())));
+        safetensors::serialize(views, Some(meta)).map_err(|e| e.to_string())
+    }
+
+    /// Opens a file's bytes.
+    pub fn read(bytes: &'a [u8]) -> Result<Self, String> {
         let (_, meta) = safetensors::SafeTensors::read_metadata(bytes).map_err(|e| format!("not safetensors: {e}"))?;
         let meta = meta.metadata().clone().unwrap_or_default();
-        let number = |key: &str| -> Result<u32, String> {
-            let text = meta.get(key).ok_or_else(|| format!("no {key:?} in the metadata"))?;
-            text.parse().map_err(|_| format!("{key:?} is {text:?}, not a step count"))
-        };
         let st = safetensors::SafeTensors::deserialize(bytes).map_err(|e| format!("not safetensors: {e}"))?;
-        let tensor = |name: String| -> Result<Vec<f32>, String> {
-            let view = st.tensor(&name).map_err(|_| format!("no tensor {name:?}"))?;
-            if view.dtype() != Dtype::F32 {
-                return Err(format!("{name:?} is {:?}, not F32", view.dtype()));
-            }
-            Ok(view.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
-        };
-        let groups = GROUPS
+        Ok(Self { st, meta })
+    }
+
+    /// A metadata entry.
+    pub fn text(&self, key: &str) -> Result<&str, String> {
+        self.meta.get(key).map(String::as_str).ok_or_else(|| format!("no {key:?} in the metadata"))
+    }
+
+    /// A metadata entry that is a count.
+    pub fn number(&self, key: &str) -> Result<u32, String> {
+        let text = self.text(key)?;
+        text.parse().map_err(|_| format!("{key:?} is {text:?}, not a step count"))
+    }
+
+    fn tensor(&self, name: &str, dtype: Dtype) -> Result<Vec<[u8; 4]>, String> {
+        let view = self.st.tensor(name).map_err(|_| format!("no tensor {name:?}"))?;
+        if view.dtype() != dtype {
+            return Err(format!("{name:?} is {:?}, not {dtype:?}", view.dtype()));
+        }
+        Ok(view.data().chunks_exact(4).map(|b| [b[0], b[1], b[2], b[3]]).collect())
+    }
+
+    /// An f32 tensor.
+    pub fn f32s(&self, name: &str) -> Result<Vec<f32>, String> {
+        Ok(self.tensor(name, Dtype::F32)?.into_iter().map(f32::from_le_bytes).collect())
+    }
+
+    /// A u32 tensor.
+    pub fn u32s(&self, name: &str) -> Result<Vec<u32>, String> {
+        Ok(self.tensor(name, Dtype::U32)?.into_iter().map(u32::from_le_bytes).collect())
+    }
+
+    /// The groups named `names`.
+    pub fn groups(&self, names: &[&str]) -> Result<Vec<AdamState>, String> {
+        names
             .iter()
             .map(|name| {
                 Ok(AdamState {
-                    step: number(&format!("{name}.steps"))?,
-                    m: tensor(format!("{name}.m"))?,
-                    v: tensor(format!("{name}.v"))?,
+                    step: self.number(&format!("{name}.steps"))?,
+                    m: self.f32s(&format!("{name}.m"))?,
+                    v: self.f32s(&format!("{name}.v"))?,
                 })
             })
-            .collect::<Result<Vec<_>, String>>()?;
-        Ok(Self { step: number("step")?, groups })
+            .collect()
     }
 }
 
