@@ -324,7 +324,7 @@ impl StudioApp {
             scene: None,
             snapshot: None,
             leave: leave::LeaveGuard::default(),
-            recovery: recovery::Recovery::default(),
+            recovery: recovery::Recovery::in_folder(recovery::folder()),
             newer_snapshot: None,
             snapshot_taken_at: None,
             software_viewport: false,

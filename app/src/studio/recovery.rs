@@ -194,9 +194,11 @@ impl Offer {
     }
 }
 
-/// The studio's side: what it offers, and the slots of its own runs.
+/// The studio's side: where runs are kept, what it offers, and the slots of its own runs.
 #[derive(Default)]
 pub struct Recovery {
+    /// The folder of kept runs ([`folder`], read when the studio opens; `None`: none are kept).
+    pub folder: Option<PathBuf>,
     /// The scene version and style last looked for.
     looked: Option<(u64, PathBuf)>,
     /// The open scene's version and [`scene_key`].
@@ -208,6 +210,11 @@ pub struct Recovery {
 }
 
 impl Recovery {
+    /// Runs kept in `folder` ([`folder`] where the studio opens).
+    pub fn in_folder(folder: Option<PathBuf>) -> Self {
+        Self { folder, ..Self::default() }
+    }
+
     /// Removes the state of every run this studio started: it leaves them
     /// (closing, or opening another scene), after asking about an unexported result.
     pub fn discard_all(&mut self) {
@@ -236,7 +243,7 @@ impl StudioApp {
     /// style when either changed and no run is live; one of this studio's
     /// own runs is not offered.
     pub(super) fn look_for_kept_run(&mut self) {
-        let Some(folder) = folder() else { return };
+        let Some(folder) = self.recovery.folder.clone() else { return };
         let (Some(version), Some((style, size))) = (
             self.scene.as_ref().map(|s| s.scene.version),
             self.style.and_then(|k| self.styles.get(k)).map(|s| (s.path.clone(), s.size)),
@@ -267,7 +274,7 @@ impl StudioApp {
         style_size: [usize; 2],
         style_depth_image: Option<PathBuf>,
     ) -> Option<Slot> {
-        let folder = folder()?;
+        let folder = self.recovery.folder.clone()?;
         let scene_key = self.scene_key()?;
         let scene = self.scene.as_ref()?;
         let record = Record {

@@ -937,3 +937,75 @@ fn leaving_an_unexported_result_asks_first() {
     assert!(!request_close(&mut harness), "no result, yet the close asked");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A run kept by a studio that ended without closing is offered by the next
+/// one that opens its scene and style: "Discard" removes it; "Go on from it"
+/// starts a run from its step with its settings (the starter is handed the
+/// kept run and makes no plan), and that studio's close removes what it kept.
+#[test]
+fn a_kept_run_is_offered_discarded_and_gone_on_from() {
+    let dir = std::env::temp_dir().join(format!("gast-studio-kept-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let studio = || {
+        let mut app = test_app();
+        app.recovery = recovery::Recovery::in_folder(Some(dir.clone()));
+        app
+    };
+    // What a studio killed at step 7 of 20 left.
+    let mut killed = studio();
+    let (style, size) = killed.style.map(|k| (killed.styles[k].path.clone(), killed.styles[k].size)).expect("a style");
+    let slot = killed.new_slot(&style, size, None).expect("a slot in the folder");
+    let kept = recovery::Record {
+        step: 7,
+        total: 20,
+        config: StyleConfig { cycles: 2, steps_per_cycle: 10, resolution: 96, ..StyleConfig::default() },
+        ..slot.record.clone()
+    };
+    let scene = (*killed.scene.as_ref().expect("the demo scene").scene.gaussians).clone();
+    let keep = || crate::checkpoint::write_with_record(&slot.path, &scene, None, &kept).expect("kept");
+    keep();
+    drop(killed);
+
+    let offered = |app: StudioApp| {
+        let mut harness = egui_kittest::Harness::builder()
+            .with_size(egui::vec2(1280.0, 900.0))
+            .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+        settle(&mut harness);
+        harness.get_by_label_contains("A run left unfinished");
+        harness.get_by_label_contains("during a run of this scene with this style: step 7 of 20, kept ");
+        harness
+    };
+    let mut harness = offered(studio());
+    harness.get_by_label("Discard").click();
+    harness.run_steps(2);
+    assert!(harness.query_by_label_contains("A run left unfinished").is_none());
+    assert!(!slot.path.exists() && !crate::checkpoint::record_path(&slot.path).exists(), "the kept run is still there");
+
+    keep();
+    let (tx, rx) = crossbeam_channel::unbounded();
+    let mut app = studio();
+    app.set_session_starter(Box::new(move |req: session_link::StartRequest| {
+        let _ = tx.send((req.resume.map(|o| o.record.step), req.config.clone(), req.fit_budget, req.keep.is_some()));
+        let (commands, _) = crossbeam_channel::unbounded();
+        let (_, events) = crossbeam_channel::unbounded();
+        Ok(session_link::SessionLink {
+            commands,
+            events,
+            snapshots: Arc::default(),
+            live: Arc::default(),
+            start: Arc::default(),
+            worker: None,
+        })
+    }));
+    let mut harness = offered(app);
+    harness.get_by_label("Go on from it").click();
+    harness.run_steps(2);
+    let (step, config, planned, keeps) = rx.try_recv().expect("the run started");
+    assert_eq!((step, planned, keeps), (Some(7), false, true), "from the kept step, unplanned, kept in turn");
+    assert_eq!(config, kept.config, "the kept run's settings");
+    assert_eq!(harness.state().config, kept.config, "the editor shows the run's settings");
+    assert!(harness.query_by_label_contains("A run left unfinished").is_none());
+    harness.state_mut().shut_down();
+    assert!(!slot.path.exists(), "the studio's close left its run's state");
+    std::fs::remove_dir_all(&dir).ok();
+}
