@@ -326,9 +326,13 @@ figure("Depth Anything V2 Small on the GPU engine", None if not lines else lines
 shot = os.path.join(out, "studio.png")
 adapter = re.findall(r"studio: headless on (.+)", log("studio"))
 ran = re.findall(r"scripted run paused after (\d+) steps", log("studio"))
+# The run's state kept against a crash at its pause (the optimiser's moments read back from the GPU).
+kept = re.findall(r"kept the run's state at step (\d+): ([0-9.]+) s", log("studio"))
 figure("studio drawn headless on the GPU (gast studio --headless)", "screenshot" if os.path.exists(shot) else None, "",
        None, None, "; ".join(x for x in (status("studio"), adapter[-1] if adapter else "",
-                                         f"a {ran[-1]}-step run" if ran else "") if x))
+                                         f"a {ran[-1]}-step run" if ran else "",
+                                         f"its state kept at step {kept[0][0]} in {float(kept[0][1]) * 1e3:.0f} ms"
+                                         if kept else "") if x))
 
 with open(os.path.join(out, "gpu-check.json"), "w") as f:
     json.dump(doc, f, indent=2)
