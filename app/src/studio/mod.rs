@@ -64,6 +64,8 @@ pub struct StudioArgs {
 /// A loaded scene.
 struct LoadedScene {
     name: String,
+    /// The file it came from (`None`: generated).
+    path: Option<PathBuf>,
     scene: SceneRef,
 }
 

@@ -6,7 +6,7 @@
 use super::*;
 
 impl StudioApp {
-    pub(super) fn set_scene(&mut self, name: String, g: Gaussians) {
+    pub(super) fn set_scene(&mut self, name: String, path: Option<PathBuf>, g: Gaussians) {
         // A run of the previous scene ends with it: its snapshots would come
         // in as this scene's result (the question of `leave` came first).
         if self.run.link.is_some() {
@@ -20,7 +20,8 @@ impl StudioApp {
         self.view.fit(&g);
         self.cameras = view::orbit_ring(&g, self.view.up, 12, 800, 600);
         self.camera_source = None;
-        self.scene = Some(LoadedScene { name, scene: SceneRef { version: self.next_version, gaussians: g.into() } });
+        let scene = SceneRef { version: self.next_version, gaussians: g.into() };
+        self.scene = Some(LoadedScene { name, path, scene });
         self.next_version += 1;
         self.snapshot = None;
         self.newer_snapshot = None;
@@ -50,7 +51,7 @@ impl StudioApp {
                 let g = f.gaussians;
                 let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
                 self.notice = format!("opened {} ({} Gaussians, SH degree {})", path.display(), g.len(), g.sh_degree);
-                self.set_scene(name, g);
+                self.set_scene(name, Some(path.to_path_buf()), g);
                 self.run.log.extend(f.warnings.iter().map(|w| format!("scene: {w}")));
                 if let Some((set, dir)) = f.cameras {
                     self.set_cameras(set, &dir);
@@ -73,7 +74,7 @@ impl StudioApp {
         if path.exists() {
             self.open_scene(&path);
         } else {
-            self.set_scene("demo scene (generated)".into(), assets::demo_scene());
+            self.set_scene("demo scene (generated)".into(), None, assets::demo_scene());
         }
     }
 

@@ -32,8 +32,10 @@ pub struct Record {
     /// Steps done when the state was written, of the schedule's `total`.
     pub step: u32,
     pub total: u32,
-    /// The scene's name and [`scene_key`], and its Gaussians.
+    /// The scene's name, file (where it came from one) and [`scene_key`], and its Gaussians.
     pub scene_name: String,
+    #[serde(default)]
+    pub scene_path: Option<PathBuf>,
     pub scene_key: String,
     pub gaussians: usize,
     /// The style image (its absolute path where it resolves) and its size.
@@ -181,7 +183,39 @@ impl Offer {
         Ok((ResumeFrom { scene, step: self.record.step, moments }, said))
     }
 
-    /// `step 744 of 1,510, kept 3 min ago`.
+    /// Every kept run in `folder` whose record reads, newest first.
+    pub fn list(folder: &Path) -> Vec<Self> {
+        let Ok(entries) = std::fs::read_dir(folder) else { return Vec::new() };
+        let mut found: Vec<Self> = entries
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.to_string_lossy().ends_with(".checkpoint.json"))
+            .filter_map(|record| {
+                let path = record.with_extension("ply");
+                let record = checkpoint::read_record(&path, &path, "studio run").ok()?;
+                Some(Self { path, record })
+            })
+            .collect();
+        found.sort_by(|a, b| b.record.written_unix_s.cmp(&a.record.written_unix_s).then(a.path.cmp(&b.path)));
+        found
+    }
+
+    /// Removes the kept run.
+    pub fn discard(&self) {
+        checkpoint::remove(&self.path);
+    }
+
+    /// `fern.ply with block2.jpg`.
+    pub fn inputs(&self) -> String {
+        let style = self
+            .record
+            .style
+            .file_name()
+            .map_or_else(|| self.record.style.display().to_string(), |n| n.to_string_lossy().into_owned());
+        format!("{} with {style}", self.record.scene_name)
+    }
+
+    /// `step 744 of 1510, kept 3 min ago`.
     pub fn summary(&self, now_unix_s: u64) -> String {
         let ago = now_unix_s.saturating_sub(self.record.written_unix_s);
         let ago = match ago {
@@ -205,6 +239,8 @@ pub struct Recovery {
     scene_key: Option<(u64, String)>,
     /// A kept run of the open scene and selected style, offered to go on from.
     pub offer: Option<Offer>,
+    /// The kept runs of other scenes or styles, newest first (`None`: to be read).
+    others: Option<Vec<Offer>>,
     /// The slots of the runs this studio started, removed when it leaves them.
     slots: Vec<Slot>,
 }
@@ -244,6 +280,9 @@ impl StudioApp {
     /// own runs is not offered.
     pub(super) fn look_for_kept_run(&mut self) {
         let Some(folder) = self.recovery.folder.clone() else { return };
+        if self.recovery.others.is_none() {
+            self.recovery.others = Some(Offer::list(&folder));
+        }
         let (Some(version), Some((style, size))) = (
             self.scene.as_ref().map(|s| s.scene.version),
             self.style.and_then(|k| self.styles.get(k)).map(|s| (s.path.clone(), s.size)),
@@ -281,6 +320,7 @@ impl StudioApp {
             step: 0,
             total: 0,
             scene_name: scene.name.clone(),
+            scene_path: scene.path.as_deref().map(absolute),
             scene_key,
             gaussians: scene.scene.gaussians.len(),
             style: style.to_path_buf(),
@@ -321,12 +361,16 @@ impl StudioApp {
         self.start_run_from(Some(offer));
     }
 
-    /// The offer in the Run panel, while there is one and no run is live.
+    /// The offer in the Run panel, while there is one and no run is live;
+    /// else the runs kept of other scenes or styles.
     pub(super) fn kept_run_offer(&mut self, ui: &mut egui::Ui) {
-        let Some(offer) = self.recovery.offer.clone() else { return };
         if self.run.is_live() {
             return;
         }
+        let Some(offer) = self.recovery.offer.clone() else {
+            self.kept_elsewhere(ui);
+            return;
+        };
         ui.group(|ui| {
             ui.label(egui::RichText::new("A run left unfinished").strong());
             ui.label(format!(
@@ -343,12 +387,63 @@ impl StudioApp {
                     self.go_on_from_kept_run();
                 }
                 if ui.button("Discard").on_hover_text("remove the kept run").clicked() {
-                    Slot { path: offer.path.clone(), record: offer.record.clone(), off: Arc::default() }.discard();
+                    offer.discard();
                     self.recovery.offer = None;
+                    self.recovery.others = None;
                 }
             });
             ui.weak("Start begins afresh and replaces it.");
         });
+    }
+
+    /// The runs kept of other scenes or styles than those open (three at
+    /// most, newest first): the files they used can be opened, which offers
+    /// the run, or the run discarded. What a studio restarted on its own
+    /// (no scene or style given) shows after a crash.
+    fn kept_elsewhere(&mut self, ui: &mut egui::Ui) {
+        let own: Vec<&Path> = self.recovery.slots.iter().map(|s| s.path.as_path()).collect();
+        let list: Vec<Offer> = self
+            .recovery
+            .others
+            .iter()
+            .flatten()
+            .filter(|o| !own.contains(&o.path.as_path()))
+            .take(3)
+            .cloned()
+            .collect();
+        if list.is_empty() {
+            return;
+        }
+        let (mut open, mut discard) = (None, None);
+        ui.group(|ui| {
+            ui.label(egui::RichText::new("Runs left unfinished").strong());
+            let now = now_unix_s();
+            for offer in &list {
+                ui.label(format!("{}: {}", offer.inputs(), offer.summary(now)));
+                ui.horizontal(|ui| {
+                    let scene = offer.record.scene_path.clone().filter(|p| p.is_file());
+                    let files = scene.zip(Some(offer.record.style.clone()).filter(|s| s.is_file()));
+                    let button = ui
+                        .add_enabled(files.is_some(), egui::Button::new("Open"))
+                        .on_hover_text("open its scene and style; the run is then offered to go on from")
+                        .on_disabled_hover_text("its scene or style file is no longer where it was");
+                    if button.clicked() {
+                        open = files;
+                    }
+                    if ui.button("Discard").on_hover_text("remove the kept run").clicked() {
+                        discard = Some(offer.clone());
+                    }
+                });
+            }
+        });
+        if let Some((scene, style)) = open {
+            self.open_style(&style);
+            self.open_scene_guarded(&scene);
+        }
+        if let Some(offer) = discard {
+            offer.discard();
+            self.recovery.others = None;
+        }
     }
 }
 
@@ -372,6 +467,7 @@ mod tests {
             step: 0,
             total: 0,
             scene_name: "s.ply".into(),
+            scene_path: None,
             scene_key: key.into(),
             gaussians: 3,
             style: style.to_path_buf(),

@@ -979,6 +979,7 @@ fn a_kept_run_is_offered_discarded_and_gone_on_from() {
     harness.get_by_label("Discard").click();
     harness.run_steps(2);
     assert!(harness.query_by_label_contains("A run left unfinished").is_none());
+    assert!(harness.query_by_label_contains("Runs left unfinished").is_none(), "the discarded run is listed");
     assert!(!slot.path.exists() && !crate::checkpoint::record_path(&slot.path).exists(), "the kept run is still there");
 
     keep();
@@ -1007,5 +1008,55 @@ fn a_kept_run_is_offered_discarded_and_gone_on_from() {
     assert!(harness.query_by_label_contains("A run left unfinished").is_none());
     harness.state_mut().shut_down();
     assert!(!slot.path.exists(), "the studio's close left its run's state");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A studio opened on other files (as one restarted without arguments after
+/// a crash) lists the runs kept of other scenes and styles: "Open" opens the
+/// run's scene and style, whose run is then offered to go on from.
+#[test]
+fn runs_kept_of_other_files_are_listed_and_open() {
+    let dir = std::env::temp_dir().join(format!("gast-studio-kept-other-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("dir");
+    let studio = || {
+        let mut app = test_app();
+        app.recovery = recovery::Recovery::in_folder(Some(dir.join("kept")));
+        app
+    };
+    // The files of the killed studio's run: part of the demo scene, and a style.
+    let mut killed = studio();
+    let demo = killed.scene.as_ref().expect("the demo scene").scene.gaussians.to_arc();
+    let (scene_file, style_file) = (dir.join("part.ply"), dir.join("gradient.png"));
+    let part = gast_core::session::subset(&demo, &(0..demo.len() as u32).step_by(3).collect::<Vec<_>>());
+    gast_core::scene::save(&scene_file, &part, &Default::default()).expect("the scene file");
+    image::RgbImage::from_fn(64, 48, |x, y| image::Rgb([(x * 4) as u8, (y * 5) as u8, 128]))
+        .save(&style_file)
+        .expect("the style file");
+    killed.open_scene(&scene_file);
+    killed.open_style(&style_file);
+    assert!(killed.errors.is_empty(), "{:?}", killed.errors);
+    let slot = killed.new_slot(&style_file, [64, 48], None).expect("a slot");
+    let kept = recovery::Record { step: 5, total: 20, ..slot.record.clone() };
+    crate::checkpoint::write_with_record(&slot.path, &part, None, &kept).expect("kept");
+    drop(killed);
+
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 900.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), studio());
+    settle(&mut harness);
+    harness.get_by_label_contains("Runs left unfinished");
+    harness.get_by_label_contains("part.ply with gradient.png: step 5 of 20, kept ");
+    harness.get_by_label("Open").click();
+    settle(&mut harness);
+    assert_eq!(
+        harness.state().scene.as_ref().map(|s| s.name.as_str()),
+        Some("part.ply"),
+        "{:?}",
+        harness.state().errors
+    );
+    harness.get_by_label_contains("A run left unfinished");
+    harness.get_by_label_contains("during a run of this scene with this style: step 5 of 20, kept ");
+    assert!(harness.query_by_label_contains("Runs left unfinished").is_none());
     std::fs::remove_dir_all(&dir).ok();
 }
