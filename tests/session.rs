@@ -143,85 +143,93 @@ fn stop_ends_the_run_early_with_the_result_so_far() {
 
 /// A worker given a keeper writes the run's state at a pause and at its end
 /// (and not again without a new step); a worker given that state goes on
-/// from it and ends where one run through ends.
+/// from it and ends where one run through ends; on the CPU and the GPU engine.
 #[test]
 fn a_worker_keeps_its_runs_state_and_another_goes_on_from_it() {
     use gast_core::session::{Keeper, OptimiserState, ResumeFrom, RunOptions, spawn_run};
     use std::sync::Mutex;
     let config = StyleConfig { cycles: 2, steps_per_cycle: 4, resolution: 32, texture_scale: 32, ..Default::default() };
     let Some(inputs) = inputs(config) else { return };
-    type Kept = Arc<Mutex<Vec<(u32, gast_core::Gaussians, OptimiserState)>>>;
-    let keeper = |kept: &Kept| {
-        let kept = kept.clone();
-        Keeper {
-            every: std::time::Duration::from_secs(3600),
-            write: Box::new(move |s| {
-                let state = s.optimiser_state()?;
-                kept.lock().expect("kept").push((s.steps_done(), s.result(), state));
-                Ok(())
-            }),
+    let gpu_inputs = SessionInputs { gpu: Some(gpu_context()), ..inputs.clone() };
+    for (device, inputs) in [("CPU", inputs), ("GPU", gpu_inputs)] {
+        type Kept = Arc<Mutex<Vec<(u32, gast_core::Gaussians, OptimiserState)>>>;
+        let keeper = |kept: &Kept| {
+            let kept = kept.clone();
+            Keeper {
+                every: std::time::Duration::from_secs(3600),
+                write: Box::new(move |s| {
+                    let state = s.optimiser_state()?;
+                    kept.lock().expect("kept").push((s.steps_done(), s.result(), state));
+                    Ok(())
+                }),
+            }
+        };
+        let finished = |handle: &gast_core::session::SessionHandle| loop {
+            match next(&handle.events) {
+                Event::Finished { completed, steps, .. } => break (completed, steps),
+                Event::Failed(e) => panic!("the run failed: {e}"),
+                _ => {}
+            }
+        };
+        // Paused after step 3, resumed, run to its end: kept at the pause and the end.
+        let kept: Kept = Arc::default();
+        let (whole_inputs, whole_keeper) = (inputs.clone(), keeper(&kept));
+        let handle = spawn_run(
+            move |_| Ok((whole_inputs, RunOptions { resume: None, keep: Some(whole_keeper) })),
+            Arc::new(|| {}),
+        );
+        loop {
+            if let Event::Step(r) = next(&handle.events)
+                && r.iter == 2
+            {
+                break;
+            }
         }
-    };
-    let finished = |handle: &gast_core::session::SessionHandle| loop {
-        match next(&handle.events) {
-            Event::Finished { completed, steps, .. } => break (completed, steps),
-            Event::Failed(e) => panic!("the run failed: {e}"),
-            _ => {}
-        }
-    };
-    // Paused after step 3, resumed, run to its end: kept at the pause and the end.
-    let kept: Kept = Arc::default();
-    let (whole_inputs, whole_keeper) = (inputs.clone(), keeper(&kept));
-    let handle =
-        spawn_run(move |_| Ok((whole_inputs, RunOptions { resume: None, keep: Some(whole_keeper) })), Arc::new(|| {}));
-    loop {
-        if let Event::Step(r) = next(&handle.events)
-            && r.iter == 2
-        {
-            break;
-        }
-    }
-    handle.commands.send(Command::Pause).expect("send");
-    handle.commands.send(Command::Pause).expect("send");
-    handle.commands.send(Command::Resume).expect("send");
-    assert_eq!(finished(&handle), (true, 8));
-    let whole = handle.stop_and_join().expect("the whole run's result");
-    let kept = Arc::try_unwrap(kept).expect("the worker let go of its keeper").into_inner().expect("kept");
-    let steps: Vec<u32> = kept.iter().map(|k| k.0).collect();
-    assert_eq!(steps.len(), 2, "kept at {steps:?}: once at the pause, once at the end");
-    assert!((3..8).contains(&steps[0]) && steps[1] == 8, "kept at {steps:?}");
-    assert_eq!(kept[1].1, whole, "the state kept at the end is the run's result");
+        handle.commands.send(Command::Pause).expect("send");
+        handle.commands.send(Command::Pause).expect("send");
+        handle.commands.send(Command::Resume).expect("send");
+        assert_eq!(finished(&handle), (true, 8));
+        let whole = handle.stop_and_join().expect("the whole run's result");
+        let kept = Arc::try_unwrap(kept).expect("the worker let go of its keeper").into_inner().expect("kept");
+        let steps: Vec<u32> = kept.iter().map(|k| k.0).collect();
+        assert_eq!(steps.len(), 2, "kept at {steps:?}: once at the pause, once at the end");
+        assert!((3..8).contains(&steps[0]) && steps[1] == 8, "kept at {steps:?}");
+        assert_eq!(kept[1].1, whole, "the state kept at the end is the run's result");
 
-    // Another worker goes on from the pause's state to the same end.
-    let (step, scene, moments) = kept[0].clone();
-    let handle = spawn_run(
-        move |_| {
-            Ok((inputs, RunOptions { resume: Some(ResumeFrom { scene, step, moments: Some(moments) }), keep: None }))
-        },
-        Arc::new(|| {}),
-    );
-    let mut first = None;
-    let said = loop {
-        match next(&handle.events) {
-            Event::Stage { name, .. } if name.starts_with("went on from") => break name,
-            Event::Failed(e) => panic!("the resumed run failed: {e}"),
-            _ => {}
-        }
-    };
-    assert!(said.contains(&format!("step {step} of 8 (with the optimiser's state)")), "{said}");
-    let ended = loop {
-        match next(&handle.events) {
-            Event::Step(r) if first.is_none() => first = Some(r.iter),
-            Event::Finished { completed, steps, .. } => break (completed, steps),
-            _ => {}
-        }
-    };
-    assert_eq!((first, ended), (Some(step), (true, 8)), "the resumed run's first step and its end");
-    let resumed = handle.stop_and_join().expect("the resumed run's result");
-    let apart = resumed.means.iter().flatten().zip(whole.means.iter().flatten()).map(|(a, b)| (a - b).abs());
-    let apart = apart.chain(resumed.sh.iter().zip(&whole.sh).map(|(a, b)| (a - b).abs())).fold(0.0f32, f32::max);
-    eprintln!("resumed from step {step} against the whole run: largest difference {apart:e}");
-    assert!(apart <= 1e-6, "the resumed run ended {apart:e} from the whole run");
+        // Another worker goes on from the pause's state to the same end.
+        let (step, scene, moments) = kept[0].clone();
+        let handle = spawn_run(
+            move |_| {
+                Ok((
+                    inputs,
+                    RunOptions { resume: Some(ResumeFrom { scene, step, moments: Some(moments) }), keep: None },
+                ))
+            },
+            Arc::new(|| {}),
+        );
+        let mut first = None;
+        let said = loop {
+            match next(&handle.events) {
+                Event::Stage { name, .. } if name.starts_with("went on from") => break name,
+                Event::Failed(e) => panic!("the resumed run failed: {e}"),
+                _ => {}
+            }
+        };
+        assert!(said.contains(&format!("step {step} of 8 (with the optimiser's state)")), "{said}");
+        let ended = loop {
+            match next(&handle.events) {
+                Event::Step(r) if first.is_none() => first = Some(r.iter),
+                Event::Finished { completed, steps, .. } => break (completed, steps),
+                _ => {}
+            }
+        };
+        assert_eq!((first, ended), (Some(step), (true, 8)), "the resumed run's first step and its end");
+        let resumed = handle.stop_and_join().expect("the resumed run's result");
+        let apart = resumed.means.iter().flatten().zip(whole.means.iter().flatten()).map(|(a, b)| (a - b).abs());
+        let apart = apart.chain(resumed.sh.iter().zip(&whole.sh).map(|(a, b)| (a - b).abs())).fold(0.0f32, f32::max);
+        eprintln!("{device}: resumed from step {step} against the whole run: largest difference {apart:e}");
+        assert!(apart <= 1e-6, "{device}: the resumed run ended {apart:e} from the whole run");
+    }
 }
 
 #[test]
