@@ -403,7 +403,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
                  left the checkpoint",
                 config.resolution, config.texture_scale, config.cycles, config.steps_per_cycle
             );
-            let now = resume::Record::of(&args, scene.len(), &cameras, &config, 0);
+            let now = resume::Record::of(&args, scene.len(), &cameras, &config, 0, None);
             Some((r.check_and_load(&now)?, r.record.step))
         }
         None => None,
@@ -482,7 +482,18 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         }
         None => 0,
     };
-    let record = |asked: &StyleConfig, step: u32| resume::Record::of(&args, scene.len(), &cameras, asked, step);
+    // A checkpoint written before the first cycle's re-plan leaves it to the
+    // resumed run, with the seconds of steps before it (its pace counts them).
+    let mut earlier_s = 0.0;
+    if let Some(p) = resume.as_ref().and_then(|r| r.record.replan).filter(|_| args.cycles.is_none()) {
+        replan = Some((p.most, p.model_s));
+        earlier_s = p.elapsed_s;
+    }
+    let record = |asked: &StyleConfig, step: u32, replan: Option<(u32, f64)>, steps: &[StepReport]| {
+        let elapsed_s = earlier_s + steps.last().map_or(0.0, |r| r.elapsed_s);
+        let pending = replan.map(|(most, model_s)| resume::PendingReplan { most, model_s, elapsed_s });
+        resume::Record::of(&args, scene.len(), &cameras, asked, step, pending)
+    };
     let mut config = session.config().clone();
     let mut total = session.total_steps();
     // Over the steps this run does (its pace and time left are this run's), as `gast fit`'s.
@@ -516,8 +527,11 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         let per_cycle = config.schedule().steps_per_cycle();
         // At the end of the first cycle that has a steady pace (every view visited, then revisits).
         let at_cycle_end = session.steps_done() % per_cycle.max(1) == 0;
-        let pace =
-            replan.filter(|_| at_cycle_end).and_then(|_| Pace::read(steps.iter().map(|r| (r.view, r.elapsed_s))));
+        // Over the whole run: a resumed one's steps and seconds before it counted.
+        let pace = replan
+            .filter(|_| at_cycle_end)
+            .and_then(|_| Pace::read(steps.iter().map(|r| (r.view, r.elapsed_s))))
+            .map(|p| Pace { steps: p.steps + start, elapsed_s: p.elapsed_s + earlier_s, ..p });
         if let (Some((most, model_s)), Some(pace @ Pace { steady_s: Some(steady), .. })) = (replan, pace) {
             replan = None;
             let fits = replan_cycles(pace, per_cycle, AUTO_RUN_BUDGET_S, most);
@@ -543,7 +557,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
             break;
         }
         if due.now() && !session.is_done() {
-            let line = write_checkpoint(&checkpoint, &session, &record(&asked, session.steps_done()), total);
+            let line =
+                write_checkpoint(&checkpoint, &session, &record(&asked, session.steps_done(), replan, &steps), total);
             due.written();
             pb.suspend(|| eprintln!("{line}"));
         }
@@ -553,7 +568,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     if let Some(n) = stopped_at {
         eprintln!("stopped at step {n} of {total} (Ctrl-C): writing what the run has; Ctrl-C again quits at once");
         // Kept, so that the same command with --resume goes on from here.
-        let line = write_checkpoint(&checkpoint, &session, &record(&asked, n), total);
+        let line = write_checkpoint(&checkpoint, &session, &record(&asked, n, replan, &steps), total);
         eprintln!("{line}; the same command with --resume goes on from it");
     }
     if let Some(why) = session.failure() {

@@ -31,6 +31,22 @@ pub struct Record {
     /// The settings the run was given (after its plan: the working
     /// resolution, texture scale and cycles it chose).
     pub config: StyleConfig,
+    /// A CPU plan's re-plan of the cycles still to come (the checkpoint was
+    /// written before the first cycle with a steady pace ended), which the
+    /// resumed run makes in its place; `None` once made, or without a plan.
+    #[serde(default)]
+    pub replan: Option<PendingReplan>,
+}
+
+/// A re-plan still to come ([`Record::replan`]).
+#[derive(Serialize, Deserialize, Debug, PartialEq, Clone, Copy)]
+pub struct PendingReplan {
+    /// The cycles asked for before the plan: the most a re-plan gives.
+    pub most: u32,
+    /// The plan's model's seconds a step.
+    pub model_s: f64,
+    /// Seconds of steps the run had taken.
+    pub elapsed_s: f64,
 }
 
 impl Record {
@@ -41,6 +57,7 @@ impl Record {
         cameras: &[gast_core::Camera],
         config: &StyleConfig,
         step: u32,
+        replan: Option<PendingReplan>,
     ) -> Self {
         let absolute = |p: &Path| p.canonicalize().unwrap_or_else(|_| p.to_path_buf());
         Self {
@@ -52,6 +69,7 @@ impl Record {
             depth_model: args.depth_model.as_deref().map(absolute),
             cameras: checkpoint::cameras_fingerprint(cameras),
             config: config.clone(),
+            replan,
         }
     }
 }
@@ -91,7 +109,7 @@ impl Resume {
     /// must hold the run's Gaussians (as many as the input, unless the run
     /// splits them).
     pub fn check_and_load(&self, now: &Record) -> anyhow::Result<gast_core::Gaussians> {
-        let now = Record { step: self.record.step, ..now.clone() };
+        let now = Record { step: self.record.step, replan: self.record.replan, ..now.clone() };
         checkpoint::refuse_other_settings(&self.path, &self.record, &now)?;
         let scene = gast_core::scene::load(&self.path)
             .with_context(|| format!("could not read the checkpoint {} to resume from", self.path.display()))?;
@@ -136,6 +154,7 @@ mod tests {
             depth_model: None,
             cameras: "1 views, 0".into(),
             config: StyleConfig::default(),
+            replan: None,
         };
         let resume = Resume { path: path.clone(), record: record.clone() };
         let e = resume.check_and_load(&Record { step: 0, ..record.clone() }).expect_err("refused").to_string();
@@ -143,8 +162,18 @@ mod tests {
         let two_now = Record { gaussians: 2, ..record.clone() };
         let e = resume.check_and_load(&two_now).expect_err("refused").to_string();
         assert!(e.contains("gaussians: 3 then, 2 now"), "{e}");
-        let resume = Resume { path, record: two_now.clone() };
+        let resume = Resume { path: path.clone(), record: two_now.clone() };
         assert_eq!(resume.check_and_load(&two_now).expect("its own").len(), 2);
+        // A re-plan still to come is the checkpoint's to hand on, not a setting that differs.
+        let pending = PendingReplan { most: 30, model_s: 0.29, elapsed_s: 12.5 };
+        let resume = Resume { path, record: Record { replan: Some(pending), ..two_now.clone() } };
+        assert_eq!(resume.check_and_load(&two_now).expect("not refused").len(), 2);
+        let json = serde_json::to_value(&resume.record).expect("json");
+        assert_eq!(json["replan"]["most"], 30);
+        // A record written before the field reads as one with no re-plan to come.
+        let mut older = serde_json::to_value(&two_now).expect("json");
+        older.as_object_mut().expect("an object").remove("replan");
+        assert_eq!(serde_json::from_value::<Record>(older).expect("reads"), two_now);
         std::fs::remove_dir_all(&dir).ok();
     }
 }
