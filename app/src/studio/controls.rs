@@ -44,8 +44,16 @@ pub fn mean_steps_label(m: MeanSteps) -> &'static str {
     }
 }
 
+/// A slider of the run's settings: a value from a preset, a plan or a kept
+/// run outside its range stays as it is (the default clamping changed a
+/// working resolution of 1,512 px to 1,024 as the editor showed it, and a
+/// live run's editor then sent that on); only a user's edit is kept within.
+fn slider<Num: egui::emath::Numeric>(value: &mut Num, range: std::ops::RangeInclusive<Num>) -> egui::Slider<'_> {
+    egui::Slider::new(value, range).clamping(egui::SliderClamping::Edits)
+}
+
 fn weight(ui: &mut Ui, value: &mut f32, max: f32, label: &str, hover: &str) -> bool {
-    ui.add(egui::Slider::new(value, 0.0..=max).logarithmic(true).smallest_positive(1e-5).text(label))
+    ui.add(slider(value, 0.0..=max).logarithmic(true).smallest_positive(1e-5).text(label))
         .on_hover_text(hover)
         .changed()
 }
@@ -157,10 +165,10 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>, st
             changed |= ui.selectable_value(&mut c.mode, m, mode_label(m)).changed();
         }
     });
-    changed |= ui.add(egui::Slider::new(&mut c.cycles, 1..=100).text("K (cycles)")).changed();
-    changed |= ui.add(egui::Slider::new(&mut c.steps_per_cycle, 1..=500).text("steps per cycle")).changed();
+    changed |= ui.add(slider(&mut c.cycles, 1..=100).text("K (cycles)")).changed();
+    changed |= ui.add(slider(&mut c.steps_per_cycle, 1..=500).text("steps per cycle")).changed();
     changed |= ui
-        .add(egui::Slider::new(&mut c.ratio_geo, 0.0..=1.0).text("N_g / (N_c+N_g)"))
+        .add(slider(&mut c.ratio_geo, 0.0..=1.0).text("N_g / (N_c+N_g)"))
         .on_hover_text("geometry share of each cycle")
         .changed();
     let s = c.schedule();
@@ -182,8 +190,8 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>, st
                 .changed();
         }
     });
-    changed |= ui.add(egui::Slider::new(&mut c.texture_scale, 16..=1024).text("style height (px)")).changed();
-    changed |= ui.add(egui::Slider::new(&mut c.resolution, 64..=1024).text("working resolution")).changed();
+    changed |= ui.add(slider(&mut c.texture_scale, 16..=1024).text("style height (px)")).changed();
+    changed |= ui.add(slider(&mut c.resolution, 64..=1024).text("working resolution")).changed();
     ui.weak(step_hint(c, coverage, style, gast_core::session::plan::machine_gemm_gflops_known()));
     egui::ComboBox::from_label("focus").selected_text(focus_label(c.focus)).show_ui(ui, |ui| {
         for f in Focus::ALL {
@@ -195,7 +203,7 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>, st
         .on_hover_text("keep every Gaussian's base colour out of the clamp at 0, where no gradient reaches it")
         .changed();
     changed |= ui
-        .add(egui::Slider::new(&mut c.depth_relief_px, 0..=64).text("depth relief (px)"))
+        .add(slider(&mut c.depth_relief_px, 0..=64).text("depth relief (px)"))
         .on_hover_text(
             "above 0, VGG sees both depth maps minus their blur of this radius: relief compared with relief, \
              not the scene's layout; 0 is the paper's min-max depth",

@@ -1060,3 +1060,20 @@ fn runs_kept_of_other_files_are_listed_and_open() {
     assert!(harness.query_by_label_contains("Runs left unfinished").is_none());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Settings beyond the sliders' ranges (a preset's, a plan's or a kept
+/// run's: 1,512 px on a GPU, 150 cycles of 800 steps, λ_TV 50) stay as they
+/// are while the editor shows them.
+#[test]
+fn the_editor_keeps_settings_beyond_its_sliders() {
+    let mut app = test_app();
+    let mut wide = StyleConfig { resolution: 1512, cycles: 150, steps_per_cycle: 800, ..StyleConfig::default() };
+    wide.weights.tv = 50.0;
+    assert!(wide.problems().is_empty(), "{:?}", wide.problems());
+    app.config = wide.clone();
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 1400.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    settle(&mut harness);
+    assert_eq!(harness.state().config, wide, "the editor changed settings it only showed");
+}
