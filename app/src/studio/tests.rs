@@ -983,6 +983,19 @@ fn a_kept_run_is_offered_discarded_and_gone_on_from() {
     assert!(!slot.path.exists() && !crate::checkpoint::record_path(&slot.path).exists(), "the kept run is still there");
 
     keep();
+    // Over other views than those it used, it does not go on: the error says why.
+    let mut other_views = studio();
+    other_views.cameras.pop();
+    let mut harness = offered(other_views);
+    harness.get_by_label("Go on from it").click();
+    harness.run_steps(2);
+    let said = harness.state().errors.join("\n");
+    assert!(
+        said.contains("the kept run used other views (12 views, ") && said.contains("open the cameras it used"),
+        "{said}"
+    );
+    assert!(harness.state().run.link.is_none(), "a run started over other views");
+
     let (tx, rx) = crossbeam_channel::unbounded();
     let mut app = studio();
     app.set_session_starter(Box::new(move |req: session_link::StartRequest| {
