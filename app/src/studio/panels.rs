@@ -404,6 +404,12 @@ impl StudioApp {
             Some(offer) => offer.record.style_depth_image.clone(),
             None => self.style_depth_images.get(&style.path).cloned(),
         };
+        if resume.is_none()
+            && let Some(kept) = self.recovery.offer.take()
+        {
+            // Start begins afresh, as the offer says: the kept run goes now, not at the new run's first write.
+            kept.discard();
+        }
         let keep = self.new_slot(&style_path, [image.width, image.height], style_depth_image.clone());
         let request = StartRequest {
             scene,

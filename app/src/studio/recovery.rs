@@ -129,6 +129,11 @@ impl Slot {
         };
         checkpoint::write_with_record(&self.path, &session.result(), moments.as_deref().ok(), &record)
             .map_err(|e| format!("{e:#}"))?;
+        // Discarded while it wrote (a close that gave up waiting for the run): gone all the same.
+        if self.off.load(Ordering::SeqCst) {
+            checkpoint::remove(&self.path);
+            return Ok(());
+        }
         moments.map(|_| ()).map_err(|e| format!("{}: kept without the optimiser's state ({e})", self.path.display()))
     }
 
@@ -392,7 +397,7 @@ impl StudioApp {
                     self.recovery.others = None;
                 }
             });
-            ui.weak("Start begins afresh and replaces it.");
+            ui.weak("Start begins afresh and removes it.");
         });
     }
 

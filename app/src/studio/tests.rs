@@ -1021,6 +1021,28 @@ fn a_kept_run_is_offered_discarded_and_gone_on_from() {
     assert!(harness.query_by_label_contains("A run left unfinished").is_none());
     harness.state_mut().shut_down();
     assert!(!slot.path.exists(), "the studio's close left its run's state");
+
+    // Start begins afresh and the kept run goes at once.
+    keep();
+    let mut app = studio();
+    app.set_session_starter(Box::new(move |req: session_link::StartRequest| {
+        assert!(req.resume.is_none(), "Start went on from the kept run");
+        let (commands, _) = crossbeam_channel::unbounded();
+        let (_, events) = crossbeam_channel::unbounded();
+        Ok(session_link::SessionLink {
+            commands,
+            events,
+            snapshots: Arc::default(),
+            live: Arc::default(),
+            start: Arc::default(),
+            worker: None,
+        })
+    }));
+    let mut harness = offered(app);
+    harness.get_by_label("Start").click();
+    harness.run_steps(2);
+    assert!(harness.state().run.link.is_some(), "no run started: {:?}", harness.state().errors);
+    assert!(!slot.path.exists(), "the kept run stayed after Start");
     std::fs::remove_dir_all(&dir).ok();
 }
 
