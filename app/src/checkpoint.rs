@@ -94,6 +94,19 @@ pub fn write_with_record(
         .with_context(|| format!("could not write the checkpoint's record {}", record_path.display()))
 }
 
+/// Writes the checkpoint `path` of a stylization's `session` with its
+/// `record`: the scene it holds and its optimiser's state. `Ok(Some(why))`:
+/// written without the state, which could not be read.
+pub fn write_session(
+    path: &Path,
+    session: &gast_core::session::Session,
+    record: &impl serde::Serialize,
+) -> anyhow::Result<Option<String>> {
+    let moments = session.optimiser_state().and_then(|m| m.to_safetensors());
+    write_with_record(path, &session.result(), moments.as_deref().ok(), record)?;
+    Ok(moments.err())
+}
+
 /// The optimiser's state beside the checkpoint `path` at `step`, and what
 /// to say of it: kept, or why the moments start afresh (none written, or
 /// unreadable: a resume still goes on, as from a checkpoint without one).
@@ -188,8 +201,13 @@ pub fn warn_of_a_checkpoint(path: &Path, what: &str) {
 /// keeps so that a run goes on only over the views it was made with.
 pub fn cameras_fingerprint(cameras: &[gast_core::Camera]) -> String {
     let text = format!("{cameras:?}");
-    let hash = text.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3));
-    format!("{} views, {hash:016x}", cameras.len())
+    format!("{} views, {:016x}", cameras.len(), fnv1a(text.bytes().map(u64::from)))
+}
+
+/// FNV-1a over `words` (over bytes, each a word below 256, it is the usual
+/// byte-wise FNV-1a): the hashes a record keeps of views, scenes and styles.
+pub fn fnv1a(words: impl Iterator<Item = u64>) -> u64 {
+    words.fold(0xcbf2_9ce4_8422_2325u64, |h, w| (h ^ w).wrapping_mul(0x0100_0000_01b3))
 }
 
 /// When the next checkpoint is due: every `every` seconds (0: never).

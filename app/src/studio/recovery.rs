@@ -64,16 +64,11 @@ pub fn folder() -> Option<PathBuf> {
     })
 }
 
-/// FNV-1a over 64-bit words.
-fn fnv(words: impl Iterator<Item = u64>) -> u64 {
-    words.fold(0xcbf2_9ce4_8422_2325u64, |h, w| (h ^ w).wrapping_mul(0x0100_0000_01b3))
-}
-
 /// What tells a scene as loaded from another: its count, SH degree, and a
 /// hash of its means and opacities (a few milliseconds at 500,000 Gaussians).
 pub fn scene_key(g: &Gaussians) -> String {
     let words = g.means.iter().flatten().chain(&g.opacity_logits).map(|v| u64::from(v.to_bits()));
-    format!("{} Gaussians, degree {}, {:016x}", g.len(), g.sh_degree, fnv(words))
+    format!("{} Gaussians, degree {}, {:016x}", g.len(), g.sh_degree, checkpoint::fnv1a(words))
 }
 
 /// A style's path as recorded: absolute where it resolves.
@@ -85,7 +80,7 @@ fn absolute(p: &Path) -> PathBuf {
 /// `style` is kept in `folder`: one slot per scene and style.
 pub fn slot_path(folder: &Path, scene_key: &str, style: &Path) -> PathBuf {
     let text = format!("{scene_key}\n{}", absolute(style).display());
-    folder.join(format!("{:016x}.checkpoint.ply", fnv(text.bytes().map(u64::from))))
+    folder.join(format!("{:016x}.checkpoint.ply", checkpoint::fnv1a(text.bytes().map(u64::from))))
 }
 
 /// A run's slot: where its state is written, and what its record says of
@@ -117,7 +112,6 @@ impl Slot {
         if self.off.load(Ordering::SeqCst) {
             return Ok(());
         }
-        let moments = session.optimiser_state().and_then(|m| m.to_safetensors());
         let written_unix_s =
             std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
         let record = Record {
@@ -127,14 +121,13 @@ impl Slot {
             written_unix_s,
             ..self.record.clone()
         };
-        checkpoint::write_with_record(&self.path, &session.result(), moments.as_deref().ok(), &record)
-            .map_err(|e| format!("{e:#}"))?;
+        let without = checkpoint::write_session(&self.path, session, &record).map_err(|e| format!("{e:#}"))?;
         // Discarded while it wrote (a close that gave up waiting for the run): gone all the same.
         if self.off.load(Ordering::SeqCst) {
             checkpoint::remove(&self.path);
             return Ok(());
         }
-        moments.map(|_| ()).map_err(|e| format!("{}: kept without the optimiser's state ({e})", self.path.display()))
+        without.map_or(Ok(()), |e| Err(format!("{}: kept without the optimiser's state ({e})", self.path.display())))
     }
 
     /// Removes what the slot holds and writes no more to it.

@@ -176,15 +176,12 @@ const STYLE_NAMES: [&str; 3] = ["style.png", "style_depth.png", "style_edge.png"
 fn write_checkpoint(path: &std::path::Path, session: &Session, record: &resume::Record, total: u32) -> String {
     let t = Instant::now();
     let step = record.step;
-    let (moments, without) = match session.optimiser_state().and_then(|m| m.to_safetensors()) {
-        Ok(bytes) => (Some(bytes), String::new()),
-        Err(e) => (None, format!(", without the optimiser's state ({e})")),
-    };
-    match checkpoint::write_with_record(path, &session.result(), moments.as_deref(), record) {
-        Ok(()) => format!(
-            "  checkpoint: step {step} of {total} written to {} in {:.0} ms{without}",
+    match checkpoint::write_session(path, session, record) {
+        Ok(without) => format!(
+            "  checkpoint: step {step} of {total} written to {} in {:.0} ms{}",
             path.display(),
-            t.elapsed().as_secs_f64() * 1e3
+            t.elapsed().as_secs_f64() * 1e3,
+            without.map(|e| format!(", without the optimiser's state ({e})")).unwrap_or_default()
         ),
         Err(e) => format!("  warning: the checkpoint at step {step} was not written: {e:#}"),
     }
