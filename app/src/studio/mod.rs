@@ -409,10 +409,11 @@ impl StudioApp {
 
     /// Connects the code that spawns session workers; until then Start is disabled.
     /// Ends the studio's run and removes the state it kept: the studio
-    /// closes (after asking about an unexported result).
+    /// closes (after asking about an unexported result). The slots go first,
+    /// so the run's end writes no state only to have it removed.
     pub(super) fn shut_down(&mut self) {
-        self.run.shut_down();
         self.recovery.discard_all();
+        self.run.shut_down();
     }
 
     pub fn set_session_starter(&mut self, starter: SessionStarter) {

@@ -10,8 +10,8 @@ impl StudioApp {
         // A run of the previous scene ends with it: its snapshots would come
         // in as this scene's result (the question of `leave` came first).
         if self.run.link.is_some() {
-            self.run.shut_down();
             self.recovery.discard_all();
+            self.run.shut_down();
             self.run = session_link::RunMonitor::default();
             self.live = None;
             self.shown = None;
