@@ -938,6 +938,21 @@ fn leaving_an_unexported_result_asks_first() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A run's link to no worker: its channels closed, its slots empty (a
+/// starter's answer in tests that only look at what it was asked).
+fn idle_link() -> session_link::SessionLink {
+    let (commands, _) = crossbeam_channel::unbounded();
+    let (_, events) = crossbeam_channel::unbounded();
+    session_link::SessionLink {
+        commands,
+        events,
+        snapshots: Arc::default(),
+        live: Arc::default(),
+        start: Arc::default(),
+        worker: None,
+    }
+}
+
 /// A run kept by a studio that ended without closing is offered by the next
 /// one that opens its scene and style: "Discard" removes it; "Go on from it"
 /// starts a run from its step with its settings (the starter is handed the
@@ -1000,16 +1015,7 @@ fn a_kept_run_is_offered_discarded_and_gone_on_from() {
     let mut app = studio();
     app.set_session_starter(Box::new(move |req: session_link::StartRequest| {
         let _ = tx.send((req.resume.map(|o| o.record.step), req.config.clone(), req.fit_budget, req.keep.is_some()));
-        let (commands, _) = crossbeam_channel::unbounded();
-        let (_, events) = crossbeam_channel::unbounded();
-        Ok(session_link::SessionLink {
-            commands,
-            events,
-            snapshots: Arc::default(),
-            live: Arc::default(),
-            start: Arc::default(),
-            worker: None,
-        })
+        Ok(idle_link())
     }));
     let mut harness = offered(app);
     harness.get_by_label("Go on from it").click();
@@ -1027,16 +1033,7 @@ fn a_kept_run_is_offered_discarded_and_gone_on_from() {
     let mut app = studio();
     app.set_session_starter(Box::new(move |req: session_link::StartRequest| {
         assert!(req.resume.is_none(), "Start went on from the kept run");
-        let (commands, _) = crossbeam_channel::unbounded();
-        let (_, events) = crossbeam_channel::unbounded();
-        Ok(session_link::SessionLink {
-            commands,
-            events,
-            snapshots: Arc::default(),
-            live: Arc::default(),
-            start: Arc::default(),
-            worker: None,
-        })
+        Ok(idle_link())
     }));
     let mut harness = offered(app);
     harness.get_by_label("Start").click();
