@@ -75,27 +75,37 @@ pub fn recipe_weights(c: &StyleConfig, coverage: Option<f32>) -> Vec<(&'static s
 /// The time a step of `c` takes, under the resolution slider: the plan's
 /// model for the run's focus (the running session's `coverage` settles
 /// `auto`; without one it reads as the object) with the style at `c`'s
-/// texture scale, `style` (width, height) pixels when one is chosen; on
-/// this machine as a run's plan takes it once a run has probed its rate
+/// texture scale, `style` (width, height) pixels when one is chosen, for a
+/// scene of `gaussians` when one is open; on this machine as a run's plan takes it once a run has probed its rate
 /// (`gemm_gflops`, [`StepModel::on_machine`]), on a 2-core CPU before.
 pub fn step_hint(
     c: &StyleConfig,
     coverage: Option<f32>,
     style: Option<[usize; 2]>,
+    gaussians: Option<usize>,
     gemm_gflops: Option<f64>,
 ) -> String {
     use gast_core::session::plan::{StepModel, step_time_hint};
     let object = coverage.map_or(c.focus != Focus::Frame, |v| c.focus.is_object(v));
     let [width, height] = style.unwrap_or([1, 1]);
-    let model = StepModel::for_run(object, Some(c.texture_scale)).with_style(width, height);
+    let model = StepModel::for_run(object, Some(c.texture_scale))
+        .with_style(width, height)
+        .with_gaussians(gaussians.unwrap_or(0));
     step_time_hint(gemm_gflops.map_or(model, |g| model.on_machine(g)), c.resolution)
 }
 
 /// Edits `c` in place; returns true when anything changed. `coverage`: the
 /// running session's mean coverage, which settles `auto` focus and so which
 /// recipe lifts which weight (shown under the slider it lifts); `style`: the
-/// chosen style's size, for the step time under the resolution slider.
-pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>, style: Option<[usize; 2]>) -> bool {
+/// chosen style's size, and `gaussians` the open scene's, for the step time
+/// under the resolution slider.
+pub fn config_editor(
+    ui: &mut Ui,
+    c: &mut StyleConfig,
+    coverage: Option<f32>,
+    style: Option<[usize; 2]>,
+    gaussians: Option<usize>,
+) -> bool {
     let mut changed = false;
     ui.label(egui::RichText::new("Loss weights").strong());
     let lifted = recipe_weights(c, coverage);
@@ -192,7 +202,7 @@ pub fn config_editor(ui: &mut Ui, c: &mut StyleConfig, coverage: Option<f32>, st
     });
     changed |= ui.add(slider(&mut c.texture_scale, 16..=1024).text("style height (px)")).changed();
     changed |= ui.add(slider(&mut c.resolution, 64..=1024).text("working resolution")).changed();
-    ui.weak(step_hint(c, coverage, style, gast_core::session::plan::machine_gemm_gflops_known()));
+    ui.weak(step_hint(c, coverage, style, gaussians, gast_core::session::plan::machine_gemm_gflops_known()));
     egui::ComboBox::from_label("focus").selected_text(focus_label(c.focus)).show_ui(ui, |ui| {
         for f in Focus::ALL {
             changed |= ui.selectable_value(&mut c.focus, f, focus_label(f)).changed();

@@ -247,7 +247,8 @@ impl StudioApp {
         ui.heading("Parameters");
         let coverage = self.run.start().map(|s| s.coverage);
         let style = self.style.and_then(|k| self.styles.get(k)).map(|s| s.size);
-        if controls::config_editor(ui, &mut self.config, coverage, style) && self.run.is_live() {
+        let gaussians = self.scene.as_ref().map(|s| s.scene.gaussians.len());
+        if controls::config_editor(ui, &mut self.config, coverage, style, gaussians) && self.run.is_live() {
             self.run.send(Command::SetConfig(Box::new(self.config.clone())));
         }
         ui.horizontal(|ui| {

@@ -756,31 +756,37 @@ fn the_step_hint_follows_the_runs_focus_and_texture() {
     use gast_core::style::Focus;
     let fern = StyleConfig { focus: Focus::Frame, resolution: 256, texture_scale: 64, ..StyleConfig::default() };
     assert!(
-        step_hint(&fern, None, None, None).contains("0.30 s per step at 256 px")
-            && step_hint(&fern, None, None, None).contains("whole-frame")
+        step_hint(&fern, None, None, None, None).contains("0.30 s per step at 256 px")
+            && step_hint(&fern, None, None, None, None).contains("whole-frame")
     );
     let auto = StyleConfig { focus: Focus::Auto, ..fern.clone() };
-    assert_eq!(step_hint(&auto, Some(0.95), None, None), step_hint(&fern, None, None, None));
+    assert_eq!(step_hint(&auto, Some(0.95), None, None, None), step_hint(&fern, None, None, None, None));
     assert!(
-        step_hint(&auto, Some(0.2), None, None).contains("the object focus"),
+        step_hint(&auto, Some(0.2), None, None, None).contains("the object focus"),
         "{}",
-        step_hint(&auto, Some(0.2), None, None)
+        step_hint(&auto, Some(0.2), None, None, None)
     );
     // The style at its full 256 px on a whole frame takes the unscaled model.
     let unscaled = StyleConfig { texture_scale: 256, ..fern };
-    assert_ne!(step_hint(&unscaled, None, None, None), step_hint(&auto, Some(0.95), None, None));
+    assert_ne!(step_hint(&unscaled, None, None, None, None), step_hint(&auto, Some(0.95), None, None, None));
     // The style's size counts: guitar × wave (4,200 × 2,000) at texture
     // scale 1,024 took 1.45 s a step where 256 took 0.18 (2026-12-01).
     let big = StyleConfig { focus: Focus::Object, resolution: 256, texture_scale: 1024, ..StyleConfig::default() };
-    let hint = step_hint(&big, None, Some([4200, 2000]), None);
+    let hint = step_hint(&big, None, Some([4200, 2000]), None, None);
     assert!(hint.contains("1.18 s per step at 256 px (the style at 1024 px)"), "{hint}");
-    assert!(step_hint(&big, None, None, None).contains("0.71 s"), "{}", step_hint(&big, None, None, None));
+    assert!(step_hint(&big, None, None, None, None).contains("0.71 s"), "{}", step_hint(&big, None, None, None, None));
     // Once a run has probed this machine's rate, the hint takes it as the
     // plan does: four times the model machine's halves the step twice; a
     // rate below twice the model's keeps the 2-core CPU's figure.
-    let fast = step_hint(&big, None, Some([4200, 2000]), Some(4.0 * MODEL_GEMM_GFLOPS));
+    let fast = step_hint(&big, None, Some([4200, 2000]), None, Some(4.0 * MODEL_GEMM_GFLOPS));
     assert!(fast.contains("about 0.29 s per step") && fast.contains("on this CPU"), "{fast}");
-    assert_eq!(step_hint(&big, None, Some([4200, 2000]), Some(1.5 * MODEL_GEMM_GFLOPS)), hint);
+    assert_eq!(step_hint(&big, None, Some([4200, 2000]), None, Some(1.5 * MODEL_GEMM_GFLOPS)), hint);
+    // The open scene's Gaussians count: four playbots (2,000,000) add 2.3 s a step.
+    let millions = step_hint(&fern, None, None, Some(2_000_000), None);
+    assert!(
+        millions.contains("about 2.62 s per step") && millions.contains("89% of it the scene's Gaussians"),
+        "{millions}"
+    );
 }
 
 /// A whole frame planned at the default texture scale takes the reference's

@@ -37,6 +37,7 @@ pub(super) fn plan_for_cpu(
     let scaled_texture = !object && config.texture_scale == StyleConfig::default().texture_scale;
     let model = StepModel::for_run(object, (!scaled_texture).then_some(config.texture_scale))
         .with_style(style[0], style[1])
+        .with_gaussians(scene.len())
         .on_machine(gemm_gflops);
     let plan = auto_plan(span, model, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
     let asked = (config.resolution, config.cycles);

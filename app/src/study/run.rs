@@ -192,7 +192,9 @@ pub fn run_grid(
 fn plan_arm(spec: &mut TrialSpec, scene: &Gaussians, views: &[Camera], style: [usize; 2], budget_s: f64) -> (u32, u32) {
     let before = spec.config.schedule().total_steps();
     let ViewsSurvey { span, object } = survey(scene, views, spec.config.focus, spec.config.background);
-    let model = StepModel::for_run(object, Some(spec.config.texture_scale)).with_style(style[0], style[1]);
+    let model = StepModel::for_run(object, Some(spec.config.texture_scale))
+        .with_style(style[0], style[1])
+        .with_gaussians(scene.len());
     let plan = auto_plan(span, model, spec.config.cycles, spec.config.steps_per_cycle, budget_s);
     spec.config.resolution = plan.resolution;
     spec.config.cycles = plan.cycles;

@@ -31,6 +31,8 @@ pub struct StepModel {
     style_aspect: f64,
     /// This machine's step time over the model machine's ([`Self::on_machine`]; 1 until given).
     pace: f64,
+    /// Gaussians the steps render beyond the model's scene ([`Self::with_gaussians`]; 0 until given).
+    extra_gaussians: f64,
 }
 
 /// Object focus, views fitted to the object, the assignment terms on
@@ -69,6 +71,20 @@ const STEP_FRAME: (f64, f64) = (0.30, 2.0);
 pub const MATCHING_S_PER_STYLE_PIXEL: (f64, f64) = (1.6e-6, 0.43e-6);
 /// The longest step the automatic working resolution accepts, seconds.
 pub const AUTO_STEP_BUDGET_S: f64 = 1.0;
+/// Seconds a step each Gaussian adds beyond the model's scene (guitar's
+/// 90,854 for the object model, fern's 64,944 for the whole frame) on the
+/// model machine: projecting it, sorting and compositing its splat forward
+/// and back, its Adam update, which do not change with the resolution. On
+/// a 2-core machine whose guitar step took 0.187 s (the model's 0.29 s, so
+/// 1.55× the model machine's pace), 2026-12-03, `gast bench step --device
+/// cpu --framing object --views 12 --resolution 256 --steps 24`, geometry
+/// step medians: guitar 187 ms, playbot (500,000 Gaussians, SH degree 2)
+/// 527 ms, four playbots (2,000,000, SH degree 3) 1,559 ms: 0.84 and 0.72 µs
+/// a Gaussian beyond guitar's there, 1.2 µs on the model machine.
+pub const GAUSSIAN_S: f64 = 1.2e-6;
+/// The scenes the models' steps were timed on: guitar's Gaussians (object), fern's (whole frame).
+const MODEL_GAUSSIANS: (usize, usize) = (90_854, 64_944);
+
 /// The rate of [`machine_gemm_gflops`] on the 2-core machine the models'
 /// steps were timed on, GFLOP/s: 124 on the machine of [`STEP_FRAME`]'s
 /// run (its fern run 0.287 s a step); a later 2-core machine at 188 ran the
@@ -112,7 +128,21 @@ impl StepModel {
     /// run sets it), on an object: 256.
     pub fn for_run(object: bool, texture_scale: Option<u32>) -> Self {
         let (at_256, exponent) = if object { STEP_OBJECT } else { STEP_FRAME };
-        Self { at_256, exponent, object, texture_scale, style_aspect: 1.0, pace: 1.0 }
+        Self { at_256, exponent, object, texture_scale, style_aspect: 1.0, pace: 1.0, extra_gaussians: 0.0 }
+    }
+
+    /// The model for a scene of `gaussians` Gaussians: each one beyond the
+    /// model's scene adds [`GAUSSIAN_S`] to every step, at any resolution (a
+    /// scene of millions spends most of its step on them, so a plan gives
+    /// it fewer cycles, not a lower resolution than [`AUTO_MIN_RESOLUTION`]).
+    pub fn with_gaussians(self, gaussians: usize) -> Self {
+        let model = if self.object { MODEL_GAUSSIANS.0 } else { MODEL_GAUSSIANS.1 };
+        Self { extra_gaussians: gaussians.saturating_sub(model) as f64, ..self }
+    }
+
+    /// Seconds a step the Gaussians beyond the model's scene add, at the model machine's pace.
+    fn gaussians_s(self) -> f64 {
+        GAUSSIAN_S * self.extra_gaussians
     }
 
     /// The model on a machine whose matrix products run at `gemm_gflops`
@@ -160,7 +190,7 @@ impl StepModel {
         let positions = side.powf(self.exponent);
         let matching = per_pixel * positions * self.style_aspect * (texture * texture - reference * reference);
         // A smaller style saves at most the matching's share of the step.
-        self.pace * (base + matching).max(0.8 * base)
+        self.pace * ((base + matching).max(0.8 * base) + self.gaussians_s())
     }
 
     /// The largest multiple of 32 whose step fits in `budget` seconds (32
@@ -172,7 +202,8 @@ impl StepModel {
 
 /// The estimated time of one CPU step at `resolution` by `model` (views
 /// fitted to an elongated object have fewer pixels and are faster), naming
-/// the texture scale where the run's differs from the model's reference.
+/// the texture scale where the run's differs from the model's reference,
+/// and the share of the scene's Gaussians where it is a tenth or more.
 pub fn step_time_hint(model: StepModel, resolution: u32) -> String {
     let s = model.seconds(resolution);
     let focus = if model.object { "the object focus" } else { "whole-frame losses" };
@@ -181,7 +212,13 @@ pub fn step_time_hint(model: StepModel, resolution: u32) -> String {
         _ => String::new(),
     };
     let cpu = if model.speed_up() > 1.0 { "this CPU" } else { "a 2-core CPU" };
-    format!("about {s:.2} s per step at {resolution} px{style} on {cpu} with {focus}")
+    // Named where the scene's own size makes a tenth of the step or more.
+    let gaussians = if model.gaussians_s() * model.pace >= 0.1 * s {
+        format!(", {:.0}% of it the scene's Gaussians", 100.0 * model.gaussians_s() * model.pace / s)
+    } else {
+        String::new()
+    };
+    format!("about {s:.2} s per step at {resolution} px{style} on {cpu} with {focus}{gaussians}")
 }
 
 /// The working resolution for an object that spans `span` of the longer
@@ -593,6 +630,38 @@ mod tests {
         // A degenerate size reads as square.
         let square = StepModel::for_run(true, Some(512));
         assert_eq!(square.with_style(0, 10).seconds(256), square.seconds(256));
+    }
+
+    #[test]
+    fn a_scene_of_millions_takes_fewer_cycles_at_the_same_resolution() {
+        // The model's scenes add nothing; smaller ones save nothing.
+        let object = StepModel::for_focus(true);
+        assert_eq!(object.with_gaussians(90_854).seconds(256), object.seconds(256));
+        assert_eq!(object.with_gaussians(1_000).seconds(256), object.seconds(256));
+        let frame = StepModel::for_focus(false);
+        assert_eq!(frame.with_gaussians(64_944).seconds(256), frame.seconds(256));
+        // playbot (500,000) and four of it (2,000,000) on fitted views at 256
+        // px: the model machine's 0.78 and 2.58 s, 1.55× the 2-core machine
+        // of GAUSSIAN_S, which measured 0.527 and 1.559 s (0.50 and 1.66 said).
+        let playbot = object.with_gaussians(500_000).seconds(256);
+        let four = object.with_gaussians(2_000_000).seconds(256);
+        assert!((playbot / 1.55 - 0.527).abs() < 0.05 && (four / 1.55 - 1.559).abs() < 0.15, "{playbot} {four}");
+        // The plan keeps 256 px and fits fewer cycles: 7 and 2 of 30.
+        let plan = |n| auto_plan(0.9, object.with_gaussians(n), 30, 100, AUTO_RUN_BUDGET_S);
+        assert_eq!((plan(500_000).resolution, plan(500_000).cycles), (256, 7));
+        assert_eq!((plan(2_000_000).resolution, plan(2_000_000).cycles), (256, 2));
+        assert!(plan(2_000_000).seconds <= AUTO_RUN_BUDGET_S);
+        // The hint names the Gaussians' share where it is a tenth or more,
+        // and scales it with the machine.
+        let hint = step_time_hint(object.with_gaussians(2_000_000), 256);
+        assert_eq!(
+            hint,
+            "about 2.58 s per step at 256 px on a 2-core CPU with the object focus, 89% of it the scene's Gaussians"
+        );
+        let fast = object.with_gaussians(2_000_000).on_machine(4.0 * MODEL_GEMM_GFLOPS);
+        assert!((fast.seconds(256) - 2.58 / 4.0).abs() < 0.01, "{}", fast.seconds(256));
+        assert!(step_time_hint(fast, 256).contains("89% of it"), "{}", step_time_hint(fast, 256));
+        assert!(!step_time_hint(object.with_gaussians(100_000), 256).contains("Gaussians"));
     }
 
     #[test]

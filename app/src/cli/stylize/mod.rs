@@ -338,8 +338,10 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
                 // The model's times, halved per doubling where this machine's
                 // matrix products run at least twice the model machine's.
                 let gflops = machine_gemm_gflops_once();
-                let model =
-                    StepModel::for_run(object, texture).with_style(style.width, style.height).on_machine(gflops);
+                let model = StepModel::for_run(object, texture)
+                    .with_style(style.width, style.height)
+                    .with_gaussians(scene.len())
+                    .on_machine(gflops);
                 let plan = auto_plan(span, model, config.cycles, config.steps_per_cycle, AUTO_RUN_BUDGET_S);
                 if args.cycles.is_none() {
                     replan = Some((config.cycles, model.seconds(plan.resolution)));
