@@ -23,6 +23,23 @@ pub fn render(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> Render {
 /// # Panics
 /// When the arrays of `g` are inconsistent (a caller bug).
 pub fn forward(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> (Render, ForwardState) {
+    let (render, state, _) = forward_marking::<false>(g, cam, opts);
+    (render, state)
+}
+
+/// As [`forward`], and for each Gaussian whether it was composited into
+/// some pixel (α ≥ 1/255 before the pixel's transmittance ran out), noted
+/// as the tiles composite rather than in a second pass over them.
+pub(crate) fn forward_shown(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> (Render, ForwardState, Vec<bool>) {
+    forward_marking::<true>(g, cam, opts)
+}
+
+/// [`forward`]; with `MARK`, also the Gaussians composited (else an empty list).
+fn forward_marking<const MARK: bool>(
+    g: &Gaussians,
+    cam: &Camera,
+    opts: &RenderOptions,
+) -> (Render, ForwardState, Vec<bool>) {
     if let Err(e) = g.check_consistent() {
         panic!("raster::forward: {e}");
     }
@@ -37,9 +54,16 @@ pub fn forward(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> (Render, Fo
         .into_par_iter()
         .map(|t| {
             let list = &tile_list[tile_starts[t] as usize..tile_starts[t + 1] as usize];
-            composite_tile(t as u32, tiles_x, cam.width, cam.height, &splats, list)
+            composite_tile::<MARK>(t as u32, tiles_x, cam.width, cam.height, &splats, list)
         })
         .collect();
+    let mut shown = Vec::new();
+    if MARK {
+        shown = vec![false; g.len()];
+        for &si in outs.iter().flat_map(|o| &o.shown) {
+            shown[ids[si as usize] as usize] = true;
+        }
+    }
 
     let (w, h) = (cam.width as usize, cam.height as usize);
     let mut out = Render::zeros(cam.width, cam.height);
@@ -73,7 +97,7 @@ pub fn forward(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> (Render, Fo
         final_t,
         n_contrib,
     };
-    (out, state)
+    (out, state, shown)
 }
 
 /// One Gaussian's parameters by index.
@@ -191,6 +215,8 @@ struct Px {
 /// One tile's composited pixels (local row-major, `TILE` wide).
 struct TileOut {
     px: [Px; TILE_PX],
+    /// The splats composited into some pixel of the tile, when asked (`MARK`).
+    shown: Vec<u32>,
 }
 
 /// The bits `lo..=hi` of a tile row mask.
@@ -202,11 +228,19 @@ pub(crate) fn span_mask(lo: usize, hi: usize) -> u32 {
 /// Composites one tile front to back, splat-major: each splat visits only the
 /// pixels of its ellipse, row by row, that are not finished yet (a bit mask
 /// per tile row marks the finished ones, so saturated regions cost nothing).
+/// With `MARK` it lists the splats it composited into some pixel.
 #[inline(never)]
-fn composite_tile(tile: u32, tiles_x: u32, w: u32, h: u32, splats: &[Splat], list: &[u32]) -> TileOut {
+fn composite_tile<const MARK: bool>(
+    tile: u32,
+    tiles_x: u32,
+    w: u32,
+    h: u32,
+    splats: &[Splat],
+    list: &[u32],
+) -> TileOut {
     let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
     let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-    let mut o = TileOut { px: [Px { t: 1.0, acc: [0.0; 4], n_contrib: 0 }; TILE_PX] };
+    let mut o = TileOut { px: [Px { t: 1.0, acc: [0.0; 4], n_contrib: 0 }; TILE_PX], shown: Vec::new() };
     // Bit j of done[ly]: the transmittance of pixel (ly, j) would have fallen below T_MIN.
     let mut done = [0u32; TILE as usize];
     let mut remaining = (x1 - x0) * (y1 - y0);
@@ -219,6 +253,7 @@ fn composite_tile(tile: u32, tiles_x: u32, w: u32, h: u32, splats: &[Splat], lis
             continue;
         }
         let box_mask = span_mask((bja as u32 - x0) as usize, (bjb as u32 - x0) as usize);
+        let mut composited = false;
         for i in ia..=ib {
             let ly = (i as u32 - y0) as usize;
             if done[ly] & box_mask == box_mask {
@@ -252,7 +287,11 @@ fn composite_tile(tile: u32, tiles_x: u32, w: u32, h: u32, splats: &[Splat], lis
                 }
                 p.t = test_t;
                 p.n_contrib = k as u32 + 1;
+                composited = true;
             }
+        }
+        if MARK && composited {
+            o.shown.push(si);
         }
         if remaining == 0 {
             break;
