@@ -15,7 +15,7 @@ use super::forward::{TILE_PX, gaussian_ref, span_mask};
 use super::project::{CamConsts, GaussianGrad, SplatGrad, project_backward};
 use super::splat::{ALPHA_MAX, LANE};
 use super::state::{ForwardState, split_by_tile};
-use super::{Grads, RenderOptions, TILE};
+use super::{Grads, RenderOptions, ShGrads, TILE};
 use crate::camera::Camera;
 use crate::scene::Gaussians;
 
@@ -33,6 +33,23 @@ pub fn backward(
     state: &ForwardState,
     v_rgb: &[f32],
     v_inv_depth: &[f32],
+) -> Grads {
+    backward_sh(g, cam, opts, state, v_rgb, v_inv_depth, ShGrads::All)
+}
+
+/// [`backward`] with the gradients of the SH coefficients `sh` only (the
+/// others' are the same as [`backward`]'s, to the bit).
+///
+/// # Panics
+/// As [`backward`].
+pub fn backward_sh(
+    g: &Gaussians,
+    cam: &Camera,
+    opts: &RenderOptions,
+    state: &ForwardState,
+    v_rgb: &[f32],
+    v_inv_depth: &[f32],
+    sh: ShGrads,
 ) -> Grads {
     if let Err(e) = g.check_consistent() {
         panic!("raster::backward: {e}");
@@ -73,7 +90,7 @@ pub fn backward(
         panic!("raster::backward: the state holds Gaussian {i}, only {} are given", g.len());
     }
     let cc = CamConsts::new(cam);
-    let ksh = g.sh_coeffs() * 3;
+    let ksh = sh.coefficients(g) * 3;
     let mut contributing: Vec<(u32, u32)> = (0..state.splats.len())
         .into_par_iter()
         .with_min_len(1024)
@@ -81,15 +98,21 @@ pub fn backward(
         .map(|k| (state.ids[k], k as u32))
         .collect();
     contributing.par_sort_unstable();
-    let mut out = Grads::zeros_like(g);
-    // Chunks of Gaussians in parallel, each writing its own slices.
+    let mut out = Grads::zeros_for(g, sh);
+    // Chunks of Gaussians in parallel, each writing its own slices (empty
+    // SH slices where no coefficient is asked).
     const CHUNK: usize = 4096;
+    let v_sh: Vec<&mut [f32]> = if ksh == 0 {
+        (0..g.len().div_ceil(CHUNK)).map(|_| &mut [][..]).collect()
+    } else {
+        out.v_sh.chunks_mut(CHUNK * ksh).collect()
+    };
     (
         out.v_means.par_chunks_mut(CHUNK),
         out.v_log_scales.par_chunks_mut(CHUNK),
         out.v_quats.par_chunks_mut(CHUNK),
         out.v_opacity_logits.par_chunks_mut(CHUNK),
-        out.v_sh.par_chunks_mut(CHUNK * ksh),
+        v_sh,
     )
         .into_par_iter()
         .enumerate()

@@ -42,7 +42,7 @@ mod visibility;
 
 use crate::scene::Gaussians;
 
-pub use backward::backward;
+pub use backward::{backward, backward_sh};
 pub use forward::{forward, render};
 pub use state::ForwardState;
 pub use visibility::{contributing, render_and_contributing};
@@ -88,7 +88,9 @@ impl Render {
 }
 
 /// Gradients of a scalar loss with respect to every Gaussian parameter, in the
-/// layout of [`Gaussians`] (`v_sh` matches `Gaussians::sh`).
+/// layout of [`Gaussians`]; `v_sh` holds the first coefficients of each
+/// Gaussian that were asked for ([`ShGrads`]): all of `Gaussians::sh` from
+/// [`backward`].
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Grads {
     /// Gradient w.r.t. `Gaussians::means`.
@@ -99,20 +101,52 @@ pub struct Grads {
     pub v_quats: Vec<[f32; 4]>,
     /// Gradient w.r.t. `Gaussians::opacity_logits`.
     pub v_opacity_logits: Vec<f32>,
-    /// Gradient w.r.t. `Gaussians::sh`.
+    /// Gradient w.r.t. the SH coefficients asked for, per Gaussian (`3 ×
+    /// coefficients` each, in the order of `Gaussians::sh`).
     pub v_sh: Vec<f32>,
+}
+
+/// Which SH coefficients' gradients a backward pass writes: the others are
+/// neither computed nor held (a stylization steps the DC colour only, so a
+/// scene of degree 3 would otherwise hold 16 times the gradient it uses).
+/// The view direction's gradient through the colour, part of the means',
+/// counts every coefficient whichever is asked.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShGrads {
+    /// Every coefficient (fitting, the golden checks).
+    All,
+    /// The DC coefficient (`Gaussians::sh`'s first three values of each Gaussian).
+    Dc,
+    /// None: a step that updates no colour.
+    Skip,
+}
+
+impl ShGrads {
+    /// Coefficients per Gaussian (each three values) for a scene of `g`'s degree.
+    pub fn coefficients(self, g: &Gaussians) -> usize {
+        match self {
+            Self::All => g.sh_coeffs(),
+            Self::Dc => 1,
+            Self::Skip => 0,
+        }
+    }
 }
 
 impl Grads {
     /// Zero gradients shaped like `g`.
     pub fn zeros_like(g: &Gaussians) -> Self {
+        Self::zeros_for(g, ShGrads::All)
+    }
+
+    /// Zero gradients for `g` with the SH coefficients `sh`.
+    pub fn zeros_for(g: &Gaussians, sh: ShGrads) -> Self {
         let n = g.len();
         Self {
             v_means: vec![[0.0; 3]; n],
             v_log_scales: vec![[0.0; 3]; n],
             v_quats: vec![[0.0; 4]; n],
             v_opacity_logits: vec![0.0; n],
-            v_sh: vec![0.0; g.sh.len()],
+            v_sh: vec![0.0; n * 3 * sh.coefficients(g)],
         }
     }
 }

@@ -301,11 +301,17 @@ pub(crate) fn project_backward(g: &GaussianRef, cc: &CamConsts, vs: &SplatGrad, 
     // Colour → SH coefficients and view direction.
     let (raw, y, d, len) = sh_color(g, cc);
     let v_col: [f32; 3] = std::array::from_fn(|c| if raw[c] > 0.0 { vs[6 + c] } else { 0.0 });
+    // The direction's weights count every coefficient; `out.v_sh` takes
+    // the first ones, as many as it holds.
     let mut w = [0.0f32; 16];
-    for (k, (vk, coef)) in out.v_sh.chunks_exact_mut(3).zip(g.sh.chunks_exact(3)).enumerate() {
+    for (k, coef) in g.sh.chunks_exact(3).enumerate() {
+        for c in 0..3 {
+            w[k] += coef[c] * v_col[c];
+        }
+    }
+    for (k, vk) in out.v_sh.chunks_exact_mut(3).enumerate() {
         for c in 0..3 {
             vk[c] = y[k] * v_col[c];
-            w[k] += coef[c] * v_col[c];
         }
     }
     let v_d = sh_basis_grad(d, g.deg, &w);

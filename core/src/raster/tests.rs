@@ -274,6 +274,34 @@ fn backward_is_deterministic() {
     assert_eq!(a, b);
 }
 
+/// Asking for the DC's SH gradient, or none, leaves every other gradient as
+/// the whole backward's to the bit, on a degree-3 scene (the direction's
+/// gradient through the colour counts every coefficient either way).
+#[test]
+fn backward_of_fewer_sh_coefficients_keeps_the_other_gradients() {
+    use super::{ShGrads, backward_sh};
+    let (g, cam) = fd_scene(7, 3, false);
+    let opts = RenderOptions::default();
+    let npx = (cam.width * cam.height) as usize;
+    let (_, state) = forward(&g, &cam, &opts);
+    let (v_rgb, v_d): (Vec<f32>, Vec<f32>) =
+        ((0..3 * npx).map(|i| ((i * 37 % 101) as f32 - 50.0) / 50.0).collect(), vec![-0.25; npx]);
+    let all = backward(&g, &cam, &opts, &state, &v_rgb, &v_d);
+    let dc = backward_sh(&g, &cam, &opts, &state, &v_rgb, &v_d, ShGrads::Dc);
+    let skip = backward_sh(&g, &cam, &opts, &state, &v_rgb, &v_d, ShGrads::Skip);
+    let k = g.sh_coeffs() * 3;
+    assert_eq!(k, 48);
+    let all_dc: Vec<f32> = all.v_sh.chunks_exact(k).flat_map(|c| c[..3].to_vec()).collect();
+    assert_eq!(dc.v_sh, all_dc);
+    assert!(all_dc.iter().any(|&v| v != 0.0) && all.v_sh.len() == g.len() * k && skip.v_sh.is_empty());
+    for other in [&dc, &skip] {
+        assert_eq!(other.v_means, all.v_means);
+        assert_eq!(other.v_log_scales, all.v_log_scales);
+        assert_eq!(other.v_quats, all.v_quats);
+        assert_eq!(other.v_opacity_logits, all.v_opacity_logits);
+    }
+}
+
 #[test]
 fn exp_neg_is_accurate() {
     let mut worst = 0.0f64;

@@ -167,7 +167,13 @@ impl Session {
             }
         }
         let t = Instant::now();
-        let mut grads = raster::backward(&cpu.g, &cam, &opts, &state, &v_rgb, &loss.v_inv_depth);
+        // The colour steps the DC coefficients only; a geometry step needs them only for the leak.
+        let sh = if phase.updates_color() || (leaking && phase == Phase::Geometry) {
+            raster::ShGrads::Dc
+        } else {
+            raster::ShGrads::Skip
+        };
+        let mut grads = raster::backward_sh(&cpu.g, &cam, &opts, &state, &v_rgb, &loss.v_inv_depth, sh);
         timings.raster_backward_ms = ms(t);
 
         let t = Instant::now();
@@ -178,11 +184,10 @@ impl Session {
             let k = cpu.g.sh_coeffs() * 3;
             let mut dc: Vec<f32> =
                 (0..cpu.g.len()).flat_map(|i| [cpu.g.sh[i * k], cpu.g.sh[i * k + 1], cpu.g.sh[i * k + 2]]).collect();
-            let mut v_dc: Vec<f32> = (0..cpu.g.len())
-                .flat_map(|i| [grads.v_sh[i * k], grads.v_sh[i * k + 1], grads.v_sh[i * k + 2]])
-                .collect();
-            take_leak(&mut v_dc, &mut self.leak.color);
-            cpu.opt.color.step(&mut dc, &v_dc, lr.color);
+            // The DC's gradient alone (`ShGrads::Dc`), three values a Gaussian.
+            let v_dc = &mut grads.v_sh;
+            take_leak(v_dc, &mut self.leak.color);
+            cpu.opt.color.step(&mut dc, v_dc, lr.color);
             if self.config.color_floor {
                 floor_dc(&mut dc);
             }
@@ -223,12 +228,7 @@ impl Session {
                     add_into(&mut self.leak.quats, flat(&grads.v_quats));
                     add_into(&mut self.leak.opacity, &grads.v_opacity_logits);
                 }
-                Phase::Geometry => {
-                    let k = cpu.g.sh_coeffs() * 3;
-                    for (i, acc) in self.leak.color.chunks_exact_mut(3).enumerate() {
-                        add_into(acc, &grads.v_sh[i * k..i * k + 3]);
-                    }
-                }
+                Phase::Geometry => add_into(&mut self.leak.color, &grads.v_sh),
                 Phase::Joint => {}
             }
         }
