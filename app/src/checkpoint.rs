@@ -204,6 +204,15 @@ pub fn cameras_fingerprint(cameras: &[gast_core::Camera]) -> String {
     format!("{} views, {:016x}", cameras.len(), fnv1a(text.bytes().map(u64::from)))
 }
 
+/// `N bytes, <hash>`: FNV-1a over a file's bytes (a style image's: 10 ms for
+/// 10 MB), which a record keeps so that a run goes on only with the image it
+/// was made with, not another written over it under the same name; `None`
+/// when the file cannot be read (the run's own read says why).
+pub fn file_fingerprint(path: &Path) -> Option<String> {
+    let bytes = std::fs::read(path).ok()?;
+    Some(format!("{} bytes, {:016x}", bytes.len(), fnv1a(bytes.iter().map(|&b| u64::from(b)))))
+}
+
 /// FNV-1a over `words` (over bytes, each a word below 256, it is the usual
 /// byte-wise FNV-1a): the hashes a record keeps of views, scenes and styles.
 pub fn fnv1a(words: impl Iterator<Item = u64>) -> u64 {

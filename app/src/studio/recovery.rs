@@ -38,9 +38,12 @@ pub struct Record {
     pub scene_path: Option<PathBuf>,
     pub scene_key: String,
     pub gaussians: usize,
-    /// The style image (its absolute path where it resolves) and its size.
+    /// The style image (its absolute path where it resolves), its size and
+    /// its bytes ([`checkpoint::file_fingerprint`]; `None` where unread).
     pub style: PathBuf,
     pub style_size: [usize; 2],
+    #[serde(default)]
+    pub style_file: Option<String>,
     /// The user's depth image for the style, where one was given.
     pub style_depth_image: Option<PathBuf>,
     /// The optimisation views ([`checkpoint::cameras_fingerprint`]) and the
@@ -148,7 +151,7 @@ impl Offer {
     /// The kept run of the scene `scene_key` with the style at `style`, if
     /// the cache holds one whose record reads and matches; `Err` says why a
     /// slot that is there cannot be offered (unreadable, or of another
-    /// style's size).
+    /// style's size or bytes: an image written over the style's file).
     pub fn find(folder: &Path, scene_key: &str, style: &Path, style_size: [usize; 2]) -> Result<Option<Self>, String> {
         let path = slot_path(folder, scene_key, style);
         if !checkpoint::record_path(&path).is_file() {
@@ -167,6 +170,15 @@ impl Offer {
                 record.style_size[1],
                 style_size[0],
                 style_size[1]
+            ));
+        }
+        if let (Some(was), Some(now)) = (&record.style_file, checkpoint::file_fingerprint(style))
+            && *was != now
+        {
+            return Err(format!(
+                "{}: a run of this scene and style was kept, with a style file of {was}; the file is {now} now \
+                 (another image written over it since)",
+                path.display()
             ));
         }
         Ok(Some(Self { path, record }))
@@ -323,6 +335,7 @@ impl StudioApp {
             gaussians: scene.scene.gaussians.len(),
             style: style.to_path_buf(),
             style_size,
+            style_file: checkpoint::file_fingerprint(style),
             style_depth_image,
             cameras: checkpoint::cameras_fingerprint(&self.cameras),
             camera_source: self.camera_source.as_deref().map(absolute),
@@ -470,6 +483,7 @@ mod tests {
             gaussians: 3,
             style: style.to_path_buf(),
             style_size: [64, 48],
+            style_file: checkpoint::file_fingerprint(style),
             style_depth_image: None,
             cameras: "1 views, 0".into(),
             camera_source: None,
@@ -488,7 +502,7 @@ mod tests {
     }
 
     /// A slot written is offered for its scene and style only, says why it
-    /// cannot be offered when the style's size changed, and is gone once discarded.
+    /// cannot be offered when the style's size or bytes changed, and is gone once discarded.
     #[test]
     fn a_kept_run_is_offered_for_its_scene_and_style() {
         let dir = std::env::temp_dir().join(format!("gast-recovery-unit-{}", std::process::id()));
@@ -510,6 +524,11 @@ mod tests {
         assert_eq!(Offer::find(&dir, &key, &dir.join("other.png"), [64, 48]).expect("readable"), None);
         let e = Offer::find(&dir, &key, &style, [32, 48]).expect_err("another size");
         assert!(e.contains("with a style of 64×48 px; the style is 32×48 px now"), "{e}");
+        // Another image of the same size written over the style's file.
+        std::fs::write(&style, b"yz").expect("another style file");
+        let e = Offer::find(&dir, &key, &style, [64, 48]).expect_err("another image");
+        assert!(e.contains("with a style file of 1 bytes, ") && e.contains("the file is 2 bytes, "), "{e}");
+        std::fs::write(&style, b"x").expect("the style file again");
         std::fs::write(checkpoint::record_path(&slot.path), b"{").expect("damaged");
         let e = Offer::find(&dir, &key, &style, [64, 48]).expect_err("unreadable");
         assert!(e.contains("expected a studio run checkpoint's record"), "{e}");

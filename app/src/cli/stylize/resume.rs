@@ -24,6 +24,10 @@ pub struct Record {
     pub gaussians: usize,
     /// The style image and the style depth's image or network, when given.
     pub style: PathBuf,
+    /// The style image's bytes ([`checkpoint::file_fingerprint`]); `None` in
+    /// a record written before it was kept, which then goes unchecked.
+    #[serde(default)]
+    pub style_file: Option<String>,
     pub style_depth: Option<PathBuf>,
     pub depth_model: Option<PathBuf>,
     /// The optimisation views: their number and a fingerprint of their poses and sizes.
@@ -65,6 +69,7 @@ impl Record {
             scene: absolute(&args.scene),
             gaussians,
             style: absolute(&args.style),
+            style_file: checkpoint::file_fingerprint(&args.style),
             style_depth: args.style_depth.as_deref().map(absolute),
             depth_model: args.depth_model.as_deref().map(absolute),
             cameras: checkpoint::cameras_fingerprint(cameras),
@@ -109,7 +114,9 @@ impl Resume {
     /// must hold the run's Gaussians (as many as the input, unless the run
     /// splits them).
     pub fn check_and_load(&self, now: &Record) -> anyhow::Result<gast_core::Gaussians> {
-        let now = Record { step: self.record.step, replan: self.record.replan, ..now.clone() };
+        // An older record without the style's bytes takes this run's.
+        let style_file = if self.record.style_file.is_some() { now.style_file.clone() } else { None };
+        let now = Record { step: self.record.step, replan: self.record.replan, style_file, ..now.clone() };
         checkpoint::refuse_other_settings(&self.path, &self.record, &now)?;
         let scene = gast_core::scene::load(&self.path)
             .with_context(|| format!("could not read the checkpoint {} to resume from", self.path.display()))?;
@@ -150,6 +157,7 @@ mod tests {
             scene: "scene.ply".into(),
             gaussians: 3,
             style: "style.jpg".into(),
+            style_file: None,
             style_depth: None,
             depth_model: None,
             cameras: "1 views, 0".into(),
@@ -174,6 +182,19 @@ mod tests {
         let mut older = serde_json::to_value(&two_now).expect("json");
         older.as_object_mut().expect("an object").remove("replan");
         assert_eq!(serde_json::from_value::<Record>(older).expect("reads"), two_now);
+        // Another image written under the style's name is refused, saying
+        // so; a record written before the style's bytes were kept goes on.
+        let style = dir.join("style.png");
+        std::fs::write(&style, b"one image").expect("written");
+        let kept = Record { style_file: checkpoint::file_fingerprint(&style), ..two_now.clone() };
+        std::fs::write(&style, b"another one").expect("written");
+        let now = Record { style_file: checkpoint::file_fingerprint(&style), ..two_now.clone() };
+        assert!(kept.style_file.as_deref().is_some_and(|f| f.starts_with("9 bytes, ")), "{kept:?}");
+        let resume = Resume { path: resume.path.clone(), record: kept };
+        let e = resume.check_and_load(&now).expect_err("refused").to_string();
+        assert!(e.contains("style_file: \"9 bytes, ") && e.contains("\"11 bytes, "), "{e}");
+        let resume = Resume { path: resume.path.clone(), record: two_now.clone() };
+        assert_eq!(resume.check_and_load(&now).expect("an older record").len(), 2);
         std::fs::remove_dir_all(&dir).ok();
     }
 }
