@@ -155,14 +155,14 @@ fn a_worker_keeps_its_runs_state_and_another_goes_on_from_it() {
         type Kept = Arc<Mutex<Vec<(u32, gast_core::Gaussians, OptimiserState)>>>;
         let keeper = |kept: &Kept| {
             let kept = kept.clone();
-            Keeper {
-                every: std::time::Duration::from_secs(3600),
-                write: Box::new(move |s| {
+            Keeper::new(
+                std::time::Duration::from_secs(3600),
+                Box::new(move |s| {
                     let state = s.optimiser_state()?;
                     kept.lock().expect("kept").push((s.steps_done(), s.result(), state));
                     Ok(())
                 }),
-            }
+            )
         };
         let finished = |handle: &gast_core::session::SessionHandle| loop {
             match next(&handle.events) {

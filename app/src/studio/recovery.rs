@@ -22,7 +22,9 @@ use super::StudioApp;
 use crate::checkpoint;
 
 /// Stepping time between two writes of a run's state: a crash loses at
-/// most a minute of a run (a fern-sized scene's write took 17–34 ms).
+/// most a minute of a run (a fern-sized scene's write took 17–34 ms), or
+/// more where a write takes longer than `gast_core::session::KEEP_SHARE`
+/// of it (two million Gaussians of degree 3: 4.7 s, every 4 min).
 pub const KEEP_EVERY: Duration = Duration::from_secs(60);
 
 /// What is kept beside a run's scene: enough to offer it for the scene and
@@ -105,10 +107,11 @@ impl Slot {
     }
 
     /// The worker's keeper: writes the session's scene, optimiser state and
-    /// record every [`KEEP_EVERY`] of stepping, at a pause and at the end.
+    /// record every [`KEEP_EVERY`] of stepping (or longer, for a scene whose
+    /// write is slow), at a pause and at the end.
     pub fn keeper(&self) -> Keeper {
         let slot = self.clone();
-        Keeper { every: KEEP_EVERY, write: Box::new(move |session| slot.write(session)) }
+        Keeper::new(KEEP_EVERY, Box::new(move |session| slot.write(session)))
     }
 
     fn write(&self, session: &gast_core::session::Session) -> Result<(), String> {

@@ -27,7 +27,9 @@ pub use prepare::{
 pub use run::{Session, SessionError, SessionInputs};
 pub use slot::Slot;
 pub use stage1_cache::{CacheOutcome, Stage1Cache, depth_key};
-pub use worker::{KeepWrite, Keeper, ResumeFrom, RunOptions, SessionHandle, run_loop, spawn, spawn_run, spawn_with};
+pub use worker::{
+    KEEP_SHARE, KeepWrite, Keeper, ResumeFrom, RunOptions, SessionHandle, run_loop, spawn, spawn_run, spawn_with,
+};
 
 use crate::camera::Camera;
 use crate::style::{StyleConfig, StyleMaps};
