@@ -204,10 +204,11 @@ pub fn cameras_fingerprint(cameras: &[gast_core::Camera]) -> String {
     format!("{} views, {:016x}", cameras.len(), fnv1a(text.bytes().map(u64::from)))
 }
 
-/// `N bytes, <hash>`: FNV-1a over a file's bytes (a style image's: 10 ms for
-/// 10 MB), which a record keeps so that a run goes on only with the image it
-/// was made with, not another written over it under the same name; `None`
-/// when the file cannot be read (the run's own read says why).
+/// `N bytes, <hash>`: FNV-1a over a file's bytes (a style image's, read
+/// whole once per record), which a record keeps so that a run goes on only
+/// with the image it was made with, not another written over it under the
+/// same name; `None` when the file cannot be read (the run's own read says
+/// why).
 pub fn file_fingerprint(path: &Path) -> Option<String> {
     let bytes = std::fs::read(path).ok()?;
     Some(format!("{} bytes, {:016x}", bytes.len(), fnv1a(bytes.iter().map(|&b| u64::from(b)))))
