@@ -205,10 +205,10 @@ pub fn cameras_fingerprint(cameras: &[gast_core::Camera]) -> String {
 }
 
 /// `N bytes, <hash>`: FNV-1a over a file's bytes (a style image's, read
-/// whole once per record), which a record keeps so that a run goes on only
-/// with the image it was made with, not another written over it under the
-/// same name; `None` when the file cannot be read (the run's own read says
-/// why).
+/// where the run or the studio reads the image), which a record keeps so
+/// that a run goes on only with the image it was made with, not another
+/// written over it under the same name; `None` when the file cannot be read
+/// (the run's own read says why).
 pub fn file_fingerprint(path: &Path) -> Option<String> {
     let bytes = std::fs::read(path).ok()?;
     Some(format!("{} bytes, {:016x}", bytes.len(), fnv1a(bytes.iter().map(|&b| u64::from(b)))))

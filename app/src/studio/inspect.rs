@@ -149,6 +149,9 @@ pub struct StyleFile {
     pub image: Arc<StyleImage>,
     /// 96 px wide.
     pub thumb: egui::ColorImage,
+    /// The file's bytes ([`crate::checkpoint::file_fingerprint`]), which a
+    /// kept run's record names; `None` for a style made in memory.
+    pub file: Option<String>,
 }
 
 /// A decoded style image made ready for the strip; one the runs cannot use
@@ -157,7 +160,7 @@ pub fn style_file(path: &Path, img: image::RgbImage) -> Result<StyleFile, String
     let thumb = image::imageops::thumbnail(&img, 96, (96 * img.height() / img.width().max(1)).max(1));
     let image = Arc::new(StyleImage::from_rgb(path, img)?);
     let thumb = egui::ColorImage::from_rgb([thumb.width() as usize, thumb.height() as usize], thumb.as_raw());
-    Ok(StyleFile { image, thumb })
+    Ok(StyleFile { image, thumb, file: None })
 }
 
 /// Reads a style image file ([`style_file`]): off the UI thread once the
@@ -167,7 +170,8 @@ pub fn style_file(path: &Path, img: image::RgbImage) -> Result<StyleFile, String
 pub fn read_style_file(path: &Path) -> Result<StyleFile, String> {
     let img = gast_core::io::open_image(path)
         .map_err(|e| format!("{}: not a style image this build can read (PNG, JPEG, WebP): {e}", path.display()))?;
-    style_file(path, img.into_rgb8())
+    let file = crate::checkpoint::file_fingerprint(path);
+    Ok(StyleFile { file, ..style_file(path, img.into_rgb8())? })
 }
 
 /// How the message of a failed scene export starts.

@@ -79,6 +79,8 @@ struct LoadedStyle {
     image: Option<Arc<gast_core::session::StyleImage>>,
     /// Read from a file, which can be read again.
     from_file: bool,
+    /// That file's bytes when it was read ([`inspect::StyleFile::file`]).
+    file: Option<String>,
     thumb: egui::ColorImage,
     texture: egui::TextureHandle,
     size: [usize; 2],

@@ -132,12 +132,12 @@ impl StudioApp {
                 return self.report(anyhow::anyhow!("{e}; {keep}"));
             }
         };
-        let inspect::StyleFile { image, thumb } = file;
+        let inspect::StyleFile { image, thumb, file } = file;
         let texture =
             self.ctx.load_texture(format!("style {}", path.display()), thumb.clone(), egui::TextureOptions::LINEAR);
         let size = [image.width, image.height];
         self.styles.retain(|s| s.path != path);
-        self.styles.insert(0, LoadedStyle { path, image: Some(image), from_file: true, thumb, texture, size });
+        self.styles.insert(0, LoadedStyle { path, image: Some(image), from_file: true, file, thumb, texture, size });
         self.styles.truncate(8);
         self.style = Some(0);
         self.release_unselected_styles();

@@ -154,8 +154,15 @@ impl Offer {
     /// The kept run of the scene `scene_key` with the style at `style`, if
     /// the cache holds one whose record reads and matches; `Err` says why a
     /// slot that is there cannot be offered (unreadable, or of another
-    /// style's size or bytes: an image written over the style's file).
-    pub fn find(folder: &Path, scene_key: &str, style: &Path, style_size: [usize; 2]) -> Result<Option<Self>, String> {
+    /// style's size or bytes: an image written over the style's file, whose
+    /// bytes as read are `style_file`).
+    pub fn find(
+        folder: &Path,
+        scene_key: &str,
+        style: &Path,
+        style_size: [usize; 2],
+        style_file: Option<&str>,
+    ) -> Result<Option<Self>, String> {
         let path = slot_path(folder, scene_key, style);
         if !checkpoint::record_path(&path).is_file() {
             return Ok(None);
@@ -175,8 +182,8 @@ impl Offer {
                 style_size[1]
             ));
         }
-        if let (Some(was), Some(now)) = (&record.style_file, checkpoint::file_fingerprint(style))
-            && *was != now
+        if let (Some(was), Some(now)) = (record.style_file.as_deref(), style_file)
+            && was != now
         {
             return Err(format!(
                 "{}: a run of this scene and style was kept, with a style file of {was}; the file is {now} now \
@@ -296,9 +303,9 @@ impl StudioApp {
         if self.recovery.others.is_none() {
             self.recovery.others = Some(Offer::list(&folder));
         }
-        let (Some(version), Some((style, size))) = (
+        let (Some(version), Some((style, size, file))) = (
             self.scene.as_ref().map(|s| s.scene.version),
-            self.style.and_then(|k| self.styles.get(k)).map(|s| (s.path.clone(), s.size)),
+            self.style.and_then(|k| self.styles.get(k)).map(|s| (s.path.clone(), s.size, s.file.clone())),
         ) else {
             self.recovery.offer = None;
             return;
@@ -309,7 +316,7 @@ impl StudioApp {
         }
         self.recovery.looked = looking;
         let Some(key) = self.scene_key() else { return };
-        self.recovery.offer = match Offer::find(&folder, &key, &style, size) {
+        self.recovery.offer = match Offer::find(&folder, &key, &style, size, file.as_deref()) {
             Ok(offer) => offer.filter(|o| self.recovery.slots.iter().all(|s| s.path != o.path)),
             Err(e) => {
                 self.report(anyhow::anyhow!("{e}"));
@@ -338,7 +345,8 @@ impl StudioApp {
             gaussians: scene.scene.gaussians.len(),
             style: style.to_path_buf(),
             style_size,
-            style_file: checkpoint::file_fingerprint(style),
+            // The bytes as the studio read them, the image the run takes.
+            style_file: self.styles.iter().find(|s| s.path == style).and_then(|s| s.file.clone()),
             style_depth_image,
             cameras: checkpoint::cameras_fingerprint(&self.cameras),
             camera_source: self.camera_source.as_deref().map(absolute),
@@ -512,32 +520,35 @@ mod tests {
         std::fs::create_dir_all(&dir).expect("a folder");
         let style = dir.join("style.png");
         std::fs::write(&style, b"x").expect("a style file");
+        // The style's bytes as the studio reads them with the image.
+        let now = |p: &Path| checkpoint::file_fingerprint(p);
         let key = scene_key(&scene(3, 0.0));
         let slot = Slot::new(&dir, record(&key, &style));
         let kept = Record { step: 7, total: 20, ..slot.record.clone() };
         checkpoint::write_with_record(&slot.path, &scene(3, 0.5), None, &kept).expect("written");
-        let offer = Offer::find(&dir, &key, &style, [64, 48]).expect("readable").expect("offered");
+        let offer =
+            Offer::find(&dir, &key, &style, [64, 48], now(&style).as_deref()).expect("readable").expect("offered");
         assert_eq!(offer.record, kept);
         assert_eq!(offer.summary(100 + 180), "step 7 of 20, kept 3 min ago");
         let (from, said) = offer.load().expect("loads");
         assert_eq!((from.step, from.scene.means[0][0], from.moments.is_none()), (7, 0.5, true));
         assert!(said.contains("start afresh"), "{said}");
         let other = scene_key(&scene(3, 1.0));
-        assert_eq!(Offer::find(&dir, &other, &style, [64, 48]).expect("readable"), None);
-        assert_eq!(Offer::find(&dir, &key, &dir.join("other.png"), [64, 48]).expect("readable"), None);
-        let e = Offer::find(&dir, &key, &style, [32, 48]).expect_err("another size");
+        assert_eq!(Offer::find(&dir, &other, &style, [64, 48], now(&style).as_deref()).expect("readable"), None);
+        assert_eq!(Offer::find(&dir, &key, &dir.join("other.png"), [64, 48], None).expect("readable"), None);
+        let e = Offer::find(&dir, &key, &style, [32, 48], now(&style).as_deref()).expect_err("another size");
         assert!(e.contains("with a style of 64×48 px; the style is 32×48 px now"), "{e}");
         // Another image of the same size written over the style's file.
         std::fs::write(&style, b"yz").expect("another style file");
-        let e = Offer::find(&dir, &key, &style, [64, 48]).expect_err("another image");
+        let e = Offer::find(&dir, &key, &style, [64, 48], now(&style).as_deref()).expect_err("another image");
         assert!(e.contains("with a style file of 1 bytes, ") && e.contains("the file is 2 bytes, "), "{e}");
         std::fs::write(&style, b"x").expect("the style file again");
         std::fs::write(checkpoint::record_path(&slot.path), b"{").expect("damaged");
-        let e = Offer::find(&dir, &key, &style, [64, 48]).expect_err("unreadable");
+        let e = Offer::find(&dir, &key, &style, [64, 48], now(&style).as_deref()).expect_err("unreadable");
         assert!(e.contains("expected a studio run checkpoint's record"), "{e}");
         slot.discard();
         assert!(!slot.path.exists() && !checkpoint::record_path(&slot.path).exists());
-        assert_eq!(Offer::find(&dir, &key, &style, [64, 48]).expect("readable"), None);
+        assert_eq!(Offer::find(&dir, &key, &style, [64, 48], now(&style).as_deref()).expect("readable"), None);
         std::fs::remove_dir_all(&dir).ok();
     }
 }

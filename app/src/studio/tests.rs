@@ -1075,6 +1075,9 @@ fn runs_kept_of_other_files_are_listed_and_open() {
     killed.open_style(&style_file);
     assert!(killed.errors.is_empty(), "{:?}", killed.errors);
     let slot = killed.new_slot(&style_file, [64, 48], None).expect("a slot");
+    // The style's bytes as the studio read them with its image.
+    assert_eq!(slot.record.style_file, crate::checkpoint::file_fingerprint(&style_file));
+    assert!(slot.record.style_file.as_deref().is_some_and(|f| f.contains(" bytes, ")), "{:?}", slot.record);
     let kept = recovery::Record { step: 5, total: 20, ..slot.record.clone() };
     crate::checkpoint::write_with_record(&slot.path, &part, None, &kept).expect("kept");
     drop(killed);

@@ -271,6 +271,8 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
         anyhow::bail!("{}: expected a scene with Gaussians to stylize, found none", args.scene.display());
     }
     let style = StyleImage::open(&args.style).map_err(anyhow::Error::msg)?;
+    // The style file's bytes as read, which every checkpoint's record names.
+    let style_file = crate::checkpoint::file_fingerprint(&args.style);
     if let Some(problem) = style.problem_at_scale(config.texture_scale) {
         anyhow::bail!("{}: {problem} (--texture-scale)", args.style.display());
     }
@@ -402,7 +404,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
                  left the checkpoint",
                 config.resolution, config.texture_scale, config.cycles, config.steps_per_cycle
             );
-            let now = resume::Record::of(&args, scene.len(), &cameras, &config, 0, None);
+            let now = resume::Record::of(&args, style_file.clone(), scene.len(), &cameras, &config, 0, None);
             Some((r.check_and_load(&now)?, r.record.step))
         }
         None => None,
@@ -491,7 +493,7 @@ pub fn run(args: StylizeArgs) -> anyhow::Result<ExitCode> {
     let record = |asked: &StyleConfig, step: u32, replan: Option<(u32, f64)>, steps: &[StepReport]| {
         let elapsed_s = earlier_s + steps.last().map_or(0.0, |r| r.elapsed_s);
         let pending = replan.map(|(most, model_s)| resume::PendingReplan { most, model_s, elapsed_s });
-        resume::Record::of(&args, scene.len(), &cameras, asked, step, pending)
+        resume::Record::of(&args, style_file.clone(), scene.len(), &cameras, asked, step, pending)
     };
     let mut config = session.config().clone();
     let mut total = session.total_steps();

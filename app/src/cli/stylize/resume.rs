@@ -54,9 +54,10 @@ pub struct PendingReplan {
 }
 
 impl Record {
-    /// This run's record after `step` steps.
+    /// This run's record after `step` steps, its style file's bytes `style_file`.
     pub fn of(
         args: &StylizeArgs,
+        style_file: Option<String>,
         gaussians: usize,
         cameras: &[gast_core::Camera],
         config: &StyleConfig,
@@ -69,7 +70,7 @@ impl Record {
             scene: absolute(&args.scene),
             gaussians,
             style: absolute(&args.style),
-            style_file: checkpoint::file_fingerprint(&args.style),
+            style_file,
             style_depth: args.style_depth.as_deref().map(absolute),
             depth_model: args.depth_model.as_deref().map(absolute),
             cameras: checkpoint::cameras_fingerprint(cameras),
