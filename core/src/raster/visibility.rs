@@ -114,20 +114,28 @@ mod tests {
         assert_eq!(shown, vec![true, false, false, false, false, true, true, true]);
     }
 
-    #[test]
-    fn every_gaussian_with_a_gradient_is_shown() {
-        // A Gaussian that receives any gradient must be marked: compare with
-        // the backward pass on a random scene with overlap.
-        let mut g = Gaussians::with_capacity(200, 0);
-        let mut s = 1u32;
+    /// `n` overlapping Gaussians in front of the test camera, from `seed`:
+    /// log scales `lo + rnd·span` with `(lo, span)` = `scales`, opacity logits
+    /// likewise from `opacities`.
+    fn overlapping(n: usize, seed: u32, scales: (f32, f32), opacities: (f32, f32)) -> Gaussians {
+        let mut g = Gaussians::with_capacity(n, 0);
+        let mut s = seed;
         let mut rnd = || {
             s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
             (s >> 8) as f32 / (1u32 << 24) as f32
         };
-        for _ in 0..200 {
+        for _ in 0..n {
             let m = [rnd() * 2.4 - 1.2, rnd() * 2.0 - 1.0, 1.5 + rnd() * 3.0];
-            push(&mut g, m, -3.0 + rnd() * 2.0, rnd() * 8.0 - 5.0);
+            push(&mut g, m, scales.0 + rnd() * scales.1, opacities.0 + rnd() * opacities.1);
         }
+        g
+    }
+
+    #[test]
+    fn every_gaussian_with_a_gradient_is_shown() {
+        // A Gaussian that receives any gradient must be marked: compare with
+        // the backward pass on a random scene with overlap.
+        let g = overlapping(200, 1, (-3.0, 2.0), (-5.0, 8.0));
         let c = cam();
         let opts = RenderOptions::default();
         let shown = contributing(&g, &c, &opts);
@@ -147,16 +155,7 @@ mod tests {
     /// render the same to the bit as `forward`'s).
     #[test]
     fn the_tiles_marks_are_the_second_passs() {
-        let mut g = Gaussians::with_capacity(300, 0);
-        let mut s = 7u32;
-        let mut rnd = || {
-            s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (s >> 8) as f32 / (1u32 << 24) as f32
-        };
-        for _ in 0..300 {
-            let m = [rnd() * 2.4 - 1.2, rnd() * 2.0 - 1.0, 1.5 + rnd() * 3.0];
-            push(&mut g, m, -3.5 + rnd() * 3.0, rnd() * 10.0 - 5.0);
-        }
+        let g = overlapping(300, 7, (-3.5, 3.0), (-5.0, 10.0));
         let opts = RenderOptions::default();
         assert_eq!(contributing(&g, &cam(), &opts), shown_by_a_second_pass(&g, &cam(), &opts));
         let Some(path) = crate::vision::weights::tests::shared("data/scenes/guitar.compressed.ply") else { return };
