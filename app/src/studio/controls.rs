@@ -76,8 +76,9 @@ pub fn recipe_weights(c: &StyleConfig, coverage: Option<f32>) -> Vec<(&'static s
 /// model for the run's focus (the running session's `coverage` settles
 /// `auto`; without one it reads as the object) with the style at `c`'s
 /// texture scale, `style` (width, height) pixels when one is chosen, for a
-/// scene of `gaussians` when one is open; on this machine as a run's plan takes it once a run has probed its rate
-/// (`gemm_gflops`, [`StepModel::on_machine`]), on a 2-core CPU before.
+/// scene of `gaussians` when one is open; on this machine as a run's plan
+/// takes it once a run has probed its rate (`gemm_gflops`,
+/// [`StepModel::on_machine`]), on a 2-core CPU before.
 pub fn step_hint(
     c: &StyleConfig,
     coverage: Option<f32>,
