@@ -148,6 +148,9 @@ impl Slot {
 pub struct Offer {
     pub path: PathBuf,
     pub record: Record,
+    /// Why its files cannot be opened to go on from it (read with the list
+    /// of kept runs): a file gone, or another image written over its style.
+    pub unusable: Option<String>,
 }
 
 impl Offer {
@@ -191,7 +194,7 @@ impl Offer {
                 path.display()
             ));
         }
-        Ok(Some(Self { path, record }))
+        Ok(Some(Self { path, record, unusable: None }))
     }
 
     /// The kept state to go on from (read on the worker thread) and what to
@@ -203,7 +206,8 @@ impl Offer {
         Ok((ResumeFrom { scene, step: self.record.step, moments }, said))
     }
 
-    /// Every kept run in `folder` whose record reads, newest first.
+    /// Every kept run in `folder` whose record reads, newest first, each
+    /// with why its files cannot be opened to go on from it, if they cannot.
     pub fn list(folder: &Path) -> Vec<Self> {
         let Ok(entries) = std::fs::read_dir(folder) else { return Vec::new() };
         let mut found: Vec<Self> = entries
@@ -212,8 +216,9 @@ impl Offer {
             .filter(|p| p.to_string_lossy().ends_with(".checkpoint.json"))
             .filter_map(|record| {
                 let path = record.with_extension("ply");
-                let record = checkpoint::read_record(&path, &path, "studio run").ok()?;
-                Some(Self { path, record })
+                let record: Record = checkpoint::read_record(&path, &path, "studio run").ok()?;
+                let unusable = why_unusable(&record);
+                Some(Self { path, record, unusable })
             })
             .collect();
         found.sort_by(|a, b| b.record.written_unix_s.cmp(&a.record.written_unix_s).then(a.path.cmp(&b.path)));
@@ -246,6 +251,19 @@ impl Offer {
         };
         format!("step {} of {}, kept {ago}", self.record.step, self.record.total)
     }
+}
+
+/// Why a kept run's files cannot be opened to go on from it: its scene or
+/// style file gone, or its style's bytes not those it was made with (only
+/// Discard helps then; opening them would refuse the run, as
+/// [`Offer::find`] does). The style is read once, when the list is.
+fn why_unusable(record: &Record) -> Option<String> {
+    if !record.scene_path.as_ref().is_some_and(|p| p.is_file()) || !record.style.is_file() {
+        return Some("its scene or style file is no longer where it was".into());
+    }
+    let was = record.style_file.as_deref()?;
+    let now = checkpoint::file_fingerprint(&record.style)?;
+    (was != now).then(|| format!("another image was written over {} since it was kept", record.style.display()))
 }
 
 /// The studio's side: where runs are kept, what it offers, and the slots of its own runs.
@@ -442,15 +460,16 @@ impl StudioApp {
             let now = now_unix_s();
             for offer in &list {
                 ui.label(format!("{}: {}", offer.inputs(), offer.summary(now)));
+                if let Some(why) = &offer.unusable {
+                    ui.weak(format!("Cannot go on: {why}."));
+                }
                 ui.horizontal(|ui| {
-                    let scene = offer.record.scene_path.clone().filter(|p| p.is_file());
-                    let files = scene.zip(Some(offer.record.style.clone()).filter(|s| s.is_file()));
                     let button = ui
-                        .add_enabled(files.is_some(), egui::Button::new("Open"))
+                        .add_enabled(offer.unusable.is_none(), egui::Button::new("Open"))
                         .on_hover_text("open its scene and style; the run is then offered to go on from")
-                        .on_disabled_hover_text("its scene or style file is no longer where it was");
+                        .on_disabled_hover_text(offer.unusable.clone().unwrap_or_default());
                     if button.clicked() {
-                        open = files;
+                        open = offer.record.scene_path.clone().zip(Some(offer.record.style.clone()));
                     }
                     if ui.button("Discard").on_hover_text("remove the kept run").clicked() {
                         discard = Some(offer.clone());

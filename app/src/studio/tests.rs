@@ -1099,6 +1099,23 @@ fn runs_kept_of_other_files_are_listed_and_open() {
     harness.get_by_label_contains("A run left unfinished");
     harness.get_by_label_contains("during a run of this scene with this style: step 5 of 20, kept ");
     assert!(harness.query_by_label_contains("Runs left unfinished").is_none());
+    drop(harness);
+
+    // Another image written over the style: the run is listed with why it
+    // cannot go on, its Open disabled (opening would refuse it), and Discard removes it.
+    image::RgbImage::from_fn(64, 48, |x, _| image::Rgb([200, (x * 3) as u8, 10])).save(&style_file).expect("over it");
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 900.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), studio());
+    settle(&mut harness);
+    harness.get_by_label_contains("part.ply with gradient.png: step 5 of 20, kept ");
+    harness.get_by_label_contains("Cannot go on: another image was written over ");
+    harness.get_by_label_contains("gradient.png since it was kept.");
+    assert!(harness.get_by_label("Open").accesskit_node().is_disabled());
+    harness.get_by_label("Discard").click();
+    harness.run_steps(2);
+    assert!(harness.query_by_label_contains("Runs left unfinished").is_none());
+    assert!(!slot.path.exists(), "the discarded run stayed");
     std::fs::remove_dir_all(&dir).ok();
 }
 
