@@ -1,9 +1,10 @@
 // Adam on one flat parameter array (core/src/gpu/adam.rs; CPU twin: style/adam.rs).
 // p -= (lr / bc1) · m / (sqrt(v) / sqrt(bc2) + eps), PyTorch's bias correction.
-// Element i of the state updates params[(i / group) * stride + i % group] (and
-// the same gradient element), so one kernel serves whole arrays (group = stride
-// = 1) and the colour phase's DC coefficients inside the SH array (group 3,
-// stride = 3 × coefficients per Gaussian). The updated value is raised to at
+// Element i of the state updates params[(i / group) * stride + i % group] by
+// grads[(i / group) * grad_stride + i % group], so one kernel serves whole
+// arrays (group = strides = 1) and the colour phase's DC coefficients inside
+// the SH array (group 3, stride 3 × coefficients per Gaussian, grad_stride 3:
+// the engine's gradient holds the DC alone). The updated value is raised to at
 // least `floor` (the colour floor; the lowest f32 when off).
 
 struct AdamParams {
@@ -18,7 +19,7 @@ struct AdamParams {
     group: u32,
     stride: u32,
     floor: f32,
-    _pad0: u32,
+    grad_stride: u32,
     _pad1: u32,
     _pad2: u32,
 }
@@ -36,7 +37,7 @@ fn step(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         return;
     }
     let j = (i / u.group) * u.stride + i % u.group;
-    let g = grads[j];
+    let g = grads[(i / u.group) * u.grad_stride + i % u.group];
     let mi = u.beta1 * m[i] + (1.0 - u.beta1) * g;
     let vi = u.beta2 * v[i] + (1.0 - u.beta2) * g * g;
     m[i] = mi;

@@ -27,7 +27,10 @@ struct Cam {
     // Workgroups per tile in the backward pass, each a slice of its list
     // (raster_forward.rs: GpuRaster::splits; the forward pass records where each slice starts).
     splits: u32,
-    _p1: u32,
+    // SH coefficients per Gaussian whose gradient the backward pass writes
+    // into `v_sh` (the first ones, at this stride): all `sh_coeffs` (fitting,
+    // the checks) or the DC alone (a stylization steps no other).
+    grad_sh_coeffs: u32,
 }
 
 // The backward pass's slices of a tile's list (raster_forward.wgsl records

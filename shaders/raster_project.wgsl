@@ -305,8 +305,8 @@ fn write_zero_grads(i: u32) {
         v_quats[4u * i + c] = 0.0;
     }
     v_opacity_logits[i] = 0.0;
-    let base = i * cam.sh_coeffs * 3u;
-    for (var k = 0u; k < cam.sh_coeffs * 3u; k = k + 1u) {
+    let base = i * cam.grad_sh_coeffs * 3u;
+    for (var k = 0u; k < cam.grad_sh_coeffs * 3u; k = k + 1u) {
         v_sh[base + k] = 0.0;
     }
 }
@@ -347,11 +347,14 @@ fn project_backward(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_
     let v_col = select(vec3<f32>(0.0), vec3<f32>(vs[6], vs[7], vs[8]), raw > vec3<f32>(0.0));
     var w: array<f32, 16>;
     let base = i * cam.sh_coeffs * 3u;
+    let v_base = i * cam.grad_sh_coeffs * 3u;
     for (var k = 0u; k < cam.sh_coeffs; k = k + 1u) {
         let coef = vec3<f32>(sh[base + 3u * k], sh[base + 3u * k + 1u], sh[base + 3u * k + 2u]);
-        v_sh[base + 3u * k] = y[k] * v_col.x;
-        v_sh[base + 3u * k + 1u] = y[k] * v_col.y;
-        v_sh[base + 3u * k + 2u] = y[k] * v_col.z;
+        if k < cam.grad_sh_coeffs {
+            v_sh[v_base + 3u * k] = y[k] * v_col.x;
+            v_sh[v_base + 3u * k + 1u] = y[k] * v_col.y;
+            v_sh[v_base + 3u * k + 2u] = y[k] * v_col.z;
+        }
         w[k] = dot(coef, v_col);
     }
     let v_d = sh_basis_grad(d, w);

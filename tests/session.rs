@@ -420,6 +420,15 @@ fn views_that_show_none_of_the_scene_are_warned_of() {
 /// Adam update, which the first step's gradients decide on both devices.
 /// Returns the CPU and GPU sessions after those two steps.
 fn gpu_and_cpu_agree(label: &str, config: StyleConfig) -> Option<[gast_core::session::Session; 2]> {
+    // The CPU reference convolution: im2col computes each output the same way
+    // on the whole frame and on the object's cone, so a step-0 content loss is
+    // exactly 0 on both devices (Winograd leaves ~1e-10 there).
+    let config = StyleConfig { conv: gast_core::vision::ConvAlgo::Im2col, ..config };
+    Some(gpu_and_cpu_agree_on(label, inputs(config)?))
+}
+
+/// [`gpu_and_cpu_agree`] on the session inputs `cpu_inputs` (the GPU session's the same on the device).
+fn gpu_and_cpu_agree_on(label: &str, cpu_inputs: SessionInputs) -> [gast_core::session::Session; 2] {
     use gast_core::session::{LossTerms, Session};
     let ctx = gpu_context();
     let terms = |l: &LossTerms| {
@@ -437,11 +446,6 @@ fn gpu_and_cpu_agree(label: &str, config: StyleConfig) -> Option<[gast_core::ses
             ("palette", l.palette),
         ]
     };
-    // The CPU reference convolution: im2col computes each output the same way
-    // on the whole frame and on the object's cone, so a step-0 content loss is
-    // exactly 0 on both devices (Winograd leaves ~1e-10 there).
-    let config = StyleConfig { conv: gast_core::vision::ConvAlgo::Im2col, ..config };
-    let cpu_inputs = inputs(config)?;
     let gpu_inputs = SessionInputs { gpu: Some(ctx.clone()), ..cpu_inputs.clone() };
     let mut warnings = Vec::new();
     let mut cpu = Session::prepare(cpu_inputs, &mut |_| {}).expect("CPU session");
@@ -465,7 +469,53 @@ fn gpu_and_cpu_agree(label: &str, config: StyleConfig) -> Option<[gast_core::ses
         }
         assert!(off.is_empty(), "{label} step {step} ({:?}): {}", a.phase, off.join("; "));
     }
-    Some([cpu, gpu])
+    [cpu, gpu]
+}
+
+/// A scene of SH degree 3 on both engines: the GPU's backward writes the
+/// DC's gradient alone (`ShGrads::Dc`), which its colour Adam and the phase
+/// leak read at their own stride. Two colour steps, then two geometry
+/// steps (the first applying what the colour steps left on the geometry):
+/// the same losses and the same DC on both, every other coefficient as
+/// colour matching left it.
+#[test]
+fn a_degree_3_scene_steps_its_dc_alike_on_both_engines() {
+    let config = StyleConfig {
+        ratio_geo: 0.5,
+        phase_leak: true,
+        conv: gast_core::vision::ConvAlgo::Im2col,
+        ..object_config(Mode::Decoupled, LossWeights::default())
+    };
+    let Some(mut cpu_inputs) = inputs(config) else { return };
+    // Guitar is of degree 0: give it 15 more coefficients per channel, small and varied.
+    let g = &*cpu_inputs.scene;
+    let mut lifted = gast_core::Gaussians { sh_degree: 3, sh: Vec::with_capacity(48 * g.len()), ..g.clone() };
+    for i in 0..g.len() {
+        lifted.sh.extend_from_slice(&g.sh[3 * i..3 * i + 3]);
+        lifted.sh.extend((3..48).map(|k| 0.04 * (((i * 48 + k) as f32 * 0.618).fract() - 0.5)));
+    }
+    cpu_inputs.scene = Arc::new(lifted);
+    let [mut cpu, mut gpu] = gpu_and_cpu_agree_on("degree 3", cpu_inputs);
+    for step in 2..4 {
+        let (a, b) = (cpu.step().expect("CPU step"), gpu.step().expect("GPU step"));
+        assert_eq!((a.phase, b.phase), (Phase::Geometry, Phase::Geometry), "step {step}");
+        let (x, y) = (a.losses.total, b.losses.total);
+        assert!((x - y).abs() <= 2e-3 * x.abs(), "step {step}: CPU {x}, GPU {y}");
+    }
+    let matched = cpu.colour_matched();
+    let (a, b) = (cpu.result(), gpu.result());
+    assert_eq!((a.sh_degree, b.sh_degree), (3, 3));
+    let (mut moved, mut worst) = (0, 0.0f32);
+    for i in 0..a.len() {
+        let (pa, pb, pm) = (&a.sh[48 * i..48 * i + 48], &b.sh[48 * i..48 * i + 48], &matched.sh[48 * i..48 * i + 48]);
+        assert_eq!(&pb[3..], &pm[3..], "Gaussian {i}: the GPU run changed a coefficient beyond the DC");
+        assert_eq!(&pa[3..], &pm[3..], "Gaussian {i}: the CPU run changed a coefficient beyond the DC");
+        moved += usize::from(pb[..3] != pm[..3]);
+        worst = (0..3).map(|c| (pa[c] - pb[c]).abs()).fold(worst, f32::max);
+    }
+    eprintln!("degree 3: {moved} of {} DCs moved on the GPU, largest CPU–GPU difference {worst:.2e}", a.len());
+    assert!(moved > a.len() / 10, "the colour steps moved {moved} of {} DCs", a.len());
+    assert!(worst < 2e-3, "the DCs differ by up to {worst}");
 }
 
 #[test]

@@ -28,7 +28,7 @@ use super::{
 };
 use crate::camera::Camera;
 use crate::eval::stability::CoveredColour;
-use crate::raster::RenderOptions;
+use crate::raster::{RenderOptions, ShGrads};
 use crate::scene::Gaussians;
 use crate::style::StyleConfig;
 use crate::style::config::LossWeights;
@@ -185,7 +185,8 @@ impl GpuEngine {
         };
         let g = GpuGaussians::upload(ctx, g_ref);
         let g_ref_gpu = GpuGaussians::upload(ctx, g_ref);
-        let grads = GpuGrads::new(ctx, &g);
+        // The colour steps the DC alone: the backward writes no other SH coefficient's gradient.
+        let grads = GpuGrads::with_sh(ctx, &g, ShGrads::Dc);
         let n = g_ref.len();
         let w = &config.weights;
         let reg = |per: usize, weight: f32, offset: usize| match config.param_regulariser {
@@ -201,7 +202,7 @@ impl GpuEngine {
         ];
         let sh_stride = (g_ref.sh_coeffs() * 3) as u32;
         let opt = Optimisers {
-            color: GpuAdam::strided(ctx, 3 * n, 3, sh_stride, config.adam),
+            color: GpuAdam::strided(ctx, 3 * n, 3, sh_stride, config.adam).with_grad_stride(3),
             means: GpuAdam::new(ctx, 3 * n, config.adam),
             scales: GpuAdam::new(ctx, 3 * n, config.adam),
             quats: GpuAdam::new(ctx, 4 * n, config.adam),
@@ -610,7 +611,8 @@ impl GpuEngine {
     fn plan(&self, cam: &Camera, w: &LossWeights) -> Result<ViewPlan, GpuError> {
         let ctx = &self.ctx;
         Ok(ViewPlan {
-            raster: GpuRaster::new(ctx, self.g.len, cam.width, cam.height, self.pair_capacity)?,
+            raster: GpuRaster::new(ctx, self.g.len, cam.width, cam.height, self.pair_capacity)?
+                .with_grad_sh(ShGrads::Dc),
             loss: StepLossPlan::new(ctx, &self.k.loss, &self.style, cam.height as usize, cam.width as usize, w)?,
         })
     }

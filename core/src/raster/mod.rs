@@ -124,8 +124,13 @@ pub enum ShGrads {
 impl ShGrads {
     /// Coefficients per Gaussian (each three values) for a scene of `g`'s degree.
     pub fn coefficients(self, g: &Gaussians) -> usize {
+        self.for_degree(g.sh_degree)
+    }
+
+    /// Coefficients per Gaussian (each three values) for a scene of SH degree `degree`.
+    pub fn for_degree(self, degree: u32) -> usize {
         match self {
-            Self::All => g.sh_coeffs(),
+            Self::All => crate::scene::sh_coeffs_for_degree(degree),
             Self::Dc => 1,
             Self::Skip => 0,
         }

@@ -4,7 +4,7 @@
 //! and they come back to the host only for snapshots and exports.
 
 use super::{GpuContext, GpuError};
-use crate::raster::Grads;
+use crate::raster::{Grads, ShGrads};
 use crate::scene::Gaussians;
 
 /// One buffer per parameter group: `means` (N·3), `log_scales` (N·3), `quats`
@@ -79,7 +79,8 @@ impl GpuGaussians {
 pub struct GpuGrads {
     /// Number of Gaussians.
     pub len: usize,
-    /// SH coefficients per channel.
+    /// SH coefficients per channel held (the first ones of each Gaussian:
+    /// all of the scene's, or the DC alone).
     pub sh_coeffs: usize,
     /// `∂L/∂means`, N·3.
     pub v_means: wgpu::Buffer,
@@ -89,22 +90,31 @@ pub struct GpuGrads {
     pub v_quats: wgpu::Buffer,
     /// `∂L/∂opacity_logits`, N.
     pub v_opacity_logits: wgpu::Buffer,
-    /// `∂L/∂sh`, N·(deg+1)²·3.
+    /// `∂L/∂sh` of the coefficients held, N·`sh_coeffs`·3.
     pub v_sh: wgpu::Buffer,
 }
 
 impl GpuGrads {
-    /// Gradient buffers for `g` (contents unspecified until a backward pass writes them).
+    /// Gradient buffers for `g`, every SH coefficient's (contents unspecified
+    /// until a backward pass writes them).
     pub fn new(ctx: &GpuContext, g: &GpuGaussians) -> Self {
+        Self::with_sh(ctx, g, ShGrads::All)
+    }
+
+    /// Gradient buffers for `g` holding the SH coefficients `sh` (a
+    /// stylization: the DC, 16 times less than all of a degree-3 scene's),
+    /// for a [`GpuRaster`](crate::gpu::GpuRaster) made [`with_grad_sh`](crate::gpu::GpuRaster::with_grad_sh) the same.
+    pub fn with_sh(ctx: &GpuContext, g: &GpuGaussians, sh: ShGrads) -> Self {
         let n = g.len;
+        let sh_coeffs = sh.for_degree(g.sh_degree);
         Self {
             len: n,
-            sh_coeffs: g.sh_coeffs(),
+            sh_coeffs,
             v_means: ctx.zeros("grads.v_means", 3 * n),
             v_log_scales: ctx.zeros("grads.v_log_scales", 3 * n),
             v_quats: ctx.zeros("grads.v_quats", 4 * n),
             v_opacity_logits: ctx.zeros("grads.v_opacity_logits", n),
-            v_sh: ctx.zeros("grads.v_sh", n * g.sh_coeffs() * 3),
+            v_sh: ctx.zeros("grads.v_sh", n * sh_coeffs * 3),
         }
     }
 

@@ -23,7 +23,8 @@ struct AdamParams {
     group: u32,
     stride: u32,
     floor: f32,
-    _pad: [u32; 3],
+    grad_stride: u32,
+    _pad: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<AdamParams>() == 48);
 
@@ -38,6 +39,7 @@ pub struct GpuAdam {
     step: u32,
     group: u32,
     stride: u32,
+    grad_stride: u32,
     floor: f32,
     m: wgpu::Buffer,
     v: wgpu::Buffer,
@@ -68,8 +70,8 @@ impl GpuAdam {
     }
 
     /// Fresh state for `len` parameters taken `group` at a time every `stride`
-    /// elements of the parameter array (the DC colour inside the SH array:
-    /// group 3, stride 3 × coefficients per Gaussian).
+    /// elements of the parameter array and of the gradient (the DC colour
+    /// inside the SH array: group 3, stride 3 × coefficients per Gaussian).
     pub fn strided(ctx: &GpuContext, len: usize, group: u32, stride: u32, config: AdamConfig) -> Self {
         let zeros = vec![0.0f32; len.max(1)];
         Self {
@@ -78,11 +80,19 @@ impl GpuAdam {
             step: 0,
             group: group.max(1),
             stride: stride.max(1),
+            grad_stride: stride.max(1),
             floor: NO_FLOOR,
             m: ctx.upload("adam.m", &zeros),
             v: ctx.upload("adam.v", &zeros),
             uniform: ctx.uniform("adam.params", &AdamParams::zeroed()),
         }
+    }
+
+    /// The gradient's groups every `grad_stride` elements rather than the
+    /// parameters' stride (a gradient of the DC colour alone: 3).
+    pub fn with_grad_stride(mut self, grad_stride: u32) -> Self {
+        self.grad_stride = grad_stride.max(1);
+        self
     }
 
     /// From the next step on, raises every updated parameter to at least
@@ -125,7 +135,8 @@ impl GpuAdam {
         Ok(())
     }
 
-    /// Records one update of `params` by `grads` (both `len` floats) into `encoder`.
+    /// Records one update of `params` by `grads` (`len` floats of each, at
+    /// their strides) into `encoder`.
     pub fn step(
         &mut self,
         ctx: &GpuContext,
@@ -148,7 +159,8 @@ impl GpuAdam {
             group: self.group,
             stride: self.stride,
             floor: self.floor,
-            _pad: [0; 3],
+            grad_stride: self.grad_stride,
+            _pad: [0; 2],
         };
         // The uniform is written before the encoder is submitted; one buffer per
         // state is enough because each state steps at most once per submission.
@@ -217,6 +229,31 @@ mod tests {
                 assert!((out[i * 12 + k] - want).abs() < 1e-6, "gaussian {i} coefficient {k}");
             }
         }
+    }
+
+    /// The engine's gradient holds the DC alone (3 floats a Gaussian): the
+    /// same update as from a gradient laid out like the SH array.
+    #[test]
+    fn a_gradient_of_the_dc_alone_updates_as_the_whole_layouts() {
+        let ctx = ctx();
+        let kernel = AdamKernel::new(ctx);
+        let (n, stride) = (40usize, 48u32);
+        let sh = noise(n * 48, 7);
+        let grads_full = noise(n * 48, 8);
+        let v_dc: Vec<f32> = (0..n).flat_map(|i| grads_full[i * 48..i * 48 + 3].to_vec()).collect();
+        let (whole, dc) = (ctx.upload("sh", &sh), ctx.upload("sh", &sh));
+        let (g_whole, g_dc) = (ctx.upload("v_sh", &grads_full), ctx.upload("v_dc", &v_dc));
+        let mut a = GpuAdam::strided(ctx, n * 3, 3, stride, AdamConfig::default());
+        let mut b = GpuAdam::strided(ctx, n * 3, 3, stride, AdamConfig::default()).with_grad_stride(3);
+        for _ in 0..3 {
+            let mut enc = ctx.encoder("adam dc");
+            a.step(ctx, &kernel, &mut enc, &whole, &g_whole, 0.05);
+            b.step(ctx, &kernel, &mut enc, &dc, &g_dc, 0.05);
+            ctx.submit(enc);
+        }
+        let (a, b): (Vec<f32>, Vec<f32>) = (ctx.read(&whole).expect("read"), ctx.read(&dc).expect("read"));
+        assert_eq!(a, b);
+        assert_ne!(a, sh, "the steps changed nothing");
     }
 
     #[test]

@@ -20,7 +20,11 @@ impl GpuRaster {
     /// Records the backward pass of the last recorded [`GpuRaster::forward`]
     /// (same Gaussians, camera and options) given `v_rgb = ∂L/∂rgb` (H·W·3)
     /// and `v_inv_depth = ∂L/∂inv_depth` (H·W). Every entry of `grads` is
-    /// written: zero for Gaussians that no pixel composited.
+    /// written: zero for Gaussians that no pixel composited; of the SH
+    /// coefficients, those of the workspace's [`GpuRaster::with_grad_sh`].
+    ///
+    /// # Panics
+    /// When `grads` holds other SH coefficients than the workspace writes (a caller bug).
     #[allow(clippy::too_many_arguments)]
     pub fn backward(
         &self,
@@ -73,6 +77,12 @@ impl GpuRaster {
         g: &GpuGaussians,
         grads: &GpuGrads,
     ) {
+        assert_eq!(
+            grads.sh_coeffs,
+            self.grad_sh.for_degree(g.sh_degree),
+            "GpuRaster::backward: the gradients hold other SH coefficients than {:?}",
+            self.grad_sh
+        );
         k.project.backward.dispatch(
             ctx,
             encoder,

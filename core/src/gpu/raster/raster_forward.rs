@@ -17,7 +17,7 @@ use super::scan::GpuScan;
 use super::sort::{GpuSort, bits_for};
 use super::{GpuContext, GpuError, GpuGaussians, Kernel};
 use crate::camera::Camera;
-use crate::raster::{Render, RenderOptions, TILE};
+use crate::raster::{Render, RenderOptions, ShGrads, TILE};
 
 /// Floats per splat in the `splats` buffer (the CPU `Splat`'s 16 fields, in order).
 pub(crate) const SPLAT_FLOATS: usize = 16;
@@ -113,6 +113,9 @@ pub struct GpuRaster {
     pub(crate) px_state: wgpu::Buffer,
     /// Screen-space gradients, 10 per Gaussian (the backward pass's accumulator).
     pub(crate) v_splat: wgpu::Buffer,
+    /// The SH coefficients whose gradient the backward pass writes (the
+    /// [`GpuGrads`](crate::gpu::GpuGrads) it is given must hold them).
+    pub(crate) grad_sh: ShGrads,
 }
 
 impl GpuRaster {
@@ -154,7 +157,17 @@ impl GpuRaster {
             alpha: ctx.zeros("raster.alpha", npx),
             px_state: ctx.zeros("raster.px_state", state),
             v_splat: ctx.zeros("raster.v_splat", 10 * n),
+            grad_sh: ShGrads::All,
         })
+    }
+
+    /// This workspace with its backward pass writing the gradient of the SH
+    /// coefficients `sh` only (a stylization: the DC), for gradients made by
+    /// [`GpuGrads::with_sh`](crate::gpu::GpuGrads::with_sh) with the same; takes
+    /// effect from the next recorded forward pass.
+    pub fn with_grad_sh(mut self, sh: ShGrads) -> Self {
+        self.grad_sh = sh;
+        self
     }
 
     /// The (tile, splat) pairs the buffers hold.
@@ -198,7 +211,7 @@ impl GpuRaster {
             cam.width,
             cam.height
         );
-        let u = RasterUniform::new(cam, opts, self.n, g.sh_degree, self.capacity, self.splits);
+        let u = RasterUniform::new(cam, opts, self.n, g.sh_degree, self.capacity, self.splits, self.grad_sh);
         ctx.queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
         for stage in Stage::ALL {
             self.record_stage(ctx, k, encoder, g, stage);

@@ -6,7 +6,7 @@
 
 use super::{Bind, GpuContext, Kernel};
 use crate::camera::Camera;
-use crate::raster::{RenderOptions, TILE};
+use crate::raster::{RenderOptions, ShGrads, TILE};
 
 /// The Jacobian clamps `x/z`, `y/z` to this multiple of `tan(half-fov)` (`raster/project.rs`).
 const FOV_CLAMP: f32 = 1.3;
@@ -46,14 +46,23 @@ pub(crate) struct RasterUniform {
     capacity: u32,
     sh_degree: u32,
     splits: u32,
-    _pad: u32,
+    grad_sh_coeffs: u32,
 }
 const _: () = assert!(std::mem::size_of::<RasterUniform>() == 160);
 
 impl RasterUniform {
     /// The uniform for `n` Gaussians of SH degree `sh_degree` seen by `cam`,
-    /// the backward pass splitting each tile's list into `splits` slices.
-    pub fn new(cam: &Camera, opts: &RenderOptions, n: usize, sh_degree: u32, capacity: usize, splits: u32) -> Self {
+    /// the backward pass splitting each tile's list into `splits` slices and
+    /// writing the gradient of the SH coefficients `grad_sh`.
+    pub fn new(
+        cam: &Camera,
+        opts: &RenderOptions,
+        n: usize,
+        sh_degree: u32,
+        capacity: usize,
+        splits: u32,
+        grad_sh: ShGrads,
+    ) -> Self {
         let (tx, ty) = cam.tan_half_fov();
         let r = cam.rotation;
         let row = |i: usize| {
@@ -83,7 +92,7 @@ impl RasterUniform {
             capacity: capacity as u32,
             sh_degree,
             splits,
-            _pad: 0,
+            grad_sh_coeffs: grad_sh.for_degree(sh_degree) as u32,
         }
     }
 }
