@@ -117,17 +117,29 @@ pub(crate) fn gaussian_ref(g: &Gaussians, i: usize) -> GaussianRef<'_> {
 ///
 /// Sorting the splats themselves (not a list of indices) makes every later
 /// pass read them in order: the tile lists become increasing indices.
+///
+/// Every Gaussian's splat goes to its own slot of one array (a culled one's
+/// depth 0, below the near plane), so the only list of unknown length is
+/// the visible ones' sort keys: gathering splats of unknown count from the
+/// threads grew and appended 64-byte vectors, most of the page faults of a
+/// step on millions of Gaussians.
 fn project_sorted(g: &Gaussians, cc: &CamConsts) -> (Vec<Splat>, Vec<u32>) {
-    let (ids, splats): (Vec<u32>, Vec<Splat>) = (0..g.len())
+    let mut all = Vec::new();
+    (0..g.len())
         .into_par_iter()
         .with_min_len(1024)
-        .filter_map(|i| project(&gaussian_ref(g, i), cc).map(|s| (i as u32, s)))
-        .unzip();
+        .map(|i| project(&gaussian_ref(g, i), cc).unwrap_or_default())
+        .collect_into_vec(&mut all);
     // Depth is positive, so its bits order like the float; ties go by index.
-    let mut keys: Vec<u64> =
-        splats.par_iter().enumerate().map(|(k, s)| (u64::from(s.depth.to_bits()) << 32) | k as u64).collect();
+    let mut keys: Vec<u64> = all
+        .par_iter()
+        .with_min_len(1024)
+        .enumerate()
+        .filter(|(_, s)| s.depth > 0.0)
+        .map(|(i, s)| (u64::from(s.depth.to_bits()) << 32) | i as u64)
+        .collect();
     keys.par_sort_unstable();
-    keys.par_iter().map(|&k| (k & 0xffff_ffff) as usize).map(|k| (splats[k], ids[k])).unzip()
+    keys.par_iter().map(|&k| ((k & 0xffff_ffff) as u32)).map(|i| (all[i as usize], i)).unzip()
 }
 
 /// Calls `f(tile)` for every tile the splat's α ≥ 1/255 region reaches.
