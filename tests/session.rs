@@ -389,6 +389,60 @@ fn a_run_resumed_from_a_checkpoint_goes_on_where_it_stood() {
     std::fs::remove_file(&file).ok();
 }
 
+/// With the phase leak on, a run resumed with its optimiser's state (through
+/// its safetensors file) goes on with the leak's sums as they stood: the
+/// colour sum the geometry steps 3 and 4 left reaches the colour step 6 as
+/// in the whole run; without the sums (a state from before they were kept),
+/// it does not. On the CPU and on the GPU engine.
+#[test]
+fn a_run_resumed_with_the_phase_leak_goes_on_with_its_sums() {
+    use gast_core::session::{OptimiserState, Session};
+    let config = StyleConfig {
+        cycles: 2,
+        steps_per_cycle: 6,
+        resolution: 32,
+        texture_scale: 32,
+        ratio_geo: 0.5,
+        phase_leak: true,
+        ..Default::default()
+    };
+    let Some(cpu_inputs) = inputs(config) else { return };
+    let gpu_inputs = SessionInputs { gpu: Some(gpu_context()), ..cpu_inputs.clone() };
+    let apart = |a: &gast_core::Gaussians, b: &gast_core::Gaussians| {
+        let means = a.means.iter().flatten().zip(b.means.iter().flatten());
+        means.chain(a.sh.iter().zip(&b.sh)).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max)
+    };
+    for (device, inputs) in [("CPU", cpu_inputs), ("GPU", gpu_inputs)] {
+        let k = 5;
+        let mut whole = Session::prepare(inputs.clone(), &mut |_| {}).expect("a session");
+        let phases: Vec<Phase> = (0..k).map(|_| whole.step().expect("a step").phase).collect();
+        assert_eq!(phases[2..], [Phase::Color, Phase::Geometry, Phase::Geometry], "{device}");
+        let checkpoint = whole.result();
+        let state = whole.optimiser_state().expect("the optimiser's state");
+        let state = OptimiserState::from_safetensors(&state.to_safetensors().expect("written")).expect("read");
+        assert_eq!(state.leak.len(), 5, "{device}: the leak's sums kept");
+        assert!(state.leak[0].iter().any(|&v| v != 0.0), "{device}: the geometry steps left no colour gradient");
+        let after: Vec<Phase> = (0..4).map(|_| whole.step().expect("a step").phase).collect();
+        assert_eq!(after[1], Phase::Color, "{device}: step 6 is a colour step");
+        let end = whole.result();
+
+        let mut ends = Vec::new();
+        for state in [state.clone(), OptimiserState { leak: Vec::new(), ..state }] {
+            let mut resumed = Session::prepare(inputs.clone(), &mut |_| {}).expect("a session");
+            resumed.resume_at(&checkpoint, k, Some(&state)).expect("resumed");
+            for _ in 0..4 {
+                resumed.step().expect("a resumed step");
+            }
+            ends.push(apart(&resumed.result(), &end));
+        }
+        let [kept, fresh] = ends[..] else { unreachable!() };
+        eprintln!(
+            "{device}: 4 steps after resuming with the leak: {kept:e} from the whole run with its sums, {fresh:e} without"
+        );
+        assert!(kept <= 1e-6 && fresh > 100.0 * kept.max(1e-8), "{device}: with the sums {kept:e}, without {fresh:e}");
+    }
+}
+
 /// Cameras that see nothing of the scene among those that do are named in a
 /// warning before the run (guitar seen from fern's LLFF poses: 18 of the 20
 /// views empty, the run went ahead silently); the orbit alone raises none.

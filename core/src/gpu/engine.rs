@@ -285,6 +285,19 @@ impl GpuEngine {
         Ok(())
     }
 
+    /// The phase leak's sums read back (`None` before the first leaking step
+    /// or with the leak off), in the order of the optimiser's groups.
+    pub fn leak_sums(&self) -> Result<Option<Vec<Vec<f32>>>, GpuError> {
+        self.leak.as_ref().map(|l| l.read(&self.ctx)).transpose()
+    }
+
+    /// Goes on from the phase leak's sums `sums` (as [`GpuEngine::leak_sums`]
+    /// gives them): a resumed run's, before its first step.
+    pub fn set_leak_sums(&mut self, sums: &[Vec<f32>]) -> Result<(), String> {
+        let leak = self.leak.get_or_insert_with(|| GpuLeak::new(&self.ctx, &self.grads));
+        leak.write(&self.ctx, sums)
+    }
+
     /// Warnings raised since the last call.
     pub fn take_warnings(&mut self) -> Vec<String> {
         std::mem::take(&mut self.warnings)

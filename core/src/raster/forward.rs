@@ -139,7 +139,7 @@ fn project_sorted(g: &Gaussians, cc: &CamConsts) -> (Vec<Splat>, Vec<u32>) {
         .map(|(i, s)| (u64::from(s.depth.to_bits()) << 32) | i as u64)
         .collect();
     keys.par_sort_unstable();
-    keys.par_iter().map(|&k| ((k & 0xffff_ffff) as u32)).map(|i| (all[i as usize], i)).unzip()
+    keys.par_iter().map(|&k| (k & 0xffff_ffff) as u32).map(|i| (all[i as usize], i)).unzip()
 }
 
 /// Calls `f(tile)` for every tile the splat's α ≥ 1/255 region reaches.

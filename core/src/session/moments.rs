@@ -1,8 +1,10 @@
 //! The optimiser's state of a run ([`OptimiserState`]): each parameter
-//! group's Adam steps and moments, which a checkpoint keeps beside its scene
-//! so that a resumed run updates as the whole run would have. Stored as
-//! safetensors: `{group}.m` and `{group}.v` (f32), the steps in the metadata
-//! ([`StateFile`], which a fit's state ([`crate::fit::FitState`]) shares).
+//! group's Adam steps and moments, and the phase leak's sums where the leak
+//! is on, which a checkpoint keeps beside its scene so that a resumed run
+//! updates as the whole run would have. Stored as safetensors: `{group}.m`
+//! and `{group}.v` (f32), `leak.{group}` (f32) when there are sums, the
+//! steps in the metadata ([`StateFile`], which a fit's state
+//! ([`crate::fit::FitState`]) shares).
 
 use std::collections::HashMap;
 
@@ -20,20 +22,38 @@ pub struct OptimiserState {
     pub step: u32,
     /// One per group of [`GROUPS`].
     pub groups: Vec<AdamState>,
+    /// The phase leak's sums ([`crate::style::StyleConfig::phase_leak`]),
+    /// one per group of [`GROUPS`] (what one phase's steps left on the other
+    /// phase's parameters, not yet applied); empty when the leak is off (and
+    /// in files written before the sums were kept).
+    pub leak: Vec<Vec<f32>>,
+}
+
+/// The tensor of the leak's sum of group `name`.
+fn leak_tensor(name: &str) -> String {
+    format!("leak.{name}")
 }
 
 impl OptimiserState {
     /// The state as a safetensors file's bytes.
     pub fn to_safetensors(&self) -> Result<Vec<u8>, String> {
         let meta = HashMap::from([("step".to_owned(), self.step.to_string())]);
-        StateFile::write(&GROUPS, &self.groups, &[], meta)
+        let names: Vec<String> = GROUPS.iter().map(|g| leak_tensor(g)).collect();
+        let leak: Vec<(&str, Tensor<'_>)> =
+            names.iter().zip(&self.leak).map(|(name, sum)| (name.as_str(), Tensor::F32(sum))).collect();
+        StateFile::write(&GROUPS, &self.groups, &leak, meta)
     }
 
     /// Reads [`OptimiserState::to_safetensors`]'s bytes; an error that says
     /// what is missing or malformed.
     pub fn from_safetensors(bytes: &[u8]) -> Result<Self, String> {
         let file = StateFile::read(bytes)?;
-        Ok(Self { step: file.number("step")?, groups: file.groups(&GROUPS)? })
+        let leak = if file.has(&leak_tensor(GROUPS[0])) {
+            GROUPS.iter().map(|g| file.f32s(&leak_tensor(g))).collect::<Result<_, _>>()?
+        } else {
+            Vec::new()
+        };
+        Ok(Self { step: file.number("step")?, groups: file.groups(&GROUPS)?, leak })
     }
 }
 
@@ -106,6 +126,11 @@ impl<'a> StateFile<'a> {
         Ok(view.data().chunks_exact(4).map(|b| [b[0], b[1], b[2], b[3]]).collect())
     }
 
+    /// Whether the file holds a tensor `name`.
+    pub fn has(&self, name: &str) -> bool {
+        self.st.tensor(name).is_ok()
+    }
+
     /// An f32 tensor.
     pub fn f32s(&self, name: &str) -> Result<Vec<f32>, String> {
         Ok(self.tensor(name, Dtype::F32)?.into_iter().map(f32::from_le_bytes).collect())
@@ -142,7 +167,12 @@ mod tests {
             m: (0..k * 3).map(|i| i as f32 * -0.25 + 1e-30).collect(),
             v: (0..k * 3).map(|i| (i as f32).sqrt()).collect(),
         };
-        let state = OptimiserState { step: 123, groups: (1..=5).map(group).collect() };
+        let state = OptimiserState { step: 123, groups: (1..=5).map(group).collect(), leak: Vec::new() };
+        let bytes = state.to_safetensors().expect("written");
+        assert_eq!(OptimiserState::from_safetensors(&bytes).expect("read"), state);
+        // With the phase leak's sums, one per group.
+        let leak = (1..=5).map(|k| (0..k * 3).map(|i| i as f32 * 0.5 - 1.0).collect()).collect();
+        let state = OptimiserState { leak, ..state };
         let bytes = state.to_safetensors().expect("written");
         assert_eq!(OptimiserState::from_safetensors(&bytes).expect("read"), state);
         let bad = OptimiserState::from_safetensors(b"not a file").expect_err("refused");

@@ -142,6 +142,16 @@ impl Leak {
             opacity: vec![0.0; n],
         }
     }
+
+    /// The sums in the order of the optimiser's groups (`moments::GROUPS`).
+    fn sums(&self) -> [&Vec<f32>; 5] {
+        [&self.color, &self.means, &self.scales, &self.quats, &self.opacity]
+    }
+
+    /// [`Leak::sums`], to set.
+    fn sums_mut(&mut self) -> [&mut Vec<f32>; 5] {
+        [&mut self.color, &mut self.means, &mut self.scales, &mut self.quats, &mut self.opacity]
+    }
 }
 
 /// One stylization run, stepped by its caller (the CLI or the studio's worker).
@@ -568,12 +578,18 @@ impl Session {
     /// (read back from the GPU when the steps run there), which a checkpoint
     /// keeps so that a resumed run updates as the whole run would have.
     pub fn optimiser_state(&self) -> Result<OptimiserState, String> {
-        let groups = match (&self.cpu, &self.engine) {
-            (Some(cpu), _) => cpu.opt.groups().map(|a| a.state()).to_vec(),
-            (None, Some(engine)) => engine.optimiser_state().map_err(|e| e.to_string())?,
+        let (groups, leak) = match (&self.cpu, &self.engine) {
+            (Some(cpu), _) => {
+                let leak = if self.leak.is_on() { self.leak.sums().map(Clone::clone).to_vec() } else { Vec::new() };
+                (cpu.opt.groups().map(|a| a.state()).to_vec(), leak)
+            }
+            (None, Some(engine)) => {
+                let groups = engine.optimiser_state().map_err(|e| e.to_string())?;
+                (groups, engine.leak_sums().map_err(|e| e.to_string())?.unwrap_or_default())
+            }
             (None, None) => return Err("the run has no optimiser".into()),
         };
-        Ok(OptimiserState { step: self.step, groups })
+        Ok(OptimiserState { step: self.step, groups, leak })
     }
 
     /// Goes on from `step` with `scene` as the run's state: a run resumed from
@@ -583,8 +599,9 @@ impl Session {
     /// from `step` on, and with `moments` (that run's
     /// [`Session::optimiser_state`] at `step`) the optimiser goes on as it
     /// was; without, its moments start afresh (Adam's bias correction makes
-    /// its first updates full-sized again). The kept matches
-    /// (`--matching-reuse`) and the phase leak's sums start afresh. At the
+    /// its first updates full-sized again). The phase leak's sums go on from
+    /// `moments` where it holds them and the run leaks (else they start
+    /// empty); the kept matches (`--matching-reuse`) start afresh. At the
     /// schedule's last step the run is done (its state is the result).
     /// Before the first step only.
     pub fn resume_at(
@@ -636,7 +653,17 @@ impl Session {
                     found.join(", ")
                 )));
             }
+            let leak_fits = m.leak.is_empty()
+                || (m.leak.len() == sizes.len() && m.leak.iter().zip(sizes).all(|(s, len)| s.len() == len));
+            if !leak_fits {
+                let found: Vec<usize> = m.leak.iter().map(Vec::len).collect();
+                return Err(SessionError::Input(format!(
+                    "the optimiser's state does not fit: expected the phase leak's sums of {sizes:?} parameters, \
+                     found {found:?}"
+                )));
+            }
         }
+        let leak = moments.map(|m| m.leak.as_slice()).filter(|l| !l.is_empty() && self.config.leaks_between_phases());
         let part = subset(scene, &self.keep);
         let moments_problem = |e: String| SessionError::Input(format!("the optimiser's state does not fit: {e}"));
         if let Some(cpu) = &mut self.cpu {
@@ -645,10 +672,18 @@ impl Session {
                     adam.set_state(g.clone()).map_err(moments_problem)?;
                 }
             }
+            if let Some(sums) = leak.filter(|_| self.leak.is_on()) {
+                for (to, from) in self.leak.sums_mut().into_iter().zip(sums) {
+                    to.clone_from(from);
+                }
+            }
             cpu.g = part;
         } else if let Some(engine) = &mut self.engine {
             if let Some(m) = moments {
                 engine.set_optimiser_state(&m.groups).map_err(moments_problem)?;
+            }
+            if let Some(sums) = leak {
+                engine.set_leak_sums(sums).map_err(moments_problem)?;
             }
             engine.set_gaussians(&part);
         }

@@ -8,7 +8,7 @@
 //! [`StyleConfig::phase_leak`]: crate::style::StyleConfig::phase_leak
 
 use super::Commands;
-use super::{Bind, GpuContext, GpuGrads, Kernel};
+use super::{Bind, GpuContext, GpuError, GpuGrads, Kernel};
 
 /// Threads per workgroup in `leak.wgsl`.
 const WORKGROUP: u32 = 256;
@@ -26,6 +26,7 @@ struct LeakParams {
 /// One parameter group's sum: `len` elements paired with a gradient array.
 #[derive(Debug)]
 struct Sum {
+    len: usize,
     acc: wgpu::Buffer,
     uniform: wgpu::Buffer,
     groups: [u32; 3],
@@ -35,6 +36,7 @@ impl Sum {
     fn new(ctx: &GpuContext, label: &str, len: usize, group: u32, stride: u32) -> Self {
         let params = LeakParams { len: len as u32, group, stride, _pad: 0 };
         Self {
+            len,
             acc: ctx.zeros(label, len.max(1)),
             uniform: ctx.uniform(label, &params),
             groups: Kernel::groups_1d(len, WORKGROUP),
@@ -70,6 +72,42 @@ impl GpuLeak {
                 Sum::new(ctx, "leak.opacity", n, 1, 1),
             ],
         }
+    }
+
+    /// The sums in the order of the optimiser's groups (colour, means,
+    /// scales, quaternions, opacity).
+    fn sums(&self) -> [&Sum; 5] {
+        let [m, s, q, o] = &self.geometry;
+        [&self.color, m, s, q, o]
+    }
+
+    /// The sums read back, in the order of the optimiser's groups (a
+    /// checkpoint keeps them, so that a resumed run leaks as the whole run).
+    pub fn read(&self, ctx: &GpuContext) -> Result<Vec<Vec<f32>>, GpuError> {
+        self.sums()
+            .into_iter()
+            .map(|s| {
+                let mut x: Vec<f32> = ctx.read(&s.acc)?;
+                x.truncate(s.len);
+                Ok(x)
+            })
+            .collect()
+    }
+
+    /// Goes on from `sums` (as [`GpuLeak::read`] gives them); an error that
+    /// says which does not fit.
+    pub fn write(&self, ctx: &GpuContext, sums: &[Vec<f32>]) -> Result<(), String> {
+        let lens: Vec<usize> = self.sums().iter().map(|s| s.len).collect();
+        if sums.len() != lens.len() || sums.iter().zip(&lens).any(|(x, &len)| x.len() != len) {
+            let found: Vec<usize> = sums.iter().map(Vec::len).collect();
+            return Err(format!("expected the phase leak's sums of {lens:?} values, found {found:?}"));
+        }
+        for (s, x) in self.sums().into_iter().zip(sums) {
+            if s.len > 0 {
+                ctx.write(&s.acc, x);
+            }
+        }
+        Ok(())
     }
 
     fn geometry_grads(grads: &GpuGrads) -> [&wgpu::Buffer; 4] {
