@@ -40,6 +40,12 @@ fn whole_guitar_inputs(config: StyleConfig) -> Option<SessionInputs> {
     })
 }
 
+/// The largest difference of the means and colours of two scenes.
+fn apart(a: &gast_core::Gaussians, b: &gast_core::Gaussians) -> f32 {
+    let means = a.means.iter().flatten().zip(b.means.iter().flatten());
+    means.chain(a.sh.iter().zip(&b.sh)).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max)
+}
+
 fn next(events: &crossbeam_channel::Receiver<Event>) -> Event {
     events.recv_timeout(Duration::from_secs(120)).expect("an event within two minutes")
 }
@@ -225,8 +231,7 @@ fn a_worker_keeps_its_runs_state_and_another_goes_on_from_it() {
         };
         assert_eq!((first, ended), (Some(step), (true, 8)), "the resumed run's first step and its end");
         let resumed = handle.stop_and_join().expect("the resumed run's result");
-        let apart = resumed.means.iter().flatten().zip(whole.means.iter().flatten()).map(|(a, b)| (a - b).abs());
-        let apart = apart.chain(resumed.sh.iter().zip(&whole.sh).map(|(a, b)| (a - b).abs())).fold(0.0f32, f32::max);
+        let apart = apart(&resumed, &whole);
         eprintln!("{device}: resumed from step {step} against the whole run: largest difference {apart:e}");
         assert!(apart <= 1e-6, "{device}: the resumed run ended {apart:e} from the whole run");
     }
@@ -316,11 +321,6 @@ fn a_run_resumed_from_a_checkpoint_goes_on_where_it_stood() {
     let Some(cpu_inputs) = inputs(config) else { return };
     let gpu_inputs = SessionInputs { gpu: Some(gpu_context()), ..cpu_inputs.clone() };
     let file = std::env::temp_dir().join(format!("gast-resume-{}.ply", std::process::id()));
-    // The largest difference of the means and colours of two scenes.
-    let apart = |a: &gast_core::Gaussians, b: &gast_core::Gaussians| {
-        let means = a.means.iter().flatten().zip(b.means.iter().flatten());
-        means.chain(a.sh.iter().zip(&b.sh)).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max)
-    };
     for (device, inputs) in [("CPU", cpu_inputs), ("GPU", gpu_inputs)] {
         let k = 5;
         let mut whole = Session::prepare(inputs.clone(), &mut |_| {}).expect("a session");
@@ -408,10 +408,6 @@ fn a_run_resumed_with_the_phase_leak_goes_on_with_its_sums() {
     };
     let Some(cpu_inputs) = inputs(config) else { return };
     let gpu_inputs = SessionInputs { gpu: Some(gpu_context()), ..cpu_inputs.clone() };
-    let apart = |a: &gast_core::Gaussians, b: &gast_core::Gaussians| {
-        let means = a.means.iter().flatten().zip(b.means.iter().flatten());
-        means.chain(a.sh.iter().zip(&b.sh)).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max)
-    };
     for (device, inputs) in [("CPU", cpu_inputs), ("GPU", gpu_inputs)] {
         let k = 5;
         let mut whole = Session::prepare(inputs.clone(), &mut |_| {}).expect("a session");
