@@ -198,6 +198,8 @@ mod tests {
         check(70_001, 80_000, 12, 4);
         check(3000, 5000, 31, 5);
         check(2_500_000 / 10, 300_000, 8, 6);
+        // More blocks than the grid has workgroups: each owns several.
+        check(2_200_000, 2_500_000, 20, 8);
     }
 
     #[test]
