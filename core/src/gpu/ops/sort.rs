@@ -200,6 +200,7 @@ mod tests {
         check(2_500_000 / 10, 300_000, 8, 6);
         // More blocks than the grid has workgroups: each owns several.
         check(2_200_000, 2_500_000, 20, 8);
+        check(1_200_000, 1_300_000, 5, 9);
     }
 
     #[test]
