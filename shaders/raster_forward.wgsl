@@ -163,6 +163,25 @@ fn put_slice(q: u32, c: u32, t_start: f32, sum: vec4<f32>) {
     px_state[at + 4u] = bitcast<u32>(sum.w);
 }
 
+// A pixel's result: its colour, inverse depth, opacity and state, and the
+// slice under way, then those the pixel never reached (with one slice the
+// backward pass needs no record: px_state has none).
+fn finish(q: u32, cur: u32, slice_t: f32, slice_sum: vec4<f32>, trans: f32, acc: vec4<f32>, n_contrib: u32) {
+    if cam.splits > 1u {
+        put_slice(q, cur, slice_t, slice_sum);
+        for (var c = cur + 1u; c < cam.splits; c = c + 1u) {
+            put_slice(q, c, trans, vec4<f32>(0.0));
+        }
+    }
+    rgb[3u * q] = acc.x + trans * cam.bg.x;
+    rgb[3u * q + 1u] = acc.y + trans * cam.bg.y;
+    rgb[3u * q + 2u] = acc.z + trans * cam.bg.z;
+    inv_depth[q] = acc.w;
+    alpha_out[q] = 1.0 - trans;
+    px_state[2u * q] = bitcast<u32>(trans);
+    px_state[2u * q + 1u] = n_contrib;
+}
+
 var<workgroup> s_xy: array<vec2<f32>, 256>;
 var<workgroup> s_conic: array<vec4<f32>, 256>;
 var<workgroup> s_feat: array<vec4<f32>, 256>;
@@ -196,7 +215,7 @@ fn composite(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id
     var slice_t = 1.0;
     var slice_sum = vec4<f32>(0.0);
     for (var start = first; start < end; start = start + 256u) {
-        if inside && cam.splits > 1u && start > first && (start - first) % per_slice == 0u {
+        if inside && !done && cam.splits > 1u && start > first && (start - first) % per_slice == 0u {
             put_slice(q, cur, slice_t, slice_sum);
             cur += 1u;
             slice_t = trans;
@@ -227,6 +246,10 @@ fn composite(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id
             if test_t < T_MIN {
                 done = true;
                 atomicAdd(&n_done, 1u);
+                // Written at once rather than after the remaining batches: on
+                // lavapipe, a pixel that stopped early and idled through a long
+                // list's barriers came out empty (a tile of 65,025 splats).
+                finish(q, cur, slice_t, slice_sum, trans, acc, n_contrib);
                 break;
             }
             let add = (alpha * trans) * s_feat[j];
@@ -243,21 +266,8 @@ fn composite(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id
             break;
         }
     }
-    if inside {
-        // The slice under way, then those the pixel never reached (with one
-        // slice the backward pass needs no record: px_state has none).
-        if cam.splits > 1u {
-            put_slice(q, cur, slice_t, slice_sum);
-            for (var c = cur + 1u; c < cam.splits; c = c + 1u) {
-                put_slice(q, c, trans, vec4<f32>(0.0));
-            }
-        }
-        rgb[3u * q] = acc.x + trans * cam.bg.x;
-        rgb[3u * q + 1u] = acc.y + trans * cam.bg.y;
-        rgb[3u * q + 2u] = acc.z + trans * cam.bg.z;
-        inv_depth[q] = acc.w;
-        alpha_out[q] = 1.0 - trans;
-        px_state[2u * q] = bitcast<u32>(trans);
-        px_state[2u * q + 1u] = n_contrib;
+    // A pixel still compositing at the end of its list writes its result now.
+    if inside && !done {
+        finish(q, cur, slice_t, slice_sum, trans, acc, n_contrib);
     }
 }

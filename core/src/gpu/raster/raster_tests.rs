@@ -369,3 +369,31 @@ fn matches_the_golden_rasterizer_files() {
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// A tile whose list is long (65,025 splats, past 254 batches of 256) and
+/// whose centre pixels saturate early while its edges run to the end: on
+/// lavapipe the early pixels came out empty when they wrote their result
+/// after the list, as on playbot's densest tiles.
+#[test]
+fn a_long_tile_list_keeps_the_pixels_that_stop_early() {
+    let ctx = ctx();
+    let n = 65_025;
+    let r = noise(3 * n, 5);
+    let g = Gaussians {
+        means: (0..n).map(|i| [0.3 * r[3 * i], 0.3 * r[3 * i + 1], 0.3 * r[3 * i + 2]]).collect(),
+        log_scales: vec![[-1.0; 3]; n],
+        quats: vec![[1.0, 0.0, 0.0, 0.0]; n],
+        opacity_logits: vec![-5.0; n],
+        sh_degree: 0,
+        sh: (0..3 * n).map(|i| (i % 7) as f32 * 0.2).collect(),
+    };
+    let cam =
+        orbit_cameras(&g.means, &OrbitOptions { count: 1, width: 16, height: 16, ..Default::default() })[0].clone();
+    let o = RenderOptions::default();
+    let (want, state) = forward(&g, &cam, &o);
+    assert_eq!(state.pairs(), n, "one tile holds every splat");
+    let got = super::render_gpu(ctx, &g, &cam, &o).expect("GPU render");
+    let worst = want.alpha.iter().zip(&got.alpha).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    let worst_rgb = want.rgb.iter().zip(&got.rgb).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    assert!(worst < 1e-4 && worst_rgb < 1e-4, "alpha off by {worst}, colour by {worst_rgb}");
+}
