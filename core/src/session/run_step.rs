@@ -4,6 +4,7 @@
 
 use super::*;
 use crate::style::Phase;
+use rayon::prelude::*;
 
 /// Every how many GPU steps the colour watch reads the step's render back
 /// (besides each view's first visit).
@@ -182,8 +183,10 @@ impl Session {
         let wts = self.config.weights;
         if phase.updates_color() {
             let k = cpu.g.sh_coeffs() * 3;
-            let mut dc: Vec<f32> =
-                (0..cpu.g.len()).flat_map(|i| [cpu.g.sh[i * k], cpu.g.sh[i * k + 1], cpu.g.sh[i * k + 2]]).collect();
+            let mut dc = vec![0.0f32; 3 * cpu.g.len()];
+            dc.par_chunks_mut(3).zip(cpu.g.sh.par_chunks(k)).with_min_len(PER_TASK).for_each(|(d, sh)| {
+                d.copy_from_slice(&sh[..3]);
+            });
             // The DC's gradient alone (`ShGrads::Dc`), three values a Gaussian.
             let v_dc = &mut grads.v_sh;
             take_leak(v_dc, &mut self.leak.color);
@@ -191,9 +194,9 @@ impl Session {
             if self.config.color_floor {
                 floor_dc(&mut dc);
             }
-            for i in 0..cpu.g.len() {
-                cpu.g.sh[i * k..i * k + 3].copy_from_slice(&dc[3 * i..3 * i + 3]);
-            }
+            cpu.g.sh.par_chunks_mut(k).zip(dc.par_chunks(3)).with_min_len(PER_TASK).for_each(|(sh, d)| {
+                sh[..3].copy_from_slice(d);
+            });
         }
         if geometry {
             let reg = |x: &[f32], r: &[f32], components: usize| match self.config.param_regulariser {
@@ -246,24 +249,23 @@ fn floor_dc(dc: &mut [f32]) {
 /// Adds the gradients leaked into `acc` (empty when the leak is off) to
 /// `grad` and clears them: the phase's first step after the other phase.
 fn take_leak(grad: &mut [f32], acc: &mut [f32]) {
-    for (g, a) in grad.iter_mut().zip(acc.iter_mut()) {
+    grad.par_iter_mut().zip(acc.par_iter_mut()).with_min_len(PER_TASK).for_each(|(g, a)| {
         *g += *a;
         *a = 0.0;
-    }
+    });
 }
 
 fn add_into(acc: &mut [f32], grad: &[f32]) {
-    for (a, &g) in acc.iter_mut().zip(grad) {
-        *a += g;
-    }
+    acc.par_iter_mut().zip(grad).with_min_len(PER_TASK).for_each(|(a, &g)| *a += g);
 }
 
 /// `(x − x^c)/‖x − x^c‖` scaled by λ, plus the loss gradient: `reg ← λ·reg + loss`.
 fn add_scaled(reg: &mut [f32], loss_grad: &[f32], lambda: f32) {
-    for (r, &g) in reg.iter_mut().zip(loss_grad) {
-        *r = lambda * *r + g;
-    }
+    reg.par_iter_mut().zip(loss_grad).with_min_len(PER_TASK).for_each(|(r, &g)| *r = lambda * *r + g);
 }
+
+/// Values (or Gaussians) a thread takes at a time in the update's element-wise passes.
+const PER_TASK: usize = 1 << 14;
 
 fn flat<const N: usize>(v: &[[f32; N]]) -> &[f32] {
     v.as_flattened()

@@ -4,7 +4,11 @@
 //! across cycles (ALGORITHM.md), so each group of each phase owns one `Adam`.
 //! Learning rates are constant; the bias correction follows PyTorch.
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+
+/// Parameters a thread updates at a time.
+const CHUNK: usize = 1 << 15;
 
 /// Adam's hyper-parameters (PyTorch names).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -89,11 +93,21 @@ impl Adam {
         let bc1 = 1.0 - beta1.powi(t);
         let bc2_sqrt = (1.0 - beta2.powi(t)).sqrt();
         let step_size = lr / bc1;
-        for (((p, &g), m), v) in params.iter_mut().zip(grads).zip(&mut self.m).zip(&mut self.v) {
-            *m = beta1 * *m + (1.0 - beta1) * g;
-            *v = beta2 * *v + (1.0 - beta2) * g * g;
-            *p -= step_size * *m / (v.sqrt() / bc2_sqrt + eps);
-        }
+        // Each parameter's update is its own, so chunks in parallel give the
+        // serial loop's values to the bit (a 2M-Gaussian geometry step's
+        // 22M parameters took 0.27 s on one thread).
+        params
+            .par_chunks_mut(CHUNK)
+            .zip(grads.par_chunks(CHUNK))
+            .zip(self.m.par_chunks_mut(CHUNK))
+            .zip(self.v.par_chunks_mut(CHUNK))
+            .for_each(|(((p, g), m), v)| {
+                for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m).zip(v) {
+                    *m = beta1 * *m + (1.0 - beta1) * g;
+                    *v = beta2 * *v + (1.0 - beta2) * g * g;
+                    *p -= step_size * *m / (v.sqrt() / bc2_sqrt + eps);
+                }
+            });
     }
 }
 
