@@ -944,6 +944,43 @@ fn leaving_an_unexported_result_asks_first() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// The question's "Export .ply…" with the path its save dialog returns: a
+/// failed write asks again with the error in the question and keeps the
+/// window open; a written one closes the window, the scene on disk.
+#[test]
+fn exporting_from_the_close_question_closes_once_written() {
+    let (app, _crx, _etx) = app_with_a_run(5);
+    let mut harness = egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, 900.0))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    settle(&mut harness);
+    assert!(request_close(&mut harness), "the close went through with an unexported result");
+
+    let dir = std::env::temp_dir().join(format!("gast-studio-leave-export-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    // A file where the export's folder would be: the write fails.
+    let blocker = dir.join("not-a-folder");
+    std::fs::write(&blocker, b"x").expect("blocker");
+    harness.state_mut().export_current_scene(blocker.join("stylized.ply"), true);
+    settle(&mut harness);
+    assert!(harness.state().leave.asking.is_some(), "a failed export dropped the question");
+    assert!(!harness.state().leave.quit_confirmed, "a failed export closed the window");
+    let error = harness.state().leave.export_error.clone().expect("the export's error in the question");
+    assert!(error.contains("not-a-folder"), "the error does not name the file: {error}");
+    // In the question (and the status line's log).
+    harness.get_by_label_contains("The stylized scene is not exported");
+    assert!(harness.query_all_by_label_contains("not-a-folder").count() >= 1, "the question shows no error");
+
+    let exported = dir.join("stylized.ply");
+    harness.state_mut().export_current_scene(exported.clone(), true);
+    settle(&mut harness);
+    let written = gast_core::scene::load(&exported).expect("the exported scene reads back");
+    assert_eq!(written.len(), harness.state().scene.as_ref().expect("scene").scene.gaussians.len());
+    assert!(harness.state().leave.asking.is_none() && harness.state().leave.quit_confirmed, "the window stays open");
+    assert_eq!(harness.state().unexported_step(), None);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// A run's link to no worker: its channels closed, its slots empty (a
 /// starter's answer in tests that only look at what it was asked).
 fn idle_link() -> session_link::SessionLink {
