@@ -147,6 +147,43 @@ fn stop_ends_the_run_early_with_the_result_so_far() {
     assert!(handle.stop_and_join().is_some());
 }
 
+/// A worker's `at_end` runs once, on its thread, when the run has ended and
+/// its session is gone: the scene the session shared is held by no one else
+/// then (the studio gives the run's freed memory back to the system there).
+#[test]
+fn a_workers_end_call_comes_after_its_session_is_dropped() {
+    use gast_core::session::{RunOptions, spawn_run};
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let config = StyleConfig { cycles: 1, steps_per_cycle: 2, resolution: 32, texture_scale: 32, ..Default::default() };
+    let Some(inputs) = inputs(config) else { return };
+    let scene = inputs.scene.clone();
+    let (calls, holders) = (Arc::new(AtomicUsize::new(0)), Arc::new(AtomicUsize::new(0)));
+    let (c, h, s) = (calls.clone(), holders.clone(), scene.clone());
+    let at_end = Box::new(move || {
+        c.fetch_add(1, Ordering::SeqCst);
+        // This closure's clone and the test's: the session's is gone.
+        h.store(Arc::strong_count(&s), Ordering::SeqCst);
+    });
+    let handle = spawn_run(
+        move |_| Ok((inputs, RunOptions { resume: None, keep: None, at_end: Some(at_end) })),
+        Arc::new(|| {}),
+    );
+    loop {
+        match next(&handle.events) {
+            Event::Finished { completed, steps, .. } => {
+                assert!(completed && steps == 2, "ended after {steps} steps");
+                break;
+            }
+            Event::Failed(e) => panic!("the run failed: {e}"),
+            _ => {}
+        }
+    }
+    let result = handle.stop_and_join().expect("the run's result");
+    assert_eq!(result.len(), scene.len());
+    assert_eq!(calls.load(Ordering::SeqCst), 1, "the end call ran {} times", calls.load(Ordering::SeqCst));
+    assert_eq!(holders.load(Ordering::SeqCst), 2, "the session still held the scene at the end call");
+}
+
 /// A worker given a keeper writes the run's state at a pause and at its end
 /// (and not again without a new step); a worker given that state goes on
 /// from it and ends where one run through ends; on the CPU and the GPU engine.
@@ -181,7 +218,7 @@ fn a_worker_keeps_its_runs_state_and_another_goes_on_from_it() {
         let kept: Kept = Arc::default();
         let (whole_inputs, whole_keeper) = (inputs.clone(), keeper(&kept));
         let handle = spawn_run(
-            move |_| Ok((whole_inputs, RunOptions { resume: None, keep: Some(whole_keeper) })),
+            move |_| Ok((whole_inputs, RunOptions { resume: None, keep: Some(whole_keeper), at_end: None })),
             Arc::new(|| {}),
         );
         loop {
@@ -208,7 +245,11 @@ fn a_worker_keeps_its_runs_state_and_another_goes_on_from_it() {
             move |_| {
                 Ok((
                     inputs,
-                    RunOptions { resume: Some(ResumeFrom { scene, step, moments: Some(moments) }), keep: None },
+                    RunOptions {
+                        resume: Some(ResumeFrom { scene, step, moments: Some(moments) }),
+                        keep: None,
+                        at_end: None,
+                    },
                 ))
             },
             Arc::new(|| {}),

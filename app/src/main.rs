@@ -6,6 +6,7 @@
 
 mod checkpoint;
 mod cli;
+mod memory;
 mod progress;
 mod report;
 mod studio;
@@ -16,7 +17,7 @@ mod views;
 use clap::Parser;
 
 fn main() -> std::process::ExitCode {
-    keep_freed_memory();
+    memory::keep_freed();
     give_a_runtime_dir();
     let args = cli::Cli::parse();
     match cli::run(args) {
@@ -56,34 +57,6 @@ fn give_a_runtime_dir() {
 
 #[cfg(not(unix))]
 fn give_a_runtime_dir() {}
-
-/// glibc's malloc hands large blocks back to the kernel when they are
-/// freed (those over its mmap threshold, and the heap's free top over 128
-/// KiB), so every CPU step, which allocates the rasterizer's and the
-/// update's arrays anew, took each of their pages again as a zeroed page
-/// fault: 3.75 million faults in 22 steps of a 2,000,000-Gaussian scene,
-/// about a quarter of its step time. Served from the heap, and with up to
-/// [`KEPT_FREE`] of freed memory kept for the next step, the arrays come back
-/// from the allocator instead (docs/figures.md). Before any thread exists.
-#[cfg(all(target_os = "linux", target_env = "gnu"))]
-#[allow(unsafe_code)]
-fn keep_freed_memory() {
-    // SAFETY: mallopt only sets the allocator's parameters; called first in
-    // `main`, before any other thread allocates.
-    unsafe {
-        libc::mallopt(libc::M_MMAP_MAX, 0);
-        libc::mallopt(libc::M_TRIM_THRESHOLD, KEPT_FREE);
-    }
-}
-
-/// The free memory at the heap's top that glibc keeps rather than returns
-/// (beyond it the whole free top goes back): a bound on what a process holds
-/// past its peak's live data.
-#[cfg(all(target_os = "linux", target_env = "gnu"))]
-const KEPT_FREE: libc::c_int = 1 << 30;
-
-#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-fn keep_freed_memory() {}
 
 /// An error and its causes on one line, each cause once: the core's errors
 /// already quote their source in their own message.

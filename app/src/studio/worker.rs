@@ -150,7 +150,13 @@ pub fn starter() -> SessionStarter {
                     }
                     None => None,
                 };
-                let options = RunOptions { resume, keep: keep.map(|slot| slot.keeper()) };
+                // The run's freed memory, kept by the allocator for its steps
+                // (`memory::keep_freed`), goes back once the run has ended.
+                let options = RunOptions {
+                    resume,
+                    keep: keep.map(|slot| slot.keeper()),
+                    at_end: Some(Box::new(crate::memory::give_back_freed)),
+                };
                 Ok((SessionInputs { scene, cameras, style, style_depth, vgg, config, gpu }, options))
             },
             waker,

@@ -84,6 +84,22 @@ pub struct RunOptions {
     pub resume: Option<ResumeFrom>,
     /// Keeps the run's state.
     pub keep: Option<Keeper>,
+    /// Called on the worker's thread when it ends, after the session and
+    /// everything else of the run's is dropped (the studio hands the freed
+    /// memory back to the system there).
+    pub at_end: Option<Box<dyn FnOnce() + Send>>,
+}
+
+/// Calls its function when dropped: declared before the session, it runs
+/// after the session is gone, however the worker ends.
+struct AtEnd(Option<Box<dyn FnOnce() + Send>>);
+
+impl Drop for AtEnd {
+    fn drop(&mut self) {
+        if let Some(f) = self.0.take() {
+            f();
+        }
+    }
 }
 
 /// An earlier run's state to go on from ([`Session::resume_at`]).
@@ -192,13 +208,14 @@ where
         let _ = events.send(e);
         waker();
     };
-    let (inputs, options) = match load(&mut |e| emit(e)) {
+    let (inputs, mut options) = match load(&mut |e| emit(e)) {
         Ok(loaded) => loaded,
         Err(e) => {
             emit(Event::Failed(e));
             return None;
         }
     };
+    let _at_end = AtEnd(options.at_end.take());
     let mut session = match Session::prepare(inputs, &mut |e| emit(e)) {
         Ok(s) => s,
         Err(e) => {
