@@ -74,9 +74,7 @@ fn a_bad_scene_file_shows_an_error_and_keeps_the_scene() {
     app.errors.pop();
 
     // The error is on screen, in the bottom panel.
-    let mut harness = egui_kittest::Harness::builder()
-        .with_size(egui::vec2(1280.0, 800.0))
-        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    let mut harness = harness_of(app, 800.0);
     harness.run_steps(3);
     harness.get_by_label_contains("broken.ply");
     harness.get_by_label("2 error(s)");
@@ -86,9 +84,7 @@ fn a_bad_scene_file_shows_an_error_and_keeps_the_scene() {
 #[test]
 fn controls_edit_the_config_and_presets_round_trip() {
     let app = test_app();
-    let mut harness = egui_kittest::Harness::builder()
-        .with_size(egui::vec2(1280.0, 1400.0))
-        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    let mut harness = harness_of(app, 1400.0);
     settle(&mut harness);
     // Texture scale buttons set the config.
     harness.get_by_label("2×").click();
@@ -175,6 +171,13 @@ fn app_with_a_run(
     (app, crx, etx)
 }
 
+/// A harness drawing `app` in a window 1280 wide and `height` high.
+fn harness_of(app: StudioApp, height: f32) -> egui_kittest::Harness<'static, StudioApp> {
+    egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1280.0, height))
+        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app)
+}
+
 /// Steps the harness until no background job (style maps and depth,
 /// inspection) is running, so a click does not race a late layout change.
 fn settle(harness: &mut egui_kittest::Harness<'_, StudioApp>) {
@@ -193,9 +196,7 @@ fn settle(harness: &mut egui_kittest::Harness<'_, StudioApp>) {
 fn session_events_and_snapshots_reach_the_window() {
     use gast_core::session::Event;
     let (app, crx, etx) = app_with_a_run(5);
-    let mut harness = egui_kittest::Harness::builder()
-        .with_size(egui::vec2(1280.0, 1400.0))
-        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    let mut harness = harness_of(app, 1400.0);
     settle(&mut harness);
     assert!(
         harness.state().snapshot.as_ref().is_some_and(|s| matches!(s.gaussians, SharedGaussians::Snapshot(_))),
@@ -295,9 +296,7 @@ impl egui::DroppedFile for TestDrop {
 fn dropped_styles_and_scenes_open() {
     let app = test_app();
     let styles_before = app.styles.len();
-    let mut harness = egui_kittest::Harness::builder()
-        .with_size(egui::vec2(1280.0, 900.0))
-        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    let mut harness = harness_of(app, 900.0);
     harness.run_steps(1);
     let dir = assets::source_assets_dir();
     let dropped: Vec<egui::DroppedFileHandle> = vec![
@@ -596,9 +595,7 @@ fn the_contact_sheet_of_a_run_is_exported() {
         "{:?}",
         app.errors
     );
-    let mut harness = egui_kittest::Harness::builder()
-        .with_size(egui::vec2(1280.0, 800.0))
-        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    let mut harness = harness_of(app, 800.0);
     harness.run_steps(3);
     harness.get_by_label_contains("cannot write the contact sheet");
     harness.get_by_label("1 error(s)");
@@ -679,9 +676,7 @@ fn a_long_warning_shows_its_first_sentence() {
 #[test]
 fn the_split_line_drags_and_hides() {
     let (app, _crx, _etx) = app_with_a_run(5);
-    let mut harness = egui_kittest::Harness::builder()
-        .with_size(egui::vec2(1280.0, 800.0))
-        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    let mut harness = harness_of(app, 800.0);
     settle(&mut harness);
     let rect = harness.state().viewport_rect;
     assert!(rect.width() > 100.0, "viewport {rect:?}");
@@ -897,9 +892,7 @@ fn request_close(harness: &mut egui_kittest::Harness<'_, StudioApp>) -> bool {
 #[test]
 fn leaving_an_unexported_result_asks_first() {
     let (app, _crx, _etx) = app_with_a_run(5);
-    let mut harness = egui_kittest::Harness::builder()
-        .with_size(egui::vec2(1280.0, 900.0))
-        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    let mut harness = harness_of(app, 900.0);
     settle(&mut harness);
     assert_eq!(harness.state().unexported_step(), Some(5));
     assert!(request_close(&mut harness), "the close went through with an unexported result");
@@ -950,9 +943,7 @@ fn leaving_an_unexported_result_asks_first() {
 #[test]
 fn exporting_from_the_close_question_closes_once_written() {
     let (app, _crx, _etx) = app_with_a_run(5);
-    let mut harness = egui_kittest::Harness::builder()
-        .with_size(egui::vec2(1280.0, 900.0))
-        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    let mut harness = harness_of(app, 900.0);
     settle(&mut harness);
     assert!(request_close(&mut harness), "the close went through with an unexported result");
 
@@ -1025,9 +1016,7 @@ fn a_kept_run_is_offered_discarded_and_gone_on_from() {
     drop(killed);
 
     let offered = |app: StudioApp| {
-        let mut harness = egui_kittest::Harness::builder()
-            .with_size(egui::vec2(1280.0, 900.0))
-            .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+        let mut harness = harness_of(app, 900.0);
         settle(&mut harness);
         harness.get_by_label_contains("A run left unfinished");
         harness.get_by_label_contains("during a run of this scene with this style: step 7 of 20, kept ");
@@ -1119,9 +1108,7 @@ fn runs_kept_of_other_files_are_listed_and_open() {
     crate::checkpoint::write_with_record(&slot.path, &part, None, &kept).expect("kept");
     drop(killed);
 
-    let mut harness = egui_kittest::Harness::builder()
-        .with_size(egui::vec2(1280.0, 900.0))
-        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), studio());
+    let mut harness = harness_of(studio(), 900.0);
     settle(&mut harness);
     harness.get_by_label_contains("Runs left unfinished");
     harness.get_by_label_contains("part.ply with gradient.png: step 5 of 20, kept ");
@@ -1141,9 +1128,7 @@ fn runs_kept_of_other_files_are_listed_and_open() {
     // Another image written over the style: the run is listed with why it
     // cannot go on, its Open disabled (opening would refuse it), and Discard removes it.
     image::RgbImage::from_fn(64, 48, |x, _| image::Rgb([200, (x * 3) as u8, 10])).save(&style_file).expect("over it");
-    let mut harness = egui_kittest::Harness::builder()
-        .with_size(egui::vec2(1280.0, 900.0))
-        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), studio());
+    let mut harness = harness_of(studio(), 900.0);
     settle(&mut harness);
     harness.get_by_label_contains("part.ply with gradient.png: step 5 of 20, kept ");
     harness.get_by_label_contains("Cannot go on: another image was written over ");
@@ -1166,9 +1151,7 @@ fn the_editor_keeps_settings_beyond_its_sliders() {
     wide.weights.tv = 50.0;
     assert!(wide.problems().is_empty(), "{:?}", wide.problems());
     app.config = wide.clone();
-    let mut harness = egui_kittest::Harness::builder()
-        .with_size(egui::vec2(1280.0, 1400.0))
-        .build_ui_state(|ui, app: &mut StudioApp| app.show(ui), app);
+    let mut harness = harness_of(app, 1400.0);
     settle(&mut harness);
     assert_eq!(harness.state().config, wide, "the editor changed settings it only showed");
 }
