@@ -124,6 +124,10 @@ pub struct StepArgs {
     /// take longer than the steps.
     #[arg(long)]
     pub no_parts: bool,
+    /// Timed repetitions of each part, after a warm-up (the GEMMs and the CPU's VGG take at most
+    /// 3): 1 checks that the parts run, as the GPU check's dry run does on lavapipe.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u16).range(1..=100))]
+    pub part_reps: u16,
 }
 
 /// Per-step medians of the host's share of a GPU step (ms; zeros on the CPU).
@@ -651,29 +655,31 @@ fn time_steps(
     })
 }
 
-/// Each GPU part of a step timed on its own at the benchmark's size.
+/// Each GPU part of a step timed on its own at the benchmark's size, `reps`
+/// times after a warm-up (the GEMMs at most 3).
 fn gpu_parts(
     ctx: &gast_core::gpu::GpuContext,
     vgg: &gast_core::vision::Vgg,
     scene: &gast_core::Gaussians,
     cam: &Camera,
     resolution: usize,
+    reps: usize,
 ) -> anyhow::Result<()> {
     use gast_core::gpu;
     println!("\nGPU parts on {} (median ms)", ctx.describe());
     let mut rows = gpu::bench_raster(ctx, scene, cam)?;
     let side = resolution / 2;
-    rows.extend(gpu::bench_vgg(ctx, vgg, side, side, 5));
+    rows.extend(gpu::bench_vgg(ctx, vgg, side, side, reps));
     let n = (side / 4) * (side / 4);
-    rows.extend(gpu::bench_gcfm(ctx, 768, n, 4096, 5));
+    rows.extend(gpu::bench_gcfm(ctx, 768, n, 4096, reps));
     // The GEMM at the step's shapes in both tilings (`GAST_GEMM_TILE` picks
     // one for the parts above; auto takes 128² where the grid stays full).
     for (rows_a, cols_b, inner) in [(n, 4096, 256), (1152, n, 256), (256, n, 1152)] {
         for tile in [gpu::GemmTile::Narrow, gpu::GemmTile::Wide] {
-            rows.extend(gpu::bench_gemm(ctx, rows_a, cols_b, inner, 3, tile));
+            rows.extend(gpu::bench_gemm(ctx, rows_a, cols_b, inner, reps.min(3), tile));
         }
     }
-    rows.extend(gpu::bench_image_ops(ctx, &[resolution], scene.len(), 5)?);
+    rows.extend(gpu::bench_image_ops(ctx, &[resolution], scene.len(), reps)?);
     for (name, ms) in rows {
         println!("  {name:<36} {ms:>9.3}");
     }
@@ -687,8 +693,9 @@ fn print_parts(args: &StepArgs, inputs: &StepInputs, runs: &[StepRun]) -> anyhow
     let side = (args.resolution / 2) as usize;
     if runs.iter().any(|r| r.device.starts_with("CPU")) {
         // One modality at the VGG input size (the render downscaled 0.5×), and the gemm floor.
-        let vt = gast_core::vision::vgg::bench(&inputs.vgg, side, side, 3);
-        let gemm = gast_core::vision::gemm_gflops(256, 64 * 64, 2304, 3);
+        let reps = usize::from(args.part_reps).min(3);
+        let vt = gast_core::vision::vgg::bench(&inputs.vgg, side, side, reps);
+        let gemm = gast_core::vision::gemm_gflops(256, 64 * 64, 2304, reps);
         let flops = inputs.vgg.forward_flops(side, side);
         println!("\none modality on the CPU: {vt}");
         println!(
@@ -702,7 +709,8 @@ fn print_parts(args: &StepArgs, inputs: &StepInputs, runs: &[StepRun]) -> anyhow
     time_style_depth(&inputs.style, args.depth_model.as_deref(), 1, false, false)?;
     if !runs.iter().all(|r| r.device.starts_with("CPU")) {
         let ctx = gast_core::gpu::DeviceChoice::Gpu.resolve()?.context("no GPU adapter for the per-part figures")?;
-        gpu_parts(&ctx, &inputs.vgg, &inputs.scene, &inputs.views[0], args.resolution as usize)?;
+        let (scene, view) = (&inputs.scene, &inputs.views[0]);
+        gpu_parts(&ctx, &inputs.vgg, scene, view, args.resolution as usize, usize::from(args.part_reps))?;
     }
     Ok(())
 }
