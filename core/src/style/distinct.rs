@@ -31,6 +31,18 @@ pub struct Matches {
     pub worst: Vec<u32>,
 }
 
+/// Chunks of consecutive positions' `(best, worst)`, joined in order.
+impl FromIterator<(Vec<u32>, Vec<u32>)> for Matches {
+    fn from_iter<I: IntoIterator<Item = (Vec<u32>, Vec<u32>)>>(chunks: I) -> Self {
+        let mut out = Matches::default();
+        for (b, w) in chunks {
+            out.best.extend(b);
+            out.worst.extend(w);
+        }
+        out
+    }
+}
+
 /// Below this share of distinct positions, the search runs on the
 /// representatives only (above it the gather costs more than it saves).
 const WORTH_IT: f64 = 0.75;

@@ -249,12 +249,7 @@ pub fn match_every_position(style: &StyleFeatures, rendered: [&[f32]; 3], n: usi
             (best, worst)
         })
         .collect();
-    let mut out = Matches { best: Vec::with_capacity(n), worst: Vec::with_capacity(n) };
-    for (b, w) in parts {
-        out.best.extend(b);
-        out.worst.extend(w);
-    }
-    out
+    parts.into_iter().collect()
 }
 
 /// Index of the largest (`want_max`) or smallest score, the first on ties;

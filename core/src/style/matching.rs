@@ -245,12 +245,7 @@ impl MatchIndex {
                 (best, worst)
             })
             .collect();
-        let mut out = Matches { best: Vec::with_capacity(n), worst: Vec::with_capacity(n) };
-        for (b, w) in parts {
-            out.best.extend(b);
-            out.worst.extend(w);
-        }
-        out
+        parts.into_iter().collect()
     }
 
     /// The candidate (ascending indices) with the largest (`want_max`) or
