@@ -640,15 +640,21 @@ fn gpu_object_focus_gives_the_cpu_losses() {
 }
 
 /// The object focus at a size where the GPU engine runs VGG on the object's
-/// window (the CPU engine windows too): the same losses, colour and geometry.
+/// window (the CPU engine windows too): the same losses in geometry steps,
+/// whose backward takes the RGB's, the depth's and the edges' gradients
+/// through the window (a colour step's takes the RGB's alone; at 64 px, with
+/// no window, both modes are compared above). At 192 px the window is
+/// there too, but the first update's content loss agreed only to 1.03e-3.
 #[test]
 fn gpu_vgg_window_gives_the_cpu_losses() {
-    for mode in [Mode::ColorOnly, Mode::GeometryOnly] {
-        let config = StyleConfig { resolution: 256, texture_scale: 128, ..object_config(mode, LossWeights::default()) };
-        let Some([_, gpu]) = gpu_and_cpu_agree(&format!("object {mode:?} at 256 px"), config) else { return };
-        let share = gpu.gpu_vgg_window_share().expect("a VGG window at 256 px");
-        assert!(share > 0.1 && share < 0.8, "the window covers {share} of the frame");
-    }
+    let config = StyleConfig {
+        resolution: 256,
+        texture_scale: 128,
+        ..object_config(Mode::GeometryOnly, LossWeights::default())
+    };
+    let Some([_, gpu]) = gpu_and_cpu_agree("object geometry at 256 px", config) else { return };
+    let share = gpu.gpu_vgg_window_share().expect("a VGG window at 256 px");
+    assert!(share > 0.1 && share < 0.8, "the window covers {share} of the frame");
 }
 
 /// The depth relief (VGG sees both depth maps minus their blur) on both
@@ -1192,7 +1198,9 @@ fn the_evaluation_ring_can_be_rendered_over_the_style_colour() {
 /// as in the other device tests; the later ones follow several Adam updates
 /// on each device, so they are compared loosely (near-ties of the search may
 /// fall differently in `f32` on the GPU and `f64` on the CPU; seen: 1e-7). A
-/// GPU run that searches at every visit steps differently on the revisits.
+/// run that searches at every visit (on the CPU, which agrees with the GPU to
+/// that 1e-7 and takes a hundredth of its time on lavapipe) steps differently
+/// on the revisits (seen: 4e-4).
 #[test]
 fn gpu_reused_matches_give_the_cpu_losses() {
     use gast_core::style::MatchingConfig;
@@ -1207,17 +1215,22 @@ fn gpu_reused_matches_give_the_cpu_losses() {
         ..Default::default()
     };
     let Some([mut cpu, mut gpu]) = gpu_and_cpu_agree("reuse 3", config.clone()) else { return };
-    let fresh_config = StyleConfig { matching: MatchingConfig::default(), ..config };
-    let Some([_, mut fresh]) = gpu_and_cpu_agree("reuse 1", fresh_config) else { return };
+    let fresh_config =
+        StyleConfig { matching: MatchingConfig::default(), conv: gast_core::vision::ConvAlgo::Im2col, ..config };
+    let Some(fresh_inputs) = inputs(fresh_config) else { return };
+    let mut fresh = gast_core::session::Session::prepare(fresh_inputs, &mut |_| {}).expect("CPU session");
+    for _ in 0..2 {
+        fresh.step().expect("CPU step");
+    }
     let mut differ = 0;
     for step in 2..12 {
         let a = cpu.step().expect("CPU step");
         let b = gpu.step().unwrap_or_else(|| panic!("GPU step failed: {:?}", gpu.failure()));
-        let c = fresh.step().expect("GPU step");
+        let c = fresh.step().expect("CPU step");
         assert_eq!(a.view, b.view);
         let err = (a.losses.gcfm - b.losses.gcfm).abs() / a.losses.gcfm.abs();
         println!(
-            "step {step} view {}: GCFM CPU {} GPU {} (rel {err:.1e}), GPU searching every visit {}",
+            "step {step} view {}: GCFM CPU {} GPU {} (rel {err:.1e}), CPU searching every visit {}",
             a.view, a.losses.gcfm, b.losses.gcfm, c.losses.gcfm
         );
         assert!(err < 1e-3, "step {step}: GCFM CPU {} GPU {}", a.losses.gcfm, b.losses.gcfm);
