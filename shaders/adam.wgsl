@@ -1,4 +1,4 @@
-// Adam on one flat parameter array (core/src/gpu/adam.rs; CPU twin: style/adam.rs).
+// Adam on one flat parameter array (core/src/gpu/ops/adam.rs; CPU twin: style/adam.rs).
 // p -= (lr / bc1) · m / (sqrt(v) / sqrt(bc2) + eps), PyTorch's bias correction.
 // Element i of the state updates params[(i / group) * stride + i % group] by
 // grads[(i / group) * grad_stride + i % group], so one kernel serves whole

@@ -1,4 +1,4 @@
-// The assignment terms' device side (core/src/gpu/assignment.rs; CPU twin:
+// The assignment terms' device side (core/src/gpu/losses/assignment.rs; CPU twin:
 // assignment_loss in style/assignment.rs). The pairing itself (a Hungarian
 // assignment of at most 512 rows) runs on the host; the device gathers the
 // columns it pairs and adds back their gradient:

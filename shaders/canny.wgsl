@@ -1,4 +1,4 @@
-// The render's edge map (core/src/gpu/canny.rs; CPU twin: vision/canny.rs
+// The render's edge map (core/src/gpu/losses/canny.rs; CPU twin: vision/canny.rs
 // render_edges): the clamped render min-max normalised to 8-bit per channel,
 // OpenCV's Canny(25, 200) with the L1 gradient on each channel, the three
 // maps averaged and replicated to 3 channels. Integer arithmetic throughout,

@@ -1,4 +1,4 @@
-// Content loss on features (core/src/gpu/content.rs; CPU twin:
+// Content loss on features (core/src/gpu/losses/content.rs; CPU twin:
 // content_loss_masked in style/content.rs): over the covered positions,
 // L = mean((f − t)²) and grad += λ · 2(f − t)/count; sq holds (f − t)²/count
 // there (0 elsewhere) for the reduction. Features are channel-major

@@ -1,4 +1,4 @@
-// Depth Anything V2's DPT neck and head around the GEMM (core/src/gpu/depth_dpt.rs;
+// Depth Anything V2's DPT neck and head around the GEMM (core/src/gpu/networks/depth_dpt.rs;
 // CPU twins: vision/depth/dpt.rs and vision/depth/ops.rs). Maps are CHW
 // planes. One thread per output element; flat index gid.x + gid.y · nwg.x · 256.
 

@@ -1,5 +1,5 @@
 // The depth map of one step: inverse depth min-max normalised per image and
-// replicated to 3 channels, and its adjoint (core/src/gpu/depth_map.rs; CPU
+// replicated to 3 channels, and its adjoint (core/src/gpu/losses/depth_map.rs; CPU
 // twins: step_loss and min_max_backward in style/step.rs). Only the pixels in
 // `mask` (1 or 0; all ones for the whole frame) count: the min and max are
 // theirs, the map is 0 elsewhere and so is the gradient.

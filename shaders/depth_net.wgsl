@@ -1,4 +1,4 @@
-// Depth Anything V2's DINOv2 backbone around the GEMM (core/src/gpu/depth_net.rs;
+// Depth Anything V2's DINOv2 backbone around the GEMM (core/src/gpu/networks/depth_net.rs;
 // CPU twins: vision/depth/vit.rs and vision/depth/ops.rs). Token states are
 // channel-major, `d × n` (one row per channel, one column per token, CLS
 // first), as on the CPU. One thread per output element or per column; flat

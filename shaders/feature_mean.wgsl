@@ -1,4 +1,4 @@
-// The feature-mean term on features (core/src/gpu/feature_mean.rs; CPU twin:
+// The feature-mean term on features (core/src/gpu/losses/feature_mean.rs; CPU twin:
 // feature_mean_loss in style/feature_mean.rs): over the covered positions,
 // μ_c = mean of channel c, d_c = μ_c − μ^S_c, L = (1/C) Σ_c d_c² and
 // grad += λ · 2 d_c / (C · count) at every covered position of channel c.

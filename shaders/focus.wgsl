@@ -1,4 +1,4 @@
-// The object focus's masks (core/src/gpu/focus.rs; CPU twins: coverage_mask
+// The object focus's masks (core/src/gpu/losses/focus.rs; CPU twins: coverage_mask
 // and feature_mask in style/focus.rs). Masks are f32 0/1 so the losses can
 // multiply by them. Runs once per view, on the colour-matched render's alpha.
 

@@ -1,4 +1,4 @@
-// GCFM on the GPU (core/src/gpu/gcfm.rs; CPU twin: style/gcfm.rs).
+// GCFM on the GPU (core/src/gpu/losses/gcfm.rs; CPU twin: style/gcfm.rs).
 // Features are CHW: rendered c × n (n positions), style c × m. The joint
 // scores ⟨r(x), s(y)⟩ of a chunk of rendered rows come from the GEMM; here:
 // the arg-extrema per row, the per-position cosines and coefficients, the

@@ -1,4 +1,4 @@
-// Tiled f32 matrix product with strides (core/src/gpu/gemm.rs; CPU twin:
+// Tiled f32 matrix product with strides (core/src/gpu/ops/gemm.rs; CPU twin:
 // vision/conv.rs `matmul`).
 //
 //   C(i, j) = act(alpha · Σ_p A(i, p) · B(p, j) + [C(i, j)] + [bias(i)])

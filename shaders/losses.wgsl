@@ -1,5 +1,5 @@
 // The step's image and parameter losses with their gradients
-// (core/src/gpu/losses.rs; CPU twins: style/tv.rs tv_loss,
+// (core/src/gpu/losses/losses.rs; CPU twins: style/tv.rs tv_loss,
 // style/regularizers.rs depth_l1 and l2_distance, style/outside.rs
 // outside_loss). Each kernel adds its
 // weighted gradient to `grad` and writes per-element terms to `scratch`,

@@ -1,4 +1,4 @@
-// Reverse compositing per tile (core/src/gpu/raster_backward.rs; CPU twin:
+// Reverse compositing per tile (core/src/gpu/raster/raster_backward.rs; CPU twin:
 // core/src/raster/backward.rs): `cam.splits` workgroups per tile, each
 // walking one slice of the tile's list (whole batches of 256, `slice_len`),
 // one thread per pixel, splats staged 256 at a time in workgroup memory from

@@ -1,6 +1,6 @@
 // The uniform block of the raster shaders (raster_project, raster_forward,
 // raster_backward): declared once here and prepended to each by the Rust
-// side (`with_camera` in core/src/gpu/raster_project.rs), whose
+// side (`with_camera` in core/src/gpu/raster/raster_project.rs), whose
 // `RasterUniform` is its twin, field for field.
 
 struct Cam {

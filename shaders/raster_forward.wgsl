@@ -1,4 +1,4 @@
-// Tile binning and compositing (core/src/gpu/raster_forward.rs; CPU twin:
+// Tile binning and compositing (core/src/gpu/raster/raster_forward.rs; CPU twin:
 // core/src/raster/forward.rs). After raster_project.wgsl and the depth sort:
 // `count_tiles` counts, per splat in depth order, the 16×16 tiles its
 // α ≥ 1/255 ellipse reaches (the CPU's box-then-ellipse test); scan.wgsl

@@ -1,4 +1,4 @@
-// Per-Gaussian projection and its backward pass (core/src/gpu/raster_project.rs;
+// Per-Gaussian projection and its backward pass (core/src/gpu/raster/raster_project.rs;
 // CPU twin: core/src/raster/project.rs, whose formulas this follows line by line).
 //
 // `project`: camera transform, EWA covariance (+0.3 px², clamped Jacobian),

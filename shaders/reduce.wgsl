@@ -1,4 +1,4 @@
-// Deterministic reductions (core/src/gpu/reduce.rs; CPU twins: the folds in
+// Deterministic reductions (core/src/gpu/ops/reduce.rs; CPU twins: the folds in
 // style/step.rs, vision/canny.rs, style/tv.rs, style/regularizers.rs).
 // Two levels, no atomics, no subgroups: `partial` gives each of `groups`
 // workgroups per lane a fixed strided slice and a tree in workgroup memory;

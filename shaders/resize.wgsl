@@ -1,5 +1,5 @@
 // The render's clamp to [0, 1] and the 0.5× bilinear downscale, forward and
-// backward (core/src/gpu/resize.rs; CPU twins: the clamp in session/run.rs,
+// backward (core/src/gpu/ops/resize.rs; CPU twins: the clamp in session/run.rs,
 // vision/resize.rs downscale_half and downscale_half_backward).
 // Images are HWC row-major with `c` interleaved channels.
 

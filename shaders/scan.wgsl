@@ -1,4 +1,4 @@
-// Exclusive prefix sum of u32 in place (core/src/gpu/scan.rs; CPU twin: a running sum).
+// Exclusive prefix sum of u32 in place (core/src/gpu/ops/scan.rs; CPU twin: a running sum).
 // A fixed grid of `groups` workgroups, each owning one contiguous range of
 // `per_group` elements: `reduce` sums each range, `scan_sums` scans the range
 // sums in one workgroup (and stores the total), `apply` scans each range from

@@ -1,5 +1,5 @@
 // Stable LSD radix sort of u32 keys with u32 values, 4 bits a pass
-// (core/src/gpu/sort.rs; CPU twin: a stable sort by key). No subgroups.
+// (core/src/gpu/ops/sort.rs; CPU twin: a stable sort by key). No subgroups.
 //
 // A fixed grid of `groups` workgroups, each owning one contiguous range of
 // whole 1,024-element blocks (the element count is read from `count[0]`, so

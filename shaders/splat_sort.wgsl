@@ -3,7 +3,7 @@
 // once sorted ascending; positive floats order like their bits) and culled
 // splats (zero extent) the largest key, so they gather at the end where the
 // draw turns them into degenerate quads. `order` is reset to the identity,
-// which the stable radix sort (core/src/gpu/sort.rs) then permutes.
+// which the stable radix sort (core/src/gpu/ops/sort.rs) then permutes.
 
 struct Projected {
     center_extent: vec4<f32>,

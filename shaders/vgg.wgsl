@@ -1,4 +1,4 @@
-// VGG relu3 forward and input gradient around the GEMM (core/src/gpu/vgg.rs;
+// VGG relu3 forward and input gradient around the GEMM (core/src/gpu/networks/vgg.rs;
 // CPU twins: vision/vgg.rs and vision/conv.rs). Layouts are CHW planes of
 // h × w; `in_off` / `out_off` / `extra_off` are offsets in f32s into the bound
 // buffers, so one buffer can hold several maps (the 768-channel features).

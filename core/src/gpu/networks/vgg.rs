@@ -1,5 +1,5 @@
 //! VGG relu3 forward and input gradient on the GPU (`shaders/vgg.wgsl` around
-//! the GEMM of `gpu/gemm.rs`), repeating the CPU [`crate::vision::Vgg`].
+//! the GEMM of `gpu/ops/gemm.rs`), repeating the CPU [`crate::vision::Vgg`].
 //!
 //! Convolutions are im2col + GEMM (bias and ReLU in the GEMM's epilogue); the
 //! input gradient is the transposed GEMM + col2im, done as a gather so no
