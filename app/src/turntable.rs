@@ -7,7 +7,7 @@
 //! stylization can be shared as one moving picture.
 //!
 //! `gast render --turntable` and the studio's "Export turntable" both call
-//! [`write`], so the two give the same files.
+//! [`write()`], so the two give the same files.
 
 use std::path::{Path, PathBuf};
 
@@ -57,7 +57,7 @@ impl Default for TurntableOptions {
     }
 }
 
-/// What [`write`] produced.
+/// What [`write()`] produced.
 #[derive(Clone, Debug)]
 pub struct Turntable {
     /// The PNG frames, in turning order.

@@ -78,7 +78,7 @@ pub fn recipe_weights(c: &StyleConfig, coverage: Option<f32>) -> Vec<(&'static s
 /// texture scale, `style` (width, height) pixels when one is chosen, for a
 /// scene of `gaussians` when one is open; on this machine as a run's plan
 /// takes it once a run has probed its rate (`gemm_gflops`,
-/// [`StepModel::on_machine`]), on a 2-core CPU before.
+/// [`gast_core::session::plan::StepModel::on_machine`]), on a 2-core CPU before.
 pub fn step_hint(
     c: &StyleConfig,
     coverage: Option<f32>,

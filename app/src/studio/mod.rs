@@ -114,7 +114,7 @@ pub struct StudioApp {
     /// How much of the stylization is shown and exported (colour, shape; 1 = all).
     strength: [f32; 2],
     /// The snapshot blended toward the run's colour-matched scene by
-    /// `strength` ([`gast_core::scene::blend`]), with the snapshot version and
+    /// `strength` ([`gast_core::scene::blend()`]), with the snapshot version and
     /// strength it was made for; the snapshot itself at full strength.
     shown: Option<(u64, [f32; 2], SceneRef)>,
     /// The running optimisation's GPU buffers, drawn instead of the snapshot when the viewport can.

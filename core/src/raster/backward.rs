@@ -21,7 +21,7 @@ use crate::scene::Gaussians;
 
 /// Gradients of a loss `L(rgb, inv_depth)` w.r.t. every Gaussian parameter,
 /// given `v_rgb = ∂L/∂rgb` (`H·W·3`) and `v_inv_depth = ∂L/∂inv_depth` (`H·W`),
-/// and the state of the [`super::forward`] call with the same inputs.
+/// and the state of the [`super::forward()`] call with the same inputs.
 ///
 /// # Panics
 /// When the arrays of `g` are inconsistent, or the cotangents or the state do

@@ -18,7 +18,7 @@ pub fn render(g: &Gaussians, cam: &Camera, opts: &RenderOptions) -> Render {
     forward(g, cam, opts).0
 }
 
-/// Renders the Gaussians and returns the state [`super::backward`] needs.
+/// Renders the Gaussians and returns the state [`super::backward()`] needs.
 ///
 /// # Panics
 /// When the arrays of `g` are inconsistent (a caller bug).

@@ -18,7 +18,7 @@
 //! where its α can reach 1/255, so the tiled result equals the dense one
 //! (the [`dense`] module) and the independent reference, not just nearly.
 //!
-//! The fast path ([`forward`], [`backward`]) works in `f32` on 16×16 tiles:
+//! The fast path ([`forward()`], [`backward()`]) works in `f32` on 16×16 tiles:
 //! project and cull in parallel, sort the splats once by depth, bin them into
 //! the tiles their ellipse reaches, and composite the tiles in parallel, each
 //! splat visiting only the pixels of its ellipse, row by row. The backward
@@ -90,7 +90,7 @@ impl Render {
 /// Gradients of a scalar loss with respect to every Gaussian parameter, in the
 /// layout of [`Gaussians`]; `v_sh` holds the first coefficients of each
 /// Gaussian that were asked for ([`ShGrads`]): all of `Gaussians::sh` from
-/// [`backward`].
+/// [`backward()`].
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Grads {
     /// Gradient w.r.t. `Gaussians::means`.

@@ -1,4 +1,4 @@
-//! What [`super::forward`] saves for [`super::backward`].
+//! What [`super::forward()`] saves for [`super::backward()`].
 
 use super::splat::Splat;
 

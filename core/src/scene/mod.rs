@@ -13,7 +13,7 @@
 //! counts against the bytes that are really there before allocating, and
 //! every decoded scene is validated (finite values, non-zero quaternions)
 //! before it is returned; [`save_ply`] applies the same check, so whatever it
-//! writes [`load`] reads back. [`save`] writes any of these formats, chosen
+//! writes [`load`] reads back. [`save()`] writes any of these formats, chosen
 //! by the output's name (`save.rs`).
 
 pub mod blend;

@@ -1,5 +1,5 @@
 //! The palette hold on the GPU (`shaders/palette.wgsl`): λ_pal's twin of
-//! [`crate::style::palette::palette_loss`], over the pixels a [`GpuFocus`]
+//! [`crate::style::palette::palette_loss`], over the pixels a [`super::focus::GpuFocus`]
 //! covers; the reference palette is written per view before the step.
 
 use std::sync::Arc;
