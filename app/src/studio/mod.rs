@@ -530,6 +530,26 @@ impl StudioApp {
         ));
     }
 
+    /// The steps the progress bar counts to: while a planned run's re-plan
+    /// is due ([`Self::replan_after_first_cycle`], the same conditions), the
+    /// cycles its pace so far fits in the plan's ten minutes
+    /// ([`session_link::RunMonitor::replanned_total`]); `None`, the run's own
+    /// steps, otherwise.
+    pub(crate) fn progress_total(&self) -> Option<u32> {
+        use gast_core::session::plan::AUTO_RUN_BUDGET_S;
+        let start = self.run.start()?;
+        self.run.planned_step_s?;
+        if is_start(&self.replanned, &start)
+            || !is_start(&self.adopted, &start)
+            || !self.run.is_live()
+            || self.config.cycles != start.config.cycles
+        {
+            return None;
+        }
+        let per_cycle = start.config.schedule().steps_per_cycle();
+        self.run.replanned_total(per_cycle, AUTO_RUN_BUDGET_S, self.asked_cycles)
+    }
+
     /// Takes up the run's newest snapshot: at once on a GPU, at most every
     /// [`SOFTWARE_VIEW_INTERVAL`] while a run goes on with a software
     /// renderer, where drawing a whole-frame scene takes about half a second

@@ -232,7 +232,7 @@ impl StudioApp {
         self.run_buttons(ui);
         self.kept_run_offer(ui);
         controls::loss_chart(ui, &self.run.steps);
-        if let Some((p, eta)) = self.run.progress() {
+        if let Some((p, eta)) = self.run.progress(self.progress_total()) {
             ui.add(egui::ProgressBar::new(p).text(format!("{:.0}%  ETA {}", p * 100.0, time_left(eta))));
         }
         if let Some(c) = self.run.steps.last().and_then(|s| s.colour) {

@@ -247,15 +247,31 @@ impl RunMonitor {
     /// 20 views: 25 min after 13 steps of a run planned to 10).
     ///
     /// A run that went on from a kept one reports from its step on, its
-    /// times from its own start.
-    pub fn progress(&self) -> Option<(f32, f64)> {
+    /// times from its own start. The steps counted to are `total` where
+    /// given (those a due re-plan will leave, [`Self::replanned_total`]),
+    /// else the run's own.
+    pub fn progress(&self, total: Option<u32>) -> Option<(f32, f64)> {
         let (first, last) = (self.steps.first()?, self.steps.last()?);
         let done = (last.iter + 1) as f64;
-        let total = last.total.max(1) as f64;
+        let total = total.unwrap_or(last.total).max(1) as f64;
         let per_step = (self.last_cycle_pace().or_else(|| self.pace_after_first_visits()))
             .or(self.planned_step_s)
             .unwrap_or(last.elapsed_s / f64::from(last.iter + 1 - first.iter));
         Some(((done / total) as f32, (per_step * (total - done)).max(0.0)))
+    }
+
+    /// The steps of `steps_per_cycle` a planned run's re-plan would give it
+    /// now ([`gast_core::session::plan::replan_cycles`] over every step so
+    /// far, within `budget_s` and at most `most` cycles); `None` until a
+    /// steady pace is read (a few revisits of a view). Before the re-plan at
+    /// the first cycle's end, the progress counts to these: fern's planned
+    /// 2,000 steps at the studio's 0.47 s a step read "ETA 16 min" two
+    /// minutes into a run the re-plan then cut to about ten.
+    pub fn replanned_total(&self, steps_per_cycle: u32, budget_s: f64, most: u32) -> Option<u32> {
+        use gast_core::session::plan::{Pace, replan_cycles};
+        let pace = Pace::read(self.steps.iter().map(|r| (r.view, r.elapsed_s)))?;
+        pace.steady_s?;
+        replan_cycles(pace, steps_per_cycle, budget_s, most).map(|c| c * steps_per_cycle)
     }
 
     /// Seconds a step over the last cycle that has ended, from the elapsed
@@ -327,7 +343,7 @@ mod tests {
         assert!(m.poll().is_none(), "the same snapshot twice");
         assert_eq!(m.steps.len(), 2);
         assert_eq!(m.status, RunStatus::Paused);
-        let (p, eta) = m.progress().expect("progress");
+        let (p, eta) = m.progress(None).expect("progress");
         assert!((p - 0.2).abs() < 1e-6 && (eta - 8.0).abs() < 1e-9);
         etx.send(Event::Finished { completed: false, steps: 2, seconds: 2.0 }).expect("send");
         m.poll();
@@ -360,7 +376,7 @@ mod tests {
             let cycle = iter / 4;
             elapsed += if cycle == 0 { 1.0 } else { 3.0 };
             m.steps.push(report(iter, 20, cycle, if iter % 4 < 2 { Phase::Color } else { Phase::Geometry }, elapsed));
-            let (p, eta) = m.progress().expect("progress");
+            let (p, eta) = m.progress(None).expect("progress");
             assert!((p - (iter + 1) as f32 / 20.0).abs() < 1e-6);
             let left = f64::from(20 - (iter + 1));
             // In cycle 0 no cycle has ended: the pace since the start; in cycle 1,
@@ -382,13 +398,13 @@ mod tests {
         let mut m = RunMonitor::default();
         for (k, iter) in (10..13u32).enumerate() {
             m.steps.push(report(iter, 20, 2, Phase::Color, 2.0 * (k + 1) as f64));
-            let (p, eta) = m.progress().expect("progress");
+            let (p, eta) = m.progress(None).expect("progress");
             assert!((p - (iter + 1) as f32 / 20.0).abs() < 1e-6);
             assert!((eta - 2.0 * f64::from(20 - (iter + 1))).abs() < 1e-9, "step {iter}: ETA {eta}");
         }
         // A cycle that ended within this run: its pace from the run's first step.
         m.steps.push(report(13, 20, 3, Phase::Color, 8.0));
-        let (_, eta) = m.progress().expect("progress");
+        let (_, eta) = m.progress(None).expect("progress");
         assert!((eta - 2.0 * 6.0).abs() < 1e-9, "ETA {eta} after the first cycle ended");
     }
 
@@ -404,7 +420,7 @@ mod tests {
             elapsed += if iter < 4 { 6.0 } else { 1.0 };
             let phase = if iter % 10 < 6 { Phase::Color } else { Phase::Geometry };
             m.steps.push(StepReport { view: iter % 4, ..report(iter, 40, iter / 10, phase, elapsed) });
-            let (_, eta) = m.progress().expect("progress");
+            let (_, eta) = m.progress(None).expect("progress");
             let pace = if iter < 4 { elapsed / f64::from(iter + 1) } else { 1.0 };
             let want = pace * f64::from(40 - (iter + 1));
             assert!((eta - want).abs() < 1e-9, "step {iter}: ETA {eta} against {want}");
@@ -421,7 +437,7 @@ mod tests {
         for iter in 0..6u32 {
             elapsed += if iter < 4 { 6.0 } else { 1.0 };
             m.steps.push(StepReport { view: iter % 4, ..report(iter, 40, 0, Phase::Color, elapsed) });
-            let (_, eta) = m.progress().expect("progress");
+            let (_, eta) = m.progress(None).expect("progress");
             let pace = if iter < 4 { 0.5 } else { 1.0 };
             let want = pace * f64::from(40 - (iter + 1));
             assert!((eta - want).abs() < 1e-9, "step {iter}: ETA {eta} against {want}");
@@ -429,6 +445,31 @@ mod tests {
         // A new run forgets the plan of the last.
         m.attach(SessionLink::of(gast_core::session::spawn_with(|_| Err("none".into()), Arc::new(|| {}))));
         assert_eq!(m.planned_step_s, None);
+    }
+
+    /// A planned run of 20 cycles of 100 steps over 20 views (fern's plan)
+    /// whose steps take 0.47 s (1 s on each view's first visit) against the
+    /// plan's 0.30: once the pace is steady, the progress counts to the 12
+    /// cycles a re-plan fits in ten minutes, not to the 20 planned.
+    #[test]
+    fn a_due_replan_sets_the_steps_the_progress_counts_to() {
+        let mut m = RunMonitor::default();
+        let mut elapsed = 0.0;
+        for iter in 0..41u32 {
+            elapsed += if iter < 20 { 1.0 } else { 0.47 };
+            m.steps.push(StepReport { view: iter % 20, ..report(iter, 2000, 0, Phase::Color, elapsed) });
+            let total = m.replanned_total(100, 600.0, 30);
+            // Five revisits make a steady pace (plan::STEADY_STEPS).
+            assert_eq!(total.is_some(), iter >= 24, "step {iter}: {total:?}");
+        }
+        // 41 + (600 − 29.87) / 0.47 = 1,254 steps fit: 12 whole cycles.
+        assert_eq!(m.replanned_total(100, 600.0, 30), Some(1200));
+        assert_eq!(m.replanned_total(100, 600.0, 8), Some(800), "at most the cycles asked for");
+        let (p, eta) = m.progress(Some(1200)).expect("progress");
+        assert!((p - 41.0 / 1200.0).abs() < 1e-6);
+        assert!((eta - 0.47 * 1159.0).abs() < 1e-6, "ETA {eta}");
+        let (_, planned) = m.progress(None).expect("progress");
+        assert!((planned - 0.47 * 1959.0).abs() < 1e-6, "ETA {planned} over the planned steps");
     }
 
     /// A close joins a worker that answers its Stop, and leaves one still
