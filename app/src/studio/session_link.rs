@@ -265,8 +265,8 @@ impl RunMonitor {
     /// far, within `budget_s` and at most `most` cycles); `None` until a
     /// steady pace is read (a few revisits of a view). Before the re-plan at
     /// the first cycle's end, the progress counts to these: fern's planned
-    /// 2,000 steps at the studio's 0.47 s a step read "ETA 16 min" two
-    /// minutes into a run the re-plan then cut to about ten.
+    /// 2,000 steps at the studio's 0.47 s a step read "ETA 16 min" 41 steps
+    /// into a run the re-plan then cut to about ten minutes.
     pub fn replanned_total(&self, steps_per_cycle: u32, budget_s: f64, most: u32) -> Option<u32> {
         use gast_core::session::plan::{Pace, replan_cycles};
         let pace = Pace::read(self.steps.iter().map(|r| (r.view, r.elapsed_s)))?;
