@@ -508,10 +508,7 @@ impl StudioApp {
     /// when the cycles were moved during the run.
     fn replan_after_first_cycle(&mut self) {
         use gast_core::session::plan::{AUTO_RUN_BUDGET_S, replan_cycles};
-        let (Some(start), Some(planned_s)) = (self.run.start(), self.run.planned_step_s) else { return };
-        if is_start(&self.replanned, &start) || !is_start(&self.adopted, &start) || !self.run.is_live() {
-            return;
-        }
+        let Some((start, planned_s)) = self.replan_due() else { return };
         let Some(pace) = self.run.pace_at_cycle_end() else { return };
         let Some(steady) = pace.steady_s else { return };
         self.replanned = Some(Arc::downgrade(&start));
@@ -530,22 +527,22 @@ impl StudioApp {
         ));
     }
 
+    /// The live planned run (its start and the plan's seconds a step) whose
+    /// re-plan ([`Self::replan_after_first_cycle`]) has not been made yet.
+    fn replan_due(&self) -> Option<(Arc<gast_core::session::RunStart>, f64)> {
+        let (start, planned_s) = (self.run.start()?, self.run.planned_step_s?);
+        let due = !is_start(&self.replanned, &start) && is_start(&self.adopted, &start) && self.run.is_live();
+        due.then_some((start, planned_s))
+    }
+
     /// The steps the progress bar counts to: while a planned run's re-plan
-    /// is due ([`Self::replan_after_first_cycle`], the same conditions), the
+    /// is due ([`Self::replan_due`]) and its cycles are the plan's, the
     /// cycles its pace so far fits in the plan's ten minutes
     /// ([`session_link::RunMonitor::replanned_total`]); `None`, the run's own
     /// steps, otherwise.
     pub(crate) fn progress_total(&self) -> Option<u32> {
         use gast_core::session::plan::AUTO_RUN_BUDGET_S;
-        let start = self.run.start()?;
-        self.run.planned_step_s?;
-        if is_start(&self.replanned, &start)
-            || !is_start(&self.adopted, &start)
-            || !self.run.is_live()
-            || self.config.cycles != start.config.cycles
-        {
-            return None;
-        }
+        let (start, _) = self.replan_due().filter(|(start, _)| self.config.cycles == start.config.cycles)?;
         let per_cycle = start.config.schedule().steps_per_cycle();
         self.run.replanned_total(per_cycle, AUTO_RUN_BUDGET_S, self.asked_cycles)
     }
