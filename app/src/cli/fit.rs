@@ -170,9 +170,11 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     }
     let all_cameras: Vec<gast_core::Camera> = data.views.iter().map(|(c, _)| c.clone()).collect();
     let k = args.holdout_every;
-    let (held, views): (Vec<_>, Vec<_>) = data.views.into_iter().enumerate().partition(|(i, _)| k > 0 && i % k == 0);
-    let (held, views): (Vec<_>, Vec<_>) =
-        (held.into_iter().map(|v| v.1).collect(), views.into_iter().map(|v| v.1).collect());
+    let views_and_alphas = data.views.into_iter().zip(data.alphas).enumerate();
+    let (held, fitted): (Vec<_>, Vec<_>) = views_and_alphas.partition(|(i, _)| k > 0 && i % k == 0);
+    let held: Vec<_> = held.into_iter().map(|(_, (v, _))| v).collect();
+    let (views, alphas): (Vec<_>, Vec<_>) = fitted.into_iter().map(|(_, va)| va).unzip();
+    let with_alpha = alphas.iter().filter(|a: &&Option<Vec<f32>>| a.is_some()).count();
     let Some((first, _)) = views.first() else {
         let found = match held.len() {
             0 => "none".to_owned(),
@@ -203,6 +205,13 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         initial.len()
     );
 
+    if with_alpha > 0 && cfg.random_background {
+        eprintln!(
+            "{with_alpha} of the {} fitted views with an alpha channel: each iteration composites them on a random colour, so empty \
+             space stays transparent (\"random_background\": false in a --preset keeps the plain background)",
+            views.len()
+        );
+    }
     let t_fit = Instant::now();
     // Over the iterations this run does (its pace and time left are this run's).
     let pb = progress::bar(u64::from(cfg.iterations - start), "fit");
@@ -212,7 +221,7 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
     let mut stopped_at = None;
     let mut checkpoint = Checkpoint::new(&args, &cfg, &all_cameras);
     interrupt.begin();
-    let scene = fit::fit_resumed(&views, initial, &cfg, start, state, &mut |p, run| {
+    let scene = fit::fit_resumed(&views, &alphas, initial, &cfg, start, state, &mut |p, run| {
         let l = smoothed.map_or(p.loss, |s| 0.98 * s + 0.02 * p.loss);
         smoothed = Some(l);
         if p.iteration % 10 == 0 || p.iteration == p.iterations {

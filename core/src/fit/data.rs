@@ -40,6 +40,11 @@ pub enum FitDataError {
 pub struct PosedImages {
     /// One camera and its RGB image (`height × width × 3`, in `[0, 1]`) per view.
     pub views: Vec<(Camera, Vec<f32>)>,
+    /// Per view, the image's alpha (`height × width`, in `[0, 1]`) when it
+    /// has a channel that is not opaque everywhere (NeRF-synthetic's RGBA
+    /// photos): the fit composites such views on a random background
+    /// ([`super::FitConfig::random_background`]).
+    pub alphas: Vec<Option<Vec<f32>>>,
     /// Things the camera reader had to approximate, one line each.
     pub warnings: Vec<String>,
     /// The folders the images were read from, and an LLFF dataset's other
@@ -114,18 +119,30 @@ fn canonical_folders(dataset: &Path, folders: impl Iterator<Item = PathBuf>) -> 
 
 /// Reads an image as RGB in `[0, 1]`, compositing any alpha channel on `background`.
 pub fn read_rgb(path: &Path, background: [f32; 3]) -> Result<(u32, u32, Vec<f32>), FitDataError> {
+    read_rgba(path, background).map(|(w, h, rgb, _)| (w, h, rgb))
+}
+
+/// An image's width, height, RGB composited on a background, and its alpha
+/// when some pixel is not opaque.
+type Composited = (u32, u32, Vec<f32>, Option<Vec<f32>>);
+
+/// [`read_rgb`], and the image's alpha when some pixel is not opaque.
+fn read_rgba(path: &Path, background: [f32; 3]) -> Result<Composited, FitDataError> {
     let img =
         crate::io::open_image(path).map_err(|message| FitDataError::Image { path: path.to_path_buf(), message })?;
     let rgba = img.to_rgba32f();
     let (w, h) = rgba.dimensions();
     let mut rgb = Vec::with_capacity(w as usize * h as usize * 3);
+    let mut alpha = Vec::with_capacity(w as usize * h as usize);
     for px in rgba.pixels() {
         let a = px.0[3].clamp(0.0, 1.0);
         for (&v, &b) in px.0[..3].iter().zip(&background) {
             rgb.push(v.clamp(0.0, 1.0) * a + b * (1.0 - a));
         }
+        alpha.push(a);
     }
-    Ok((w, h, rgb))
+    let see_through = alpha.iter().any(|&a| a < 1.0);
+    Ok((w, h, rgb, see_through.then_some(alpha)))
 }
 
 /// Loads the cameras of `dataset` (any source [`camera::load`] reads) and
@@ -154,28 +171,31 @@ pub fn load_posed_images(
         .map(|&i| {
             let cam = &set.cameras[i];
             let path = find_image(dataset, images, &cam.name)?;
-            let (w, h, rgb) = read_rgb(&path, background)?;
+            let (w, h, rgb, alpha) = read_rgba(&path, background)?;
             let folder = path.parent().map(Path::to_path_buf);
             let stretched = stretch_warning(&path, cam, w, h);
             let full = if (w, h) == (cam.width, cam.height) { cam.clone() } else { cam.scaled_to(w, h) };
             let work = full.downscaled_to_max_side(resolution.max(1));
-            let img = if (work.width, work.height) == (w, h) {
-                rgb
-            } else {
-                resize_area(&rgb, h as usize, w as usize, 3, work.height as usize, work.width as usize)
+            let resize = |v: Vec<f32>, channels: usize| {
+                if (work.width, work.height) == (w, h) {
+                    v
+                } else {
+                    resize_area(&v, h as usize, w as usize, channels, work.height as usize, work.width as usize)
+                }
             };
-            Ok(((work, img), folder, stretched))
+            let (img, alpha) = (resize(rgb, 3), alpha.map(|a| resize(a, 1)));
+            Ok(((work, img), alpha, folder, stretched))
         })
         .collect::<Result<Vec<_>, FitDataError>>()?;
-    let image_folders = canonical_folders(dataset, views.iter().filter_map(|(_, f, _)| f.clone()));
+    let image_folders = canonical_folders(dataset, views.iter().filter_map(|(_, _, f, _)| f.clone()));
     let mut warnings = set.warnings;
-    let stretched: Vec<String> = views.iter().filter_map(|(_, _, s)| s.clone()).collect();
+    let stretched: Vec<String> = views.iter().filter_map(|(_, _, _, s)| s.clone()).collect();
     if let Some(first) = stretched.first() {
         let more = stretched.len() - 1;
         warnings.push(if more == 0 { first.clone() } else { format!("{first}; and {more} more image(s) like it") });
     }
-    let views = views.into_iter().map(|(v, _, _)| v).collect();
-    Ok(PosedImages { views, warnings, image_folders })
+    let (views, alphas) = views.into_iter().map(|(v, a, _, _)| (v, a)).unzip();
+    Ok(PosedImages { views, alphas, warnings, image_folders })
 }
 
 /// A warning when the image at `path` (`w × h`) has another shape than its

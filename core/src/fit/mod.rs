@@ -72,6 +72,14 @@ pub struct FitConfig {
     pub lr_quats: f32,
     /// Background colour the renders (and the composited images) use.
     pub background: [f32; 3],
+    /// For a view whose image has an alpha channel (NeRF-synthetic's RGBA
+    /// photos), each iteration composites it on a random colour and renders
+    /// on the same colour, as nerfstudio's `random` background does: empty
+    /// space then has to stay transparent. On one fixed background a dark
+    /// floater in front of black costs nothing, and lego's fit kept a haze
+    /// around the model that its depth showed and a stylization's colour
+    /// matching lit up. Views without alpha use `background` regardless.
+    pub random_background: bool,
     /// Seed of the initial points and the view order.
     pub seed: u64,
     /// Densification and pruning.
@@ -93,6 +101,7 @@ impl Default for FitConfig {
             lr_scales: 5e-3,
             lr_quats: 1e-3,
             background: [0.0; 3],
+            random_background: true,
             seed: 0,
             densify: DensifyConfig::default(),
         }
@@ -255,20 +264,23 @@ pub fn fit(
     progress: &mut dyn FnMut(FitProgress, &FitRun<'_>) -> ControlFlow<()>,
 ) -> Gaussians {
     let cameras: Vec<Camera> = views.iter().map(|(c, _)| c.clone()).collect();
-    fit_from(views, initial_scene(&cameras, cfg), cfg, progress)
+    fit_from(views, &[], initial_scene(&cameras, cfg), cfg, progress)
 }
 
-/// As [`fit`], starting from `initial` (e.g. [`initial_scene_from_points`]).
+/// As [`fit`], starting from `initial` (e.g. [`initial_scene_from_points`]),
+/// with each view's alpha where its image has one (`alphas[i]` for
+/// `views[i]`, as [`PosedImages::alphas`]; an empty slice when none has).
 ///
 /// # Panics
 /// When an image's size does not match its camera (a caller bug).
 pub fn fit_from(
     views: &[(Camera, Vec<f32>)],
+    alphas: &[Option<Vec<f32>>],
     initial: Gaussians,
     cfg: &FitConfig,
     progress: &mut dyn FnMut(FitProgress, &FitRun<'_>) -> ControlFlow<()>,
 ) -> Gaussians {
-    fit_resumed(views, initial, cfg, 0, None, progress)
+    fit_resumed(views, alphas, initial, cfg, 0, None, progress)
 }
 
 /// As [`fit_from`], from iteration `start` (a checkpoint's scene after
@@ -280,10 +292,11 @@ pub fn fit_from(
 /// to the bit; without, they start afresh and the view order is drawn anew.
 ///
 /// # Panics
-/// When an image's size does not match its camera, or `state` does not fit
-/// `initial` (caller bugs).
+/// When an image's size does not match its camera, an alpha's size its
+/// image, or `state` does not fit `initial` (caller bugs).
 pub fn fit_resumed(
     views: &[(Camera, Vec<f32>)],
+    alphas: &[Option<Vec<f32>>],
     initial: Gaussians,
     cfg: &FitConfig,
     start: u32,
@@ -298,6 +311,14 @@ pub fn fit_resumed(
             cam.name
         );
     }
+    assert!(alphas.is_empty() || alphas.len() == views.len(), "fit: one alpha (or none) per view");
+    for ((cam, img), alpha) in views.iter().zip(alphas) {
+        assert!(
+            alpha.as_ref().is_none_or(|a| 3 * a.len() == img.len()),
+            "fit: alpha of {} has the wrong size",
+            cam.name
+        );
+    }
     let cameras: Vec<Camera> = views.iter().map(|(c, _)| c.clone()).collect();
     let mut g = initial;
     if views.is_empty() {
@@ -305,7 +326,6 @@ pub fn fit_resumed(
     }
     let extent = scene_extent(&cameras);
     let mut rng = Rng::new(cfg.seed ^ 0xA5A5_5A5A ^ u64::from(start));
-    let opts = RenderOptions { background: cfg.background };
     let mut opt = Optimisers::new(&g);
     let mut stats = GradStats::new(g.len());
     let mut order: Vec<usize> = Vec::new();
@@ -329,6 +349,21 @@ pub fn fit_resumed(
         }
         let vi = order.pop().unwrap_or(0);
         let (cam, gt) = &views[vi];
+        let alpha = alphas.get(vi).and_then(Option::as_ref).filter(|_| cfg.random_background);
+        let (opts, gt) = match alpha {
+            // The photo was composited on `cfg.background`: moved onto `b`.
+            Some(alpha) => {
+                let b = [rng.uniform(), rng.uniform(), rng.uniform()];
+                let shift: [f32; 3] = std::array::from_fn(|c| b[c] - cfg.background[c]);
+                let moved = gt.chunks_exact(3).zip(alpha).flat_map(|(p, &a)| {
+                    let t = 1.0 - a;
+                    [p[0] + t * shift[0], p[1] + t * shift[1], p[2] + t * shift[2]]
+                });
+                (RenderOptions { background: b }, std::borrow::Cow::Owned(moved.collect()))
+            }
+            None => (RenderOptions { background: cfg.background }, std::borrow::Cow::Borrowed(gt)),
+        };
+        let gt: &[f32] = &gt;
         let (render, state) = raster::forward(&g, cam, &opts);
         let npx = render.alpha.len();
         let scale = 1.0 / (3 * npx) as f32;

@@ -112,7 +112,7 @@ fn a_fit_resumed_from_its_checkpoint_goes_on_to_the_end() {
     let checkpoint = checkpoint.expect("the checkpoint at iteration 150");
     let at_150 = mean_psnr(&checkpoint, &views, cfg.background);
     let mut seen = Vec::new();
-    let g = fit_resumed(&views, checkpoint, &cfg, 150, None, &mut |p, _| {
+    let g = fit_resumed(&views, &[], checkpoint, &cfg, 150, None, &mut |p, _| {
         seen.push(p.iteration);
         ControlFlow::Continue(())
     });
@@ -121,7 +121,7 @@ fn a_fit_resumed_from_its_checkpoint_goes_on_to_the_end() {
     println!("resumed fit: PSNR {at_150:.2} dB at iteration 150 → {after:.2} dB at 400");
     assert!(after > 26.0 && after > at_150 + 1.0, "PSNR {at_150:.2} → {after:.2} dB");
     // From the last iteration on, nothing is left to do: the scene comes back pruned only.
-    let done = fit_resumed(&views, g.clone(), &cfg, 400, None, &mut |_, _| panic!("an iteration past the end"));
+    let done = fit_resumed(&views, &[], g.clone(), &cfg, 400, None, &mut |_, _| panic!("an iteration past the end"));
     assert_eq!(done.len(), finished(&g, &cfg).len());
 }
 
@@ -151,7 +151,7 @@ fn a_fit_resumed_with_its_state_is_the_fit_run_through() {
     let fewer = crate::session::subset(&scene, &[0, 1]);
     assert!(state.check(&fewer, 175, views.len()).is_err_and(|e| e.contains("for 2 Gaussians")));
     assert!(state.check(&scene, 175, 1).is_err_and(|e| e.contains("its view order names view")));
-    let resumed = fit_resumed(&views, scene, &cfg, 175, Some(state), &mut |_, _| ControlFlow::Continue(()));
+    let resumed = fit_resumed(&views, &[], scene, &cfg, 175, Some(state), &mut |_, _| ControlFlow::Continue(()));
     std::fs::remove_file(&file).ok();
     assert_eq!(resumed.len(), whole.len());
     assert!(resumed == whole, "the resumed fit ended elsewhere than the fit run through");
