@@ -7,7 +7,7 @@
 //! the app's own frame count asks for the screenshot and the close, and this
 //! loop answers them.
 
-use std::sync::Arc;
+use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
 use super::{SessionStarter, StudioApp, StudioArgs, wgpu_options, window_size};
@@ -31,6 +31,15 @@ pub fn run(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Result<
     let info = rs.adapter.get_info();
     eprintln!("studio: headless on {} ({:?}, {:?})", info.name, info.backend, info.device_type);
     let ctx = egui::Context::default();
+    let wake = Wake::default();
+    {
+        let wake = wake.clone();
+        ctx.set_request_repaint_callback(move |info| {
+            if info.viewport_id == egui::ViewportId::ROOT {
+                wake.ask(info.delay);
+            }
+        });
+    }
     let mut app = StudioApp::on_device(ctx.clone(), args, &rs, starter);
     if app.exit_after.is_none() {
         app.exit_after = Some(DEFAULT_FRAMES);
@@ -58,6 +67,7 @@ pub fn run(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Result<
             }
         }
         let delay = output.viewport_output.get(&egui::ViewportId::ROOT).map_or(Duration::ZERO, |v| v.repaint_delay);
+        wake.ask(delay);
         if let Some(image) = draw(&rs, &ctx, output, !shots.is_empty())? {
             for cb in shots {
                 cb.complete(image.clone());
@@ -79,10 +89,57 @@ pub fn run(args: StudioArgs, starter: Option<SessionStarter>) -> anyhow::Result<
             return Ok(());
         }
         // A window draws when something asks for it (an input, a worker's
-        // wake-up, a delayed repaint); with no event loop to wake, this one
-        // draws when asked at once and otherwise looks again every 100 ms,
-        // leaving the time between frames to the workers (the run, the maps).
-        std::thread::sleep(delay.clamp(Duration::from_millis(10), Duration::from_millis(100)));
+        // wake-up, a delayed repaint), and so does this loop: it sleeps until
+        // the earliest repaint asked for, leaving the time between frames to
+        // the workers (the run, the maps). Before, it drew a frame every
+        // 100 ms whether asked or not: on a software renderer, with the
+        // script's polls, lavapipe took 37 % of the process's CPU, and the
+        // run's steps 1.2–1.5× the time (docs/figures.md).
+        wake.wait(Duration::from_millis(10), IDLE_FRAME);
+    }
+}
+
+/// The longest the loop waits with no repaint asked for before it draws
+/// anyway, so that a missed wake-up costs a second, not a hang.
+const IDLE_FRAME: Duration = Duration::from_secs(1);
+
+/// The earliest repaint asked for, from the pass (its repaint delay) or
+/// from any thread (egui's repaint callback: a worker's wake-up).
+#[derive(Clone, Default)]
+struct Wake(Arc<(Mutex<Option<Instant>>, Condvar)>);
+
+impl Wake {
+    /// A repaint `delay` from now (`Duration::MAX`: none).
+    fn ask(&self, delay: Duration) {
+        let Some(at) = Instant::now().checked_add(delay) else { return };
+        let (due, bell) = &*self.0;
+        let mut due = due.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if due.is_none_or(|d| at < d) {
+            *due = Some(at);
+            bell.notify_one();
+        }
+    }
+
+    /// Sleeps at least `least`, then until the earliest repaint asked for
+    /// is due (and takes it) or `most` has passed since the call (a repaint
+    /// asked for later stays asked for).
+    fn wait(&self, least: Duration, most: Duration) {
+        let deadline = Instant::now() + most;
+        std::thread::sleep(least);
+        let (due, bell) = &*self.0;
+        let mut due = due.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        loop {
+            let now = Instant::now();
+            if due.is_some_and(|d| d <= now) {
+                *due = None;
+                return;
+            }
+            if now >= deadline {
+                return;
+            }
+            let until = due.map_or(deadline, |d| d.min(deadline));
+            due = bell.wait_timeout(due, until - now).unwrap_or_else(std::sync::PoisonError::into_inner).0;
+        }
     }
 }
 
@@ -160,4 +217,44 @@ fn draw(
         })
         .collect();
     Ok(Some(Arc::new(egui::ColorImage::new([w as usize, h as usize], pixels))))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_loop_sleeps_until_a_repaint_is_asked_for() {
+        let ms = Duration::from_millis;
+        // Asked for at once (a worker's wake-up from another thread, while the loop sleeps).
+        let wake = Wake::default();
+        let bell = wake.clone();
+        let t = Instant::now();
+        let waker = std::thread::spawn(move || {
+            std::thread::sleep(ms(50));
+            bell.ask(Duration::ZERO);
+        });
+        wake.wait(ms(1), ms(5_000));
+        let woke = t.elapsed();
+        waker.join().expect("the waker thread");
+        assert!(woke >= ms(50) && woke < ms(2_000), "woke after {woke:?}");
+        // Nothing asked for: the idle frame's bound.
+        let t = Instant::now();
+        wake.wait(ms(1), ms(100));
+        assert!(t.elapsed() >= ms(100), "woke after {:?} with nothing asked for", t.elapsed());
+        // A repaint asked for later than the bound stays asked for, and comes.
+        wake.ask(ms(150));
+        let t = Instant::now();
+        wake.wait(ms(1), ms(50));
+        assert!(t.elapsed() < ms(140), "the bound held the loop {:?}", t.elapsed());
+        wake.wait(ms(1), ms(5_000));
+        let came = t.elapsed();
+        assert!(came >= ms(140) && came < ms(2_000), "the later repaint came after {came:?}");
+        // The earlier of two requests wins.
+        wake.ask(ms(5_000));
+        wake.ask(ms(20));
+        let t = Instant::now();
+        wake.wait(ms(1), ms(10_000));
+        assert!(t.elapsed() < ms(2_000), "the earlier request was lost: {:?}", t.elapsed());
+    }
 }

@@ -11,11 +11,14 @@ impl StudioApp {
         if script.done {
             return true;
         }
-        // The run's events wake the window at every step; this only polls
-        // the loading and the pause, as a user's window would not redraw on
-        // its own (an immediate repaint here drew frames without end, which
-        // on a software renderer took the CPU from the run it scripts).
-        ctx.request_repaint_after(std::time::Duration::from_millis(250));
+        // The run's events wake the window at every step (on a software
+        // renderer at most once a second); this only polls the loading and
+        // the pause, as a user's window would not redraw on its own (an
+        // immediate repaint here drew frames without end, and a poll every
+        // 250 ms drew four frames a second, which on a software renderer took
+        // the CPU from the run it scripts).
+        let poll = if self.software_viewport { 1000 } else { 250 };
+        ctx.request_repaint_after(std::time::Duration::from_millis(poll));
         if !script.started {
             let ready = self.scene.is_some() && self.style.is_some() && self.starter.is_some();
             if ready {
@@ -57,7 +60,10 @@ impl StudioApp {
         if paused || finished {
             script.done = true;
             let export = script.export.clone();
-            eprintln!("studio: scripted run paused after {} steps ({:?})", self.run.steps.len(), self.run.status);
+            let pace = self.run.steps.last().map_or(String::new(), |s| {
+                format!(", {:.1} s optimising, {:.3} s a step", s.elapsed_s, s.elapsed_s / f64::from(s.iter + 1))
+            });
+            eprintln!("studio: scripted run paused after {} steps ({:?}{pace})", self.run.steps.len(), self.run.status);
             if let (Some(path), Some(g)) = (export, self.current()) {
                 match gast_core::scene::save(&path, &g, &Default::default()) {
                     Ok(()) => eprintln!("studio: exported {} Gaussians to {}", g.len(), path.display()),
