@@ -11,7 +11,10 @@
 //! clone/split/prune densification driven by the view-space gradient of the
 //! means. Departures from the original, for brevity: no D-SSIM term, no
 //! opacity reset, and the Adam moments restart after each densification (the
-//! trainer keeps those of the surviving Gaussians). A checkpoint keeps the
+//! trainer keeps those of the surviving Gaussians). One addition: photos with
+//! an alpha channel are composited on a random colour at each iteration
+//! ([`FitConfig::random_background`]), where the trainer keeps one fixed
+//! background, so that the space around an object ends transparent. A checkpoint keeps the
 //! fit's whole state ([`FitState`]), so a fit resumed from one is the fit run
 //! through.
 //!
