@@ -952,6 +952,36 @@ fn the_background_hold_can_be_turned_on_mid_run() {
     }
 }
 
+/// With the object focus the CPU engine keeps only the covered positions of
+/// each view's content target; a run whose focus turns to the frame (a
+/// studio slider) computes the whole map again, so its steps are those of a
+/// run on the frame from the start.
+#[test]
+fn the_focus_can_turn_to_the_frame_mid_run() {
+    use gast_core::session::Session;
+    use gast_core::style::Focus;
+    let Some(inputs) = inputs(object_config(Mode::Decoupled, LossWeights::default())) else { return };
+    let on_frame = |inputs: &SessionInputs| {
+        let mut config = inputs.config.clone();
+        config.focus = Focus::Frame;
+        config
+    };
+    let mut frame =
+        Session::prepare(SessionInputs { config: on_frame(&inputs), ..inputs.clone() }, &mut |_| {}).expect("session");
+    let mut turned = Session::prepare(inputs.clone(), &mut |_| {}).expect("session");
+    turned.warm_view_targets().expect("the object's targets");
+    turned.set_config(on_frame(&inputs)).expect("the focus on the frame");
+    let mut steps = 0;
+    while let Some(a) = frame.step() {
+        let b = turned.step().expect("the same schedule");
+        assert_eq!((a.view, a.phase), (b.view, b.phase));
+        assert!(a.losses.content > 0.0 || steps == 0, "step {}: {:?}", a.iter, a.losses);
+        assert_eq!(a.losses, b.losses, "step {}", a.iter);
+        steps += 1;
+    }
+    assert_eq!(steps, 4);
+}
+
 /// The colour floor on both devices, with a colour learning rate large
 /// enough that the first updates push DC colours below the floor: after two
 /// colour steps both devices hold the same DC coefficients, none below the

@@ -15,6 +15,7 @@ mod slot;
 pub mod split;
 mod stage1_cache;
 mod style_image;
+mod view_target;
 mod worker;
 
 pub use colour_watch::{ColourReading, ColourWatch};

@@ -9,6 +9,7 @@ use super::colour_watch::ColourWatch;
 use super::events::{Event, LossTerms, StepReport, StepTimings};
 use super::moments::OptimiserState;
 use super::prepare::{PreparedStyle, StyleDepthSource, StyleImage, prepare_style, scatter, subset, survey_views};
+use super::view_target::{ContentTarget, ViewTarget};
 use crate::camera::{Camera, scene_extent};
 use crate::eval::stability::CoveredColour;
 use crate::gpu::{GpuContext, GpuEngine, GpuError, LiveGaussians};
@@ -23,7 +24,7 @@ use crate::style::gcfm::{Matches, match_features};
 use crate::style::matching::{MatchIndex, MatchMethod, agreement, find_matches};
 use crate::style::outside::{Outside, outside_mask};
 use crate::style::regularizers::{l2_distance, mean_square_distance};
-use crate::style::step::{FeatureMap, LossFocus, RenderedMaps, content_target, step_loss_with};
+use crate::style::step::{LossFocus, RenderedMaps, content_target, step_loss_with};
 use crate::vision::Vgg;
 use crate::vision::canny::render_edges;
 
@@ -60,19 +61,6 @@ pub struct SessionInputs {
     /// The GPU that runs the steps ([`crate::gpu::DeviceChoice::resolve`]);
     /// `None` runs them on the CPU engine.
     pub gpu: Option<GpuContext>,
-}
-
-/// Per-view targets computed once from the colour-matched scene `G^c`.
-struct ViewTarget {
-    content: FeatureMap,
-    inv_depth: Vec<f32>,
-    /// Pixels `G^c` covers ([`coverage_mask`]): the focus of the losses with `Focus::Object`.
-    coverage: Vec<bool>,
-    /// With λ_out above 0, the pixels `G^c` leaves empty and its render
-    /// ([`crate::style::outside`]); `None` otherwise, so no render is kept.
-    outside: Option<(Vec<bool>, Vec<f32>)>,
-    /// The colour-matched render's palette over `coverage` (λ_pal's reference).
-    palette: crate::style::palette::Palette,
 }
 
 /// What only the CPU engine steps: the optimised Gaussians, the frozen
@@ -716,10 +704,13 @@ impl Session {
 
     /// The CPU engine's targets of `view`, computed on its first visit; the
     /// hold's part on the first visit with λ_out > 0 (a slider may turn it on
-    /// after the other targets exist).
+    /// after the other targets exist); the whole content map on the first
+    /// visit without the object focus after one with it.
     fn make_target(&mut self, view: usize) {
         let want_hold = self.config.weights.outside > 0.0;
-        if self.targets[view].as_ref().is_some_and(|t| t.outside.is_some() || !want_hold) {
+        let object = self.focus_on_object();
+        let complete = |t: &ViewTarget| (t.outside.is_some() || !want_hold) && t.content.serves(object);
+        if self.targets[view].as_ref().is_some_and(complete) {
             return;
         }
         let Some(cpu) = &self.cpu else { return };
@@ -729,14 +720,20 @@ impl Session {
         let r = raster::render(&cpu.g_ref, cam, &opts);
         let rgb: Vec<f32> = r.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
         if let Some(t) = self.targets[view].as_mut() {
-            t.outside = Some((outside_mask(&r.alpha), rgb));
+            if !t.content.serves(object) {
+                t.content = ContentTarget::keep(content_target(&*self.vgg, &rgb, h, w), &t.coverage, h, w, object);
+            }
+            if want_hold && t.outside.is_none() {
+                t.outside = Some((outside_mask(&r.alpha), rgb));
+            }
             return;
         }
         self.colour_watch.set_reference(view, CoveredColour::of(&rgb, &r.alpha));
         let outside = want_hold.then(|| (outside_mask(&r.alpha), rgb.clone()));
         let coverage = coverage_mask(&r.alpha, h, w);
+        let content = ContentTarget::keep(content_target(&*self.vgg, &rgb, h, w), &coverage, h, w, object);
         self.targets[view] = Some(ViewTarget {
-            content: content_target(&*self.vgg, &rgb, h, w),
+            content,
             palette: crate::style::palette::palette_of(&rgb, &coverage),
             coverage,
             inv_depth: r.inv_depth,

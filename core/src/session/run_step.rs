@@ -137,7 +137,7 @@ impl Session {
             &*self.vgg,
             &self.style.targets,
             RenderedMaps { rgb: &rgb, inv_depth: &img.inv_depth, edge: &edge, height: h, width: w },
-            Some(&target.content),
+            Some(&target.content.map()),
             geometry.then_some(target.inv_depth.as_slice()),
             &self.config.weights_for(phase),
             depth_grad,
