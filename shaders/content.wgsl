@@ -3,7 +3,10 @@
 // L = mean((f − t)²) and grad += λ · 2(f − t)/count; sq holds (f − t)²/count
 // there (0 elsewhere) for the reduction. Features are channel-major
 // (c × positions); cells is the position mask (all ones for the whole frame)
-// and counts[0] the number of covered positions (see focus.wgsl).
+// and counts[0] the number of covered positions (see focus.wgsl). The target
+// may hold the covered positions' columns alone: columns[p] is position p's
+// column in t (NONE where it has none, outside the mask) and
+// columns[positions] the number of t's columns (positions for a whole map).
 
 struct ContentParams {
     // Floats in a feature map (c × positions).
@@ -22,6 +25,9 @@ struct ContentParams {
 @group(0) @binding(4) var<storage, read_write> sq: array<f32>;
 @group(0) @binding(5) var<storage, read> cells: array<f32>;
 @group(0) @binding(6) var<storage, read> counts: array<f32>;
+@group(0) @binding(7) var<storage, read> columns: array<u32>;
+
+const NONE: u32 = 0xffffffffu;
 
 @compute @workgroup_size(256)
 fn content(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -34,7 +40,13 @@ fn content(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     if covered > 0.0 {
         inv = 1.0 / covered;
     }
-    let d = (f[i] - t[i]) * cells[i % u.positions];
+    let p = i % u.positions;
+    let column = columns[p];
+    var held = 0.0;
+    if column != NONE {
+        held = t[(i / u.positions) * columns[u.positions] + column];
+    }
+    let d = (f[i] - held) * cells[p];
     sq[i] = d * d * inv;
     grad[i] = grad[i] + u.weight * 2.0 * inv * d;
 }

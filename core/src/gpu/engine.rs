@@ -21,6 +21,7 @@ use std::collections::HashMap;
 use super::Encoder;
 use super::adam::AdamKernel;
 use super::assignment::GpuAssignment;
+use super::content::ContentColumns;
 use super::step_loss::{StepInputs, StepLossKernels, StepLossPlan, slot};
 use super::{
     GcfmSubset, GpuAdam, GpuContext, GpuError, GpuFocus, GpuGaussians, GpuGrads, GpuLeak, GpuRaster, GpuStyle,
@@ -32,7 +33,7 @@ use crate::raster::{RenderOptions, ShGrads};
 use crate::scene::Gaussians;
 use crate::style::StyleConfig;
 use crate::style::config::LossWeights;
-use crate::style::focus::coverage_mask;
+use crate::style::focus::{coverage_mask, gather_positions};
 use crate::style::gcfm::StyleFeatures;
 use crate::style::outside::outside_mask;
 use crate::style::palette::{Palette, palette_of};
@@ -58,7 +59,11 @@ struct ViewPlan {
 
 /// What a view's steps compare against, computed once from `G^c`.
 struct ViewTarget {
+    /// The content features of `G^c`'s render: with the object focus on a
+    /// view that covers part of the feature grid, the covered positions'
+    /// columns alone (placed by `content_columns`), as the CPU engine keeps.
     content: wgpu::Buffer,
+    content_columns: Option<wgpu::Buffer>,
     inv_depth: wgpu::Buffer,
     /// What `G^c` covers from the view (`None` when it covers no feature
     /// position: the losses then look at the whole frame, as on the CPU).
@@ -433,6 +438,7 @@ impl GpuEngine {
             inv_depth: &plan.raster.inv_depth,
             edge: None,
             content: Some(&target.content),
+            content_columns: target.content_columns.as_ref(),
             depth_ref: geometry.then_some(&target.inv_depth),
             // The hold acts with the object focus only, as on the CPU.
             hold: if self.object_focus { target.hold.as_ref() } else { None },
@@ -642,6 +648,13 @@ impl GpuEngine {
             self.plans.insert(size, plan);
             self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
         }
+        // A target holding the object's content columns alone serves the
+        // object focus only: turned to the frame (a slider), it is made again.
+        if !self.object_focus
+            && self.targets.get(view).is_some_and(|t| t.as_ref().is_some_and(|t| t.content_columns.is_some()))
+        {
+            self.targets[view] = None;
+        }
         if self.targets.get(view).is_none_or(Option::is_none) {
             let before = self.ctx.allocated_bytes();
             self.make_target(view, cam, weights.outside > 0.0)?;
@@ -699,11 +712,10 @@ impl GpuEngine {
         };
         let (ctx, k) = (&self.ctx, &self.k);
         let opts = RenderOptions { background: self.background };
-        let content = ctx.zeros("engine.target.content", plan.loss.feature_len());
         let inv_depth = ctx.zeros("engine.target.inv_depth", (cam.width * cam.height) as usize);
         let mut enc = ctx.encoder("engine.target");
         plan.raster.forward(ctx, &k.raster, &mut enc, &self.g_ref, cam, &opts);
-        plan.loss.record_content_target(ctx, &k.loss, &mut enc, &plan.raster.rgb, &content);
+        let held = plan.loss.record_content_target_in_place(ctx, &k.loss, &mut enc, &plan.raster.rgb);
         enc.copy_buffer_to_buffer(&plan.raster.inv_depth, 0, &inv_depth, 0, u64::from(cam.width * cam.height) * 4);
         let focus = plan.loss.record_focus(ctx, &k.loss, &mut enc, &plan.raster.alpha)?;
         ctx.submit(enc);
@@ -722,6 +734,25 @@ impl GpuEngine {
                 (Some(at), crate::style::window::covered_box(&covered, fh, fw))
             }
             None => (None, None),
+        };
+        // The content target out of the plan's buffer: with the object focus
+        // on part of the grid, the covered columns alone (read back once).
+        let partial = covered_at.as_ref().filter(|at| self.object_focus && at.len() < positions);
+        let (content, content_columns) = match partial {
+            Some(at) => {
+                let whole: Vec<f32> = ctx.read(held)?;
+                let kept: Vec<usize> = at.iter().map(|&p| p as usize).collect();
+                let part = gather_positions(&whole, whole.len() / positions.max(1), positions, &kept);
+                let columns = ContentColumns::of(at, positions);
+                (ctx.upload("engine.target.content", &part), Some(ctx.upload("engine.target.columns", &columns)))
+            }
+            None => {
+                let content = ctx.zeros("engine.target.content", plan.loss.feature_len());
+                let mut enc = ctx.encoder("engine.target.content");
+                enc.copy_buffer_to_buffer(held, 0, &content, 0, (plan.loss.feature_len() * 4) as u64);
+                ctx.submit(enc);
+                (content, None)
+            }
         };
         let subset = match &covered_at {
             Some(at) if (covered as f64) <= SUBSET_SHARE * positions as f64 => {
@@ -744,6 +775,7 @@ impl GpuEngine {
         }
         self.targets[view] = Some(ViewTarget {
             content,
+            content_columns,
             inv_depth,
             focus,
             colour,

@@ -691,6 +691,11 @@ impl Session {
     /// their step medians are those of the steady state, not of first visits.
     pub fn warm_view_targets(&mut self) -> Result<f64, String> {
         let t = Instant::now();
+        // The engine keeps what the focus reads, as its steps would.
+        let object = self.focus_on_object();
+        if let Some(engine) = &mut self.engine {
+            engine.set_object_focus(object);
+        }
         for view in 0..self.cameras.len() {
             match &mut self.engine {
                 Some(engine) => engine

@@ -2,7 +2,9 @@
 //! difference between the render's features and the colour-matched scene's
 //! from the same view, as [`crate::style::content::content_loss_masked`]:
 //! over the feature positions a [`GpuFocus`] covers (every one for the frame),
-//! whose count the kernel reads from the device.
+//! whose count the kernel reads from the device. A target may hold the
+//! covered positions' columns alone ([`ContentColumns`]), as the CPU engine
+//! keeps with the object focus.
 
 use std::sync::Arc;
 
@@ -23,6 +25,32 @@ struct ContentParams {
 }
 const _: () = assert!(std::mem::size_of::<ContentParams>() == 16);
 
+/// Where a content target's columns lie (`content.wgsl`'s `columns`): for
+/// each feature position its column in the target, [`ContentColumns::NONE`]
+/// where it has none, then the number of columns.
+pub struct ContentColumns;
+
+impl ContentColumns {
+    /// A position the target holds no column of.
+    pub const NONE: u32 = u32::MAX;
+
+    /// The columns of a target holding the positions `kept` (ascending) of
+    /// `positions`.
+    pub fn of(kept: &[u32], positions: usize) -> Vec<u32> {
+        let mut out = vec![Self::NONE; positions + 1];
+        for (column, &p) in kept.iter().enumerate() {
+            out[p as usize] = column as u32;
+        }
+        out[positions] = kept.len() as u32;
+        out
+    }
+
+    /// The columns of a whole map: every position its own.
+    pub fn whole(positions: usize) -> Vec<u32> {
+        (0..=positions as u32).collect()
+    }
+}
+
 /// The content loss of `n`-float feature maps: its kernel, scratch and reduction.
 #[derive(Debug)]
 pub struct ContentLoss {
@@ -31,6 +59,8 @@ pub struct ContentLoss {
     positions: usize,
     uniform: wgpu::Buffer,
     sq: wgpu::Buffer,
+    /// [`ContentColumns::whole`]: the columns of a whole-map target.
+    whole: wgpu::Buffer,
     reduction: Reduction,
 }
 
@@ -52,7 +82,16 @@ impl ContentLoss {
             "content",
             include_str!("../../../../shaders/content.wgsl"),
             "content",
-            &[Bind::Uniform, Bind::Read, Bind::Read, Bind::ReadWrite, Bind::ReadWrite, Bind::Read, Bind::Read],
+            &[
+                Bind::Uniform,
+                Bind::Read,
+                Bind::Read,
+                Bind::ReadWrite,
+                Bind::ReadWrite,
+                Bind::Read,
+                Bind::Read,
+                Bind::Read,
+            ],
         );
         Ok(Self {
             kernel,
@@ -60,6 +99,7 @@ impl ContentLoss {
             positions,
             uniform: ctx.uniform("content.params", &Self::params(n, positions, weight)),
             sq: ctx.zeros("content.sq", n),
+            whole: ctx.upload("content.whole", &ContentColumns::whole(positions)),
             reduction: Reduction::new(ctx, reduce, ReduceSpec::new(ReduceOp::Sum, n).to(loss_offset))?,
         })
     }
@@ -75,6 +115,7 @@ impl ContentLoss {
 
     /// Records, over the positions `focus` covers, `v_features += λ·2(f − t)/count`
     /// and `scalars[loss_offset] = mean((f − t)²)` (`count` = covered positions × channels).
+    /// `columns` places the target's columns ([`ContentColumns::of`]; a whole map without).
     #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
@@ -82,12 +123,14 @@ impl ContentLoss {
         encoder: &mut dyn Commands,
         features: &wgpu::Buffer,
         target: &wgpu::Buffer,
+        columns: Option<&wgpu::Buffer>,
         focus: &GpuFocus,
         v_features: &wgpu::Buffer,
         scalars: &wgpu::Buffer,
     ) {
         let groups = Kernel::groups_1d(self.n, WORKGROUP);
-        let b = [&self.uniform, features, target, v_features, &self.sq, focus.cells(), focus.counts()];
+        let columns = columns.unwrap_or(&self.whole);
+        let b = [&self.uniform, features, target, v_features, &self.sq, focus.cells(), focus.counts(), columns];
         self.kernel.dispatch(ctx, encoder, &b, groups);
         self.reduction.record(ctx, encoder, &self.sq, scalars);
     }
@@ -98,6 +141,7 @@ mod tests {
     use super::*;
     use crate::gpu::test_util::{cells_focus, ctx, noise};
     use crate::style::content::content_loss_masked;
+    use crate::style::focus::gather_positions;
 
     #[test]
     fn matches_the_cpu_content_loss_and_accumulates() {
@@ -115,7 +159,12 @@ mod tests {
             let scalars = ctx.upload("scalars", &noise(8, 4));
             ctx.write(&loss.sq, &noise(n, 5));
             let mut enc = ctx.encoder("content test");
-            loss.record(ctx, &mut enc, &fb, &tb, &focus, &gb, &scalars);
+            // The whole target, or the covered positions' columns alone.
+            let kept: Vec<u32> = (0..positions as u32).filter(|&p| cells[p as usize]).collect();
+            let part = gather_positions(&t, c, positions, &kept.iter().map(|&p| p as usize).collect::<Vec<_>>());
+            let (pb, cb) = (ctx.upload("part", &part), ctx.upload("columns", &ContentColumns::of(&kept, positions)));
+            let (target, columns) = if masked { (&pb, Some(&cb)) } else { (&tb, None) };
+            loss.record(ctx, &mut enc, &fb, target, columns, &focus, &gb, &scalars);
             ctx.submit(enc);
             let (want, grad) = content_loss_masked(&f, &t, masked.then_some(cells.as_slice()));
             let got: Vec<f32> = ctx.read(&scalars).expect("scalars");

@@ -428,10 +428,25 @@ impl StepLossPlan {
         rgb_raw: &wgpu::Buffer,
         out: &wgpu::Buffer,
     ) {
+        let held = self.record_content_target_in_place(ctx, k, enc, rgb_raw);
+        enc.encoder().copy_buffer_to_buffer(held, 0, out, 0, (self.feature_len * 4) as u64);
+    }
+
+    /// Records the content target of a raw render as
+    /// [`StepLossPlan::record_content_target`] does, but leaves it in the
+    /// plan's own buffer, which it returns: valid until the plan's next VGG
+    /// pass (the engine copies it or reads back the columns it keeps).
+    pub fn record_content_target_in_place(
+        &self,
+        ctx: &GpuContext,
+        k: &StepLossKernels,
+        enc: &mut dyn Commands,
+        rgb_raw: &wgpu::Buffer,
+    ) -> &wgpu::Buffer {
         self.clamp.forward(ctx, enc, rgb_raw, &self.rgb);
         self.down.forward(ctx, enc, &self.rgb, &self.small[0]);
         k.vgg.forward(ctx, enc, &self.vgg_ws, &self.small[0], &self.states[2]);
-        enc.encoder().copy_buffer_to_buffer(self.states[2].features(), 0, out, 0, (self.feature_len * 4) as u64);
+        self.states[2].features()
     }
 
     /// Records the whole loss of one render ([`StepInputs`]); `search`
@@ -531,7 +546,7 @@ impl StepLossPlan {
         let feats = [self.states[0].features(), self.states[1].features(), self.states[2].features()];
         k.gcfm.record(ctx, enc, &self.gcfm_ws, style, feats, focus, &self.v_feat[0], &self.v_feat[1], scalars, search);
         if let Some(target) = inputs.content {
-            self.content.record(ctx, enc, feats[0], target, focus, &self.v_feat[0], scalars);
+            self.content.record(ctx, enc, feats[0], target, inputs.content_columns, focus, &self.v_feat[0], scalars);
         }
         if self.feature_mean_on {
             self.feature_mean.record(ctx, enc, feats[0], focus, &self.v_feat[0], scalars);
@@ -630,6 +645,9 @@ pub struct StepInputs<'a> {
     pub edge: Option<&'a wgpu::Buffer>,
     /// The content target ([`StepLossPlan::record_content_target`]) when the step uses one.
     pub content: Option<&'a wgpu::Buffer>,
+    /// Where its columns lie when it holds the covered positions' alone
+    /// ([`super::content::ContentColumns::of`]); `None` for a whole map.
+    pub content_columns: Option<&'a wgpu::Buffer>,
     /// The inverse depth of `G^c`, when the depth regulariser acts.
     pub depth_ref: Option<&'a wgpu::Buffer>,
     /// The background hold's reference ([`RefLoss::hold_reference`]), used when λ_out > 0.
@@ -756,6 +774,7 @@ pub(crate) fn step_loss_gpu_windowed(
         inv_depth: &inv_depth,
         edge: Some(&edge),
         content: content.as_ref(),
+        content_columns: None,
         depth_ref: dref.as_ref(),
         hold: None,
         depth_grad,
