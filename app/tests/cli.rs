@@ -628,6 +628,22 @@ fn a_fit_resumed_from_its_checkpoint_writes_the_scene_of_a_fit_run_through() {
     let (a, b) = (std::fs::read(&whole).expect("whole"), std::fs::read(&part).expect("resumed"));
     assert!(a == b, "the fit resumed from iteration {at} wrote another scene than the fit run through");
 
+    // A record from before `random_background` (a build that fitted on the
+    // plain background) goes on so, saying so; fern has no alpha, so the
+    // scene is the same.
+    let (status, text) = signalled(&killed, "checkpoint: iteration", "-KILL", std::time::Duration::ZERO);
+    assert!(!status.success(), "{text}");
+    let record_path = out.join("part.checkpoint.json");
+    let record = std::fs::read_to_string(&record_path).expect("the record");
+    let older: String =
+        record.lines().filter(|l| !l.contains("\"random_background\"")).map(|l| format!("{l}\n")).collect();
+    assert!(older != record, "{record}");
+    std::fs::write(&record_path, older).expect("the older record");
+    let o = run(&resumed);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("a build that fitted on the plain background; the fit goes on so"), "{}", stderr(&o));
+    assert!(std::fs::read(&part).expect("resumed") == a, "the older record's resume wrote another scene");
+
     // Without its state (an older version's checkpoint) the fit still goes on, saying why.
     let (status, text) = signalled(&killed, "checkpoint: iteration", "-KILL", std::time::Duration::ZERO);
     assert!(!status.success(), "{text}");

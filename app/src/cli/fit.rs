@@ -151,7 +151,7 @@ pub fn run(args: FitArgs) -> anyhow::Result<ExitCode> {
         eprintln!("LLFF capture: fitting at {LLFF_RESOLUTION} px, the size of its images_8 (--resolution overrides)");
     }
     // Checked before the images load: a resume with other settings, or without a checkpoint, is refused at once.
-    let resume_from = if args.resume { Some(resumable(&args, &cfg)?) } else { None };
+    let resume_from = if args.resume { Some(resumable(&args, &mut cfg)?) } else { None };
     if !args.resume {
         checkpoint::warn_of_a_checkpoint(&checkpoint_path(&args.out), "fit");
     }
@@ -313,9 +313,30 @@ struct CheckpointInfo {
 /// The iteration `--resume` goes on from: the checkpoint beside `--out`
 /// must exist and record the same settings as `cfg` and the flags that pick
 /// the views; else an error that says what differs.
-fn resumable(args: &FitArgs, cfg: &FitConfig) -> anyhow::Result<u32> {
+///
+/// A record without `random_background` was written by a build that fitted
+/// every view on the plain background: the fit goes on so (`cfg` is set to
+/// it, saying so), rather than switching halfway through, or refusing a
+/// fern fit that the setting does not touch.
+fn resumable(args: &FitArgs, cfg: &mut FitConfig) -> anyhow::Result<u32> {
     let path = checkpoint_path(&args.out);
-    let info: CheckpointInfo = checkpoint::read_record(&args.out, &path, "fit")?;
+    let record: serde_json::Value = checkpoint::read_record(&args.out, &path, "fit")?;
+    let plain =
+        record.pointer("/config").and_then(|c| c.as_object()).is_some_and(|c| !c.contains_key("random_background"));
+    let mut record = record;
+    if plain && let Some(config) = record.pointer_mut("/config").and_then(|c| c.as_object_mut()) {
+        config.insert("random_background".to_owned(), serde_json::Value::Bool(false));
+    }
+    let info: CheckpointInfo = serde_json::from_value(record)
+        .with_context(|| format!("{}: expected a fit checkpoint's record", checkpoint::record_path(&path).display()))?;
+    if plain && cfg.random_background {
+        eprintln!(
+            "{}: the checkpoint comes from a build that fitted on the plain background; the fit goes on so \
+             (views with alpha are not composited on random colours)",
+            path.display()
+        );
+        cfg.random_background = false;
+    }
     checkpoint::refuse_other_settings(&path, &info, &Checkpoint::new(args, cfg, &[]).info(info.iteration))?;
     Ok(info.iteration)
 }
