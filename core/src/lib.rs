@@ -16,6 +16,7 @@ pub(crate) mod rng;
 pub mod scene;
 pub mod session;
 pub mod settings;
+pub mod stats;
 pub mod style;
 pub mod vision;
 

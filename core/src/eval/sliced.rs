@@ -20,7 +20,8 @@
 
 use rayon::prelude::*;
 
-use super::style::{projection_directions, quantile, sorted_projections, unit_columns};
+use super::style::{projection_directions, sorted_projections, unit_columns};
+use crate::stats::quantile;
 
 /// The parts of one sliced Wasserstein distance (see the module doc).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::Gaussians;
 use crate::camera::robust_bounds;
+use crate::stats::median;
 
 /// Thresholds of the detectors; the defaults are documented per field.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -185,15 +186,6 @@ pub fn exploding_scale(before: &Gaussians, after: &Gaussians, th: &StabilityThre
     let largest = |g: &Gaussians| max_scales(g).into_iter().filter(|v| v.is_finite()).fold(0.0f32, f32::max);
     let (b, a) = (largest(before) / extent, largest(after) / extent);
     fired(DegenerationKind::ExplodingScale, a, th.max_scale_extents.max(b))
-}
-
-fn median(mut v: Vec<f32>) -> Option<f32> {
-    v.retain(|x| x.is_finite());
-    if v.is_empty() {
-        return None;
-    }
-    let k = v.len() / 2;
-    Some(*v.select_nth_unstable_by(k, f32::total_cmp).1)
 }
 
 /// The median largest-axis scale growing by more than `max_median_scale_growth`.

@@ -12,6 +12,7 @@
 
 use rayon::prelude::*;
 
+use crate::stats::quantile;
 use crate::vision::matmul;
 
 /// The style side of every distance below, computed once: a study measures
@@ -327,16 +328,6 @@ pub(super) fn projection_directions(channels: usize, projections: usize) -> Vec<
             v.into_iter().map(move |x| (x / len) as f32)
         })
         .collect()
-}
-
-/// The `q` quantile of sorted, non-empty `s`, linearly interpolated between
-/// sample `i` at position `(i + ½)/n`.
-pub(super) fn quantile(s: &[f64], q: f64) -> f64 {
-    let x = (q * s.len() as f64 - 0.5).clamp(0.0, (s.len() - 1) as f64);
-    let i = x.floor() as usize;
-    let j = (i + 1).min(s.len() - 1);
-    let t = x - i as f64;
-    s[i] * (1.0 - t) + s[j] * t
 }
 
 /// SplitMix64, enough for reproducible projection directions.

@@ -27,6 +27,7 @@ use rayon::prelude::*;
 
 use super::focus::gather_positions;
 use crate::rng::Rng;
+use crate::stats::quantile;
 use crate::vision::matmul;
 
 /// Projection directions of the term.
@@ -102,16 +103,6 @@ fn project(directions: &[f32], projections: usize, x: &[f32], channels: usize, n
     let mut p = vec![0.0f32; projections * n];
     matmul(&mut p, n, (directions, channels, 1), (x, n), (projections, n, channels), false);
     p
-}
-
-/// The value of sorted, non-empty `s` at quantile `q`, linearly interpolated
-/// between sample `i` at position `(i + ½)/len`.
-fn quantile(s: &[f32], q: f32) -> f32 {
-    let x = (q * s.len() as f32 - 0.5).clamp(0.0, (s.len() - 1) as f32);
-    let i = x.floor() as usize;
-    let j = (i + 1).min(s.len() - 1);
-    let t = x - i as f32;
-    s[i] * (1.0 - t) + s[j] * t
 }
 
 /// The term and its gradient w.r.t. `rendered` (`channels × n`, CHW), over

@@ -123,9 +123,9 @@ pub fn reset_peak_memory() {
     let _ = std::fs::write("/proc/self/clear_refs", "5");
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    if v.is_empty() { 0.0 } else { v[v.len() / 2] }
+/// The median of the timings `v`; 0 for none.
+fn median(v: Vec<f64>) -> f64 {
+    gast_core::stats::median(v).unwrap_or(0.0)
 }
 
 /// Times forward and backward on every scene and size, then the dense reference.

@@ -12,6 +12,7 @@ use std::path::Path;
 use anyhow::Context as _;
 
 use gast_core::eval::{DegenerationKind, Measures};
+use gast_core::stats::median;
 
 use crate::report::chart::{Chart, Series, palette};
 use crate::study::{
@@ -102,12 +103,6 @@ fn rows_of(run: &RunSummary, study: Study) -> Vec<(&Row, &Record)> {
         .filter(|r| r.study == study)
         .filter_map(|r| run.trials.iter().find(|t| t.id == r.trial).map(|t| (r, t)))
         .collect()
-}
-
-fn median(mut v: Vec<f32>) -> Option<f32> {
-    v.retain(|x| x.is_finite());
-    v.sort_by(f32::total_cmp);
-    (!v.is_empty()).then(|| if v.len() % 2 == 1 { v[v.len() / 2] } else { 0.5 * (v[v.len() / 2 - 1] + v[v.len() / 2]) })
 }
 
 /// The seed floor of measure `f` on `scene`: how far apart the final values
