@@ -66,15 +66,18 @@ pub fn moments_path(checkpoint: &Path) -> PathBuf {
     checkpoint.with_extension("adam.safetensors")
 }
 
+/// What writes a run's optimiser state (a safetensors file) into a file.
+pub type StateWrite<'a> = &'a dyn Fn(&mut dyn std::io::Write) -> std::io::Result<()>;
+
 /// Writes the checkpoint `path`: the scene, the optimiser's state
-/// (`moments`, a safetensors file's bytes) where given, then its `record`
+/// (`moments` writes it, straight into its file) where given, then its `record`
 /// (last: a record always names a scene and state written whole; older ones
 /// are removed first, so that they do not pair with the new scene if this
 /// write stops half-way).
 pub fn write_with_record(
     path: &Path,
     scene: &gast_core::Gaussians,
-    moments: Option<&[u8]>,
+    moments: Option<StateWrite<'_>>,
     record: &impl serde::Serialize,
 ) -> anyhow::Result<()> {
     let record_path = record_path(path);
@@ -84,9 +87,9 @@ pub fn write_with_record(
         }
     }
     write_scene(path, scene)?;
-    if let Some(bytes) = moments {
+    if let Some(write) = moments {
         let at = moments_path(path);
-        gast_core::io::write_bytes(&at, bytes)
+        gast_core::io::atomic_write(&at, |w| write(w))
             .with_context(|| format!("could not write the optimiser's state {}", at.display()))?;
     }
     let json = serde_json::to_string_pretty(record)?;
@@ -102,8 +105,9 @@ pub fn write_session(
     session: &gast_core::session::Session,
     record: &impl serde::Serialize,
 ) -> anyhow::Result<Option<String>> {
-    let moments = session.optimiser_state().and_then(|m| m.to_safetensors());
-    write_with_record(path, &session.result(), moments.as_deref().ok(), record)?;
+    let moments = session.optimiser_state();
+    let write = moments.as_ref().ok().map(|m| move |w: &mut dyn std::io::Write| m.write_to(w));
+    write_with_record(path, &session.result(), write.as_ref().map(|f| f as StateWrite<'_>), record)?;
     Ok(moments.err())
 }
 

@@ -406,8 +406,8 @@ impl<'a> Checkpoint<'a> {
     /// cameras beside it once.
     fn write(&mut self, run: &fit::FitRun<'_>) -> anyhow::Result<()> {
         let state = run.state();
-        let bytes = state.to_safetensors().map_err(|e| anyhow::anyhow!("the fit's state: {e}"))?;
-        checkpoint::write_with_record(&self.path, run.scene(), Some(&bytes), &self.info(state.iteration))?;
+        let write = |w: &mut dyn std::io::Write| state.write_to(w);
+        checkpoint::write_with_record(&self.path, run.scene(), Some(&write), &self.info(state.iteration))?;
         if !self.written {
             // Once: the checkpoint is a scene the studio and `gast stylize` open with its cameras.
             crate::views::write_cameras_beside(&self.path, &self.args.dataset, self.cameras)?;

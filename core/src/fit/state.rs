@@ -34,6 +34,14 @@ pub struct FitState {
 impl FitState {
     /// The state as a safetensors file's bytes.
     pub fn to_safetensors(&self) -> Result<Vec<u8>, String> {
+        let mut bytes = Vec::new();
+        self.write_to(&mut bytes).map_err(|e| e.to_string())?;
+        Ok(bytes)
+    }
+
+    /// Writes [`FitState::to_safetensors`]'s bytes into `w` without making
+    /// them in memory first.
+    pub fn write_to(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
         let meta = HashMap::from([
             ("iteration".to_owned(), self.iteration.to_string()),
             ("rng".to_owned(), self.rng.to_string()),
@@ -43,7 +51,7 @@ impl FitState {
             ("grad_count", Tensor::U32(&self.grad_count)),
             ("order", Tensor::U32(&self.order)),
         ];
-        StateFile::write(&GROUPS, &self.groups, &extra, meta)
+        StateFile::write_into(w, &GROUPS, &self.groups, &extra, meta)
     }
 
     /// Reads [`FitState::to_safetensors`]'s bytes; an error that says what
