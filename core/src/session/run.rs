@@ -411,6 +411,18 @@ impl Session {
         full
     }
 
+    /// [`Session::colour_matched`] for a run that is over: the session (its
+    /// optimised Gaussians and their reference, the optimiser's moments, the
+    /// per-view targets, a GPU engine) is let go first, so that `G^c` is
+    /// never made beside them (the peak of `gast stylize` on a large scene).
+    pub fn into_colour_matched(self) -> Gaussians {
+        let (input, colour) = (Arc::clone(&self.input), self.colour);
+        drop(self);
+        let mut full = Arc::unwrap_or_clone(input);
+        colour.apply_to_gaussians(&mut full);
+        full
+    }
+
     /// The scene the run started from: as loaded, or split at
     /// [`StyleConfig::split_px`].
     pub fn input(&self) -> &Arc<Gaussians> {
