@@ -192,6 +192,46 @@ fn a_workers_end_call_comes_after_its_session_is_dropped() {
 /// A worker given a keeper writes the run's state at a pause and at its end
 /// (and not again without a new step); a worker given that state goes on
 /// from it and ends where one run through ends; on the CPU and the GPU engine.
+/// `PauseAfter(n)`, sent before the run's first step, pauses the worker
+/// exactly `n` steps in, with that step's snapshot in the slot, however
+/// late its sender looks (the scripted studio run's pause, which a window
+/// woken once a second saw land after a short run had ended); another one,
+/// sent while paused, counts from there.
+#[test]
+fn a_worker_pauses_itself_after_the_steps_asked() {
+    use gast_core::session::{RunOptions, spawn_run};
+    let config = StyleConfig { cycles: 2, steps_per_cycle: 4, resolution: 32, texture_scale: 32, ..Default::default() };
+    let Some(inputs) = inputs(config) else { return };
+    let options = RunOptions { resume: None, keep: None, at_end: None };
+    let handle = spawn_run(move |_| Ok((inputs, options)), Arc::new(|| {}));
+    let steps_to_pause = |handle: &gast_core::session::SessionHandle| {
+        let mut steps = 0;
+        loop {
+            match next(&handle.events) {
+                Event::Step(_) => steps += 1,
+                Event::Paused => break steps,
+                Event::Finished { .. } | Event::Failed(_) => panic!("the run ended without pausing"),
+                _ => {}
+            }
+        }
+    };
+    handle.commands.send(Command::PauseAfter(3)).expect("send");
+    assert_eq!(steps_to_pause(&handle), 3);
+    assert_eq!(handle.snapshots.latest().expect("the paused state's snapshot").step, 3);
+    handle.commands.send(Command::PauseAfter(2)).expect("send");
+    handle.commands.send(Command::Resume).expect("send");
+    assert_eq!(steps_to_pause(&handle), 2);
+    assert_eq!(handle.snapshots.latest().expect("the paused state's snapshot").step, 5);
+    handle.commands.send(Command::Resume).expect("send");
+    let ended = loop {
+        if let Event::Finished { completed, steps, .. } = next(&handle.events) {
+            break (completed, steps);
+        }
+    };
+    assert_eq!(ended, (true, 8));
+    handle.stop_and_join().expect("the run's result");
+}
+
 #[test]
 fn a_worker_keeps_its_runs_state_and_another_goes_on_from_it() {
     use gast_core::session::{Keeper, OptimiserState, ResumeFrom, RunOptions, spawn_run};
@@ -205,9 +245,10 @@ fn a_worker_keeps_its_runs_state_and_another_goes_on_from_it() {
             let kept = kept.clone();
             Keeper::new(
                 std::time::Duration::from_secs(3600),
-                Box::new(move |s| {
+                Box::new(move |s, result| {
                     let state = s.optimiser_state()?;
-                    kept.lock().expect("kept").push((s.steps_done(), s.result(), state));
+                    assert!(*result == s.result(), "the kept scene is the session's result");
+                    kept.lock().expect("kept").push((s.steps_done(), result.clone(), state));
                     Ok(())
                 }),
             )

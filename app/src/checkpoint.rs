@@ -98,16 +98,18 @@ pub fn write_with_record(
 }
 
 /// Writes the checkpoint `path` of a stylization's `session` with its
-/// `record`: the scene it holds and its optimiser's state. `Ok(Some(why))`:
-/// written without the state, which could not be read.
+/// `record`: the scene it holds (`result`, its [`gast_core::session::Session::result`]
+/// now) and its optimiser's state. `Ok(Some(why))`: written without the
+/// state, which could not be read.
 pub fn write_session(
     path: &Path,
     session: &gast_core::session::Session,
+    result: &gast_core::Gaussians,
     record: &impl serde::Serialize,
 ) -> anyhow::Result<Option<String>> {
     let moments = session.optimiser_state();
     let write = moments.as_ref().ok().map(|m| move |w: &mut dyn std::io::Write| m.write_to(w));
-    write_with_record(path, &session.result(), write.as_ref().map(|f| f as StateWrite<'_>), record)?;
+    write_with_record(path, result, write.as_ref().map(|f| f as StateWrite<'_>), record)?;
     Ok(moments.err())
 }
 

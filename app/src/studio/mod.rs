@@ -187,8 +187,6 @@ struct ScriptedRun {
     go_on: bool,
     export: Option<PathBuf>,
     started: bool,
-    /// Pause was sent; the export waits for the paused state's snapshot.
-    pausing: bool,
     done: bool,
     /// The run could not start (no scene or style loaded, or refused).
     failed: bool,
@@ -380,7 +378,6 @@ impl StudioApp {
                 go_on: std::env::var_os("GAST_STUDIO_GO_ON").is_some_and(|v| v == "1"),
                 export: std::env::var_os("GAST_STUDIO_EXPORT").map(PathBuf::from),
                 started: false,
-                pausing: false,
                 done: false,
                 failed: false,
             }),

@@ -111,10 +111,10 @@ impl Slot {
     /// write is slow), at a pause and at the end.
     pub fn keeper(&self) -> Keeper {
         let slot = self.clone();
-        Keeper::new(KEEP_EVERY, Box::new(move |session| slot.write(session)))
+        Keeper::new(KEEP_EVERY, Box::new(move |session, result| slot.write(session, result)))
     }
 
-    fn write(&self, session: &gast_core::session::Session) -> Result<(), String> {
+    fn write(&self, session: &gast_core::session::Session, result: &gast_core::Gaussians) -> Result<(), String> {
         if self.off.load(Ordering::SeqCst) {
             return Ok(());
         }
@@ -127,7 +127,7 @@ impl Slot {
             written_unix_s,
             ..self.record.clone()
         };
-        let without = checkpoint::write_session(&self.path, session, &record).map_err(|e| format!("{e:#}"))?;
+        let without = checkpoint::write_session(&self.path, session, result, &record).map_err(|e| format!("{e:#}"))?;
         // Discarded while it wrote (a close that gave up waiting for the run): gone all the same.
         if self.off.load(Ordering::SeqCst) {
             checkpoint::remove(&self.path);

@@ -23,6 +23,10 @@ impl StudioApp {
             let ready = self.scene.is_some() && self.style.is_some() && self.starter.is_some();
             if ready {
                 script.started = true;
+                // The worker pauses itself after the scripted steps: exactly
+                // there, however late this window is woken (on a software
+                // renderer once a second, when a short run had ended).
+                let steps = u32::try_from(script.steps).unwrap_or(u32::MAX);
                 if !script.go_on {
                     self.start_run();
                 } else if self.recovery.offer.is_some() {
@@ -32,6 +36,10 @@ impl StudioApp {
                         "GAST_STUDIO_GO_ON: no kept run of this scene and style to go on from"
                     ));
                 }
+                // The worker puts the paused state's snapshot in the slot
+                // before it reports Paused, so the export below is exactly
+                // what the run holds.
+                self.run.send(Command::PauseAfter(steps));
             }
             // A scene or style that failed to load, or a run refused at its
             // start, ends the script (it waited for ever) with what the window shows.
@@ -49,14 +57,7 @@ impl StudioApp {
             return false;
         }
         let finished = matches!(self.run.status, RunStatus::Finished { .. } | RunStatus::Failed(_));
-        let have_snapshot = self.snapshot.as_ref().is_some_and(|s| !s.gaussians.is_empty());
-        if !script.pausing && self.run.steps.len() >= script.steps && have_snapshot {
-            // The worker puts the paused state's snapshot in the slot before it
-            // reports Paused, so the export below is exactly what the run holds.
-            script.pausing = true;
-            self.run.send(Command::Pause);
-        }
-        let paused = script.pausing && self.run.status == RunStatus::Paused;
+        let paused = self.run.status == RunStatus::Paused;
         if paused || finished {
             script.done = true;
             let export = script.export.clone();

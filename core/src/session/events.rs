@@ -14,6 +14,9 @@ use crate::style::{Phase, StyleConfig};
 pub enum Command {
     /// Stop stepping until `Resume`.
     Pause,
+    /// Pause once this many more steps are done (as `Pause` then), however
+    /// late the sender would have seen them: a scripted run's exact pause.
+    PauseAfter(u32),
     /// Continue after `Pause`.
     Resume,
     /// End the run after the current step (the result so far is kept).

@@ -17,11 +17,14 @@ impl<T> Default for Slot<T> {
 }
 
 impl<T> Slot<T> {
-    /// Replaces the value (the previous one is dropped once no reader holds it).
-    pub fn put(&self, value: T) {
+    /// Replaces the value (the previous one is dropped once no reader holds
+    /// it); returns the value as readers get it.
+    pub fn put(&self, value: T) -> Arc<T> {
+        let value = Arc::new(value);
         let mut g = self.inner.lock().unwrap_or_else(|p| p.into_inner());
         g.0 += 1;
-        g.1 = Some(Arc::new(value));
+        g.1 = Some(Arc::clone(&value));
+        value
     }
 
     /// The newest value, if any.

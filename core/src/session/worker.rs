@@ -132,8 +132,10 @@ pub struct Keeper {
 /// than every minute).
 pub const KEEP_SHARE: f64 = 0.02;
 
-/// A [`Keeper`]'s writer: the session's state to wherever it is kept.
-pub type KeepWrite = Box<dyn FnMut(&Session) -> Result<(), String> + Send>;
+/// A [`Keeper`]'s writer: the session's state to wherever it is kept, with
+/// its [`Session::result`] at this step, which the worker has made for the
+/// run's snapshot as well (one whole scene, not two).
+pub type KeepWrite = Box<dyn FnMut(&Session, &Gaussians) -> Result<(), String> + Send>;
 
 impl Keeper {
     /// A keeper writing with `write` every `every` of stepping, at the least.
@@ -149,13 +151,13 @@ impl Keeper {
 
     /// Writes the session's state when it has stepped since `written` (the
     /// step last written), reporting a failure as a warning.
-    fn keep(&mut self, session: &Session, written: &mut u32, emit: &dyn Fn(Event)) {
+    fn keep(&mut self, session: &Session, result: &Gaussians, written: &mut u32, emit: &dyn Fn(Event)) {
         if session.steps_done() == *written {
             return;
         }
         *written = session.steps_done();
         let t = Instant::now();
-        let done = (self.write)(session);
+        let done = (self.write)(session, result);
         self.last_write = t.elapsed();
         match done {
             Ok(()) => emit(Event::Stage {
@@ -250,7 +252,7 @@ where
     run_loop_keeping(&mut session, &commands, &emit, slot, &*waker, keep.as_mut());
     let result = session.result();
     if let Some((keeper, written)) = &mut keep {
-        keeper.keep(&session, written, &emit);
+        keeper.keep(&session, &result, written, &emit);
     }
     slot.put(Snapshot { step: session.steps_done(), gaussians: result.clone() });
     emit(Event::Finished { completed: session.is_done(), steps: session.steps_done(), seconds: session.elapsed_s() });
@@ -280,6 +282,7 @@ fn run_loop_keeping(
     mut keep: Option<&mut (Keeper, u32)>,
 ) {
     let mut paused = false;
+    let mut pause_at: Option<u32> = None;
     let mut last_kept = Instant::now();
     let mut last_snapshot = Instant::now();
     let interval = if session.is_shared_live() { LIVE_SNAPSHOT_INTERVAL } else { SNAPSHOT_INTERVAL };
@@ -296,18 +299,29 @@ fn run_loop_keeping(
                 Err(TryRecvError::Disconnected) => return,
             }
         };
+        let cmd = match cmd {
+            None if pause_at.is_some_and(|at| session.steps_done() >= at) => {
+                pause_at = None;
+                Some(Command::Pause)
+            }
+            cmd => cmd,
+        };
         match cmd {
             Some(Command::Stop) => return,
             Some(Command::Pause) => {
                 if !paused {
                     paused = true;
-                    slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
+                    let snapshot = slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
                     if let Some((keeper, written)) = keep.as_deref_mut() {
-                        keeper.keep(session, written, emit);
+                        keeper.keep(session, &snapshot.gaussians, written, emit);
                         last_kept = Instant::now();
                     }
                     emit(Event::Paused);
                 }
+                continue;
+            }
+            Some(Command::PauseAfter(n)) => {
+                pause_at = Some(session.steps_done().saturating_add(n));
                 continue;
             }
             Some(Command::Resume) => {
@@ -337,8 +351,12 @@ fn run_loop_keeping(
                 if let Some((keeper, written)) = keep.as_deref_mut()
                     && last_kept.elapsed() >= keeper.interval()
                 {
-                    keeper.keep(session, written, emit);
+                    // The kept scene is the run's newest snapshot too.
+                    let snapshot = slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
+                    keeper.keep(session, &snapshot.gaussians, written, emit);
                     last_kept = Instant::now();
+                    last_snapshot = Instant::now();
+                    waker();
                 }
                 if last_snapshot.elapsed() >= interval {
                     slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
@@ -367,7 +385,7 @@ mod tests {
     /// that writing takes at most KEEP_SHARE of the run.
     #[test]
     fn a_slow_write_is_made_less_often() {
-        let mut keeper = Keeper::new(Duration::from_secs(60), Box::new(|_| Ok(())));
+        let mut keeper = Keeper::new(Duration::from_secs(60), Box::new(|_, _| Ok(())));
         assert_eq!(keeper.interval(), Duration::from_secs(60));
         keeper.last_write = Duration::from_millis(30);
         assert_eq!(keeper.interval(), Duration::from_secs(60));

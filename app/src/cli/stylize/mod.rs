@@ -176,7 +176,7 @@ const STYLE_NAMES: [&str; 3] = ["style.png", "style_depth.png", "style_edge.png"
 fn write_checkpoint(path: &std::path::Path, session: &Session, record: &resume::Record, total: u32) -> String {
     let t = Instant::now();
     let step = record.step;
-    match checkpoint::write_session(path, session, record) {
+    match checkpoint::write_session(path, session, &session.result(), record) {
         Ok(without) => format!(
             "  checkpoint: step {step} of {total} written to {} in {:.0} ms{}",
             path.display(),
