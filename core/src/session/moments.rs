@@ -113,10 +113,9 @@ pub(crate) struct StateFile<'a> {
 
 impl<'a> StateFile<'a> {
     /// Writes the file of `groups` (named by `names`), `extra` tensors and
-    /// `meta` into `w` as the moments stand: the bytes `safetensors::serialize`
-    /// makes (its header, its tensor order), without the copy of every
-    /// tensor in bytes and the whole file in memory that it takes first (a
-    /// checkpoint of a 500,000-Gaussian run held its state three times over).
+    /// `meta` into `w` as the moments stand, laid out as `safetensors::serialize`
+    /// lays them out (its header, its tensor order), without the copy of every
+    /// tensor in bytes and of the whole file in memory that it makes first.
     pub fn write_into<W: std::io::Write + ?Sized>(
         w: &mut W,
         names: &[&str],
