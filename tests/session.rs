@@ -189,9 +189,6 @@ fn a_workers_end_call_comes_after_its_session_is_dropped() {
     assert_eq!(holders.load(Ordering::SeqCst), 2, "the session still held the scene at the end call");
 }
 
-/// A worker given a keeper writes the run's state at a pause and at its end
-/// (and not again without a new step); a worker given that state goes on
-/// from it and ends where one run through ends; on the CPU and the GPU engine.
 /// `PauseAfter(n)`, sent before the run's first step, pauses the worker
 /// exactly `n` steps in, with that step's snapshot in the slot, however
 /// late its sender looks (the scripted studio run's pause, which a window
@@ -232,6 +229,9 @@ fn a_worker_pauses_itself_after_the_steps_asked() {
     handle.stop_and_join().expect("the run's result");
 }
 
+/// A worker given a keeper writes the run's state at a pause and at its end
+/// (and not again without a new step); a worker given that state goes on
+/// from it and ends where one run through ends; on the CPU and the GPU engine.
 #[test]
 fn a_worker_keeps_its_runs_state_and_another_goes_on_from_it() {
     use gast_core::session::{Keeper, OptimiserState, ResumeFrom, RunOptions, spawn_run};

@@ -109,8 +109,7 @@ mod tests {
     /// The `f32` quantile is the arithmetic the sliced loss had, to the bit.
     #[test]
     fn the_f32_quantile_computes_in_f32() {
-        let s: Vec<f32> = (0..37).map(|i| (i as f32 * 0.731).sin()).collect::<Vec<_>>();
-        let mut s = s;
+        let mut s: Vec<f32> = (0..37).map(|i| (i as f32 * 0.731).sin()).collect();
         s.sort_by(f32::total_cmp);
         for k in 0..50 {
             let q = (k as f32 + 0.5) / 50.0;

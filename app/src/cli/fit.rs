@@ -320,10 +320,9 @@ struct CheckpointInfo {
 /// fern fit that the setting does not touch.
 fn resumable(args: &FitArgs, cfg: &mut FitConfig) -> anyhow::Result<u32> {
     let path = checkpoint_path(&args.out);
-    let record: serde_json::Value = checkpoint::read_record(&args.out, &path, "fit")?;
+    let mut record: serde_json::Value = checkpoint::read_record(&args.out, &path, "fit")?;
     let plain =
         record.pointer("/config").and_then(|c| c.as_object()).is_some_and(|c| !c.contains_key("random_background"));
-    let mut record = record;
     if plain && let Some(config) = record.pointer_mut("/config").and_then(|c| c.as_object_mut()) {
         config.insert("random_background".to_owned(), serde_json::Value::Bool(false));
     }
