@@ -6,6 +6,7 @@
 //! between steps.
 
 mod colour_watch;
+mod cpu_state;
 mod events;
 pub mod moments;
 pub mod plan;

@@ -6,6 +6,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use super::colour_watch::ColourWatch;
+use super::cpu_state::{CpuState, Optimisers};
 use super::events::{Event, LossTerms, StepReport, StepTimings};
 use super::moments::OptimiserState;
 use super::prepare::{PreparedStyle, StyleDepthSource, StyleImage, prepare_style, scatter, subset, survey_views};
@@ -61,38 +62,6 @@ pub struct SessionInputs {
     /// The GPU that runs the steps ([`crate::gpu::DeviceChoice::resolve`]);
     /// `None` runs them on the CPU engine.
     pub gpu: Option<GpuContext>,
-}
-
-/// What only the CPU engine steps: the optimised Gaussians, the frozen
-/// reference and Adam's moments. A run on the GPU engine keeps none of it on
-/// the host (the engine holds its own copies on the device).
-struct CpuState {
-    /// The optimised Gaussians (current).
-    g: Gaussians,
-    /// `G^c` restricted to `keep`: the frozen reference.
-    g_ref: Gaussians,
-    opt: Optimisers,
-}
-
-/// Optimiser state, one Adam per parameter group, per phase (kept across cycles).
-struct Optimisers {
-    color: Adam,
-    means: Adam,
-    scales: Adam,
-    quats: Adam,
-    opacity: Adam,
-}
-
-impl Optimisers {
-    /// Every group, in the order of [`super::moments::GROUPS`].
-    fn groups(&self) -> [&Adam; 5] {
-        [&self.color, &self.means, &self.scales, &self.quats, &self.opacity]
-    }
-
-    /// [`Optimisers::groups`], to set.
-    fn groups_mut(&mut self) -> [&mut Adam; 5] {
-        [&mut self.color, &mut self.means, &mut self.scales, &mut self.quats, &mut self.opacity]
-    }
 }
 
 /// Gradients one phase's steps leave on the other phase's parameters
@@ -327,16 +296,15 @@ impl Session {
             None => None,
         };
         // The CPU engine's state, made only where it steps.
-        let cpu = engine.is_none().then(|| CpuState {
-            g: g_ref.clone(),
-            g_ref,
-            opt: Optimisers {
+        let cpu = engine.is_none().then(|| {
+            let opt = Optimisers {
                 color: Adam::new(n * 3, config.adam),
                 means: Adam::new(n * 3, config.adam),
                 scales: Adam::new(n * 3, config.adam),
                 quats: Adam::new(n * 4, config.adam),
                 opacity: Adam::new(n, config.adam),
-            },
+            };
+            CpuState::new(g_ref, opt)
         });
         Ok(Self {
             targets: (0..work_cams.len()).map(|_| None).collect(),
@@ -678,6 +646,9 @@ impl Session {
                 }
             }
             cpu.g = part;
+            let mut reference = subset(&self.input, &self.keep);
+            self.colour.apply_to_gaussians(&mut reference);
+            cpu.take_higher_bands(&reference);
         } else if let Some(engine) = &mut self.engine {
             if let Some(m) = moments {
                 engine.set_optimiser_state(&m.groups).map_err(moments_problem)?;
@@ -730,11 +701,11 @@ impl Session {
         if self.targets[view].as_ref().is_some_and(complete) {
             return;
         }
-        let Some(cpu) = &self.cpu else { return };
+        let Some(cpu) = &mut self.cpu else { return };
         let opts = RenderOptions { background: self.config.background };
         let cam = &self.cameras[view];
         let (h, w) = (cam.height as usize, cam.width as usize);
-        let r = raster::render(&cpu.g_ref, cam, &opts);
+        let r = cpu.with_reference(|g_ref| raster::render(g_ref, cam, &opts));
         let rgb: Vec<f32> = r.rgb.iter().map(|v| v.clamp(0.0, 1.0)).collect();
         if let Some(t) = self.targets[view].as_mut() {
             if !t.content.serves(object) {
