@@ -165,20 +165,25 @@ pub(crate) fn winograd_conv_banded(
     while ty0 < tiles_y {
         let ty1 = (ty0 + band_rows).min(tiles_y);
         let nt = (ty1 - ty0) * tiles_x;
-        // V: [ci][ξ][tile], one row of tiles transformed into `row` then copied out.
+        // V: [ci][ξ][tile], [`LANES`] tiles of a row at once (each ξ's values
+        // of them one contiguous run), the row's last few one by one.
         v_buf.par_chunks_mut(XI * stride).take(c_in).enumerate().for_each(|(ci, vc)| {
             let plane = &input[ci * h * w..(ci + 1) * h * w];
-            let mut row = vec![0f32; XI * tiles_x];
             for ty in ty0..ty1 {
-                for tx in 0..tiles_x {
+                let t = (ty - ty0) * tiles_x;
+                let mut tx = 0;
+                while tx + LANES <= tiles_x {
+                    let v = input_transform_lanes(&gather_lanes(plane, h, w, ty * TILE, tx * TILE));
+                    for (xi, lanes) in v.iter().enumerate() {
+                        vc[xi * stride + t + tx..xi * stride + t + tx + LANES].copy_from_slice(lanes);
+                    }
+                    tx += LANES;
+                }
+                for tx in tx..tiles_x {
                     let d = gather(plane, h, w, ty * TILE, tx * TILE);
                     for (xi, val) in input_transform(&d).into_iter().enumerate() {
-                        row[xi * tiles_x + tx] = val;
+                        vc[xi * stride + t + tx] = val;
                     }
-                }
-                let t = (ty - ty0) * tiles_x;
-                for (xi, src) in row.chunks_exact(tiles_x).enumerate() {
-                    vc[xi * stride + t..xi * stride + t + tiles_x].copy_from_slice(src);
                 }
             }
         });
@@ -203,14 +208,33 @@ pub(crate) fn winograd_conv_banded(
             let mut tile = [0f32; XI];
             for ty in ty0..ty1 {
                 let t0 = (ty - ty0) * tiles_x;
-                for tx in 0..tiles_x {
+                let oy = ty * TILE;
+                let rows = y_hi.min(oy + TILE) - oy;
+                let mut tx = 0;
+                while tx + LANES <= tiles_x {
+                    let at = co * stride + t0 + tx;
+                    let y = output_transform_lanes(&std::array::from_fn(|xi| {
+                        let run = &m[xi * m_block + at..xi * m_block + at + LANES];
+                        std::array::from_fn(|l| run[l])
+                    }));
+                    for lane in 0..LANES {
+                        let ox = (tx + lane) * TILE;
+                        let n = TILE.min(w - ox);
+                        for (r, row) in y.iter().enumerate().take(rows) {
+                            let dst = &mut plane[(oy + r) * w + ox..(oy + r) * w + ox + n];
+                            dst.iter_mut().zip(row).for_each(|(d, v)| *d = v[lane]);
+                        }
+                    }
+                    tx += LANES;
+                }
+                for tx in tx..tiles_x {
                     for (xi, v) in tile.iter_mut().enumerate() {
                         *v = m[xi * m_block + co * stride + t0 + tx];
                     }
                     let y = output_transform(&tile);
-                    let (oy, ox) = (ty * TILE, tx * TILE);
+                    let ox = tx * TILE;
                     let n = TILE.min(w - ox);
-                    for (r, row) in y.iter().enumerate().take(y_hi.min(oy + TILE) - oy) {
+                    for (r, row) in y.iter().enumerate().take(rows) {
                         plane[(oy + r) * w + ox..(oy + r) * w + ox + n].copy_from_slice(&row[..n]);
                     }
                 }
@@ -274,6 +298,89 @@ fn output_transform(m: &[f32; XI]) -> [[f32; TILE]; TILE] {
         }
     }
     rows.map(at)
+}
+
+/// Tiles of a row the transforms take at once: the same operations as one
+/// tile's ([`input_transform`], [`output_transform`]), each on `LANES`
+/// values, which the compiler runs as vector instructions (the results are
+/// the one-tile path's to the bit).
+const LANES: usize = 8;
+
+/// One value for each of [`LANES`] tiles.
+type Lanes = [f32; LANES];
+
+/// [`gather`] of the `LANES` tiles side by side from `(oy, ox)` on.
+#[inline(always)]
+fn gather_lanes(plane: &[f32], h: usize, w: usize, oy: usize, ox: usize) -> [Lanes; XI] {
+    let interior = oy >= 1 && ox >= 1 && oy + 5 <= h && ox + TILE * (LANES - 1) + 5 <= w;
+    if !interior {
+        let tiles: [[f32; XI]; LANES] = std::array::from_fn(|l| gather(plane, h, w, oy, ox + l * TILE));
+        return std::array::from_fn(|i| std::array::from_fn(|l| tiles[l][i]));
+    }
+    let mut d = [[0f32; LANES]; XI];
+    for r in 0..ALPHA {
+        let row = &plane[(oy + r - 1) * w + ox - 1..];
+        for c in 0..ALPHA {
+            d[r * ALPHA + c] = std::array::from_fn(|l| row[l * TILE + c]);
+        }
+    }
+    d
+}
+
+/// [`bt`] lane by lane.
+#[inline(always)]
+fn bt_lanes(x: [Lanes; ALPHA]) -> [Lanes; ALPHA] {
+    let mut out = [[0f32; LANES]; ALPHA];
+    for l in 0..LANES {
+        let y = bt(std::array::from_fn(|i| x[i][l]));
+        for i in 0..ALPHA {
+            out[i][l] = y[i];
+        }
+    }
+    out
+}
+
+/// [`at`] lane by lane.
+#[inline(always)]
+fn at_lanes(x: [Lanes; ALPHA]) -> [Lanes; TILE] {
+    let mut out = [[0f32; LANES]; TILE];
+    for l in 0..LANES {
+        let y = at(std::array::from_fn(|i| x[i][l]));
+        for i in 0..TILE {
+            out[i][l] = y[i];
+        }
+    }
+    out
+}
+
+/// [`input_transform`] of `LANES` tiles.
+#[inline(always)]
+fn input_transform_lanes(d: &[Lanes; XI]) -> [Lanes; XI] {
+    let mut cols = [[[0f32; LANES]; ALPHA]; ALPHA];
+    for c in 0..ALPHA {
+        let col = bt_lanes(std::array::from_fn(|r| d[r * ALPHA + c]));
+        for r in 0..ALPHA {
+            cols[r][c] = col[r];
+        }
+    }
+    let mut out = [[0f32; LANES]; XI];
+    for r in 0..ALPHA {
+        out[r * ALPHA..(r + 1) * ALPHA].copy_from_slice(&bt_lanes(cols[r]));
+    }
+    out
+}
+
+/// [`output_transform`] of `LANES` tiles.
+#[inline(always)]
+fn output_transform_lanes(m: &[Lanes; XI]) -> [[Lanes; TILE]; TILE] {
+    let mut rows = [[[0f32; LANES]; ALPHA]; TILE];
+    for c in 0..ALPHA {
+        let col = at_lanes(std::array::from_fn(|r| m[r * ALPHA + c]));
+        for r in 0..TILE {
+            rows[r][c] = col[r];
+        }
+    }
+    rows.map(at_lanes)
 }
 
 /// Multiplies of one 3×3 convolution at `h × w` (multiply and add counted apart)

@@ -27,6 +27,10 @@ fn winograd_matches_im2col_forward_and_backward() {
         (16, 24, 13, 17, XI * 40 * 5 * 2),
         (64, 32, 11, 10, BAND_ELEMS),
         (3, 64, 4, 4, BAND_ELEMS),
+        // Rows of 8 tiles and more: the lanes' path, at the edges and inside.
+        (3, 4, 21, 70, BAND_ELEMS),
+        (5, 3, 9, 32, BAND_ELEMS),
+        (2, 2, 10, 33, XI * 7 * 9 * 2),
     ];
     for (seed, &(c_in, c_out, h, w, band)) in cases.iter().enumerate() {
         let seed = seed as u64 * 10;
@@ -53,4 +57,33 @@ fn winograd_matches_im2col_forward_and_backward() {
         }
     }
     assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
+}
+
+#[test]
+fn eight_tiles_at_once_are_eight_tiles_one_by_one_to_the_bit() {
+    // A plane wide enough for two groups of lanes inside it and one at its edges.
+    let (h, w) = (14, 80);
+    let plane = noise(h * w, 41);
+    for oy in [0, 4, 8] {
+        for ox in [0, 4, 32, 44] {
+            let d = gather_lanes(&plane, h, w, oy, ox);
+            let v = input_transform_lanes(&d);
+            for l in 0..LANES {
+                let one = input_transform(&gather(&plane, h, w, oy, ox + l * TILE));
+                for xi in 0..XI {
+                    assert_eq!(v[xi][l].to_bits(), one[xi].to_bits(), "input at ({oy}, {ox}) lane {l} point {xi}");
+                }
+            }
+        }
+    }
+    let m: [Lanes; XI] = std::array::from_fn(|xi| std::array::from_fn(|l| plane[xi * LANES + l]));
+    let y = output_transform_lanes(&m);
+    for l in 0..LANES {
+        let one = output_transform(&std::array::from_fn(|xi| m[xi][l]));
+        for (r, row) in one.iter().enumerate() {
+            for (c, v) in row.iter().enumerate() {
+                assert_eq!(y[r][c][l].to_bits(), v.to_bits(), "output lane {l} ({r}, {c})");
+            }
+        }
+    }
 }
