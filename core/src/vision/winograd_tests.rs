@@ -68,11 +68,10 @@ fn eight_tiles_at_once_are_eight_tiles_one_by_one_to_the_bit() {
         for ox in [0, 4, 32, 44] {
             let d = gather_lanes(&plane, h, w, oy, ox);
             let v = input_transform_lanes(&d);
-            for l in 0..LANES {
-                let one = input_transform(&gather(&plane, h, w, oy, ox + l * TILE));
-                for xi in 0..XI {
-                    assert_eq!(v[xi][l].to_bits(), one[xi].to_bits(), "input at ({oy}, {ox}) lane {l} point {xi}");
-                }
+            let tiles = (0..LANES).map(|l| input_transform(&gather(&plane, h, w, oy, ox + l * TILE)));
+            for (l, one) in tiles.enumerate() {
+                let lane: [f32; XI] = std::array::from_fn(|xi| v[xi][l]);
+                assert_eq!(lane.map(f32::to_bits), one.map(f32::to_bits), "input at ({oy}, {ox}), lane {l}");
             }
         }
     }
