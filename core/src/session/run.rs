@@ -646,9 +646,11 @@ impl Session {
                 }
             }
             cpu.g = part;
-            let mut reference = subset(&self.input, &self.keep);
-            self.colour.apply_to_gaussians(&mut reference);
-            cpu.take_higher_bands(&reference);
+            if self.input.sh_degree > 0 {
+                let mut reference = subset(&self.input, &self.keep);
+                self.colour.apply_to_gaussians(&mut reference);
+                cpu.take_higher_bands(&reference);
+            }
         } else if let Some(engine) = &mut self.engine {
             if let Some(m) = moments {
                 engine.set_optimiser_state(&m.groups).map_err(moments_problem)?;
