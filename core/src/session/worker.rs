@@ -36,14 +36,15 @@ pub struct SessionHandle {
     pub live: Arc<Slot<LiveGaussians>>,
     /// The run's start, put once when preparation is done.
     pub start: Arc<Slot<RunStart>>,
-    thread: Option<JoinHandle<Option<Gaussians>>>,
+    thread: Option<JoinHandle<Option<Arc<Snapshot>>>>,
 }
 
 impl SessionHandle {
     /// Asks the worker to stop and waits for the result (the scene so far), if any.
     pub fn stop_and_join(mut self) -> Option<Gaussians> {
         let _ = self.commands.send(Command::Stop);
-        self.thread.take().and_then(|t| t.join().ok().flatten())
+        let last = self.thread.take().and_then(|t| t.join().ok().flatten());
+        last.map(|s| Arc::unwrap_or_clone(s).gaussians)
     }
 
     /// Whether the worker thread has ended.
@@ -202,7 +203,7 @@ fn worker<F>(
     events: Sender<Event>,
     slots: WorkerSlots,
     waker: Arc<dyn Fn() + Send + Sync>,
-) -> Option<Gaussians>
+) -> Option<Arc<Snapshot>>
 where
     F: FnOnce(&mut dyn FnMut(Event)) -> Result<(SessionInputs, RunOptions), String>,
 {
@@ -250,12 +251,16 @@ where
     waker();
     let mut keep = options.keep.map(|k| (k, session.steps_done()));
     run_loop_keeping(&mut session, &commands, &emit, slot, &*waker, keep.as_mut());
-    let result = session.result();
+    // The result is the slot's last snapshot and the thread's return value at
+    // once (one copy, not two), and the session is let go before `Finished`.
+    let result = slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
+    waker();
     if let Some((keeper, written)) = &mut keep {
-        keeper.keep(&session, &result, written, &emit);
+        keeper.keep(&session, &result.gaussians, written, &emit);
     }
-    slot.put(Snapshot { step: session.steps_done(), gaussians: result.clone() });
-    emit(Event::Finished { completed: session.is_done(), steps: session.steps_done(), seconds: session.elapsed_s() });
+    let (completed, steps, seconds) = (session.is_done(), session.steps_done(), session.elapsed_s());
+    drop(session);
+    emit(Event::Finished { completed, steps, seconds });
     Some(result)
 }
 
