@@ -88,10 +88,10 @@ impl CpuState {
         out
     }
 
-    /// Takes `g`'s higher SH bands from `G^c` (`reference`, the same
-    /// Gaussians at `g`'s degree): a resumed state's bands are those of the
-    /// run that wrote it, which [`CpuState::with_reference`] lends to the
-    /// reference's renders.
+    /// Gives `g` (a resumed state) the higher SH bands of `G^c`
+    /// (`reference`, the same Gaussians at `g`'s degree), which
+    /// [`CpuState::with_reference`] lends to the reference's renders; a state
+    /// a run with the same inputs wrote has them already.
     pub(super) fn take_higher_bands(&mut self, reference: &Gaussians) {
         let k = self.g.sh_coeffs() * 3;
         if k == 3 || reference.sh.len() != self.g.sh.len() {
