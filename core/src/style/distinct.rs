@@ -21,6 +21,8 @@
 //! It fills [`Matches`], the search's result, which lives here because
 //! GCFM (`gcfm.rs`, which calls this) and the matching index share it.
 
+use rayon::prelude::*;
+
 /// For every rendered position, the flat (row-major) index into the style
 /// feature map of its best and worst match.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -43,6 +45,9 @@ impl FromIterator<(Vec<u32>, Vec<u32>)> for Matches {
     }
 }
 
+/// Positions a thread hashes and checks at once.
+const POSITIONS_PER_TASK: usize = 512;
+
 /// Below this share of distinct positions, the search runs on the
 /// representatives only (above it the gather costs more than it saves).
 const WORTH_IT: f64 = 0.75;
@@ -51,31 +56,36 @@ const WORTH_IT: f64 = 0.75;
 /// `c × n`, CHW), the first position holding a bit-identical joint vector,
 /// and the number of distinct vectors.
 pub fn representatives(rendered: [&[f32]; 3], c: usize, n: usize) -> (Vec<u32>, usize) {
-    // FNV-style hash per position, channel by channel (rows are contiguous).
+    // FNV-style hash per position, channel by channel (rows are contiguous),
+    // the positions in blocks on the threads (one thread hashing 3 × 768
+    // rows took 1.4 % of a fern run's samples while the other waited).
+    let rows = || rendered.into_iter().flat_map(|r| r.chunks_exact(n).take(c));
     let mut hash = vec![0xcbf2_9ce4_8422_2325u64; n];
-    for r in rendered {
-        for row in r.chunks_exact(n).take(c) {
-            for (h, v) in hash.iter_mut().zip(row) {
+    hash.par_chunks_mut(POSITIONS_PER_TASK).enumerate().for_each(|(b, hs)| {
+        let at = b * POSITIONS_PER_TASK;
+        for row in rows() {
+            for (h, v) in hs.iter_mut().zip(&row[at..]) {
                 *h = (*h ^ u64::from(v.to_bits())).wrapping_mul(0x0000_0100_0000_01b3);
             }
         }
-    }
+    });
     let mut first = std::collections::HashMap::with_capacity(n);
     let mut rep: Vec<u32> = hash.iter().enumerate().map(|(x, h)| *first.entry(*h).or_insert(x as u32)).collect();
     // A position whose hash met a different vector is its own representative.
-    let mut same = vec![true; n];
-    for r in rendered {
-        for row in r.chunks_exact(n).take(c) {
-            for (x, ok) in same.iter_mut().enumerate() {
-                *ok &= row[x].to_bits() == row[rep[x] as usize].to_bits();
+    rep.par_chunks_mut(POSITIONS_PER_TASK).enumerate().for_each(|(b, reps)| {
+        let at = b * POSITIONS_PER_TASK;
+        let mut same = vec![true; reps.len()];
+        for row in rows() {
+            for ((ok, &r), v) in same.iter_mut().zip(reps.iter()).zip(&row[at..]) {
+                *ok &= v.to_bits() == row[r as usize].to_bits();
             }
         }
-    }
-    for (x, ok) in same.iter().enumerate() {
-        if !ok {
-            rep[x] = x as u32;
+        for (i, (r, ok)) in reps.iter_mut().zip(same).enumerate() {
+            if !ok {
+                *r = (at + i) as u32;
+            }
         }
-    }
+    });
     let distinct = rep.iter().enumerate().filter(|&(x, &r)| r as usize == x).count();
     (rep, distinct)
 }
@@ -114,7 +124,9 @@ pub fn search_distinct(
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use rayon::prelude::*;
+
+use super::*;
 
     #[test]
     fn copies_share_a_representative_and_distinct_vectors_keep_their_own() {
