@@ -124,9 +124,7 @@ pub fn search_distinct(
 
 #[cfg(test)]
 mod tests {
-    use rayon::prelude::*;
-
-use super::*;
+    use super::*;
 
     #[test]
     fn copies_share_a_representative_and_distinct_vectors_keep_their_own() {
