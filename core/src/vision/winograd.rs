@@ -327,30 +327,29 @@ fn gather_lanes(plane: &[f32], h: usize, w: usize, oy: usize, ox: usize) -> [Lan
     d
 }
 
-/// [`bt`] lane by lane.
+/// `f` (a transform of `N` values into `M`) lane by lane.
 #[inline(always)]
-fn bt_lanes(x: [Lanes; ALPHA]) -> [Lanes; ALPHA] {
-    let mut out = [[0f32; LANES]; ALPHA];
+fn per_lane<const N: usize, const M: usize>(x: [Lanes; N], f: impl Fn([f32; N]) -> [f32; M]) -> [Lanes; M] {
+    let mut out = [[0f32; LANES]; M];
     for l in 0..LANES {
-        let y = bt(std::array::from_fn(|i| x[i][l]));
-        for i in 0..ALPHA {
+        let y = f(std::array::from_fn(|i| x[i][l]));
+        for i in 0..M {
             out[i][l] = y[i];
         }
     }
     out
 }
 
+/// [`bt`] lane by lane.
+#[inline(always)]
+fn bt_lanes(x: [Lanes; ALPHA]) -> [Lanes; ALPHA] {
+    per_lane(x, bt)
+}
+
 /// [`at`] lane by lane.
 #[inline(always)]
 fn at_lanes(x: [Lanes; ALPHA]) -> [Lanes; TILE] {
-    let mut out = [[0f32; LANES]; TILE];
-    for l in 0..LANES {
-        let y = at(std::array::from_fn(|i| x[i][l]));
-        for i in 0..TILE {
-            out[i][l] = y[i];
-        }
-    }
-    out
+    per_lane(x, at)
 }
 
 /// [`input_transform`] of `LANES` tiles.
