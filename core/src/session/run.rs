@@ -64,6 +64,13 @@ pub struct SessionInputs {
     pub gpu: Option<GpuContext>,
 }
 
+/// `G^c` on the optimised Gaussians: `scene`'s at `keep`, colour-matched.
+fn colour_matched_part(scene: &Gaussians, keep: &[u32], colour: &ColorTransfer) -> Gaussians {
+    let mut part = subset(scene, keep);
+    colour.apply_to_gaussians(&mut part);
+    part
+}
+
 /// Gradients one phase's steps leave on the other phase's parameters
 /// ([`StyleConfig::phase_leak`]), summed until that phase's next step adds
 /// them to its own. Empty when the leak is off, and when the steps run on the
@@ -247,8 +254,7 @@ impl Session {
         on_event(Event::Stage { name: "colour matching".into(), seconds: t.elapsed().as_secs_f64() });
 
         let t = Instant::now();
-        let mut g_ref = subset(&scene, &keep);
-        colour.apply_to_gaussians(&mut g_ref);
+        let g_ref = colour_matched_part(&scene, &keep, &colour);
         on_event(Event::Culled { total: scene.len(), kept: keep.len() });
         on_event(Event::Stage { name: "visibility culling".into(), seconds: t.elapsed().as_secs_f64() });
 
@@ -647,9 +653,7 @@ impl Session {
             }
             cpu.g = part;
             if self.input.sh_degree > 0 {
-                let mut reference = subset(&self.input, &self.keep);
-                self.colour.apply_to_gaussians(&mut reference);
-                cpu.take_higher_bands(&reference);
+                cpu.take_higher_bands(&colour_matched_part(&self.input, &self.keep, &self.colour));
             }
         } else if let Some(engine) = &mut self.engine {
             if let Some(m) = moments {

@@ -247,13 +247,13 @@ where
     if let Some(l) = session.live() {
         slots.live.put(l);
     }
-    slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
+    put_snapshot(slot, &session);
     waker();
     let mut keep = options.keep.map(|k| (k, session.steps_done()));
     run_loop_keeping(&mut session, &commands, &emit, slot, &*waker, keep.as_mut());
     // The result is the slot's last snapshot and the thread's return value at
     // once (one copy, not two), and the session is let go before `Finished`.
-    let result = slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
+    let result = put_snapshot(slot, &session);
     waker();
     if let Some((keeper, written)) = &mut keep {
         keeper.keep(&session, &result.gaussians, written, &emit);
@@ -262,6 +262,12 @@ where
     drop(session);
     emit(Event::Finished { completed, steps, seconds });
     Some(result)
+}
+
+/// Puts the session's [`Session::result`] at this step in `slot` as its
+/// newest snapshot; returns it as readers get it.
+fn put_snapshot(slot: &Slot<Snapshot>, session: &Session) -> Arc<Snapshot> {
+    slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() })
 }
 
 /// Steps until the schedule ends or a `Stop` arrives; `Pause` blocks on the
@@ -316,7 +322,7 @@ fn run_loop_keeping(
             Some(Command::Pause) => {
                 if !paused {
                     paused = true;
-                    let snapshot = slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
+                    let snapshot = put_snapshot(slot, session);
                     if let Some((keeper, written)) = keep.as_deref_mut() {
                         keeper.keep(session, &snapshot.gaussians, written, emit);
                         last_kept = Instant::now();
@@ -357,14 +363,14 @@ fn run_loop_keeping(
                     && last_kept.elapsed() >= keeper.interval()
                 {
                     // The kept scene is the run's newest snapshot too.
-                    let snapshot = slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
+                    let snapshot = put_snapshot(slot, session);
                     keeper.keep(session, &snapshot.gaussians, written, emit);
                     last_kept = Instant::now();
                     last_snapshot = Instant::now();
                     waker();
                 }
                 if last_snapshot.elapsed() >= interval {
-                    slot.put(Snapshot { step: session.steps_done(), gaussians: session.result() });
+                    put_snapshot(slot, session);
                     last_snapshot = Instant::now();
                     waker();
                 }
