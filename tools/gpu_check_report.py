@@ -104,7 +104,7 @@ for scene in ("guitar", "playbot"):
                 note += (f"; recording colour {fmt(med(gpu, 'colour_record_median_ms'))} / geometry "
                          f"{fmt(med(gpu, 'geometry_record_median_ms'))} ms, submitting "
                          f"{fmt(med(gpu, 'colour_submit_median_ms'))} / {fmt(med(gpu, 'geometry_submit_median_ms'))} ms, "
-                         f"{med(gpu, 'geometry_bind_groups') or 0:.0f} bind groups a geometry step")
+                         f"{med(gpu, 'geometry_bind_groups') or 0:.0f} bind groups made a geometry step")
             # The compute passes they ran in (absent before 2026-11-30's third session).
             if gpu.get("geometry_passes") is not None:
                 note += f" in {med(gpu, 'geometry_passes'):.0f} compute passes"

@@ -21,6 +21,7 @@ use std::collections::HashMap;
 use super::Encoder;
 use super::adam::AdamKernel;
 use super::assignment::GpuAssignment;
+use super::bind_cache::BindCache;
 use super::content::ContentColumns;
 use super::step_loss::{StepInputs, StepLossKernels, StepLossPlan, slot};
 use super::{
@@ -147,6 +148,9 @@ pub struct GpuEngine {
     leak: Option<GpuLeak>,
     /// The host's share of the last step ([`GpuEngine::host_times`]).
     host: HostTimes,
+    /// The steps' bind groups, kept from one step to the next (lent to the
+    /// thread while a step records; emptied where the engine drops buffers).
+    bind_cache: BindCache,
 }
 
 /// What the host spent of one GPU step: the time the device's part timings
@@ -163,7 +167,8 @@ pub struct HostTimes {
     pub record_ms: f32,
     /// Handing the command buffers to the queue (`Queue::submit`).
     pub submit_ms: f32,
-    /// Bind groups the step made, one per dispatch recorded.
+    /// Bind groups the step made; its other dispatches took groups kept
+    /// from earlier steps ([`super::BindCache`]).
     pub bind_groups: u32,
     /// Compute passes the step's dispatches ran in (one per run of
     /// dispatches between copies; one per dispatch with `GAST_GPU_PASSES=each`).
@@ -239,6 +244,7 @@ impl GpuEngine {
             assign: None,
             leak: None,
             host: HostTimes::default(),
+            bind_cache: BindCache::default(),
         };
         engine.bytes = ctx.allocated_bytes().saturating_sub(before);
         Ok(engine)
@@ -319,6 +325,7 @@ impl GpuEngine {
         // their targets are made anew at their next visit.
         self.plans.clear();
         self.targets.iter_mut().for_each(|t| *t = None);
+        self.bind_cache.clear();
         self.bytes += self.ctx.allocated_bytes().saturating_sub(before);
     }
 
@@ -327,11 +334,13 @@ impl GpuEngine {
         for t in self.targets.iter_mut().flatten() {
             t.kept = None;
         }
+        self.bind_cache.clear();
     }
 
     /// Empties the phase leak's sums (the leak was turned on or off).
     pub fn reset_leak(&mut self) {
         self.leak = None;
+        self.bind_cache.clear();
     }
 
     /// New cameras (a new working resolution or background): per-view targets are recomputed.
@@ -340,6 +349,7 @@ impl GpuEngine {
         self.plans.clear();
         self.targets = (0..views).map(|_| None).collect();
         self.background = background;
+        self.bind_cache.clear();
     }
 
     /// Uploads the style's sliced targets that `weights` turns on and the
@@ -413,12 +423,15 @@ impl GpuEngine {
         // too, which reaches the geometry, whose next step applies it.
         let leaking = config.leaks_between_phases();
         if !leaking {
-            self.leak = None;
+            if self.leak.take().is_some() {
+                self.bind_cache.clear();
+            }
         } else if self.leak.is_none() {
             self.leak = Some(GpuLeak::new(&self.ctx, &self.grads));
         }
         let (ctx, k) = (&self.ctx, &self.k);
         let allocated = ctx.allocated_bytes();
+        let lent = std::mem::take(&mut self.bind_cache).lend(ctx);
         let (started, binds, passes) = (std::time::Instant::now(), ctx.bind_groups_made(), ctx.passes_begun());
         let mut host = HostTimes::default();
         let submit = |host: &mut HostTimes, enc: Encoder| {
@@ -576,6 +589,7 @@ impl GpuEngine {
         host.bind_groups = u32::try_from(ctx.bind_groups_made() - binds).unwrap_or(u32::MAX);
         host.passes = u32::try_from(ctx.passes_begun() - passes).unwrap_or(u32::MAX);
         self.host = host;
+        self.bind_cache = lent.finish();
         let pairs = s[slot::PAIRS].to_bits() as usize;
         if pairs > plan.raster.capacity() {
             self.grow_pairs(size, pairs);
@@ -614,6 +628,7 @@ impl GpuEngine {
         ));
         self.pair_capacity = (pairs as f64 * PAIR_HEADROOM) as usize;
         self.plans.remove(&size);
+        self.bind_cache.clear();
     }
 
     fn set_weights(&mut self, w: &LossWeights) {

@@ -16,6 +16,8 @@
 //! entry point with an explicit binding list.
 
 // The device and its buffers (`device/`).
+#[path = "device/bind_cache.rs"]
+mod bind_cache;
 #[path = "device/context.rs"]
 mod context;
 #[path = "device/encoder.rs"]
@@ -109,6 +111,7 @@ mod step_loss;
 mod engine;
 pub use adam::GpuAdam;
 pub use assignment::GpuAssignment;
+pub use bind_cache::{BindCache, Lent};
 pub use canny::{CannyKernels, EdgeMap};
 pub use content::ContentLoss;
 pub use context::{AdapterPolicy, GpuCaps, GpuContext, GpuError, device_descriptor};

@@ -59,7 +59,7 @@ pub struct StepTimings {
     /// GPU engine: handing the step's command buffers to the queue. 0 on the CPU.
     #[serde(default)]
     pub submit_ms: f32,
-    /// GPU engine: bind groups the step made (one per dispatch). 0 on the CPU.
+    /// GPU engine: bind groups the step made (the others kept from earlier steps). 0 on the CPU.
     #[serde(default)]
     pub bind_groups: u32,
     /// GPU engine: compute passes the step's dispatches ran in. 0 on the CPU.

@@ -639,7 +639,7 @@ fn time_steps(
             "(on the GPU the parts run back to back in one submission; their times are below; \
              \"pairing\" is the host's, \"waits\" the host waiting on the device, \"record\" the host \
              recording the step's commands, \"submit\" handing them to the queue, \"binds\" the bind \
-             groups made, one per dispatch, \"passes\" the compute passes they ran in)"
+             groups made (a dispatch reuses the one an earlier step made for its buffers), \"passes\" the compute passes they ran in)"
         );
     }
     Ok(StepRun {

@@ -170,7 +170,8 @@ impl GpuContext {
     }
 
     /// Bind groups made so far ([`super::Kernel::bind`]); the difference
-    /// over a step is the dispatches it records with fresh bind groups.
+    /// over a step is the groups it made (not those kept from an earlier
+    /// step, [`super::BindCache`]).
     pub fn bind_groups_made(&self) -> u64 {
         self.bind_groups.load(Ordering::Relaxed)
     }

@@ -1,6 +1,6 @@
 //! One compute entry point with its bindings, and its dispatch.
 
-use super::{Commands, GpuContext};
+use super::{BindCache, Commands, GpuContext};
 
 /// How a kernel binds one buffer, in binding order (group 0, bindings 0, 1, …).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -69,26 +69,33 @@ impl Kernel {
         Self { label: label.to_owned(), pipeline, layout, binds: binds.to_vec() }
     }
 
-    /// A bind group of `buffers`, one per declared binding, in order.
+    /// A bind group of `buffers`, one per declared binding, in order: the
+    /// kept one while an engine's step has lent its [`BindCache`] to this
+    /// thread, else a new one.
     ///
     /// # Panics
     /// When the number of buffers differs from the declared bindings (a bug in the caller).
     pub fn bind(&self, ctx: &GpuContext, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
         assert_eq!(buffers.len(), self.binds.len(), "kernel {}: buffers and bindings differ in number", self.label);
-        let entries: Vec<wgpu::BindGroupEntry> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-            .collect();
-        ctx.count_bind_group();
-        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(&self.label),
-            layout: &self.layout,
-            entries: &entries,
-        })
+        let (group, made) = BindCache::group(&self.layout, buffers, || {
+            let entries: Vec<wgpu::BindGroupEntry> = buffers
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+                .collect();
+            ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(&self.label),
+                layout: &self.layout,
+                entries: &entries,
+            })
+        });
+        if made {
+            ctx.count_bind_group();
+        }
+        group
     }
 
-    /// Records a dispatch of `groups` workgroups (x, y, z) with a fresh bind group of `buffers`.
+    /// Records a dispatch of `groups` workgroups (x, y, z) with a bind group of `buffers` ([`Kernel::bind`]).
     pub fn dispatch(&self, ctx: &GpuContext, encoder: &mut dyn Commands, buffers: &[&wgpu::Buffer], groups: [u32; 3]) {
         let bind = self.bind(ctx, buffers);
         self.dispatch_bound(encoder, &bind, groups);
