@@ -286,6 +286,8 @@ def compare(prefix, arms, title, names):
 ab_parts = compare("ab", ("base", "new"), "this build / baseline", (f"baseline {base_rev or '(--base)'}", "this build"))
 # A compute pass per dispatch against runs of dispatches sharing one (pass_RES_ARMROUND, this build alone).
 compare("pass", ("each", "shared"), "shared passes / a pass per dispatch", ("GAST_GPU_PASSES=each", "shared"))
+# Bind groups made every step against kept from step to step (bind_RES_ARMROUND, this build alone).
+compare("bind", ("off", "on"), "kept bind groups / made every step", ("GAST_BIND_CACHE=0", "kept"))
 # VGG on the object's window against the whole frame (win_RES_ARMROUND, this build alone).
 compare("win", ("off", "on"), "VGG window / whole frame", ("GAST_VGG_WINDOW=0", "window"))
 # The assignment pairing in blocks of 256 rows against one block of up to 512 (blk_RES_ARMROUND).

@@ -82,8 +82,9 @@ fn the_gpu_check_dry_run_measures_every_step_it_can_here() {
 /// The report's side-by-side figures from a baseline build's and this build's
 /// bench logs (`ab_RES_ARMROUND`, as `run` writes them when a baseline is
 /// packed), from the GEMM tilings' (`tile_RES_ARMROUND`), from the
-/// assignment pairing's blocks (`blk_RES_ARMROUND`) and from the compute
-/// passes' (`pass_RES_ARMROUND`): the step
+/// assignment pairing's blocks (`blk_RES_ARMROUND`), from the compute
+/// passes' (`pass_RES_ARMROUND`) and from the kept bind groups'
+/// (`bind_RES_ARMROUND`): the step
 /// medians' ratio and each GPU part's. The runs themselves
 /// are `gast bench step`, which the dry run above takes; at the dry run's
 /// sizes on lavapipe two more would double its time, so the report is given
@@ -114,13 +115,16 @@ fn the_gpu_check_report_gives_this_build_against_the_baseline() {
     // And as the compute passes' arms: a pass per dispatch first, shared passes second.
     let passes =
         runs.map(|(arm, round, c, g, e, b)| (if arm == "base" { "each" } else { "shared" }, round, c, g, e, b));
+    // And as the bind groups' arms: made every step first, kept second.
+    let binds = runs.map(|(arm, round, c, g, e, b)| (if arm == "base" { "off" } else { "on" }, round, c, g, e, b));
     let named = runs
         .iter()
         .map(|r| ("ab", *r))
         .chain(tiles.iter().map(|r| ("tile", *r)))
         .chain(wide.map(|r| ("tile", r)))
         .chain(blocks.iter().map(|r| ("blk", *r)))
-        .chain(passes.iter().map(|r| ("pass", *r)));
+        .chain(passes.iter().map(|r| ("pass", *r)))
+        .chain(binds.iter().map(|r| ("bind", *r)));
     for (prefix, (arm, round, colour, geometry, edge, backward)) in named {
         let name = format!("{prefix}_256_{arm}{round}");
         write(&format!("{name}.rc.json"), format!(r#"{{"name":"{name}","rc":0,"wall_s":9.5}}"#));
@@ -190,6 +194,9 @@ fn the_gpu_check_report_gives_this_build_against_the_baseline() {
     let shared = figure("guitar colour step at 256 px, shared passes / a pass per dispatch");
     assert!((shared["value"].as_f64().expect("ratio") - 21.0 / 41.0).abs() < 1e-9, "{shared}");
     assert!(shared["note"].as_str().is_some_and(|n| n.contains("GAST_GPU_PASSES=each: 40.00, 42.00")), "{shared}");
+    let kept = figure("guitar geometry step at 256 px, kept bind groups / made every step");
+    assert!((kept["value"].as_f64().expect("ratio") - 24.0 / 45.0).abs() < 1e-9, "{kept}");
+    assert!(kept["note"].as_str().is_some_and(|n| n.contains("GAST_BIND_CACHE=0: 44.00, 46.00")), "{kept}");
     let wide = figure("guitar geometry step at 256 px, GEMM tiles 128² / 64²");
     assert!((wide["value"].as_f64().expect("ratio") - 24.0 / 45.0).abs() < 1e-9, "{wide}");
     let fern = figure("fern step at 1008 px on the longer side (its LLFF cameras, frame recipe)");

@@ -14,11 +14,20 @@
 //! engine empties it when it drops buffers without allocating
 //! ([`BindCache::clear`]). Outside a lend (the studio's viewport, the
 //! per-view targets, tests) every bind group is made fresh, as before.
+//!
+//! `GAST_BIND_CACHE=0` makes every group fresh in the steps too, for
+//! measuring one against the other (`tools/gpu-check`'s `bind_*` arms).
 
 use std::cell::RefCell;
 use std::collections::HashMap;
 
 use super::GpuContext;
+
+/// Whether the steps keep their bind groups (not `GAST_BIND_CACHE=0`).
+pub fn enabled() -> bool {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ON.get_or_init(|| !std::env::var("GAST_BIND_CACHE").is_ok_and(|v| v.trim() == "0"))
+}
 
 /// More kept groups than this empties the cache (a bound on what it holds
 /// alive should a step make new groups every time).
@@ -81,8 +90,12 @@ impl Drop for Lent {
 impl BindCache {
     /// Lends the cache to this thread until [`Lent::finish`]: the bind
     /// groups made meanwhile are kept or taken from it. Empties it first
-    /// when `ctx` allocated since the last lend began.
+    /// when `ctx` allocated since the last lend began. With
+    /// `GAST_BIND_CACHE=0` ([`enabled`]) it lends nothing.
     pub fn lend(mut self, ctx: &GpuContext) -> Lent {
+        if !enabled() {
+            return Lent { installed: false };
+        }
         let allocated = ctx.allocated_bytes();
         if allocated != self.allocated_at || self.groups.len() > MAX_KEPT {
             self.groups.clear();
