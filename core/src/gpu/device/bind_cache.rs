@@ -33,27 +33,20 @@ pub fn enabled() -> bool {
 /// alive should a step make new groups every time).
 const MAX_KEPT: usize = 16_384;
 
-#[derive(Clone, PartialEq, Eq, Hash)]
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
 struct Key {
     layout: wgpu::BindGroupLayout,
     buffers: Vec<wgpu::Buffer>,
 }
 
-/// Bind groups by layout and buffers, kept across an engine's steps.
-#[derive(Default)]
+/// Bind groups by layout and buffers, kept across an engine's steps (the
+/// groups it makes are counted where every group is, in
+/// [`GpuContext::bind_groups_made`]).
+#[derive(Debug, Default)]
 pub struct BindCache {
     groups: HashMap<Key, wgpu::BindGroup>,
     /// The context's allocated bytes when the last lend began.
     allocated_at: u64,
-    /// Groups taken from the cache, and made, since the engine began.
-    hits: u64,
-    made: u64,
-}
-
-impl std::fmt::Debug for BindCache {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("BindCache").field("kept", &self.groups.len()).field("hits", &self.hits).finish()
-    }
 }
 
 thread_local! {
@@ -116,11 +109,6 @@ impl BindCache {
         self.groups.clear();
     }
 
-    /// Groups taken from the cache and groups made, since the engine began.
-    pub fn counts(&self) -> (u64, u64) {
-        (self.hits, self.made)
-    }
-
     /// `make`'s group for `layout` and `buffers`: from the lent cache when
     /// this thread has one (kept there if new), else made fresh. The second
     /// value says whether it was made.
@@ -136,11 +124,9 @@ impl BindCache {
             };
             let key = Key { layout: layout.clone(), buffers: buffers.iter().map(|&b| b.clone()).collect() };
             if let Some(group) = cache.groups.get(&key) {
-                cache.hits += 1;
                 return (group.clone(), false);
             }
             let group = make();
-            cache.made += 1;
             cache.groups.insert(key, group.clone());
             (group, true)
         })
@@ -167,28 +153,32 @@ mod tests {
         let ctx = own_ctx();
         let k = Kernel::new(&ctx, "add_one", ADD_ONE, "main", &[Bind::ReadWrite]);
         let (a, b) = (ctx.zeros("a", 1), ctx.zeros("b", 1));
+        // Groups made since `from` (the context counts every group made).
+        let made = |from: u64| ctx.bind_groups_made() - from;
         // Not lent: a new group at every bind.
         assert_ne!(k.bind(&ctx, &[&a]), k.bind(&ctx, &[&a]));
 
         // Lent: one group per kernel and buffers, kept into the next lend.
+        let at = ctx.bind_groups_made();
         let lent = BindCache::default().lend(&ctx);
         let first = k.bind(&ctx, &[&a]);
         assert_eq!(k.bind(&ctx, &[&a]), first);
         assert_ne!(k.bind(&ctx, &[&b]), first);
         let mut cache = lent.finish();
-        assert_eq!(cache.counts(), (1, 2));
+        assert_eq!(made(at), 2, "three binds, one of them kept");
         assert_ne!(k.bind(&ctx, &[&a]), first, "given back, the thread makes groups afresh");
+        let at = ctx.bind_groups_made();
         let lent = cache.lend(&ctx);
         assert_eq!(k.bind(&ctx, &[&a]), first);
         cache = lent.finish();
-        assert_eq!(cache.counts(), (2, 2));
+        assert_eq!(made(at), 0, "kept from the last lend");
 
         // The context allocated since: the next lend starts empty.
         let _c = ctx.zeros("c", 1);
         let lent = cache.lend(&ctx);
         assert_ne!(k.bind(&ctx, &[&a]), first);
         cache = lent.finish();
-        assert_eq!(cache.counts(), (2, 3));
+        assert_eq!(made(at), 1);
 
         // Cleared by its engine: empty too.
         let kept = {
@@ -211,6 +201,7 @@ mod tests {
         let k = Kernel::new(&ctx, "add_one", ADD_ONE, "main", &[Bind::ReadWrite]);
         let a = ctx.zeros("a", 1);
         let mut cache = BindCache::default();
+        let at = ctx.bind_groups_made();
         for step in 1..=3 {
             let lent = cache.lend(&ctx);
             let mut enc = ctx.encoder("kept group test");
@@ -222,6 +213,6 @@ mod tests {
             let got: Vec<f32> = ctx.read(&a).expect("read back");
             assert_eq!(got[0], (4 * step) as f32, "step {step}");
         }
-        assert_eq!(cache.counts(), (11, 1), "one group made, the other eleven dispatches kept it");
+        assert_eq!(ctx.bind_groups_made() - at, 1, "one group made, the other eleven dispatches kept it");
     }
 }
